@@ -1,0 +1,8 @@
+//! jointid host library: from a capture of one robot joint to models a control
+//! engineer can trust, and to where the simulation departs from the real joint.
+//!
+//! Modules follow the user's path: capture -> data -> frf -> subspace / pem /
+//! grey_box -> validate -> diagnose -> report. Estimators do no IO: they take
+//! an [`data::IdData`] and return values.
+
+pub mod data;

@@ -1,0 +1,4 @@
+//! `jointid`: command-line entry point.
+fn main() {
+    println!("jointid");
+}

@@ -1,0 +1,1 @@
+//! Helpers shared by the workspace-level tests (finding the firmware, running QEMU).
