@@ -6,3 +6,5 @@
 //! an [`data::IdData`] and return values.
 
 pub mod data;
+pub mod linalg;
+pub mod ss;
