@@ -8,3 +8,4 @@
 pub mod data;
 pub mod linalg;
 pub mod ss;
+pub mod subspace;

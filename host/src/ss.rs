@@ -274,15 +274,17 @@ impl StateSpace {
     }
 
     /// Resonances (complex pole pairs) and anti-resonances (complex zero
-    /// pairs) with damping below `max_damping`, mapped to continuous time by
-    /// `s = ln(z)/Ts`; roots above 0.9 × Nyquist (sampling zeros) are left out.
-    /// The integrator of a position output adds a real pole only, so the
-    /// pairs are those of the velocity-type part.
-    pub fn resonances(&self, max_damping: f64) -> Resonances {
+    /// pairs) above `f_min_hz` [Hz] with damping below `max_damping`, mapped
+    /// to continuous time by `s = ln(z)/Ts`; roots above 0.9 × Nyquist
+    /// (sampling zeros) are left out. The integrator of a position output
+    /// adds a real pole only, so the pairs are those of the velocity-type
+    /// part; `f_min_hz` drops the near-rigid-body pairs an estimated double
+    /// integrator may show.
+    pub fn resonances(&self, f_min_hz: f64, max_damping: f64) -> Resonances {
         let ts = self.ts;
         let fmax = 0.45 / ts;
         let to_s = |z: Complex<f64>| z.ln() / ts;
-        let keep = |m: &Mode| m.damping < max_damping;
+        let keep = |m: &Mode| m.damping < max_damping && m.freq_hz >= f_min_hz;
         Resonances {
             resonances: complex_modes(&self.poles(), to_s, fmax)
                 .into_iter()
@@ -421,9 +423,9 @@ impl ContinuousSs {
     }
 
     /// Resonances and anti-resonances (complex pole / zero pairs of the s-plane
-    /// model) with damping below `max_damping`.
-    pub fn resonances(&self, max_damping: f64) -> Resonances {
-        let keep = |m: &Mode| m.damping < max_damping;
+    /// model) above `f_min_hz` [Hz] with damping below `max_damping`.
+    pub fn resonances(&self, f_min_hz: f64, max_damping: f64) -> Resonances {
+        let keep = |m: &Mode| m.damping < max_damping && m.freq_hz >= f_min_hz;
         Resonances {
             resonances: complex_modes(&self.poles(), |s| s, f64::INFINITY)
                 .into_iter()
@@ -502,7 +504,7 @@ mod tests {
         let (j1, j2, k): (f64, f64, f64) = (0.01, 0.03, 400.0);
         let fr = (k * (1.0 / j1 + 1.0 / j2)).sqrt() / (2.0 * std::f64::consts::PI);
         let fa = (k / j2).sqrt() / (2.0 * std::f64::consts::PI);
-        for r in [c.resonances(0.5), c.zoh(5e-4).resonances(0.5)] {
+        for r in [c.resonances(1.0, 0.5), c.zoh(5e-4).resonances(1.0, 0.5)] {
             assert_eq!(r.resonances.len(), 1, "{r:?}");
             assert_eq!(r.anti_resonances.len(), 1, "{r:?}");
             assert!(
