@@ -7,5 +7,6 @@
 
 pub mod data;
 pub mod linalg;
+pub mod pem;
 pub mod ss;
 pub mod subspace;
