@@ -6,6 +6,7 @@
 //! an [`data::IdData`] and return values.
 
 pub mod data;
+pub mod grey_box;
 pub mod linalg;
 pub mod pem;
 pub mod ss;
