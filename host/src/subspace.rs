@@ -759,4 +759,109 @@ pub(crate) mod tests {
         let err = pole_error(&fit.model, &plant);
         assert!(err < 2e-3, "max pole error {err}");
     }
+
+    fn resonance_error(est: &StateSpace, truth: &StateSpace) -> f64 {
+        // largest relative error of the true resonance / anti-resonance
+        // frequencies against the nearest estimated ones
+        let (e, t) = (est.resonances(1.0, 0.3), truth.resonances(1.0, 0.3));
+        let worst = |est: &[crate::ss::Mode], tr: &[crate::ss::Mode]| {
+            tr.iter()
+                .map(|m| {
+                    est.iter()
+                        .map(|q| (q.freq_hz - m.freq_hz).abs() / m.freq_hz)
+                        .fold(f64::INFINITY, f64::min)
+                })
+                .fold(0.0, f64::max)
+        };
+        worst(&e.resonances, &t.resonances).max(worst(&e.anti_resonances, &t.anti_resonances))
+    }
+
+    #[test]
+    fn pbsid_recovers_order_6_three_mass_resonances_on_closed_loop() {
+        use crate::grey_box::{GreyBoxModel, Output, Structure, DEFAULT_GEAR_RATIO};
+        let r2 = DEFAULT_GEAR_RATIO * DEFAULT_GEAR_RATIO;
+        let p = [
+            5e-3,
+            4e-3 / r2,
+            3e-3 / r2,
+            40.0 / r2,
+            15.0 / r2,
+            0.004 / r2,
+            0.002 / r2,
+            0.01,
+        ];
+        let gm = GreyBoxModel {
+            structure: Structure::ThreeMass,
+            output: Output::Angle,
+            r: DEFAULT_GEAR_RATIO,
+            ts: 2e-3,
+        };
+        let plant = gm.continuous(&p).zoh(2e-3);
+        let spec = LoopSpec {
+            kp: 1.0,
+            kd: 0.02,
+            noise: 1e-4,
+            colour: 0.0,
+            seed: 8,
+            n: 10_000,
+            r_smooth: 0.8,
+            u_dither: 0.02,
+        };
+        let data = closed_loop(&plant, &spec);
+        let opts = SubspaceOptions {
+            method: Method::Pbsid,
+            order: Order::Fixed(6),
+            past: 30,
+            ..Default::default()
+        };
+        let fit = estimate(&data, &opts).unwrap();
+        let err = resonance_error(&fit.model, &plant);
+        assert!(
+            err < 0.01,
+            "relative frequency error {err}: {:?} vs {:?}",
+            fit.model.resonances(1.0, 0.3),
+            plant.resonances(1.0, 0.3)
+        );
+    }
+
+    #[test]
+    fn pbsid_bias_smaller_than_moesp_under_feedback_with_coloured_noise() {
+        let plant = two_mass_ct(true).zoh(2e-3);
+        let mut e_moesp = 0.0;
+        let mut e_pbsid = 0.0;
+        for seed in 0..3 {
+            let spec = LoopSpec {
+                kp: 2.0,
+                kd: 0.05,
+                noise: 2e-3,
+                colour: 0.95,
+                seed: 40 + seed,
+                n: 20_000,
+                r_smooth: 0.9,
+                u_dither: 0.0,
+            };
+            let data = closed_loop(&plant, &spec);
+            for (method, acc) in [(Method::Moesp, &mut e_moesp), (Method::Pbsid, &mut e_pbsid)] {
+                // order 5: the four plant states plus the state of the AR(1) noise
+                let opts = SubspaceOptions {
+                    method,
+                    order: Order::Fixed(5),
+                    past: 80,
+                    ..Default::default()
+                };
+                let fit = estimate(&data, &opts).unwrap();
+                *acc += resonance_error(&fit.model, &plant);
+            }
+        }
+        eprintln!(
+            "mean relative resonance error: MOESP {:.4}, PBSID {:.4}",
+            e_moesp / 3.0,
+            e_pbsid / 3.0
+        );
+        assert!(
+            e_pbsid < 0.5 * e_moesp,
+            "PBSID {e_pbsid} vs MOESP {e_moesp}"
+        );
+        assert!(e_pbsid / 3.0 < 0.03, "PBSID {e_pbsid}");
+    }
 }
