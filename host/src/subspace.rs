@@ -77,6 +77,20 @@ pub struct SubspaceOptions {
     /// estimate the direct feed-through `D` (false: `D = 0`, the usual
     /// choice for a torque → angle model)
     pub feedthrough: bool,
+    /// how PBSID estimates `B`, `D` once `A`, `C` are known (MOESP always
+    /// uses [`BdEstimate::SimulationLs`])
+    pub bd: BdEstimate,
+}
+
+/// Second step of PBSID: where `B` and `D` come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BdEstimate {
+    /// from the state regression `x(t+1) = A x + B u + K e` (consistent in
+    /// closed loop; keeps `K`)
+    StateRegression,
+    /// least squares on the simulation error with `x0` ([`fit_b_d_x0`];
+    /// best output-error fit, biased under feedback; keeps `K`)
+    SimulationLs,
 }
 
 impl Default for SubspaceOptions {
@@ -87,6 +101,7 @@ impl Default for SubspaceOptions {
             past: 0,
             future: 0,
             feedthrough: false,
+            bd: BdEstimate::StateRegression,
         }
     }
 }
@@ -407,7 +422,14 @@ fn pbsid(
     let mut model = StateSpace::new(a, b_s / su, c_s * sy, d_s * sy / su, data.ts);
     model.k = Some(k_s / sy);
     stabilise(&mut model, &mut warnings);
-    let x0 = estimate_x0(&model, &data.u, &data.y);
+    let x0 = if opts.bd == BdEstimate::SimulationLs {
+        let (b, d, x0) = fit_b_d_x0(&model.a, &model.c, &data.u, &data.y, opts.feedthrough)?;
+        model.b = b;
+        model.d = d;
+        x0
+    } else {
+        estimate_x0(&model, &data.u, &data.y)
+    };
     Ok(SubspaceFit {
         model,
         x0,
