@@ -842,7 +842,6 @@ pub fn features(
     let opts = SubspaceOptions {
         method: Method::Pbsid,
         order: Order::Fixed(order),
-        past: (2 * order + 2).max(30),
         ..Default::default()
     };
     let sid = subspace::estimate(data, &opts)?;
