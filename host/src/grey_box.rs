@@ -1304,4 +1304,93 @@ pub(crate) mod tests {
         let off = f.get("offset").unwrap();
         assert!((off + 3.1648).abs() < 0.5, "offset {off}");
     }
+
+    #[test]
+    fn rigid_fit_recovers_inertia_and_friction_on_closed_loop() {
+        let ts = 1e-3;
+        let model = GreyBoxModel {
+            structure: Structure::Rigid,
+            output: Output::Angle,
+            r: DEFAULT_GEAR_RATIO,
+            ts,
+        };
+        let p = [0.02, 0.15];
+        let plant = model.continuous(&p).zoh(ts);
+        let spec = LoopSpec {
+            kp: 3.0,
+            kd: 0.05,
+            noise: 1e-5,
+            colour: 0.0,
+            seed: 5,
+            n: 6000,
+            r_smooth: 0.9,
+            u_dither: 0.05,
+        };
+        let data = closed_loop(&plant, &spec);
+        let f = fit(
+            &data,
+            &GreyBoxOptions {
+                structure: Structure::Rigid,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        for (est, t) in f.params.iter().zip(&p) {
+            assert!(
+                (est.value - t).abs() < 0.02 * t,
+                "{}: {} vs {t}",
+                est.name,
+                est.value
+            );
+        }
+    }
+
+    #[test]
+    fn four_mass_fit_recovers_parameters_from_automatic_initial_values() {
+        let ts = 2e-3;
+        let r2 = DEFAULT_GEAR_RATIO * DEFAULT_GEAR_RATIO;
+        let model = GreyBoxModel {
+            structure: Structure::FourMass,
+            output: Output::Angle,
+            r: DEFAULT_GEAR_RATIO,
+            ts,
+        };
+        let p = [
+            5e-3,
+            4e-3 / r2,
+            3e-3 / r2,
+            1e-3 / r2,
+            40.0 / r2,
+            15.0 / r2,
+            20.0 / r2,
+            0.004 / r2,
+            0.002 / r2,
+            0.001 / r2,
+            0.01,
+        ];
+        let plant = model.continuous(&p).zoh(ts);
+        let spec = LoopSpec {
+            kp: 1.0,
+            kd: 0.02,
+            noise: 2e-5,
+            colour: 0.0,
+            seed: 23,
+            n: 10_000,
+            r_smooth: 0.8,
+            u_dither: 0.02,
+        };
+        let data = closed_loop(&plant, &spec);
+        let f = fit(
+            &data,
+            &GreyBoxOptions {
+                structure: Structure::FourMass,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        for (est, t) in f.params.iter().zip(&p) {
+            let rel = (est.value - t).abs() / t;
+            assert!(rel < 0.05, "{}: {} vs {t}", est.name, est.value);
+        }
+    }
 }

@@ -740,6 +740,58 @@ mod tests {
         );
     }
 
+    #[test]
+    fn innovations_sensitivities_match_finite_differences() {
+        let model = TwoMassLog { ts: 2e-3 };
+        let th_true: Vec<f64> = [0.01f64, 0.02, 200.0, 0.02, 0.05]
+            .iter()
+            .map(|v| v.ln())
+            .collect();
+        let mut m = model.to_ss(&th_true);
+        m.k = Some(DVector::from_vec(vec![0.3, 0.1, -0.2, 0.05]));
+        let data = data_for(&model.to_ss(&th_true), 12, 300, 1e-3);
+        let (fs, th) = FullSs::from_ss(&m, false, true);
+        let x0 = DVector::from_vec(vec![1e-3, 0.0, 2e-4, 0.0]);
+        let free: Vec<usize> = (0..fs.n_params()).collect();
+        let (jtj, jte, _) = normal_equations(&fs, &th, &free, &x0, true, &data);
+        // Jᵀε for an A entry, a K entry and an x0 entry against finite differences of the predictor
+        let y0 = predict(&fs.to_ss(&th), &data.u, &data.y, &x0);
+        let e0: Vec<f64> = data.y.iter().zip(&y0).map(|(a, b)| a - b).collect();
+        let h = 1e-7;
+        for i in [5usize, fs.n_params() - 2] {
+            let mut tp = th.clone();
+            tp[i] += h;
+            let y1 = predict(&fs.to_ss(&tp), &data.u, &data.y, &x0);
+            let g: f64 = y1
+                .iter()
+                .zip(&y0)
+                .zip(&e0)
+                .map(|((a, b), e)| (a - b) / h * e)
+                .sum();
+            assert!(
+                (jte[i] - g).abs() < 1e-4 * g.abs().max(1e-12),
+                "param {i}: {} vs {g}",
+                jte[i]
+            );
+        }
+        let mut xp = x0.clone();
+        xp[2] += h;
+        let y1 = predict(&fs.to_ss(&th), &data.u, &data.y, &xp);
+        let g: f64 = y1
+            .iter()
+            .zip(&y0)
+            .zip(&e0)
+            .map(|((a, b), e)| (a - b) / h * e)
+            .sum();
+        let i = fs.n_params() + 2;
+        assert!(
+            (jte[i] - g).abs() < 1e-4 * g.abs().max(1e-12),
+            "x0: {} vs {g}",
+            jte[i]
+        );
+        assert!(jtj[(i, i)] > 0.0);
+    }
+
     fn fit_pct(y: &[f64], yh: &[f64]) -> f64 {
         let m = y.iter().sum::<f64>() / y.len() as f64;
         let e: f64 = y
