@@ -901,4 +901,50 @@ pub(crate) mod tests {
         );
         assert!(e_pbsid / 3.0 < 0.03, "PBSID {e_pbsid}");
     }
+
+    #[test]
+    fn pbsid_order_20_keeps_three_mass_resonances() {
+        use crate::grey_box::{GreyBoxModel, Output, Structure, DEFAULT_GEAR_RATIO};
+        let r2 = DEFAULT_GEAR_RATIO * DEFAULT_GEAR_RATIO;
+        let p = [
+            5e-3,
+            4e-3 / r2,
+            3e-3 / r2,
+            40.0 / r2,
+            15.0 / r2,
+            0.004 / r2,
+            0.002 / r2,
+            0.01,
+        ];
+        let gm = GreyBoxModel {
+            structure: Structure::ThreeMass,
+            output: Output::Angle,
+            r: DEFAULT_GEAR_RATIO,
+            ts: 2e-3,
+        };
+        let plant = gm.continuous(&p).zoh(2e-3);
+        let spec = LoopSpec {
+            kp: 1.0,
+            kd: 0.02,
+            noise: 1e-4,
+            colour: 0.0,
+            seed: 9,
+            n: 10_000,
+            r_smooth: 0.8,
+            u_dither: 0.02,
+        };
+        let data = closed_loop(&plant, &spec);
+        let fit = estimate(
+            &data,
+            &SubspaceOptions {
+                order: Order::Fixed(20),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(fit.model.order(), 20);
+        assert!(fit.model.spectral_radius() <= 1.0 + 1e-9);
+        let err = resonance_error(&fit.model, &plant);
+        assert!(err < 0.01, "relative frequency error {err}");
+    }
 }
