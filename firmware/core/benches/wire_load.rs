@@ -128,7 +128,7 @@ fn main() {
     loop {
         sampler.tick_io(500u32.wrapping_mul(k), &mut io);
         k += 1;
-        if k % 16 == 0 && pump.poll(&mut meter) == PumpState::Done {
+        if k.is_multiple_of(16) && pump.poll(&mut meter) == PumpState::Done {
             break;
         }
         if k as usize > total + 100 {
