@@ -141,9 +141,17 @@ fn main() {
     let mut dec = Decoder::new();
     let mut damaged = 0;
     let mut end = None;
+    // batches per (torque order, angle order) the encoder chose
+    let mut orders = [[0usize; 3]; 3];
+    let mut data_bytes = 0usize;
     dec.feed(&meter.stream, |e| match e {
         DecodeEvent::Frame { message, .. } => match message {
-            Message::Batch(b) => raw.extend(b.samples()),
+            Message::Batch(b) => {
+                let (t, a) = b.predictor_orders();
+                orders[t as usize][a as usize] += 1;
+                data_bytes += b.data_len();
+                raw.extend(b.samples());
+            }
             Message::End(s) => end = Some(s),
             _ => {}
         },
@@ -177,6 +185,11 @@ fn main() {
         cfg.rms_rad,
         range(&t),
         range(&a)
+    );
+    println!(
+        "predictor orders chosen per batch (torque x angle, 0 = value, 1 = first, \
+         2 = second difference): {orders:?}; delta-coded data {:.3} bytes/sample",
+        data_bytes as f64 / total as f64
     );
     let ours = load(&meter.frame_lens);
     report(

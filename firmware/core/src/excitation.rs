@@ -1229,6 +1229,48 @@ mod tests {
     }
 
     #[test]
+    fn bad_shape_rms_and_rate_are_refused_with_their_values() {
+        let limits = SafetyLimits::default();
+        let cfg = ExcitationConfig::paper_default();
+        for cutoff_hz in [0.0, -5.0, f32::NAN] {
+            match (ExcitationConfig { cutoff_hz, ..cfg }).validate(&limits) {
+                Err(ExcitationError::BadCutoff { cutoff_hz: got }) => {
+                    assert_eq!(got.to_bits(), cutoff_hz.to_bits())
+                }
+                other => panic!("cut-off {cutoff_hz}: {other:?}"),
+            }
+        }
+        assert_eq!(
+            ExcitationConfig {
+                rms_rad: -0.1,
+                ..cfg
+            }
+            .validate(&limits),
+            Err(ExcitationError::BadRms { rms_rad: -0.1 })
+        );
+        assert_eq!(
+            ExcitationConfig { fs_hz: 0, ..cfg }.validate(&limits),
+            Err(ExcitationError::ZeroSampleRate)
+        );
+        // rms 0 is allowed: an all-zero run (a dry run of the whole chain)
+        let zero = ExcitationConfig {
+            rms_rad: 0.0,
+            ..cfg
+        };
+        assert_eq!(zero.validate(&limits), Ok(()));
+        assert!(period_of(&zero).iter().all(|&x| x == 0.0));
+        // messages name value and limit
+        let msg = format!(
+            "{}",
+            ExcitationError::PeakAngle {
+                value_rad: 0.7,
+                limit_rad: 0.5
+            }
+        );
+        assert_eq!(msg, "peak angle 0.7 rad exceeds the limit of 0.5 rad");
+    }
+
+    #[test]
     fn from_f0_refuses_non_integer_periods() {
         assert_eq!(
             ExcitationConfig::from_f0(2000, 0.4).unwrap(),
