@@ -814,7 +814,7 @@ impl<'a> Excitation<'a> {
 ///
 /// # Errors
 /// [`ExcitationError::Endless`] when `periods == 0`, and the errors of [`Excitation::new`].
-#[cfg(feature = "std")]
+#[cfg(any(feature = "std", test))]
 pub fn generate(cfg: &ExcitationConfig) -> Result<Vec<f32>, ExcitationError> {
     let total = cfg.total_samples().ok_or(ExcitationError::Endless)?;
     let mut table = vec![0.0f32; cfg.period_samples as usize];
@@ -971,7 +971,6 @@ mod tests {
         assert!((kurtosis - 3.0).abs() < 0.3, "kurtosis {kurtosis}");
     }
 
-    #[cfg(feature = "std")]
     #[test]
     fn consecutive_periods_are_bit_identical() {
         let cfg = ExcitationConfig {
@@ -994,7 +993,6 @@ mod tests {
         }
     }
 
-    #[cfg(feature = "std")]
     #[test]
     fn generate_equals_next_sequence() {
         let cfg = ExcitationConfig {
@@ -1075,7 +1073,6 @@ mod tests {
 
     const PINNED_BITS: [u32; 5] = [1009278708, 1011488412, 1014297114, 3162960695, 1007787986];
 
-    #[cfg(feature = "std")]
     #[test]
     fn ramps_start_and_end_at_zero_without_steps() {
         let cfg = ExcitationConfig {

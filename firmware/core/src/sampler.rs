@@ -11,7 +11,7 @@
 //! counting, so the host sees the gap as well.
 //!
 //! The [`TxPump`] runs in the idle loop: it sends the [`SessionHeader`], pops
-//! samples, packs them into [`SampleBatch`](crate::wire::SampleBatch)es,
+//! samples, packs them into sample batches (`SampleBatch`),
 //! frames them and hands the frames to a [`FrameSink`], with a [`Status`]
 //! every few batches and [`Message::End`] once the excitation has finished.
 //! Samples of a frame the sink could not send are counted as queue drops.
