@@ -12,7 +12,7 @@
 //! Run: `cargo bench -p jointid-core --features std --bench wire_load`
 
 use heapless::spsc::Queue;
-use jointid_core::excitation::{Excitation, ExcitationConfig};
+use jointid_core::excitation::{crest_factor, Excitation, ExcitationConfig};
 use jointid_core::joint::{JointIo, JointParams, JointSim};
 use jointid_core::sampler::{Counters, PumpConfig, PumpState, Sampler, TaggedSample, TxPump};
 use jointid_core::transport::can::{
@@ -117,6 +117,15 @@ fn main() {
     };
     let mut table = vec![0.0f32; cfg.period_samples as usize];
     let exc = Excitation::new(&cfg, &mut table).unwrap();
+    let peaks = cfg.peaks().unwrap();
+    println!(
+        "excitation: peak {:.4} rad, crest factor {:.2}, peak velocity {:.1} rad/s \
+         ({:.1} with the ramp bound)",
+        peaks.angle_rad,
+        crest_factor(exc.period()),
+        peaks.velocity_rad_s,
+        peaks.velocity_with_ramp_rad_s
+    );
     let mut queue: Queue<TaggedSample, 256> = Queue::new();
     let (producer, consumer) = queue.split();
     let counters = Counters::new();

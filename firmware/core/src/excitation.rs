@@ -260,7 +260,8 @@ pub struct SignalPeaks {
     pub angle_rad: f32,
     /// max |θ_ref(n+1) - θ_ref(n)|·fs over one period, wrapping around [rad/s]
     pub velocity_rad_s: f32,
-    /// velocity bound including the raised-cosine ramp: `velocity + angle·π·fs/(2R)` [rad/s]
+    /// velocity bound including the raised-cosine ramp: `velocity + angle·π·fs/(2R)`,
+    /// or `velocity + angle·fs` without a ramp (a jump from rest) [rad/s]
     pub velocity_with_ramp_rad_s: f32,
 }
 
@@ -495,7 +496,9 @@ impl PeakTracker {
         let ramp = if cfg.ramp_samples > 0 {
             self.peak_angle * core::f32::consts::PI * fs / (2.0 * cfg.ramp_samples as f32)
         } else {
-            0.0
+            // no ramp: the reference jumps from rest to the table, up to
+            // the peak within one sample
+            self.peak_angle * fs
         };
         SignalPeaks {
             angle_rad: self.peak_angle,
@@ -1248,6 +1251,19 @@ mod tests {
         assert_eq!(
             ExcitationConfig { fs_hz: 0, ..cfg }.validate(&limits),
             Err(ExcitationError::ZeroSampleRate)
+        );
+        // no ramp means a jump from rest: refused by the velocity limit
+        let no_ramp = ExcitationConfig {
+            ramp_samples: 0,
+            ..cfg
+        };
+        let peaks = no_ramp.peaks().unwrap();
+        assert_eq!(
+            no_ramp.validate(&limits),
+            Err(ExcitationError::PeakVelocity {
+                value_rad_s: peaks.velocity_rad_s + peaks.angle_rad * 2000.0,
+                limit_rad_s: limits.peak_velocity_rad_s
+            })
         );
         // rms 0 is allowed: an all-zero run (a dry run of the whole chain)
         let zero = ExcitationConfig {
