@@ -1489,4 +1489,46 @@ pub(crate) mod tests {
             );
         }
     }
+
+    #[test]
+    fn two_mass_fit_recovers_parameters_from_velocity_output() {
+        let ts = 1e-3;
+        let r2 = DEFAULT_GEAR_RATIO * DEFAULT_GEAR_RATIO;
+        let model = GreyBoxModel {
+            structure: Structure::TwoMass,
+            output: Output::Velocity,
+            r: DEFAULT_GEAR_RATIO,
+            ts,
+        };
+        // motor side: J_m 4e-3, J_a1' 6e-3 kg·m², k_g' 30 N·m/rad (resonance 14 Hz, anti-resonance 11 Hz)
+        let p = [4e-3, 6e-3 / r2, 30.0 / r2, 0.004 / r2, 0.02];
+        let plant = model.continuous(&p).zoh(ts);
+        // velocity loop: the same P-D law acting on the measured velocity
+        let spec = LoopSpec {
+            kp: 0.3,
+            kd: 0.0,
+            noise: 1e-3,
+            colour: 0.0,
+            seed: 31,
+            n: 8000,
+            r_smooth: 0.9,
+            u_dither: 0.02,
+        };
+        let data = closed_loop(&plant, &spec);
+        let opts = GreyBoxOptions {
+            structure: Structure::TwoMass,
+            output: Output::Velocity,
+            ..Default::default()
+        };
+        let f = fit(&data, &opts).unwrap();
+        for (est, t) in f.params.iter().zip(&p) {
+            assert!(
+                (est.value - t).abs() < 0.05 * t,
+                "{}: {} vs {t}; features {:?}",
+                est.name,
+                est.value,
+                f.features
+            );
+        }
+    }
 }
