@@ -19,6 +19,7 @@ use jointid::grey_box::{
     self, GreyBoxModel, GreyBoxOptions, Output, Structure, DEFAULT_GEAR_RATIO,
 };
 use jointid::linalg::{filtfilt_lowpass, GaussRng};
+use jointid::pem::{self, FullSs, ParamModel, PemOptions};
 use jointid::ss::StateSpace;
 use jointid::subspace::{self, estimate_x0, Method, Order, SubspaceOptions};
 use nalgebra::DVector;
@@ -110,6 +111,40 @@ fn freqs(m: &StateSpace) -> (Vec<f64>, Vec<f64>) {
     )
 }
 
+/// black-box output-error refinement (full parameterisation) of a subspace model
+fn pem_line(m: &StateSpace, est: &IdData, val: &IdData) {
+    let mut m0 = m.clone();
+    m0.k = None;
+    let (fs, th) = FullSs::from_ss(&m0, false, false);
+    let t = Instant::now();
+    match pem::fit(
+        &fs,
+        &th,
+        est,
+        &PemOptions {
+            max_iter: 20,
+            ..Default::default()
+        },
+    ) {
+        Ok(pf) => {
+            let dt = t.elapsed().as_secs_f64();
+            let (r, a) = freqs(&pf.model);
+            println!(
+                "{:<34} {dt:>9.4} {:>9} {:>8.2} {:>8}  [{}] | [{}]  ({} iterations, {:?})",
+                format!("  +PEM (OE, {} params)", fs.n_params()),
+                "",
+                val_fit(&pf.model, val),
+                "",
+                fmt(&r),
+                fmt(&a),
+                pf.iterations,
+                pf.termination
+            );
+        }
+        Err(e) => println!("  +PEM failed: {e}"),
+    }
+}
+
 fn fmt(v: &[f64]) -> String {
     v.iter()
         .map(|f| format!("{f:.2}"))
@@ -178,6 +213,9 @@ fn main() {
                     let name = format!("{method:?} n={order} N={} dec={dec}", est.u.len());
                     match fit {
                         Ok(f) => {
+                            if dec == 10 && order == 11 && method == Method::Pbsid {
+                                pem_line(&f.model, &est, &val);
+                            }
                             let (r, a) = freqs(&f.model);
                             println!(
                                 "{name:<34} {dt:>9.4} {:>9.2} {:>8.2} {:>8}  [{}] | [{}]",

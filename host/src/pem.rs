@@ -191,6 +191,12 @@ fn cost_of(m: &StateSpace, data: &IdData, x0: &DVector<f64>) -> f64 {
     s / data.y.len() as f64
 }
 
+/// sparse vector: (index, value)
+type Sparse = Vec<(usize, f64)>;
+/// one parameter's predictor derivatives: ∂Ā as (row, column, value), ∂B̄,
+/// ∂C, ∂D, ∂K
+type SparseDer = (Vec<(usize, usize, f64)>, Sparse, Sparse, f64, Sparse);
+
 /// Normal equations `JᵀJ`, `Jᵀε` over the free parameters then the `x0`
 /// entries, by forward sensitivities.
 fn normal_equations<M: ParamModel + ?Sized>(
@@ -220,24 +226,74 @@ fn normal_equations<M: ParamModel + ?Sized>(
             (dabar, dbu, dk)
         })
         .collect();
-    let mut x = x0.clone();
-    let mut sens: Vec<DVector<f64>> = vec![DVector::zeros(n); nf];
-    let mut w = m.c.clone(); // C Ā^t
+    // flat, allocation-free propagation; derivative matrices kept sparse
+    // (the full parameterisation has one non-zero per parameter)
+    let nz = |v: &[f64]| -> Sparse {
+        v.iter()
+            .copied()
+            .enumerate()
+            .filter(|x| x.1 != 0.0)
+            .collect()
+    };
+    let sp: Vec<SparseDer> = dab
+        .iter()
+        .zip(&ders)
+        .map(|((dabar, dbu, dk), d)| {
+            let mut da = Vec::new();
+            for i in 0..n {
+                for c in 0..n {
+                    let v = dabar[(i, c)];
+                    if v != 0.0 {
+                        da.push((i, c, v));
+                    }
+                }
+            }
+            (
+                da,
+                nz(dbu.as_slice()),
+                nz(d.dc.as_slice()),
+                d.dd,
+                if has_k { nz(dk.as_slice()) } else { Vec::new() },
+            )
+        })
+        .collect();
+    let ar: Vec<f64> = (0..n * n).map(|q| abar[(q / n, q % n)]).collect();
+    let c = m.c.as_slice().to_vec();
+    let bu = b_u.as_slice().to_vec();
+    let kv = k.as_slice().to_vec();
+    let mut x = x0.as_slice().to_vec();
+    let mut xn = vec![0.0; n];
+    let mut sens = vec![0.0; nf * n];
+    let mut sens_n = vec![0.0; nf * n];
+    let mut w = c.clone(); // C Ā^t
+    let mut wn = vec![0.0; n];
     let mut jtj = DMatrix::<f64>::zeros(p, p);
     let mut jte = DVector::<f64>::zeros(p);
     let mut phi = vec![0.0; p];
     let mut ssr = 0.0;
     let mut acc = vec![0.0; p * p];
+    let dotn = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
     for (&ut, &yt) in data.u.iter().zip(&data.y) {
-        let yh = (&m.c * &x)[0] + m.d * ut;
+        let yh = dotn(&c, &x) + m.d * ut;
         let e = yt - yh;
         ssr += e * e;
-        for (j, d) in ders.iter().enumerate() {
-            phi[j] = (&m.c * &sens[j])[0] + (&d.dc * &x)[0] + d.dd * ut;
+        for (j, (_, _, dc, dd, _)) in sp.iter().enumerate() {
+            let mut v = dotn(&c, &sens[j * n..(j + 1) * n]) + dd * ut;
+            for &(i, cv) in dc {
+                v += cv * x[i];
+            }
+            phi[j] = v;
         }
         if with_x0 {
-            phi[nf..].copy_from_slice(w.as_slice());
-            w = &w * &abar;
+            phi[nf..].copy_from_slice(&w);
+            for (col, o) in wn.iter_mut().enumerate() {
+                let mut v = 0.0;
+                for (i, wi) in w.iter().enumerate() {
+                    v += wi * ar[i * n + col];
+                }
+                *o = v;
+            }
+            std::mem::swap(&mut w, &mut wn);
         }
         for i in 0..p {
             let pi = phi[i];
@@ -251,18 +307,29 @@ fn normal_equations<M: ParamModel + ?Sized>(
             jte[i] += pi * e;
         }
         // propagate sensitivities then the state
-        for (j, (dabar, dbu, dk)) in dab.iter().enumerate() {
-            let mut s = &abar * &sens[j] + dabar * &x + dbu * ut;
-            if has_k {
-                s += dk * yt;
+        for (j, (da, dbu, _, _, dk)) in sp.iter().enumerate() {
+            let sj = &sens[j * n..(j + 1) * n];
+            let out = &mut sens_n[j * n..(j + 1) * n];
+            for (i, o) in out.iter_mut().enumerate() {
+                *o = dotn(&ar[i * n..(i + 1) * n], sj);
             }
-            sens[j] = s;
+            for &(i, col, v) in da {
+                out[i] += v * x[col];
+            }
+            for &(i, v) in dbu {
+                out[i] += v * ut;
+            }
+            for &(i, v) in dk {
+                out[i] += v * yt;
+            }
         }
-        let mut xn = &abar * &x + &b_u * ut;
-        if has_k {
-            xn += &k * yt;
+        std::mem::swap(&mut sens, &mut sens_n);
+        for i in 0..n {
+            xn[i] = dotn(&ar[i * n..(i + 1) * n], &x)
+                + bu[i] * ut
+                + if has_k { kv[i] * yt } else { 0.0 };
         }
-        x = xn;
+        std::mem::swap(&mut x, &mut xn);
     }
     for i in 0..p {
         for j in i..p {
