@@ -10,8 +10,8 @@
 //! `Σ_t x(t+a) y(t+b)` differ along a diagonal only by two boundary terms,
 //! `S(a+1, b+1) = S(a, b) − x(a) y(b) + x(a+N) y(b+N)`, so only the first row
 //! and column need sums over the data (Van Overschee & De Moor, "Subspace
-//! Identification for Linear Systems", Kluwer 1996, §6.1.1, use the same
-//! structure for their fast covariance algorithm).
+//! Identification for Linear Systems", Kluwer 1996, exploit the same
+//! structure for fast covariance computation).
 
 use nalgebra::{DMatrix, DVector};
 

@@ -8,11 +8,11 @@
 //! (`x(t+1) = (A − K C) x + (B − K D) u + K y`, `ŷ = C x + D u`).
 //!
 //! Method: Levenberg–Marquardt with Marquardt's diagonal scaling (Nocedal &
-//! Wright, "Numerical Optimization", 2nd ed., §10.3), projected onto box
+//! Wright, "Numerical Optimization", 2nd ed., ch. 10), projected onto box
 //! bounds after each step; some parameters may be fixed. The Jacobian
 //! `∂ŷ/∂θ` comes from forward sensitivity equations propagated with the
-//! simulation (Ljung, "System Identification", 2nd ed., §10.3, eq. (10.57)
-//! for the state-space gradient): `s_i(t+1) = Ā s_i + ∂Ā x + ∂B̄ [u; y]`,
+//! simulation (Ljung, "System Identification: Theory for the User", 2nd ed., ch. 10,
+//! gradient of the state-space predictor): `s_i(t+1) = Ā s_i + ∂Ā x + ∂B̄ [u; y]`,
 //! `∂ŷ = C s_i + ∂C x + ∂D u`. The matrix derivatives `∂(A, B, C, D, K)/∂θ_i`
 //! are analytic when the model provides them ([`FullSs`]) and central
 //! differences of the small matrices otherwise (grey-box models, where the
@@ -20,7 +20,7 @@
 //! part of the gradient is always propagated exactly. The initial state is
 //! estimated jointly (its gradient row is `C Ā^t`).
 //!
-//! Uncertainty: `cov(θ̂) = σ̂² (JᵀJ)^{−1}`, `σ̂² = Σ ε² / (N − p)` (Ljung §9.3,
+//! Uncertainty: `cov(θ̂) = σ̂² (JᵀJ)^{−1}`, `σ̂² = Σ ε² / (N − p)` (Ljung ch. 9,
 //! asymptotic covariance for white residuals; optimistic when the residuals
 //! are coloured or the data are closed loop and the noise model is wrong).
 //! Memory is linear in `N`: `JᵀJ` and `Jᵀε` are accumulated row by row.

@@ -12,12 +12,12 @@
 //!
 //! Source: ZOH by the exponential of the augmented matrix
 //! `exp([[F, G], [0, 0]] Ts) = [[A_T, B_T], [0, I]]` (Van Loan, "Computing
-//! integrals involving the matrix exponential", IEEE TAC 23(3), 1978, §1),
+//! integrals involving the matrix exponential", IEEE TAC 23(3), 1978),
 //! which gives eq. (12) and (13) of seed 000 in one call. Zeros of a SISO
 //! model with relative degree `ρ` are the eigenvalues of
 //! `A − B (C A^{ρ−1} B)^{−1} C A^ρ` other than the `ρ` eigenvalues that the
 //! projection puts at the origin (the zero dynamics of the normal form,
-//! Isidori, "Nonlinear Control Systems", 3rd ed., §4.1, specialised to the
+//! Isidori, "Nonlinear Control Systems", 3rd ed., specialised to the
 //! linear case).
 
 use nalgebra::{Complex, DMatrix, DVector, RowDVector, Schur};

@@ -7,7 +7,8 @@
 //! Two methods:
 //! - [`Method::Moesp`]: PO-MOESP (Verhaegen, "Identification of the
 //!   deterministic part of MIMO state space models given in innovations form
-//!   from input-output data", Automatica 30(1), 1994, §4): the LQ factor of
+//!   from input-output data", Automatica 30(1), 1994; section numbers not
+//!   checked here): the LQ factor of
 //!   `[U_f; U_p; Y_p; Y_f]`, SVD of the block `L32`, `A` and `C` from the
 //!   shift invariance of the extended observability matrix, `B`, `D` and
 //!   `x0` by linear least squares on the simulation error. Consistent in
@@ -15,9 +16,9 @@
 //!   future noise and `A` is biased.
 //! - [`Method::Pbsid`]: predictor-based subspace identification (Chiuso,
 //!   "The role of vector autoregressive modeling in predictor-based subspace
-//!   identification", Automatica 43(6), 2007, §3–4; the "PBSID" estimator
-//!   with the product `Γ_f K_p` assembled from the VARX Markov parameters,
-//!   eq. (17)–(19) there). A VARX of order `p` gives the predictor Markov
+//!   identification", Automatica 43(6), 2007; the "PBSID" estimator with
+//!   the product `Γ_f K_p` assembled from the VARX Markov parameters;
+//!   section and equation numbers not checked here). A VARX of order `p` gives the predictor Markov
 //!   parameters `Φ_k = C Ã^{k−1} [B̃ K]`, `Ã = A − K C`; their block
 //!   Toeplitz arrangement is `Γ_f K_p`; its weighted SVD gives the state
 //!   `x(t) = K̂_p z_p(t)`, and `C, D` then `A, B, K` follow by least squares
@@ -256,7 +257,7 @@ pub fn estimate(data: &IdData, opts: &SubspaceOptions) -> Result<SubspaceFit, Su
     }
 }
 
-/// PO-MOESP (Verhaegen 1994, §4). Horizon `i = max(past, future)`.
+/// PO-MOESP (Verhaegen 1994). Horizon `i = max(past, future)`.
 fn moesp(
     data: &IdData,
     opts: &SubspaceOptions,
@@ -317,7 +318,7 @@ fn moesp(
     })
 }
 
-/// PBSID (Chiuso 2007, §3–4).
+/// PBSID (Chiuso 2007).
 fn pbsid(
     data: &IdData,
     opts: &SubspaceOptions,
@@ -510,7 +511,7 @@ fn sorted_svd(s: &DVector<f64>, u: &DMatrix<f64>) -> (Vec<f64>, DMatrix<f64>) {
 }
 
 /// `A = Γ_↑⁺ Γ_↓`, `C = Γ_0` (shift invariance of the extended observability
-/// matrix; Verhaegen 1994 §4, SISO so one row per block).
+/// matrix, Verhaegen 1994; SISO so one row per block).
 fn a_c_from_gamma(gamma: &DMatrix<f64>) -> Result<(DMatrix<f64>, RowDVector<f64>), SubspaceError> {
     let (rows, n) = gamma.shape();
     let up = gamma.rows(0, rows - 1).into_owned();
