@@ -561,8 +561,7 @@ pub fn fit_b_d_x0(
     let mut phi = vec![0.0; p];
     // accumulate the upper triangle in a flat buffer for speed
     let mut acc = vec![0.0; p * p];
-    for (t, (&ut, &yt)) in u.iter().zip(y).enumerate() {
-        let _ = t;
+    for (&ut, &yt) in u.iter().zip(y) {
         phi[..n].copy_from_slice(w.as_slice());
         phi[n..2 * n].copy_from_slice(v.as_slice());
         if feedthrough {
