@@ -43,68 +43,7 @@ use std::collections::BTreeMap;
 use std::fmt;
 use std::path::Path;
 
-pub use shim::{ExcitationConfig, SignalKind};
-
-/// Stand-in for `jointid_core::excitation::{ExcitationConfig, SignalKind}`
-/// with the binding names and shapes of the shared contract, until the core
-/// crate lands its excitation module; then this module is replaced by
-/// `pub use jointid_core::excitation::{ExcitationConfig, SignalKind};`.
-mod shim {
-    use serde::{Deserialize, Serialize};
-
-    /// which signal the generator produces
-    #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-    pub enum SignalKind {
-        /// lines k ≡ 1 or 3 (mod 8), 1 ≤ k ≤ F
-        SpecialOddMultisine,
-        /// all odd lines 1 ≤ k ≤ F
-        RandomOddMultisine,
-        /// band-limited noise (not periodic in the line sense)
-        BandLimitedNoise,
-    }
-
-    /// complete, small description of an excitation
-    #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-    pub struct ExcitationConfig {
-        /// signal kind
-        pub kind: SignalKind,
-        /// sample rate [Hz]
-        pub fs_hz: u32,
-        /// period N [samples]
-        pub period_samples: u32,
-        /// highest excited harmonic index F
-        pub max_line: u32,
-        /// first-order Butterworth amplitude shape cut-off [Hz]
-        pub cutoff_hz: f32,
-        /// RMS of the full-amplitude reference [rad]
-        pub rms_rad: f32,
-        /// phases / noise seed
-        pub seed: u64,
-        /// raised-cosine ramp length [samples]
-        pub ramp_samples: u32,
-        /// full-amplitude periods after the ramp-in (0 = endless)
-        pub periods: u32,
-    }
-
-    impl ExcitationConfig {
-        /// frequency resolution f0 = fs / N [Hz]
-        pub fn f0_hz(&self) -> f64 {
-            f64::from(self.fs_hz) / f64::from(self.period_samples)
-        }
-
-        /// whether harmonic `line` carries excitation energy
-        pub fn is_excited(&self, line: u32) -> bool {
-            if line == 0 || line > self.max_line {
-                return false;
-            }
-            match self.kind {
-                SignalKind::SpecialOddMultisine => line % 8 == 1 || line % 8 == 3,
-                SignalKind::RandomOddMultisine => line % 2 == 1,
-                SignalKind::BandLimitedNoise => false,
-            }
-        }
-    }
-}
+pub use jointid_core::excitation::{ExcitationConfig, SignalKind};
 
 /// Input/output record of one experiment, uniformly sampled.
 #[derive(Clone, Debug, PartialEq)]

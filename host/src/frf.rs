@@ -494,11 +494,11 @@ pub fn detect_period(x: &[f64], signal: &str) -> Result<usize, FrfError> {
 /// As [`Dataset::period_layout`], [`detect_period`] and [`analyze`].
 pub fn analyze_dataset(ds: &Dataset, settle_periods: usize) -> Result<FrfAnalysis, FrfError> {
     match ds.excitation {
-        Some(cfg) if cfg.kind != crate::data::SignalKind::BandLimitedNoise => {
+        Some(cfg) => {
             let layout = ds.period_layout(settle_periods)?;
             analyze(&ds.data, layout, ExcitedLines::Config(cfg))
         }
-        _ => {
+        None => {
             let (sig, name) = match &ds.data.r {
                 Some(r) => (r.as_slice(), "theta_ref"),
                 None => (ds.data.u.as_slice(), "u"),
@@ -1019,6 +1019,79 @@ mod tests {
             e.to_string().starts_with("no period found in `noise`"),
             "{e}"
         );
+    }
+
+    /// capture CSV text with the `# key=value` contract, reference from the
+    /// core generator, closed loop around [`plant`]
+    pub(crate) fn capture_csv(cubic: f64, seed: u64) -> String {
+        let c = ExcitationConfig {
+            kind: SignalKind::SpecialOddMultisine,
+            fs_hz: 1000,
+            period_samples: 500,
+            max_line: 120,
+            cutoff_hz: 50.0,
+            rms_rad: 0.5,
+            seed: 9,
+            ramp_samples: 300,
+            periods: 6,
+        };
+        let r: Vec<f64> = jointid_core::excitation::generate(&c)
+            .unwrap()
+            .into_iter()
+            .map(f64::from)
+            .collect();
+        let d = plant().run(&r, 0.002, cubic, seed);
+        let mut text = crate::data::excitation_comment_lines(&c);
+        text.push_str("# sample_interval_s=0.001\nt,theta_ref,u,theta_m\n");
+        for k in 0..d.len() {
+            text.push_str(&format!(
+                "{},{},{},{}\n",
+                k as f64 * 1e-3,
+                r[k],
+                d.u[k],
+                d.y[k]
+            ));
+        }
+        text
+    }
+
+    #[test]
+    fn capture_csv_with_core_multisine_analyses_end_to_end() {
+        let ds = crate::data::parse_csv(
+            &capture_csv(0.0, 4),
+            "cap.csv",
+            &crate::data::ColumnMap::capture(),
+        )
+        .unwrap();
+        let a = analyze_dataset(&ds, 1).unwrap();
+        // ramp-in 300 + 1 settling period; 6 − 1 periods; ramp-out excluded
+        assert_eq!(
+            a.layout,
+            PeriodLayout {
+                period: 500,
+                start: 800,
+                count: 5
+            }
+        );
+        assert_eq!(a.excited_source, ExcitedSource::Config);
+        assert_eq!(a.instrument, Instrument::Reference);
+        assert_eq!(a.frf.lines.len(), 30);
+        let sys = plant();
+        for ((k, g), s) in a.frf.lines.iter().zip(&a.frf.g).zip(&a.frf.sigma) {
+            let t = sys.plant(Complex64::from_polar(1.0, 2.0 * PI * *k as f64 / 500.0));
+            assert!(
+                (g - t).norm() < 5.0 * s + 1e-9,
+                "line {k}: {g} vs {t} (σ {s})"
+            );
+        }
+        assert!(!a.distortion_detected(), "{}", a.linearity_u.verdict);
+        let ds = crate::data::parse_csv(
+            &capture_csv(0.5, 4),
+            "cap.csv",
+            &crate::data::ColumnMap::capture(),
+        )
+        .unwrap();
+        assert!(analyze_dataset(&ds, 1).unwrap().linearity_y.odd.detected);
     }
 
     #[test]
