@@ -1043,14 +1043,8 @@ mod tests {
         let d = plant().run(&r, 0.002, cubic, seed);
         let mut text = crate::data::excitation_comment_lines(&c);
         text.push_str("# sample_interval_s=0.001\nt,theta_ref,u,theta_m\n");
-        for k in 0..d.len() {
-            text.push_str(&format!(
-                "{},{},{},{}\n",
-                k as f64 * 1e-3,
-                r[k],
-                d.u[k],
-                d.y[k]
-            ));
+        for (k, ((rk, uk), yk)) in r.iter().zip(&d.u).zip(&d.y).enumerate() {
+            text.push_str(&format!("{},{rk},{uk},{yk}\n", k as f64 * 1e-3));
         }
         text
     }

@@ -7,4 +7,5 @@
 
 pub mod data;
 pub mod frf;
+pub mod plot;
 pub mod validate;
