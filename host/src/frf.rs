@@ -704,7 +704,7 @@ fn linearity(name: &str, s: &LineStats, classes: &[LineClass], periods: usize) -
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::data::SignalKind;
     use std::f64::consts::PI;
