@@ -323,6 +323,19 @@ impl Dataset {
     }
 }
 
+impl Dataset {
+    /// The record restricted to its whole steady-state periods
+    /// ([`Dataset::period_layout`]), for estimators that want periodic data
+    /// without the transient.
+    ///
+    /// # Errors
+    /// As [`Dataset::period_layout`].
+    pub fn steady_data(&self, settle_periods: usize) -> Result<(IdData, PeriodLayout), DataError> {
+        let lay = self.period_layout(settle_periods)?;
+        Ok((self.data.slice(lay.range()), lay))
+    }
+}
+
 /// Errors of loading and preparing data.
 #[derive(Debug, thiserror::Error)]
 pub enum DataError {

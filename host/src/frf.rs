@@ -1089,6 +1089,43 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn detect_period_on_a_mapped_csv_without_config_or_reference() {
+        let c = cfg(400, 50, 7);
+        let r = multisine(&c, 7, 8);
+        let sys = plant();
+        let d = sys.run(&r, 0.001, 0.0, 2);
+        let mut text = String::from("time_s,torque,angle,unused\n");
+        for (k, (u, y)) in d.u.iter().zip(&d.y).enumerate() {
+            text.push_str(&format!("{},{u},{y},0\n", k as f64 * 1e-3));
+        }
+        let map = crate::data::ColumnMap {
+            time: "time_s".into(),
+            input: "torque".into(),
+            output: "angle".into(),
+            reference: None,
+        };
+        let ds = crate::data::parse_csv(&text, "mapped.csv", &map).unwrap();
+        assert!(ds.excitation.is_none() && ds.data.r.is_none());
+        let a = analyze_dataset(&ds, 1).unwrap();
+        assert_eq!(
+            a.layout,
+            PeriodLayout {
+                period: 400,
+                start: 400,
+                count: 6
+            }
+        );
+        assert_eq!(a.instrument, Instrument::Input);
+        assert_eq!(a.excited_source, ExcitedSource::Detected);
+        let want: Vec<u32> = (1..=50).filter(|&k| c.is_excited(k)).collect();
+        assert_eq!(a.frf.lines, want);
+        for (k, g) in a.frf.lines.iter().zip(&a.frf.g) {
+            let t = sys.plant(Complex64::from_polar(1.0, 2.0 * PI * *k as f64 / 400.0));
+            assert!((g - t).norm() < 0.05 * t.norm(), "line {k}");
+        }
+    }
+
+    #[test]
     fn too_few_periods_is_an_error() {
         let d = IdData {
             ts: 1.0,

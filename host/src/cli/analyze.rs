@@ -201,7 +201,7 @@ fn print_table(
         out,
         "FRF u -> theta_m at the excited lines{}",
         if step > 1 {
-            format!(" (every {step}th line; --all-lines or --json for all)")
+            format!(" (one line in {step}; --all-lines or --json for all)")
         } else {
             String::new()
         }
