@@ -97,7 +97,13 @@ pub fn spectrum_svg(title: &str, panels: &[SpectrumPanel<'_>]) -> Result<String,
         let root = root
             .titled(title, ("sans-serif", 20))
             .map_err(draw_err(W))?;
-        for (area, p) in root.split_evenly((panels.len(), 1)).iter().zip(panels) {
+        let last = panels.len() - 1;
+        for (i, (area, p)) in root
+            .split_evenly((panels.len(), 1))
+            .iter()
+            .zip(panels)
+            .enumerate()
+        {
             let shown: Vec<usize> = (0..p.freq_hz.len())
                 .filter(|&k| {
                     !matches!(
@@ -157,7 +163,11 @@ pub fn spectrum_svg(title: &str, panels: &[SpectrumPanel<'_>]) -> Result<String,
                 }))
                 .map_err(draw_err(W))?
                 .label("excited (+)")
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 8, y)], BLUE));
+                .legend(|(x, y)| {
+                    EmptyElement::at((x + 4, y))
+                        + PathElement::new(vec![(-4, 0), (4, 0)], BLUE)
+                        + PathElement::new(vec![(0, -4), (0, 4)], BLUE)
+                });
             chart
                 .draw_series(of(LineClass::OddNonExcited).map(|k| Cross::new(at(k), 3, RED)))
                 .map_err(draw_err(W))?
@@ -170,13 +180,15 @@ pub fn spectrum_svg(title: &str, panels: &[SpectrumPanel<'_>]) -> Result<String,
                 .map_err(draw_err(W))?
                 .label("even (o)")
                 .legend(|(x, y)| Circle::new((x + 4, y), 3, GREEN.stroke_width(1)));
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()
-                .map_err(draw_err(W))?;
+            if i == last {
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.8))
+                    .border_style(BLACK)
+                    .position(SeriesLabelPosition::MiddleRight)
+                    .draw()
+                    .map_err(draw_err(W))?;
+            }
         }
         root.present().map_err(draw_err(W))?;
     }
@@ -260,7 +272,7 @@ pub fn bode_svg(
             .titled(title, ("sans-serif", 20))
             .map_err(draw_err(W))?;
         let (top, bottom) = root.split_vertically(370);
-        let fmt_hz = |f: &f64| format!("{f:.3}");
+        let fmt_hz = |f: &f64| format!("{}", (f * 1e6).round() / 1e6);
         for (area, is_mag) in [(top, true), (bottom, false)] {
             let (lo, hi) = if is_mag { (mlo, mhi) } else { (plo, phi) };
             let mut chart = ChartBuilder::on(&area)
@@ -387,8 +399,8 @@ mod tests {
         };
         let svg = spectrum_svg("test", &[p, p, p]).unwrap();
         assert!(svg.starts_with("<svg"));
-        // 3 panels × 6 even lines (2..12) drawn as circles, plus 3 legend circles
-        assert_eq!(svg.matches("<circle").count(), 3 * 6 + 3, "{svg}");
+        // 3 panels × 6 even lines (2..12) drawn as circles, plus one legend circle
+        assert_eq!(svg.matches("<circle").count(), 3 * 6 + 1, "{svg}");
         assert!(svg.contains("odd non-excited (x)"));
         assert!(matches!(spectrum_svg("x", &[]), Err(PlotError::Empty(_))));
     }
