@@ -6,3 +6,4 @@
 //! an [`data::IdData`] and return values.
 
 pub mod data;
+pub mod sim;
