@@ -75,6 +75,26 @@ impl CoulombFriction {
         level * sign
     }
 
+    /// Derivative `dτ_f/dω` at `omega` [N·m·s/rad].
+    pub fn slope(&self, omega: f64) -> f64 {
+        let x = omega / self.v_stribeck;
+        let (level, dlevel) = if x.abs() < 6.0 {
+            let e = (-x * x).exp();
+            (
+                self.fc + (self.fs - self.fc) * e,
+                -(self.fs - self.fc) * e * 2.0 * x / self.v_stribeck,
+            )
+        } else {
+            (self.fc, 0.0)
+        };
+        let s = omega / self.v_smooth;
+        if s.abs() >= 20.0 {
+            return dlevel * s.signum();
+        }
+        let t = s.tanh();
+        dlevel * t + level * (1.0 - t * t) / self.v_smooth
+    }
+
     /// Upper bound of `|dτ_f/dω|` [N·m·s/rad], used to size refined steps.
     pub fn max_slope(&self) -> f64 {
         self.fs.max(self.fc) / self.v_smooth + (self.fs - self.fc).abs() * 0.86 / self.v_stribeck
@@ -617,5 +637,13 @@ mod tests {
         let slope = (c.torque(h) - c.torque(-h)) / (2.0 * h);
         assert!((slope - c.fs / c.v_smooth).abs() < 1e-6 * slope);
         assert!(slope <= c.max_slope());
+        for w in [0.0, 0.003, 0.02, 0.05, 0.5, 3.0, -1.0] {
+            let fd = (c.torque(w + h) - c.torque(w - h)) / (2.0 * h);
+            assert!(
+                (c.slope(w) - fd).abs() < 1e-6 * c.max_slope(),
+                "{w}: {} vs {fd}",
+                c.slope(w)
+            );
+        }
     }
 }

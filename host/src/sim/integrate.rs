@@ -31,6 +31,51 @@ use nalgebra::DMatrix;
 use super::effects::{CoulombFriction, TorqueRipple};
 use super::plant::{Mechanism, MAX_STATE};
 
+/// Calls a const-generic method with the number of bodies known at compile time, so that
+/// the state loops are unrolled (the body count is at most [`super::plant::MAX_BODIES`]).
+macro_rules! dispatch {
+    ($n:expr, $nb:ident => $call:expr) => {
+        match $n {
+            1 => {
+                const $nb: usize = 1;
+                $call
+            }
+            2 => {
+                const $nb: usize = 2;
+                $call
+            }
+            3 => {
+                const $nb: usize = 3;
+                $call
+            }
+            4 => {
+                const $nb: usize = 4;
+                $call
+            }
+            5 => {
+                const $nb: usize = 5;
+                $call
+            }
+            6 => {
+                const $nb: usize = 6;
+                $call
+            }
+            7 => {
+                const $nb: usize = 7;
+                $call
+            }
+            _ => {
+                const $nb: usize = 8;
+                $call
+            }
+        }
+    };
+}
+
+/// Largest friction stiffness `h · max|∂τ_f/∂ω| / J_m` accepted in one step near zero
+/// motor velocity; steps there are cut into parts that respect it.
+const STIFF_LIMIT: f64 = 0.15;
+
 /// State vector storage.
 pub type State = [f64; MAX_STATE];
 
@@ -124,8 +169,9 @@ pub struct NonlinearPlant {
     half_gap: Option<f64>,
     coulomb: Vec<CoulombFriction>,
     ripple: Vec<TorqueRipple>,
-    /// refinement: velocity threshold [rad/s] and number of parts per substep
+    /// |ω_m| below which the friction is steep: 4 `v_ε` [rad/s]
     near_zero: f64,
+    /// largest friction slope over `J_m` [1/s]
     slope_over_j: f64,
 }
 
@@ -200,9 +246,26 @@ impl NonlinearPlant {
 
     /// Right-hand side with the contact mode frozen; `u_d` delayed torque reference, `w`
     /// disturbance [N·m].
-    #[inline]
     pub fn rhs(&self, x: &State, mode: Contact, u_d: f64, w: f64, dx: &mut State) {
-        let n = self.n;
+        dispatch!(self.n, NB => self.rhs_n::<NB>(x, mode, u_d, w, dx))
+    }
+
+    /// One classical RK4 step of length `h` [s] with the mode frozen.
+    pub fn rk4(&self, x: &State, mode: Contact, h: f64, u_d: f64, w: f64) -> State {
+        dispatch!(self.n, NB => self.rk4_n::<NB>(x, mode, h, u_d, w))
+    }
+
+    /// Advances `x` by `h` [s] with inputs held, handling backlash events and refining near
+    /// zero motor velocity when Coulomb friction is active.
+    pub fn advance(&self, x: &mut State, mode: &mut Contact, h: f64, u_d: f64, w: f64) {
+        dispatch!(self.n, NB => self.advance_n::<NB>(x, mode, h, u_d, w))
+    }
+
+    /// Right-hand side with the contact mode frozen; `u_d` delayed torque reference, `w`
+    /// disturbance [N·m].
+    #[inline(always)]
+    fn rhs_n<const NB: usize>(&self, x: &State, mode: Contact, u_d: f64, w: f64, dx: &mut State) {
+        let n = NB;
         let mut acc = [0.0; MAX_STATE];
         for i in 0..n {
             dx[i] = x[n + i];
@@ -243,26 +306,27 @@ impl NonlinearPlant {
     }
 
     /// One classical RK4 step of length `h` [s] with the mode frozen.
-    pub fn rk4(&self, x: &State, mode: Contact, h: f64, u_d: f64, w: f64) -> State {
-        let nx = self.n_state();
+    /// One classical RK4 step of length `h` [s] with the mode frozen.
+    fn rk4_n<const NB: usize>(&self, x: &State, mode: Contact, h: f64, u_d: f64, w: f64) -> State {
+        let nx = 2 * NB + 1;
         let mut k1 = [0.0; MAX_STATE];
         let mut k2 = [0.0; MAX_STATE];
         let mut k3 = [0.0; MAX_STATE];
         let mut k4 = [0.0; MAX_STATE];
         let mut tmp = [0.0; MAX_STATE];
-        self.rhs(x, mode, u_d, w, &mut k1);
+        self.rhs_n::<NB>(x, mode, u_d, w, &mut k1);
         for i in 0..nx {
             tmp[i] = x[i] + 0.5 * h * k1[i];
         }
-        self.rhs(&tmp, mode, u_d, w, &mut k2);
+        self.rhs_n::<NB>(&tmp, mode, u_d, w, &mut k2);
         for i in 0..nx {
             tmp[i] = x[i] + 0.5 * h * k2[i];
         }
-        self.rhs(&tmp, mode, u_d, w, &mut k3);
+        self.rhs_n::<NB>(&tmp, mode, u_d, w, &mut k3);
         for i in 0..nx {
             tmp[i] = x[i] + h * k3[i];
         }
-        self.rhs(&tmp, mode, u_d, w, &mut k4);
+        self.rhs_n::<NB>(&tmp, mode, u_d, w, &mut k4);
         let mut out = *x;
         for i in 0..nx {
             out[i] = x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
@@ -270,20 +334,27 @@ impl NonlinearPlant {
         out
     }
 
-    /// Advances `x` by `h` [s] with inputs held, handling backlash events and refining near
-    /// zero motor velocity when Coulomb friction is active.
-    pub fn advance(&self, x: &mut State, mode: &mut Contact, h: f64, u_d: f64, w: f64) {
-        if self.coulomb.is_empty() {
-            self.advance_events(x, mode, h, u_d, w);
+    /// Advances `x` by `h` [s] with inputs held, handling backlash events and the stiff
+    /// regularised friction near zero motor velocity (see the module documentation).
+    fn advance_n<const NB: usize>(
+        &self,
+        x: &mut State,
+        mode: &mut Contact,
+        h: f64,
+        u_d: f64,
+        w: f64,
+    ) {
+        let parts = (h * self.slope_over_j / STIFF_LIMIT).ceil().max(1.0) as usize;
+        if parts == 1 {
+            self.advance_events_n::<NB>(x, mode, h, u_d, w);
             return;
         }
-        let vm = self.n;
+        let vm = NB;
         let near = |s: &State| s[vm].abs() < self.near_zero;
-        let parts = (h * self.slope_over_j / 0.25).ceil().max(1.0) as usize;
-        if parts > 1 && !near(x) {
+        if !near(x) {
             let mut trial = *x;
             let mut tmode = *mode;
-            self.advance_events(&mut trial, &mut tmode, h, u_d, w);
+            self.advance_events_n::<NB>(&mut trial, &mut tmode, h, u_d, w);
             if !near(&trial) && trial[vm].signum() == x[vm].signum() {
                 *x = trial;
                 *mode = tmode;
@@ -292,18 +363,25 @@ impl NonlinearPlant {
         }
         let hp = h / parts as f64;
         for _ in 0..parts {
-            self.advance_events(x, mode, hp, u_d, w);
+            self.advance_events_n::<NB>(x, mode, hp, u_d, w);
         }
     }
 
-    fn advance_events(&self, x: &mut State, mode: &mut Contact, h: f64, u_d: f64, w: f64) {
+    fn advance_events_n<const NB: usize>(
+        &self,
+        x: &mut State,
+        mode: &mut Contact,
+        h: f64,
+        u_d: f64,
+        w: f64,
+    ) {
         let Some(half) = self.half_gap else {
-            *x = self.rk4(x, *mode, h, u_d, w);
+            *x = self.rk4_n::<NB>(x, *mode, h, u_d, w);
             return;
         };
         let mut remaining = h;
         for _switch in 0..8 {
-            let x1 = self.rk4(x, *mode, remaining, u_d, w);
+            let x1 = self.rk4_n::<NB>(x, *mode, remaining, u_d, w);
             let region = self.region(self.gearbox_deflection(&x1));
             if region == *mode {
                 *x = x1;
@@ -330,7 +408,7 @@ impl NonlinearPlant {
                     }
                     let c = (lo * fhi - hi * flo) / (fhi - flo);
                     let c = if c > lo && c < hi { c } else { 0.5 * (lo + hi) };
-                    let fc = g(&self.rk4(x, *mode, c, u_d, w));
+                    let fc = g(&self.rk4_n::<NB>(x, *mode, c, u_d, w));
                     if fc == 0.0 {
                         hi = c;
                         break;
@@ -354,7 +432,7 @@ impl NonlinearPlant {
                 hi
             };
             if tau > 0.0 {
-                *x = self.rk4(x, *mode, tau, u_d, w);
+                *x = self.rk4_n::<NB>(x, *mode, tau, u_d, w);
             }
             *mode = new_mode;
             remaining -= tau;
@@ -364,7 +442,7 @@ impl NonlinearPlant {
         }
         // grazing contact that keeps switching: finish the substep in the current region
         *mode = self.region(self.gearbox_deflection(x));
-        *x = self.rk4(x, *mode, remaining, u_d, w);
+        *x = self.rk4_n::<NB>(x, *mode, remaining, u_d, w);
     }
 }
 

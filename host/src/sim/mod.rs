@@ -32,6 +32,8 @@ pub mod sensors;
 
 use std::io::Write;
 
+use jointid_core::excitation::{ExcitationConfig, ExcitationError};
+use jointid_core::wire::{RawSample, Scale};
 use serde::{Deserialize, Serialize};
 
 pub use controller::{Controller, ControllerConfig};
@@ -48,7 +50,7 @@ use sensors::Sensors;
 /// How the plant is integrated between samples.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IntegrationConfig {
-    /// RK4 substeps `M` per sample when the plant is nonlinear [-]; default 10 (20 kHz)
+    /// RK4 substeps `M` per sample when the plant is nonlinear [-]; default 5 (10 kHz)
     pub substeps: u32,
     /// use RK4 even when the plant is linear (for checks); default false
     pub force_rk4: bool,
@@ -57,7 +59,7 @@ pub struct IntegrationConfig {
 impl Default for IntegrationConfig {
     fn default() -> Self {
         IntegrationConfig {
-            substeps: 10,
+            substeps: 5,
             force_rk4: false,
         }
     }
@@ -165,6 +167,26 @@ impl SimOutput {
         Some(self.states.iter().skip(i).step_by(n).copied().collect())
     }
 
+    /// The measured signals as the board would stream them: `seq = k`, `tick = k ·
+    /// timer_hz / fs` (wrapping), `torque = round(u / torque_nm_per_count)`,
+    /// `angle = round(θ_m / angle_rad_per_count)`, counts saturated to the `i32` range.
+    /// `timer_hz` is the tick rate of [`jointid_core::wire::SessionHeader::timer_hz`].
+    pub fn to_raw_samples(&self, scale: &Scale, timer_hz: u32) -> Vec<RawSample> {
+        let step = (f64::from(timer_hz) * self.sample_interval_s).round() as u64;
+        let counts = |v: f64, per: f32| {
+            let c = (v / f64::from(per)).round();
+            c.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+        };
+        (0..self.len())
+            .map(|k| RawSample {
+                seq: k as u32,
+                tick: (k as u64).wrapping_mul(step) as u32,
+                torque: counts(self.u[k], scale.torque_nm_per_count),
+                angle: counts(self.theta_m[k], scale.angle_rad_per_count),
+            })
+            .collect()
+    }
+
     /// Identification data `u → θ_m` with the reference (measured signals).
     pub fn to_id_data(&self) -> crate::data::IdData {
         crate::data::IdData {
@@ -248,6 +270,17 @@ pub enum SimError {
         effect: &'static str,
         /// what is wrong
         reason: String,
+    },
+    /// the excitation could not be generated
+    #[error("excitation: {0}")]
+    Excitation(#[from] ExcitationError),
+    /// the excitation's sample rate differs from the simulator's
+    #[error("excitation sample rate {excitation_hz} Hz differs from the simulator's {sim_hz} Hz")]
+    RateMismatch {
+        /// `ExcitationConfig::fs_hz`
+        excitation_hz: u32,
+        /// `SimConfig::sample_rate_hz`
+        sim_hz: f64,
     },
     /// serialisation of the configuration failed
     #[error("cannot serialise the configuration: {0}")]
@@ -566,6 +599,26 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
     }
     out.saturated_samples = controller.saturated_samples();
     Ok(out)
+}
+
+/// [`simulate`] with the reference the firmware's generator produces for `excitation`
+/// (`jointid_core::excitation::generate`, bit-exact with the board).
+///
+/// # Errors
+/// As [`simulate`], plus [`SimError::Excitation`] when the excitation cannot be generated
+/// (e.g. endless) and [`SimError::RateMismatch`] when its sample rate differs.
+pub fn simulate_excitation(
+    cfg: &SimConfig,
+    excitation: &ExcitationConfig,
+) -> Result<SimOutput, SimError> {
+    if f64::from(excitation.fs_hz) != cfg.sample_rate_hz {
+        return Err(SimError::RateMismatch {
+            excitation_hz: excitation.fs_hz,
+            sim_hz: cfg.sample_rate_hz,
+        });
+    }
+    let r = jointid_core::excitation::generate(excitation)?;
+    simulate_f32(cfg, &r)
 }
 
 /// [`simulate`] with an `f32` reference (as the firmware's excitation generator produces it).

@@ -403,11 +403,15 @@ fn all_effects(substeps: u32) -> SimConfig {
 
 #[test]
 fn rk4_with_all_effects_converges_to_1e6_against_ten_times_the_rate() {
-    // quantisation is off: a one-count flip between the two runs would dominate the difference
+    // norm: relative 2-norm over the whole run, ‖x_M − x_10M‖₂ / ‖x_10M‖₂, of the true
+    // motor angle, of u and of the gearbox deflection; M is the default substep count.
+    // Quantisation is off: a one-count flip between the two runs would dominate the
+    // difference (and noise would only add the same values to both runs).
+    let m = IntegrationConfig::default().substeps;
     let r = ramped(multisine(2000, &special_odd_lines(120), 0.02, 2, 8), 400);
-    let coarse = simulate(&all_effects(10), &r).unwrap();
-    let fine = simulate(&all_effects(100), &r).unwrap();
-    assert_eq!(coarse.integrator, Integrator::Rk4 { substeps: 10 });
+    let coarse = simulate(&all_effects(m), &r).unwrap();
+    let fine = simulate(&all_effects(10 * m), &r).unwrap();
+    assert_eq!(coarse.integrator, Integrator::Rk4 { substeps: m });
     let e_th = rel_err(&coarse.theta_m_true, &fine.theta_m_true);
     let e_u = rel_err(&coarse.u_true, &fine.u_true);
     let defl = |o: &SimOutput| -> Vec<f64> {
@@ -416,6 +420,7 @@ fn rk4_with_all_effects_converges_to_1e6_against_ten_times_the_rate() {
         m.iter().zip(&a).map(|(m, a)| m / 118.0 - a).collect()
     };
     let e_d = rel_err(&defl(&coarse), &defl(&fine));
+    eprintln!("convergence: theta {e_th:e}, u {e_u:e}, deflection {e_d:e}");
     assert!(
         e_th < 1e-6 && e_u < 1e-6 && e_d < 1e-6,
         "theta {e_th:e}, u {e_u:e}, deflection {e_d:e}"
@@ -432,7 +437,7 @@ fn rk4_on_linear_plant_agrees_with_exact_path() {
     let mut cfg = ideal(Plant::default(), vec![]);
     cfg.integration.force_rk4 = true;
     let rk = simulate(&cfg, &r).unwrap();
-    assert_eq!(rk.integrator, Integrator::Rk4 { substeps: 10 });
+    assert_eq!(rk.integrator, Integrator::Rk4 { substeps: 5 });
     let e = rel_err(&rk.theta_m_true, &exact.theta_m_true);
     assert!(e < 1e-8, "{e:e}");
 }
@@ -550,7 +555,7 @@ fn every_plant_kind_runs_and_tracks_a_slow_reference() {
     for kind in PlantKind::ALL {
         let out = simulate(&ideal(Plant::new(kind), vec![]), &r).unwrap();
         let expected = if kind == PlantKind::NonlinearTwoMass {
-            Integrator::Rk4 { substeps: 10 }
+            Integrator::Rk4 { substeps: 5 }
         } else {
             Integrator::ExactZoh
         };
@@ -740,4 +745,50 @@ fn torque_ripple_puts_energy_on_even_lines() {
         SensorConfig::default(),
     );
     assert!(seen > 10.0 * floor, "even lines {seen:e}, floor {floor:e}");
+}
+
+// ---------- with the firmware core: excitation and wire types ----------
+
+#[test]
+fn simulate_excitation_uses_the_core_generator_and_raw_samples_round_trip() {
+    use jointid_core::excitation::ExcitationConfig;
+    let mut exc = ExcitationConfig::paper_default();
+    exc.periods = 1;
+    exc.ramp_samples = 200;
+    let cfg = SimConfig::default();
+    let out = simulate_excitation(&cfg, &exc).unwrap();
+    let r = jointid_core::excitation::generate(&exc).unwrap();
+    assert_eq!(out.len(), r.len());
+    assert!(out
+        .theta_ref
+        .iter()
+        .zip(&r)
+        .all(|(a, b)| *a == f64::from(*b)));
+    let res = cfg.sensors.angle_resolution().unwrap();
+    let scale = jointid_core::wire::Scale {
+        torque_nm_per_count: 1e-4,
+        angle_rad_per_count: res as f32,
+    };
+    let raw = out.to_raw_samples(&scale, 1_000_000);
+    assert_eq!(raw.len(), out.len());
+    for (k, s) in raw.iter().enumerate().step_by(97) {
+        assert_eq!(s.seq, k as u32);
+        assert_eq!(s.tick, 500 * k as u32);
+        let u = f64::from(s.torque) * 1e-4;
+        assert!((u - out.u[k]).abs() <= 0.5e-4 + 1e-12, "{k}");
+        let th = f64::from(s.angle) * f64::from(scale.angle_rad_per_count);
+        assert!((th - out.theta_m[k]).abs() <= 0.5 * res * 1.000_001, "{k}");
+    }
+    let mut wrong = exc;
+    wrong.fs_hz = 1000;
+    assert!(matches!(
+        simulate_excitation(&cfg, &wrong),
+        Err(SimError::RateMismatch { .. })
+    ));
+    wrong = exc;
+    wrong.periods = 0;
+    assert!(matches!(
+        simulate_excitation(&cfg, &wrong),
+        Err(SimError::Excitation(_))
+    ));
 }
