@@ -3,20 +3,31 @@
 //!
 //! Each effect has its own parameters with documented defaults. The defaults are sized so
 //! that the effect is clearly visible in the spectra of `u` and `θ_m` of the default
-//! three-mass joint under the default excitation (a special odd multisine with 0.05 rad RMS
-//! on the motor-angle reference, see the fingerprint tests in [`super`]):
-//! backlash, Coulomb friction and the cubic spring put energy on the non-excited odd lines
-//! well above the sensor floor, the extra mode adds a resonance near 40 Hz and the delay
-//! bends the phase by 0.6° per Hz.
+//! three-mass joint under the default excitation, core's `ExcitationConfig::paper_default()`
+//! (special odd multisine, 0.02 rad RMS on the motor-angle reference). That amplitude is
+//! small: it moves the motor by about 7 mrad RMS, deflects the gearbox by at most about
+//! 6e-5 rad (arm side) and needs about 0.05 N·m RMS of torque, so the defaults are small in
+//! absolute terms (4 arcsec of backlash, 0.03 N·m of Coulomb friction); scale them with the
+//! excitation. Measured by the fingerprint tests in `super::tests` (power at the
+//! non-excited odd lines relative to the excited ones, mean of 4 periods):
+//! - backlash, Coulomb friction and the cubic spring raise the non-excited odd lines of `u`
+//!   to 1e-2, 1.6e-2 and ~1e-3 of the excited power, 20–300 times the floor of the default
+//!   sensors (quantisation, noise, disturbance: ~5e-5); backlash and friction relatively
+//!   more at small amplitude, the cubic spring more at large amplitude;
+//! - the extra mode adds a resonance near 10.4 Hz (anti-resonance 9.3 Hz), below the
+//!   gearbox modes, where the motor-side FRF had none;
+//! - the delay bends the phase of the `u → θ_m` FRF by −0.27° per Hz (1.5 samples);
+//! - the torque ripple raises the even lines (it is not an odd function of the motion).
 //!
 //! Physics of each effect (where it acts in the plant):
 //! - `coulomb_friction`: motor-side friction `τ_f(ω) = [F_c + (F_s − F_c) e^{−(ω/v_s)²}]
 //!   tanh(ω/v_ε)` opposing the motor velocity ω (Coulomb level plus a Stribeck bump). The
 //!   `tanh` regularises `sgn`: below `|ω| ≈ v_ε` the friction acts as a steep viscous
-//!   friction of slope `F_s/v_ε`. `v_ε` defaults to 0.02 rad/s, five times below the
+//!   friction of slope `F_s/v_ε`. `v_ε` defaults to 0.01 rad/s, ten times below the
 //!   velocity quantum of a 2^17-count encoder differenced at 2 kHz (0.096 rad/s), so the
-//!   smoothing cannot be seen in measured data. The integrator refines its step where this
-//!   steep region is crossed (see [`super::integrate`]).
+//!   smoothing is hard to see in measured data (a sticking motor creeps at a fraction of
+//!   `v_ε`). The integrator refines its step where this steep region is crossed (see
+//!   [`super::integrate`]).
 //! - `backlash`: dead zone of total width `w` in the gearbox spring: the spring torque is
 //!   `k_g dz(δ) + k3 dz(δ)³ + d_g δ̇` in contact and 0 in the gap, `dz(δ) = δ − w/2` for
 //!   `δ > w/2`, `δ + w/2` for `δ < −w/2`, 0 in between (δ = `r θ_m − θ_a1`, arm side). The
@@ -140,11 +151,11 @@ pub enum Attach {
 /// One more mass on a spring.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ExtraMode {
-    /// inertia `J` [kg·m²], arm side; default 1.2
+    /// inertia `J` [kg·m²], arm side; default 3.0 (a quarter of `J_a1`)
     pub j: f64,
-    /// stiffness `k` [N·m/rad]; default 7.6e4 (40 Hz locked)
+    /// stiffness `k` [N·m/rad]; default 1.18e4 (10 Hz with `J_a1` held still)
     pub k: f64,
-    /// damping `d` [N·m·s/rad]; default 3
+    /// damping `d` [N·m·s/rad]; default 7.5 (2 % of critical)
     pub d: f64,
     /// attachment; default parallel
     pub attach: Attach,

@@ -11,7 +11,9 @@
 //! two exact steps of lengths `φT` and `(1 − φ)T`.
 //!
 //! **Nonlinear plant**: classical fourth-order Runge–Kutta at `M` substeps per sample
-//! (default 10, i.e. 20 kHz), with the inputs held (split at the delay instant as above).
+//! (default 5, i.e. 10 kHz; the convergence test against `10 M` gives relative differences
+//! of 4e-8 in `θ_m` and 1e-7 in `u`), with the inputs held (split at the delay instant as
+//! above).
 //! Non-smooth parts are handled so that RK4 never integrates across a kink blindly:
 //! - the backlash contact edges are *events*: each RK4 substep is taken with the contact mode
 //!   (negative contact, gap, positive contact) frozen, so the right-hand side is smooth; when
@@ -21,8 +23,10 @@
 //! - the Coulomb `sgn` is regularised by `tanh(ω/v_ε)` (see [`super::effects`]), which is
 //!   smooth but steep (slope `F_s/v_ε`) near zero velocity; a substep that starts or ends
 //!   with `|ω_m| < 4 v_ε`, or whose motor velocity changes sign, is redone in `K` equal parts
-//!   with `K = ⌈h · slope / (0.25 J_m)⌉`, which keeps the stiff friction mode well inside the
-//!   RK4 stability region and accurate.
+//!   with `K = ⌈h · slope / (0.15 J_m)⌉`, which keeps the stiff friction mode well inside the
+//!   RK4 stability region and accurate. (A Lawson integrating-factor RK4 for this mode was
+//!   tried and dropped: it was barely faster and less accurate, the stiff friction being
+//!   coupled to the rest of the state.)
 //!
 //! The cubic spring and the torque ripple are smooth and need nothing special.
 

@@ -420,7 +420,6 @@ fn rk4_with_all_effects_converges_to_1e6_against_ten_times_the_rate() {
         m.iter().zip(&a).map(|(m, a)| m / 118.0 - a).collect()
     };
     let e_d = rel_err(&defl(&coarse), &defl(&fine));
-    eprintln!("convergence: theta {e_th:e}, u {e_u:e}, deflection {e_d:e}");
     assert!(
         e_th < 1e-6 && e_u < 1e-6 && e_d < 1e-6,
         "theta {e_th:e}, u {e_u:e}, deflection {e_d:e}"
