@@ -5,5 +5,9 @@
 //! grey_box -> validate -> diagnose -> report. Estimators do no IO: they take
 //! an [`data::IdData`] and return values.
 
+pub mod cli;
 pub mod data;
+pub mod frf;
+pub mod plot;
 pub mod sim;
+pub mod validate;
