@@ -7,6 +7,8 @@
 
 pub mod cli;
 pub mod data;
+pub mod experiment;
+pub mod fit;
 pub mod frf;
 pub mod grey_box;
 pub mod linalg;

@@ -21,7 +21,10 @@ use crate::data::Loaders;
 
 pub mod analyze;
 pub mod args;
+pub mod demo;
+pub mod fit;
 pub mod validate;
+pub mod validate_cmd;
 
 /// `jointid`: identification of one robot joint, from capture to validated models.
 #[derive(Debug, Parser)]
@@ -40,8 +43,14 @@ pub struct Cli {
 pub enum Command {
     /// nonparametric FRF, noise level and nonlinear distortion of periodic data
     Analyze(analyze::AnalyzeArgs),
-    /// FIT and residual tests of a simulated output against measured data
-    Validate(validate::ValidateArgs),
+    /// fit a black-box or physical model: parameters, FIT, resonances, residual tests
+    Fit(fit::FitArgs),
+    /// FIT and residual tests of a saved model (or a simulated column) on data
+    Validate(validate_cmd::ValidateCmdArgs),
+    /// the whole path on the simulated joint, through the wire encoder (no board needed)
+    Demo(demo::DemoArgs),
+    /// seed 000 Table 2 on simulated IRB1400-like data (FIT of black box 11, three-, four-mass)
+    Experiment(demo::ExperimentArgs),
 }
 
 /// How a command ended when it did not fail with an error.
@@ -91,7 +100,10 @@ pub fn default_loaders() -> Loaders {
 pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
     match &cli.command {
         Command::Analyze(a) => analyze::run(a, ctx),
-        Command::Validate(a) => validate::run(a, ctx),
+        Command::Fit(a) => fit::run(a, ctx),
+        Command::Validate(a) => validate_cmd::run(a, ctx),
+        Command::Demo(a) => demo::run(a, ctx),
+        Command::Experiment(a) => demo::run_experiment(a, ctx),
     }
 }
 

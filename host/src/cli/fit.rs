@@ -1,0 +1,418 @@
+//! `jointid fit DATA --model KIND`: fit a black-box or physical model
+//! ([`crate::fit`]) and report parameters with standard deviations and
+//! units, FIT (toolbox `compare` definition) on estimation and validation
+//! data, resonance and anti-resonance frequencies, residual tests, and
+//! optionally Bode plots over the measured FRF (seed 000 Figs. 5–6) and the
+//! model file.
+//!
+//! Column mapping: DATA is a capture CSV, a `.jcap` capture (once its loader
+//! is registered) or any CSV with `--time/--input/--output-col` (`--output`
+//! is taken here by the output kind, angle or velocity).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clap::{Args, ValueEnum};
+use serde::Serialize;
+
+use super::args::{DataArgs, DetrendArg, PrepArgs};
+use super::{print_json, CmdResult, Context, Outcome};
+use crate::data::Dataset;
+use crate::fit::{
+    default_f_min, fit_model, log_grid, param_map, DetrendKind, FitOptions, Fitted, ModelKind,
+    ParamJson, Prep,
+};
+use crate::frf::analyze_dataset;
+use crate::grey_box::{Output, DEFAULT_GEAR_RATIO};
+use crate::plot::{bode_svg, write_svg};
+use crate::subspace::Method;
+use crate::validate::{BodeCurve, CorrelationTest, FrfBand, Validation, DEFAULT_LAGS, FIT_NAME};
+
+/// Friction model of the rigid body.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FrictionArg {
+    /// viscous only
+    Viscous,
+    /// viscous and Coulomb, plus a torque offset (inverse-dynamics LS)
+    Coulomb,
+}
+
+/// Which motor signal the output column holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OutputArg {
+    /// motor angle [rad] (or position [m])
+    Angle,
+    /// motor velocity [rad/s] (or [m/s])
+    Velocity,
+}
+
+impl From<OutputArg> for Output {
+    fn from(o: OutputArg) -> Self {
+        match o {
+            OutputArg::Angle => Output::Angle,
+            OutputArg::Velocity => Output::Velocity,
+        }
+    }
+}
+
+/// Subspace method of the black box.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MethodArg {
+    /// predictor-based subspace identification (closed-loop consistent)
+    Pbsid,
+    /// PO-MOESP (open loop)
+    Moesp,
+}
+
+/// A data file with the column mapping of `fit` (`--output-col` for the
+/// output column, since `--output` names the output kind).
+#[derive(Debug, Clone, Args)]
+pub struct FitDataArgs {
+    /// data file: capture CSV (`t,theta_ref,u,theta_m`), a mapped CSV, or `.jcap`
+    #[arg(value_name = "DATA")]
+    pub path: PathBuf,
+    /// time column [s] (with --input and --output-col)
+    #[arg(long, value_name = "COL", requires_all = ["input", "output_col"])]
+    pub time: Option<String>,
+    /// input column (torque [N·m] or force [N])
+    #[arg(long, value_name = "COL", requires_all = ["time", "output_col"])]
+    pub input: Option<String>,
+    /// output column (motor angle [rad] or position [m])
+    #[arg(long, value_name = "COL", requires_all = ["time", "input"])]
+    pub output_col: Option<String>,
+    /// reference column (default: the capture CSV's `theta_ref`)
+    #[arg(long, value_name = "COL")]
+    pub reference: Option<String>,
+}
+
+impl FitDataArgs {
+    /// the same mapping as analysis' [`DataArgs`] for `path`
+    pub fn data_args(&self, path: &Path) -> DataArgs {
+        DataArgs {
+            path: path.to_path_buf(),
+            time: self.time.clone(),
+            input: self.input.clone(),
+            output: self.output_col.clone(),
+            reference: self.reference.clone(),
+        }
+    }
+}
+
+/// Arguments of `jointid fit`.
+#[derive(Debug, Clone, Args)]
+pub struct FitArgs {
+    /// estimation data and columns
+    #[command(flatten)]
+    pub data: FitDataArgs,
+    /// model: black-box:ORDER, rigid, two-mass, three-mass or four-mass
+    #[arg(long, value_name = "KIND", value_parser = parse_kind)]
+    pub model: ModelKind,
+    /// friction of the rigid model
+    #[arg(long, value_enum, default_value_t = FrictionArg::Viscous)]
+    pub friction: FrictionArg,
+    /// validation data (same columns and preparation)
+    #[arg(long, value_name = "VAL")]
+    pub validation: Option<PathBuf>,
+    /// store the model (everything needed to simulate it again)
+    #[arg(long, value_name = "MODEL.json")]
+    pub save: Option<PathBuf>,
+    /// write bode.svg (model over the FRF with ±2σ) into this directory
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
+    /// which motor signal the output column holds
+    #[arg(long, value_enum, default_value_t = OutputArg::Angle)]
+    pub output: OutputArg,
+    /// subspace method of the black box
+    #[arg(long, value_enum, default_value_t = MethodArg::Pbsid)]
+    pub method: MethodArg,
+    /// keep the subspace black box (no output-error refinement)
+    #[arg(long)]
+    pub no_refine: bool,
+    /// gear ratio r (arm angle per motor angle) of the physical models
+    #[arg(long, value_name = "R", default_value_t = DEFAULT_GEAR_RATIO)]
+    pub gear_ratio: f64,
+    /// lags M of the residual tests
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS)]
+    pub lags: usize,
+    /// whole periods dropped as transient before the FRF of the plot
+    #[arg(long, value_name = "P", default_value_t = 1)]
+    pub settle_periods: usize,
+    /// decimation and detrending
+    #[command(flatten)]
+    pub prep: PrepArgs,
+}
+
+fn parse_kind(s: &str) -> Result<ModelKind, String> {
+    s.parse()
+}
+
+/// Everything `fit --json` prints.
+#[derive(Debug, Serialize)]
+pub struct FitReport {
+    /// model family
+    pub model: String,
+    /// how it was estimated
+    pub method: String,
+    /// estimation data file
+    pub file: String,
+    /// validation data file
+    pub validation_file: Option<String>,
+    /// model sample interval [s]
+    pub ts: f64,
+    /// estimation samples (after preparation)
+    pub samples: usize,
+    /// parameters by name (empty for a black box)
+    pub parameters: std::collections::BTreeMap<String, ParamJson>,
+    /// name of the FIT definition
+    pub fit_name: String,
+    /// FIT on the estimation data [%]
+    pub fit_estimation: f64,
+    /// FIT on the validation data [%]
+    pub fit_validation: Option<f64>,
+    /// identified resonance frequencies [Hz]
+    pub resonances_hz: Vec<f64>,
+    /// identified anti-resonance frequencies [Hz]
+    pub antiresonances_hz: Vec<f64>,
+    /// residual tests on estimation (and validation) data
+    pub residual_tests: ResidualTests,
+    /// wall time of the fit [s]
+    pub seconds: f64,
+    /// files written
+    pub files: Vec<String>,
+    /// estimator notes
+    pub warnings: Vec<String>,
+}
+
+/// Residual tests per data set.
+#[derive(Debug, Serialize)]
+pub struct ResidualTests {
+    /// on the estimation data
+    pub estimation: Validation,
+    /// on the validation data
+    pub validation: Option<Validation>,
+}
+
+pub(crate) fn prep_of(p: &PrepArgs) -> Prep {
+    Prep {
+        decimate: p.decimate as usize,
+        detrend: match p.detrend {
+            DetrendArg::None => DetrendKind::None,
+            DetrendArg::Mean => DetrendKind::Mean,
+            DetrendArg::Linear => DetrendKind::Linear,
+        },
+    }
+}
+
+/// Runs `jointid fit`.
+///
+/// # Errors
+/// Loading, fitting, plotting and output errors.
+pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
+    let ds = args.data.data_args(&args.data.path).load(ctx.loaders)?;
+    let val_ds = match &args.validation {
+        Some(p) => Some(args.data.data_args(p).load(ctx.loaders)?),
+        None => None,
+    };
+    let prep = prep_of(&args.prep);
+    let est = prep
+        .apply(&ds.data)
+        .map_err(|e| format!("{}: {e}", ds.name))?;
+    let val = match &val_ds {
+        Some(v) => Some(
+            prep.apply(&v.data)
+                .map_err(|e| format!("{}: {e}", v.name))?,
+        ),
+        None => None,
+    };
+    let opts = FitOptions {
+        kind: args.model,
+        coulomb: args.friction == FrictionArg::Coulomb,
+        method: match args.method {
+            MethodArg::Pbsid => Method::Pbsid,
+            MethodArg::Moesp => Method::Moesp,
+        },
+        output: args.output.into(),
+        r: args.gear_ratio,
+        refine: !args.no_refine,
+    };
+    let t0 = Instant::now();
+    let fitted = fit_model(&est, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let ev = fitted
+        .evaluate(&est, args.lags)
+        .map_err(|e| format!("{}: {e}", ds.name))?;
+    let vv = match (&val, &val_ds) {
+        (Some(v), Some(vd)) => Some(
+            fitted
+                .evaluate(v, args.lags)
+                .map_err(|e| format!("{}: {e}", vd.name))?,
+        ),
+        _ => None,
+    };
+    let mut files = Vec::new();
+    if let Some(path) = &args.save {
+        let saved = fitted.to_saved(prep, &ds.name, ev.fit);
+        let text = serde_json::to_string_pretty(&saved)?;
+        std::fs::write(path, text + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
+        files.push(path.display().to_string());
+    }
+    if let Some(dir) = &args.plot {
+        let p = write_bode(dir, "bode.svg", &ds, args.settle_periods, &[&fitted])?;
+        files.push(p.display().to_string());
+    }
+    let res = fitted.resonances(default_f_min(est.len(), est.ts));
+    let report = FitReport {
+        model: fitted.kind.name(),
+        method: fitted.method.clone(),
+        file: ds.name.clone(),
+        validation_file: val_ds.as_ref().map(|v| v.name.clone()),
+        ts: est.ts,
+        samples: est.len(),
+        parameters: param_map(&fitted.params),
+        fit_name: FIT_NAME.into(),
+        fit_estimation: ev.fit,
+        fit_validation: vv.as_ref().map(|v| v.fit),
+        resonances_hz: res.resonances.iter().map(|m| m.freq_hz).collect(),
+        antiresonances_hz: res.anti_resonances.iter().map(|m| m.freq_hz).collect(),
+        residual_tests: ResidualTests {
+            estimation: ev,
+            validation: vv,
+        },
+        seconds,
+        files,
+        warnings: fitted.warnings.clone(),
+    };
+    if ctx.json {
+        print_json(ctx.out, &report)?;
+    } else {
+        print_report(ctx.out, &report)?;
+    }
+    Ok(Outcome::Ok)
+}
+
+/// Writes `name` into `dir`: Bode plot of `models` over the FRF of `ds`
+/// (when `ds` is periodic) with ±2σ, up to 0.45 / Ts of the coarsest model.
+///
+/// # Errors
+/// Directory, plot and write errors.
+pub fn write_bode(
+    dir: &Path,
+    name: &str,
+    ds: &Dataset,
+    settle_periods: usize,
+    models: &[&Fitted],
+) -> Result<PathBuf, Box<dyn std::error::Error + Send + Sync>> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let fmax = models
+        .iter()
+        .map(|m| 0.45 / m.ts)
+        .fold(0.45 / ds.data.ts, f64::min);
+    let band = analyze_dataset(ds, settle_periods).ok().map(|a| {
+        let b = FrfBand::from(&a.frf);
+        let keep: Vec<usize> = (0..b.freq_hz.len())
+            .filter(|&i| b.freq_hz[i] > 0.0 && b.freq_hz[i] <= fmax)
+            .collect();
+        FrfBand {
+            freq_hz: keep.iter().map(|&i| b.freq_hz[i]).collect(),
+            g: keep.iter().map(|&i| b.g[i]).collect(),
+            sigma: keep.iter().map(|&i| b.sigma[i]).collect(),
+        }
+    });
+    let fmin = band
+        .as_ref()
+        .and_then(|b| b.freq_hz.first().copied())
+        .unwrap_or(0.1);
+    let grid = log_grid(fmin, fmax, 400);
+    let curves: Vec<BodeCurve> = models
+        .iter()
+        .map(|m| BodeCurve {
+            name: m.kind.name(),
+            freq_hz: grid.clone(),
+            response: m.freq_response(&grid),
+        })
+        .collect();
+    let path = dir.join(name);
+    let title = format!("models over the FRF u -> theta_m: {}", ds.name);
+    write_svg(&path, &bode_svg(&title, band.as_ref(), &curves)?)?;
+    Ok(path)
+}
+
+pub(crate) fn print_report(out: &mut dyn Write, r: &FitReport) -> std::io::Result<()> {
+    writeln!(out, "jointid fit: {} on {}", r.model, r.file)?;
+    writeln!(out, "  method: {}", r.method)?;
+    writeln!(
+        out,
+        "  {} samples, Ts = {} s, fitted in {:.2} s",
+        r.samples, r.ts, r.seconds
+    )?;
+    if !r.parameters.is_empty() {
+        writeln!(
+            out,
+            "  {:<8} {:>14} {:>12} {:>8}  unit",
+            "param", "value", "std", "std %"
+        )?;
+        for (name, p) in &r.parameters {
+            writeln!(
+                out,
+                "  {:<8} {:>14.6e} {:>12.3e} {:>8.2}  {}",
+                name,
+                p.value,
+                p.std,
+                100.0 * p.std / p.value.abs().max(f64::MIN_POSITIVE),
+                p.unit
+            )?;
+        }
+    }
+    writeln!(out, "  {FIT_NAME}:")?;
+    writeln!(out, "    estimation: {:.2}", r.fit_estimation)?;
+    if let Some(v) = r.fit_validation {
+        writeln!(out, "    validation: {v:.2}")?;
+    }
+    let hz = |v: &[f64]| {
+        if v.is_empty() {
+            "none".to_string()
+        } else {
+            v.iter()
+                .map(|f| format!("{f:.2}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    };
+    writeln!(out, "  resonances [Hz]: {}", hz(&r.resonances_hz))?;
+    writeln!(out, "  anti-resonances [Hz]: {}", hz(&r.antiresonances_hz))?;
+    writeln!(out, "  residual tests (99 %):")?;
+    print_tests(out, "estimation", &r.residual_tests.estimation)?;
+    if let Some(v) = &r.residual_tests.validation {
+        print_tests(out, "validation", v)?;
+    }
+    for f in &r.files {
+        writeln!(out, "  wrote {f}")?;
+    }
+    for w in &r.warnings {
+        writeln!(out, "  note: {w}")?;
+    }
+    Ok(())
+}
+
+pub(crate) fn print_tests(out: &mut dyn Write, label: &str, v: &Validation) -> std::io::Result<()> {
+    for t in [&v.whiteness, &v.independence] {
+        print_test(out, label, t)?;
+    }
+    Ok(())
+}
+
+fn print_test(out: &mut dyn Write, label: &str, t: &CorrelationTest) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "    {label:<10} {:<40} {}: max |r| {:.3} vs bound {:.3} ({} of {} lags outside), χ² {:.1} vs {:.1}",
+        t.name,
+        if t.pass { "pass" } else { "FAIL" },
+        t.max_abs,
+        t.bound,
+        t.outside,
+        t.lags.len(),
+        t.statistic,
+        t.critical
+    )
+}
