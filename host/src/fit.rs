@@ -340,13 +340,49 @@ fn fit_black_box(data: &IdData, n: usize, opts: &FitOptions) -> Result<Fitted, F
 
 fn fit_grey(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitError> {
     let structure = opts.kind.structure().expect("grey-box kind");
-    let gopts = GreyBoxOptions {
-        structure,
-        output: opts.output,
-        r: opts.r,
-        ..GreyBoxOptions::default()
+    let m = structure.masses();
+    // Multi-start over the order of the subspace model the resonance and
+    // anti-resonance frequencies are read from: with closely spaced pairs
+    // (the default joint: 15, 17, 19, 23 Hz) one order may show a spurious
+    // near-cancelling pair instead of a true one, and its start then ends
+    // in a local minimum; another order rarely does the same. The lowest
+    // output-error cost wins (measured on the three-mass joint of
+    // tests/identify.rs: order 8 misses 17/19 Hz on two of three seeds,
+    // orders 6 and 16 find them).
+    let orders: Vec<usize> = if m <= 1 {
+        vec![0]
+    } else {
+        vec![2 * m + 2, 2 * m, 4 * m + 4]
     };
-    let f = grey_box::fit(data, &gopts)?;
+    let mut best: Option<grey_box::GreyBoxFit> = None;
+    let mut first_err = None;
+    for &order in &orders {
+        let gopts = GreyBoxOptions {
+            structure,
+            output: opts.output,
+            r: opts.r,
+            subspace_order: order,
+            ..GreyBoxOptions::default()
+        };
+        match grey_box::fit(data, &gopts) {
+            Ok(f) => {
+                let cost = |f: &grey_box::GreyBoxFit| {
+                    f.pem.cost_history.last().copied().unwrap_or(f64::INFINITY)
+                };
+                if best.as_ref().is_none_or(|b| cost(&f) < cost(b)) {
+                    best = Some(f);
+                }
+            }
+            Err(e) => {
+                first_err.get_or_insert(e);
+            }
+        }
+    }
+    let f = match (best, first_err) {
+        (Some(f), _) => f,
+        (None, Some(e)) => return Err(e.into()),
+        (None, None) => unreachable!("at least one start ran"),
+    };
     let mut model = f.discrete.clone();
     model.k = None;
     Ok(Fitted {
@@ -359,7 +395,8 @@ fn fit_grey(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitError> {
         friction: None,
         warnings: f.warnings.clone(),
         method: format!(
-            "grey box (initial values from the data, output error, {} iterations)",
+            "grey box (initial values from the data, best of {} starts, output error, {} iterations)",
+            orders.len(),
             f.pem.iterations
         ),
     })

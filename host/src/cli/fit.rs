@@ -114,6 +114,10 @@ pub struct FitArgs {
     /// validation data (same columns and preparation)
     #[arg(long, value_name = "VAL")]
     pub validation: Option<PathBuf>,
+    /// without --validation: estimate on this first fraction of DATA
+    /// (after preparation) and validate on the rest
+    #[arg(long, value_name = "F", conflicts_with = "validation", value_parser = parse_fraction)]
+    pub estimation_fraction: Option<f64>,
     /// store the model (everything needed to simulate it again)
     #[arg(long, value_name = "MODEL.json")]
     pub save: Option<PathBuf>,
@@ -141,6 +145,13 @@ pub struct FitArgs {
     /// decimation and detrending
     #[command(flatten)]
     pub prep: PrepArgs,
+}
+
+fn parse_fraction(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(f) if f > 0.0 && f < 1.0 => Ok(f),
+        _ => Err(format!("`{s}` is not a fraction strictly between 0 and 1")),
+    }
 }
 
 fn parse_kind(s: &str) -> Result<ModelKind, String> {
@@ -215,16 +226,23 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         None => None,
     };
     let prep = prep_of(&args.prep);
-    let est = prep
+    let mut est = prep
         .apply(&ds.data)
         .map_err(|e| format!("{}: {e}", ds.name))?;
-    let val = match &val_ds {
+    let mut val = match &val_ds {
         Some(v) => Some(
             prep.apply(&v.data)
                 .map_err(|e| format!("{}: {e}", v.name))?,
         ),
         None => None,
     };
+    let mut val_name = val_ds.as_ref().map(|v| v.name.clone());
+    if let Some(frac) = args.estimation_fraction {
+        let (a, b) = est.split(frac);
+        val_name = Some(format!("{} (last {:.0} %)", ds.name, 100.0 * (1.0 - frac)));
+        est = a;
+        val = Some(b);
+    }
     let opts = FitOptions {
         kind: args.model,
         coulomb: args.friction == FrictionArg::Coulomb,
@@ -242,11 +260,11 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     let ev = fitted
         .evaluate(&est, args.lags)
         .map_err(|e| format!("{}: {e}", ds.name))?;
-    let vv = match (&val, &val_ds) {
-        (Some(v), Some(vd)) => Some(
+    let vv = match (&val, &val_name) {
+        (Some(v), Some(vn)) => Some(
             fitted
                 .evaluate(v, args.lags)
-                .map_err(|e| format!("{}: {e}", vd.name))?,
+                .map_err(|e| format!("{vn}: {e}"))?,
         ),
         _ => None,
     };
@@ -266,7 +284,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         model: fitted.kind.name(),
         method: fitted.method.clone(),
         file: ds.name.clone(),
-        validation_file: val_ds.as_ref().map(|v| v.name.clone()),
+        validation_file: val_name,
         ts: est.ts,
         samples: est.len(),
         parameters: param_map(&fitted.params),
