@@ -38,6 +38,8 @@
 //! first sample of the ramp-in (the excitation's first sample).
 //! After the comments comes the header `t,theta_ref,u,theta_m` (extra
 //! columns are allowed and ignored), then one row per sample.
+// Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
 use std::collections::BTreeMap;
 use std::fmt;

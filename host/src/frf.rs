@@ -29,6 +29,8 @@
 //! neighbouring lines so that coloured noise is followed) exceeds its
 //! one-sided 99 % quantile under "noise only" (log-normal approximation, see
 //! [`distortion_threshold_db`]).
+// Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
 use std::sync::Arc;
 
