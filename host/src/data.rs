@@ -291,8 +291,10 @@ impl PeriodLayout {
 impl Dataset {
     /// Layout of the whole steady-state periods from the excitation config:
     /// skips the ramp-in and `settle_periods` more periods (transient), then
-    /// takes every whole period left (at most `periods − settle_periods`
-    /// when the run is finite, so the ramp-out is excluded).
+    /// takes every whole period left: at most `periods − settle_periods` when
+    /// the run is finite, so the ramp-out is excluded; for an endless run
+    /// (`periods = 0`) the last `ramp_samples` samples of the record are left
+    /// out, as they may hold a ramp-out.
     ///
     /// # Errors
     /// [`DataError::NoPeriods`] when there is no config or no whole period
@@ -304,10 +306,15 @@ impl Dataset {
         })?;
         let period = cfg.period_samples as usize;
         let start = cfg.ramp_samples as usize + settle_periods * period;
-        let mut count = self.data.len().saturating_sub(start) / period.max(1);
-        if cfg.periods > 0 {
-            count = count.min((cfg.periods as usize).saturating_sub(settle_periods));
-        }
+        let count = if cfg.periods > 0 {
+            let avail = self.data.len().saturating_sub(start) / period.max(1);
+            avail.min((cfg.periods as usize).saturating_sub(settle_periods))
+        } else {
+            // endless run stopped by the user: its last `ramp_samples` may be
+            // the ramp-out, so they are left out
+            let end = self.data.len().saturating_sub(cfg.ramp_samples as usize);
+            end.saturating_sub(start) / period.max(1)
+        };
         if period == 0 || count == 0 {
             return Err(DataError::NoPeriods {
                 file: self.name.clone(),
