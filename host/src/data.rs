@@ -516,6 +516,7 @@ const EXCITATION_KEYS: [&str; 9] = [
 pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, DataError> {
     let file = || name.to_string();
     let mut meta: BTreeMap<String, (usize, String)> = BTreeMap::new();
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l));
     let (header_line, header) = loop {
         match lines.next() {
@@ -531,7 +532,10 @@ pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, Dat
         }
     };
     let excitation = parse_excitation(&meta, name)?;
-    let cols: Vec<&str> = header.split(',').map(|c| c.trim()).collect();
+    let cols: Vec<&str> = header
+        .split(',')
+        .map(|c| c.trim().trim_matches('"').trim())
+        .collect();
     let find = |c: &str| {
         cols.iter()
             .position(|h| *h == c)
@@ -1046,6 +1050,14 @@ mod tests {
         );
         let e = parse_csv(&jit, "j.csv", &ColumnMap::capture()).unwrap_err();
         assert!(matches!(e, DataError::NonUniform { line: 5, .. }), "{e}");
+    }
+
+    #[test]
+    fn parse_csv_accepts_bom_crlf_and_quoted_header() {
+        let text = "\u{feff}\"t\", \"theta_ref\",u,theta_m\r\n0,1,2,3\r\n0.5,1,2,3\r\n";
+        let ds = parse_csv(text, "w.csv", &ColumnMap::capture()).unwrap();
+        assert_eq!(ds.data.len(), 2);
+        assert_eq!(ds.data.y, vec![3.0, 3.0]);
     }
 
     #[test]
