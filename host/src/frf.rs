@@ -17,8 +17,8 @@
 //! expression from the sample (co)variances of the period spectra,
 //! σ²(Ĝ) = |Ĝ|² (σ²_Ȳ/|Ȳ|² + σ²_Ū/|Ū|² − 2 Re(σ²_ȲŪ / (Ȳ Ū*))),
 //! Pintelon & Schoukens, *System Identification: A Frequency Domain
-//! Approach*, 2nd ed. (2012), ch. 2 (FRF from periodic excitation with
-//! sample means and sample (co)variances).
+//! Approach* (IEEE Press, 2001; the book seed 000 cites), ch. 2 (FRF from
+//! periodic excitation with sample means and sample (co)variances).
 //!
 //! Linearity check: seed 000 (Norrlöf et al.) §3 and Fig. 3, after Pintelon &
 //! Schoukens ch. 3: with a special odd multisine (lines k ≡ 1, 3 mod 8,
@@ -29,6 +29,10 @@
 //! neighbouring lines so that coloured noise is followed) exceeds its
 //! one-sided 99 % quantile under "noise only" (log-normal approximation, see
 //! [`distortion_threshold_db`]).
+//!
+//! Two amplitudes (DESIGN.md §7): [`amplitude_trend`] compares the relative
+//! distortion of two runs; growing with amplitude points to saturation or
+//! polynomial stiffness, falling to backlash, dead zone or stiction.
 // Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
 #![allow(rustdoc::broken_intra_doc_links)]
 
