@@ -38,6 +38,8 @@
 //! first sample of the ramp-in (the excitation's first sample).
 //! After the comments comes the header `t,theta_ref,u,theta_m` (extra
 //! columns are allowed and ignored), then one row per sample.
+// Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -289,8 +291,10 @@ impl PeriodLayout {
 impl Dataset {
     /// Layout of the whole steady-state periods from the excitation config:
     /// skips the ramp-in and `settle_periods` more periods (transient), then
-    /// takes every whole period left (at most `periods − settle_periods`
-    /// when the run is finite, so the ramp-out is excluded).
+    /// takes every whole period left: at most `periods − settle_periods` when
+    /// the run is finite, so the ramp-out is excluded; for an endless run
+    /// (`periods = 0`) the last `ramp_samples` samples of the record are left
+    /// out, as they may hold a ramp-out.
     ///
     /// # Errors
     /// [`DataError::NoPeriods`] when there is no config or no whole period
@@ -302,10 +306,15 @@ impl Dataset {
         })?;
         let period = cfg.period_samples as usize;
         let start = cfg.ramp_samples as usize + settle_periods * period;
-        let mut count = self.data.len().saturating_sub(start) / period.max(1);
-        if cfg.periods > 0 {
-            count = count.min((cfg.periods as usize).saturating_sub(settle_periods));
-        }
+        let count = if cfg.periods > 0 {
+            let avail = self.data.len().saturating_sub(start) / period.max(1);
+            avail.min((cfg.periods as usize).saturating_sub(settle_periods))
+        } else {
+            // endless run stopped by the user: its last `ramp_samples` may be
+            // the ramp-out, so they are left out
+            let end = self.data.len().saturating_sub(cfg.ramp_samples as usize);
+            end.saturating_sub(start) / period.max(1)
+        };
         if period == 0 || count == 0 {
             return Err(DataError::NoPeriods {
                 file: self.name.clone(),
@@ -507,6 +516,7 @@ const EXCITATION_KEYS: [&str; 9] = [
 pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, DataError> {
     let file = || name.to_string();
     let mut meta: BTreeMap<String, (usize, String)> = BTreeMap::new();
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l));
     let (header_line, header) = loop {
         match lines.next() {
@@ -522,7 +532,10 @@ pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, Dat
         }
     };
     let excitation = parse_excitation(&meta, name)?;
-    let cols: Vec<&str> = header.split(',').map(|c| c.trim()).collect();
+    let cols: Vec<&str> = header
+        .split(',')
+        .map(|c| c.trim().trim_matches('"').trim())
+        .collect();
     let find = |c: &str| {
         cols.iter()
             .position(|h| *h == c)
@@ -1037,6 +1050,14 @@ mod tests {
         );
         let e = parse_csv(&jit, "j.csv", &ColumnMap::capture()).unwrap_err();
         assert!(matches!(e, DataError::NonUniform { line: 5, .. }), "{e}");
+    }
+
+    #[test]
+    fn parse_csv_accepts_bom_crlf_and_quoted_header() {
+        let text = "\u{feff}\"t\", \"theta_ref\",u,theta_m\r\n0,1,2,3\r\n0.5,1,2,3\r\n";
+        let ds = parse_csv(text, "w.csv", &ColumnMap::capture()).unwrap();
+        assert_eq!(ds.data.len(), 2);
+        assert_eq!(ds.data.y, vec![3.0, 3.0]);
     }
 
     #[test]

@@ -17,8 +17,8 @@
 //! expression from the sample (co)variances of the period spectra,
 //! σ²(Ĝ) = |Ĝ|² (σ²_Ȳ/|Ȳ|² + σ²_Ū/|Ū|² − 2 Re(σ²_ȲŪ / (Ȳ Ū*))),
 //! Pintelon & Schoukens, *System Identification: A Frequency Domain
-//! Approach*, 2nd ed. (2012), ch. 2 (FRF from periodic excitation with
-//! sample means and sample (co)variances).
+//! Approach* (IEEE Press, 2001; the book seed 000 cites), ch. 2 (FRF from
+//! periodic excitation with sample means and sample (co)variances).
 //!
 //! Linearity check: seed 000 (Norrlöf et al.) §3 and Fig. 3, after Pintelon &
 //! Schoukens ch. 3: with a special odd multisine (lines k ≡ 1, 3 mod 8,
@@ -29,6 +29,12 @@
 //! neighbouring lines so that coloured noise is followed) exceeds its
 //! one-sided 99 % quantile under "noise only" (log-normal approximation, see
 //! [`distortion_threshold_db`]).
+//!
+//! Two amplitudes (DESIGN.md §7): [`amplitude_trend`] compares the relative
+//! distortion of two runs; growing with amplitude points to saturation or
+//! polynomial stiffness, falling to backlash, dead zone or stiction.
+// Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
 use std::sync::Arc;
 
@@ -631,6 +637,95 @@ pub fn analyze(
     })
 }
 
+/// How nonlinear distortion changes between two amplitudes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrendKind {
+    /// relative distortion grows with amplitude: saturation, polynomial
+    /// (e.g. cubic) stiffness
+    GrowsWithAmplitude,
+    /// relative distortion falls as amplitude grows: backlash, dead zone,
+    /// stiction, Coulomb friction
+    FallsWithAmplitude,
+    /// changes by less than [`TREND_MIN_DB`]
+    Unclear,
+    /// no distortion detected at either amplitude
+    NoneDetected,
+}
+
+/// smallest change of the relative distortion level counted as a trend [dB]
+pub const TREND_MIN_DB: f64 = 3.0;
+
+/// Distortion of one signal at two amplitudes (DESIGN.md §7, seed 000 §3).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AmplitudeTrend {
+    /// signal name
+    pub signal: String,
+    /// change of the excited level from the low to the high run [dB]
+    pub excitation_change_db: f64,
+    /// change of the odd non-excited level relative to the excited level [dB]
+    pub odd_change_db: f64,
+    /// change of the even level relative to the excited level [dB]
+    pub even_change_db: f64,
+    /// classification
+    pub kind: TrendKind,
+    /// verdict in words and figures
+    pub verdict: String,
+}
+
+/// Compares the linearity checks of two runs of the same excitation at a
+/// lower and a higher amplitude: distortion relative to the excited lines
+/// that grows with amplitude points to saturation or polynomial stiffness,
+/// distortion that falls points to backlash, dead zone or stiction (seed 000
+/// §3). The non-excited class with the larger level decides; a class counts
+/// only when detected in at least one run.
+pub fn amplitude_trend(low: &Linearity, high: &Linearity) -> AmplitudeTrend {
+    let exc = high.excited_db - low.excited_db;
+    let odd = high.odd.vs_excited_db - low.odd.vs_excited_db;
+    let even = high.even.vs_excited_db - low.even.vs_excited_db;
+    let odd_seen = low.odd.detected || high.odd.detected;
+    let even_seen = low.even.detected || high.even.detected;
+    let change = match (odd_seen, even_seen) {
+        (false, false) => None,
+        (true, false) => Some(odd),
+        (false, true) => Some(even),
+        (true, true) => Some(if high.odd.level_db >= high.even.level_db {
+            odd
+        } else {
+            even
+        }),
+    };
+    let kind = match change {
+        None => TrendKind::NoneDetected,
+        Some(c) if c * exc.signum() > TREND_MIN_DB => TrendKind::GrowsWithAmplitude,
+        Some(c) if c * exc.signum() < -TREND_MIN_DB => TrendKind::FallsWithAmplitude,
+        Some(_) => TrendKind::Unclear,
+    };
+    let what = match kind {
+        TrendKind::GrowsWithAmplitude => {
+            "distortion grows with amplitude: saturation or polynomial stiffness"
+        }
+        TrendKind::FallsWithAmplitude => {
+            "distortion falls as amplitude grows: backlash, dead zone, stiction or Coulomb friction"
+        }
+        TrendKind::Unclear => "distortion about proportional to the excitation: no clear trend",
+        TrendKind::NoneDetected => "no nonlinear distortion detected at either amplitude",
+    };
+    AmplitudeTrend {
+        signal: low.signal.clone(),
+        excitation_change_db: exc,
+        odd_change_db: odd,
+        even_change_db: even,
+        kind,
+        verdict: format!(
+            "{}: excitation {exc:+.1} dB, odd lines {odd:+.1} dB{}, even lines {even:+.1} dB{} relative to the excited ones: {what}",
+            low.signal,
+            if odd_seen { "" } else { " (noise only)" },
+            if even_seen { "" } else { " (noise only)" },
+        ),
+    }
+}
+
 fn db(p: f64) -> f64 {
     10.0 * p.max(1e-300).log10()
 }
@@ -778,6 +873,11 @@ pub(crate) mod tests {
         }
 
         fn run(&self, r: &[f64], noise_sd: f64, cubic: f64, seed: u64) -> IdData {
+            self.run_with(r, noise_sd, |e| e + cubic * e * e * e, seed)
+        }
+
+        /// controller u = kp · f(e)
+        fn run_with(&self, r: &[f64], noise_sd: f64, f: impl Fn(f64) -> f64, seed: u64) -> IdData {
             let mut g = Gauss::new(seed);
             let (mut y1, mut y2, mut u1) = (0.0, 0.0, 0.0);
             let (mut u, mut y) = (Vec::new(), Vec::new());
@@ -785,7 +885,7 @@ pub(crate) mod tests {
                 let yk = -self.a1 * y1 - self.a2 * y2 + self.b1 * u1;
                 let ym = yk + noise_sd * g.next();
                 let e = rk - ym;
-                let uk = self.kp * (e + cubic * e * e * e);
+                let uk = self.kp * f(e);
                 u.push(uk);
                 y.push(ym);
                 y2 = y1;
@@ -942,6 +1042,37 @@ pub(crate) mod tests {
             .linearity_u
             .verdict
             .contains("odd nonlinear distortion detected"));
+    }
+
+    #[test]
+    fn amplitude_trend_tells_cubic_from_dead_zone() {
+        let c = cfg(512, 60, 10);
+        let base = multisine(&c, 10, 21);
+        let sys = plant();
+        let lay = PeriodLayout {
+            period: 512,
+            start: 1024,
+            count: 8,
+        };
+        let at = |scale: f64, f: &dyn Fn(f64) -> f64| {
+            let r: Vec<f64> = base.iter().map(|v| scale * v).collect();
+            analyze(&sys.run_with(&r, 0.002, f, 3), lay, ExcitedLines::Config(c)).unwrap()
+        };
+        let cubic = |e: f64| e + 0.05 * e * e * e;
+        let t = amplitude_trend(&at(0.1, &cubic).linearity_u, &at(0.3, &cubic).linearity_u);
+        assert_eq!(t.kind, TrendKind::GrowsWithAmplitude, "{}", t.verdict);
+        // cubic: relative level ∝ A², +9.5 dB amplitude gives about +19 dB
+        assert!(
+            (t.odd_change_db - 2.0 * t.excitation_change_db).abs() < 3.0,
+            "{}",
+            t.verdict
+        );
+        let dead = |e: f64| e.signum() * (e.abs() - 0.05).max(0.0);
+        let t = amplitude_trend(&at(0.1, &dead).linearity_u, &at(0.3, &dead).linearity_u);
+        assert_eq!(t.kind, TrendKind::FallsWithAmplitude, "{}", t.verdict);
+        let lin = |e: f64| e;
+        let t = amplitude_trend(&at(0.1, &lin).linearity_u, &at(0.3, &lin).linearity_u);
+        assert_eq!(t.kind, TrendKind::NoneDetected, "{}", t.verdict);
     }
 
     #[test]

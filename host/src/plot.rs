@@ -6,6 +6,8 @@
 //! so any command can call them; they render to a `String` (testable, no
 //! IO) and [`write_svg`] stores it. Only SVG: PNG would need a font
 //! rasteriser and system font files, which this crate does not pull in.
+// Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
 use std::path::Path;
 

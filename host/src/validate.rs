@@ -21,6 +21,8 @@
 //!   outside them are reported alongside as figures for plots and reports.
 //! - Bode comparison: a measured FRF with its σ against model responses;
 //!   per model, the share of lines where the model lies outside ±2σ.
+// Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
 use rustfft::num_complex::Complex64;
 use serde::Serialize;

@@ -9,7 +9,10 @@ use serde::Serialize;
 
 use super::args::DataArgs;
 use super::{print_json, CmdResult, Context, Outcome};
-use crate::frf::{analyze_dataset, ClassLevel, ExcitedSource, FrfAnalysis, Instrument};
+use crate::frf::{
+    amplitude_trend, analyze_dataset, AmplitudeTrend, ClassLevel, ExcitedSource, FrfAnalysis,
+    Instrument,
+};
 use crate::plot::{bode_svg, spectrum_svg, write_svg, SpectrumPanel};
 use crate::validate::FrfBand;
 
@@ -31,6 +34,11 @@ pub struct AnalyzeArgs {
     /// print every FRF line (default: at most 60 rows)
     #[arg(long)]
     pub all_lines: bool,
+    /// a second run of the same excitation at another amplitude (same
+    /// columns): tells distortion that grows with amplitude from distortion
+    /// that falls with it
+    #[arg(long, value_name = "DATA2")]
+    pub compare: Option<PathBuf>,
 }
 
 #[derive(Serialize)]
@@ -39,6 +47,8 @@ struct Report<'a> {
     analysis: &'a FrfAnalysis,
     distortion_detected: bool,
     plots: Vec<String>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    amplitude_trend: Vec<AmplitudeTrend>,
 }
 
 /// Runs `jointid analyze`.
@@ -73,6 +83,15 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
         plots = vec![spec.display().to_string(), frf.display().to_string()];
     }
     let detected = a.distortion_detected();
+    let mut trend = Vec::new();
+    if let Some(other) = &args.compare {
+        let b = analyze_dataset(
+            &ctx.loaders.load(other, &args.data.column_map())?,
+            args.settle_periods,
+        )?;
+        trend.push(amplitude_trend(&a.linearity_u, &b.linearity_u));
+        trend.push(amplitude_trend(&a.linearity_y, &b.linearity_y));
+    }
     if ctx.json {
         print_json(
             ctx.out,
@@ -81,10 +100,17 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
                 analysis: &a,
                 distortion_detected: detected,
                 plots,
+                amplitude_trend: trend,
             },
         )?;
     } else {
         print_table(ctx.out, &ds.name, &a, &plots, args.all_lines)?;
+        if let Some(other) = &args.compare {
+            writeln!(ctx.out, "amplitude comparison with {}", other.display())?;
+            for t in &trend {
+                writeln!(ctx.out, "  {}", t.verdict)?;
+            }
+        }
     }
     Ok(if args.require_linear && detected {
         Outcome::CheckFailed

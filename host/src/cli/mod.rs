@@ -12,6 +12,8 @@
 //! [`run`]. Nothing else changes.
 //!
 //! Exit codes ([`Outcome::code`]): 0 ok, 1 a check failed, 2 error (main.rs).
+// Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
 use std::io::Write;
 
