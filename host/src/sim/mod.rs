@@ -197,19 +197,18 @@ impl SimOutput {
         }
     }
 
-    /// Writes the capture CSV of DESIGN.md §5: `# key=value` comment lines, then
-    /// `t,theta_ref,u,theta_m` rows (17 significant digits, lossless for f64).
+    /// Writes the capture CSV of DESIGN.md §5: `# sample_interval_s=T`, then `comments`
+    /// verbatim (whole `# key=value` lines, e.g. `data::excitation_comment_lines`), then
+    /// the header `t,theta_ref,u,theta_m` and one row per sample (shortest round-trip
+    /// formatting, lossless for f64).
     ///
     /// # Errors
     /// Any error of the writer.
-    pub fn write_csv<W: Write>(
-        &self,
-        mut w: W,
-        comments: &[(&str, String)],
-    ) -> std::io::Result<()> {
+    pub fn write_csv<W: Write>(&self, mut w: W, comments: &str) -> std::io::Result<()> {
         writeln!(w, "# sample_interval_s={}", self.sample_interval_s)?;
-        for (k, v) in comments {
-            writeln!(w, "# {k}={v}")?;
+        w.write_all(comments.as_bytes())?;
+        if !comments.is_empty() && !comments.ends_with('\n') {
+            writeln!(w)?;
         }
         writeln!(w, "t,theta_ref,u,theta_m")?;
         for k in 0..self.len() {
