@@ -21,6 +21,20 @@
 //!
 //! See also: [`params`] for the default joint and its modal frequencies, [`effects`] for the
 //! physics and defaults of each effect.
+//!
+//! ```
+//! use jointid::sim::{parse_effects, simulate, SimConfig};
+//!
+//! let cfg = SimConfig {
+//!     effects: parse_effects(&["backlash:width=2e-5", "time_delay"]).unwrap(),
+//!     ..SimConfig::default()
+//! };
+//! // 0.5 s of a 2 Hz reference [rad]
+//! let r: Vec<f64> = (0..1000).map(|k| 0.01 * (2.0 * 3.14159 * 2.0 * k as f64 / 2000.0).sin()).collect();
+//! let out = simulate(&cfg, &r).unwrap();
+//! assert_eq!(out.u.len(), 1000);
+//! println!("{}", cfg.params_json().unwrap());
+//! ```
 #![deny(missing_docs)]
 
 pub mod controller;
