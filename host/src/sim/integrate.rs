@@ -33,7 +33,7 @@
 use nalgebra::DMatrix;
 
 use super::effects::{CoulombFriction, TorqueRipple};
-use super::plant::{Mechanism, MAX_STATE};
+use super::plant::{Mechanism, MAX_BODIES, MAX_STATE};
 
 /// Calls a const-generic method with the number of bodies known at compile time, so that
 /// the state loops are unrolled (the body count is at most [`super::plant::MAX_BODIES`]).
@@ -149,7 +149,7 @@ pub enum Contact {
     Pos,
 }
 
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 struct FastSpring {
     a: usize,
     b: usize,
@@ -165,7 +165,8 @@ pub struct NonlinearPlant {
     n: usize,
     inv_j: [f64; MAX_STATE],
     viscous: [f64; MAX_STATE],
-    springs: Vec<FastSpring>,
+    /// springs; a chain or tree of `n` bodies has exactly `n − 1`
+    springs: [FastSpring; MAX_BODIES],
     inv_tc: f64,
     /// cubic coefficient of the gearbox spring (spring 0) [N·m/rad³]
     k3: f64,
@@ -196,18 +197,18 @@ impl NonlinearPlant {
             inv_j[i] = 1.0 / b.inertia;
             viscous[i] = b.viscous;
         }
-        let springs = mech
-            .springs
-            .iter()
-            .map(|s| FastSpring {
+        assert_eq!(mech.springs.len() + 1, n, "mechanism must be a tree");
+        let mut springs = [FastSpring::default(); MAX_BODIES];
+        for (f, s) in springs.iter_mut().zip(&mech.springs) {
+            *f = FastSpring {
                 a: s.a,
                 b: s.b,
                 ga: mech.bodies[s.a].gain,
                 gb: mech.bodies[s.b].gain,
                 k: s.k,
                 d: s.d,
-            })
-            .collect();
+            };
+        }
         let near_zero = coulomb.iter().map(|c| 4.0 * c.v_smooth).fold(0.0, f64::max);
         let slope: f64 = coulomb.iter().map(|c| c.max_slope()).sum();
         NonlinearPlant {
@@ -232,9 +233,11 @@ impl NonlinearPlant {
 
     /// Gearbox deflection `δ = r θ_m − θ_a1` [rad] (0 without a gearbox spring).
     pub fn gearbox_deflection(&self, x: &State) -> f64 {
-        match self.springs.first() {
-            Some(s) => s.ga * x[s.a] - s.gb * x[s.b],
-            None => 0.0,
+        if self.n > 1 {
+            let s = &self.springs[0];
+            s.ga * x[s.a] - s.gb * x[s.b]
+        } else {
+            0.0
         }
     }
 
@@ -283,7 +286,7 @@ impl NonlinearPlant {
             motor += r.amplitude * (r.order * x[0] + r.phase).sin();
         }
         acc[0] += motor;
-        for (si, s) in self.springs.iter().enumerate() {
+        for (si, s) in self.springs[..NB - 1].iter().enumerate() {
             let delta = s.ga * x[s.a] - s.gb * x[s.b];
             let ddelta = s.ga * x[n + s.a] - s.gb * x[n + s.b];
             let tau = if si == 0 {
@@ -309,7 +312,6 @@ impl NonlinearPlant {
         dx[2 * n] = (u_d - x[2 * n]) * self.inv_tc;
     }
 
-    /// One classical RK4 step of length `h` [s] with the mode frozen.
     /// One classical RK4 step of length `h` [s] with the mode frozen.
     fn rk4_n<const NB: usize>(&self, x: &State, mode: Contact, h: f64, u_d: f64, w: f64) -> State {
         let nx = 2 * NB + 1;
