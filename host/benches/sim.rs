@@ -1,6 +1,6 @@
 //! Simulator throughput: simulated seconds per wall-clock second for the default three-mass
 //! joint under the seed-000 excitation (core's paper default, 2 kHz, ~60 s), with no effect
-//! (exact zero-order-hold path) and with every effect on (event-aware RK4, 10 substeps).
+//! (exact zero-order-hold path) and with every effect on (event-aware RK4, default substeps).
 //! The baseline measured in the same run is the linear joint forced through RK4, which
 //! separates the cost of the integrator from the cost of the effects.
 //!

@@ -25,6 +25,7 @@ pub mod analyze;
 pub mod args;
 pub mod demo;
 pub mod fit;
+pub mod simulate;
 pub mod validate;
 pub mod validate_cmd;
 
@@ -53,6 +54,8 @@ pub enum Command {
     Demo(demo::DemoArgs),
     /// seed 000 Table 2 on simulated IRB1400-like data (FIT of black box 11, three-, four-mass)
     Experiment(demo::ExperimentArgs),
+    /// closed-loop joint simulator with switchable effects; writes a capture CSV
+    Simulate(simulate::SimulateArgs),
 }
 
 /// How a command ended when it did not fail with an error.
@@ -106,6 +109,7 @@ pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
         Command::Validate(a) => validate_cmd::run(a, ctx),
         Command::Demo(a) => demo::run(a, ctx),
         Command::Experiment(a) => demo::run_experiment(a, ctx),
+        Command::Simulate(a) => simulate::run(a, ctx),
     }
 }
 

@@ -12,8 +12,9 @@
 //!
 //! **Nonlinear plant**: classical fourth-order Runge–Kutta at `M` substeps per sample
 //! (default 5, i.e. 10 kHz; the convergence test against `10 M` gives relative differences
-//! of 4e-8 in `θ_m` and 1e-7 in `u`), with the inputs held (split at the delay instant as
-//! above).
+//! of 4e-8 in `θ_m` and 7e-8 in `u`), with the inputs held (split at the delay instant as
+//! above). The current-loop lag is not left to RK4: with `u_d` held its output is known in
+//! closed form and is set exactly at the RK4 stage times.
 //! Non-smooth parts are handled so that RK4 never integrates across a kink blindly:
 //! - the backlash contact edges are *events*: each RK4 substep is taken with the contact mode
 //!   (negative contact, gap, positive contact) frozen, so the right-hand side is smooth; when
@@ -33,7 +34,7 @@
 use nalgebra::DMatrix;
 
 use super::effects::{CoulombFriction, TorqueRipple};
-use super::plant::{Mechanism, MAX_STATE};
+use super::plant::{Mechanism, MAX_BODIES, MAX_STATE};
 
 /// Calls a const-generic method with the number of bodies known at compile time, so that
 /// the state loops are unrolled (the body count is at most [`super::plant::MAX_BODIES`]).
@@ -149,7 +150,7 @@ pub enum Contact {
     Pos,
 }
 
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 struct FastSpring {
     a: usize,
     b: usize,
@@ -165,7 +166,8 @@ pub struct NonlinearPlant {
     n: usize,
     inv_j: [f64; MAX_STATE],
     viscous: [f64; MAX_STATE],
-    springs: Vec<FastSpring>,
+    /// springs; a chain or tree of `n` bodies has exactly `n − 1`
+    springs: [FastSpring; MAX_BODIES],
     inv_tc: f64,
     /// cubic coefficient of the gearbox spring (spring 0) [N·m/rad³]
     k3: f64,
@@ -196,18 +198,18 @@ impl NonlinearPlant {
             inv_j[i] = 1.0 / b.inertia;
             viscous[i] = b.viscous;
         }
-        let springs = mech
-            .springs
-            .iter()
-            .map(|s| FastSpring {
+        assert_eq!(mech.springs.len() + 1, n, "mechanism must be a tree");
+        let mut springs = [FastSpring::default(); MAX_BODIES];
+        for (f, s) in springs.iter_mut().zip(&mech.springs) {
+            *f = FastSpring {
                 a: s.a,
                 b: s.b,
                 ga: mech.bodies[s.a].gain,
                 gb: mech.bodies[s.b].gain,
                 k: s.k,
                 d: s.d,
-            })
-            .collect();
+            };
+        }
         let near_zero = coulomb.iter().map(|c| 4.0 * c.v_smooth).fold(0.0, f64::max);
         let slope: f64 = coulomb.iter().map(|c| c.max_slope()).sum();
         NonlinearPlant {
@@ -232,9 +234,11 @@ impl NonlinearPlant {
 
     /// Gearbox deflection `δ = r θ_m − θ_a1` [rad] (0 without a gearbox spring).
     pub fn gearbox_deflection(&self, x: &State) -> f64 {
-        match self.springs.first() {
-            Some(s) => s.ga * x[s.a] - s.gb * x[s.b],
-            None => 0.0,
+        if self.n > 1 {
+            let s = &self.springs[0];
+            s.ga * x[s.a] - s.gb * x[s.b]
+        } else {
+            0.0
         }
     }
 
@@ -283,7 +287,7 @@ impl NonlinearPlant {
             motor += r.amplitude * (r.order * x[0] + r.phase).sin();
         }
         acc[0] += motor;
-        for (si, s) in self.springs.iter().enumerate() {
+        for (si, s) in self.springs[..NB - 1].iter().enumerate() {
             let delta = s.ga * x[s.a] - s.gb * x[s.b];
             let ddelta = s.ga * x[n + s.a] - s.gb * x[n + s.b];
             let tau = if si == 0 {
@@ -309,10 +313,16 @@ impl NonlinearPlant {
         dx[2 * n] = (u_d - x[2 * n]) * self.inv_tc;
     }
 
-    /// One classical RK4 step of length `h` [s] with the mode frozen.
-    /// One classical RK4 step of length `h` [s] with the mode frozen.
+    /// One classical RK4 step of length `h` [s] with the mode frozen. The current-loop
+    /// torque `τ_a` is not integrated by RK4: with `u_d` held it is known in closed form,
+    /// `τ_a(t) = u_d + (τ_a(0) − u_d) e^{−t/T_c}`, and is set exactly at the stage times (so
+    /// the fast lag does not limit the step; RK4 sees a smooth known input).
     fn rk4_n<const NB: usize>(&self, x: &State, mode: Contact, h: f64, u_d: f64, w: f64) -> State {
         let nx = 2 * NB + 1;
+        let it = 2 * NB;
+        let e_half = (-0.5 * h * self.inv_tc).exp();
+        let ta_half = u_d + (x[it] - u_d) * e_half;
+        let ta_full = u_d + (x[it] - u_d) * e_half * e_half;
         let mut k1 = [0.0; MAX_STATE];
         let mut k2 = [0.0; MAX_STATE];
         let mut k3 = [0.0; MAX_STATE];
@@ -322,19 +332,23 @@ impl NonlinearPlant {
         for i in 0..nx {
             tmp[i] = x[i] + 0.5 * h * k1[i];
         }
+        tmp[it] = ta_half;
         self.rhs_n::<NB>(&tmp, mode, u_d, w, &mut k2);
         for i in 0..nx {
             tmp[i] = x[i] + 0.5 * h * k2[i];
         }
+        tmp[it] = ta_half;
         self.rhs_n::<NB>(&tmp, mode, u_d, w, &mut k3);
         for i in 0..nx {
             tmp[i] = x[i] + h * k3[i];
         }
+        tmp[it] = ta_full;
         self.rhs_n::<NB>(&tmp, mode, u_d, w, &mut k4);
         let mut out = *x;
         for i in 0..nx {
             out[i] = x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
         }
+        out[it] = ta_full;
         out
     }
 

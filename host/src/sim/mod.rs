@@ -21,6 +21,20 @@
 //!
 //! See also: [`params`] for the default joint and its modal frequencies, [`effects`] for the
 //! physics and defaults of each effect.
+//!
+//! ```
+//! use jointid::sim::{parse_effects, simulate, SimConfig};
+//!
+//! let cfg = SimConfig {
+//!     effects: parse_effects(&["backlash:width=2e-5", "time_delay"]).unwrap(),
+//!     ..SimConfig::default()
+//! };
+//! // 0.5 s of a 2 Hz reference [rad]
+//! let r: Vec<f64> = (0..1000).map(|k| 0.01 * (2.0 * 3.14159 * 2.0 * k as f64 / 2000.0).sin()).collect();
+//! let out = simulate(&cfg, &r).unwrap();
+//! assert_eq!(out.u.len(), 1000);
+//! println!("{}", cfg.params_json().unwrap());
+//! ```
 #![deny(missing_docs)]
 
 pub mod controller;
@@ -197,19 +211,18 @@ impl SimOutput {
         }
     }
 
-    /// Writes the capture CSV of DESIGN.md §5: `# key=value` comment lines, then
-    /// `t,theta_ref,u,theta_m` rows (17 significant digits, lossless for f64).
+    /// Writes the capture CSV of DESIGN.md §5: `# sample_interval_s=T`, then `comments`
+    /// verbatim (whole `# key=value` lines, e.g. `data::excitation_comment_lines`), then
+    /// the header `t,theta_ref,u,theta_m` and one row per sample (shortest round-trip
+    /// formatting, lossless for f64).
     ///
     /// # Errors
     /// Any error of the writer.
-    pub fn write_csv<W: Write>(
-        &self,
-        mut w: W,
-        comments: &[(&str, String)],
-    ) -> std::io::Result<()> {
+    pub fn write_csv<W: Write>(&self, mut w: W, comments: &str) -> std::io::Result<()> {
         writeln!(w, "# sample_interval_s={}", self.sample_interval_s)?;
-        for (k, v) in comments {
-            writeln!(w, "# {k}={v}")?;
+        w.write_all(comments.as_bytes())?;
+        if !comments.is_empty() && !comments.ends_with('\n') {
+            writeln!(w)?;
         }
         writeln!(w, "t,theta_ref,u,theta_m")?;
         for k in 0..self.len() {
