@@ -58,6 +58,10 @@ struct DemoReport<'a> {
     linearity_u: &'a str,
     linearity_y: &'a str,
     distortion_detected: bool,
+    /// level of the non-excited odd lines against the excited ones [dB], u and θm
+    odd_vs_excited_db: (f64, f64),
+    /// level of the even lines against the excited ones [dB], u and θm
+    even_vs_excited_db: (f64, f64),
     table: &'a Table,
     seconds: f64,
 }
@@ -128,6 +132,14 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
                 linearity_u: &a.linearity_u.verdict,
                 linearity_y: &a.linearity_y.verdict,
                 distortion_detected: a.distortion_detected(),
+                odd_vs_excited_db: (
+                    a.linearity_u.odd.vs_excited_db,
+                    a.linearity_y.odd.vs_excited_db,
+                ),
+                even_vs_excited_db: (
+                    a.linearity_u.even.vs_excited_db,
+                    a.linearity_y.even.vs_excited_db,
+                ),
                 table: &t,
                 seconds,
             },
