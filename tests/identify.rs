@@ -308,6 +308,7 @@ fn emps_rigid_coulomb_fit_via_cli_matches_published_within_3_percent() {
         "rigid",
         "--friction",
         "coulomb",
+        "--linear-axis",
         "--json",
     ]);
     eprintln!(
@@ -321,6 +322,8 @@ fn emps_rigid_coulomb_fit_via_cli_matches_published_within_3_percent() {
             "{name}: {v} vs published {published}"
         );
     }
+    assert_eq!(j["parameters"]["J"]["unit"], "kg");
+    assert_eq!(j["parameters"]["Fv"]["unit"], "N·s/m");
     assert!(j["fit_estimation"].is_number());
 }
 

@@ -482,7 +482,7 @@ impl Fitted {
     /// [`FitError::Validate`].
     pub fn evaluate(&self, data: &IdData, lags: usize) -> Result<Validation, FitError> {
         check(data)?;
-        if (data.ts - self.ts).abs() > 1e-6 * self.ts {
+        if (data.ts - self.ts).abs() > 1e-3 * self.ts {
             return Err(FitError::BadData(format!(
                 "sample interval {} s differs from the model's {} s (decimate the data as the model was)",
                 data.ts, self.ts

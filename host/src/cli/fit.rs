@@ -139,12 +139,26 @@ pub struct FitArgs {
     /// lags M of the residual tests
     #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS)]
     pub lags: usize,
+    /// the axis is linear (force [N] → position [m]): units kg, N·s/m, N, N/m
+    #[arg(long)]
+    pub linear_axis: bool,
     /// whole periods dropped as transient before the FRF of the plot
     #[arg(long, value_name = "P", default_value_t = 1)]
     pub settle_periods: usize,
     /// decimation and detrending
     #[command(flatten)]
     pub prep: PrepArgs,
+}
+
+/// the linear-axis unit of a rotary one
+pub fn linear_unit(rotary: &str) -> &str {
+    match rotary {
+        "kg·m²" => "kg",
+        "N·m·s/rad" => "N·s/m",
+        "N·m/rad" => "N/m",
+        "N·m" => "N",
+        o => o,
+    }
 }
 
 fn parse_fraction(s: &str) -> Result<f64, String> {
@@ -287,7 +301,15 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         validation_file: val_name,
         ts: est.ts,
         samples: est.len(),
-        parameters: param_map(&fitted.params),
+        parameters: {
+            let mut p = param_map(&fitted.params);
+            if args.linear_axis {
+                for v in p.values_mut() {
+                    v.unit = linear_unit(&v.unit).into();
+                }
+            }
+            p
+        },
         fit_name: FIT_NAME.into(),
         fit_estimation: ev.fit,
         fit_validation: vv.as_ref().map(|v| v.fit),
