@@ -328,8 +328,9 @@ fn emps_rigid_coulomb_fit_via_cli_matches_published_within_3_percent() {
 }
 
 // DaISy 96-009 through `jointid fit --model black-box:4 --estimation-fraction
-// 0.5`: FIT on the second half reported (no published figure; the check is
-// that it is a real number above the mean predictor's 0 %).
+// 0.5`: FIT on the second half reported. DaISy publishes no figure; the
+// bound is a regression guard 8 points under the 88.4 % measured when the
+// test was written (PO-MOESP start kept over PBSID on these open-loop data).
 #[test]
 fn daisy_order_4_fit_on_first_half_reports_second_half_fit_via_cli() {
     let path = shared("data/daisy-robot-arm/robot_arm.csv");
@@ -353,5 +354,5 @@ fn daisy_order_4_fit_on_first_half_reports_second_half_fit_via_cli() {
     let fv = j["fit_validation"].as_f64().unwrap();
     eprintln!("DaISy robot arm, order 4: FIT estimation {fe:.1} %, validation {fv:.1} %");
     assert_eq!(j["samples"].as_u64(), Some(512));
-    assert!(fv > 0.0 && fv < 100.0, "validation FIT {fv}");
+    assert!(fv > 80.0 && fv < 100.0, "validation FIT {fv}");
 }

@@ -133,6 +133,9 @@ pub struct FitOptions {
     pub r: f64,
     /// refine the black box by output error when affordable ([`PEM_BUDGET`])
     pub refine: bool,
+    /// black box: estimate a direct feed-through `D` (an acceleration
+    /// output responds within the sample; angle and velocity do not)
+    pub feedthrough: bool,
 }
 
 impl Default for FitOptions {
@@ -144,6 +147,7 @@ impl Default for FitOptions {
             output: Output::Angle,
             r: grey_box::DEFAULT_GEAR_RATIO,
             refine: true,
+            feedthrough: false,
         }
     }
 }
@@ -283,25 +287,35 @@ pub fn fit_model(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitError> {
     }
 }
 
-fn fit_black_box(data: &IdData, n: usize, opts: &FitOptions) -> Result<Fitted, FitError> {
+/// One black-box start: the subspace model of `method`, refined by output
+/// error when affordable; returns the model, its estimation cost (mean
+/// squared simulation error with the best initial state), a description and
+/// notes.
+fn black_box_start(
+    data: &IdData,
+    n: usize,
+    method: Method,
+    opts: &FitOptions,
+) -> Result<(StateSpace, f64, String, Vec<String>), FitError> {
     let sopts = SubspaceOptions {
-        method: opts.method,
+        method,
         order: Order::Fixed(n),
+        feedthrough: opts.feedthrough,
         ..SubspaceOptions::default()
     };
     let sf = subspace::estimate(data, &sopts)?;
     let mut warnings = sf.warnings.clone();
     let mut model = sf.model.clone();
     model.k = None;
-    let mname = match opts.method {
+    let mname = match method {
         Method::Pbsid => "PBSID",
         Method::Moesp => "PO-MOESP",
     };
-    let mut method = format!("{mname} order {n}");
-    let (fam, th0) = FullSs::from_ss(&model, false, false);
+    let mut desc = format!("{mname} order {n}");
+    let (fam, th0) = FullSs::from_ss(&model, opts.feedthrough, false);
     let np = pem::ParamModel::n_params(&fam) as f64;
     if opts.refine && (data.len() as f64) * np * np <= PEM_BUDGET {
-        let pf = pem::fit(
+        let refined = pem::fit(
             &fam,
             &th0,
             data,
@@ -309,15 +323,22 @@ fn fit_black_box(data: &IdData, n: usize, opts: &FitOptions) -> Result<Fitted, F
                 max_iter: 40,
                 ..PemOptions::default()
             },
-        )?;
-        let start_cost = pf.cost_history.first().copied().unwrap_or(f64::INFINITY);
-        let end_cost = pf.cost_history.last().copied().unwrap_or(f64::INFINITY);
-        if pf.model.is_stable() && end_cost <= start_cost {
-            model = pf.model;
-            model.k = None;
-            method.push_str(" + output-error refinement");
-        } else {
-            warnings.push("output-error refinement rejected (unstable or no descent)".into());
+        );
+        match refined {
+            Ok(pf) => {
+                let start_cost = pf.cost_history.first().copied().unwrap_or(f64::INFINITY);
+                let end_cost = pf.cost_history.last().copied().unwrap_or(f64::INFINITY);
+                if pf.model.is_stable() && end_cost <= start_cost {
+                    model = pf.model;
+                    model.k = None;
+                    desc.push_str(" + output-error refinement");
+                } else {
+                    warnings.push(format!(
+                        "{mname}: output-error refinement rejected (unstable or no descent)"
+                    ));
+                }
+            }
+            Err(e) => warnings.push(format!("{mname}: output-error refinement failed: {e}")),
         }
     } else if opts.refine {
         warnings.push(format!(
@@ -325,6 +346,46 @@ fn fit_black_box(data: &IdData, n: usize, opts: &FitOptions) -> Result<Fitted, F
             data.len()
         ));
     }
+    let x0 = subspace::estimate_x0(&model, &data.u, &data.y);
+    let yh = model.simulate(&data.u, Some(&x0));
+    let cost = data
+        .y
+        .iter()
+        .zip(&yh)
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum::<f64>()
+        / data.len() as f64;
+    let cost = if cost.is_finite() {
+        cost
+    } else {
+        f64::INFINITY
+    };
+    Ok((model, cost, desc, warnings))
+}
+
+/// Black box: the chosen subspace method, and the other one as a second
+/// start (PO-MOESP is biased under feedback but can still be the better
+/// start for the output-error criterion, and PBSID can give a marginal model
+/// the refinement cannot leave); the lower output-error cost on the
+/// estimation data wins, so the choice follows the criterion FIT measures.
+fn fit_black_box(data: &IdData, n: usize, opts: &FitOptions) -> Result<Fitted, FitError> {
+    let other = match opts.method {
+        Method::Pbsid => Method::Moesp,
+        Method::Moesp => Method::Pbsid,
+    };
+    let first = black_box_start(data, n, opts.method, opts)?;
+    let (model, _, desc, mut warnings) = match black_box_start(data, n, other, opts) {
+        Ok(second) if second.1 < first.1 => {
+            let mut w = second.3.clone();
+            w.push(format!(
+                "the {} start gave the lower output-error cost and was kept",
+                second.2
+            ));
+            (second.0, second.1, second.2, w)
+        }
+        _ => first,
+    };
+    warnings.dedup();
     Ok(Fitted {
         kind: opts.kind,
         output: opts.output,
@@ -334,7 +395,7 @@ fn fit_black_box(data: &IdData, n: usize, opts: &FitOptions) -> Result<Fitted, F
         params: Vec::new(),
         friction: None,
         warnings,
-        method,
+        method: desc,
     })
 }
 

@@ -133,6 +133,9 @@ pub struct FitArgs {
     /// keep the subspace black box (no output-error refinement)
     #[arg(long)]
     pub no_refine: bool,
+    /// black box with a direct feed-through D (e.g. an acceleration output)
+    #[arg(long)]
+    pub feedthrough: bool,
     /// gear ratio r (arm angle per motor angle) of the physical models
     #[arg(long, value_name = "R", default_value_t = DEFAULT_GEAR_RATIO)]
     pub gear_ratio: f64,
@@ -267,6 +270,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         output: args.output.into(),
         r: args.gear_ratio,
         refine: !args.no_refine,
+        feedthrough: args.feedthrough,
     };
     let t0 = Instant::now();
     let fitted = fit_model(&est, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
