@@ -53,7 +53,7 @@ use serde::Serialize;
 use thiserror::Error;
 
 use crate::data::{Dataset, IdData};
-use crate::fit::{default_f_min, fit_model, FitOptions, Fitted, ModelKind};
+use crate::fit::{default_f_min, fit_model, FitOptions, Fitted, InputHold, ModelKind};
 use crate::grey_box::Output;
 use crate::sim::{self, Mechanism, PlantKind, SimConfig, SimOutput};
 use crate::ss::StateSpace;
@@ -509,6 +509,7 @@ pub fn table(
                 kind,
                 output: Output::Angle,
                 r: truth.plant.params.r,
+                input_hold: InputHold::IntervalMean,
                 ..FitOptions::default()
             },
         )

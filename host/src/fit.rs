@@ -136,6 +136,49 @@ pub struct FitOptions {
     /// black box: estimate a direct feed-through `D` (an acceleration
     /// output responds within the sample; angle and velocity do not)
     pub feedthrough: bool,
+    /// what the discrete physical model takes as its held input
+    pub input_hold: InputHold,
+}
+
+/// What the zero-order-hold input of a physical model is (seed 000 eq. (13)
+/// assumes `u` constant over each sample interval).
+///
+/// Raw board data satisfy that assumption exactly: the controller holds `u`
+/// over each 0.5 ms tick. Decimated data do not: after the anti-alias
+/// filter `u` varies smoothly inside the coarse interval, and feeding the
+/// sample `u[k]` to eq. (13) acts like an extra delay of half a coarse
+/// sample (2.5 ms at 200 Hz, 18° at 20 Hz), which the fit turns into wrong
+/// stiffnesses and dampings. [`InputHold::IntervalMean`] feeds the mean of
+/// `u` over the interval instead, `(u[k] + u[k+1]) / 2`, exact to second
+/// order for a smooth input (trapezoidal rule). Measured on the four-mass
+/// experiment of [`crate::experiment`], seed 1, true parameters: FIT 92.5 %
+/// with the sample, 95.4 % with the interval mean, and the fitted `k_g`
+/// moves from +39 % to −4 % of the truth.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InputHold {
+    /// `u[k]` held over `[kT, (k+1)T)` (raw, undecimated data)
+    #[default]
+    Zoh,
+    /// the interval mean `(u[k] + u[k+1]) / 2` (decimated data)
+    IntervalMean,
+}
+
+impl InputHold {
+    /// the input sequence the discrete model takes
+    pub fn apply<'a>(&self, u: &'a [f64]) -> std::borrow::Cow<'a, [f64]> {
+        match self {
+            InputHold::Zoh => std::borrow::Cow::Borrowed(u),
+            InputHold::IntervalMean => {
+                let n = u.len();
+                std::borrow::Cow::Owned(
+                    (0..n)
+                        .map(|k| 0.5 * (u[k] + u[(k + 1).min(n.saturating_sub(1))]))
+                        .collect(),
+                )
+            }
+        }
+    }
 }
 
 impl Default for FitOptions {
@@ -148,6 +191,7 @@ impl Default for FitOptions {
             r: grey_box::DEFAULT_GEAR_RATIO,
             refine: true,
             feedthrough: false,
+            input_hold: InputHold::Zoh,
         }
     }
 }
@@ -240,6 +284,8 @@ pub struct Fitted {
     pub warnings: Vec<String>,
     /// what was done, for reports ("PBSID order 11 + output-error", ...)
     pub method: String,
+    /// the model's held input
+    pub input_hold: InputHold,
 }
 
 fn check(data: &IdData) -> Result<(), FitError> {
@@ -396,10 +442,22 @@ fn fit_black_box(data: &IdData, n: usize, opts: &FitOptions) -> Result<Fitted, F
         friction: None,
         warnings,
         method: desc,
+        input_hold: InputHold::Zoh,
     })
 }
 
 fn fit_grey(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitError> {
+    let held;
+    let data = match opts.input_hold {
+        InputHold::Zoh => data,
+        hold => {
+            held = IdData {
+                u: hold.apply(&data.u).into_owned(),
+                ..data.clone()
+            };
+            &held
+        }
+    };
     let structure = opts.kind.structure().expect("grey-box kind");
     let m = structure.masses();
     // Multi-start over the order of the subspace model the resonance and
@@ -460,6 +518,7 @@ fn fit_grey(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitError> {
             orders.len(),
             f.pem.iterations
         ),
+        input_hold: opts.input_hold,
     })
 }
 
@@ -495,6 +554,7 @@ fn fit_rigid_coulomb(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitErro
             rf.rel_error_percent
         )],
         method: "inverse-dynamics least squares (IDIM-LS), then output-error simulation".into(),
+        input_hold: InputHold::Zoh,
     })
 }
 
@@ -532,8 +592,9 @@ impl Fitted {
             };
             return fr.simulate(&data.u, data.ts, q0, v0, self.output);
         }
-        let x0 = subspace::estimate_x0(&self.model, &data.u, &data.y);
-        self.model.simulate(&data.u, Some(&x0))
+        let u = self.input_hold.apply(&data.u);
+        let x0 = subspace::estimate_x0(&self.model, &u, &data.y);
+        self.model.simulate(&u, Some(&x0))
     }
 
     /// FIT and residual tests on `data` with `lags` lags.
@@ -564,7 +625,19 @@ impl Fitted {
 
     /// Frequency response of the linear model at `f_hz` [Hz].
     pub fn freq_response(&self, f_hz: &[f64]) -> Vec<Complex<f64>> {
-        self.model.freq_response(f_hz)
+        let g = self.model.freq_response(f_hz);
+        match self.input_hold {
+            InputHold::Zoh => g,
+            // (1 + z)/2 at z = e^{jωT}: the interval mean of the input
+            InputHold::IntervalMean => g
+                .iter()
+                .zip(f_hz)
+                .map(|(g, f)| {
+                    let w = 2.0 * std::f64::consts::PI * f * self.ts;
+                    g * (Complex::new(1.0 + w.cos(), w.sin()) * 0.5)
+                })
+                .collect(),
+        }
     }
 
     /// The model file.
@@ -585,6 +658,7 @@ impl Fitted {
             d: self.model.d,
             parameters: param_map(&self.params),
             friction: self.friction,
+            input_hold: self.input_hold,
             fit_estimation,
             source: source.into(),
         }
@@ -697,6 +771,9 @@ pub struct SavedModel {
     pub parameters: BTreeMap<String, ParamJson>,
     /// nonlinear rigid model (Coulomb friction), simulated instead of `A, B, C, D`
     pub friction: Option<RigidFriction>,
+    /// the model's held input (absent in older files: zero-order hold)
+    #[serde(default)]
+    pub input_hold: InputHold,
     /// FIT on the estimation data [%] (toolbox definition)
     pub fit_estimation: f64,
     /// estimation data file
@@ -760,6 +837,7 @@ impl SavedModel {
             friction: self.friction,
             warnings: Vec::new(),
             method: self.method.clone(),
+            input_hold: self.input_hold,
         })
     }
 }
@@ -879,6 +957,38 @@ mod tests {
         other.ts = 4e-3;
         let e = f.evaluate(&other, 10).unwrap_err().to_string();
         assert!(e.contains("sample interval"), "{e}");
+    }
+
+    #[test]
+    fn interval_mean_hold_follows_smooth_input_better_than_sample_hold() {
+        // ẏ = −a y + a u with a smooth u = sin(2π 20 t): exact response
+        // from the continuous solution on a fine grid, then sampled at 5 ms
+        let a = 2.0 * std::f64::consts::PI * 30.0;
+        let c = ContinuousSs {
+            f: DMatrix::from_element(1, 1, -a),
+            g: DVector::from_element(1, a),
+            h: RowDVector::from_element(1, 1.0),
+            d: 0.0,
+        };
+        let (fine, q) = (5e-6, 1000);
+        let exact = c.zoh(fine);
+        let n = 400 * q;
+        let uf: Vec<f64> = (0..n)
+            .map(|k| (2.0 * std::f64::consts::PI * 20.0 * k as f64 * fine).sin())
+            .collect();
+        let yf = exact.simulate(&uf, None);
+        let u: Vec<f64> = uf.iter().step_by(q).copied().collect();
+        let y: Vec<f64> = yf.iter().step_by(q).copied().collect();
+        let coarse = c.zoh(fine * q as f64);
+        let err = |hold: InputHold| {
+            let yh = coarse.simulate(&hold.apply(&u), None);
+            (100..u.len() - 1)
+                .map(|k| (y[k] - yh[k]).abs())
+                .fold(0.0, f64::max)
+        };
+        let (e0, e1) = (err(InputHold::Zoh), err(InputHold::IntervalMean));
+        // measured: 0.049 vs 0.30 (ωT = 0.63 at 20 Hz and 5 ms)
+        assert!(e1 < 0.25 * e0, "interval mean {e1} vs sample {e0}");
     }
 
     #[test]

@@ -20,8 +20,8 @@ use super::args::{DataArgs, DetrendArg, PrepArgs};
 use super::{print_json, CmdResult, Context, Outcome};
 use crate::data::Dataset;
 use crate::fit::{
-    default_f_min, fit_model, log_grid, param_map, DetrendKind, FitOptions, Fitted, ModelKind,
-    ParamJson, Prep,
+    default_f_min, fit_model, log_grid, param_map, DetrendKind, FitOptions, Fitted, InputHold,
+    ModelKind, ParamJson, Prep,
 };
 use crate::frf::analyze_dataset;
 use crate::grey_box::{Output, DEFAULT_GEAR_RATIO};
@@ -271,6 +271,12 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         r: args.gear_ratio,
         refine: !args.no_refine,
         feedthrough: args.feedthrough,
+        // decimated data are not held over the coarse interval (see InputHold)
+        input_hold: if prep.decimate > 1 {
+            InputHold::IntervalMean
+        } else {
+            InputHold::Zoh
+        },
     };
     let t0 = Instant::now();
     let fitted = fit_model(&est, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
