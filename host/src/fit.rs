@@ -12,7 +12,9 @@
 //!   small enough ([`PEM_BUDGET`]);
 //! - physical models (rigid, two-, three- and four-mass, seed 000 eq. (5)–(8),
 //!   zero-order hold eq. (12)–(13)) through [`crate::grey_box::fit`], with
-//!   initial values from the data and standard deviations by the delta method;
+//!   initial values from the data (best of three starts, see `fit_grey`) and
+//!   standard deviations by the delta method; on decimated data the model's
+//!   held input is the interval mean of `u` ([`InputHold`]);
 //! - the rigid body with Coulomb friction: inverse-dynamics least squares
 //!   ([`crate::grey_box::rigid_idim`], seed 001 steps 1–2), then the
 //!   output-error FIT of the resulting nonlinear model (explicit simulation,

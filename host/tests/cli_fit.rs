@@ -212,6 +212,18 @@ fn demo_writes_captures_plots_and_the_table() {
     ] {
         assert!(dir.join(f).exists(), "{f} missing");
     }
+    // the demo's captures load in every analysis command
+    let est = dir.join("estimation.jcap");
+    let f = json(&jointid(&[
+        "fit",
+        est.to_str().unwrap(),
+        "--model",
+        "black-box:6",
+        "--decimate",
+        "10",
+        "--json",
+    ]));
+    assert!(f["fit_estimation"].as_f64().unwrap() > 50.0, "{f}");
     let rows = j["table"]["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 3);
     for r in rows {

@@ -5,6 +5,10 @@
 //! optionally Bode plots over the measured FRF (seed 000 Figs. 5–6) and the
 //! model file.
 //!
+//! With `--decimate N > 1` the physical models take the interval mean of
+//! the input ([`crate::fit::InputHold::IntervalMean`]); the model file
+//! records it, so `jointid validate` applies the same.
+//!
 //! Column mapping: DATA is a capture CSV, a `.jcap` capture (once its loader
 //! is registered) or any CSV with `--time/--input/--output-col` (`--output`
 //! is taken here by the output kind, angle or velocity).

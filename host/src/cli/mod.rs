@@ -93,8 +93,22 @@ pub struct Context<'a> {
 /// Loaders the binary uses.
 // TODO(lead): register the `.jcap` loader of the capture module here, e.g.
 // `l.register("jcap", Box::new(|p, _| crate::capture::load_dataset(p).map_err(Into::into)));`
+// Until then, `.jcap` files are read by the strict single-session decoder of
+// `crate::experiment` (lossless streams such as the demo's; a damaged frame
+// or a sequence gap is an error naming its byte offset).
 pub fn default_loaders() -> Loaders {
-    Loaders::default()
+    let mut l = Loaders::default();
+    l.register(
+        "jcap",
+        Box::new(|p, _| {
+            let stream = crate::experiment::read_jcap_stream(p)?;
+            Ok(crate::experiment::decode_session(
+                &stream,
+                &p.display().to_string(),
+            )?)
+        }),
+    );
+    l
 }
 
 /// Runs the parsed command line.
