@@ -38,6 +38,8 @@
 //! batch's reference CRC. The `.jcap` file written by the demo is the
 //! capture module's format version 1: the 8 bytes [`JCAP_MAGIC`] then the
 //! byte stream.
+// Units in brackets (`[s]`, `[Hz]`, `[%]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
 use std::collections::BTreeMap;
 use std::path::Path;

@@ -35,6 +35,8 @@
 //! (decimation, detrending), the physical parameters with their standard
 //! deviations, and for the Coulomb rigid model its four parameters: all that
 //! is needed to simulate the model again on new data.
+// Units in brackets (`[s]`, `[Hz]`, `[%]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
 use std::collections::BTreeMap;
 
