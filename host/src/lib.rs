@@ -5,4 +5,5 @@
 //! grey_box -> validate -> diagnose -> report. Estimators do no IO: they take
 //! an [`data::IdData`] and return values.
 
+pub mod capture;
 pub mod data;

@@ -1,0 +1,499 @@
+//! From received bytes to samples and a report: the one place that interprets a stream,
+//! used alike by the live capture (progress, summary) and by [`super::read_jcap`].
+//!
+//! [`StreamAnalyzer`] feeds the bytes to `jointid_core::wire::Decoder`, keeps every
+//! intact frame, lists every damaged one with its stream offset, follows session headers,
+//! tracks which sequence numbers arrived (as sorted ranges, so duplicates and late
+//! arrivals are recognised without a per-sample set) and remembers each batch's reference
+//! CRC. At [`StreamAnalyzer::finish`] it regenerates the excitation from the session
+//! header (`jointid_core::excitation`), checks every batch's reference CRC against it, and
+//! converts the kept raw counts to SI with the header's scale.
+//!
+//! **Invariant**: nothing is interpolated or invented. Samples are kept exactly as they
+//! arrived (each sequence number once); the report says where the holes are.
+
+use jointid_core::excitation::{Excitation, ExcitationConfig};
+use jointid_core::wire::{DecodeError, DecodeEvent, Decoder, Message, RawSample, SessionHeader};
+
+use super::report::{
+    BoardCounters, CaptureReport, DamagedFrame, ReferenceMismatch, SeqGap, SessionSummary,
+};
+use super::{CaptureError, CaptureRecord, CaptureSample};
+
+/// Live counters, cheap to read after every chunk (for the progress line).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Progress {
+    /// stream bytes read [bytes]
+    pub bytes: u64,
+    /// samples of the reported session received
+    pub samples: u64,
+    /// highest sequence number received in the reported session
+    pub last_seq: Option<u32>,
+    /// holes in the sequence so far
+    pub gaps: u64,
+    /// samples missing in those holes
+    pub missing: u64,
+    /// frames rejected for a bad CRC
+    pub crc_errors: u64,
+    /// frames rejected for any reason (CRC included)
+    pub damaged: u64,
+    /// sampler overruns the board reported last
+    pub overruns: u32,
+}
+
+/// One batch's bookkeeping for the reference check.
+#[derive(Clone, Copy, Debug)]
+struct BatchRef {
+    first_seq: u32,
+    len: u32,
+    crc: u32,
+}
+
+/// Streaming interpreter of a capture's bytes.
+#[derive(Debug)]
+pub struct StreamAnalyzer {
+    decoder: Decoder,
+    /// stream offset at which the current decoder started
+    base: u64,
+    bytes: u64,
+    keep_samples: bool,
+    frames: u64,
+    damaged: Vec<DamagedFrame>,
+    crc_errors: u64,
+    /// the reported session's first header
+    header: Option<SessionHeader>,
+    sessions: Vec<SessionSummary>,
+    /// index into `sessions` of the session the next batch belongs to
+    current: Option<usize>,
+    /// sorted, disjoint, non-adjacent inclusive ranges of received sequence numbers
+    ranges: Vec<(u32, u32)>,
+    samples: u64,
+    kept: Vec<RawSample>,
+    batches: Vec<BatchRef>,
+    duplicates: u64,
+    out_of_order: u64,
+    without_header: u64,
+    other_sessions: u64,
+    board: BoardCounters,
+    ended: bool,
+    /// `End.seq`: samples the board took in the reported session
+    end_seq: Option<u32>,
+}
+
+impl Default for StreamAnalyzer {
+    fn default() -> Self {
+        Self::new(true)
+    }
+}
+
+impl StreamAnalyzer {
+    /// A fresh analyzer; `keep_samples` = false keeps only counts (live capture).
+    pub fn new(keep_samples: bool) -> Self {
+        Self {
+            decoder: Decoder::new(),
+            base: 0,
+            bytes: 0,
+            keep_samples,
+            frames: 0,
+            damaged: Vec::new(),
+            crc_errors: 0,
+            header: None,
+            sessions: Vec::new(),
+            current: None,
+            ranges: Vec::new(),
+            samples: 0,
+            kept: Vec::new(),
+            batches: Vec::new(),
+            duplicates: 0,
+            out_of_order: 0,
+            without_header: 0,
+            other_sessions: 0,
+            board: BoardCounters::default(),
+            ended: false,
+            end_seq: None,
+        }
+    }
+
+    /// Feeds the next received bytes.
+    pub fn feed(&mut self, bytes: &[u8]) {
+        self.bytes += bytes.len() as u64;
+        let mut events = Vec::new();
+        self.decoder.feed(bytes, |e| events.push(e));
+        for e in events {
+            self.on_event(e);
+        }
+    }
+
+    /// Marks a link interruption at the current offset: the frame cut by it is reported
+    /// as truncated, and decoding starts afresh with the bytes that follow.
+    pub fn boundary(&mut self) {
+        let mut events = Vec::new();
+        self.decoder.finish(|e| events.push(e));
+        for e in events {
+            self.on_event(e);
+        }
+        self.decoder = Decoder::new();
+        self.base = self.bytes;
+    }
+
+    /// Stream bytes fed so far [bytes].
+    pub fn bytes(&self) -> u64 {
+        self.bytes
+    }
+
+    /// The reported session's header, once it arrived.
+    pub fn header(&self) -> Option<&SessionHeader> {
+        self.header.as_ref()
+    }
+
+    /// True once the board's `End` message for the reported session arrived.
+    pub fn ended(&self) -> bool {
+        self.ended
+    }
+
+    /// Highest sequence number received in the reported session.
+    pub fn last_seq(&self) -> Option<u32> {
+        self.ranges.last().map(|r| r.1)
+    }
+
+    /// Live counters.
+    pub fn progress(&self) -> Progress {
+        let gaps = self.gaps();
+        Progress {
+            bytes: self.bytes,
+            samples: self.samples,
+            last_seq: self.last_seq(),
+            gaps: gaps.len() as u64,
+            missing: gaps.iter().map(SeqGap::len).sum(),
+            crc_errors: self.crc_errors,
+            damaged: self.damaged.len() as u64,
+            overruns: self.board.overruns,
+        }
+    }
+
+    /// Missing sequence ranges of the reported session: before the first received sample
+    /// (a session starts at seq 0), between received runs, and after the last one when
+    /// the board's `End` says more samples were taken.
+    pub fn gaps(&self) -> Vec<SeqGap> {
+        let mut gaps = Vec::new();
+        if self.header.is_some() {
+            match self.ranges.first() {
+                Some(&(first, _)) if first > 0 => gaps.push(SeqGap { from: 0, to: first - 1 }),
+                None => {
+                    if let Some(n) = self.end_seq.filter(|n| *n > 0) {
+                        gaps.push(SeqGap { from: 0, to: n - 1 });
+                    }
+                }
+                _ => {}
+            }
+        }
+        gaps.extend(self.ranges.windows(2).map(|w| SeqGap {
+            from: w[0].1 + 1,
+            to: w[1].0 - 1,
+        }));
+        if let (Some(&(_, last)), Some(n)) = (self.ranges.last(), self.end_seq) {
+            if n > last.saturating_add(1) {
+                gaps.push(SeqGap { from: last + 1, to: n - 1 });
+            }
+        }
+        gaps
+    }
+
+    fn on_event(&mut self, e: DecodeEvent) {
+        match e {
+            DecodeEvent::Frame { offset, message, .. } => {
+                self.frames += 1;
+                self.on_message(message, self.base + offset);
+            }
+            DecodeEvent::Damaged { offset, len, error } => {
+                if matches!(error, DecodeError::Crc { .. }) {
+                    self.crc_errors += 1;
+                }
+                self.damaged.push(DamagedFrame {
+                    offset: self.base + offset,
+                    len: len as u64,
+                    kind: error_kind(&error).to_string(),
+                    error: error.to_string(),
+                });
+            }
+        }
+    }
+
+    fn on_message(&mut self, message: Message, offset: u64) {
+        match message {
+            Message::Header(h) => {
+                let idx = match self
+                    .sessions
+                    .iter()
+                    .position(|s| s.board_id == h.board_id && s.session_id == h.session_id)
+                {
+                    Some(i) => i,
+                    None => {
+                        self.sessions.push(SessionSummary {
+                            board_id: h.board_id,
+                            session_id: h.session_id,
+                            offset,
+                            samples: 0,
+                        });
+                        self.sessions.len() - 1
+                    }
+                };
+                if self.header.is_none() {
+                    self.header = Some(h);
+                }
+                self.current = Some(idx);
+            }
+            Message::Batch(b) => {
+                let n = b.len() as u64;
+                match self.current {
+                    None => self.without_header += n,
+                    Some(i) => {
+                        self.sessions[i].samples += n;
+                        if i != 0 {
+                            self.other_sessions += n;
+                        } else {
+                            self.batches.push(BatchRef {
+                                first_seq: b.first_seq(),
+                                len: b.len() as u32,
+                                crc: b.reference_crc(),
+                            });
+                            for s in b.samples() {
+                                self.on_sample(s);
+                            }
+                        }
+                    }
+                }
+            }
+            Message::Status(s) => {
+                if self.current == Some(0) {
+                    self.board = counters(&s);
+                }
+            }
+            Message::End(s) => {
+                if self.current == Some(0) {
+                    self.board = counters(&s);
+                    self.ended = true;
+                    self.end_seq = Some(s.seq);
+                }
+            }
+        }
+    }
+
+    fn on_sample(&mut self, s: RawSample) {
+        let seq = s.seq;
+        // fast path: the next one in order
+        match self.ranges.last_mut() {
+            Some(last) if last.1.checked_add(1) == Some(seq) => last.1 = seq,
+            Some(last) if seq > last.1 => self.ranges.push((seq, seq)),
+            None => self.ranges.push((seq, seq)),
+            Some(_) => {
+                if !self.insert_late(seq) {
+                    self.duplicates += 1;
+                    return;
+                }
+                self.out_of_order += 1;
+            }
+        }
+        self.samples += 1;
+        if self.keep_samples {
+            self.kept.push(s);
+        }
+    }
+
+    /// Inserts a sequence number below the highest one; false if it was already there.
+    fn insert_late(&mut self, seq: u32) -> bool {
+        // first range whose end is >= seq
+        let i = self.ranges.partition_point(|r| r.1 < seq);
+        if i < self.ranges.len() && self.ranges[i].0 <= seq {
+            return false;
+        }
+        let joins_prev = i > 0 && self.ranges[i - 1].1 + 1 == seq;
+        let joins_next = i < self.ranges.len() && self.ranges[i].0 == seq + 1;
+        match (joins_prev, joins_next) {
+            (true, true) => {
+                self.ranges[i - 1].1 = self.ranges[i].1;
+                self.ranges.remove(i);
+            }
+            (true, false) => self.ranges[i - 1].1 = seq,
+            (false, true) => self.ranges[i].0 = seq,
+            (false, false) => self.ranges.insert(i, (seq, seq)),
+        }
+        true
+    }
+
+    fn drain_decoder(&mut self) {
+        let mut events = Vec::new();
+        self.decoder.finish(|e| events.push(e));
+        for e in events {
+            self.on_event(e);
+        }
+    }
+
+    /// Ends the stream: reports a truncated tail, checks the reference, builds the report
+    /// and, when a session header arrived and samples were kept, the record.
+    ///
+    /// # Errors
+    /// [`CaptureError::Excitation`] when the session header's excitation config cannot be
+    /// regenerated ([`Self::finish_report`] still gives the report).
+    pub fn finish(mut self) -> Result<(CaptureReport, Option<CaptureRecord>), CaptureError> {
+        self.drain_decoder();
+        let mut report = self.report_without_reference();
+        let Some(header) = self.header else {
+            return Ok((report, None));
+        };
+        self.kept.sort_by_key(|s| s.seq);
+        self.batches.sort_by_key(|b| b.first_seq);
+        let (mismatches, refs) = self.check_reference(&header.excitation)?;
+        report.reference_mismatches = mismatches;
+        if !self.keep_samples {
+            return Ok((report, None));
+        }
+        let fs = f64::from(header.sample_rate_hz);
+        let tq = f64::from(header.scale.torque_nm_per_count);
+        let an = f64::from(header.scale.angle_rad_per_count);
+        let samples = self
+            .kept
+            .iter()
+            .zip(refs)
+            .map(|(s, r)| CaptureSample {
+                seq: s.seq,
+                tick: s.tick,
+                t: f64::from(s.seq) / fs,
+                theta_ref: f64::from(r),
+                u: f64::from(s.torque) * tq,
+                theta_m: f64::from(s.angle) * an,
+            })
+            .collect();
+        Ok((
+            report.clone(),
+            Some(CaptureRecord {
+                header,
+                samples,
+                report,
+            }),
+        ))
+    }
+
+    /// Like [`Self::finish`] but only the report; a reference that cannot be regenerated
+    /// is left unchecked instead of failing.
+    pub fn finish_report(mut self) -> CaptureReport {
+        self.keep_samples = false;
+        self.drain_decoder();
+        let mut report = self.report_without_reference();
+        if let Some(h) = self.header {
+            self.batches.sort_by_key(|b| b.first_seq);
+            if let Ok((mismatches, _)) = self.check_reference(&h.excitation) {
+                report.reference_mismatches = mismatches;
+            }
+        }
+        report
+    }
+
+    fn report_without_reference(&self) -> CaptureReport {
+        let gaps = self.gaps();
+        let session = self.sessions.first();
+        CaptureReport {
+            board_id: session.map(|s| s.board_id),
+            session_id: session.map(|s| s.session_id),
+            bytes: self.bytes,
+            frames: self.frames,
+            samples: self.samples,
+            first_seq: self.ranges.first().map(|r| r.0),
+            last_seq: self.last_seq(),
+            missing_samples: gaps.iter().map(SeqGap::len).sum(),
+            gaps,
+            damaged_frames: self.damaged.clone(),
+            overruns: self.board.overruns,
+            board: self.board,
+            duplicates: self.duplicates,
+            out_of_order: self.out_of_order,
+            reference_mismatches: Vec::new(),
+            samples_without_header: self.without_header,
+            samples_other_sessions: self.other_sessions,
+            sessions: self.sessions.clone(),
+            ended: self.ended,
+            link_events: Vec::new(),
+        }
+    }
+
+    /// Regenerates the reference up to the highest received sequence number in one pass,
+    /// checks each batch's CRC and returns the reference of every kept sample (in `kept`
+    /// order, which is sorted by sequence number). Memory stays proportional to the kept
+    /// samples, not to the length of the run.
+    fn check_reference(
+        &self,
+        cfg: &ExcitationConfig,
+    ) -> Result<(Vec<ReferenceMismatch>, Vec<f32>), CaptureError> {
+        let Some(last) = self.last_seq() else {
+            return Ok((Vec::new(), Vec::new()));
+        };
+        let mut table = vec![0.0f32; cfg.period_samples as usize];
+        let mut gen = Excitation::new(cfg, &mut table).map_err(|e| CaptureError::Excitation {
+            message: format!("{e:?}"),
+        })?;
+        let mut mismatches = Vec::new();
+        let mut refs = Vec::with_capacity(if self.keep_samples { self.kept.len() } else { 0 });
+        // batches being collected: (batch, its reference so far)
+        let mut active: Vec<(BatchRef, Vec<f32>)> = Vec::new();
+        let (mut bi, mut ki) = (0, 0);
+        for k in 0..=last {
+            // past the end of a finite run the generator is silent: reference 0
+            let r = gen.next().unwrap_or(0.0);
+            while bi < self.batches.len() && self.batches[bi].first_seq == k {
+                active.push((self.batches[bi], Vec::with_capacity(self.batches[bi].len as usize)));
+                bi += 1;
+            }
+            if !active.is_empty() {
+                for (_, v) in active.iter_mut() {
+                    v.push(r);
+                }
+                active.retain(|(b, v)| {
+                    if v.len() < b.len as usize && k < last {
+                        return true;
+                    }
+                    let host_crc = jointid_core::wire::reference_crc(v);
+                    if host_crc != b.crc {
+                        mismatches.push(ReferenceMismatch {
+                            first_seq: b.first_seq,
+                            len: b.len,
+                            board_crc: b.crc,
+                            host_crc,
+                        });
+                    }
+                    false
+                });
+            }
+            if self.keep_samples {
+                while ki < self.kept.len() && self.kept[ki].seq == k {
+                    refs.push(r);
+                    ki += 1;
+                }
+            }
+        }
+        mismatches.sort_by_key(|m| m.first_seq);
+        Ok((mismatches, refs))
+    }
+}
+
+fn counters(s: &jointid_core::wire::Status) -> BoardCounters {
+    BoardCounters {
+        overruns: s.overruns,
+        queue_drops: s.queue_drops,
+        tx_errors: s.tx_errors,
+    }
+}
+
+/// Short machine-readable name of a decode error.
+pub fn error_kind(e: &DecodeError) -> &'static str {
+    match e {
+        DecodeError::Cobs => "cobs",
+        DecodeError::Crc { .. } => "crc",
+        DecodeError::Postcard => "postcard",
+        DecodeError::TooLong { .. } => "too_long",
+        DecodeError::Truncated => "truncated",
+        DecodeError::TrailingBytes { .. } => "trailing_bytes",
+        DecodeError::Batch(_) => "batch",
+        #[allow(unreachable_patterns)]
+        _ => "other",
+    }
+}
