@@ -346,7 +346,8 @@ impl JcapWriter {
         while done < self.buf.len() {
             match self.file.write(&self.buf[done..]) {
                 Ok(0) => {
-                    let source = io::Error::new(io::ErrorKind::WriteZero, "device accepted no bytes");
+                    let source =
+                        io::Error::new(io::ErrorKind::WriteZero, "device accepted no bytes");
                     return Err(self.write_error(done, source));
                 }
                 Ok(n) => done += n,
@@ -631,7 +632,10 @@ mod tests {
         std::fs::write(&path, b"precious").unwrap();
         let err = JcapWriter::create(&path, false, FlushPolicy::default()).unwrap_err();
         assert!(matches!(err, JcapError::Exists { .. }), "{err}");
-        assert!(err.to_string().contains("run.jcap: already exists"), "{err}");
+        assert!(
+            err.to_string().contains("run.jcap: already exists"),
+            "{err}"
+        );
         assert_eq!(std::fs::read(&path).unwrap(), b"precious");
         JcapWriter::create(&path, true, FlushPolicy::default())
             .unwrap()
@@ -653,14 +657,26 @@ mod tests {
     fn check_header_names_each_kind_of_bad_header() {
         let p = Path::new("x.jcap");
         assert!(check_header(p, &MAGIC).is_ok());
-        assert!(matches!(check_header(p, b"JCA"), Err(JcapError::Short { len: 3, .. })));
-        assert!(matches!(check_header(p, b"PK\x03\x04abcd"), Err(JcapError::BadMagic { .. })));
-        assert!(matches!(check_header(p, b"PK"), Err(JcapError::BadMagic { .. })));
+        assert!(matches!(
+            check_header(p, b"JCA"),
+            Err(JcapError::Short { len: 3, .. })
+        ));
+        assert!(matches!(
+            check_header(p, b"PK\x03\x04abcd"),
+            Err(JcapError::BadMagic { .. })
+        ));
+        assert!(matches!(
+            check_header(p, b"PK"),
+            Err(JcapError::BadMagic { .. })
+        ));
         assert!(matches!(
             check_header(p, b"JCAP\x02\r\n\x1a"),
             Err(JcapError::Version { version: 2, .. })
         ));
-        assert!(matches!(check_header(p, b"JCAP\x01\n\x1a\x00"), Err(JcapError::Mangled { .. })));
+        assert!(matches!(
+            check_header(p, b"JCAP\x01\n\x1a\x00"),
+            Err(JcapError::Mangled { .. })
+        ));
     }
 
     #[test]
@@ -683,7 +699,10 @@ mod tests {
         log.log(&a).unwrap();
         log.log(&b).unwrap();
         drop(log);
-        let mut f = OpenOptions::new().append(true).open(events_path(&cap)).unwrap();
+        let mut f = OpenOptions::new()
+            .append(true)
+            .open(events_path(&cap))
+            .unwrap();
         f.write_all(br#"{"offset":5000,"unix_ms""#).unwrap();
         assert_eq!(read_events(&cap).unwrap().unwrap(), vec![a, b]);
         assert_eq!(read_events(&dir.join("other.jcap")).unwrap(), None);
@@ -693,8 +712,16 @@ mod tests {
     fn read_events_names_the_bad_line() {
         let dir = tmp("badevents");
         let cap = dir.join("run.jcap");
-        std::fs::write(events_path(&cap), "{\"offset\":1,\"unix_ms\":0,\"utc\":\"\",\"event\":\"start\"}\nnonsense\n").unwrap();
+        std::fs::write(
+            events_path(&cap),
+            "{\"offset\":1,\"unix_ms\":0,\"utc\":\"\",\"event\":\"start\"}\nnonsense\n",
+        )
+        .unwrap();
         let err = read_events(&cap).unwrap_err();
-        assert!(err.to_string().contains("run.jcap.events:2: bad event line"), "{err}");
+        assert!(
+            err.to_string()
+                .contains("run.jcap.events:2: bad event line"),
+            "{err}"
+        );
     }
 }

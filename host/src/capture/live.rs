@@ -154,7 +154,8 @@ pub fn record_capture(
     let mut last_progress = start;
     let periods_target = |an: &StreamAnalyzer, n: u32| {
         an.header().map(|h| {
-            u64::from(h.excitation.ramp_samples) + u64::from(n) * u64::from(h.excitation.period_samples)
+            u64::from(h.excitation.ramp_samples)
+                + u64::from(n) * u64::from(h.excitation.period_samples)
         })
     };
     let result: Result<StopReason, CaptureError> = loop {
@@ -214,7 +215,10 @@ pub fn record_capture(
             let _ = log.log(&JcapEvent::now(received, EventKind::Stop, stop.to_string()));
             on_progress(&an.progress(), elapsed);
             let mut report = an.finish_report();
-            report.link_events = jcap::read_events(&opts.out).ok().flatten().unwrap_or_default();
+            report.link_events = jcap::read_events(&opts.out)
+                .ok()
+                .flatten()
+                .unwrap_or_default();
             Ok(CaptureOutcome {
                 stop,
                 bytes,
@@ -229,7 +233,11 @@ pub fn record_capture(
             } else {
                 // keep what arrived; say why it ended
                 let _ = writer.finish();
-                let _ = log.log(&JcapEvent::now(received, EventKind::Stop, format!("error: {e}")));
+                let _ = log.log(&JcapEvent::now(
+                    received,
+                    EventKind::Stop,
+                    format!("error: {e}"),
+                ));
             }
             Err(e)
         }

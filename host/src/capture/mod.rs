@@ -28,12 +28,14 @@ use std::path::{Path, PathBuf};
 
 use jointid_core::wire::SessionHeader;
 
+pub mod can;
 pub mod export;
 pub mod jcap;
 pub mod live;
 pub mod record;
 pub mod report;
 pub mod source;
+pub mod synth;
 
 pub use jcap::{JcapError, JcapEvent};
 pub use live::{record_capture, CaptureOptions, CaptureOutcome, StopReason, StopRule};
@@ -143,7 +145,9 @@ pub fn read_jcap(path: &Path) -> Result<CaptureRecord, CaptureError> {
 ///
 /// # Errors
 /// [`CaptureError::Jcap`] when the file cannot be read or is no jcap file.
-pub fn read_jcap_report(path: &Path) -> Result<(CaptureReport, Option<SessionHeader>), CaptureError> {
+pub fn read_jcap_report(
+    path: &Path,
+) -> Result<(CaptureReport, Option<SessionHeader>), CaptureError> {
     let (stream, events) = read_jcap_parts(path)?;
     let boundaries = boundaries_of(&events);
     let mut an = StreamAnalyzer::new(false);

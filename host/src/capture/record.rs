@@ -178,7 +178,10 @@ impl StreamAnalyzer {
         let mut gaps = Vec::new();
         if self.header.is_some() {
             match self.ranges.first() {
-                Some(&(first, _)) if first > 0 => gaps.push(SeqGap { from: 0, to: first - 1 }),
+                Some(&(first, _)) if first > 0 => gaps.push(SeqGap {
+                    from: 0,
+                    to: first - 1,
+                }),
                 None => {
                     if let Some(n) = self.end_seq.filter(|n| *n > 0) {
                         gaps.push(SeqGap { from: 0, to: n - 1 });
@@ -193,7 +196,10 @@ impl StreamAnalyzer {
         }));
         if let (Some(&(_, last)), Some(n)) = (self.ranges.last(), self.end_seq) {
             if n > last.saturating_add(1) {
-                gaps.push(SeqGap { from: last + 1, to: n - 1 });
+                gaps.push(SeqGap {
+                    from: last + 1,
+                    to: n - 1,
+                });
             }
         }
         gaps
@@ -201,7 +207,9 @@ impl StreamAnalyzer {
 
     fn on_event(&mut self, e: DecodeEvent) {
         match e {
-            DecodeEvent::Frame { offset, message, .. } => {
+            DecodeEvent::Frame {
+                offset, message, ..
+            } => {
                 self.frames += 1;
                 self.on_message(message, self.base + offset);
             }
@@ -429,10 +437,14 @@ impl StreamAnalyzer {
         };
         let mut table = vec![0.0f32; cfg.period_samples as usize];
         let mut gen = Excitation::new(cfg, &mut table).map_err(|e| CaptureError::Excitation {
-            message: format!("{e:?}"),
+            message: e.to_string(),
         })?;
         let mut mismatches = Vec::new();
-        let mut refs = Vec::with_capacity(if self.keep_samples { self.kept.len() } else { 0 });
+        let mut refs = Vec::with_capacity(if self.keep_samples {
+            self.kept.len()
+        } else {
+            0
+        });
         // batches being collected: (batch, its reference so far)
         let mut active: Vec<(BatchRef, Vec<f32>)> = Vec::new();
         let (mut bi, mut ki) = (0, 0);
@@ -440,7 +452,10 @@ impl StreamAnalyzer {
             // past the end of a finite run the generator is silent: reference 0
             let r = gen.next().unwrap_or(0.0);
             while bi < self.batches.len() && self.batches[bi].first_seq == k {
-                active.push((self.batches[bi], Vec::with_capacity(self.batches[bi].len as usize)));
+                active.push((
+                    self.batches[bi],
+                    Vec::with_capacity(self.batches[bi].len as usize),
+                ));
                 bi += 1;
             }
             if !active.is_empty() {
@@ -495,5 +510,234 @@ pub fn error_kind(e: &DecodeError) -> &'static str {
         DecodeError::Batch(_) => "batch",
         #[allow(unreachable_patterns)]
         _ => "other",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::capture::synth::{synth_stream, FrameContent, SynthOptions, SynthStream};
+
+    fn decode(bytes: &[u8], chunk: usize) -> (CaptureReport, CaptureRecord) {
+        let mut an = StreamAnalyzer::new(true);
+        for c in bytes.chunks(chunk.max(1)) {
+            an.feed(c);
+        }
+        let (report, record) = an.finish().unwrap();
+        (report, record.unwrap())
+    }
+
+    fn batch_frames(s: &SynthStream) -> Vec<usize> {
+        (0..s.frames.len())
+            .filter(|&i| matches!(s.frames[i].content, FrameContent::Batch { .. }))
+            .collect()
+    }
+
+    #[test]
+    fn analyzer_recovers_every_sample_bit_exact_whatever_the_chunking() {
+        let s = synth_stream(&SynthOptions::small());
+        for chunk in [1, 7, 64, 1 << 20] {
+            let (report, rec) = decode(&s.bytes, chunk);
+            assert!(report.is_clean(), "chunk {chunk}: {report}");
+            assert!(report.ended);
+            assert_eq!(report.samples, 400);
+            assert_eq!(report.frames as usize, s.frames.len());
+            assert_eq!(rec.samples.len(), 400);
+            let sc = s.header.scale;
+            for (got, (raw, r)) in rec.samples.iter().zip(s.samples.iter().zip(&s.reference)) {
+                assert_eq!(got.seq, raw.seq);
+                assert_eq!(got.tick, raw.tick);
+                assert_eq!(got.theta_ref, f64::from(*r));
+                assert_eq!(
+                    got.u,
+                    f64::from(raw.torque) * f64::from(sc.torque_nm_per_count)
+                );
+                assert_eq!(
+                    got.theta_m,
+                    f64::from(raw.angle) * f64::from(sc.angle_rad_per_count)
+                );
+                assert_eq!(got.t, f64::from(raw.seq) / 200.0);
+            }
+        }
+    }
+
+    #[test]
+    fn analyzer_reports_a_flipped_bit_at_its_frame_offset_and_the_lost_seqs_as_a_gap() {
+        let s = synth_stream(&SynthOptions::small());
+        let i = batch_frames(&s)[5];
+        let f = s.frames[i];
+        let mut bytes = s.bytes.clone();
+        let at = (f.offset + f.len / 2) as usize;
+        // flip a bit that does not create a delimiter
+        let mask = if bytes[at] ^ 0x10 != 0 { 0x10 } else { 0x01 };
+        bytes[at] ^= mask;
+        let (report, rec) = decode(&bytes, 100);
+        assert_eq!(report.damaged_frames.len(), 1);
+        assert_eq!(report.damaged_frames[0].offset, f.offset);
+        assert_eq!(report.damaged_frames[0].len, f.len);
+        let FrameContent::Batch { first, len } = f.content else {
+            unreachable!()
+        };
+        assert_eq!(
+            report.gaps,
+            vec![SeqGap {
+                from: first,
+                to: first + len - 1
+            }]
+        );
+        assert_eq!(report.missing_samples, u64::from(len));
+        assert_eq!(rec.samples.len(), 400 - len as usize);
+        assert!(rec
+            .samples
+            .iter()
+            .all(|x| x.seq < first || x.seq >= first + len));
+    }
+
+    #[test]
+    fn analyzer_reports_head_and_tail_gaps_from_the_header_and_end_message() {
+        let s = synth_stream(&SynthOptions::small());
+        let b = batch_frames(&s);
+        let (first, last) = (s.frames[b[0]], s.frames[*b.last().unwrap()]);
+        // drop the first and the last batch frames entirely (delimiters included)
+        let mut bytes = Vec::new();
+        for f in &s.frames {
+            if *f != first && *f != last {
+                bytes.extend_from_slice(&s.bytes[f.offset as usize..(f.offset + f.len) as usize]);
+            }
+        }
+        let (report, _) = decode(&bytes, 333);
+        let FrameContent::Batch { len: l0, .. } = first.content else {
+            unreachable!()
+        };
+        let FrameContent::Batch { first: f1, .. } = last.content else {
+            unreachable!()
+        };
+        assert_eq!(
+            report.gaps,
+            vec![
+                SeqGap {
+                    from: 0,
+                    to: l0 - 1
+                },
+                SeqGap { from: f1, to: 399 }
+            ]
+        );
+        assert!(report.damaged_frames.is_empty());
+    }
+
+    #[test]
+    fn analyzer_keeps_duplicates_once_and_sorts_late_batches() {
+        let s = synth_stream(&SynthOptions::small());
+        let b = batch_frames(&s);
+        let span = |i: usize| {
+            let f = s.frames[i];
+            &s.bytes[f.offset as usize..(f.offset + f.len) as usize]
+        };
+        let mut bytes = Vec::new();
+        for i in 0..s.frames.len() {
+            if i == b[3] {
+                continue; // moved after b[4]
+            }
+            bytes.extend_from_slice(span(i));
+            if i == b[4] {
+                bytes.extend_from_slice(span(b[3]));
+                bytes.extend_from_slice(span(b[2])); // a duplicate
+            }
+        }
+        let (report, rec) = decode(&bytes, 50);
+        assert!(report.gaps.is_empty(), "{report}");
+        assert_eq!(report.duplicates, 16);
+        assert_eq!(report.out_of_order, 16);
+        assert_eq!(report.samples, 400);
+        let seqs: Vec<u32> = rec.samples.iter().map(|x| x.seq).collect();
+        assert_eq!(seqs, (0..400).collect::<Vec<_>>());
+        assert!(report.reference_mismatches.is_empty());
+    }
+
+    #[test]
+    fn analyzer_flags_every_batch_when_the_reference_differs_from_the_header() {
+        let opts = SynthOptions::small();
+        let s = synth_stream(&opts);
+        let mut other = opts;
+        other.excitation.seed = 43;
+        let o = synth_stream(&other);
+        // the header of `o` (seed 43) with the batches of `s` (seed 42)
+        let h = o.frames[0];
+        let mut bytes = o.bytes[..h.len as usize].to_vec();
+        bytes.extend_from_slice(&s.bytes[s.frames[0].len as usize..]);
+        let (report, _) = decode(&bytes, 4096);
+        assert_eq!(report.reference_mismatches.len(), batch_frames(&s).len());
+        assert!(report.damaged_frames.is_empty());
+    }
+
+    #[test]
+    fn analyzer_counts_samples_without_header_and_of_other_sessions_apart() {
+        let opts = SynthOptions::small();
+        let s = synth_stream(&opts);
+        let mut second = opts;
+        second.session_id = 8;
+        let t = synth_stream(&second);
+        // s without its header, then t complete, then s complete
+        let mut bytes = s.bytes[s.frames[0].len as usize..].to_vec();
+        bytes.extend_from_slice(&t.bytes);
+        bytes.extend_from_slice(&s.bytes);
+        let (report, rec) = decode(&bytes, 4096);
+        assert_eq!(report.samples_without_header, 400);
+        assert_eq!(report.session_id, Some(8));
+        assert_eq!(report.samples, 400);
+        assert_eq!(report.samples_other_sessions, 400);
+        assert_eq!(report.sessions.len(), 2);
+        assert_eq!(
+            report.sessions[1].offset,
+            (s.bytes.len() - s.frames[0].len as usize + t.bytes.len()) as u64
+        );
+        assert_eq!(rec.header.session_id, 8);
+    }
+
+    #[test]
+    fn boundary_reports_the_cut_frame_as_truncated_and_decodes_what_follows() {
+        let s = synth_stream(&SynthOptions::small());
+        let f = s.frames[batch_frames(&s)[2]];
+        let cut = (f.offset + 5) as usize;
+        let mut an = StreamAnalyzer::new(true);
+        an.feed(&s.bytes[..cut]);
+        an.boundary();
+        // the link comes back in the middle of the next frame
+        let g = s.frames[batch_frames(&s)[4]];
+        let resume = (g.offset + 3) as usize;
+        an.feed(&s.bytes[resume..]);
+        let (report, _) = an.finish().unwrap();
+        assert_eq!(report.damaged_frames.len(), 2, "{report}");
+        assert_eq!(report.damaged_frames[0].offset, f.offset);
+        assert_eq!(report.damaged_frames[0].kind, "truncated");
+        assert_eq!(report.damaged_frames[0].len, 5);
+        assert_eq!(report.damaged_frames[1].offset, cut as u64);
+        assert_eq!(report.damaged_frames[1].len, g.len - 3);
+        let FrameContent::Batch { first, .. } = f.content else {
+            unreachable!()
+        };
+        let FrameContent::Batch { first: g0, len: gl } = g.content else {
+            unreachable!()
+        };
+        assert_eq!(
+            report.gaps,
+            vec![SeqGap {
+                from: first,
+                to: g0 + gl - 1
+            }]
+        );
+    }
+
+    #[test]
+    fn insert_late_merges_ranges_on_both_sides() {
+        let mut an = StreamAnalyzer::new(false);
+        an.ranges = vec![(0, 3), (5, 7), (10, 10)];
+        assert!(an.insert_late(4));
+        assert_eq!(an.ranges, vec![(0, 7), (10, 10)]);
+        assert!(an.insert_late(9));
+        assert_eq!(an.ranges, vec![(0, 7), (9, 10)]);
+        assert!(!an.insert_late(6));
+        assert!(an.insert_late(8));
+        assert_eq!(an.ranges, vec![(0, 10)]);
     }
 }

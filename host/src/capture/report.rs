@@ -143,7 +143,10 @@ impl CaptureReport {
 
     /// Frames whose CRC did not match.
     pub fn crc_errors(&self) -> usize {
-        self.damaged_frames.iter().filter(|d| d.kind == "crc").count()
+        self.damaged_frames
+            .iter()
+            .filter(|d| d.kind == "crc")
+            .count()
     }
 }
 
@@ -160,7 +163,12 @@ impl fmt::Display for CaptureReport {
             if self.sessions.len() == 1 { "" } else { "s" }
         )?;
         writeln!(f, "bytes            {}", self.bytes)?;
-        writeln!(f, "frames           {} intact, {} damaged", self.frames, self.damaged_frames.len())?;
+        writeln!(
+            f,
+            "frames           {} intact, {} damaged",
+            self.frames,
+            self.damaged_frames.len()
+        )?;
         writeln!(
             f,
             "samples          {} (seq {}..{})",
@@ -181,10 +189,18 @@ impl fmt::Display for CaptureReport {
             writeln!(f, "  ... {} more (see --json)", self.gaps.len() - 20)?;
         }
         for d in self.damaged_frames.iter().take(20) {
-            writeln!(f, "  damaged at byte {} ({} bytes): {}", d.offset, d.len, d.error)?;
+            writeln!(
+                f,
+                "  damaged at byte {} ({} bytes): {}",
+                d.offset, d.len, d.error
+            )?;
         }
         if self.damaged_frames.len() > 20 {
-            writeln!(f, "  ... {} more (see --json)", self.damaged_frames.len() - 20)?;
+            writeln!(
+                f,
+                "  ... {} more (see --json)",
+                self.damaged_frames.len() - 20
+            )?;
         }
         writeln!(
             f,
@@ -192,7 +208,11 @@ impl fmt::Display for CaptureReport {
             self.board.overruns, self.board.queue_drops, self.board.tx_errors
         )?;
         if self.duplicates > 0 || self.out_of_order > 0 {
-            writeln!(f, "duplicates       {}, out of order {}", self.duplicates, self.out_of_order)?;
+            writeln!(
+                f,
+                "duplicates       {}, out of order {}",
+                self.duplicates, self.out_of_order
+            )?;
         }
         if !self.reference_mismatches.is_empty() {
             writeln!(
@@ -203,17 +223,40 @@ impl fmt::Display for CaptureReport {
             )?;
         }
         if self.samples_without_header > 0 {
-            writeln!(f, "no header        {} samples arrived before any session header", self.samples_without_header)?;
+            writeln!(
+                f,
+                "no header        {} samples arrived before any session header",
+                self.samples_without_header
+            )?;
         }
         if self.samples_other_sessions > 0 {
-            writeln!(f, "other sessions   {} samples not reported here", self.samples_other_sessions)?;
+            writeln!(
+                f,
+                "other sessions   {} samples not reported here",
+                self.samples_other_sessions
+            )?;
         }
         for e in &self.link_events {
-            if matches!(e.event, super::jcap::EventKind::LinkLost | super::jcap::EventKind::LinkResumed) {
-                writeln!(f, "  {} {:?} at byte {} {}", e.utc, e.event, e.offset, e.detail)?;
+            if matches!(
+                e.event,
+                super::jcap::EventKind::LinkLost | super::jcap::EventKind::LinkResumed
+            ) {
+                writeln!(
+                    f,
+                    "  {} {:?} at byte {} {}",
+                    e.utc, e.event, e.offset, e.detail
+                )?;
             }
         }
-        write!(f, "end message      {}", if self.ended { "received" } else { "not received" })
+        write!(
+            f,
+            "end message      {}",
+            if self.ended {
+                "received"
+            } else {
+                "not received"
+            }
+        )
     }
 }
 
@@ -224,7 +267,10 @@ pub fn gaps_in(sorted_seqs: impl IntoIterator<Item = u32>) -> Vec<SeqGap> {
     for s in sorted_seqs {
         if let Some(p) = prev {
             if s > p + 1 {
-                gaps.push(SeqGap { from: p + 1, to: s - 1 });
+                gaps.push(SeqGap {
+                    from: p + 1,
+                    to: s - 1,
+                });
             }
         }
         prev = Some(s);
@@ -239,7 +285,10 @@ mod tests {
     #[test]
     fn gaps_in_lists_each_missing_run_inclusive() {
         let g = gaps_in([0, 1, 2, 5, 6, 10]);
-        assert_eq!(g, vec![SeqGap { from: 3, to: 4 }, SeqGap { from: 7, to: 9 }]);
+        assert_eq!(
+            g,
+            vec![SeqGap { from: 3, to: 4 }, SeqGap { from: 7, to: 9 }]
+        );
         assert_eq!(g.iter().map(SeqGap::len).sum::<u64>(), 5);
         assert!(gaps_in([7]).is_empty());
         assert!(gaps_in([0, 1, 2]).is_empty());

@@ -373,7 +373,10 @@ fn spawn_file(
     };
     let meta = std::fs::metadata(&path).map_err(err)?;
     if meta.is_dir() {
-        return Err(err(io::Error::new(io::ErrorKind::InvalidInput, "is a directory")));
+        return Err(err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "is a directory",
+        )));
     }
     #[cfg(unix)]
     let is_fifo = std::os::unix::fs::FileTypeExt::is_fifo(&meta.file_type());
@@ -460,13 +463,15 @@ mod can {
         let mut sock = open(iface)?;
         let iface = iface.to_string();
         Ok(std::thread::spawn(move || {
-            let mut stream = crate::capture::CanStream::new();
+            let mut stream = crate::capture::can::CanStream::new();
             let mut out = Vec::new();
             while !stop.load(Ordering::SeqCst) {
                 let lost = match sock.read_frame() {
                     Ok(frame) => {
                         stream.push(&frame, &mut out);
-                        if !out.is_empty() && tx.send(SourceMsg::Data(std::mem::take(&mut out))).is_err() {
+                        if !out.is_empty()
+                            && tx.send(SourceMsg::Data(std::mem::take(&mut out))).is_err()
+                        {
                             return;
                         }
                         continue;
@@ -486,7 +491,7 @@ mod can {
                         break s;
                     }
                 };
-                stream = crate::capture::CanStream::new();
+                stream = crate::capture::can::CanStream::new();
                 if tx.send(SourceMsg::LinkResumed(name.clone())).is_err() {
                     return;
                 }
