@@ -6,4 +6,5 @@
 //! an [`data::IdData`] and return values.
 
 pub mod capture;
+pub mod cli;
 pub mod data;

@@ -125,7 +125,7 @@ pub fn export_csv(record: &CaptureRecord, path: &Path) -> Result<(), CaptureErro
     let tmp = std::path::PathBuf::from(tmp);
     let err = |source| CaptureError::Export {
         path: path.to_path_buf(),
-        source,
+        err: source,
     };
     let result = (|| {
         let file = std::fs::File::create(&tmp)?;

@@ -64,13 +64,12 @@ pub const EVENTS_SUFFIX: &str = ".events";
 #[non_exhaustive]
 pub enum JcapError {
     /// The file could not be opened, created, read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}: {}", super::io_msg(err))]
     Io {
         /// the file concerned
         path: PathBuf,
         /// what the operating system said
-        #[source]
-        source: io::Error,
+        err: io::Error,
     },
     /// The output file exists and overwriting was not asked for.
     #[error("{path}: already exists (pass --force to overwrite)")]
@@ -79,15 +78,14 @@ pub enum JcapError {
         path: PathBuf,
     },
     /// Writing failed at a known place of the stream (full disk, removed medium).
-    #[error("{path}: write failed at stream byte {offset}: {source}")]
+    #[error("{path}: write failed at stream byte {offset}: {}", super::io_msg(err))]
     Write {
         /// the file concerned
         path: PathBuf,
         /// stream offset of the first byte that could not be written
         offset: u64,
         /// what the operating system said
-        #[source]
-        source: io::Error,
+        err: io::Error,
     },
     /// The file is shorter than the 8-byte header.
     #[error("{path}: too short for a jcap header ({len} of 8 bytes)")]
@@ -164,7 +162,7 @@ pub fn check_header(path: &Path, head: &[u8]) -> Result<(), JcapError> {
 pub fn read_stream(path: &Path) -> Result<Vec<u8>, JcapError> {
     let io_err = |source| JcapError::Io {
         path: path.to_path_buf(),
-        source,
+        err: source,
     };
     let mut file = File::open(path).map_err(io_err)?;
     let mut all = Vec::new();
@@ -239,7 +237,7 @@ impl JcapWriter {
             } else {
                 JcapError::Io {
                     path: path.to_path_buf(),
-                    source,
+                    err: source,
                 }
             }
         })?;
@@ -248,7 +246,7 @@ impl JcapWriter {
             let _ = std::fs::remove_file(path);
             return Err(JcapError::Io {
                 path: path.to_path_buf(),
-                source,
+                err: source,
             });
         }
         Ok(Self {
@@ -367,7 +365,7 @@ impl JcapWriter {
         JcapError::Write {
             path: self.path.clone(),
             offset: self.written,
-            source,
+            err: source,
         }
     }
 
@@ -380,7 +378,7 @@ impl JcapWriter {
         self.file.sync_data().map_err(|source| JcapError::Write {
             path: self.path.clone(),
             offset: self.written,
-            source,
+            err: source,
         })
     }
 }
@@ -490,7 +488,7 @@ impl EventLog {
             } else {
                 JcapError::Io {
                     path: path.to_path_buf(),
-                    source,
+                    err: source,
                 }
             }
         })?;
@@ -517,7 +515,7 @@ impl EventLog {
             .and_then(|()| self.file.flush())
             .map_err(|source| JcapError::Io {
                 path: self.path.clone(),
-                source,
+                err: source,
             })
     }
 }
@@ -534,7 +532,7 @@ pub fn read_events(capture: &Path) -> Result<Option<Vec<JcapEvent>>, JcapError> 
     let text = match std::fs::read_to_string(&path) {
         Ok(t) => t,
         Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(None),
-        Err(source) => return Err(JcapError::Io { path, source }),
+        Err(source) => return Err(JcapError::Io { path, err: source }),
     };
     let complete = match text.rfind('\n') {
         Some(i) => &text[..=i],

@@ -70,13 +70,12 @@ pub enum CaptureError {
         message: String,
     },
     /// Writing an export failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {}", io_msg(err))]
     Export {
         /// the output file
         path: PathBuf,
         /// what the operating system said
-        #[source]
-        source: std::io::Error,
+        err: std::io::Error,
     },
 }
 
@@ -211,4 +210,17 @@ fn decode_named(
             samples: report.samples_without_header,
         }),
     }
+}
+
+/// An I/O error as one lowercase phrase without the `(os error N)` suffix.
+pub(crate) fn io_msg(e: &std::io::Error) -> String {
+    let mut m = e.to_string();
+    if let Some(i) = m.find(" (os error ") {
+        m.truncate(i);
+    }
+    if let Some(first) = m.get(..1) {
+        let lower = first.to_lowercase();
+        m.replace_range(..1, &lower);
+    }
+    m
 }

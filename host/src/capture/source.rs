@@ -99,13 +99,12 @@ pub enum SourceError {
         message: String,
     },
     /// The CAN interface could not be opened (unknown name, not up, not CAN).
-    #[error("can interface {iface}: {source}")]
+    #[error("can interface {iface}: {}", super::io_msg(err))]
     CanOpen {
         /// interface name
         iface: String,
         /// what the kernel said
-        #[source]
-        source: io::Error,
+        err: io::Error,
     },
     /// CAN capture needs SocketCAN, which only Linux has.
     #[error("can interface {iface}: CAN capture needs Linux SocketCAN")]
@@ -114,33 +113,33 @@ pub enum SourceError {
         iface: String,
     },
     /// `HOST:PORT` did not resolve or the connection failed.
-    #[error("tcp {addr}: {source}")]
+    #[error("tcp {addr}: {}", super::io_msg(err))]
     Tcp {
         /// `HOST:PORT`
         addr: String,
         /// what the resolver or the network said
-        #[source]
-        source: io::Error,
+        err: io::Error,
     },
     /// The file could not be opened or is not a byte stream.
-    #[error("{path}: {source}")]
+    #[error("{path}: {}", super::io_msg(err))]
     File {
         /// the file
         path: PathBuf,
         /// what the operating system said
-        #[source]
-        source: io::Error,
+        err: io::Error,
     },
     /// Reading failed in a way that retrying cannot fix.
-    #[error("{source_name}: read failed at stream byte {offset}: {source}")]
+    #[error(
+        "{source_name}: read failed at stream byte {offset}: {}",
+        super::io_msg(err)
+    )]
     Read {
         /// the source, as displayed by [`SourceSpec`]
         source_name: String,
         /// stream offset at which the read failed
         offset: u64,
         /// what the operating system said
-        #[source]
-        source: io::Error,
+        err: io::Error,
     },
 }
 
@@ -279,7 +278,7 @@ fn serial_message(e: &serialport::Error) -> String {
 fn open_tcp(addr: &str) -> Result<TcpStream, SourceError> {
     let err = |source| SourceError::Tcp {
         addr: addr.to_string(),
-        source,
+        err: source,
     };
     let mut last = io::Error::new(io::ErrorKind::NotFound, "address resolved to nothing");
     for sa in addr.to_socket_addrs().map_err(err)? {
@@ -369,7 +368,7 @@ fn spawn_file(
 ) -> Result<JoinHandle<()>, SourceError> {
     let err = |source| SourceError::File {
         path: path.clone(),
-        source,
+        err: source,
     };
     let meta = std::fs::metadata(&path).map_err(err)?;
     if meta.is_dir() {
@@ -393,7 +392,7 @@ fn spawn_file(
             None => match File::open(&path) {
                 Ok(f) => f,
                 Err(source) => {
-                    let _ = tx.send(SourceMsg::Failed(SourceError::File { path, source }));
+                    let _ = tx.send(SourceMsg::Failed(SourceError::File { path, err: source }));
                     return;
                 }
             },
@@ -422,7 +421,7 @@ fn spawn_file(
                     let _ = tx.send(SourceMsg::Failed(SourceError::Read {
                         source_name: name,
                         offset,
-                        source,
+                        err: source,
                     }));
                     return;
                 }
@@ -439,7 +438,7 @@ mod can {
     fn open(iface: &str) -> Result<CanFdSocket, SourceError> {
         let err = |source| SourceError::CanOpen {
             iface: iface.to_string(),
-            source,
+            err: source,
         };
         let sock = CanFdSocket::open(iface).map_err(|e| {
             // if_nametoindex fails with ENODEV for an unknown name
