@@ -22,5 +22,8 @@
 mod fmt;
 
 pub mod excitation;
+pub mod joint;
 pub mod rng;
+pub mod sampler;
+pub mod transport;
 pub mod wire;
