@@ -663,3 +663,78 @@ fn info_and_export_name_the_problem_of_a_bad_capture_file() {
     assert_eq!(v["samples_without_header"], 400);
     assert_eq!(v["header"], Value::Null);
 }
+
+#[test]
+fn capture_stops_by_itself_after_the_requested_periods_or_duration() {
+    let dir = tmpdir("stops");
+    let s = small();
+    let x = s.header.excitation;
+    // --periods 2: seq ramp + 2N - 1 = 249 ends the capture while the pipe stays open
+    let fifo = dir.join("board.fifo");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let out = dir.join("periods.jcap");
+    let mut child = Command::new(BIN)
+        .args([
+            "capture",
+            "--file",
+            fifo.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--periods",
+            "2",
+            "--json",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let target = x.ramp_samples + 2 * x.period_samples - 1;
+    let last = batches(&s)
+        .into_iter()
+        .find(|f| seqs_of(f).contains(&target))
+        .unwrap();
+    let mut w = OpenOptions::new().write(true).open(&fifo).unwrap();
+    w.write_all(&s.bytes[..(last.offset + last.len) as usize])
+        .unwrap();
+    let v = json_of(&wait_exit(&mut child, Duration::from_secs(10)));
+    drop(w);
+    assert_eq!(v["stop"], "requested periods received");
+    assert_eq!(
+        v["last_seq"].as_u64().unwrap(),
+        u64::from(seqs_of(&last).end - 1)
+    );
+    assert!(v["last_seq"].as_u64().unwrap() >= u64::from(target));
+
+    // --duration 0.4 on a silent pipe: a valid, empty capture and a stop event
+    let fifo2 = dir.join("silent.fifo");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo2)
+        .status()
+        .unwrap()
+        .success());
+    let out2 = dir.join("silent.jcap");
+    let t0 = Instant::now();
+    let v = json_of(&jointid(&[
+        "capture",
+        "--file",
+        fifo2.to_str().unwrap(),
+        "--out",
+        out2.to_str().unwrap(),
+        "--duration",
+        "0.4",
+        "--json",
+    ]));
+    let took = t0.elapsed();
+    assert!(
+        took >= Duration::from_millis(400) && took < Duration::from_secs(5),
+        "{took:?}"
+    );
+    assert_eq!(v["stop"], "duration reached");
+    assert_eq!(v["samples"], 0);
+    assert_eq!(std::fs::read(&out2).unwrap(), b"JCAP\x01\r\n\x1a");
+    assert!(events(&out2).contains("\"stop\""));
+}

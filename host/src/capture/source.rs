@@ -47,6 +47,8 @@ pub enum SourceSpec {
     Can {
         /// interface name
         iface: String,
+        /// identifier of the board's frames (`None`: every data frame)
+        id: Option<embedded_can::Id>,
     },
     /// TCP endpoint `HOST:PORT` (the emulated board's UART)
     Tcp {
@@ -64,7 +66,15 @@ impl std::fmt::Display for SourceSpec {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::Serial { port, baud } => write!(f, "serial {port} at {baud} baud"),
-            Self::Can { iface } => write!(f, "can {iface}"),
+            Self::Can { iface, id: None } => write!(f, "can {iface}"),
+            Self::Can {
+                iface,
+                id: Some(embedded_can::Id::Standard(id)),
+            } => write!(f, "can {iface} id {:#05x}", id.as_raw()),
+            Self::Can {
+                iface,
+                id: Some(embedded_can::Id::Extended(id)),
+            } => write!(f, "can {iface} id {:#010x}", id.as_raw()),
             Self::Tcp { addr } => write!(f, "tcp {addr}"),
             Self::File { path } => write!(f, "file {}", path.display()),
         }
@@ -245,7 +255,9 @@ impl SourceSpec {
                 })
             }
             Self::File { path } => spawn_file(path.clone(), tx, stop.clone(), name.clone())?,
-            Self::Can { iface } => can::spawn(iface, tx, stop.clone(), name.clone(), retry)?,
+            Self::Can { iface, id } => {
+                can::spawn(iface, *id, tx, stop.clone(), name.clone(), retry)?
+            }
         };
         Ok(RunningSource {
             rx,
@@ -433,7 +445,7 @@ fn spawn_file(
 #[cfg(target_os = "linux")]
 mod can {
     use super::*;
-    use socketcan::{CanFdSocket, Socket};
+    use socketcan::{CanAnyFrame, CanFdSocket, Socket};
 
     fn open(iface: &str) -> Result<CanFdSocket, SourceError> {
         let err = |source| SourceError::CanOpen {
@@ -454,6 +466,7 @@ mod can {
 
     pub(super) fn spawn(
         iface: &str,
+        id: Option<embedded_can::Id>,
         tx: Sender<SourceMsg>,
         stop: Arc<AtomicBool>,
         name: String,
@@ -462,12 +475,17 @@ mod can {
         let mut sock = open(iface)?;
         let iface = iface.to_string();
         Ok(std::thread::spawn(move || {
-            let mut stream = crate::capture::can::CanStream::new();
+            let mut stream = crate::capture::can::CanStream::new(id);
             let mut out = Vec::new();
             while !stop.load(Ordering::SeqCst) {
                 let lost = match sock.read_frame() {
                     Ok(frame) => {
-                        stream.push(&frame, &mut out);
+                        match frame {
+                            CanAnyFrame::Normal(f) => stream.push(&f, &mut out),
+                            CanAnyFrame::Fd(f) => stream.push(&f, &mut out),
+                            // remote and error frames carry no stream bytes
+                            CanAnyFrame::Remote(_) | CanAnyFrame::Error(_) => {}
+                        }
                         if !out.is_empty()
                             && tx.send(SourceMsg::Data(std::mem::take(&mut out))).is_err()
                         {
@@ -490,7 +508,7 @@ mod can {
                         break s;
                     }
                 };
-                stream = crate::capture::can::CanStream::new();
+                stream = crate::capture::can::CanStream::new(id);
                 if tx.send(SourceMsg::LinkResumed(name.clone())).is_err() {
                     return;
                 }
@@ -505,6 +523,7 @@ mod can {
 
     pub(super) fn spawn(
         iface: &str,
+        _id: Option<embedded_can::Id>,
         _tx: Sender<SourceMsg>,
         _stop: Arc<AtomicBool>,
         _name: String,

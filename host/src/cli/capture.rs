@@ -40,6 +40,10 @@ pub struct CaptureArgs {
     /// SocketCAN interface to read (`can0`), classic and FD frames (Linux)
     #[arg(long, value_name = "IFACE")]
     pub can: Option<String>,
+    /// CAN identifier of the board's frames: `0x101` (the firmware's), any standard or
+    /// extended id in hex or decimal, or `any`
+    #[arg(long, value_name = "ID", conflicts_with_all = ["serial", "tcp", "file"], value_parser = parse_can_id)]
+    pub can_id: Option<CanId>,
     /// TCP endpoint to read, `HOST:PORT` (the emulated board's UART)
     #[arg(long, value_name = "HOST:PORT")]
     pub tcp: Option<String>,
@@ -72,6 +76,38 @@ pub struct CaptureArgs {
     pub strict: bool,
 }
 
+/// Default CAN identifier of the board's stream (the firmware's `CAN_ID`).
+pub const DEFAULT_CAN_ID: u16 = 0x101;
+
+/// A `--can-id` value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CanId {
+    /// every data frame
+    Any,
+    /// only this identifier
+    Id(embedded_can::Id),
+}
+
+fn parse_can_id(s: &str) -> Result<CanId, String> {
+    if s == "any" {
+        return Ok(CanId::Any);
+    }
+    let v = match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        Some(hex) => u32::from_str_radix(hex, 16),
+        None => s.parse(),
+    }
+    .map_err(|_| format!("`{s}` is not a CAN identifier (hex 0x101, decimal, or any)"))?;
+    if let Some(id) = u16::try_from(v)
+        .ok()
+        .and_then(embedded_can::StandardId::new)
+    {
+        return Ok(CanId::Id(id.into()));
+    }
+    embedded_can::ExtendedId::new(v)
+        .map(|id| CanId::Id(id.into()))
+        .ok_or_else(|| format!("`{s}` is above the largest extended CAN identifier 0x1fffffff"))
+}
+
 fn parse_seconds(s: &str) -> Result<f64, String> {
     let v: f64 = s
         .parse()
@@ -93,6 +129,11 @@ impl CaptureArgs {
         } else if let Some(iface) = &self.can {
             SourceSpec::Can {
                 iface: iface.clone(),
+                id: match self.can_id {
+                    Some(CanId::Any) => None,
+                    Some(CanId::Id(id)) => Some(id),
+                    None => embedded_can::StandardId::new(DEFAULT_CAN_ID).map(Into::into),
+                },
             }
         } else if let Some(addr) = &self.tcp {
             SourceSpec::Tcp { addr: addr.clone() }
@@ -260,10 +301,29 @@ mod tests {
         );
         let a = parse(&["--can", "can0", "--out", "r.jcap", "--periods", "4"]).unwrap();
         let (spec, opts) = a.validate();
+        let board = embedded_can::StandardId::new(0x101).map(Into::into);
         assert_eq!(
             spec,
             SourceSpec::Can {
-                iface: "can0".into()
+                iface: "can0".into(),
+                id: board
+            }
+        );
+        let a = parse(&["--can", "can1", "--can-id", "0x18FF0001", "--out", "r.jcap"]).unwrap();
+        let ext = embedded_can::ExtendedId::new(0x18FF_0001).map(Into::into);
+        assert_eq!(
+            a.validate().0,
+            SourceSpec::Can {
+                iface: "can1".into(),
+                id: ext
+            }
+        );
+        let a = parse(&["--can", "can1", "--can-id", "any", "--out", "r.jcap"]).unwrap();
+        assert_eq!(
+            a.validate().0,
+            SourceSpec::Can {
+                iface: "can1".into(),
+                id: None
             }
         );
         assert_eq!(opts.stop.periods, Some(4));
@@ -308,6 +368,9 @@ mod tests {
             &["--file", "f", "--out", "r.jcap", "--duration", "-1"],
             &["--file", "f", "--out", "r.jcap", "--duration", "nan"],
             &["--file", "f", "--out", "r.jcap", "--periods", "0"],
+            &["--can", "c", "--can-id", "0x20000000", "--out", "r.jcap"],
+            &["--can", "c", "--can-id", "zz", "--out", "r.jcap"],
+            &["--file", "f", "--can-id", "0x101", "--out", "r.jcap"],
         ] {
             assert!(parse(bad).is_err(), "{bad:?} should be rejected");
         }
