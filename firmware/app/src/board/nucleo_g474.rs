@@ -1,0 +1,140 @@
+//! Real board: NUCLEO-G474RE (STM32G474RE, Cortex-M4F at 170 MHz) on embassy-stm32.
+//! - clocks: HSI16 / 4 × 85 / 2 = 170 MHz (boost), PLL1_Q = 85 MHz for FDCAN;
+//! - tick: TIM2 update interrupt at 2 kHz (raw ISR, highest priority in use);
+//!   embassy's time driver runs on TIM3 so it never takes TIM2;
+//! - stream: LPUART1 TX on PA2 (AF12), the ST-LINK/V3E virtual COM port, 921 600 baud 8N1;
+//!   with feature `can`: FDCAN1 on PA11 (RX) / PA12 (TX), 1 Mbit/s nominal, 5 Mbit/s data (BRS);
+//! - sensors: motor encoder on TIM4 (PB6 = CH1, PB7 = CH2, quadrature mode 3),
+//!   torque on ADC1 IN1 (PA0, Arduino A0), reference out on DAC1 OUT1 (PA4, Arduino A2);
+//! - log: defmt over RTT, panics through panic-probe (read both with `probe-rs run`).
+//!
+//! Cost unit: DWT cycles (CYCCNT), one per core clock.
+
+use cortex_m::peripheral::{DCB, DWT};
+use defmt_rtt as _;
+use embassy_executor::Spawner;
+use embassy_stm32::adc::{Adc, AdcConfig, SampleTime};
+use embassy_stm32::dac::{DacChannel, Value};
+use embassy_stm32::mode::Blocking;
+use embassy_stm32::peripherals::{ADC1, PA0, TIM4};
+use embassy_stm32::time::Hertz;
+use embassy_stm32::timer::low_level::{RoundTo, Timer};
+use embassy_stm32::timer::qei::{Qei, QeiMode};
+use embassy_stm32::{interrupt, pac, rcc, Config, Peri};
+use panic_probe as _;
+
+use crate::{app, cost};
+
+/// one DWT cycle is one core cycle: the cost is reported in cycles
+pub const INSTRUCTIONS_PER_UNIT: u32 = 1;
+/// stream baud rate of the ST-LINK virtual COM port [bit/s]
+const BAUD: u32 = 921_600;
+
+/// the board's sensors and actuator
+pub struct Io {
+    adc: Adc<'static, ADC1>,
+    torque_pin: Peri<'static, PA0>,
+    encoder: Qei<'static, TIM4>,
+    last_count: u16,
+    angle: i32,
+    dac: DacChannel<'static, Blocking>,
+}
+
+impl app::Io for Io {
+    fn torque(&mut self) -> i32 {
+        i32::from(
+            self.adc
+                .blocking_read(&mut self.torque_pin, SampleTime::CYCLES24_5),
+        )
+    }
+    fn angle(&mut self) -> i32 {
+        // extend the 16-bit hardware counter by the signed difference since the last tick
+        let now = self.encoder.count();
+        self.angle = self
+            .angle
+            .wrapping_add(i32::from(now.wrapping_sub(self.last_count) as i16));
+        self.last_count = now;
+        self.angle
+    }
+    fn reference(&mut self, theta: f32) {
+        self.dac.set(Value::Bit12Right(app::dac_code(theta)));
+    }
+}
+
+/// monotonic time in core cycles (DWT CYCCNT, wraps after 25 s)
+pub fn cost_stamp() -> u32 {
+    DWT::cycle_count()
+}
+
+fn clocks() -> Config {
+    let mut c = Config::default();
+    c.rcc.pll = Some(rcc::Pll {
+        source: rcc::PllSource::HSI,
+        prediv: rcc::PllPreDiv::DIV4,
+        mul: rcc::PllMul::MUL85,
+        divp: None,
+        divq: Some(rcc::PllQDiv::DIV4),
+        divr: Some(rcc::PllRDiv::DIV2),
+    });
+    c.rcc.sys = rcc::Sysclk::PLL1_R;
+    c.rcc.boost = true;
+    c.rcc.mux.fdcansel = rcc::mux::Fdcansel::PLL1_Q;
+    c.rcc.mux.adc12sel = rcc::mux::Adcsel::SYS;
+    c
+}
+
+#[embassy_executor::main]
+async fn main(_spawner: Spawner) {
+    let p = embassy_stm32::init(clocks());
+    // SAFETY: DCB and DWT are used only here and by `cost_stamp` (a read-only register).
+    let mut core = unsafe { cortex_m::Peripherals::steal() };
+    DCB::enable_trace(&mut core.DCB);
+    core.DWT.enable_cycle_counter();
+
+    let qei_cfg = embassy_stm32::timer::qei::Config {
+        mode: QeiMode::Mode3,
+        ..Default::default()
+    };
+    let encoder = Qei::new(p.TIM4, p.PB6, p.PB7, qei_cfg);
+    app::install(Io {
+        adc: Adc::new(p.ADC1, AdcConfig::default()),
+        torque_pin: p.PA0,
+        last_count: encoder.count(),
+        encoder,
+        angle: 0,
+        dac: DacChannel::new_blocking(p.DAC1, p.PA4),
+    });
+
+    let tick = Timer::new(p.TIM2);
+    tick.set_frequency(Hertz(app::SAMPLE_RATE_HZ), RoundTo::Slower);
+    tick.enable_update_interrupt(true);
+    tick.start();
+    // SAFETY: the TIM2 handler below only touches the application state through critical sections.
+    unsafe { cortex_m::peripheral::NVIC::unmask(pac::Interrupt::TIM2) };
+    defmt::info!("nucleo-g474re: {=u32} Hz tick on TIM2", app::SAMPLE_RATE_HZ);
+
+    let mut cfg = embassy_stm32::usart::Config::default();
+    cfg.baudrate = BAUD;
+    let mut uart = embassy_stm32::usart::UartTx::new_blocking(p.LPUART1, p.PA2, cfg).unwrap();
+    loop {
+        match app::pump(&mut uart) {
+            app::Pump::Busy => {}
+            app::Pump::Idle => cortex_m::asm::wfi(),
+            app::Pump::Done => break,
+        }
+    }
+    cost::summary(&cost::snapshot(), INSTRUCTIONS_PER_UNIT).log();
+    drop(tick);
+}
+
+#[interrupt]
+fn TIM2() {
+    pac::TIM2.sr().modify(|r| r.set_uif(false));
+    let c0 = DWT::cycle_count();
+    app::tick();
+    let spent = DWT::cycle_count().wrapping_sub(c0);
+    cost::with(|l| {
+        l.tick.add(spent);
+        l.in_ticks += u64::from(spent);
+    });
+}
