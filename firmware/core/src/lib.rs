@@ -23,3 +23,4 @@ mod fmt;
 
 pub mod excitation;
 pub mod rng;
+pub mod wire;
