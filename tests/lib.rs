@@ -19,7 +19,8 @@ use std::time::{Duration, Instant};
 pub const FIRMWARE_TARGET: &str = "thumbv7em-none-eabihf";
 
 /// what to tell a developer whose machine lacks a tool the test needs
-pub const SETUP_HINT: &str = "run `.ci/setup` (installs the thumbv7em-none-eabihf target and qemu-system-arm)";
+pub const SETUP_HINT: &str =
+    "run `.ci/setup` (installs the thumbv7em-none-eabihf target and qemu-system-arm)";
 
 /// the workspace root (the directory of the root Cargo.toml)
 pub fn workspace_root() -> PathBuf {
@@ -76,7 +77,9 @@ pub fn emulated_firmware_elf() -> Result<PathBuf, String> {
         };
     }
     if !firmware_target_installed() {
-        return Err(format!("the {FIRMWARE_TARGET} target is not installed: {SETUP_HINT}"));
+        return Err(format!(
+            "the {FIRMWARE_TARGET} target is not installed: {SETUP_HINT}"
+        ));
     }
     let root = workspace_root();
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
@@ -187,7 +190,15 @@ impl Qemu {
     /// A message when qemu-system-arm cannot be started.
     pub fn start(elf: &Path, port: u16) -> Result<Self, String> {
         let mut child = Command::new("qemu-system-arm")
-            .args(["-machine", "mps2-an386", "-cpu", "cortex-m4", "-nographic", "-monitor", "none"])
+            .args([
+                "-machine",
+                "mps2-an386",
+                "-cpu",
+                "cortex-m4",
+                "-nographic",
+                "-monitor",
+                "none",
+            ])
             .args(["-icount", "shift=3,align=off,sleep=off"])
             .args(["-semihosting-config", "enable=on,target=native"])
             .args(["-serial", &format!("tcp:127.0.0.1:{port}")])
@@ -200,7 +211,11 @@ impl Qemu {
             .map_err(|e| format!("cannot start qemu-system-arm ({SETUP_HINT}): {e}"))?;
         let stdout = child.stdout.take().map(drain);
         let stderr = child.stderr.take().map(drain);
-        Ok(Self { child: KillOnDrop(child), stdout, stderr })
+        Ok(Self {
+            child: KillOnDrop(child),
+            stdout,
+            stderr,
+        })
     }
 
     /// Runs `elf` to completion: listens on 127.0.0.1:0, starts QEMU, reads
@@ -211,21 +226,38 @@ impl Qemu {
     /// A message naming the step that failed or timed out.
     pub fn run(elf: &Path, timeout: Duration) -> Result<QemuRun, String> {
         let deadline = Instant::now() + timeout;
-        let listener =
-            TcpListener::bind("127.0.0.1:0").map_err(|e| format!("cannot listen on 127.0.0.1:0: {e}"))?;
+        let listener = TcpListener::bind("127.0.0.1:0")
+            .map_err(|e| format!("cannot listen on 127.0.0.1:0: {e}"))?;
         let port = listener.local_addr().map_err(|e| e.to_string())?.port();
         let mut qemu = Self::start(elf, port)?;
         let stream = accept_until(&listener, &mut qemu.child, deadline)?;
         let uart = read_until_closed(stream, deadline)?;
         let status = qemu.child.wait_until(deadline)?;
-        let defmt = qemu.stdout.take().and_then(|h| h.join().ok()).unwrap_or_default();
-        let stderr = qemu.stderr.take().and_then(|h| h.join().ok()).unwrap_or_default();
-        Ok(QemuRun { status, uart, defmt, stderr: String::from_utf8_lossy(&stderr).into_owned() })
+        let defmt = qemu
+            .stdout
+            .take()
+            .and_then(|h| h.join().ok())
+            .unwrap_or_default();
+        let stderr = qemu
+            .stderr
+            .take()
+            .and_then(|h| h.join().ok())
+            .unwrap_or_default();
+        Ok(QemuRun {
+            status,
+            uart,
+            defmt,
+            stderr: String::from_utf8_lossy(&stderr).into_owned(),
+        })
     }
 }
 
 /// Accepts one connection before `deadline`, failing early if the child exits first.
-fn accept_until(listener: &TcpListener, child: &mut KillOnDrop, deadline: Instant) -> Result<TcpStream, String> {
+fn accept_until(
+    listener: &TcpListener,
+    child: &mut KillOnDrop,
+    deadline: Instant,
+) -> Result<TcpStream, String> {
     listener.set_nonblocking(true).map_err(|e| e.to_string())?;
     loop {
         match listener.accept() {
@@ -254,15 +286,29 @@ fn read_until_closed(mut stream: TcpStream, deadline: Instant) -> Result<Vec<u8>
     loop {
         let left = deadline.saturating_duration_since(Instant::now());
         if left.is_zero() {
-            return Err(format!("the UART stream was still open at the deadline after {} bytes", data.len()));
+            return Err(format!(
+                "the UART stream was still open at the deadline after {} bytes",
+                data.len()
+            ));
         }
-        stream.set_read_timeout(Some(left)).map_err(|e| e.to_string())?;
+        stream
+            .set_read_timeout(Some(left))
+            .map_err(|e| e.to_string())?;
         match stream.read(&mut buf) {
             Ok(0) => return Ok(data),
             Ok(n) => data.extend_from_slice(&buf[..n]),
-            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {}
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) => {}
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(format!("reading the UART stream failed after {} bytes: {e}", data.len())),
+            Err(e) => {
+                return Err(format!(
+                    "reading the UART stream failed after {} bytes: {e}",
+                    data.len()
+                ))
+            }
         }
     }
 }
@@ -286,7 +332,13 @@ mod tests {
     #[test]
     fn cost_line_parses_keys_and_values() {
         let got = parse_cost_line("noise\njointid-cost ticks=24000 per_tick_mean=640\n").unwrap();
-        assert_eq!(got, vec![("ticks".to_string(), 24000), ("per_tick_mean".to_string(), 640)]);
+        assert_eq!(
+            got,
+            vec![
+                ("ticks".to_string(), 24000),
+                ("per_tick_mean".to_string(), 640)
+            ]
+        );
     }
 
     #[test]
@@ -298,7 +350,10 @@ mod tests {
     #[test]
     fn json_field_reads_executable_path() {
         let line = r#"{"reason":"compiler-artifact","executable":"/t/jointid-fw","fresh":true}"#;
-        assert_eq!(json_string_field(line, "executable").as_deref(), Some("/t/jointid-fw"));
+        assert_eq!(
+            json_string_field(line, "executable").as_deref(),
+            Some("/t/jointid-fw")
+        );
         assert_eq!(json_string_field(line, "missing"), None);
     }
 }

@@ -9,11 +9,15 @@ compile_error!("choose one board: --no-default-features --features nucleo-g474re
 compile_error!("choose a board: `cargo fw` (nucleo-g474re) or `cargo fw-qemu` (mps2-an386)");
 
 #[cfg(feature = "mps2-an386")]
+mod cmsdk_uart;
+#[cfg(feature = "mps2-an386")]
 mod mps2_an386;
 #[cfg(feature = "mps2-an386")]
 pub use mps2_an386::*;
 
 #[cfg(all(feature = "nucleo-g474re", not(feature = "mps2-an386")))]
 mod nucleo_g474;
+#[cfg(all(feature = "nucleo-g474re", not(feature = "mps2-an386")))]
+mod nucleo_io;
 #[cfg(all(feature = "nucleo-g474re", not(feature = "mps2-an386")))]
 pub use nucleo_g474::*;

@@ -3,87 +3,70 @@
 //! - stream: CMSDK APB UART0 at 0x4000_4000 (QEMU `-serial`), polled on TXFULL;
 //! - sensors: the core's simulated joint, so the stream carries realistic data;
 //! - log: defmt over semihosting (QEMU stdout); the run ends with a semihosting
-//!   exit (0 when the configured run is sent, 1 on panic or HardFault).
+//!   exit (0 when the configured run is sent, 1 on panic or HardFault), after
+//!   a `jointid-cost ...` line on semihosting stderr.
 //!
-//! Cost unit: SysTick counts; under `-icount shift=3` one count is 40 ns of
-//! virtual time, that is 40 / 2^3 = 5 instructions (notes/embedded-feasibility.md).
+//! Time stamps and cost are SysTick counts (25 MHz). Under `-icount shift=3`
+//! one count is 40 ns of virtual time = 40 / 2^3 = 5 instructions
+//! (notes/embedded-feasibility.md §2).
 
-use core::convert::Infallible;
-use core::ptr::{read_volatile, write_volatile};
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::peripheral::{syst::SystClkSource, SCB, SYST};
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::{debug, heprintln};
 use defmt_semihosting as _;
+use jointid_core::wire::Scale;
 
+use super::cmsdk_uart::CmsdkUartTx;
 use crate::{app, cost};
 
-/// core clock of the AN386 image [Hz]
-const CPU_HZ: u32 = 25_000_000;
+/// SysTick clock = core clock of the AN386 image [Hz]; also the rate of `RawSample::tick`
+pub const TIMER_HZ: u32 = 25_000_000;
 /// SysTick reload for the sample rate: 25 MHz / 2 kHz - 1 = 12_499
-const RELOAD: u32 = CPU_HZ / app::SAMPLE_RATE_HZ - 1;
+const RELOAD: u32 = TIMER_HZ / app::SAMPLE_RATE_HZ - 1;
 /// instructions per SysTick count under `-icount shift=3`: 40 ns / 8 ns
 pub const INSTRUCTIONS_PER_UNIT: u32 = 5;
-/// CMSDK APB UART0 base address
-const UART0: usize = 0x4000_4000;
+/// counts to SI units of the simulated joint's sensors
+pub const SCALE: Scale = Scale {
+    torque_nm_per_count: 1.0e-4,
+    angle_rad_per_count: 1.0e-6,
+};
 
-/// ticks since boot (the upper part of [`cost_stamp`])
+/// ticks since boot (the upper part of [`stamp`])
 static TICKS: AtomicU32 = AtomicU32::new(0);
 
-/// the board's sensors and actuator: the simulated joint (stand-in until the core lands)
+/// the board's sensors and actuator: the simulated joint (STAND-IN until the core's joint lands)
 pub struct Io {
-    k: i32,
+    theta_ref: f32,
+    angle: f32,
 }
 
-impl app::Io for Io {
+impl app::JointIo for Io {
+    fn set_reference(&mut self, theta_ref: f32) {
+        self.theta_ref = theta_ref;
+        self.angle += 0.05 * (theta_ref - self.angle);
+    }
     fn torque(&mut self) -> i32 {
-        self.k
+        ((self.theta_ref - self.angle) * 1.0e4) as i32
     }
     fn angle(&mut self) -> i32 {
-        self.k += 1;
-        -self.k
-    }
-    fn reference(&mut self, _theta: f32) {}
-}
-
-/// CMSDK UART0 transmitter as a blocking `embedded_io::Write`
-pub struct Uart0(());
-
-impl Uart0 {
-    fn new() -> Self {
-        // SAFETY: UART0 registers are only touched through this single value.
-        unsafe {
-            write_volatile((UART0 + 0x10) as *mut u32, 16); // BAUDDIV >= 16 or QEMU ignores writes
-            write_volatile((UART0 + 0x08) as *mut u32, 1); // CTRL: TX enable
-        }
-        Uart0(())
+        (self.angle * 1.0e6) as i32
     }
 }
 
-impl embedded_io::ErrorType for Uart0 {
-    type Error = Infallible;
+/// identifies the emulated board in the session header ("AN386" folded)
+pub fn board_id() -> u32 {
+    0x0038_3641
 }
 
-impl embedded_io::Write for Uart0 {
-    fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
-        for &b in buf {
-            // SAFETY: STATE and DATA are UART0 registers; bit 0 of STATE is TXFULL.
-            unsafe {
-                while read_volatile((UART0 + 0x04) as *const u32) & 1 != 0 {}
-                write_volatile(UART0 as *mut u32, u32::from(b));
-            }
-        }
-        Ok(buf.len())
-    }
-
-    fn flush(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
+/// the emulated run is deterministic, so is its session id
+pub fn session_id() -> u32 {
+    1
 }
 
-/// monotonic time in SysTick counts since boot (wraps after ~172 s)
-pub fn cost_stamp() -> u32 {
+/// SysTick counts since boot (wraps after 172 s)
+pub fn stamp() -> u32 {
     critical_section::with(|_| {
         let mut ticks = TICKS.load(Ordering::Relaxed);
         let mut cvr = SYST::get_current();
@@ -99,8 +82,12 @@ pub fn cost_stamp() -> u32 {
 fn main() -> ! {
     let cp = cortex_m::Peripherals::take().unwrap();
     let mut syst = cp.SYST;
-    let mut uart = Uart0::new();
-    app::install(Io { k: 0 });
+    // SAFETY: UART0 is used only here.
+    let mut uart = unsafe { CmsdkUartTx::new(0x4000_4000, 16) };
+    app::install(Io {
+        theta_ref: 0.0,
+        angle: 0.0,
+    });
     defmt::info!(
         "mps2-an386: {=u32} Hz tick, SysTick reload {=u32}",
         app::SAMPLE_RATE_HZ,
@@ -111,8 +98,9 @@ fn main() -> ! {
     syst.clear_current();
     syst.enable_interrupt();
     syst.enable_counter();
+    let mut tx = app::Transmitter::new();
     loop {
-        match app::pump(&mut uart) {
+        match tx.pump(&mut uart) {
             app::Pump::Busy => {}
             app::Pump::Idle => cortex_m::asm::wfi(),
             app::Pump::Done => break,

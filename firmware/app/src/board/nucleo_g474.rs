@@ -8,61 +8,53 @@
 //!   torque on ADC1 IN1 (PA0, Arduino A0), reference out on DAC1 OUT1 (PA4, Arduino A2);
 //! - log: defmt over RTT, panics through panic-probe (read both with `probe-rs run`).
 //!
-//! Cost unit: DWT cycles (CYCCNT), one per core clock.
+//! Time stamps and cost: DWT cycle counter (CYCCNT) at the 170 MHz core clock.
+//! `SCALE` below is a placeholder for a 16384-count/rev encoder and a 12-bit
+//! torque ADC spanning ±2 N·m: set it for the real sensors.
 
 use cortex_m::peripheral::{DCB, DWT};
 use defmt_rtt as _;
 use embassy_executor::Spawner;
-use embassy_stm32::adc::{Adc, AdcConfig, SampleTime};
-use embassy_stm32::dac::{DacChannel, Value};
-use embassy_stm32::mode::Blocking;
-use embassy_stm32::peripherals::{ADC1, PA0, TIM4};
+use embassy_stm32::adc::{Adc, AdcConfig};
+use embassy_stm32::dac::DacChannel;
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::{RoundTo, Timer};
 use embassy_stm32::timer::qei::{Qei, QeiMode};
-use embassy_stm32::{interrupt, pac, rcc, Config, Peri};
+use embassy_stm32::{interrupt, pac, rcc, Config};
 use panic_probe as _;
 
+use jointid_core::wire::Scale;
+
+pub use super::nucleo_io::Io;
 use crate::{app, cost};
 
-/// one DWT cycle is one core cycle: the cost is reported in cycles
+/// core clock = DWT cycle counter rate = rate of `RawSample::tick` [Hz]
+pub const TIMER_HZ: u32 = 170_000_000;
+/// one DWT count is one core cycle: the cost is reported in cycles
 pub const INSTRUCTIONS_PER_UNIT: u32 = 1;
+/// counts to SI units (placeholder sensors, see the module docs)
+pub const SCALE: Scale = Scale {
+    torque_nm_per_count: 4.0 / 4096.0,
+    angle_rad_per_count: core::f32::consts::TAU / 16384.0,
+};
 /// stream baud rate of the ST-LINK virtual COM port [bit/s]
 const BAUD: u32 = 921_600;
 
-/// the board's sensors and actuator
-pub struct Io {
-    adc: Adc<'static, ADC1>,
-    torque_pin: Peri<'static, PA0>,
-    encoder: Qei<'static, TIM4>,
-    last_count: u16,
-    angle: i32,
-    dac: DacChannel<'static, Blocking>,
+/// the MCU's 96-bit unique id folded to 32 bits
+pub fn board_id() -> u32 {
+    let uid = embassy_stm32::uid::uid();
+    uid.chunks(4).fold(0, |acc, w| {
+        acc ^ u32::from_le_bytes([w[0], w[1], w[2], w[3]])
+    })
 }
 
-impl app::Io for Io {
-    fn torque(&mut self) -> i32 {
-        i32::from(
-            self.adc
-                .blocking_read(&mut self.torque_pin, SampleTime::CYCLES24_5),
-        )
-    }
-    fn angle(&mut self) -> i32 {
-        // extend the 16-bit hardware counter by the signed difference since the last tick
-        let now = self.encoder.count();
-        self.angle = self
-            .angle
-            .wrapping_add(i32::from(now.wrapping_sub(self.last_count) as i16));
-        self.last_count = now;
-        self.angle
-    }
-    fn reference(&mut self, theta: f32) {
-        self.dac.set(Value::Bit12Right(app::dac_code(theta)));
-    }
+/// cycle counter at the time the header is built (differs from run to run)
+pub fn session_id() -> u32 {
+    DWT::cycle_count()
 }
 
-/// monotonic time in core cycles (DWT CYCCNT, wraps after 25 s)
-pub fn cost_stamp() -> u32 {
+/// core cycles since the counter was enabled (DWT CYCCNT, wraps after 25 s)
+pub fn stamp() -> u32 {
     DWT::cycle_count()
 }
 
@@ -96,14 +88,13 @@ async fn main(_spawner: Spawner) {
         ..Default::default()
     };
     let encoder = Qei::new(p.TIM4, p.PB6, p.PB7, qei_cfg);
-    app::install(Io {
-        adc: Adc::new(p.ADC1, AdcConfig::default()),
-        torque_pin: p.PA0,
-        last_count: encoder.count(),
+    let adc = Adc::new(p.ADC1, AdcConfig::default());
+    app::install(Io::new(
+        adc,
+        p.PA0,
         encoder,
-        angle: 0,
-        dac: DacChannel::new_blocking(p.DAC1, p.PA4),
-    });
+        DacChannel::new_blocking(p.DAC1, p.PA4),
+    ));
 
     let tick = Timer::new(p.TIM2);
     tick.set_frequency(Hertz(app::SAMPLE_RATE_HZ), RoundTo::Slower);
@@ -116,8 +107,9 @@ async fn main(_spawner: Spawner) {
     let mut cfg = embassy_stm32::usart::Config::default();
     cfg.baudrate = BAUD;
     let mut uart = embassy_stm32::usart::UartTx::new_blocking(p.LPUART1, p.PA2, cfg).unwrap();
+    let mut tx = app::Transmitter::new();
     loop {
-        match app::pump(&mut uart) {
+        match tx.pump(&mut uart) {
             app::Pump::Busy => {}
             app::Pump::Idle => cortex_m::asm::wfi(),
             app::Pump::Done => break,
