@@ -23,4 +23,6 @@ mod fmt;
 
 pub mod excitation;
 pub mod rng;
+pub mod sampler;
+pub mod transport;
 pub mod wire;

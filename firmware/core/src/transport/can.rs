@@ -1,0 +1,1 @@
+//! CAN link (filled in below).

@@ -1,0 +1,1 @@
+//! Serial link (filled in below).
