@@ -1,10 +1,16 @@
 //! Shared application wiring, the same on both boards:
-//! - the 2 kHz tick ([`tick`], called from the board's timer interrupt): next
-//!   reference θ_ref(k) from the core's excitation out to the joint, torque
-//!   and angle in, the sample queued;
-//! - the idle loop ([`pump`]): session header, delta-coded sample batches with
-//!   the reference CRC, periodic status, the end message, through the core's
-//!   wire encoder to the board's link.
+//! - [`start`] generates the excitation period, splits the sample queue, hands
+//!   the core's `Sampler` (producer end) to the tick and returns the core's
+//!   `TxPump` (consumer end) wrapped in a [`Streamer`] for the idle loop;
+//! - [`tick`], called from the board's 2 kHz timer interrupt: the core's
+//!   `Sampler::tick_io` reads u(k) and θm(k), writes θ_ref(k), queues the sample;
+//! - [`Streamer::poll`], called from the idle loop: the core's `TxPump` sends
+//!   the session header, delta-coded batches with the reference CRC, a status
+//!   every few batches and the end message through the board's link.
+//!
+//! Cost: the tick and every poll are timed with the board's [`board::stamp`];
+//! a poll's time excludes the link (the UART write) and the tick interrupts
+//! that preempted it, so what is left is dequeuing, batching and encoding.
 //!
 //! The run is the seed-000 experiment ([`ExcitationConfig::paper_default`]):
 //! 1 s ramp-in, 4 periods of 5000 samples, 1 s ramp-out = 24 000 samples, 12 s.
@@ -15,207 +21,137 @@ use heapless::spsc::Queue;
 use static_cell::ConstStaticCell;
 
 use jointid_core::excitation::{Excitation, ExcitationConfig, SafetyLimits};
-use jointid_core::wire::{self, BatchBuilder, Message, RawSample, SessionHeader, Status};
+use jointid_core::sampler::{Counters, PumpConfig, PumpState, Sampler, TaggedSample, TxPump};
+use jointid_core::transport::{FrameSink, TxError};
+use jointid_core::wire::{self, SessionHeader};
 
 use crate::{board, cost};
 
 /// sample rate of the tick [Hz]
 pub const SAMPLE_RATE_HZ: u32 = 2_000;
-/// the excitation of a run (24 000 samples; both boards)
+/// The excitation of a run, the same on both boards: the seed-000 experiment
+/// ([`ExcitationConfig::paper_default`]): 1 s ramp-in, 4 periods of 5000
+/// samples, 1 s ramp-out = 24 000 samples (12 s).
 pub const EXCITATION: ExcitationConfig = ExcitationConfig::paper_default();
 /// samples per batch frame (25 ms at 2 kHz)
 const BATCH_LEN: usize = 50;
-/// a status message after this many batches
+/// a status message after this many batches (every 0.5 s)
 const STATUS_EVERY: u32 = 20;
-/// queue between the tick and the idle loop [samples] (64 ms at 2 kHz)
+/// queue between the tick and the idle loop (64 ms at 2 kHz)
 const QUEUE_LEN: usize = 128;
 /// the excitation table holds one period
 const PERIOD: usize = EXCITATION.period_samples as usize;
 
-/// The sensors and the actuator of a board.
-pub trait JointIo {
-    /// sends the reference θ_ref(k) [rad] to the joint's controller
-    fn set_reference(&mut self, theta_ref: f32);
-    /// torque reference u(k) [counts]
-    fn torque(&mut self) -> i32;
-    /// motor angle θm(k) [counts]
-    fn angle(&mut self) -> i32;
-}
-
-struct TickState {
-    excitation: Excitation<'static>,
+struct Tick {
+    sampler: Sampler<'static, 'static>,
     io: board::Io,
-    seq: u32,
-    overruns: u32,
-    finished: bool,
 }
 
 static TABLE: ConstStaticCell<[f32; PERIOD]> = ConstStaticCell::new([0.0; PERIOD]);
-static TICK: Mutex<RefCell<Option<TickState>>> = Mutex::new(RefCell::new(None));
-static QUEUE: Mutex<RefCell<Queue<(RawSample, f32), QUEUE_LEN>>> =
-    Mutex::new(RefCell::new(Queue::new()));
+static QUEUE: ConstStaticCell<Queue<TaggedSample, QUEUE_LEN>> = ConstStaticCell::new(Queue::new());
+static COUNTERS: Counters = Counters::new();
+static TICK: Mutex<RefCell<Option<Tick>>> = Mutex::new(RefCell::new(None));
 
-/// Generates the excitation period and hands the board's I/O to the tick;
-/// call once, before the tick interrupt starts.
-pub fn install(io: board::Io) {
+/// Generates the excitation (checked against the default joint limits), hands
+/// the sampler and the board's I/O to the tick and returns the idle loop's
+/// side. Call once, before the tick interrupt starts.
+pub fn start<S: FrameSink>(io: board::Io, link: S) -> Streamer<S> {
     let excitation =
         match Excitation::new_checked(&EXCITATION, TABLE.take(), &SafetyLimits::default_joint()) {
             Ok(e) => e,
             Err(e) => defmt::panic!("excitation refused: {}", e),
         };
-    let state = TickState {
-        excitation,
-        io,
-        seq: 0,
-        overruns: 0,
-        finished: false,
+    let (producer, consumer) = QUEUE.take().split();
+    let sampler = Sampler::new(excitation, producer, &COUNTERS);
+    critical_section::with(|cs| TICK.borrow(cs).replace(Some(Tick { sampler, io })));
+    let config = PumpConfig {
+        batch_len: BATCH_LEN,
+        status_every: STATUS_EVERY,
+        max_samples_per_poll: QUEUE_LEN,
     };
-    critical_section::with(|cs| TICK.borrow(cs).replace(Some(state)));
+    Streamer {
+        pump: TxPump::new(consumer, &COUNTERS, header(), config),
+        link: TimedLink { link, spent: 0 },
+    }
 }
 
-/// One tick: reference out, torque and angle in, sample queued (or counted as an overrun).
-pub fn tick() {
-    let stamp = board::stamp();
+/// One 2 kHz tick at timer count `stamp` (the board's interrupt calls it).
+pub fn tick(stamp: u32) {
     critical_section::with(|cs| {
-        let mut guard = TICK.borrow_ref_mut(cs);
-        let Some(s) = guard.as_mut() else { return };
-        let Some(theta_ref) = s.excitation.next() else {
-            s.finished = true;
-            return;
-        };
-        s.io.set_reference(theta_ref);
-        let sample = RawSample {
-            seq: s.seq,
-            tick: stamp,
-            torque: s.io.torque(),
-            angle: s.io.angle(),
-        };
-        s.seq = s.seq.wrapping_add(1);
-        if QUEUE
-            .borrow_ref_mut(cs)
-            .enqueue((sample, theta_ref))
-            .is_err()
-        {
-            s.overruns += 1;
+        if let Some(t) = TICK.borrow_ref_mut(cs).as_mut() {
+            t.sampler.tick_io(stamp, &mut t.io);
         }
     });
 }
 
-/// what the idle loop should do next
-pub enum Pump {
-    /// more work may be waiting
-    Busy,
-    /// nothing queued: sleep until the next interrupt
-    Idle,
-    /// the run is over and the end message was sent
-    Done,
+/// The idle loop's side: the core's transmit pump and the board's link.
+pub struct Streamer<S> {
+    pump: TxPump<'static>,
+    link: TimedLink<S>,
 }
 
-/// Transmit side: owns the batch builder and the frame buffer.
-pub struct Transmitter {
-    builder: BatchBuilder,
-    frame: [u8; wire::MAX_FRAME_LEN],
-    header_sent: bool,
-    done: bool,
-    batches: u32,
-    queue_drops: u32,
-    tx_errors: u32,
+impl<S: FrameSink> Streamer<S> {
+    /// One idle-loop step (see `TxPump::poll`), timed into the cost ledger.
+    pub fn poll(&mut self) -> PumpState {
+        let (t0, ticks0, link0) = (board::stamp(), cost::with(|l| l.in_ticks), self.link.spent);
+        let state = self.pump.poll(&mut self.link);
+        let (t1, ticks1) = (board::stamp(), cost::with(|l| l.in_ticks));
+        let other = (ticks1 - ticks0) + (self.link.spent - link0);
+        let spent = u64::from(t1.wrapping_sub(t0)).saturating_sub(other);
+        cost::with(|l| l.pump.add(spent as u32));
+        state
+    }
+
+    /// the counters as the end message reported them
+    pub fn status(&self) -> wire::Status {
+        self.pump.status(&self.link)
+    }
 }
 
-impl Transmitter {
-    /// a transmitter that starts with the session header
-    pub fn new() -> Self {
-        Self {
-            builder: BatchBuilder::new(board::TIMER_HZ / SAMPLE_RATE_HZ, BATCH_LEN),
-            frame: [0; wire::MAX_FRAME_LEN],
-            header_sent: false,
-            done: false,
-            batches: 0,
-            queue_drops: 0,
-            tx_errors: 0,
-        }
+/// A link that keeps the time spent inside it [board stamp units].
+struct TimedLink<S> {
+    link: S,
+    spent: u64,
+}
+
+impl<S: FrameSink> FrameSink for TimedLink<S> {
+    fn send_frame(&mut self, frame: &[u8]) -> Result<(), TxError> {
+        let t0 = board::stamp();
+        let r = self.link.send_frame(frame);
+        self.spent += u64::from(board::stamp().wrapping_sub(t0));
+        r
     }
 
-    /// One idle-loop step: sends the header, or moves queued samples into
-    /// the batch builder and sends a finished batch (plus a status every
-    /// [`STATUS_EVERY`] batches), or at the end of the run the last batch and
-    /// the end message.
-    pub fn pump<W: embedded_io::Write>(&mut self, link: &mut W) -> Pump {
-        if self.done {
-            return Pump::Done;
-        }
-        if !self.header_sent {
-            self.header_sent = true;
-            self.send(link, &Message::Header(header()), 0);
-            return Pump::Busy;
-        }
-        loop {
-            let item = critical_section::with(|cs| QUEUE.borrow_ref_mut(cs).dequeue());
-            let Some((sample, theta_ref)) = item else {
-                break;
-            };
-            if let Some(batch) = self.builder.push(sample, theta_ref) {
-                let n = batch.len() as u32;
-                self.send(link, &Message::Batch(batch), n);
-                self.batches += 1;
-                if self.batches.is_multiple_of(STATUS_EVERY) {
-                    self.send(link, &Message::Status(self.status()), 0);
-                }
-                return Pump::Busy;
-            }
-        }
-        if critical_section::with(|cs| TICK.borrow_ref(cs).as_ref().is_some_and(|s| s.finished)) {
-            if let Some(batch) = self.builder.flush() {
-                let n = batch.len() as u32;
-                self.send(link, &Message::Batch(batch), n);
-            }
-            self.send(link, &Message::End(self.status()), 0);
-            self.done = true;
-            return Pump::Done;
-        }
-        Pump::Idle
+    fn tx_errors(&self) -> u32 {
+        self.link.tx_errors()
+    }
+}
+
+/// A blocking `embedded_io::Write` link (UART) as a frame sink.
+#[cfg_attr(feature = "can", allow(dead_code))]
+pub struct SerialLink<W> {
+    writer: W,
+    errors: u32,
+}
+
+#[cfg_attr(feature = "can", allow(dead_code))]
+impl<W: embedded_io::Write> SerialLink<W> {
+    /// frames go to `writer` whole
+    pub fn new(writer: W) -> Self {
+        Self { writer, errors: 0 }
+    }
+}
+
+impl<W: embedded_io::Write> FrameSink for SerialLink<W> {
+    fn send_frame(&mut self, frame: &[u8]) -> Result<(), TxError> {
+        self.writer.write_all(frame).map_err(|_| {
+            self.errors += 1;
+            TxError::Link
+        })
     }
 
-    /// Encodes and writes one frame; the encoding time (tick interrupts
-    /// subtracted) goes into the cost ledger when the frame carries samples.
-    fn send<W: embedded_io::Write>(&mut self, link: &mut W, msg: &Message, samples: u32) {
-        let (t0, in_ticks0) = (board::stamp(), cost::with(|l| l.in_ticks));
-        let encoded = wire::encode_frame(msg, &mut self.frame);
-        let (t1, in_ticks1) = (board::stamp(), cost::with(|l| l.in_ticks));
-        let spent = u64::from(t1.wrapping_sub(t0)).saturating_sub(in_ticks1 - in_ticks0);
-        match encoded {
-            Ok(len) => {
-                if samples > 0 {
-                    cost::with(|l| {
-                        l.encode.add(spent as u32);
-                        l.encoded_samples += samples;
-                    });
-                }
-                if link.write_all(&self.frame[..len]).is_err() {
-                    self.tx_errors += 1;
-                    self.queue_drops += samples;
-                }
-            }
-            Err(e) => {
-                defmt::error!("frame not encoded: {}", defmt::Debug2Format(&e));
-                self.queue_drops += samples;
-            }
-        }
-    }
-
-    /// the counters as a status message
-    fn status(&self) -> Status {
-        let (seq, overruns) = critical_section::with(|cs| {
-            TICK.borrow_ref(cs)
-                .as_ref()
-                .map_or((0, 0), |s| (s.seq, s.overruns))
-        });
-        Status {
-            seq,
-            overruns,
-            queue_drops: self.queue_drops,
-            tx_errors: self.tx_errors,
-        }
+    fn tx_errors(&self) -> u32 {
+        self.errors
     }
 }
 

@@ -1,7 +1,17 @@
-//! Cost accounting for the 2 kHz tick and the transmit-side encoding, in the
-//! board's cost unit (mps2-an386: SysTick counts under QEMU icount, which count
-//! instructions; NUCLEO: DWT cycles). Plain counters shared between the tick
+//! Cost accounting for the 2 kHz tick and the transmit side, in the board's
+//! stamp unit (mps2-an386: SysTick counts under QEMU icount, 5 instructions
+//! each at shift 3; NUCLEO: DWT cycles). Counters shared between the tick
 //! interrupt and the idle loop through a critical section.
+//!
+//! - tick: the whole tick handler (excitation, sensors, queue push) minus the
+//!   simulated plant's step on the emulated board (that stands in for
+//!   hardware, it is not firmware work);
+//! - pump: each idle-loop poll (dequeue, batching, CRC, postcard, COBS) minus
+//!   the link's write and the tick interrupts that preempted it.
+//!
+//! Reported per 2 kHz tick period: mean = tick mean + pump total / ticks;
+//! max = largest tick + largest single poll (an upper bound: the two rarely
+//! fall in the same period).
 
 use core::cell::RefCell;
 use critical_section::Mutex;
@@ -35,38 +45,31 @@ impl Stats {
     }
 }
 
-/// what one run cost
+/// what one run cost [stamp units]
 #[derive(Clone, Copy, Default)]
 pub struct Ledger {
-    /// whole tick handler, per tick [units]
+    /// tick handler without the simulated plant, per tick
     pub tick: Stats,
-    /// part of the tick spent in the simulated plant (emulated board only) [units]
+    /// simulated plant's step inside the tick (emulated board only), per tick
     pub plant: Stats,
-    /// encoding one frame in the idle loop, interrupts subtracted, per frame [units]
-    pub encode: Stats,
-    /// samples carried by the encoded frames
-    pub encoded_samples: u32,
-    /// cost units spent in tick handlers so far (to subtract from idle-loop measurements) [units]
+    /// the plant's last step, subtracted from the tick that contains it
+    pub plant_last: u32,
+    /// idle-loop polls without the link and the preempting ticks, per poll
+    pub pump: Stats,
+    /// all time spent in tick handlers (subtracted from the polls they preempt)
     pub in_ticks: u64,
 }
 
+const EMPTY: Stats = Stats {
+    count: 0,
+    sum: 0,
+    max: 0,
+};
 static LEDGER: Mutex<RefCell<Ledger>> = Mutex::new(RefCell::new(Ledger {
-    tick: Stats {
-        count: 0,
-        sum: 0,
-        max: 0,
-    },
-    plant: Stats {
-        count: 0,
-        sum: 0,
-        max: 0,
-    },
-    encode: Stats {
-        count: 0,
-        sum: 0,
-        max: 0,
-    },
-    encoded_samples: 0,
+    tick: EMPTY,
+    plant: EMPTY,
+    plant_last: 0,
+    pump: EMPTY,
     in_ticks: 0,
 }));
 
@@ -75,63 +78,59 @@ pub fn with<R>(f: impl FnOnce(&mut Ledger) -> R) -> R {
     critical_section::with(|cs| f(&mut LEDGER.borrow_ref_mut(cs)))
 }
 
-/// a copy of the ledger
-pub fn snapshot() -> Ledger {
-    with(|l| *l)
+/// Books one tick handler that took `spent` units in all (plant included).
+pub fn book_tick(spent: u32) {
+    with(|l| {
+        l.tick.add(spent.saturating_sub(l.plant_last));
+        l.plant_last = 0;
+        l.in_ticks += u64::from(spent);
+    });
 }
 
-/// what one run cost, converted to instructions (or cycles) per tick
+/// Books one step of the simulated plant [units].
+#[cfg_attr(not(feature = "mps2-an386"), allow(dead_code))]
+pub fn book_plant(spent: u32) {
+    with(|l| {
+        l.plant.add(spent);
+        l.plant_last = spent;
+    });
+}
+
+/// a run's cost per 2 kHz tick period, in instructions (emulated) or cycles (NUCLEO)
 #[derive(Clone, Copy, defmt::Format)]
 pub struct Summary {
     /// ticks measured
     pub ticks: u32,
-    /// tick handler without the simulated plant: mean [instructions]
-    pub tick_mean: u32,
-    /// tick handler without the simulated plant: max (max tick minus min plant share is not
-    /// known per tick, so this is max tick − mean plant) [instructions]
-    pub tick_max: u32,
-    /// simulated plant inside the tick (emulated board only): mean [instructions]
-    pub plant_mean: u32,
-    /// encoding in the idle loop per sample: mean [instructions]
-    pub encode_per_sample_mean: u32,
-    /// encoding in the idle loop per sample: worst frame's cost divided by the mean samples per frame [instructions]
-    pub encode_per_sample_max: u32,
-    /// generation + sampling + encoding per tick: mean [instructions]
+    /// firmware work per tick period: tick + pump share, mean
     pub per_tick_mean: u32,
-    /// generation + sampling + encoding per tick: max [instructions]
+    /// firmware work per tick period: largest tick + largest poll (upper bound)
     pub per_tick_max: u32,
+    /// tick handler (plant excluded), mean
+    pub tick_mean: u32,
+    /// tick handler (plant excluded), max
+    pub tick_max: u32,
+    /// idle-loop pump (batching + encoding) per tick, mean
+    pub pump_per_tick_mean: u32,
+    /// longest single poll (one batch encoded)
+    pub pump_poll_max: u32,
+    /// simulated plant per tick, mean (not firmware work)
+    pub plant_mean: u32,
 }
 
-/// converts a ledger to per-tick figures, `scale` instructions (or cycles) per cost unit
-pub fn summary(l: &Ledger, scale: u32) -> Summary {
-    let plant_mean = l.plant.mean();
-    let tick_mean = l.tick.mean().saturating_sub(plant_mean);
-    let tick_max = l.tick.max.saturating_sub(plant_mean);
-    let (enc_mean, enc_max) = if l.encoded_samples == 0 || l.encode.count == 0 {
-        (0, 0)
-    } else {
-        let per_frame = l.encoded_samples.div_ceil(l.encode.count).max(1);
-        (
-            (l.encode.sum / u64::from(l.encoded_samples)) as u32,
-            l.encode.max.div_ceil(per_frame),
-        )
-    };
+/// The ledger converted to per-tick figures with `scale` instructions (or cycles) per unit.
+pub fn summary(scale: u32) -> Summary {
+    let l = with(|l| *l);
+    let ticks = l.tick.count.max(1);
+    let pump_per_tick = (l.pump.sum / u64::from(ticks)) as u32;
     Summary {
         ticks: l.tick.count,
-        tick_mean: tick_mean * scale,
-        tick_max: tick_max * scale,
-        plant_mean: plant_mean * scale,
-        encode_per_sample_mean: enc_mean * scale,
-        encode_per_sample_max: enc_max * scale,
-        per_tick_mean: (tick_mean + enc_mean) * scale,
-        per_tick_max: (tick_max + enc_max) * scale,
-    }
-}
-
-impl Summary {
-    /// writes the summary to the defmt log
-    pub fn log(&self) {
-        defmt::info!("cost per tick: {}", self);
+        per_tick_mean: (l.tick.mean() + pump_per_tick) * scale,
+        per_tick_max: (l.tick.max + l.pump.max) * scale,
+        tick_mean: l.tick.mean() * scale,
+        tick_max: l.tick.max * scale,
+        pump_per_tick_mean: pump_per_tick * scale,
+        pump_poll_max: l.pump.max * scale,
+        plant_mean: l.plant.mean() * scale,
     }
 }
 
@@ -141,14 +140,14 @@ impl core::fmt::Display for Summary {
         write!(
             f,
             "jointid-cost ticks={} per_tick_mean={} per_tick_max={} tick_mean={} tick_max={} \
-             encode_per_sample_mean={} encode_per_sample_max={} plant_mean={}",
+             pump_per_tick_mean={} pump_poll_max={} plant_mean={}",
             self.ticks,
             self.per_tick_mean,
             self.per_tick_max,
             self.tick_mean,
             self.tick_max,
-            self.encode_per_sample_mean,
-            self.encode_per_sample_max,
+            self.pump_per_tick_mean,
+            self.pump_poll_max,
             self.plant_mean
         )
     }

@@ -15,6 +15,12 @@ mod mps2_an386;
 #[cfg(feature = "mps2-an386")]
 pub use mps2_an386::*;
 
+#[cfg(all(
+    feature = "nucleo-g474re",
+    not(feature = "mps2-an386"),
+    feature = "can"
+))]
+mod nucleo_can;
 #[cfg(all(feature = "nucleo-g474re", not(feature = "mps2-an386")))]
 mod nucleo_g474;
 #[cfg(all(feature = "nucleo-g474re", not(feature = "mps2-an386")))]

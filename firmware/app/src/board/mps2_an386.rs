@@ -16,6 +16,7 @@ use cortex_m::peripheral::{syst::SystClkSource, SCB, SYST};
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::{debug, heprintln};
 use defmt_semihosting as _;
+use jointid_core::sampler::{AngleInput, PumpState, ReferenceOutput, TorqueInput};
 use jointid_core::wire::Scale;
 
 use super::cmsdk_uart::CmsdkUartTx;
@@ -42,16 +43,24 @@ pub struct Io {
     angle: f32,
 }
 
-impl app::JointIo for Io {
-    fn set_reference(&mut self, theta_ref: f32) {
-        self.theta_ref = theta_ref;
-        self.angle += 0.05 * (theta_ref - self.angle);
-    }
-    fn torque(&mut self) -> i32 {
+impl TorqueInput for Io {
+    fn read_torque(&mut self) -> i32 {
         ((self.theta_ref - self.angle) * 1.0e4) as i32
     }
-    fn angle(&mut self) -> i32 {
+}
+
+impl AngleInput for Io {
+    fn read_angle(&mut self) -> i32 {
         (self.angle * 1.0e6) as i32
+    }
+}
+
+impl ReferenceOutput for Io {
+    fn write_reference(&mut self, theta_ref: f32) {
+        let t0 = stamp();
+        self.theta_ref = theta_ref;
+        self.angle += 0.05 * (theta_ref - self.angle);
+        cost::book_plant(stamp().wrapping_sub(t0));
     }
 }
 
@@ -83,11 +92,12 @@ fn main() -> ! {
     let cp = cortex_m::Peripherals::take().unwrap();
     let mut syst = cp.SYST;
     // SAFETY: UART0 is used only here.
-    let mut uart = unsafe { CmsdkUartTx::new(0x4000_4000, 16) };
-    app::install(Io {
+    let uart = unsafe { CmsdkUartTx::new(0x4000_4000, 16) };
+    let io = Io {
         theta_ref: 0.0,
         angle: 0.0,
-    });
+    };
+    let mut streamer = app::start(io, app::SerialLink::new(uart));
     defmt::info!(
         "mps2-an386: {=u32} Hz tick, SysTick reload {=u32}",
         app::SAMPLE_RATE_HZ,
@@ -98,17 +108,20 @@ fn main() -> ! {
     syst.clear_current();
     syst.enable_interrupt();
     syst.enable_counter();
-    let mut tx = app::Transmitter::new();
     loop {
-        match tx.pump(&mut uart) {
-            app::Pump::Busy => {}
-            app::Pump::Idle => cortex_m::asm::wfi(),
-            app::Pump::Done => break,
+        match streamer.poll() {
+            PumpState::Busy => {}
+            PumpState::Idle => cortex_m::asm::wfi(),
+            PumpState::Done => break,
         }
     }
     syst.disable_interrupt();
-    let s = cost::summary(&cost::snapshot(), INSTRUCTIONS_PER_UNIT);
-    s.log();
+    let s = cost::summary(INSTRUCTIONS_PER_UNIT);
+    defmt::info!(
+        "end: {}; cost per tick [instructions]: {}",
+        streamer.status(),
+        s
+    );
     heprintln!("{}", s);
     exit(true)
 }
@@ -117,14 +130,9 @@ fn main() -> ! {
 fn SysTick() {
     let c0 = SYST::get_current();
     TICKS.fetch_add(1, Ordering::Relaxed);
-    app::tick();
-    let spent = c0.wrapping_sub(SYST::get_current());
-    cost::with(|l| {
-        l.tick.add(spent);
-        l.in_ticks += u64::from(spent);
-    });
+    app::tick(stamp());
+    cost::book_tick(c0.wrapping_sub(SYST::get_current()));
 }
-
 #[exception]
 unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
     defmt::error!("HardFault at pc {=u32:#010x}", ef.pc());

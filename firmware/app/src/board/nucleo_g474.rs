@@ -20,7 +20,10 @@ use embassy_stm32::dac::DacChannel;
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::{RoundTo, Timer};
 use embassy_stm32::timer::qei::{Qei, QeiMode};
+#[cfg(not(feature = "can"))]
+use embassy_stm32::usart;
 use embassy_stm32::{interrupt, pac, rcc, Config};
+use jointid_core::sampler::PumpState;
 use panic_probe as _;
 
 use jointid_core::wire::Scale;
@@ -37,6 +40,7 @@ pub const SCALE: Scale = Scale {
     torque_nm_per_count: 4.0 / 4096.0,
     angle_rad_per_count: core::f32::consts::TAU / 16384.0,
 };
+#[cfg(not(feature = "can"))]
 /// stream baud rate of the ST-LINK virtual COM port [bit/s]
 const BAUD: u32 = 921_600;
 
@@ -89,44 +93,44 @@ async fn main(_spawner: Spawner) {
     };
     let encoder = Qei::new(p.TIM4, p.PB6, p.PB7, qei_cfg);
     let adc = Adc::new(p.ADC1, AdcConfig::default());
-    app::install(Io::new(
-        adc,
-        p.PA0,
-        encoder,
-        DacChannel::new_blocking(p.DAC1, p.PA4),
-    ));
+    let io = Io::new(adc, p.PA0, encoder, DacChannel::new_blocking(p.DAC1, p.PA4));
+    #[cfg(not(feature = "can"))]
+    let link = {
+        let mut cfg = usart::Config::default();
+        cfg.baudrate = BAUD;
+        app::SerialLink::new(usart::UartTx::new_blocking(p.LPUART1, p.PA2, cfg).unwrap())
+    };
+    #[cfg(feature = "can")]
+    let link = super::nucleo_can::FdCanLink::new(p.FDCAN1, p.PA11, p.PA12);
+    let mut streamer = app::start(io, link);
 
     let tick = Timer::new(p.TIM2);
     tick.set_frequency(Hertz(app::SAMPLE_RATE_HZ), RoundTo::Slower);
     tick.enable_update_interrupt(true);
     tick.start();
-    // SAFETY: the TIM2 handler below only touches the application state through critical sections.
+    // SAFETY: the TIM2 handler touches the application state only through critical sections.
     unsafe { cortex_m::peripheral::NVIC::unmask(pac::Interrupt::TIM2) };
     defmt::info!("nucleo-g474re: {=u32} Hz tick on TIM2", app::SAMPLE_RATE_HZ);
-
-    let mut cfg = embassy_stm32::usart::Config::default();
-    cfg.baudrate = BAUD;
-    let mut uart = embassy_stm32::usart::UartTx::new_blocking(p.LPUART1, p.PA2, cfg).unwrap();
-    let mut tx = app::Transmitter::new();
     loop {
-        match tx.pump(&mut uart) {
-            app::Pump::Busy => {}
-            app::Pump::Idle => cortex_m::asm::wfi(),
-            app::Pump::Done => break,
+        match streamer.poll() {
+            PumpState::Busy => {}
+            PumpState::Idle => cortex_m::asm::wfi(),
+            PumpState::Done => break,
         }
     }
-    cost::summary(&cost::snapshot(), INSTRUCTIONS_PER_UNIT).log();
-    drop(tick);
+    tick.enable_update_interrupt(false);
+    let summary = cost::summary(INSTRUCTIONS_PER_UNIT);
+    defmt::info!(
+        "end: {}; cost per tick [cycles]: {}",
+        streamer.status(),
+        summary
+    );
 }
 
 #[interrupt]
 fn TIM2() {
     pac::TIM2.sr().modify(|r| r.set_uif(false));
     let c0 = DWT::cycle_count();
-    app::tick();
-    let spent = DWT::cycle_count().wrapping_sub(c0);
-    cost::with(|l| {
-        l.tick.add(spent);
-        l.in_ticks += u64::from(spent);
-    });
+    app::tick(c0);
+    cost::book_tick(DWT::cycle_count().wrapping_sub(c0));
 }

@@ -1,4 +1,4 @@
-//! NUCLEO-G474RE sensors and actuator behind [`crate::app::JointIo`]: motor
+//! NUCLEO-G474RE sensors and actuator behind the core's sampler traits: motor
 //! encoder on TIM4 (quadrature, 16-bit counter extended to 32 bits), torque on
 //! ADC1 (one blocking 12-bit conversion per tick, 24.5 ADC cycles sampling),
 //! reference on DAC1 channel 1 (12 bits, ±π rad full scale).
@@ -9,6 +9,8 @@ use embassy_stm32::mode::Blocking;
 use embassy_stm32::peripherals::{ADC1, PA0, TIM4};
 use embassy_stm32::timer::qei::Qei;
 use embassy_stm32::Peri;
+
+use jointid_core::sampler::{AngleInput, ReferenceOutput, TorqueInput};
 
 use crate::app;
 
@@ -22,17 +24,23 @@ pub struct Io {
     dac: DacChannel<'static, Blocking>,
 }
 
-impl app::JointIo for Io {
-    fn set_reference(&mut self, theta_ref: f32) {
+impl ReferenceOutput for Io {
+    fn write_reference(&mut self, theta_ref: f32) {
         self.dac.set(Value::Bit12Right(app::dac_code(theta_ref)));
     }
-    fn torque(&mut self) -> i32 {
+}
+
+impl TorqueInput for Io {
+    fn read_torque(&mut self) -> i32 {
         i32::from(
             self.adc
                 .blocking_read(&mut self.torque_pin, SampleTime::CYCLES24_5),
         )
     }
-    fn angle(&mut self) -> i32 {
+}
+
+impl AngleInput for Io {
+    fn read_angle(&mut self) -> i32 {
         // extend the 16-bit hardware counter by the signed difference since the last tick
         let now = self.encoder.count();
         self.angle = self
