@@ -22,6 +22,7 @@
 mod fmt;
 
 pub mod excitation;
+pub mod joint;
 pub mod rng;
 pub mod sampler;
 pub mod transport;
