@@ -127,34 +127,6 @@ impl<S: FrameSink> FrameSink for TimedLink<S> {
     }
 }
 
-/// A blocking `embedded_io::Write` link (UART) as a frame sink.
-#[cfg_attr(feature = "can", allow(dead_code))]
-pub struct SerialLink<W> {
-    writer: W,
-    errors: u32,
-}
-
-#[cfg_attr(feature = "can", allow(dead_code))]
-impl<W: embedded_io::Write> SerialLink<W> {
-    /// frames go to `writer` whole
-    pub fn new(writer: W) -> Self {
-        Self { writer, errors: 0 }
-    }
-}
-
-impl<W: embedded_io::Write> FrameSink for SerialLink<W> {
-    fn send_frame(&mut self, frame: &[u8]) -> Result<(), TxError> {
-        self.writer.write_all(frame).map_err(|_| {
-            self.errors += 1;
-            TxError::Link
-        })
-    }
-
-    fn tx_errors(&self) -> u32 {
-        self.errors
-    }
-}
-
 /// the session header of this board and run
 fn header() -> SessionHeader {
     SessionHeader {
@@ -164,7 +136,7 @@ fn header() -> SessionHeader {
         sample_rate_hz: SAMPLE_RATE_HZ,
         timer_hz: board::TIMER_HZ,
         excitation: EXCITATION,
-        scale: board::SCALE,
+        scale: board::scale(),
     }
 }
 

@@ -13,6 +13,8 @@ mod cmsdk_uart;
 #[cfg(feature = "mps2-an386")]
 mod mps2_an386;
 #[cfg(feature = "mps2-an386")]
+mod sim_joint;
+#[cfg(feature = "mps2-an386")]
 pub use mps2_an386::*;
 
 #[cfg(all(

@@ -16,7 +16,11 @@ use cortex_m::peripheral::{syst::SystClkSource, SCB, SYST};
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::{debug, heprintln};
 use defmt_semihosting as _;
-use jointid_core::sampler::{AngleInput, PumpState, ReferenceOutput, TorqueInput};
+use jointid_core::joint::{JointIo, JointParams, JointSim};
+
+pub use super::sim_joint::Io;
+use jointid_core::sampler::PumpState;
+use jointid_core::transport::serial::SerialSink;
 use jointid_core::wire::Scale;
 
 use super::cmsdk_uart::CmsdkUartTx;
@@ -28,40 +32,15 @@ pub const TIMER_HZ: u32 = 25_000_000;
 const RELOAD: u32 = TIMER_HZ / app::SAMPLE_RATE_HZ - 1;
 /// instructions per SysTick count under `-icount shift=3`: 40 ns / 8 ns
 pub const INSTRUCTIONS_PER_UNIT: u32 = 5;
-/// counts to SI units of the simulated joint's sensors
-pub const SCALE: Scale = Scale {
-    torque_nm_per_count: 1.0e-4,
-    angle_rad_per_count: 1.0e-6,
-};
+/// the simulated joint (the same parameters the host test re-runs)
+pub const JOINT: JointParams = JointParams::default_joint();
 
 /// ticks since boot (the upper part of [`stamp`])
 static TICKS: AtomicU32 = AtomicU32::new(0);
 
-/// the board's sensors and actuator: the simulated joint (STAND-IN until the core's joint lands)
-pub struct Io {
-    theta_ref: f32,
-    angle: f32,
-}
-
-impl TorqueInput for Io {
-    fn read_torque(&mut self) -> i32 {
-        ((self.theta_ref - self.angle) * 1.0e4) as i32
-    }
-}
-
-impl AngleInput for Io {
-    fn read_angle(&mut self) -> i32 {
-        (self.angle * 1.0e6) as i32
-    }
-}
-
-impl ReferenceOutput for Io {
-    fn write_reference(&mut self, theta_ref: f32) {
-        let t0 = stamp();
-        self.theta_ref = theta_ref;
-        self.angle += 0.05 * (theta_ref - self.angle);
-        cost::book_plant(stamp().wrapping_sub(t0));
-    }
+/// counts to SI units of the simulated joint's sensors
+pub fn scale() -> Scale {
+    JOINT.scale()
 }
 
 /// identifies the emulated board in the session header ("AN386" folded)
@@ -93,11 +72,8 @@ fn main() -> ! {
     let mut syst = cp.SYST;
     // SAFETY: UART0 is used only here.
     let uart = unsafe { CmsdkUartTx::new(0x4000_4000, 16) };
-    let io = Io {
-        theta_ref: 0.0,
-        angle: 0.0,
-    };
-    let mut streamer = app::start(io, app::SerialLink::new(uart));
+    let io = Io::new(JointIo::new(JointSim::new(JOINT)));
+    let mut streamer = app::start(io, SerialSink::new(uart));
     defmt::info!(
         "mps2-an386: {=u32} Hz tick, SysTick reload {=u32}",
         app::SAMPLE_RATE_HZ,

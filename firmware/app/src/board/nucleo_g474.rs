@@ -9,7 +9,7 @@
 //! - log: defmt over RTT, panics through panic-probe (read both with `probe-rs run`).
 //!
 //! Time stamps and cost: DWT cycle counter (CYCCNT) at the 170 MHz core clock.
-//! `SCALE` below is a placeholder for a 16384-count/rev encoder and a 12-bit
+//! `scale()` below is a placeholder for a 16384-count/rev encoder and a 12-bit
 //! torque ADC spanning ±2 N·m: set it for the real sensors.
 
 use cortex_m::peripheral::{DCB, DWT};
@@ -26,6 +26,8 @@ use embassy_stm32::{interrupt, pac, rcc, Config};
 use jointid_core::sampler::PumpState;
 use panic_probe as _;
 
+#[cfg(not(feature = "can"))]
+use jointid_core::transport::serial::SerialSink;
 use jointid_core::wire::Scale;
 
 pub use super::nucleo_io::Io;
@@ -36,10 +38,12 @@ pub const TIMER_HZ: u32 = 170_000_000;
 /// one DWT count is one core cycle: the cost is reported in cycles
 pub const INSTRUCTIONS_PER_UNIT: u32 = 1;
 /// counts to SI units (placeholder sensors, see the module docs)
-pub const SCALE: Scale = Scale {
-    torque_nm_per_count: 4.0 / 4096.0,
-    angle_rad_per_count: core::f32::consts::TAU / 16384.0,
-};
+pub fn scale() -> Scale {
+    Scale {
+        torque_nm_per_count: 4.0 / 4096.0,
+        angle_rad_per_count: core::f32::consts::TAU / 16384.0,
+    }
+}
 #[cfg(not(feature = "can"))]
 /// stream baud rate of the ST-LINK virtual COM port [bit/s]
 const BAUD: u32 = 921_600;
@@ -98,7 +102,7 @@ async fn main(_spawner: Spawner) {
     let link = {
         let mut cfg = usart::Config::default();
         cfg.baudrate = BAUD;
-        app::SerialLink::new(usart::UartTx::new_blocking(p.LPUART1, p.PA2, cfg).unwrap())
+        SerialSink::new(usart::UartTx::new_blocking(p.LPUART1, p.PA2, cfg).unwrap())
     };
     #[cfg(feature = "can")]
     let link = super::nucleo_can::FdCanLink::new(p.FDCAN1, p.PA11, p.PA12);
