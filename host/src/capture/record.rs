@@ -13,7 +13,9 @@
 //! arrived (each sequence number once); the report says where the holes are.
 
 use jointid_core::excitation::{Excitation, ExcitationConfig};
-use jointid_core::wire::{DecodeError, DecodeEvent, Decoder, Message, RawSample, SessionHeader};
+use jointid_core::wire::{
+    Crc32, DecodeError, DecodeEvent, Decoder, Message, RawSample, SessionHeader,
+};
 
 use super::report::{
     BoardCounters, CaptureReport, DamagedFrame, ReferenceMismatch, SeqGap, SessionSummary,
@@ -68,7 +70,8 @@ pub struct StreamAnalyzer {
     /// sorted, disjoint, non-adjacent inclusive ranges of received sequence numbers
     ranges: Vec<(u32, u32)>,
     samples: u64,
-    kept: Vec<RawSample>,
+    /// kept samples in SI, `theta_ref` filled in by the reference pass at the end
+    kept: Vec<CaptureSample>,
     batches: Vec<BatchRef>,
     duplicates: u64,
     out_of_order: u64,
@@ -117,21 +120,23 @@ impl StreamAnalyzer {
     /// Feeds the next received bytes.
     pub fn feed(&mut self, bytes: &[u8]) {
         self.bytes += bytes.len() as u64;
-        let mut events = Vec::new();
-        self.decoder.feed(bytes, |e| events.push(e));
-        for e in events {
-            self.on_event(e);
+        // the decoder is moved out for the call so that events are handled as they come
+        let mut decoder = std::mem::take(&mut self.decoder);
+        decoder.feed(bytes, |e| self.on_event(e));
+        self.decoder = decoder;
+    }
+
+    /// Reserves room for `n` more kept samples.
+    pub fn reserve_samples(&mut self, n: usize) {
+        if self.keep_samples {
+            self.kept.reserve(n);
         }
     }
 
     /// Marks a link interruption at the current offset: the frame cut by it is reported
     /// as truncated, and decoding starts afresh with the bytes that follow.
     pub fn boundary(&mut self) {
-        let mut events = Vec::new();
-        self.decoder.finish(|e| events.push(e));
-        for e in events {
-            self.on_event(e);
-        }
+        self.drain_decoder();
         self.decoder = Decoder::new();
         self.base = self.bytes;
     }
@@ -211,7 +216,7 @@ impl StreamAnalyzer {
                 offset, message, ..
             } => {
                 self.frames += 1;
-                self.on_message(message, self.base + offset);
+                self.on_message(&message, self.base + offset);
             }
             DecodeEvent::Damaged { offset, len, error } => {
                 if matches!(error, DecodeError::Crc { .. }) {
@@ -227,7 +232,7 @@ impl StreamAnalyzer {
         }
     }
 
-    fn on_message(&mut self, message: Message, offset: u64) {
+    fn on_message(&mut self, message: &Message, offset: u64) {
         match message {
             Message::Header(h) => {
                 let idx = match self
@@ -247,7 +252,7 @@ impl StreamAnalyzer {
                     }
                 };
                 if self.header.is_none() {
-                    self.header = Some(h);
+                    self.header = Some(*h);
                 }
                 self.current = Some(idx);
             }
@@ -274,12 +279,12 @@ impl StreamAnalyzer {
             }
             Message::Status(s) => {
                 if self.current == Some(0) {
-                    self.board = counters(&s);
+                    self.board = counters(s);
                 }
             }
             Message::End(s) => {
                 if self.current == Some(0) {
-                    self.board = counters(&s);
+                    self.board = counters(s);
                     self.ended = true;
                     self.end_seq = Some(s.seq);
                 }
@@ -304,7 +309,17 @@ impl StreamAnalyzer {
         }
         self.samples += 1;
         if self.keep_samples {
-            self.kept.push(s);
+            // kept samples belong to the reported session, whose header is known
+            if let Some(h) = &self.header {
+                self.kept.push(CaptureSample {
+                    seq,
+                    tick: s.tick,
+                    t: f64::from(seq) / f64::from(h.sample_rate_hz),
+                    theta_ref: 0.0,
+                    u: f64::from(s.torque) * f64::from(h.scale.torque_nm_per_count),
+                    theta_m: f64::from(s.angle) * f64::from(h.scale.angle_rad_per_count),
+                });
+            }
         }
     }
 
@@ -330,11 +345,9 @@ impl StreamAnalyzer {
     }
 
     fn drain_decoder(&mut self) {
-        let mut events = Vec::new();
-        self.decoder.finish(|e| events.push(e));
-        for e in events {
-            self.on_event(e);
-        }
+        let mut decoder = std::mem::take(&mut self.decoder);
+        decoder.finish(|e| self.on_event(e));
+        self.decoder = decoder;
     }
 
     /// Ends the stream: reports a truncated tail, checks the reference, builds the report
@@ -349,29 +362,17 @@ impl StreamAnalyzer {
         let Some(header) = self.header else {
             return Ok((report, None));
         };
-        self.kept.sort_by_key(|s| s.seq);
-        self.batches.sort_by_key(|b| b.first_seq);
-        let (mismatches, refs) = self.check_reference(&header.excitation)?;
-        report.reference_mismatches = mismatches;
+        if !self.kept.is_sorted_by_key(|s| s.seq) {
+            self.kept.sort_by_key(|s| s.seq);
+        }
+        if !self.batches.is_sorted_by_key(|b| b.first_seq) {
+            self.batches.sort_by_key(|b| b.first_seq);
+        }
+        report.reference_mismatches = self.check_reference(&header.excitation)?;
         if !self.keep_samples {
             return Ok((report, None));
         }
-        let fs = f64::from(header.sample_rate_hz);
-        let tq = f64::from(header.scale.torque_nm_per_count);
-        let an = f64::from(header.scale.angle_rad_per_count);
-        let samples = self
-            .kept
-            .iter()
-            .zip(refs)
-            .map(|(s, r)| CaptureSample {
-                seq: s.seq,
-                tick: s.tick,
-                t: f64::from(s.seq) / fs,
-                theta_ref: f64::from(r),
-                u: f64::from(s.torque) * tq,
-                theta_m: f64::from(s.angle) * an,
-            })
-            .collect();
+        let samples = std::mem::take(&mut self.kept);
         Ok((
             report.clone(),
             Some(CaptureRecord {
@@ -390,7 +391,7 @@ impl StreamAnalyzer {
         let mut report = self.report_without_reference();
         if let Some(h) = self.header {
             self.batches.sort_by_key(|b| b.first_seq);
-            if let Ok((mismatches, _)) = self.check_reference(&h.excitation) {
+            if let Ok(mismatches) = self.check_reference(&h.excitation) {
                 report.reference_mismatches = mismatches;
             }
         }
@@ -429,44 +430,39 @@ impl StreamAnalyzer {
     /// order, which is sorted by sequence number). Memory stays proportional to the kept
     /// samples, not to the length of the run.
     fn check_reference(
-        &self,
+        &mut self,
         cfg: &ExcitationConfig,
-    ) -> Result<(Vec<ReferenceMismatch>, Vec<f32>), CaptureError> {
+    ) -> Result<Vec<ReferenceMismatch>, CaptureError> {
         let Some(last) = self.last_seq() else {
-            return Ok((Vec::new(), Vec::new()));
+            return Ok(Vec::new());
         };
         let mut table = vec![0.0f32; cfg.period_samples as usize];
         let mut gen = Excitation::new(cfg, &mut table).map_err(|e| CaptureError::Excitation {
             message: e.to_string(),
         })?;
         let mut mismatches = Vec::new();
-        let mut refs = Vec::with_capacity(if self.keep_samples {
-            self.kept.len()
-        } else {
-            0
-        });
-        // batches being collected: (batch, its reference so far)
-        let mut active: Vec<(BatchRef, Vec<f32>)> = Vec::new();
+        // batches being checked: (batch, samples still to come, CRC so far)
+        let mut active: Vec<(BatchRef, u32, Crc32)> = Vec::new();
         let (mut bi, mut ki) = (0, 0);
         for k in 0..=last {
             // past the end of a finite run the generator is silent: reference 0
             let r = gen.next().unwrap_or(0.0);
             while bi < self.batches.len() && self.batches[bi].first_seq == k {
-                active.push((
-                    self.batches[bi],
-                    Vec::with_capacity(self.batches[bi].len as usize),
-                ));
+                let b = self.batches[bi];
+                active.push((b, b.len, Crc32::new()));
                 bi += 1;
             }
             if !active.is_empty() {
-                for (_, v) in active.iter_mut() {
-                    v.push(r);
+                let bytes = r.to_le_bytes();
+                for (_, left, crc) in active.iter_mut() {
+                    crc.update(&bytes);
+                    *left -= 1;
                 }
-                active.retain(|(b, v)| {
-                    if v.len() < b.len as usize && k < last {
+                active.retain(|(b, left, crc)| {
+                    if *left > 0 && k < last {
                         return true;
                     }
-                    let host_crc = jointid_core::wire::reference_crc(v);
+                    let host_crc = crc.finish();
                     if host_crc != b.crc {
                         mismatches.push(ReferenceMismatch {
                             first_seq: b.first_seq,
@@ -480,13 +476,13 @@ impl StreamAnalyzer {
             }
             if self.keep_samples {
                 while ki < self.kept.len() && self.kept[ki].seq == k {
-                    refs.push(r);
+                    self.kept[ki].theta_ref = f64::from(r);
                     ki += 1;
                 }
             }
         }
         mismatches.sort_by_key(|m| m.first_seq);
-        Ok((mismatches, refs))
+        Ok(mismatches)
     }
 }
 
