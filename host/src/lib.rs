@@ -8,3 +8,6 @@
 pub mod capture;
 pub mod cli;
 pub mod data;
+pub mod frf;
+pub mod plot;
+pub mod validate;

@@ -1,38 +1,58 @@
-//! `jointid`: command-line entry point (placeholder dispatch until the `analysis` branch
-//! lands the CLI skeleton).
+//! `jointid`: command-line entry point. Exit codes: 0 ok, 1 a check failed,
+//! 2 error (printed on one line, or as `{"error": ...}` with `--json`).
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
-use jointid::cli;
-
-#[derive(Parser)]
-#[command(name = "jointid", version, about)]
-struct Cli {
-    #[command(subcommand)]
-    command: Command,
-}
-
-#[derive(Subcommand)]
-enum Command {
-    /// Record the board's stream into a .jcap capture
-    Capture(cli::capture::CaptureArgs),
-    /// Write a capture as the capture CSV
-    Export(cli::export::ExportArgs),
-    /// Show what a capture holds
-    Info(cli::info::InfoArgs),
-}
+use clap::Parser;
+use jointid::cli::{default_loaders, run, Cli, Context};
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
-    let result: anyhow::Result<u8> = match &cli.command {
-        Command::Capture(a) => cli::capture::run(a).map_err(Into::into),
-        Command::Export(a) => cli::export::run(a).map_err(Into::into),
-        Command::Info(a) => cli::info::run(a).map_err(Into::into),
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) if e.use_stderr() && std::env::args().any(|a| a == "--json") => {
+            let text = e.render().to_string();
+            let lines: Vec<&str> = text
+                .lines()
+                .map(str::trim)
+                .take_while(|l| !l.starts_with("Usage:"))
+                .filter(|l| !l.is_empty())
+                .collect();
+            let msg = lines.join(" ");
+            println!(
+                "{}",
+                serde_json::json!({ "error": msg.trim_start_matches("error: ") })
+            );
+            return ExitCode::from(2);
+        }
+        Err(e) => e.exit(),
     };
+    let loaders = default_loaders();
+    let mut stdout = std::io::stdout().lock();
+    let result = run(
+        &cli,
+        &mut Context {
+            json: cli.json,
+            loaders: &loaders,
+            out: &mut stdout,
+        },
+    )
+    .map_err(anyhow::Error::from_boxed);
     match result {
-        Ok(code) => ExitCode::from(code),
+        Ok(outcome) => ExitCode::from(outcome.code()),
         Err(e) => {
-            eprintln!("error: {e:#}");
+            // the chain, skipping causes the message already states
+            let mut msg = e.to_string();
+            for cause in e.chain().skip(1) {
+                let c = cause.to_string();
+                if !msg.contains(&c) {
+                    msg = format!("{msg}: {c}");
+                }
+            }
+            let msg = msg.replace('\n', " ");
+            if cli.json {
+                println!("{}", serde_json::json!({ "error": msg }));
+            } else {
+                eprintln!("jointid: error: {msg}");
+            }
             ExitCode::from(2)
         }
     }

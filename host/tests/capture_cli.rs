@@ -205,6 +205,7 @@ fn capture_from_file_keeps_every_sample_in_order_bit_exact() {
     assert_eq!(v["damaged_frames"], serde_json::json!([]));
     assert_eq!(v["overruns"], 0);
     assert_eq!(v["ended"], true);
+    assert_eq!(v["reference_mismatches"], serde_json::json!([]));
     assert_eq!(v["bytes"], s.bytes.len());
     // the file is the 8-byte header and then exactly the received bytes
     let raw = std::fs::read(&out).unwrap();
@@ -253,6 +254,14 @@ fn capture_from_file_keeps_every_sample_in_order_bit_exact() {
     ] {
         assert_eq!(meta.get(k), Some(&want), "# {k}");
     }
+    // every analysis command reads the capture directly through the .jcap loader
+    let mut a = json_of(&jointid(&["analyze", out.to_str().unwrap(), "--json"]));
+    let mut b = json_of(&jointid(&["analyze", csv.to_str().unwrap(), "--json"]));
+    for v in [&mut a, &mut b] {
+        v.as_object_mut().unwrap().remove("file");
+    }
+    assert!(a == b, "analyze reads the .jcap as it reads its CSV export");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -338,6 +347,7 @@ fn capture_reports_exactly_the_injected_faults_and_keeps_every_intact_frame() {
     let listed: Vec<String> = gaps(&v).iter().map(|(a, b)| format!("{a}..{b}")).collect();
     assert_eq!(meta["gaps"], listed.join(";"));
     assert_eq!(meta["damaged_frames"], want_damaged.len().to_string());
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -402,6 +412,7 @@ fn capture_killed_midway_leaves_a_file_read_up_to_its_last_whole_frame() {
     let (_, rows) = read_csv(&csv);
     let lost: Vec<u32> = (whole..400).collect();
     assert_rows_match(&s, &rows, &lost);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A socat pty pair: bytes written to `a` come out of `b`.
@@ -498,6 +509,7 @@ fn capture_from_serial_pty_keeps_every_sample_in_order_bit_exact() {
     .status
     .success());
     assert_rows_match(&s, &read_csv(&csv).1, &[]);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -560,6 +572,7 @@ fn capture_survives_the_serial_device_vanishing_and_records_the_gap() {
     let info = json_of(&jointid(&["info", out.to_str().unwrap(), "--json"]));
     assert_eq!(info["damaged_frames"], v["damaged_frames"]);
     assert_eq!(info["gaps"], v["gaps"]);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Runs a capture that must fail at setup: exit 2, one line naming `names`, no file.
@@ -569,7 +582,7 @@ fn assert_setup_error(args: &[&str], out: &Path, names: &str) {
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(err.lines().count(), 1, "one line: {err}");
     assert!(
-        err.starts_with("error: ") && err.contains(names),
+        err.starts_with("jointid: error: ") && err.contains(names),
         "{err} should name {names}"
     );
     assert!(!out.exists(), "{} left behind", out.display());
@@ -616,6 +629,22 @@ fn capture_setup_errors_exit_2_with_one_line_and_leave_no_file() {
         &unwritable,
         "no/such/dir/run.jcap: no such file or directory",
     );
+    // with --json the error is a JSON object on stdout, still exit 2, still no file
+    let j = jointid(&[
+        "--json",
+        "capture",
+        "--serial",
+        "/dev/ttyNOSUCH9",
+        "--out",
+        o,
+    ]);
+    assert_eq!(j.status.code(), Some(2));
+    let v: Value = serde_json::from_slice(&j.stdout).unwrap();
+    assert_eq!(
+        v["error"],
+        "serial port /dev/ttyNOSUCH9: no such file or directory"
+    );
+    assert!(!out.exists());
     // a refused TCP connection (port 1 on loopback has no listener)
     assert_setup_error(
         &["capture", "--tcp", "127.0.0.1:1", "--out", o],
@@ -628,6 +657,7 @@ fn capture_setup_errors_exit_2_with_one_line_and_leave_no_file() {
     assert_eq!(r.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&r.stderr).contains("already exists"));
     assert_eq!(std::fs::read(&out).unwrap(), b"precious");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -662,6 +692,11 @@ fn info_and_export_name_the_problem_of_a_bad_capture_file() {
     let v = json_of(&jointid(&["info", headless.to_str().unwrap(), "--json"]));
     assert_eq!(v["samples_without_header"], 400);
     assert_eq!(v["header"], Value::Null);
+    // and the analysis commands refuse it through the .jcap loader, naming why
+    let o = jointid(&["analyze", headless.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no session header"));
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -737,4 +772,5 @@ fn capture_stops_by_itself_after_the_requested_periods_or_duration() {
     assert_eq!(v["samples"], 0);
     assert_eq!(std::fs::read(&out2).unwrap(), b"JCAP\x01\r\n\x1a");
     assert!(events(&out2).contains("\"stop\""));
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -28,6 +28,8 @@ use std::path::{Path, PathBuf};
 
 use jointid_core::wire::SessionHeader;
 
+use crate::data::{Dataset, IdData};
+
 pub mod can;
 pub mod export;
 pub mod jcap;
@@ -68,6 +70,14 @@ pub enum CaptureError {
     Excitation {
         /// what the generator said
         message: String,
+    },
+    /// The capture cannot serve as uniformly sampled identification data.
+    #[error("{path}: {reason}; `jointid info` lists what is missing")]
+    NotUniform {
+        /// the capture file
+        path: PathBuf,
+        /// what is wrong (gaps with the first one, too few samples)
+        reason: String,
     },
     /// Writing an export failed.
     #[error("{path}: {}", io_msg(err))]
@@ -113,6 +123,62 @@ impl CaptureRecord {
     pub fn sample_interval_s(&self) -> f64 {
         1.0 / f64::from(self.header.sample_rate_hz)
     }
+
+    /// The record as identification data: u → θm with the reference, the excitation
+    /// config, and the other capture facts as `meta` (the keys of the capture CSV's
+    /// comments). `path` names the capture in errors.
+    ///
+    /// # Errors
+    /// [`CaptureError::NotUniform`] when samples are missing (gaps are never filled) or
+    /// fewer than two samples arrived.
+    pub fn to_dataset(&self, path: &Path) -> Result<Dataset, CaptureError> {
+        let r = &self.report;
+        if let Some(first) = r.gaps.first() {
+            return Err(CaptureError::NotUniform {
+                path: path.to_path_buf(),
+                reason: format!(
+                    "{} gap{}, {} samples missing (first seq {}..={})",
+                    r.gaps.len(),
+                    if r.gaps.len() == 1 { "" } else { "s" },
+                    r.missing_samples,
+                    first.from,
+                    first.to
+                ),
+            });
+        }
+        if self.samples.len() < 2 {
+            return Err(CaptureError::NotUniform {
+                path: path.to_path_buf(),
+                reason: format!("{} samples, need at least 2", self.samples.len()),
+            });
+        }
+        let meta = export::comment_pairs(self)
+            .into_iter()
+            .filter(|(k, _)| !export::EXCITATION_KEYS.contains(k))
+            .map(|(k, v)| (k.to_string(), v))
+            .collect();
+        Ok(Dataset {
+            name: path.display().to_string(),
+            data: IdData {
+                ts: self.sample_interval_s(),
+                u: self.samples.iter().map(|s| s.u).collect(),
+                y: self.samples.iter().map(|s| s.theta_m).collect(),
+                r: Some(self.samples.iter().map(|s| s.theta_ref).collect()),
+            },
+            t0: self.samples[0].t,
+            excitation: Some(self.header.excitation),
+            meta,
+        })
+    }
+}
+
+/// Reads a `.jcap` as identification data: the loader `data::Loaders` uses for `.jcap`
+/// files, so every analysis command reads a capture directly.
+///
+/// # Errors
+/// As [`read_jcap`] and [`CaptureRecord::to_dataset`].
+pub fn load_dataset(path: &Path) -> Result<Dataset, CaptureError> {
+    read_jcap(path)?.to_dataset(path)
 }
 
 /// Decodes a byte stream as [`read_jcap`] does (no file, no events).

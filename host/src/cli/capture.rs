@@ -19,8 +19,9 @@ use std::time::Duration;
 
 use serde::Serialize;
 
+use super::{print_json, CmdResult, Context, Outcome};
 use crate::capture::{
-    record_capture, CaptureError, CaptureOptions, CaptureReport, Progress, SourceSpec, StopRule,
+    record_capture, CaptureOptions, CaptureReport, Progress, SourceSpec, StopRule,
 };
 
 /// Default serial baud rate: 2 kHz of samples needs about 420 kbaud (field notes §0.7).
@@ -65,9 +66,6 @@ pub struct CaptureArgs {
     /// Keep reading after the board's end-of-session message
     #[arg(long)]
     pub ignore_end: bool,
-    /// Print the summary as JSON on stdout
-    #[arg(long)]
-    pub json: bool,
     /// No progress line
     #[arg(long, short)]
     pub quiet: bool,
@@ -168,11 +166,13 @@ pub struct CaptureSummary {
     pub report: CaptureReport,
 }
 
-/// Runs `jointid capture`; returns the exit status (0 or 1 with `--strict`).
+/// Runs `jointid capture`: [`Outcome::CheckFailed`] with `--strict` when anything is
+/// missing or damaged.
 ///
 /// # Errors
-/// Setup and capture errors (see [`crate::capture::live`] for what stays on disk).
-pub fn run(args: &CaptureArgs) -> Result<u8, CaptureError> {
+/// Setup and capture errors ([`crate::capture::CaptureError`]; see
+/// [`crate::capture::live`] for what stays on disk), output errors.
+pub fn run(args: &CaptureArgs, ctx: &mut Context<'_>) -> CmdResult {
     let (spec, opts) = args.validate();
     let interrupt = Arc::new(AtomicBool::new(false));
     {
@@ -210,19 +210,21 @@ pub fn run(args: &CaptureArgs) -> Result<u8, CaptureError> {
         elapsed_s: outcome.elapsed.as_secs_f64(),
         report: outcome.report,
     };
-    if args.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&summary).expect("a summary always serialises")
-        );
+    if ctx.json {
+        print_json(ctx.out, &summary)?;
     } else {
-        println!(
+        writeln!(
+            ctx.out,
             "captured {} bytes from {spec} into {} in {:.1} s ({})",
             outcome.bytes, summary.out, summary.elapsed_s, summary.stop
-        );
-        println!("{}", summary.report);
+        )?;
+        writeln!(ctx.out, "{}", summary.report)?;
     }
-    Ok(u8::from(args.strict && !summary.report.is_clean()))
+    Ok(if args.strict && !summary.report.is_clean() {
+        Outcome::CheckFailed
+    } else {
+        Outcome::Ok
+    })
 }
 
 /// Sample rate over the last few seconds, for the progress line.

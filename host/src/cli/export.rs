@@ -7,6 +7,7 @@
 
 use std::path::PathBuf;
 
+use super::{CmdResult, Context, Outcome};
 use crate::capture::{export, read_jcap, CaptureError};
 
 /// Arguments of `jointid export`.
@@ -23,17 +24,19 @@ pub struct ExportArgs {
     pub strict: bool,
 }
 
-/// Runs `jointid export`; returns the exit status.
+/// Runs `jointid export`: [`Outcome::CheckFailed`] with `--strict` when anything is
+/// missing or damaged. With `--json`, a summary object goes to the output (not with
+/// `--csv -`, where the output is the CSV).
 ///
 /// # Errors
 /// Reading the capture ([`CaptureError::Jcap`], [`CaptureError::NoHeader`],
 /// [`CaptureError::Excitation`]) or writing the CSV ([`CaptureError::Export`]).
-pub fn run(args: &ExportArgs) -> Result<u8, CaptureError> {
+pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
     let record = read_jcap(&args.input)?;
-    if args.csv.as_os_str() == "-" {
-        let stdout = std::io::stdout();
-        let mut lock = std::io::BufWriter::new(stdout.lock());
-        export::write_csv(&record, &mut lock).map_err(|source| CaptureError::Export {
+    let to_stdout = args.csv.as_os_str() == "-";
+    if to_stdout {
+        let mut w = std::io::BufWriter::new(&mut *ctx.out);
+        export::write_csv(&record, &mut w).map_err(|source| CaptureError::Export {
             path: args.csv.clone(),
             err: source,
         })?;
@@ -49,5 +52,24 @@ pub fn run(args: &ExportArgs) -> Result<u8, CaptureError> {
         r.missing_samples,
         r.damaged_frames.len()
     );
-    Ok(u8::from(args.strict && !r.is_clean()))
+    if ctx.json && !to_stdout {
+        super::print_json(
+            ctx.out,
+            &serde_json::json!({
+                "file": args.input.display().to_string(),
+                "csv": args.csv.display().to_string(),
+                "rows": record.samples.len(),
+                "samples": r.samples,
+                "gaps": r.gaps,
+                "missing_samples": r.missing_samples,
+                "damaged_frames": r.damaged_frames,
+                "overruns": r.overruns,
+            }),
+        )?;
+    }
+    Ok(if args.strict && !r.is_clean() {
+        Outcome::CheckFailed
+    } else {
+        Outcome::Ok
+    })
 }

@@ -12,8 +12,9 @@ use std::path::PathBuf;
 use jointid_core::wire::SessionHeader;
 use serde::Serialize;
 
+use super::{print_json, CmdResult, Context, Outcome};
 use crate::capture::export::kind_name;
-use crate::capture::{read_jcap_report, CaptureError, CaptureReport};
+use crate::capture::{read_jcap_report, CaptureReport};
 
 /// Arguments of `jointid info`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
@@ -21,9 +22,6 @@ pub struct InfoArgs {
     /// Capture file to read
     #[arg(value_name = "RUN.jcap")]
     pub input: PathBuf,
-    /// Print as JSON on stdout
-    #[arg(long)]
-    pub json: bool,
     /// Exit with status 1 when anything is missing or damaged
     #[arg(long)]
     pub strict: bool,
@@ -41,11 +39,13 @@ pub struct InfoSummary {
     pub report: CaptureReport,
 }
 
-/// Runs `jointid info`; returns the exit status.
+/// Runs `jointid info`: [`Outcome::CheckFailed`] with `--strict` when anything is
+/// missing or damaged.
 ///
 /// # Errors
-/// [`CaptureError::Jcap`] when the file cannot be read or is no jcap file.
-pub fn run(args: &InfoArgs) -> Result<u8, CaptureError> {
+/// [`crate::capture::CaptureError::Jcap`] when the file cannot be read or is no jcap
+/// file; output errors.
+pub fn run(args: &InfoArgs, ctx: &mut Context<'_>) -> CmdResult {
     let (report, header) = read_jcap_report(&args.input)?;
     let clean = report.is_clean();
     let summary = InfoSummary {
@@ -53,15 +53,16 @@ pub fn run(args: &InfoArgs) -> Result<u8, CaptureError> {
         header,
         report,
     };
-    if args.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&summary).expect("a summary always serialises")
-        );
+    if ctx.json {
+        print_json(ctx.out, &summary)?;
     } else {
-        print!("{}", describe(&summary));
+        write!(ctx.out, "{}", describe(&summary))?;
     }
-    Ok(u8::from(args.strict && !clean))
+    Ok(if args.strict && !clean {
+        Outcome::CheckFailed
+    } else {
+        Outcome::Ok
+    })
 }
 
 /// The human-readable description `info` prints.
