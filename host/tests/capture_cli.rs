@@ -774,3 +774,53 @@ fn capture_stops_by_itself_after_the_requested_periods_or_duration() {
     assert!(events(&out2).contains("\"stop\""));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn ctrl_c_stops_cleanly_with_the_summary_and_a_complete_file() {
+    let dir = tmpdir("sigint");
+    let s = small();
+    let fifo = dir.join("board.fifo");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let out = dir.join("run.jcap");
+    let mut child = Command::new(BIN)
+        .args([
+            "--json",
+            "capture",
+            "--file",
+            fifo.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let half = batches(&s)[12];
+    let cut = (half.offset + half.len) as usize;
+    let mut w = OpenOptions::new().write(true).open(&fifo).unwrap();
+    w.write_all(&s.bytes[..cut]).unwrap();
+    wait_until("the bytes on disk", Duration::from_secs(5), || {
+        file_len(&out) == 8 + cut as u64
+    });
+    let int = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(int.success());
+    let v = json_of(&wait_exit(&mut child, Duration::from_secs(10)));
+    drop(w);
+    assert_eq!(v["stop"], "interrupted");
+    let whole: u32 = batches(&s)[..13]
+        .iter()
+        .map(|f| seqs_of(f).len() as u32)
+        .sum();
+    assert_eq!(v["samples"].as_u64().unwrap(), u64::from(whole));
+    assert_eq!(v["damaged_frames"], serde_json::json!([]));
+    assert!(events(&out).contains("\"detail\":\"interrupted\""));
+    assert_eq!(&std::fs::read(&out).unwrap()[8..], &s.bytes[..cut]);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -157,7 +157,8 @@ impl fmt::Display for CaptureReport {
         writeln!(
             f,
             "board {}  session {}  ({} session header{} seen)",
-            opt(self.board_id),
+            self.board_id
+                .map_or_else(|| "-".to_string(), |b| format!("{b:#010x}")),
             opt(self.session_id),
             self.sessions.len(),
             if self.sessions.len() == 1 { "" } else { "s" }
