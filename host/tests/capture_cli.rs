@@ -776,7 +776,7 @@ fn capture_stops_by_itself_after_the_requested_periods_or_duration() {
 }
 
 #[test]
-fn ctrl_c_stops_cleanly_with_the_summary_and_a_complete_file() {
+fn capture_stops_cleanly_on_ctrl_c_with_the_summary_and_a_complete_file() {
     let dir = tmpdir("sigint");
     let s = small();
     let fifo = dir.join("board.fifo");
