@@ -5,8 +5,9 @@
 //! - write: the received bytes into a `.jcap` through `JcapWriter` (4 KiB chunks, the
 //!   default flush policy, fsync at the end);
 //! - decode: bytes → `CaptureRecord` (frames, sessions, gaps, reference regenerated and
-//!   CRC-checked, SI conversion), against the baseline of the core's bare `Decoder` in
-//!   the same run;
+//!   CRC-checked, SI conversion) on one thread and as `read_jcap` does it (decoders in
+//!   parallel on pieces cut at frame delimiters), against the baseline of the core's bare
+//!   `Decoder` on one thread in the same run;
 //! - export: `CaptureRecord` → capture CSV in memory, against a baseline writing the same
 //!   rows with `std::fmt`;
 //! - the `jointid export` path: `read_jcap` + `export_csv` from and to files.
@@ -22,7 +23,7 @@ use std::time::{Duration, Instant};
 use jointid::capture::export::write_csv;
 use jointid::capture::jcap::{FlushPolicy, JcapWriter};
 use jointid::capture::synth::{synth_stream, SynthOptions};
-use jointid::capture::{decode_stream, export, read_jcap};
+use jointid::capture::{decode_stream, export, read_jcap, StreamAnalyzer};
 use jointid_core::wire::{DecodeEvent, Decoder};
 
 const SECONDS: u32 = 3600;
@@ -102,6 +103,12 @@ fn main() {
     });
     assert_eq!(frames as usize, s.frames.len());
 
+    let (t_seq, _) = best_of(3, || {
+        let mut an = StreamAnalyzer::new(true);
+        an.reserve_samples(n / 4);
+        an.feed(&s.bytes);
+        an.finish().expect("decodes").1.expect("has a header")
+    });
     let (t_decode, record) = best_of(3, || decode_stream(&s.bytes, &[]).expect("decodes"));
     if std::env::var_os("JOINTID_BENCH_DECODE_ONLY").is_some() {
         for _ in 0..5 {
@@ -153,11 +160,13 @@ fn main() {
     println!();
     line("write .jcap (JcapWriter, 4 KiB chunks)", t_write, n);
     line("decode: core Decoder alone (baseline)", t_base, n);
-    line("decode: bytes -> CaptureRecord", t_decode, n);
+    line("decode: bytes -> CaptureRecord, one thread", t_seq, n);
+    line("decode: bytes -> CaptureRecord (read_jcap)", t_decode, n);
     println!(
-        "{:<44} {:>9.2}x the baseline's time",
+        "{:<44} {:>9.2}x the baseline's time (one thread: {:.2}x)",
         "  record / bare decoder",
-        t_decode.as_secs_f64() / t_base.as_secs_f64()
+        t_decode.as_secs_f64() / t_base.as_secs_f64(),
+        t_seq.as_secs_f64() / t_base.as_secs_f64()
     );
     line("csv: std::fmt rows (baseline)", t_fmt, n);
     line("csv: write_csv", t_csv, n);

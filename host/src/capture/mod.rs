@@ -216,7 +216,7 @@ pub fn read_jcap_report(
     let (stream, events) = read_jcap_parts(path)?;
     let boundaries = boundaries_of(&events);
     let mut an = StreamAnalyzer::new(false);
-    feed_with_boundaries(&mut an, &stream, &boundaries);
+    an.feed_parallel(&stream, &boundaries, decode_threads(), PARALLEL_PIECE);
     let header = an.header().copied();
     let mut report = an.finish_report();
     report.link_events = events;
@@ -242,18 +242,12 @@ fn boundaries_of(events: &[JcapEvent]) -> Vec<u64> {
     b
 }
 
-fn feed_with_boundaries(an: &mut StreamAnalyzer, stream: &[u8], boundaries: &[u64]) {
-    let mut at = 0usize;
-    for &b in boundaries {
-        let b = (b as usize).min(stream.len());
-        if b < at {
-            continue;
-        }
-        an.feed(&stream[at..b]);
-        an.boundary();
-        at = b;
-    }
-    an.feed(&stream[at..]);
+/// Smallest piece of a stream worth a decoder thread of its own [bytes].
+const PARALLEL_PIECE: usize = 1 << 20;
+
+/// Decoder threads for reading a capture: the cores there are, at most 8.
+fn decode_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get().min(8))
 }
 
 fn decode_named(
@@ -265,7 +259,7 @@ fn decode_named(
     let mut an = StreamAnalyzer::new(true);
     // about 5.4 bytes per sample on the wire: reserve once instead of doubling
     an.reserve_samples(stream.len() / 4);
-    feed_with_boundaries(&mut an, stream, boundaries);
+    an.feed_parallel(stream, boundaries, decode_threads(), PARALLEL_PIECE);
     let (report, record) = an.finish()?;
     match record {
         Some(mut r) => {

@@ -14,7 +14,7 @@
 
 use jointid_core::excitation::{Excitation, ExcitationConfig};
 use jointid_core::wire::{
-    Crc32, DecodeError, DecodeEvent, Decoder, Message, RawSample, SessionHeader,
+    Crc32, DecodeError, DecodeEvent, Decoder, Message, RawSample, SessionHeader, Status,
 };
 
 use super::report::{
@@ -216,80 +216,202 @@ impl StreamAnalyzer {
                 offset, message, ..
             } => {
                 self.frames += 1;
-                self.on_message(&message, self.base + offset);
+                match &message {
+                    Message::Header(h) => self.on_header(h, self.base + offset),
+                    Message::Batch(b) => self.on_batch(
+                        b.first_seq(),
+                        b.len() as u32,
+                        b.reference_crc(),
+                        b.samples(),
+                    ),
+                    Message::Status(s) => self.on_status(s, false),
+                    Message::End(s) => self.on_status(s, true),
+                }
             }
             DecodeEvent::Damaged { offset, len, error } => {
-                if matches!(error, DecodeError::Crc { .. }) {
-                    self.crc_errors += 1;
-                }
-                self.damaged.push(DamagedFrame {
-                    offset: self.base + offset,
-                    len: len as u64,
-                    kind: error_kind(&error).to_string(),
-                    error: error.to_string(),
-                });
+                self.on_damaged(self.base + offset, len, &error)
             }
         }
     }
 
-    fn on_message(&mut self, message: &Message, offset: u64) {
-        match message {
-            Message::Header(h) => {
-                let idx = match self
-                    .sessions
-                    .iter()
-                    .position(|s| s.board_id == h.board_id && s.session_id == h.session_id)
-                {
-                    Some(i) => i,
-                    None => {
-                        self.sessions.push(SessionSummary {
-                            board_id: h.board_id,
-                            session_id: h.session_id,
-                            offset,
-                            samples: 0,
-                        });
-                        self.sessions.len() - 1
+    fn on_damaged(&mut self, offset: u64, len: usize, error: &DecodeError) {
+        if matches!(error, DecodeError::Crc { .. }) {
+            self.crc_errors += 1;
+        }
+        self.damaged.push(DamagedFrame {
+            offset,
+            len: len as u64,
+            kind: error_kind(error).to_string(),
+            error: error.to_string(),
+        });
+    }
+
+    fn on_header(&mut self, h: &SessionHeader, offset: u64) {
+        let idx = match self
+            .sessions
+            .iter()
+            .position(|s| s.board_id == h.board_id && s.session_id == h.session_id)
+        {
+            Some(i) => i,
+            None => {
+                self.sessions.push(SessionSummary {
+                    board_id: h.board_id,
+                    session_id: h.session_id,
+                    offset,
+                    samples: 0,
+                });
+                self.sessions.len() - 1
+            }
+        };
+        if self.header.is_none() {
+            self.header = Some(*h);
+        }
+        self.current = Some(idx);
+    }
+
+    fn on_batch(
+        &mut self,
+        first_seq: u32,
+        len: u32,
+        crc: u32,
+        samples: impl Iterator<Item = RawSample>,
+    ) {
+        let n = u64::from(len);
+        match self.current {
+            None => self.without_header += n,
+            Some(i) => {
+                self.sessions[i].samples += n;
+                if i != 0 {
+                    self.other_sessions += n;
+                } else {
+                    self.batches.push(BatchRef {
+                        first_seq,
+                        len,
+                        crc,
+                    });
+                    for s in samples {
+                        self.on_sample(s);
                     }
-                };
-                if self.header.is_none() {
-                    self.header = Some(*h);
-                }
-                self.current = Some(idx);
-            }
-            Message::Batch(b) => {
-                let n = b.len() as u64;
-                match self.current {
-                    None => self.without_header += n,
-                    Some(i) => {
-                        self.sessions[i].samples += n;
-                        if i != 0 {
-                            self.other_sessions += n;
-                        } else {
-                            self.batches.push(BatchRef {
-                                first_seq: b.first_seq(),
-                                len: b.len() as u32,
-                                crc: b.reference_crc(),
-                            });
-                            for s in b.samples() {
-                                self.on_sample(s);
-                            }
-                        }
-                    }
-                }
-            }
-            Message::Status(s) => {
-                if self.current == Some(0) {
-                    self.board = counters(s);
-                }
-            }
-            Message::End(s) => {
-                if self.current == Some(0) {
-                    self.board = counters(s);
-                    self.ended = true;
-                    self.end_seq = Some(s.seq);
                 }
             }
         }
+    }
+
+    fn on_status(&mut self, s: &Status, end: bool) {
+        if self.current == Some(0) {
+            self.board = counters(s);
+            if end {
+                self.ended = true;
+                self.end_seq = Some(s.seq);
+            }
+        }
+    }
+
+    /// Applies a chunk decoded apart (see [`decode_chunk`]) as if its bytes had been fed.
+    fn apply(&mut self, chunk: Chunk) {
+        self.bytes += chunk.bytes;
+        self.base = self.bytes;
+        self.frames += chunk.frames;
+        for piece in chunk.pieces {
+            match piece {
+                Piece::Header(h, offset) => self.on_header(&h, offset),
+                Piece::Batch {
+                    first_seq,
+                    len,
+                    crc,
+                    samples,
+                } => self.on_batch(first_seq, len, crc, chunk.samples[samples].iter().copied()),
+                Piece::Status(s, end) => self.on_status(&s, end),
+                Piece::Damaged { offset, len, error } => self.on_damaged(offset, len, &error),
+            }
+        }
+    }
+
+    /// Decodes a whole stream with up to `threads` decoders working on disjoint pieces
+    /// of at least `min_piece` bytes and applies the results in stream order; the outcome
+    /// equals [`Self::feed`] of the bytes with a [`Self::boundary`] at each of
+    /// `boundaries` (stream offsets). On an analyzer that was already fed, it does exactly
+    /// that, sequentially.
+    ///
+    /// The stream is cut only right after a `0x00` delimiter, where a sequential decoder
+    /// holds no partial frame, so each piece decodes exactly as it would in sequence.
+    pub fn feed_parallel(
+        &mut self,
+        stream: &[u8],
+        boundaries: &[u64],
+        threads: usize,
+        min_piece: usize,
+    ) {
+        if self.bytes > 0 {
+            let mut at = 0usize;
+            for &b in boundaries {
+                let b = (b as usize).clamp(at, stream.len());
+                self.feed(&stream[at..b]);
+                self.boundary();
+                at = b;
+            }
+            self.feed(&stream[at..]);
+            return;
+        }
+        let mut cuts = vec![0usize];
+        let mut segment_ends: Vec<usize> = boundaries
+            .iter()
+            .map(|&b| (b as usize).min(stream.len()))
+            .collect();
+        segment_ends.push(stream.len());
+        let mut start = 0usize;
+        for end in segment_ends {
+            if end < start {
+                continue;
+            }
+            let seg = &stream[start..end];
+            let pieces = threads.max(1).min(seg.len() / min_piece.max(1)).max(1);
+            for k in 1..pieces {
+                let nominal = seg.len() * k / pieces;
+                if let Some(z) = seg[nominal..].iter().position(|&b| b == 0) {
+                    let cut = start + nominal + z + 1;
+                    if cut > *cuts.last().unwrap_or(&0) && cut < end {
+                        cuts.push(cut);
+                    }
+                }
+            }
+            if end > *cuts.last().unwrap_or(&0) {
+                cuts.push(end);
+            }
+            start = end;
+        }
+        // every cut is a decoder restart; those inside a segment follow a delimiter and
+        // so change nothing, those at link boundaries end the cut frame as truncated
+        let base = self.bytes;
+        let spans: Vec<(usize, usize)> = cuts.windows(2).map(|w| (w[0], w[1])).collect();
+        let mut chunks: Vec<Option<Chunk>> = Vec::new();
+        std::thread::scope(|scope| {
+            let per = spans.len().div_ceil(threads.max(1));
+            let handles: Vec<_> = spans
+                .chunks(per.max(1))
+                .map(|group| {
+                    scope.spawn(move || {
+                        group
+                            .iter()
+                            .map(|&(a, b)| decode_chunk(&stream[a..b], base + a as u64))
+                            .collect::<Vec<_>>()
+                    })
+                })
+                .collect();
+            for h in handles {
+                chunks.extend(
+                    h.join()
+                        .expect("a decoder thread never panics")
+                        .into_iter()
+                        .map(Some),
+                );
+            }
+        });
+        for c in chunks.into_iter().flatten() {
+            self.apply(c);
+        }
+        self.decoder = Decoder::new();
+        self.base = self.bytes;
     }
 
     fn on_sample(&mut self, s: RawSample) {
@@ -486,7 +608,76 @@ impl StreamAnalyzer {
     }
 }
 
-fn counters(s: &jointid_core::wire::Status) -> BoardCounters {
+/// A decoded frame reduced to what the analyzer needs; a batch's samples live in
+/// [`Chunk::samples`].
+#[derive(Debug)]
+enum Piece {
+    Header(SessionHeader, u64),
+    Batch {
+        first_seq: u32,
+        len: u32,
+        crc: u32,
+        samples: std::ops::Range<usize>,
+    },
+    Status(Status, bool),
+    Damaged {
+        offset: u64,
+        len: usize,
+        error: DecodeError,
+    },
+}
+
+/// What one decoder found in one piece of the stream.
+#[derive(Debug)]
+struct Chunk {
+    bytes: u64,
+    frames: u64,
+    pieces: Vec<Piece>,
+    samples: Vec<RawSample>,
+}
+
+/// Decodes `bytes` (stream offset `base`) with a fresh decoder, finishing at the end.
+fn decode_chunk(bytes: &[u8], base: u64) -> Chunk {
+    let mut c = Chunk {
+        bytes: bytes.len() as u64,
+        frames: 0,
+        pieces: Vec::new(),
+        samples: Vec::with_capacity(bytes.len() / 4),
+    };
+    let mut d = Decoder::new();
+    let mut on = |e: DecodeEvent| match e {
+        DecodeEvent::Frame {
+            offset, message, ..
+        } => {
+            c.frames += 1;
+            c.pieces.push(match message {
+                Message::Header(h) => Piece::Header(h, base + offset),
+                Message::Batch(b) => {
+                    let from = c.samples.len();
+                    c.samples.extend(b.samples());
+                    Piece::Batch {
+                        first_seq: b.first_seq(),
+                        len: b.len() as u32,
+                        crc: b.reference_crc(),
+                        samples: from..c.samples.len(),
+                    }
+                }
+                Message::Status(s) => Piece::Status(s, false),
+                Message::End(s) => Piece::Status(s, true),
+            });
+        }
+        DecodeEvent::Damaged { offset, len, error } => c.pieces.push(Piece::Damaged {
+            offset: base + offset,
+            len,
+            error,
+        }),
+    };
+    d.feed(bytes, &mut on);
+    d.finish(&mut on);
+    c
+}
+
+fn counters(s: &Status) -> BoardCounters {
     BoardCounters {
         overruns: s.overruns,
         queue_drops: s.queue_drops,
@@ -735,5 +926,60 @@ mod tests {
         assert!(!an.insert_late(6));
         assert!(an.insert_late(8));
         assert_eq!(an.ranges, vec![(0, 10)]);
+    }
+
+    #[test]
+    fn parallel_decoding_equals_sequential_on_damaged_streams_with_link_boundaries() {
+        let mut opts = SynthOptions::small();
+        opts.samples = 3000;
+        opts.excitation.periods = 40;
+        let s = synth_stream(&opts);
+        // damage: flip bits in every 7th frame, cut 3 bytes out of every 11th, glue
+        // garbage in front of every 13th, then a second session and a truncated tail
+        let mut bytes = Vec::new();
+        for (i, f) in s.frames.iter().enumerate() {
+            let mut fr = s.bytes[f.offset as usize..(f.offset + f.len) as usize].to_vec();
+            let mid = fr.len() / 2;
+            if i % 7 == 3 {
+                fr[mid] ^= if fr[mid] ^ 0x08 != 0 { 0x08 } else { 0x02 };
+            }
+            if i % 11 == 5 && fr.len() > 8 {
+                fr.drain(mid..mid + 3);
+            }
+            if i % 13 == 6 {
+                fr.splice(0..0, [0x77, 0x00, 0x66]);
+            }
+            bytes.extend_from_slice(&fr);
+        }
+        let mut other = opts;
+        other.session_id = 9;
+        other.samples = 100;
+        bytes.extend_from_slice(&synth_stream(&other).bytes);
+        bytes.extend_from_slice(&s.bytes[s.frames[5].offset as usize..][..9]);
+        let boundaries = [
+            s.frames[40].offset + 3,
+            s.frames[40].offset + 3,
+            s.frames[90].offset + 1,
+            bytes.len() as u64 - 4,
+        ];
+
+        let mut seq = StreamAnalyzer::new(true);
+        let mut at = 0usize;
+        for &b in &boundaries {
+            seq.feed(&bytes[at..b as usize]);
+            seq.boundary();
+            at = b as usize;
+        }
+        seq.feed(&bytes[at..]);
+        let (want_report, want_record) = seq.finish().unwrap();
+        assert!(want_report.damaged_frames.len() > 40, "{want_report}");
+        assert!(!want_report.gaps.is_empty());
+        for (threads, piece) in [(1, 1 << 20), (2, 64), (3, 200), (8, 1)] {
+            let mut par = StreamAnalyzer::new(true);
+            par.feed_parallel(&bytes, &boundaries, threads, piece);
+            let (report, record) = par.finish().unwrap();
+            assert_eq!(report, want_report, "threads {threads}, piece {piece}");
+            assert_eq!(record, want_record, "threads {threads}, piece {piece}");
+        }
     }
 }
