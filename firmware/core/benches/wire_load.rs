@@ -12,7 +12,7 @@
 //! Run: `cargo bench -p jointid-core --features std --bench wire_load`
 
 use heapless::spsc::Queue;
-use jointid_core::excitation::{Excitation, ExcitationConfig};
+use jointid_core::excitation::{crest_factor, Excitation, ExcitationConfig};
 use jointid_core::joint::{JointIo, JointParams, JointSim};
 use jointid_core::sampler::{Counters, PumpConfig, PumpState, Sampler, TaggedSample, TxPump};
 use jointid_core::transport::can::{
@@ -117,6 +117,15 @@ fn main() {
     };
     let mut table = vec![0.0f32; cfg.period_samples as usize];
     let exc = Excitation::new(&cfg, &mut table).unwrap();
+    let peaks = cfg.peaks().unwrap();
+    println!(
+        "excitation: peak {:.4} rad, crest factor {:.2}, peak velocity {:.1} rad/s \
+         ({:.1} with the ramp bound)",
+        peaks.angle_rad,
+        crest_factor(exc.period()),
+        peaks.velocity_rad_s,
+        peaks.velocity_with_ramp_rad_s
+    );
     let mut queue: Queue<TaggedSample, 256> = Queue::new();
     let (producer, consumer) = queue.split();
     let counters = Counters::new();
@@ -141,9 +150,17 @@ fn main() {
     let mut dec = Decoder::new();
     let mut damaged = 0;
     let mut end = None;
+    // batches per (torque order, angle order) the encoder chose
+    let mut orders = [[0usize; 3]; 3];
+    let mut data_bytes = 0usize;
     dec.feed(&meter.stream, |e| match e {
         DecodeEvent::Frame { message, .. } => match message {
-            Message::Batch(b) => raw.extend(b.samples()),
+            Message::Batch(b) => {
+                let (t, a) = b.predictor_orders();
+                orders[t as usize][a as usize] += 1;
+                data_bytes += b.data_len();
+                raw.extend(b.samples());
+            }
             Message::End(s) => end = Some(s),
             _ => {}
         },
@@ -177,6 +194,11 @@ fn main() {
         cfg.rms_rad,
         range(&t),
         range(&a)
+    );
+    println!(
+        "predictor orders chosen per batch (torque x angle, 0 = value, 1 = first, \
+         2 = second difference): {orders:?}; delta-coded data {:.3} bytes/sample",
+        data_bytes as f64 / total as f64
     );
     let ours = load(&meter.frame_lens);
     report(

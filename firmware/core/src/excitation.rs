@@ -260,7 +260,8 @@ pub struct SignalPeaks {
     pub angle_rad: f32,
     /// max |θ_ref(n+1) - θ_ref(n)|·fs over one period, wrapping around [rad/s]
     pub velocity_rad_s: f32,
-    /// velocity bound including the raised-cosine ramp: `velocity + angle·π·fs/(2R)` [rad/s]
+    /// velocity bound including the raised-cosine ramp: `velocity + angle·π·fs/(2R)`,
+    /// or `velocity + angle·fs` without a ramp (a jump from rest) [rad/s]
     pub velocity_with_ramp_rad_s: f32,
 }
 
@@ -495,7 +496,9 @@ impl PeakTracker {
         let ramp = if cfg.ramp_samples > 0 {
             self.peak_angle * core::f32::consts::PI * fs / (2.0 * cfg.ramp_samples as f32)
         } else {
-            0.0
+            // no ramp: the reference jumps from rest to the table, up to
+            // the peak within one sample
+            self.peak_angle * fs
         };
         SignalPeaks {
             angle_rad: self.peak_angle,
@@ -814,7 +817,7 @@ impl<'a> Excitation<'a> {
 ///
 /// # Errors
 /// [`ExcitationError::Endless`] when `periods == 0`, and the errors of [`Excitation::new`].
-#[cfg(feature = "std")]
+#[cfg(any(feature = "std", test))]
 pub fn generate(cfg: &ExcitationConfig) -> Result<Vec<f32>, ExcitationError> {
     let total = cfg.total_samples().ok_or(ExcitationError::Endless)?;
     let mut table = vec![0.0f32; cfg.period_samples as usize];
@@ -971,7 +974,6 @@ mod tests {
         assert!((kurtosis - 3.0).abs() < 0.3, "kurtosis {kurtosis}");
     }
 
-    #[cfg(feature = "std")]
     #[test]
     fn consecutive_periods_are_bit_identical() {
         let cfg = ExcitationConfig {
@@ -994,7 +996,6 @@ mod tests {
         }
     }
 
-    #[cfg(feature = "std")]
     #[test]
     fn generate_equals_next_sequence() {
         let cfg = ExcitationConfig {
@@ -1075,7 +1076,6 @@ mod tests {
 
     const PINNED_BITS: [u32; 5] = [1009278708, 1011488412, 1014297114, 3162960695, 1007787986];
 
-    #[cfg(feature = "std")]
     #[test]
     fn ramps_start_and_end_at_zero_without_steps() {
         let cfg = ExcitationConfig {
@@ -1226,6 +1226,61 @@ mod tests {
                 min_samples: 609
             })
         );
+    }
+
+    #[test]
+    fn bad_shape_rms_and_rate_are_refused_with_their_values() {
+        let limits = SafetyLimits::default();
+        let cfg = ExcitationConfig::paper_default();
+        for cutoff_hz in [0.0, -5.0, f32::NAN] {
+            match (ExcitationConfig { cutoff_hz, ..cfg }).validate(&limits) {
+                Err(ExcitationError::BadCutoff { cutoff_hz: got }) => {
+                    assert_eq!(got.to_bits(), cutoff_hz.to_bits())
+                }
+                other => panic!("cut-off {cutoff_hz}: {other:?}"),
+            }
+        }
+        assert_eq!(
+            ExcitationConfig {
+                rms_rad: -0.1,
+                ..cfg
+            }
+            .validate(&limits),
+            Err(ExcitationError::BadRms { rms_rad: -0.1 })
+        );
+        assert_eq!(
+            ExcitationConfig { fs_hz: 0, ..cfg }.validate(&limits),
+            Err(ExcitationError::ZeroSampleRate)
+        );
+        // no ramp means a jump from rest: refused by the velocity limit
+        let no_ramp = ExcitationConfig {
+            ramp_samples: 0,
+            ..cfg
+        };
+        let peaks = no_ramp.peaks().unwrap();
+        assert_eq!(
+            no_ramp.validate(&limits),
+            Err(ExcitationError::PeakVelocity {
+                value_rad_s: peaks.velocity_rad_s + peaks.angle_rad * 2000.0,
+                limit_rad_s: limits.peak_velocity_rad_s
+            })
+        );
+        // rms 0 is allowed: an all-zero run (a dry run of the whole chain)
+        let zero = ExcitationConfig {
+            rms_rad: 0.0,
+            ..cfg
+        };
+        assert_eq!(zero.validate(&limits), Ok(()));
+        assert!(period_of(&zero).iter().all(|&x| x == 0.0));
+        // messages name value and limit
+        let msg = format!(
+            "{}",
+            ExcitationError::PeakAngle {
+                value_rad: 0.7,
+                limit_rad: 0.5
+            }
+        );
+        assert_eq!(msg, "peak angle 0.7 rad exceeds the limit of 0.5 rad");
     }
 
     #[test]

@@ -366,6 +366,32 @@ mod tests {
     }
 
     #[test]
+    fn expm_agrees_with_rk4_integration_on_the_joint() {
+        // X' = F X, X(0) = I over one sample interval with 50 000 RK4 steps:
+        // an independent estimate of e^{F T}
+        let p = JointParams::default_joint();
+        let (f, _) = p.continuous();
+        let t = 1.0 / p.fs_hz as f64;
+        let ours = expm(&(f * t));
+        let steps = 50_000;
+        let h = t / steps as f64;
+        let mut x = SMatrix::<f64, 6, 6>::identity();
+        for _ in 0..steps {
+            let k1 = f * x;
+            let k2 = f * (x + k1 * (h / 2.0));
+            let k3 = f * (x + k2 * (h / 2.0));
+            let k4 = f * (x + k3 * h);
+            x += (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (h / 6.0);
+        }
+        let err = (ours - x).abs().max();
+        let size = x.abs().max();
+        assert!(
+            err < 1e-9 * size,
+            "max difference {err} (entries up to {size})"
+        );
+    }
+
+    #[test]
     fn zoh_of_double_integrator_is_exact() {
         // ẍ = u: A_T = [[1, T], [0, 1]], B_T = [T²/2, T]
         let f = SMatrix::<f64, 2, 2>::new(0.0, 1.0, 0.0, 0.0);

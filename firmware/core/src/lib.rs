@@ -17,6 +17,9 @@
 //! std so the unit tests can use `Vec`).
 #![cfg_attr(not(any(feature = "std", test)), no_std)]
 #![deny(missing_docs)]
+// Units are written in brackets (`/// motor angle [rad]`, project style), which
+// rustdoc would otherwise take for intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
 #[macro_use]
 mod fmt;

@@ -11,7 +11,7 @@
 //! counting, so the host sees the gap as well.
 //!
 //! The [`TxPump`] runs in the idle loop: it sends the [`SessionHeader`], pops
-//! samples, packs them into [`SampleBatch`](crate::wire::SampleBatch)es,
+//! samples, packs them into sample batches (`SampleBatch`),
 //! frames them and hands the frames to a [`FrameSink`], with a [`Status`]
 //! every few batches and [`Message::End`] once the excitation has finished.
 //! Samples of a frame the sink could not send are counted as queue drops.
@@ -572,5 +572,55 @@ mod tests {
         assert_eq!(end.tx_errors, sink.errors);
         assert_eq!(decoded as u32 + end.queue_drops, 3400);
         assert!(end.queue_drops > 0);
+    }
+
+    #[test]
+    fn joint_session_is_lossless_under_six_bytes_per_sample() {
+        use crate::joint::{JointIo, JointParams, JointSim};
+        let cfg = ExcitationConfig::paper_default();
+        let mut table = vec![0.0f32; 5000];
+        let exc = Excitation::new(&cfg, &mut table).unwrap();
+        let mut queue: Queue<TaggedSample, 64> = Queue::new();
+        let (producer, consumer) = queue.split();
+        let counters = Counters::new();
+        let mut sampler = Sampler::new(exc, producer, &counters);
+        let mut io = JointIo::new(JointSim::new(JointParams::default_joint()));
+        let hdr = SessionHeader {
+            scale: io.sim.scale(),
+            ..header(cfg)
+        };
+        let mut pump = TxPump::new(consumer, &counters, hdr, PumpConfig::default());
+        let mut sink = VecSink {
+            bytes: Vec::new(),
+            frames: 0,
+            fail_every: 0,
+            errors: 0,
+        };
+        let mut k = 0u32;
+        while pump.poll(&mut sink) != PumpState::Done {
+            for _ in 0..32 {
+                sampler.tick_io(500 * k, &mut io);
+                k += 1;
+            }
+        }
+        let total = cfg.total_samples().unwrap() as usize;
+        let refs = generate(&cfg).unwrap();
+        let mut dec = Decoder::new();
+        let mut seq = 0usize;
+        dec.feed(&sink.bytes, |e| match e {
+            DecodeEvent::Frame {
+                message: Message::Batch(b),
+                ..
+            } => {
+                assert_eq!(b.first_seq() as usize, seq);
+                assert_eq!(b.reference_crc(), reference_crc(&refs[seq..seq + b.len()]));
+                seq += b.len();
+            }
+            DecodeEvent::Frame { .. } => {}
+            DecodeEvent::Damaged { .. } => panic!("damaged frame"),
+        });
+        assert_eq!(seq, total);
+        let per_sample = sink.bytes.len() as f64 / total as f64;
+        assert!(per_sample < 6.0, "{per_sample} bytes per sample");
     }
 }

@@ -195,6 +195,11 @@ impl SampleBatch {
         u32::from_le_bytes(self.reference_crc)
     }
 
+    /// Predictor orders (0, 1 or 2) the encoder chose for (torque, angle).
+    pub fn predictor_orders(&self) -> (u8, u8) {
+        (self.predictors & 0x3, self.predictors >> 2)
+    }
+
     /// Bytes of delta-coded sample data (for link budgets).
     pub fn data_len(&self) -> usize {
         self.data.len()
