@@ -5,9 +5,13 @@
 //! grey_box -> validate -> diagnose -> report. Estimators do no IO: they take
 //! an [`data::IdData`] and return values.
 
+pub mod cli;
 pub mod data;
+pub mod frf;
 pub mod grey_box;
 pub mod linalg;
 pub mod pem;
+pub mod plot;
 pub mod ss;
 pub mod subspace;
+pub mod validate;
