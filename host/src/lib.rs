@@ -12,6 +12,7 @@ pub mod grey_box;
 pub mod linalg;
 pub mod pem;
 pub mod plot;
+pub mod sim;
 pub mod ss;
 pub mod subspace;
 pub mod validate;

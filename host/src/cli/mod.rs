@@ -23,6 +23,7 @@ use crate::data::Loaders;
 
 pub mod analyze;
 pub mod args;
+pub mod simulate;
 pub mod validate;
 
 /// `jointid`: identification of one robot joint, from capture to validated models.
@@ -44,6 +45,8 @@ pub enum Command {
     Analyze(analyze::AnalyzeArgs),
     /// FIT and residual tests of a simulated output against measured data
     Validate(validate::ValidateArgs),
+    /// closed-loop joint simulator with switchable effects; writes a capture CSV
+    Simulate(simulate::SimulateArgs),
 }
 
 /// How a command ended when it did not fail with an error.
@@ -94,6 +97,7 @@ pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
     match &cli.command {
         Command::Analyze(a) => analyze::run(a, ctx),
         Command::Validate(a) => validate::run(a, ctx),
+        Command::Simulate(a) => simulate::run(a, ctx),
     }
 }
 
