@@ -383,14 +383,10 @@ fn unzigzag(v: u32) -> i32 {
     ((v >> 1) as i32) ^ -((v & 1) as i32)
 }
 
+/// Bytes of the LEB128 encoding of `v` (1 to 5): one per started 7 bits.
 fn varint_len(v: u32) -> usize {
-    match v {
-        0..=0x7F => 1,
-        0x80..=0x3FFF => 2,
-        0x4000..=0x1F_FFFF => 3,
-        0x20_0000..=0x0FFF_FFFF => 4,
-        _ => 5,
-    }
+    let bits = 32 - (v | 1).leading_zeros() as usize;
+    bits.div_ceil(7)
 }
 
 fn push_varint<const N: usize>(out: &mut heapless::Vec<u8, N>, mut v: u32) -> Result<(), ()> {
@@ -570,20 +566,33 @@ impl BatchBuilder {
 
 /// Predictor order (0, 1, 2) with the fewest varint bytes for one channel.
 fn best_order(samples: &[RawSample], get: impl Fn(&RawSample) -> i32) -> u8 {
-    let mut best = (usize::MAX, 0u8);
-    for order in 0..=2u8 {
-        let mut bytes = 0;
-        for i in 0..samples.len() {
-            let p1 = if i >= 1 { get(&samples[i - 1]) } else { 0 };
-            let p2 = if i >= 2 { get(&samples[i - 2]) } else { 0 };
-            let r = get(&samples[i]).wrapping_sub(predict(order, i, p1, p2));
-            bytes += varint_len(zigzag(r));
-        }
-        if bytes < best.0 {
-            best = (bytes, order);
-        }
+    // one pass for the three orders, with `predict`'s rules written out:
+    // order 1 predicts p1 (0 at the first sample, where p1 is still 0),
+    // order 2 predicts 2·p1 − p2 from the third sample on, else as order 1
+    let (mut b0, mut b1, mut b2) = (0usize, 0usize, 0usize);
+    let (mut p1, mut p2) = (0i32, 0i32);
+    for (i, s) in samples.iter().enumerate() {
+        let v = get(s);
+        let r1 = v.wrapping_sub(p1);
+        let r2 = if i >= 2 {
+            r1.wrapping_sub(p1.wrapping_sub(p2))
+        } else {
+            r1
+        };
+        b0 += varint_len(zigzag(v));
+        b1 += varint_len(zigzag(r1));
+        b2 += varint_len(zigzag(r2));
+        p2 = p1;
+        p1 = v;
     }
-    best.1
+    // fewest bytes, the lowest order on a tie
+    if b0 <= b1 && b0 <= b2 {
+        0
+    } else if b1 <= b2 {
+        1
+    } else {
+        2
+    }
 }
 
 /// CRC-32 (IEEE 802.3, reflected polynomial 0xEDB88320, initial value and
@@ -1193,6 +1202,56 @@ mod tests {
         assert_eq!(batches.len(), 2);
         assert_eq!((batches[0].first_seq(), batches[0].len()), (0, 10));
         assert_eq!((batches[1].first_seq(), batches[1].len()), (11, 19));
+    }
+
+    #[test]
+    fn varint_len_counts_the_bytes_push_varint_writes() {
+        let mut values = vec![0u32, u32::MAX];
+        for shift in [7, 14, 21, 28] {
+            values.extend([(1u32 << shift) - 1, 1 << shift, (1 << shift) + 1]);
+        }
+        for v in values {
+            let mut out: heapless::Vec<u8, 8> = heapless::Vec::new();
+            push_varint(&mut out, v).unwrap();
+            assert_eq!(varint_len(v), out.len(), "{v:#x}");
+            assert_eq!(read_varint(&out), Some((v, out.len())));
+        }
+    }
+
+    #[test]
+    fn best_order_picks_the_order_with_fewest_encoded_bytes() {
+        // reference: encode the channel with each order, count the bytes
+        fn encoded_len(values: &[i32], order: u8) -> usize {
+            let mut out: heapless::Vec<u8, BATCH_DATA_CAPACITY> = heapless::Vec::new();
+            for i in 0..values.len() {
+                let p1 = if i >= 1 { values[i - 1] } else { 0 };
+                let p2 = if i >= 2 { values[i - 2] } else { 0 };
+                push_varint(
+                    &mut out,
+                    zigzag(values[i].wrapping_sub(predict(order, i, p1, p2))),
+                )
+                .unwrap();
+            }
+            out.len()
+        }
+        let mut orders_seen = [false; 3];
+        for seed in 0..40 {
+            let (mut samples, _) = synthetic(2 + seed as usize, seed);
+            if seed % 3 == 0 {
+                // a constant channel: order 0 and 1 tie on small values
+                samples.iter_mut().for_each(|s| s.torque = 5);
+            }
+            for get in [|s: &RawSample| s.torque, |s: &RawSample| s.angle] {
+                let values: Vec<i32> = samples.iter().map(get).collect();
+                let lens: Vec<usize> = (0..3).map(|o| encoded_len(&values, o)).collect();
+                let min = *lens.iter().min().unwrap();
+                let expected = lens.iter().position(|&l| l == min).unwrap() as u8;
+                let got = best_order(&samples, get);
+                assert_eq!(got, expected, "seed {seed}: lengths {lens:?}");
+                orders_seen[got as usize] = true;
+            }
+        }
+        assert_eq!(orders_seen, [true, true, true]);
     }
 
     #[test]
