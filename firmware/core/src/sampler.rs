@@ -5,8 +5,8 @@
 //! [`AngleInput`], writes the next excitation sample θ_ref(k) through
 //! [`ReferenceOutput`], stamps sequence number k and the timer count, and
 //! pushes the sample with its reference into a `heapless::spsc` queue. The
-//! work per tick is bounded (one table look-up, at most one `cos` during the
-//! ramps, one queue push); nothing allocates or panics. A full queue loses
+//! work per tick is bounded (one table look-up, a short f32 polynomial during
+//! the ramps, one queue push); nothing allocates or panics. A full queue loses
 //! the sample and counts an overrun in [`Counters`]; sequence numbers keep
 //! counting, so the host sees the gap as well.
 //!
