@@ -18,8 +18,12 @@
 //!   25 MHz) within 2 %;
 //! - the end status reports no overrun, drop or transmit error;
 //! - QEMU exits by itself with status 0 before a deadline;
-//! - the firmware's cost line says it needs fewer than 5 000 instructions per
-//!   tick on average (a regression guard, far above the measured figure).
+//! - the firmware's cost line says it needs fewer than 1 200 instructions per
+//!   tick on average for generation, sampling and encoding (the simulated
+//!   joint excluded). The figure is an instruction count under `-icount`,
+//!   deterministic rather than a timing: about 775 are measured, and either
+//!   cost removed from the core would cross the bound again (a 984-byte batch
+//!   copy per sample, +1 100; an f64 `cos` per ramp sample, +500 on average).
 //!
 //! A machine without qemu-system-arm or the thumbv7em target fails the test
 //! with a message pointing at `.ci/setup`.
@@ -193,7 +197,7 @@ fn emulated_board_streams_the_whole_run_intact_and_as_the_joint_model_predicts()
     );
     let mean = get("per_tick_mean").expect("per_tick_mean in the cost line");
     assert!(
-        mean > 0 && mean < 5_000,
-        "instructions per tick {mean} outside (0, 5000): {cost:?}"
+        mean > 0 && mean < 1_200,
+        "instructions per tick {mean} outside (0, 1200): {cost:?}"
     );
 }
