@@ -1,4 +1,6 @@
 //! Workspace-level tests, one binary.
 
-/// emulated board (QEMU) streaming over TCP into the capture, read back bit-exact
+// The emulated board streaming over TCP into `jointid capture`, read back bit-exact.
 mod capture_cli;
+// The thumbv7em firmware on QEMU mps2-an386, streaming over its UART to this test.
+mod emulated_board;

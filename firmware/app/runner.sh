@@ -15,6 +15,10 @@ shift
 entry=$(od -An -tx4 -j24 -N4 "$elf" | tr -d ' \n')
 case "$entry" in
 08*)
+    if ! command -v probe-rs >/dev/null; then
+        echo "runner: probe-rs not found (cargo install probe-rs-tools --locked); $elf is built" >&2
+        exit 2
+    fi
     exec probe-rs run --chip STM32G474RETx "$elf" "$@"
     ;;
 00*)

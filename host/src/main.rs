@@ -34,9 +34,20 @@ fn main() -> ExitCode {
             loaders: &loaders,
             out: &mut stdout,
         },
-    )
-    .map_err(anyhow::Error::from_boxed);
-    match result {
+    );
+    // output closed early (`jointid analyze x.csv | head`): stop quietly
+    if let Err(e) = &result {
+        let mut cur: Option<&(dyn std::error::Error + 'static)> = Some(e.as_ref());
+        while let Some(c) = cur {
+            if c.downcast_ref::<std::io::Error>()
+                .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+            {
+                return ExitCode::SUCCESS;
+            }
+            cur = c.source();
+        }
+    }
+    match result.map_err(anyhow::Error::from_boxed) {
         Ok(outcome) => ExitCode::from(outcome.code()),
         Err(e) => {
             // the chain, skipping causes the message already states

@@ -108,7 +108,7 @@ impl<S: FrameSink> Streamer<S> {
     }
 }
 
-/// A link that keeps the time spent inside it [board stamp units].
+/// A link that keeps the time spent inside it, tick interrupts excluded [board stamp units].
 struct TimedLink<S> {
     link: S,
     spent: u64,
@@ -116,9 +116,10 @@ struct TimedLink<S> {
 
 impl<S: FrameSink> FrameSink for TimedLink<S> {
     fn send_frame(&mut self, frame: &[u8]) -> Result<(), TxError> {
-        let t0 = board::stamp();
+        let (t0, ticks0) = (board::stamp(), cost::with(|l| l.in_ticks));
         let r = self.link.send_frame(frame);
-        self.spent += u64::from(board::stamp().wrapping_sub(t0));
+        let (t1, ticks1) = (board::stamp(), cost::with(|l| l.in_ticks));
+        self.spent += u64::from(t1.wrapping_sub(t0)).saturating_sub(ticks1 - ticks0);
         r
     }
 

@@ -26,6 +26,7 @@ pub mod args;
 pub mod capture;
 pub mod export;
 pub mod info;
+pub mod simulate;
 pub mod validate;
 
 /// `jointid`: identification of one robot joint, from capture to validated models.
@@ -53,6 +54,8 @@ pub enum Command {
     Analyze(analyze::AnalyzeArgs),
     /// FIT and residual tests of a simulated output against measured data
     Validate(validate::ValidateArgs),
+    /// closed-loop joint simulator with switchable effects; writes a capture CSV
+    Simulate(simulate::SimulateArgs),
 }
 
 /// How a command ended when it did not fail with an error.
@@ -109,6 +112,7 @@ pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
         Command::Export(a) => export::run(a, ctx),
         Command::Analyze(a) => analyze::run(a, ctx),
         Command::Validate(a) => validate::run(a, ctx),
+        Command::Simulate(a) => simulate::run(a, ctx),
     }
 }
 

@@ -17,13 +17,12 @@ use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::{debug, heprintln};
 use defmt_semihosting as _;
 use jointid_core::joint::{JointIo, JointParams, JointSim};
-
-pub use super::sim_joint::Io;
 use jointid_core::sampler::PumpState;
 use jointid_core::transport::serial::SerialSink;
 use jointid_core::wire::Scale;
 
 use super::cmsdk_uart::CmsdkUartTx;
+pub use super::sim_joint::Io;
 use crate::{app, cost};
 
 /// SysTick clock = core clock of the AN386 image [Hz]; also the rate of `RawSample::tick`
@@ -31,7 +30,7 @@ pub const TIMER_HZ: u32 = 25_000_000;
 /// SysTick reload for the sample rate: 25 MHz / 2 kHz - 1 = 12_499
 const RELOAD: u32 = TIMER_HZ / app::SAMPLE_RATE_HZ - 1;
 /// instructions per SysTick count under `-icount shift=3`: 40 ns / 8 ns
-pub const INSTRUCTIONS_PER_UNIT: u32 = 5;
+pub const COST_PER_UNIT: u32 = 5;
 /// the simulated joint (the same parameters the host test re-runs)
 pub const JOINT: JointParams = JointParams::default_joint();
 
@@ -43,9 +42,9 @@ pub fn scale() -> Scale {
     JOINT.scale()
 }
 
-/// identifies the emulated board in the session header ("AN386" folded)
+/// identifies the emulated board in the session header: 0x386 for AN386
 pub fn board_id() -> u32 {
-    0x0038_3641
+    0x386
 }
 
 /// the emulated run is deterministic, so is its session id
@@ -92,7 +91,7 @@ fn main() -> ! {
         }
     }
     syst.disable_interrupt();
-    let s = cost::summary(INSTRUCTIONS_PER_UNIT);
+    let s = cost::summary(COST_PER_UNIT);
     defmt::info!(
         "end: {}; cost per tick [instructions]: {}",
         streamer.status(),
@@ -109,6 +108,7 @@ fn SysTick() {
     app::tick(stamp());
     cost::book_tick(c0.wrapping_sub(SYST::get_current()));
 }
+
 #[exception]
 unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
     defmt::error!("HardFault at pc {=u32:#010x}", ef.pc());

@@ -36,7 +36,7 @@ use crate::{app, cost};
 /// core clock = DWT cycle counter rate = rate of `RawSample::tick` [Hz]
 pub const TIMER_HZ: u32 = 170_000_000;
 /// one DWT count is one core cycle: the cost is reported in cycles
-pub const INSTRUCTIONS_PER_UNIT: u32 = 1;
+pub const COST_PER_UNIT: u32 = 1;
 /// counts to SI units (placeholder sensors, see the module docs)
 pub fn scale() -> Scale {
     Scale {
@@ -44,6 +44,7 @@ pub fn scale() -> Scale {
         angle_rad_per_count: core::f32::consts::TAU / 16384.0,
     }
 }
+
 #[cfg(not(feature = "can"))]
 /// stream baud rate of the ST-LINK virtual COM port [bit/s]
 const BAUD: u32 = 921_600;
@@ -123,7 +124,7 @@ async fn main(_spawner: Spawner) {
         }
     }
     tick.enable_update_interrupt(false);
-    let summary = cost::summary(INSTRUCTIONS_PER_UNIT);
+    let summary = cost::summary(COST_PER_UNIT);
     defmt::info!(
         "end: {}; cost per tick [cycles]: {}",
         streamer.status(),
