@@ -657,6 +657,11 @@ fn capture_setup_errors_exit_2_with_one_line_and_leave_no_file() {
     assert_eq!(r.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&r.stderr).contains("already exists"));
     assert_eq!(std::fs::read(&out).unwrap(), b"precious");
+    // not even with --force when the output is the input
+    let r = jointid(&["capture", "--file", o, "--out", o, "--force"]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("is both the input and the output"));
+    assert_eq!(std::fs::read(&out).unwrap(), b"precious");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -126,6 +126,20 @@ pub fn record_capture(
     interrupt: &AtomicBool,
     mut on_progress: impl FnMut(&Progress, Duration),
 ) -> Result<CaptureOutcome, CaptureError> {
+    if let SourceSpec::File { path } = spec {
+        let same = match (
+            std::fs::canonicalize(path),
+            std::fs::canonicalize(&opts.out),
+        ) {
+            (Ok(a), Ok(b)) => a == b,
+            _ => false,
+        };
+        if same {
+            return Err(CaptureError::SameFile {
+                path: opts.out.clone(),
+            });
+        }
+    }
     let events_path = jcap::events_path(&opts.out);
     let mut writer = JcapWriter::create(&opts.out, opts.overwrite, opts.flush)?;
     let remove_both = || {
@@ -206,11 +220,16 @@ pub fn record_capture(
             on_progress(&an.progress(), now - start);
         }
     };
-    source.stop();
+    let late = source.stop();
     let elapsed = start.elapsed();
-    let received = an.bytes();
     match result {
         Ok(stop) => {
+            // bytes read before the stop but not yet handled still belong to the capture
+            for bytes in late {
+                writer.append(&bytes, Instant::now())?;
+                an.feed(&bytes);
+            }
+            let received = an.bytes();
             let bytes = writer.finish()?;
             let _ = log.log(&JcapEvent::now(received, EventKind::Stop, stop.to_string()));
             on_progress(&an.progress(), elapsed);
@@ -227,6 +246,7 @@ pub fn record_capture(
             })
         }
         Err(e) => {
+            let received = an.bytes();
             if received == 0 {
                 drop((writer, log));
                 remove_both();

@@ -55,6 +55,12 @@ pub enum CaptureError {
     /// The source could not be opened or failed while reading.
     #[error(transparent)]
     Source(#[from] SourceError),
+    /// `--file` and `--out` name the same file.
+    #[error("{path}: is both the input and the output")]
+    SameFile {
+        /// the file
+        path: PathBuf,
+    },
     /// The capture holds no session header, so its counts cannot be scaled to SI.
     #[error("{path}: no session header in {bytes} bytes ({samples} samples without one)")]
     NoHeader {

@@ -194,14 +194,22 @@ impl RunningSource {
 
     /// Asks the reader thread to stop and waits for it, unless it is blocked in a read
     /// that has no timeout (a pipe or pty given as `--file`): that thread is left to end
-    /// with the process.
-    pub fn stop(mut self) {
+    /// with the process. Returns the bytes that had already been read but not yet
+    /// received, in order, so that a stop loses nothing that arrived.
+    pub fn stop(mut self) -> Vec<Vec<u8>> {
         self.stop.store(true, Ordering::SeqCst);
         if let Some(t) = self.thread.take() {
             if t.is_finished() || !self.name.starts_with("file ") {
                 let _ = t.join();
             }
         }
+        self.rx
+            .try_iter()
+            .filter_map(|m| match m {
+                SourceMsg::Data(d) => Some(d),
+                _ => None,
+            })
+            .collect()
     }
 }
 
