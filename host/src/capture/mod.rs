@@ -23,6 +23,8 @@
 //! else (samples, gaps, SI values, reference) is derived from them on reading, so a better
 //! decoder later reads old captures better. Nothing is interpolated: a gap is reported,
 //! never filled.
+// Units in brackets (`[s]`, `[bytes]`, `[rad]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
 use std::path::{Path, PathBuf};
 

@@ -14,7 +14,7 @@
 //! writer closed, pty whose other side hung up) and an orderly TCP close end the stream.
 //!
 //! CAN: frames (classic and FD) are reassembled into the serial byte stream with the
-//! core's `transport::can` reassembler ([`CanStream`]); the recorded bytes are that
+//! core's `transport::can` reassembler ([`super::can::CanStream`]); the recorded bytes are that
 //! reassembled stream, so a CAN capture and a serial capture of the same run are the same
 //! file.
 
