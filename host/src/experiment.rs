@@ -32,37 +32,33 @@
 //!
 //! Wire path (DESIGN.md §8, software in the loop): the simulated samples
 //! become [`RawSample`] counts with the session's [`Scale`], are batched by
-//! the firmware core's [`BatchBuilder`], framed by [`encode_frame`], and
-//! the stream is decoded back by the core's [`Decoder`], the reference
-//! regenerated from the header's excitation and checked against each
-//! batch's reference CRC. The `.jcap` file written by the demo is the
-//! capture module's format version 1: the 8 bytes [`JCAP_MAGIC`] then the
-//! byte stream.
+//! the firmware core's [`BatchBuilder`], framed by [`encode_frame`], written
+//! as a `.jcap` by the capture module's writer and decoded back by the
+//! capture module (the reference regenerated from the header's excitation
+//! and checked against each batch's reference CRC), exactly as a capture
+//! from a board is.
 // Units in brackets (`[s]`, `[Hz]`, `[%]`) are not intra-doc links.
 #![allow(rustdoc::broken_intra_doc_links)]
 
-use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
 
 use jointid_core::excitation::{generate, ExcitationConfig, SignalKind};
 use jointid_core::wire::{
-    encode_frame, reference_crc, BatchBuilder, DecodeEvent, Decoder, Message, RawSample, Scale,
-    SessionHeader, Status, MAX_FRAME_LEN, PROTOCOL_VERSION,
+    encode_frame, BatchBuilder, Message, RawSample, Scale, SessionHeader, Status, MAX_FRAME_LEN,
+    PROTOCOL_VERSION,
 };
 use nalgebra::{DMatrix, DVector, RowDVector};
 use serde::Serialize;
 use thiserror::Error;
 
+use crate::capture::jcap::{FlushPolicy, JcapWriter};
 use crate::data::{Dataset, IdData};
 use crate::fit::{default_f_min, fit_model, FitOptions, Fitted, InputHold, ModelKind};
 use crate::grey_box::Output;
 use crate::sim::{self, Mechanism, PlantKind, SimConfig, SimOutput};
 use crate::ss::StateSpace;
 use crate::validate::fit_percent;
-
-/// First 8 bytes of a `.jcap` capture file (format version 1).
-pub const JCAP_MAGIC: [u8; 8] = *b"JCAP\x01\r\n\x1a";
 
 /// timer rate of the simulated board [Hz]
 pub const TIMER_HZ: u32 = 1_000_000;
@@ -84,14 +80,9 @@ pub enum ExperimentError {
         /// encoder error
         reason: String,
     },
-    /// the stream did not decode to one whole session
-    #[error("{name}: {reason}")]
-    Decode {
-        /// stream name
-        name: String,
-        /// what was wrong (with byte offset where known)
-        reason: String,
-    },
+    /// the capture could not be written or decoded
+    #[error(transparent)]
+    Capture(#[from] crate::capture::CaptureError),
     /// a fit failed
     #[error("{model}: {source}")]
     Fit {
@@ -195,111 +186,30 @@ pub fn encode_session(
     Ok(out)
 }
 
-/// Decodes one session from a byte stream: the header's scale converts the
-/// counts to SI, the reference is regenerated from the header's excitation
-/// and checked against every batch's CRC; samples must arrive complete and
-/// in order (a demo stream is lossless).
+/// Decodes a byte stream with the capture module's decoder (the path every
+/// `.jcap` takes: header scale to SI, reference regenerated from the
+/// header's excitation and checked against each batch's CRC) into a dataset
+/// named `name`.
 ///
 /// # Errors
-/// [`ExperimentError::Decode`] naming the byte offset of a damaged frame, a
-/// sequence gap, a reference CRC mismatch or a missing header.
+/// [`ExperimentError::Capture`]: no header, excitation not regenerable, or
+/// samples missing (gaps are never filled).
 pub fn decode_session(stream: &[u8], name: &str) -> Result<Dataset, ExperimentError> {
-    let bad = |reason: String| ExperimentError::Decode {
-        name: name.to_string(),
-        reason,
-    };
-    let mut dec = Decoder::new();
-    let mut events = Vec::new();
-    dec.feed(stream, |e| events.push(e));
-    dec.finish(|e| events.push(e));
-    let mut header: Option<SessionHeader> = None;
-    let mut reference: Vec<f32> = Vec::new();
-    let (mut u, mut y, mut r) = (Vec::new(), Vec::new(), Vec::new());
-    for ev in events {
-        match ev {
-            DecodeEvent::Damaged { offset, error, .. } => {
-                return Err(bad(format!("damaged frame at byte {offset}: {error:?}")));
-            }
-            DecodeEvent::Frame {
-                offset, message, ..
-            } => match message {
-                Message::Header(h) => {
-                    if header.is_some() {
-                        return Err(bad(format!("second session header at byte {offset}")));
-                    }
-                    reference = generate(&h.excitation).map_err(ExperimentError::Excitation)?;
-                    header = Some(h);
-                }
-                Message::Batch(b) => {
-                    let h = header
-                        .as_ref()
-                        .ok_or_else(|| bad(format!("batch before any header at byte {offset}")))?;
-                    let first = b.first_seq() as usize;
-                    if first != u.len() {
-                        return Err(bad(format!(
-                            "sequence gap at byte {offset}: expected sample {}, got {first}",
-                            u.len()
-                        )));
-                    }
-                    let refs = reference.get(first..first + b.len()).ok_or_else(|| {
-                        bad(format!("batch at byte {offset} runs past the excitation"))
-                    })?;
-                    if reference_crc(refs) != b.reference_crc() {
-                        return Err(bad(format!(
-                            "reference CRC mismatch in the batch at byte {offset}"
-                        )));
-                    }
-                    for (s, &rv) in b.samples().zip(refs) {
-                        u.push(f64::from(s.torque) * f64::from(h.scale.torque_nm_per_count));
-                        y.push(f64::from(s.angle) * f64::from(h.scale.angle_rad_per_count));
-                        r.push(f64::from(rv));
-                    }
-                }
-                Message::Status(_) | Message::End(_) => {}
-            },
-        }
-    }
-    let h = header.ok_or_else(|| bad(format!("no session header in {} bytes", stream.len())))?;
-    if u.is_empty() {
-        return Err(bad("no samples".into()));
-    }
-    let mut meta = BTreeMap::new();
-    meta.insert("board_id".into(), h.board_id.to_string());
-    meta.insert("session_id".into(), h.session_id.to_string());
-    Ok(Dataset {
-        name: name.to_string(),
-        data: IdData {
-            ts: 1.0 / f64::from(h.sample_rate_hz),
-            u,
-            y,
-            r: Some(r),
-        },
-        t0: 0.0,
-        excitation: Some(h.excitation),
-        meta,
-    })
+    Ok(crate::capture::decode_stream(stream, &[])?.to_dataset(Path::new(name))?)
 }
 
-/// Writes `stream` as a `.jcap` file (magic, then the bytes).
+/// Writes `stream` as a `.jcap` capture with the capture module's writer
+/// (format version 1: magic, then the bytes), replacing an existing file.
 ///
 /// # Errors
-/// Any IO error, with the path.
-pub fn write_jcap(path: &Path, stream: &[u8]) -> Result<(), String> {
-    let mut bytes = JCAP_MAGIC.to_vec();
-    bytes.extend_from_slice(stream);
-    std::fs::write(path, bytes).map_err(|e| format!("{}: {e}", path.display()))
-}
-
-/// Reads the byte stream of a `.jcap` file.
-///
-/// # Errors
-/// IO errors and a wrong magic, with the path.
-pub fn read_jcap_stream(path: &Path) -> Result<Vec<u8>, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    if bytes.len() < JCAP_MAGIC.len() || bytes[..JCAP_MAGIC.len()] != JCAP_MAGIC {
-        return Err(format!("{}: not a jcap file (bad magic)", path.display()));
-    }
-    Ok(bytes[JCAP_MAGIC.len()..].to_vec())
+/// [`ExperimentError::Capture`] naming the file.
+pub fn write_jcap(path: &Path, stream: &[u8]) -> Result<(), ExperimentError> {
+    let mut w = JcapWriter::create(path, true, FlushPolicy::default())
+        .map_err(crate::capture::CaptureError::from)?;
+    w.append(stream, Instant::now())
+        .map_err(crate::capture::CaptureError::from)?;
+    w.finish().map_err(crate::capture::CaptureError::from)?;
+    Ok(())
 }
 
 /// The simulated joint of the experiment (see the module docs).
@@ -663,17 +573,6 @@ mod tests {
     }
 
     #[test]
-    fn decode_session_names_the_byte_offset_of_a_damaged_frame() {
-        let exc = short_excitation();
-        let run = sim::simulate_excitation(&SimConfig::default(), &exc).unwrap();
-        let mut stream = encode_session(&run, &exc, default_scale(), 1).unwrap();
-        let mid = stream.len() / 2;
-        stream[mid] ^= 0x55;
-        let e = decode_session(&stream, "bad.jcap").unwrap_err().to_string();
-        assert!(e.starts_with("bad.jcap: ") && e.contains("byte"), "{e}");
-    }
-
-    #[test]
     fn true_output_matches_noise_free_run() {
         let exc = short_excitation();
         let cfg = SimConfig {
@@ -686,7 +585,7 @@ mod tests {
             data: run.to_id_data(),
             t0: 0.0,
             excitation: Some(exc),
-            meta: BTreeMap::new(),
+            meta: Default::default(),
         };
         let yt = true_output(&cfg, &ds, 0, 1).unwrap();
         let y = &ds.data.y[steady_range(&ds, 0)];

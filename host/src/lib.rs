@@ -5,6 +5,7 @@
 //! grey_box -> validate -> diagnose -> report. Estimators do no IO: they take
 //! an [`data::IdData`] and return values.
 
+pub mod capture;
 pub mod cli;
 pub mod data;
 pub mod experiment;

@@ -37,10 +37,14 @@
 //!
 //! # Ramp
 //! The run starts and ends with a raised-cosine ramp of `ramp_samples`
-//! samples: weight `(1 - cos(π i/R))/2` on the way in (0 at the first sample),
-//! `(1 + cos(π (i+1)/R))/2` on the way out (0 at the last sample), so the
-//! reference never steps. The table index runs on through the ramps, so the
-//! full-amplitude part starts at table index `R mod N`.
+//! samples: weight `(1 - cos(π i/R))/2` on the way in (exactly 0 at the first
+//! sample), `(1 + cos(π (i+1)/R))/2` on the way out (the mirror image, exactly
+//! 0 at the last sample), and exactly 1 in between, so the reference never
+//! steps. The weight is evaluated in f32 from a polynomial (`ramp_rise`),
+//! within a few f32 ulps of the cosine and bit-identical on board and host;
+//! it costs a few dozen instructions per ramp sample on a Cortex-M4F, where an
+//! f64 `cos` costs thousands. The table index runs on through the ramps, so
+//! the full-amplitude part starts at table index `R mod N`.
 
 use serde::{Deserialize, Serialize};
 
@@ -705,15 +709,34 @@ pub fn crest_factor(signal: &[f32]) -> f32 {
     (peak / libm::sqrt(sum_sq / signal.len() as f64)) as f32
 }
 
-/// Raised-cosine weight at sample `i` of a ramp of `r` samples, rising or falling.
-fn ramp_weight(i: u64, r: u32, rising: bool) -> f32 {
-    let x = core::f64::consts::PI * i as f64 / r as f64;
-    let w = if rising {
-        0.5 - 0.5 * libm::cos(x)
+/// Rising raised-cosine weight `h(j/r) = (1 - cos(π j/r))/2` for `0 ≤ j ≤ r`,
+/// in f32 `+ − × ÷` only (correctly rounded on every target, no fused
+/// multiply-add), so the board and the host agree bit for bit; cheap on a
+/// single-precision FPU (a `cos` in f64 or `libm::cosf`, which works in f64
+/// inside, is software floating point on a Cortex-M4F).
+///
+/// Uses `h(u) = sin²(πu/2)` for `u ≤ 1/2` and the mirror `h(u) = 1 - h(1 - u)`
+/// above, with `1 - u = (r - j)/r` taken in integers, so `h` is exactly 0 at
+/// `j = 0` and exactly 1 at `j = r`. `sin t` for `t ≤ π/4` is its Taylor
+/// polynomial to `t⁹` (truncation below 3e-9); the weight is within a few
+/// f32 ulps of the raised cosine.
+fn ramp_rise(j: u32, r: u32) -> f32 {
+    let (m, mirrored) = if j <= r - j {
+        (j, false)
     } else {
-        0.5 + 0.5 * libm::cos(core::f64::consts::PI * (i + 1) as f64 / r as f64)
+        (r - j, true)
     };
-    w as f32
+    let t = core::f32::consts::FRAC_PI_2 * (m as f32 / r as f32);
+    let t2 = t * t;
+    let poly = 1.0
+        + t2 * (-1.0 / 6.0 + t2 * (1.0 / 120.0 + t2 * (-1.0 / 5040.0 + t2 * (1.0 / 362_880.0))));
+    let s = t * poly;
+    let h = s * s;
+    if mirrored {
+        1.0 - h
+    } else {
+        h
+    }
 }
 
 /// Generator: ramp-in, full-amplitude periods, ramp-out. Storage for one
@@ -724,6 +747,8 @@ pub struct Excitation<'a> {
     ramp: u32,
     /// sample index k of the next output
     k: u64,
+    /// k mod N, kept alongside k (no 64-bit division per sample)
+    index: usize,
     /// first sample of the ramp-out, if known
     ramp_out_start: Option<u64>,
 }
@@ -744,6 +769,7 @@ impl<'a> Excitation<'a> {
             table: &table[..n],
             ramp: cfg.ramp_samples,
             k: 0,
+            index: 0,
             ramp_out_start,
         })
     }
@@ -799,13 +825,22 @@ impl<'a> Excitation<'a> {
             return None;
         }
         let k = self.k;
-        let x = self.table[(k % self.table.len() as u64) as usize];
+        let x = self.table.get(self.index).copied().unwrap_or(0.0);
+        // ramp-in: h(k/R); ramp-out, its mirror: h((R-1-i)/R) at i = k - start
+        // (the raised cosine (1 + cos(π(i+1)/R))/2), 0 at the last sample
         let w = match self.ramp_out_start {
-            Some(start) if k >= start => Some(ramp_weight(k - start, self.ramp, false)),
-            _ if k < self.ramp as u64 => Some(ramp_weight(k, self.ramp, true)),
+            Some(start) if k >= start => {
+                // k - start < R here (otherwise finished)
+                Some(ramp_rise(self.ramp - 1 - (k - start) as u32, self.ramp))
+            }
+            _ if k < self.ramp as u64 => Some(ramp_rise(k as u32, self.ramp)),
             _ => None,
         };
         self.k += 1;
+        self.index += 1;
+        if self.index == self.table.len() {
+            self.index = 0;
+        }
         Some(match w {
             Some(w) => w * x,
             None => x,
@@ -1041,12 +1076,13 @@ mod tests {
 
     /// CRC-32 of the little-endian f32 bits of (one period, the whole run)
     /// of `paper_default()` with each kind, as computed on a Cortex-M4
-    /// (thumbv7em-none-eabihf, release, qemu-system-arm 7.2 mps2-an386).
+    /// (thumbv7em-none-eabihf, firmware profile, qemu-system-arm 7.2
+    /// mps2-an386; run CRCs re-measured for the f32 ramp weight).
     /// Equality on the host shows the table is bit-identical on both.
     const CORTEX_M4_CRCS: [(SignalKind, u32, u32); 3] = [
-        (SignalKind::SpecialOddMultisine, 0xdf67_d099, 0x64d6_36b2),
-        (SignalKind::RandomOddMultisine, 0xd7f2_b943, 0x9f2b_1b0c),
-        (SignalKind::BandLimitedNoise, 0x00f0_7402, 0xc1cf_0fda),
+        (SignalKind::SpecialOddMultisine, 0xdf67_d099, 0xa06c_367e),
+        (SignalKind::RandomOddMultisine, 0xd7f2_b943, 0xd3e2_648a),
+        (SignalKind::BandLimitedNoise, 0x00f0_7402, 0x8bd7_0a2b),
     ];
 
     #[test]
@@ -1106,6 +1142,45 @@ mod tests {
                 assert!(w >= prev_w - 1e-6, "ramp-in weight fell at {k}");
                 prev_w = w;
             }
+        }
+    }
+
+    #[test]
+    fn ramp_weight_is_the_raised_cosine_within_3e7_and_exact_at_the_ends() {
+        for r in [1u32, 2, 3, 7, 100, 2000, 4001, 100_000] {
+            assert_eq!(ramp_rise(0, r).to_bits(), 0.0f32.to_bits(), "r {r}");
+            assert_eq!(ramp_rise(r, r), 1.0, "r {r}");
+            let mut prev = 0.0f32;
+            for j in 0..=r {
+                let w = ramp_rise(j, r);
+                let exact = 0.5 - 0.5 * (std::f64::consts::PI * j as f64 / r as f64).cos();
+                assert!(
+                    (w as f64 - exact).abs() < 3e-7,
+                    "r {r}, j {j}: {w} vs {exact}"
+                );
+                assert!((0.0..=1.0).contains(&w), "r {r}, j {j}: {w}");
+                // monotone up to one rounding step
+                assert!(w >= prev - 1.2e-7, "r {r}, j {j}: {w} after {prev}");
+                prev = w;
+            }
+        }
+        // the ramp-out is the ramp-in reversed, sample for sample
+        let cfg = ExcitationConfig {
+            ramp_samples: 300,
+            periods: 1,
+            period_samples: 1000,
+            max_line: 80,
+            ..ExcitationConfig::paper_default()
+        };
+        let run = generate(&cfg).unwrap();
+        let table = period_of(&cfg);
+        let (r, n, total) = (300usize, 1000usize, run.len());
+        for i in 0..r {
+            let w_in = ramp_rise(i as u32, 300);
+            let w_out = ramp_rise((r - 1 - i) as u32, 300);
+            assert_eq!(run[i].to_bits(), (w_in * table[i % n]).to_bits());
+            let k = total - r + i;
+            assert_eq!(run[k].to_bits(), (w_out * table[k % n]).to_bits());
         }
     }
 

@@ -5,15 +5,15 @@
 //! [`AngleInput`], writes the next excitation sample θ_ref(k) through
 //! [`ReferenceOutput`], stamps sequence number k and the timer count, and
 //! pushes the sample with its reference into a `heapless::spsc` queue. The
-//! work per tick is bounded (one table look-up, at most one `cos` during the
-//! ramps, one queue push); nothing allocates or panics. A full queue loses
+//! work per tick is bounded (one table look-up, a short f32 polynomial during
+//! the ramps, one queue push); nothing allocates or panics. A full queue loses
 //! the sample and counts an overrun in [`Counters`]; sequence numbers keep
 //! counting, so the host sees the gap as well.
 //!
 //! The [`TxPump`] runs in the idle loop: it sends the [`SessionHeader`], pops
 //! samples, packs them into sample batches (`SampleBatch`),
 //! frames them and hands the frames to a [`FrameSink`], with a [`Status`]
-//! every few batches and [`Message::End`] once the excitation has finished.
+//! every few batches and [`Message::End`](crate::wire::Message::End) once the excitation has finished.
 //! Samples of a frame the sink could not send are counted as queue drops.
 
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
@@ -23,8 +23,7 @@ use heapless::spsc::{Consumer, Producer};
 use crate::excitation::Excitation;
 use crate::transport::FrameSink;
 use crate::wire::{
-    encode_frame, BatchBuilder, Message, RawSample, SampleBatch, SessionHeader, Status,
-    MAX_FRAME_LEN,
+    encode_frame_ref, BatchBuilder, MessageRef, RawSample, SessionHeader, Status, MAX_FRAME_LEN,
 };
 
 /// Reads the motor torque reference u.
@@ -304,8 +303,8 @@ impl<'q> TxPump<'q> {
         let mut busy = false;
         if !self.header_sent {
             self.header_sent = true;
-            let header = Message::Header(self.header);
-            self.send(&header, sink);
+            let header = self.header;
+            self.send(MessageRef::Header(&header), sink);
             busy = true;
         }
         // read before draining: the tick sets it after its last push
@@ -316,17 +315,18 @@ impl<'q> TxPump<'q> {
                 break;
             };
             moved += 1;
-            if let Some(batch) = self.builder.push(t.sample, t.reference) {
-                self.send_batch(batch, sink);
+            // in place: the finished batch is framed where it lies
+            if self.builder.push_sample(t.sample, t.reference) {
+                self.send_batch(sink);
             }
         }
         busy |= moved > 0;
         if finished && self.consumer.is_empty() {
-            if let Some(batch) = self.builder.flush() {
-                self.send_batch(batch, sink);
+            if self.builder.finish() {
+                self.send_batch(sink);
             }
-            let end = Message::End(self.status(sink));
-            self.send(&end, sink);
+            let end = self.status(sink);
+            self.send(MessageRef::End(&end), sink);
             self.done = true;
             info!("session done: {} frames", self.frames_sent);
             return PumpState::Done;
@@ -338,35 +338,54 @@ impl<'q> TxPump<'q> {
         }
     }
 
-    fn send_batch<S: FrameSink + ?Sized>(&mut self, batch: SampleBatch, sink: &mut S) {
+    /// Sends the builder's finished batch, then a status if one is due.
+    fn send_batch<S: FrameSink + ?Sized>(&mut self, sink: &mut S) {
+        let batch = self.builder.batch();
         let len = batch.len() as u32;
-        if !self.send(&Message::Batch(batch), sink) {
+        let sent = send_frame(
+            MessageRef::Batch(batch),
+            &mut self.frame,
+            &mut self.frames_sent,
+            sink,
+        );
+        if !sent {
             self.queue_drops = self.queue_drops.saturating_add(len);
         }
         self.batches_since_status += 1;
         if self.config.status_every > 0 && self.batches_since_status >= self.config.status_every {
             self.batches_since_status = 0;
-            let status = Message::Status(self.status(sink));
-            self.send(&status, sink);
+            let status = self.status(sink);
+            self.send(MessageRef::Status(&status), sink);
         }
     }
 
     /// Encodes and sends one message; `false` if it was lost.
-    fn send<S: FrameSink + ?Sized>(&mut self, msg: &Message, sink: &mut S) -> bool {
-        match encode_frame(msg, &mut self.frame) {
-            Ok(n) => match sink.send_frame(&self.frame[..n]) {
-                Ok(()) => {
-                    self.frames_sent = self.frames_sent.wrapping_add(1);
-                    true
-                }
-                Err(e) => {
-                    warn!("frame lost: {}", e as u8);
-                    false
-                }
-            },
-            // cannot happen: MAX_FRAME_LEN holds every message; counted as lost
-            Err(_) => false,
-        }
+    fn send<S: FrameSink + ?Sized>(&mut self, msg: MessageRef<'_>, sink: &mut S) -> bool {
+        send_frame(msg, &mut self.frame, &mut self.frames_sent, sink)
+    }
+}
+
+/// Encodes `msg` into `frame` and hands it to `sink`; counts it in
+/// `frames_sent` if it went out, `false` if it was lost.
+fn send_frame<S: FrameSink + ?Sized>(
+    msg: MessageRef<'_>,
+    frame: &mut [u8; MAX_FRAME_LEN],
+    frames_sent: &mut u32,
+    sink: &mut S,
+) -> bool {
+    match encode_frame_ref(msg, frame) {
+        Ok(n) => match sink.send_frame(&frame[..n]) {
+            Ok(()) => {
+                *frames_sent = frames_sent.wrapping_add(1);
+                true
+            }
+            Err(e) => {
+                warn!("frame lost: {}", e as u8);
+                false
+            }
+        },
+        // cannot happen: MAX_FRAME_LEN holds every message; counted as lost
+        Err(_) => false,
     }
 }
 
@@ -375,7 +394,7 @@ mod tests {
     use super::*;
     use crate::excitation::{generate, ExcitationConfig, SignalKind};
     use crate::transport::TxError;
-    use crate::wire::{reference_crc, DecodeEvent, Decoder, Scale, PROTOCOL_VERSION};
+    use crate::wire::{reference_crc, DecodeEvent, Decoder, Message, Scale, PROTOCOL_VERSION};
     use heapless::spsc::Queue;
 
     /// Fake joint: torque and angle are known functions of the last reference

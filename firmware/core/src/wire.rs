@@ -130,6 +130,32 @@ pub enum Message {
     End(Status),
 }
 
+/// A [`Message`] that borrows its content: serialises to the same bytes
+/// (same variants in the same order), so a batch can be framed where it lies,
+/// without moving it into a `Message` (see [`encode_frame_ref`]).
+#[derive(Serialize, Clone, Copy, Debug)]
+pub enum MessageRef<'m> {
+    /// session header, first
+    Header(&'m SessionHeader),
+    /// delta-coded samples
+    Batch(&'m SampleBatch),
+    /// periodic counters
+    Status(&'m Status),
+    /// final counters; nothing follows
+    End(&'m Status),
+}
+
+impl<'m> From<&'m Message> for MessageRef<'m> {
+    fn from(msg: &'m Message) -> Self {
+        match msg {
+            Message::Header(h) => Self::Header(h),
+            Message::Batch(b) => Self::Batch(b),
+            Message::Status(s) => Self::Status(s),
+            Message::End(s) => Self::End(s),
+        }
+    }
+}
+
 /// Compact, delta-coded consecutive samples (see the module docs).
 #[derive(Serialize, Deserialize, Clone, PartialEq, Eq, Debug)]
 pub struct SampleBatch {
@@ -140,7 +166,18 @@ pub struct SampleBatch {
     /// bits 0–1: torque predictor order, bits 2–3: angle predictor order
     predictors: u8,
     reference_crc: [u8; 4],
+    #[serde(serialize_with = "serialize_data")]
     data: heapless::Vec<u8, BATCH_DATA_CAPACITY>,
+}
+
+/// Serialises the batch data as a byte string. In postcard that is the same
+/// bytes as the default sequence of `u8` (varint length, then the bytes), but
+/// one copy instead of one serializer call per byte.
+fn serialize_data<S: serde::Serializer>(
+    data: &heapless::Vec<u8, BATCH_DATA_CAPACITY>,
+    serializer: S,
+) -> Result<S::Ok, S::Error> {
+    serializer.serialize_bytes(data)
 }
 
 /// Why a decoded batch is inconsistent.
@@ -346,14 +383,10 @@ fn unzigzag(v: u32) -> i32 {
     ((v >> 1) as i32) ^ -((v & 1) as i32)
 }
 
+/// Bytes of the LEB128 encoding of `v` (1 to 5): one per started 7 bits.
 fn varint_len(v: u32) -> usize {
-    match v {
-        0..=0x7F => 1,
-        0x80..=0x3FFF => 2,
-        0x4000..=0x1F_FFFF => 3,
-        0x20_0000..=0x0FFF_FFFF => 4,
-        _ => 5,
-    }
+    let bits = 32 - (v | 1).leading_zeros() as usize;
+    bits.div_ceil(7)
 }
 
 fn push_varint<const N: usize>(out: &mut heapless::Vec<u8, N>, mut v: u32) -> Result<(), ()> {
@@ -386,6 +419,13 @@ fn read_varint(bytes: &[u8]) -> Option<(u32, usize)> {
 
 /// Accumulates samples and their references; yields a [`SampleBatch`] when
 /// full, at a seq gap, or on [`flush`](Self::flush).
+///
+/// Two interfaces: [`push`](Self::push) / [`flush`](Self::flush) return the
+/// finished batch by value (convenient on the host); the in-place
+/// [`push_sample`](Self::push_sample) / [`finish`](Self::finish) /
+/// [`batch`](Self::batch) finish it into a slot inside the builder and lend
+/// it out, so the firmware never moves the ~1 KB batch (on a Cortex-M4 the
+/// by-value `Option<SampleBatch>` costs a 984-byte copy on every push).
 #[derive(Clone, Debug)]
 pub struct BatchBuilder {
     tick_step: u32,
@@ -393,6 +433,8 @@ pub struct BatchBuilder {
     samples: [RawSample; BATCH_CAPACITY],
     len: usize,
     crc: Crc32,
+    /// the last finished batch
+    done: SampleBatch,
 }
 
 impl BatchBuilder {
@@ -405,6 +447,15 @@ impl BatchBuilder {
             samples: [RawSample::default(); BATCH_CAPACITY],
             len: 0,
             crc: Crc32::new(),
+            done: SampleBatch {
+                first_seq: 0,
+                first_tick: 0,
+                tick_step,
+                count: 0,
+                predictors: 0,
+                reference_crc: [0; 4],
+                data: heapless::Vec::new(),
+            },
         }
     }
 
@@ -421,41 +472,68 @@ impl BatchBuilder {
     /// Adds a sample and its reference θ_ref [rad]. Returns a finished batch
     /// when this sample filled it, or when `sample.seq` does not follow the
     /// previous one (the old batch is returned, the sample starts the next).
+    /// Built on [`push_sample`](Self::push_sample); the batch is cloned out.
     pub fn push(&mut self, sample: RawSample, reference: f32) -> Option<SampleBatch> {
-        let mut done = None;
-        if self.len > 0 && sample.seq != self.samples[self.len - 1].seq.wrapping_add(1) {
-            done = self.flush();
+        if self.push_sample(sample, reference) {
+            Some(self.done.clone())
+        } else {
+            None
         }
-        self.samples[self.len] = sample;
-        self.len += 1;
-        self.crc.update(&reference.to_le_bytes());
-        if self.len >= self.capacity {
-            // after a gap flush len is 1 < capacity (capacity ≥ 2), so at most
-            // one batch is finished per push
-            done = self.flush();
-        }
-        done
     }
 
     /// Finishes the waiting samples into a batch (`None` if there are none).
+    /// Built on [`finish`](Self::finish); the batch is cloned out.
     pub fn flush(&mut self) -> Option<SampleBatch> {
+        if self.finish() {
+            Some(self.done.clone())
+        } else {
+            None
+        }
+    }
+
+    /// Adds a sample and its reference θ_ref [rad] without moving any batch.
+    /// Returns `true` when a batch was finished, because this sample filled
+    /// it or because `sample.seq` does not follow the previous one (then the
+    /// old samples form the batch and this one starts the next); the batch is
+    /// then in [`batch`](Self::batch) until the next `push_sample` or `finish`.
+    /// At most one batch is finished per call.
+    pub fn push_sample(&mut self, sample: RawSample, reference: f32) -> bool {
+        let mut finished = false;
+        if self.len > 0 && sample.seq != self.samples[self.len - 1].seq.wrapping_add(1) {
+            finished = self.finish();
+        }
+        // len < capacity ≤ BATCH_CAPACITY here: a full builder is finished below
+        if let Some(slot) = self.samples.get_mut(self.len) {
+            *slot = sample;
+            self.len += 1;
+        }
+        self.crc.update(&reference.to_le_bytes());
+        if self.len >= self.capacity {
+            // after a gap finish len is 1 < capacity (capacity ≥ 2), so at most
+            // one batch is finished per push
+            finished = self.finish();
+        }
+        finished
+    }
+
+    /// Finishes the waiting samples into [`batch`](Self::batch), in place;
+    /// `false` (and the previous batch left alone) if none wait.
+    pub fn finish(&mut self) -> bool {
         if self.len == 0 {
-            return None;
+            return false;
         }
         let samples = &self.samples[..self.len];
         let torque_order = best_order(samples, |s| s.torque);
         let angle_order = best_order(samples, |s| s.angle);
-        let mut data = heapless::Vec::new();
+        let out = &mut self.done;
+        out.data.clear();
+        let mut p1 = RawSample::default();
+        let mut p2 = RawSample::default();
         for (i, s) in samples.iter().enumerate() {
-            let (p1, p2) = match i {
-                0 => (RawSample::default(), RawSample::default()),
-                1 => (samples[0], RawSample::default()),
-                _ => (samples[i - 1], samples[i - 2]),
-            };
             if i > 0 {
                 let dev = s.tick.wrapping_sub(p1.tick).wrapping_sub(self.tick_step) as i32;
                 // cannot fail: at most 15 bytes per sample were reserved
-                let _ = push_varint(&mut data, zigzag(dev));
+                let _ = push_varint(&mut out.data, zigzag(dev));
             }
             let t = s
                 .torque
@@ -463,40 +541,58 @@ impl BatchBuilder {
             let a = s
                 .angle
                 .wrapping_sub(predict(angle_order, i, p1.angle, p2.angle));
-            let _ = push_varint(&mut data, zigzag(t));
-            let _ = push_varint(&mut data, zigzag(a));
+            let _ = push_varint(&mut out.data, zigzag(t));
+            let _ = push_varint(&mut out.data, zigzag(a));
+            p2 = p1;
+            p1 = *s;
         }
-        let batch = SampleBatch {
-            first_seq: samples[0].seq,
-            first_tick: samples[0].tick,
-            tick_step: self.tick_step,
-            count: self.len as u8,
-            predictors: torque_order | (angle_order << 2),
-            reference_crc: self.crc.finish().to_le_bytes(),
-            data,
-        };
+        out.first_seq = samples[0].seq;
+        out.first_tick = samples[0].tick;
+        out.tick_step = self.tick_step;
+        out.count = self.len as u8;
+        out.predictors = torque_order | (angle_order << 2);
+        out.reference_crc = self.crc.finish().to_le_bytes();
         self.len = 0;
         self.crc = Crc32::new();
-        Some(batch)
+        true
+    }
+
+    /// The last batch finished by [`push_sample`](Self::push_sample) or
+    /// [`finish`](Self::finish) (empty, `len() == 0`, before the first).
+    pub fn batch(&self) -> &SampleBatch {
+        &self.done
     }
 }
 
 /// Predictor order (0, 1, 2) with the fewest varint bytes for one channel.
 fn best_order(samples: &[RawSample], get: impl Fn(&RawSample) -> i32) -> u8 {
-    let mut best = (usize::MAX, 0u8);
-    for order in 0..=2u8 {
-        let mut bytes = 0;
-        for i in 0..samples.len() {
-            let p1 = if i >= 1 { get(&samples[i - 1]) } else { 0 };
-            let p2 = if i >= 2 { get(&samples[i - 2]) } else { 0 };
-            let r = get(&samples[i]).wrapping_sub(predict(order, i, p1, p2));
-            bytes += varint_len(zigzag(r));
-        }
-        if bytes < best.0 {
-            best = (bytes, order);
-        }
+    // one pass for the three orders, with `predict`'s rules written out:
+    // order 1 predicts p1 (0 at the first sample, where p1 is still 0),
+    // order 2 predicts 2·p1 − p2 from the third sample on, else as order 1
+    let (mut b0, mut b1, mut b2) = (0usize, 0usize, 0usize);
+    let (mut p1, mut p2) = (0i32, 0i32);
+    for (i, s) in samples.iter().enumerate() {
+        let v = get(s);
+        let r1 = v.wrapping_sub(p1);
+        let r2 = if i >= 2 {
+            r1.wrapping_sub(p1.wrapping_sub(p2))
+        } else {
+            r1
+        };
+        b0 += varint_len(zigzag(v));
+        b1 += varint_len(zigzag(r1));
+        b2 += varint_len(zigzag(r2));
+        p2 = p1;
+        p1 = v;
     }
-    best.1
+    // fewest bytes, the lowest order on a tie
+    if b0 <= b1 && b0 <= b2 {
+        0
+    } else if b1 <= b2 {
+        1
+    } else {
+        2
+    }
 }
 
 /// CRC-32 (IEEE 802.3, reflected polynomial 0xEDB88320, initial value and
@@ -668,8 +764,16 @@ impl std::error::Error for EncodeError {}
 /// # Errors
 /// [`EncodeError`]; `out` of [`MAX_FRAME_LEN`] bytes always suffices.
 pub fn encode_frame(msg: &Message, out: &mut [u8]) -> Result<usize, EncodeError> {
+    encode_frame_ref(MessageRef::from(msg), out)
+}
+
+/// [`encode_frame`] of a borrowed message: the same bytes, nothing moved.
+///
+/// # Errors
+/// [`EncodeError`]; `out` of [`MAX_FRAME_LEN`] bytes always suffices.
+pub fn encode_frame_ref(msg: MessageRef<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
     let mut scratch = [0u8; MAX_MESSAGE_LEN + 4];
-    let n = postcard::to_slice(msg, &mut scratch[..MAX_MESSAGE_LEN])
+    let n = postcard::to_slice(&msg, &mut scratch[..MAX_MESSAGE_LEN])
         .map_err(|_| EncodeError::Serialize)?
         .len();
     let crc = Crc32::checksum(&scratch[..n]);
@@ -1098,6 +1202,94 @@ mod tests {
         assert_eq!(batches.len(), 2);
         assert_eq!((batches[0].first_seq(), batches[0].len()), (0, 10));
         assert_eq!((batches[1].first_seq(), batches[1].len()), (11, 19));
+    }
+
+    #[test]
+    fn varint_len_counts_the_bytes_push_varint_writes() {
+        let mut values = vec![0u32, u32::MAX];
+        for shift in [7, 14, 21, 28] {
+            values.extend([(1u32 << shift) - 1, 1 << shift, (1 << shift) + 1]);
+        }
+        for v in values {
+            let mut out: heapless::Vec<u8, 8> = heapless::Vec::new();
+            push_varint(&mut out, v).unwrap();
+            assert_eq!(varint_len(v), out.len(), "{v:#x}");
+            assert_eq!(read_varint(&out), Some((v, out.len())));
+        }
+    }
+
+    #[test]
+    fn best_order_picks_the_order_with_fewest_encoded_bytes() {
+        // reference: encode the channel with each order, count the bytes
+        fn encoded_len(values: &[i32], order: u8) -> usize {
+            let mut out: heapless::Vec<u8, BATCH_DATA_CAPACITY> = heapless::Vec::new();
+            for i in 0..values.len() {
+                let p1 = if i >= 1 { values[i - 1] } else { 0 };
+                let p2 = if i >= 2 { values[i - 2] } else { 0 };
+                push_varint(
+                    &mut out,
+                    zigzag(values[i].wrapping_sub(predict(order, i, p1, p2))),
+                )
+                .unwrap();
+            }
+            out.len()
+        }
+        let mut orders_seen = [false; 3];
+        for seed in 0..40 {
+            let (mut samples, _) = synthetic(2 + seed as usize, seed);
+            if seed % 3 == 0 {
+                // a constant channel: order 0 and 1 tie on small values
+                samples.iter_mut().for_each(|s| s.torque = 5);
+            }
+            for get in [|s: &RawSample| s.torque, |s: &RawSample| s.angle] {
+                let values: Vec<i32> = samples.iter().map(get).collect();
+                let lens: Vec<usize> = (0..3).map(|o| encoded_len(&values, o)).collect();
+                let min = *lens.iter().min().unwrap();
+                let expected = lens.iter().position(|&l| l == min).unwrap() as u8;
+                let got = best_order(&samples, get);
+                assert_eq!(got, expected, "seed {seed}: lengths {lens:?}");
+                orders_seen[got as usize] = true;
+            }
+        }
+        assert_eq!(orders_seen, [true, true, true]);
+    }
+
+    #[test]
+    fn in_place_builder_gives_the_same_batches_and_frames_as_push() {
+        // gaps at seq 10 and 40, batches of 16, a partial batch at the end
+        let (mut samples, refs) = synthetic(70, 4);
+        samples.remove(40);
+        samples.remove(10);
+        let mut by_value = BatchBuilder::new(500, 16);
+        let mut in_place = BatchBuilder::new(500, 16);
+        assert_eq!(in_place.batch().len(), 0);
+        let mut expected = Vec::new();
+        let mut got = Vec::new();
+        for (s, r) in samples.iter().zip(&refs) {
+            expected.extend(by_value.push(*s, *r));
+            if in_place.push_sample(*s, *r) {
+                got.push(in_place.batch().clone());
+            }
+        }
+        expected.extend(by_value.flush());
+        assert!(in_place.finish());
+        got.push(in_place.batch().clone());
+        // nothing waits: finish reports it and keeps the last batch
+        assert!(!in_place.finish());
+        assert_eq!(in_place.batch(), got.last().unwrap());
+        assert_eq!(got, expected);
+        let sizes: Vec<(u32, usize)> = got.iter().map(|b| (b.first_seq(), b.len())).collect();
+        assert_eq!(
+            sizes,
+            [(0, 10), (11, 16), (27, 13), (41, 16), (57, 13)],
+            "batch boundaries"
+        );
+        // a borrowed message frames to the same bytes as the owned one
+        for b in &got {
+            let mut buf = [0u8; MAX_FRAME_LEN];
+            let n = encode_frame_ref(MessageRef::Batch(b), &mut buf).unwrap();
+            assert_eq!(buf[..n], encode(&Message::Batch(b.clone()))[..]);
+        }
     }
 
     #[test]

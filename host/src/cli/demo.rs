@@ -20,8 +20,8 @@ use serde::Serialize;
 use super::fit::write_bode;
 use super::{print_json, CmdResult, Context, Outcome};
 use crate::experiment::{
-    decode_session, default_scale, encode_session, paper_runs, read_jcap_stream, table, write_jcap,
-    write_table, Table, PAPER_MODELS,
+    decode_session, default_scale, encode_session, paper_runs, table, write_jcap, write_table,
+    Table, PAPER_MODELS,
 };
 use crate::frf::{analyze_dataset, LineClass, SignalSpectrum};
 use crate::plot::{bode_svg, spectrum_svg, write_svg, SpectrumPanel};
@@ -84,8 +84,8 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
     write_jcap(&val_path, &val_stream)?;
     let est_name = est_path.display().to_string();
     let val_name = val_path.display().to_string();
-    let est_ds = decode_session(&read_jcap_stream(&est_path)?, &est_name)?;
-    let val_ds = decode_session(&read_jcap_stream(&val_path)?, &val_name)?;
+    let est_ds = crate::capture::load_dataset(&est_path)?;
+    let val_ds = crate::capture::load_dataset(&val_path)?;
     let mut files = vec![est_name.clone(), val_name.clone()];
 
     let a = analyze_dataset(&est_ds, crate::experiment::SETTLE_PERIODS)?;
@@ -165,7 +165,7 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
     )?;
     writeln!(
         out,
-        "  decoded losslessly, reference regenerated and CRC-checked in every batch"
+        "  read back by the capture decoder: no gap, reference regenerated and CRC-checked in every batch"
     )?;
     writeln!(
         out,

@@ -23,8 +23,11 @@ use crate::data::Loaders;
 
 pub mod analyze;
 pub mod args;
+pub mod capture;
 pub mod demo;
+pub mod export;
 pub mod fit;
+pub mod info;
 pub mod simulate;
 pub mod validate;
 pub mod validate_cmd;
@@ -44,6 +47,12 @@ pub struct Cli {
 /// Subcommands, in the order of the user's path.
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// record the board's stream (serial, CAN, TCP or file) into a .jcap capture
+    Capture(capture::CaptureArgs),
+    /// what a .jcap capture holds: board, excitation, samples, gaps, damaged frames
+    Info(info::InfoArgs),
+    /// write a .jcap capture as the capture CSV (t,theta_ref,u,theta_m)
+    Export(export::ExportArgs),
     /// nonparametric FRF, noise level and nonlinear distortion of periodic data
     Analyze(analyze::AnalyzeArgs),
     /// fit a black-box or physical model: parameters, FIT, resonances, residual tests
@@ -90,23 +99,12 @@ pub struct Context<'a> {
     pub out: &'a mut dyn Write,
 }
 
-/// Loaders the binary uses.
-// TODO(lead): register the `.jcap` loader of the capture module here, e.g.
-// `l.register("jcap", Box::new(|p, _| crate::capture::load_dataset(p).map_err(Into::into)));`
-// Until then, `.jcap` files are read by the strict single-session decoder of
-// `crate::experiment` (lossless streams such as the demo's; a damaged frame
-// or a sequence gap is an error naming its byte offset).
+/// Loaders the binary uses: CSV (built in) and the native `.jcap` capture.
 pub fn default_loaders() -> Loaders {
     let mut l = Loaders::default();
     l.register(
         "jcap",
-        Box::new(|p, _| {
-            let stream = crate::experiment::read_jcap_stream(p)?;
-            Ok(crate::experiment::decode_session(
-                &stream,
-                &p.display().to_string(),
-            )?)
-        }),
+        Box::new(|p, _| crate::capture::load_dataset(p).map_err(Into::into)),
     );
     l
 }
@@ -118,6 +116,9 @@ pub fn default_loaders() -> Loaders {
 /// JSON with `--json`) and exits with 2.
 pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
     match &cli.command {
+        Command::Capture(a) => capture::run(a, ctx),
+        Command::Info(a) => info::run(a, ctx),
+        Command::Export(a) => export::run(a, ctx),
         Command::Analyze(a) => analyze::run(a, ctx),
         Command::Fit(a) => fit::run(a, ctx),
         Command::Validate(a) => validate_cmd::run(a, ctx),

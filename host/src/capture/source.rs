@@ -1,0 +1,544 @@
+//! Where a capture's bytes come from: a serial port, a CAN interface, a TCP socket or a
+//! file (regular file, named pipe, pty).
+//!
+//! Each source is opened on the caller's thread, so a bad port, an unknown interface or a
+//! refused connection is a setup error reported before anything is recorded. Reading then
+//! runs on a thread of its own that sends [`SourceMsg`]s over a channel; the capture loop
+//! waits on the channel with a timeout, so the file is flushed and Ctrl-C, `--duration`
+//! and `--periods` are honoured even while the link is silent.
+//!
+//! Link loss: a serial port that disappears (USB unplugged), a CAN interface that goes
+//! down or a TCP connection that is reset is reported as [`SourceMsg::LinkLost`]; the
+//! thread then tries to reopen it every [`RetryPolicy::interval`] and reports
+//! [`SourceMsg::LinkResumed`] when it succeeds. End of file (regular file, pipe whose
+//! writer closed, pty whose other side hung up) and an orderly TCP close end the stream.
+//!
+//! CAN: frames (classic and FD) are reassembled into the serial byte stream with the
+//! core's `transport::can` reassembler ([`super::can::CanStream`]); the recorded bytes are that
+//! reassembled stream, so a CAN capture and a serial capture of the same run are the same
+//! file.
+
+use std::fs::File;
+use std::io::{self, Read};
+use std::net::{TcpStream, ToSocketAddrs};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+/// How long one blocking read may wait before the reader thread checks its stop flag.
+const READ_TIMEOUT: Duration = Duration::from_millis(50);
+/// Size of one read [bytes].
+const CHUNK: usize = 64 * 1024;
+
+/// Which link to capture from (validated command-line choice).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum SourceSpec {
+    /// serial port device path (`/dev/ttyACM0`, `COM3`) and baud rate [bit/s]
+    Serial {
+        /// device path
+        port: String,
+        /// baud rate [bit/s]
+        baud: u32,
+    },
+    /// SocketCAN interface name (`can0`), classic and FD frames
+    Can {
+        /// interface name
+        iface: String,
+        /// identifier of the board's frames (`None`: every data frame)
+        id: Option<embedded_can::Id>,
+    },
+    /// TCP endpoint `HOST:PORT` (the emulated board's UART)
+    Tcp {
+        /// `HOST:PORT`
+        addr: String,
+    },
+    /// raw byte stream from a file, named pipe or pty
+    File {
+        /// path of the file
+        path: PathBuf,
+    },
+}
+
+impl std::fmt::Display for SourceSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Serial { port, baud } => write!(f, "serial {port} at {baud} baud"),
+            Self::Can { iface, id: None } => write!(f, "can {iface}"),
+            Self::Can {
+                iface,
+                id: Some(embedded_can::Id::Standard(id)),
+            } => write!(f, "can {iface} id {:#05x}", id.as_raw()),
+            Self::Can {
+                iface,
+                id: Some(embedded_can::Id::Extended(id)),
+            } => write!(f, "can {iface} id {:#010x}", id.as_raw()),
+            Self::Tcp { addr } => write!(f, "tcp {addr}"),
+            Self::File { path } => write!(f, "file {}", path.display()),
+        }
+    }
+}
+
+/// How a lost link is retried.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RetryPolicy {
+    /// pause between two attempts to reopen a lost link [s]
+    pub interval: Duration,
+}
+
+impl Default for RetryPolicy {
+    fn default() -> Self {
+        Self {
+            interval: Duration::from_millis(200),
+        }
+    }
+}
+
+/// Errors opening or reading a source.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SourceError {
+    /// The serial port could not be opened.
+    #[error("serial port {port}: {message}")]
+    SerialOpen {
+        /// device path
+        port: String,
+        /// what the driver said
+        message: String,
+    },
+    /// The CAN interface could not be opened (unknown name, not up, not CAN).
+    #[error("can interface {iface}: {}", super::io_msg(err))]
+    CanOpen {
+        /// interface name
+        iface: String,
+        /// what the kernel said
+        err: io::Error,
+    },
+    /// CAN capture needs SocketCAN, which only Linux has.
+    #[error("can interface {iface}: CAN capture needs Linux SocketCAN")]
+    CanUnsupported {
+        /// interface name
+        iface: String,
+    },
+    /// `HOST:PORT` did not resolve or the connection failed.
+    #[error("tcp {addr}: {}", super::io_msg(err))]
+    Tcp {
+        /// `HOST:PORT`
+        addr: String,
+        /// what the resolver or the network said
+        err: io::Error,
+    },
+    /// The file could not be opened or is not a byte stream.
+    #[error("{path}: {}", super::io_msg(err))]
+    File {
+        /// the file
+        path: PathBuf,
+        /// what the operating system said
+        err: io::Error,
+    },
+    /// Reading failed in a way that retrying cannot fix.
+    #[error(
+        "{source_name}: read failed at stream byte {offset}: {}",
+        super::io_msg(err)
+    )]
+    Read {
+        /// the source, as displayed by [`SourceSpec`]
+        source_name: String,
+        /// stream offset at which the read failed
+        offset: u64,
+        /// what the operating system said
+        err: io::Error,
+    },
+}
+
+/// What the reader thread reports.
+#[derive(Debug)]
+pub enum SourceMsg {
+    /// bytes, in arrival order
+    Data(Vec<u8>),
+    /// the link stopped delivering; the thread is retrying (detail = why)
+    LinkLost(String),
+    /// the link delivers again (detail = what was reopened)
+    LinkResumed(String),
+    /// the stream ended (detail = why); no message follows
+    End(String),
+    /// unrecoverable error; no message follows
+    Failed(SourceError),
+}
+
+/// A running source: a reader thread and the channel it reports on.
+#[derive(Debug)]
+pub struct RunningSource {
+    rx: Receiver<SourceMsg>,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+    name: String,
+}
+
+impl RunningSource {
+    /// The source, as displayed by [`SourceSpec`].
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Next message, or `None` when none arrived within `timeout` (or the thread is gone).
+    pub fn recv_timeout(&self, timeout: Duration) -> Option<SourceMsg> {
+        match self.rx.recv_timeout(timeout) {
+            Ok(m) => Some(m),
+            Err(RecvTimeoutError::Timeout) => None,
+            Err(RecvTimeoutError::Disconnected) => Some(SourceMsg::End("reader stopped".into())),
+        }
+    }
+
+    /// Asks the reader thread to stop and waits for it, unless it is blocked in a read
+    /// that has no timeout (a pipe or pty given as `--file`): that thread is left to end
+    /// with the process. Returns the bytes that had already been read but not yet
+    /// received, in order, so that a stop loses nothing that arrived.
+    pub fn stop(mut self) -> Vec<Vec<u8>> {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(t) = self.thread.take() {
+            if t.is_finished() || !self.name.starts_with("file ") {
+                let _ = t.join();
+            }
+        }
+        self.rx
+            .try_iter()
+            .filter_map(|m| match m {
+                SourceMsg::Data(d) => Some(d),
+                _ => None,
+            })
+            .collect()
+    }
+}
+
+/// A link that delivers bytes: one blocking read with a short timeout.
+trait Link: Send {
+    /// `Ok(0)` means end of stream; `Err(TimedOut | WouldBlock)` means nothing yet.
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize>;
+}
+
+impl Link for Box<dyn serialport::SerialPort> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        Read::read(self, buf)
+    }
+}
+
+impl Link for TcpStream {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        Read::read(self, buf)
+    }
+}
+
+impl Link for File {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        Read::read(self, buf)
+    }
+}
+
+impl SourceSpec {
+    /// Opens the source on this thread and starts its reader thread.
+    ///
+    /// # Errors
+    /// The `*Open`/`Tcp`/`File` variants of [`SourceError`] naming the port, interface,
+    /// address or path and what went wrong.
+    pub fn open(&self, retry: RetryPolicy) -> Result<RunningSource, SourceError> {
+        let name = self.to_string();
+        let (tx, rx) = mpsc::channel();
+        let stop = Arc::new(AtomicBool::new(false));
+        let thread = match self {
+            Self::Serial { port, baud } => {
+                let link = open_serial(port, *baud)?;
+                let (port, baud) = (port.clone(), *baud);
+                spawn_link(link, tx, stop.clone(), name.clone(), retry, move || {
+                    open_serial(&port, baud)
+                })
+            }
+            Self::Tcp { addr } => {
+                let link = open_tcp(addr)?;
+                let addr = addr.clone();
+                spawn_link(link, tx, stop.clone(), name.clone(), retry, move || {
+                    open_tcp(&addr)
+                })
+            }
+            Self::File { path } => spawn_file(path.clone(), tx, stop.clone(), name.clone())?,
+            Self::Can { iface, id } => {
+                can::spawn(iface, *id, tx, stop.clone(), name.clone(), retry)?
+            }
+        };
+        Ok(RunningSource {
+            rx,
+            stop,
+            thread: Some(thread),
+            name,
+        })
+    }
+}
+
+fn open_serial(port: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>, SourceError> {
+    serialport::new(port, baud)
+        .timeout(READ_TIMEOUT)
+        .open()
+        .map_err(|e| SourceError::SerialOpen {
+            port: port.to_string(),
+            message: serial_message(&e),
+        })
+}
+
+fn serial_message(e: &serialport::Error) -> String {
+    let mut m = e.description.clone();
+    if let Some(first) = m.get(..1) {
+        let lower = first.to_lowercase();
+        m.replace_range(..1, &lower);
+    }
+    m
+}
+
+fn open_tcp(addr: &str) -> Result<TcpStream, SourceError> {
+    let err = |source| SourceError::Tcp {
+        addr: addr.to_string(),
+        err: source,
+    };
+    let mut last = io::Error::new(io::ErrorKind::NotFound, "address resolved to nothing");
+    for sa in addr.to_socket_addrs().map_err(err)? {
+        match TcpStream::connect_timeout(&sa, Duration::from_secs(5)) {
+            Ok(s) => {
+                s.set_read_timeout(Some(READ_TIMEOUT)).map_err(err)?;
+                let _ = s.set_nodelay(true);
+                return Ok(s);
+            }
+            Err(e) => last = e,
+        }
+    }
+    Err(err(last))
+}
+
+fn is_timeout(e: &io::Error) -> bool {
+    matches!(
+        e.kind(),
+        io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
+    )
+}
+
+/// Reader thread for a link that can be lost and reopened (serial, TCP).
+fn spawn_link<L, F>(
+    mut link: L,
+    tx: Sender<SourceMsg>,
+    stop: Arc<AtomicBool>,
+    name: String,
+    retry: RetryPolicy,
+    mut reopen: F,
+) -> JoinHandle<()>
+where
+    L: Link + 'static,
+    F: FnMut() -> Result<L, SourceError> + Send + 'static,
+{
+    std::thread::spawn(move || {
+        let mut buf = vec![0u8; CHUNK];
+        while !stop.load(Ordering::SeqCst) {
+            let lost = match link.read(&mut buf) {
+                Ok(0) if name.starts_with("tcp ") => {
+                    let _ = tx.send(SourceMsg::End("connection closed by peer".into()));
+                    return;
+                }
+                // a tty that reports readable and then returns nothing has hung up
+                Ok(0) => "device hung up".to_string(),
+                Ok(n) => {
+                    if tx.send(SourceMsg::Data(buf[..n].to_vec())).is_err() {
+                        return;
+                    }
+                    continue;
+                }
+                Err(e) if is_timeout(&e) => continue,
+                Err(e) => e.to_string(),
+            };
+            if tx.send(SourceMsg::LinkLost(lost)).is_err() {
+                return;
+            }
+            // close the dead handle first so the device node is free, then retry until
+            // reopened or stopped
+            drop(link);
+            link = loop {
+                std::thread::sleep(retry.interval);
+                if stop.load(Ordering::SeqCst) {
+                    return;
+                }
+                if let Ok(l) = reopen() {
+                    break l;
+                }
+            };
+            if tx.send(SourceMsg::LinkResumed(name.clone())).is_err() {
+                return;
+            }
+        }
+    })
+}
+
+/// Reader thread for `--file`: regular files, named pipes and ptys.
+///
+/// A regular file or pty is opened here (a missing or unreadable file is a setup error);
+/// a named pipe is opened by the thread, because opening it blocks until a writer
+/// appears.
+fn spawn_file(
+    path: PathBuf,
+    tx: Sender<SourceMsg>,
+    stop: Arc<AtomicBool>,
+    name: String,
+) -> Result<JoinHandle<()>, SourceError> {
+    let err = |source| SourceError::File {
+        path: path.clone(),
+        err: source,
+    };
+    let meta = std::fs::metadata(&path).map_err(err)?;
+    if meta.is_dir() {
+        return Err(err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "is a directory",
+        )));
+    }
+    #[cfg(unix)]
+    let is_fifo = std::os::unix::fs::FileTypeExt::is_fifo(&meta.file_type());
+    #[cfg(not(unix))]
+    let is_fifo = false;
+    let opened = if is_fifo {
+        None
+    } else {
+        Some(File::open(&path).map_err(err)?)
+    };
+    Ok(std::thread::spawn(move || {
+        let mut file = match opened {
+            Some(f) => f,
+            None => match File::open(&path) {
+                Ok(f) => f,
+                Err(source) => {
+                    let _ = tx.send(SourceMsg::Failed(SourceError::File { path, err: source }));
+                    return;
+                }
+            },
+        };
+        let mut buf = vec![0u8; CHUNK];
+        let mut offset = 0u64;
+        while !stop.load(Ordering::SeqCst) {
+            match Read::read(&mut file, &mut buf) {
+                Ok(0) => {
+                    let _ = tx.send(SourceMsg::End("end of file".into()));
+                    return;
+                }
+                Ok(n) => {
+                    offset += n as u64;
+                    if tx.send(SourceMsg::Data(buf[..n].to_vec())).is_err() {
+                        return;
+                    }
+                }
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                // EIO on a pty: the other side hung up, which is its end of stream
+                Err(e) if e.raw_os_error() == Some(5) => {
+                    let _ = tx.send(SourceMsg::End("pty hung up".into()));
+                    return;
+                }
+                Err(source) => {
+                    let _ = tx.send(SourceMsg::Failed(SourceError::Read {
+                        source_name: name,
+                        offset,
+                        err: source,
+                    }));
+                    return;
+                }
+            }
+        }
+    }))
+}
+
+#[cfg(target_os = "linux")]
+mod can {
+    use super::*;
+    use socketcan::{CanAnyFrame, CanFdSocket, Socket};
+
+    fn open(iface: &str) -> Result<CanFdSocket, SourceError> {
+        let err = |source| SourceError::CanOpen {
+            iface: iface.to_string(),
+            err: source,
+        };
+        let sock = CanFdSocket::open(iface).map_err(|e| {
+            // if_nametoindex fails with ENODEV for an unknown name
+            if e.raw_os_error() == Some(19) {
+                err(io::Error::new(io::ErrorKind::NotFound, "no such interface"))
+            } else {
+                err(e)
+            }
+        })?;
+        sock.set_read_timeout(READ_TIMEOUT).map_err(err)?;
+        Ok(sock)
+    }
+
+    pub(super) fn spawn(
+        iface: &str,
+        id: Option<embedded_can::Id>,
+        tx: Sender<SourceMsg>,
+        stop: Arc<AtomicBool>,
+        name: String,
+        retry: RetryPolicy,
+    ) -> Result<JoinHandle<()>, SourceError> {
+        let mut sock = open(iface)?;
+        let iface = iface.to_string();
+        Ok(std::thread::spawn(move || {
+            let mut stream = crate::capture::can::CanStream::new(id);
+            let mut out = Vec::new();
+            while !stop.load(Ordering::SeqCst) {
+                let lost = match sock.read_frame() {
+                    Ok(frame) => {
+                        match frame {
+                            CanAnyFrame::Normal(f) => stream.push(&f, &mut out),
+                            CanAnyFrame::Fd(f) => stream.push(&f, &mut out),
+                            // remote and error frames carry no stream bytes
+                            CanAnyFrame::Remote(_) | CanAnyFrame::Error(_) => {}
+                        }
+                        if !out.is_empty()
+                            && tx.send(SourceMsg::Data(std::mem::take(&mut out))).is_err()
+                        {
+                            return;
+                        }
+                        continue;
+                    }
+                    Err(e) if is_timeout(&e) => continue,
+                    Err(e) => e.to_string(),
+                };
+                if tx.send(SourceMsg::LinkLost(lost)).is_err() {
+                    return;
+                }
+                sock = loop {
+                    std::thread::sleep(retry.interval);
+                    if stop.load(Ordering::SeqCst) {
+                        return;
+                    }
+                    if let Ok(s) = open(&iface) {
+                        break s;
+                    }
+                };
+                stream = crate::capture::can::CanStream::new(id);
+                if tx.send(SourceMsg::LinkResumed(name.clone())).is_err() {
+                    return;
+                }
+            }
+        }))
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+mod can {
+    use super::*;
+
+    pub(super) fn spawn(
+        iface: &str,
+        _id: Option<embedded_can::Id>,
+        _tx: Sender<SourceMsg>,
+        _stop: Arc<AtomicBool>,
+        _name: String,
+        _retry: RetryPolicy,
+    ) -> Result<JoinHandle<()>, SourceError> {
+        Err(SourceError::CanUnsupported {
+            iface: iface.to_string(),
+        })
+    }
+}
