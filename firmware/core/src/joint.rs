@@ -9,11 +9,13 @@
 //! `x5 = θ̇a2`, plus `x6 = θm` (the integrator the paper adds when the output
 //! is the angle). Input: motor torque u [N·m].
 //!
-//! Default parameters ([`JointParams::default_joint`]) are plausible for a
-//! small industrial axis and put the flexible modes where seed 000 finds them
-//! (10–25 Hz): with the motor inertia reflected to the arm side
-//! (`J_m/r² = 13.9 kg·m²`) the undamped resonances are 12.1 Hz and 23.2 Hz,
-//! the anti-resonances (motor locked) 9.2 Hz and 19.5 Hz.
+//! Default parameters ([`JointParams::default_joint`]) are the host
+//! simulator's default three-mass joint (`jointid::sim::params`, where their
+//! derivation is written out; the host reads them from here, so there is one
+//! source of truth): an IRB1400-like axis 1 constructed so that the undamped
+//! motor-side spectrum has anti-resonances (motor locked) at 15.0 and 19.0 Hz
+//! and resonances at 17.0 and 23.0 Hz, the double notch around 17 Hz of
+//! seed 000 Fig. 5–6.
 //!
 //! # Discretisation
 //! Zero-order hold at the sample interval T (seed 000 eq. (12)–(13)): the
@@ -27,6 +29,11 @@
 //! (`v_ref = K_p (θ_ref − θ̂m)`), velocity PI on the backward-difference
 //! velocity of the quantised encoder angle, output saturated at `u_max` with
 //! a clamped integrator. The torque reference u is what the joint reports.
+//! The gains are the host simulator's defaults (`K_p = 18 1/s`,
+//! `K_v = 0.2 N·m·s/rad`, `T_i = 0.05 s`, i.e. `K_i = K_v/T_i = 4 N·m/rad`,
+//! `u_max = 12 N·m`). Simpler than the host's controller: the torque acts at
+//! once (the host adds a 0.5 ms current-loop lag), and the integrator is
+//! clamped at ±`u_max` instead of being frozen while the output saturates.
 //!
 //! # Sensors
 //! Encoder: `counts_per_rev` counts per motor revolution (2²⁰ by default).
@@ -80,28 +87,30 @@ pub struct JointParams {
 }
 
 impl JointParams {
-    /// Default joint (module docs): J_m = 1e-3 kg·m², f_m = 5e-3 N·m·s/rad,
-    /// k_g = 1.2e5 N·m/rad, d_g = 100 N·m·s/rad, J_a1 = 12 kg·m², J_a2 = 8 kg·m²,
-    /// k_a = 4e4 N·m/rad, d_a = 40 N·m·s/rad, r = 1/118, 2 kHz; controller
-    /// K_p = 50 1/s, K_v = 0.46 N·m·s/rad (about 30 Hz on the rigid-body
-    /// inertia 2.44e-3 kg·m²), K_i = 14 N·m/rad, u_max = 10 N·m; encoder 2²⁰;
-    /// disturbance 0.01 N·m RMS.
+    /// Default joint (module docs), the host simulator's default three-mass
+    /// joint: J_m = 1e-3 kg·m², f_m = 2e-3 N·m·s/rad, k_g = 1.275e5 N·m/rad,
+    /// d_g = 80 N·m·s/rad, J_a1 = 11.66 kg·m², J_a2 = 0.627 kg·m²,
+    /// k_a = 7.26e3 N·m/rad, d_a = 4 N·m·s/rad, r = 1/118, 2 kHz (undamped
+    /// anti-resonances 15.0 / 19.0 Hz, resonances 17.0 / 23.0 Hz); controller
+    /// K_p = 18 1/s, K_v = 0.2 N·m·s/rad (velocity crossover about 17 Hz on
+    /// the rigid-body inertia 1.882e-3 kg·m²), K_i = K_v/T_i = 4 N·m/rad
+    /// (T_i = 0.05 s), u_max = 12 N·m; encoder 2²⁰; disturbance 0.01 N·m RMS.
     pub const fn default_joint() -> Self {
         Self {
             gear_ratio: 1.0 / 118.0,
             j_m: 1.0e-3,
-            f_m: 5.0e-3,
-            k_g: 1.2e5,
-            d_g: 100.0,
-            j_a1: 12.0,
-            j_a2: 8.0,
-            k_a: 4.0e4,
-            d_a: 40.0,
+            f_m: 2.0e-3,
+            k_g: 1.275e5,
+            d_g: 80.0,
+            j_a1: 11.66,
+            j_a2: 0.627,
+            k_a: 7.26e3,
+            d_a: 4.0,
             fs_hz: 2000,
-            kp: 50.0,
-            kv: 0.46,
-            ki: 14.0,
-            u_max: 10.0,
+            kp: 18.0,
+            kv: 0.2,
+            ki: 4.0,
+            u_max: 12.0,
             counts_per_rev: 1 << 20,
             disturbance_nm_rms: 0.01,
             seed: 0x5EED_0001,
@@ -420,7 +429,7 @@ mod tests {
     }
 
     #[test]
-    fn open_loop_resonances_lie_between_10_and_25_hz() {
+    fn open_loop_resonances_lie_at_17_and_23_hz() {
         let sim = JointSim::new(JointParams::default_joint());
         // local maxima of the compliance between 2 and 60 Hz
         let freqs: Vec<f64> = (200..6000).map(|i| i as f64 * 0.01).collect();
@@ -430,14 +439,14 @@ mod tests {
             .map(|i| freqs[i])
             .collect();
         assert_eq!(peaks.len(), 2, "{peaks:?}");
-        // damping and the ω² weighting move the peaks slightly above the
-        // undamped 12.1 Hz and 23.2 Hz
+        // damping (ζ = 3 % and 5 %) and the ω² weighting move the peaks a
+        // little away from the undamped 17.0 Hz and 23.0 Hz
         assert!(
             peaks.iter().all(|&f| (10.0..25.0).contains(&f)),
             "{peaks:?}"
         );
-        assert!((peaks[0] - 12.1).abs() < 0.3, "{peaks:?}");
-        assert!((peaks[1] - 23.2).abs() < 0.8, "{peaks:?}");
+        assert!((peaks[0] - 17.0).abs() < 0.3, "{peaks:?}");
+        assert!((peaks[1] - 23.0).abs() < 0.8, "{peaks:?}");
         // at low frequency the joint is a rigid body with viscous friction:
         // |θm/u|·ω² = ω / sqrt((J ω)² + f_m²)
         let j = sim.params.rigid_inertia();
@@ -518,13 +527,30 @@ mod tests {
         let rf: Vec<f64> = refs[range.clone()].iter().map(|&r| r as f64).collect();
         let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
         let diff: Vec<f64> = ang.iter().zip(&rf).map(|(a, r)| a - r).collect();
-        // the loop tracks the low frequencies but not the lines up to 121 Hz:
-        // the angle is neither the reference nor unrelated to it
+        // the loop (position bandwidth about 3.6 Hz) tracks the low
+        // frequencies but not the lines up to 121 Hz, which lag: the angle is
+        // neither the reference nor unrelated to it
         let ratio = rms(&diff) / rms(&rf);
-        assert!(ratio > 0.2 && ratio < 1.0, "tracking error ratio {ratio}");
-        let corr = ang.iter().zip(&rf).map(|(a, r)| a * r).sum::<f64>()
-            / (rms(&ang) * rms(&rf) * ang.len() as f64);
-        assert!(corr > 0.2, "correlation {corr}");
+        assert!(ratio > 0.2 && ratio < 1.5, "tracking error ratio {ratio}");
+        // line by line over the one full period (N = 5000 samples): at line 1
+        // (0.4 Hz) the angle follows the reference, at line 297 (118.8 Hz,
+        // far above the bandwidth) it is attenuated
+        let line = |x: &[f64], k: usize| {
+            let (mut re, mut im) = (0.0, 0.0);
+            for (n, v) in x.iter().enumerate() {
+                let ph = core::f64::consts::TAU * (k * n) as f64 / x.len() as f64;
+                re += v * ph.cos();
+                im -= v * ph.sin();
+            }
+            (re, im)
+        };
+        let gain = |k: usize| {
+            let (a, r) = (line(&ang, k), line(&rf, k));
+            ((a.0 * a.0 + a.1 * a.1) / (r.0 * r.0 + r.1 * r.1)).sqrt()
+        };
+        let (low, high) = (gain(1), gain(297));
+        assert!((low - 1.0).abs() < 0.05, "gain at 0.4 Hz {low}");
+        assert!(high < 0.5, "gain at 118.8 Hz {high}");
         // torque varies, within the 16-bit range, not saturated
         let t = &torque[range];
         let (tmin, tmax) = (t.iter().min().unwrap(), t.iter().max().unwrap());
@@ -535,14 +561,17 @@ mod tests {
     #[test]
     fn torque_sequence_matches_cortex_m4_bits() {
         // CRC-32 of the LE torque counts of 2000 steps at 0.01 rad then 2000
-        // at 0, read through JointIo, as computed on a Cortex-M4
-        // (thumbv7em-none-eabihf, release, qemu-system-arm mps2-an386)
+        // at 0, read through JointIo. Pinned from a host run: the emulated-board
+        // test (`jointid-tests`, emulated) checks sample by sample over a whole
+        // session that the Cortex-M4 build (thumbv7em-none-eabihf, firmware
+        // profile, qemu-system-arm mps2-an386) streams exactly the bits the host
+        // computes with this model, so the host value is the target's value
         let mut io = JointIo::new(JointSim::new(JointParams::default_joint()));
         let mut crc = crate::wire::Crc32::new();
         for k in 0..4000 {
             io.write_reference(if k < 2000 { 0.01 } else { 0.0 });
             crc.update(&io.read_torque().to_le_bytes());
         }
-        assert_eq!(crc.finish(), 0x0b9c_3388);
+        assert_eq!(crc.finish(), 0x0aaa_3055);
     }
 }

@@ -62,7 +62,8 @@ pub struct SimulateArgs {
     /// velocity and torque feedforward in the robot's controller
     #[arg(long)]
     pub feedforward: bool,
-    /// RK4 substeps per sample when the plant is nonlinear
+    /// event-aware RK4 substeps per sample when the plant is nonlinear (used in the samples
+    /// with contact or stick–slip events; the others take one exponential step)
     #[arg(long, value_name = "M", value_parser = clap::value_parser!(u32).range(1..))]
     pub substeps: Option<u32>,
     /// also write the whole simulator configuration (every parameter) as JSON here

@@ -11,23 +11,23 @@
 //! excitation. Measured by the fingerprint tests in `super::tests` (power at the
 //! non-excited odd lines relative to the excited ones, mean of 4 periods):
 //! - backlash, Coulomb friction and the cubic spring raise the non-excited odd lines of `u`
-//!   to 1e-2, 1.6e-2 and ~1e-3 of the excited power, 20–300 times the floor of the default
-//!   sensors (quantisation, noise, disturbance: ~5e-5); backlash and friction relatively
-//!   more at small amplitude, the cubic spring more at large amplitude;
+//!   to 7e-3, 1.2e-2 and 1.4e-3 of the excited power (ideal sensors), 100–1000 times the
+//!   floor of the default sensors (quantisation, noise, disturbance: 1.3e-5 in `u`);
+//!   backlash and friction relatively more at small amplitude (at 4 times the amplitude:
+//!   1.8e-4, 7.9e-4), the cubic spring more at large amplitude (2.5e-2);
 //! - the extra mode adds a resonance near 10.4 Hz (anti-resonance 9.3 Hz), below the
 //!   gearbox modes, where the motor-side FRF had none;
 //! - the delay bends the phase of the `u → θ_m` FRF by −0.27° per Hz (1.5 samples);
 //! - the torque ripple raises the even lines (it is not an odd function of the motion).
 //!
 //! Physics of each effect (where it acts in the plant):
-//! - `coulomb_friction`: motor-side friction `τ_f(ω) = [F_c + (F_s − F_c) e^{−(ω/v_s)²}]
-//!   tanh(ω/v_ε)` opposing the motor velocity ω (Coulomb level plus a Stribeck bump). The
-//!   `tanh` regularises `sgn`: below `|ω| ≈ v_ε` the friction acts as a steep viscous
-//!   friction of slope `F_s/v_ε`. `v_ε` defaults to 0.01 rad/s, ten times below the
-//!   velocity quantum of a 2^17-count encoder differenced at 2 kHz (0.096 rad/s), so the
-//!   smoothing is hard to see in measured data (a sticking motor creeps at a fraction of
-//!   `v_ε`). The integrator refines its step where this steep region is crossed (see
-//!   [`super::integrate`]).
+//! - `coulomb_friction`: motor-side friction opposing the motor velocity ω with the
+//!   Coulomb level plus a Stribeck bump, `τ_f = sgn(ω) [F_c + (F_s − F_c) e^{−(ω/v_s)²}]`
+//!   while sliding, and set-valued at ω = 0: the motor sticks while the net torque on it is
+//!   below the breakaway level `F_s` (friction balances it exactly) and breaks away when it
+//!   exceeds it. The integrator treats sticking, stopping and breakaway as events (see
+//!   [`super::integrate`]); no regularisation is used, so `v_ε` (`v_smooth`) only enters
+//!   the smooth approximation [`CoulombFriction::torque`], kept for analysis.
 //! - `backlash`: dead zone of total width `w` in the gearbox spring: the spring torque is
 //!   `k_g dz(δ) + k3 dz(δ)³ + d_g δ̇` in contact and 0 in the gap, `dz(δ) = δ − w/2` for
 //!   `δ > w/2`, `δ + w/2` for `δ < −w/2`, 0 in between (δ = `r θ_m − θ_a1`, arm side). The
@@ -57,7 +57,8 @@ pub struct CoulombFriction {
     pub fs: f64,
     /// Stribeck velocity `v_s` [rad/s], motor side; default 0.1
     pub v_stribeck: f64,
-    /// regularisation velocity `v_ε` of `tanh(ω/v_ε)` [rad/s]; default 0.01
+    /// regularisation velocity `v_ε` of the smooth approximation [`Self::torque`] [rad/s];
+    /// default 0.01 (the simulator integrates the set-valued law and does not use it)
     pub v_smooth: f64,
 }
 
@@ -73,7 +74,20 @@ impl Default for CoulombFriction {
 }
 
 impl CoulombFriction {
-    /// Friction torque opposing the motor velocity `omega` [rad/s] → [N·m].
+    /// Friction level `F_c + (F_s − F_c) e^{−(ω/v_s)²}` while sliding at `omega` [rad/s] →
+    /// [N·m] (the magnitude of the set-valued law the simulator integrates).
+    pub fn level(&self, omega: f64) -> f64 {
+        let x = omega / self.v_stribeck;
+        if x.abs() < 6.0 {
+            self.fc + (self.fs - self.fc) * (-x * x).exp()
+        } else {
+            self.fc
+        }
+    }
+
+    /// Regularised friction torque `level(ω) tanh(ω/v_ε)` opposing the motor velocity
+    /// `omega` [rad/s] → [N·m]; a smooth approximation of the set-valued law, for analysis
+    /// (the simulator does not use it).
     pub fn torque(&self, omega: f64) -> f64 {
         let x = omega / self.v_stribeck;
         let level = if x.abs() < 6.0 {
@@ -268,7 +282,7 @@ impl Effect {
             .collect()
     }
 
-    /// True for effects that make the plant nonlinear (they force the RK4 integrator).
+    /// True for effects that make the plant nonlinear (they need the nonlinear integrators).
     pub fn is_nonlinear(&self) -> bool {
         !matches!(self, Effect::ExtraMode(_) | Effect::TimeDelay(_))
     }

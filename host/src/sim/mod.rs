@@ -16,7 +16,9 @@
 //! How: per sample `k` the sensors read the true state, the discrete controller computes
 //! `u[k]` ([`controller`]), and the plant is propagated over the sample with the inputs held
 //! ([`integrate`]): exactly (zero-order hold, seed 000 eq. (12)–(13)) when the plant is
-//! linear, by event-aware RK4 when an effect makes it nonlinear. Everything random is drawn
+//! linear; when an effect makes it nonlinear, by one exponential (Lawson) RK4 step per sample
+//! with the linear part of the current mode exact, and event-aware RK4 (backlash contact
+//! edges, stick–slip of Coulomb friction located as events) in the samples with events. Everything random is drawn
 //! from generators seeded by [`SimConfig::seed`], so a run is reproducible bit for bit.
 //!
 //! See also: [`params`] for the default joint and its modal frequencies, [`effects`] for the
@@ -57,17 +59,28 @@ pub use plant::{Mechanism, ModalFrequencies};
 pub use sensors::{Disturbance, SensorConfig};
 
 use effects::CoulombFriction;
-use integrate::{NonlinearPlant, State, ZohStep};
+use integrate::{LawsonStep, NonlinearPlant, State, ZohStep};
 use plant::{MAX_BODIES, MAX_STATE};
 use sensors::Sensors;
 
 /// How the plant is integrated between samples.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IntegrationConfig {
-    /// RK4 substeps `M` per sample when the plant is nonlinear [-]; default 5 (10 kHz)
+    /// RK4 substeps `M` per sample of the event-aware RK4 [-]; default 5 (10 kHz). Used for
+    /// every sample when `exponential` is off or `force_rk4` on, else only in the samples
+    /// that contain an event (contact edge, stick–slip transition)
     pub substeps: u32,
-    /// use RK4 even when the plant is linear (for checks); default false
+    /// use RK4 even when the plant is linear, and for nonlinear plants instead of the
+    /// exponential stepper (for checks); default false
     pub force_rk4: bool,
+    /// nonlinear plants: exponential (Lawson) RK4, one step per sample with the linear part
+    /// of the current mode exact, event-aware RK4 only in samples with events; default true
+    #[serde(default = "default_true")]
+    pub exponential: bool,
+}
+
+fn default_true() -> bool {
+    true
 }
 
 impl Default for IntegrationConfig {
@@ -75,6 +88,7 @@ impl Default for IntegrationConfig {
         IntegrationConfig {
             substeps: 5,
             force_rk4: false,
+            exponential: true,
         }
     }
 }
@@ -122,6 +136,12 @@ pub enum Integrator {
     /// RK4 with this many substeps per sample
     Rk4 {
         /// substeps per sample
+        substeps: u32,
+    },
+    /// exponential (Lawson) RK4, one step per sample; event-aware RK4 with this many
+    /// substeps in the samples that contain an event
+    ExponentialRk4 {
+        /// RK4 substeps per sample in samples with events
         substeps: u32,
     },
 }
@@ -444,7 +464,7 @@ fn assemble(cfg: &SimConfig) -> Assembled {
     if cfg.plant.kind == PlantKind::NonlinearTwoMass {
         k3 += p.k3;
         if p.f_c > 0.0 {
-            // seed 001 eq. (7): pure Coulomb, no Stribeck bump; sgn regularised as usual
+            // seed 001 eq. (7): pure Coulomb, no Stribeck bump (set-valued at rest as usual)
             coulomb.push(CoulombFriction {
                 fc: p.f_c,
                 fs: p.f_c,
@@ -510,9 +530,32 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
         Rk4 {
             substeps: u32,
         },
+        Exponential {
+            /// one step per interval of constant delayed input: the whole sample, or the
+            /// parts `φT` (with `u_old`) and `(1 − φ)T` (with `u_new`) of a fractional delay
+            steps: Vec<(LawsonStep, bool)>,
+            substeps: u32,
+        },
     }
-    let stepper = if a.is_nonlinear || cfg.integration.force_rk4 {
+    let tc = cfg.controller.current_loop_tau;
+    let stepper = if cfg.integration.force_rk4 || (a.is_nonlinear && !cfg.integration.exponential) {
         Stepper::Rk4 {
+            substeps: cfg.integration.substeps,
+        }
+    } else if a.is_nonlinear {
+        // the delay's switch is kept at a step boundary: a step across it would see the kink
+        // of the current-loop torque inside its quadrature and lose its order
+        let step = |h: f64| LawsonStep::new(&a.mech, tc, &a.nonlinear, h);
+        let steps = if a.delay_frac > 0.0 {
+            vec![
+                (step(a.delay_frac * ts), true),
+                (step((1.0 - a.delay_frac) * ts), false),
+            ]
+        } else {
+            vec![(step(ts), false)]
+        };
+        Stepper::Exponential {
+            steps,
             substeps: cfg.integration.substeps,
         }
     } else {
@@ -559,9 +602,32 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
         integrator: match stepper {
             Stepper::Exact { .. } => Integrator::ExactZoh,
             Stepper::Rk4 { substeps } => Integrator::Rk4 { substeps },
+            Stepper::Exponential { substeps, .. } => Integrator::ExponentialRk4 { substeps },
         },
     };
     let (dw, phi) = (a.delay_whole, a.delay_frac);
+    // one sample of the event-aware RK4 at `m` substeps, the delayed torque reference
+    // switching from `u_old` to `u_new` at `phi T`
+    let rk4_sample =
+        |x: &mut State, mode: &mut integrate::Contact, m: u32, u_old: f64, u_new: f64, w: f64| {
+            let m = m as usize;
+            let h = ts / m as f64;
+            let t_switch = phi * ts;
+            for j in 0..m {
+                let (t0, t1) = (j as f64 * h, (j + 1) as f64 * h);
+                if phi > 0.0 && t_switch > t0 && t_switch < t1 {
+                    a.nonlinear.advance(x, mode, t_switch - t0, u_old, w);
+                    a.nonlinear.advance(x, mode, t1 - t_switch, u_new, w);
+                } else {
+                    let ud = if phi > 0.0 && t1 <= t_switch {
+                        u_old
+                    } else {
+                        u_new
+                    };
+                    a.nonlinear.advance(x, mode, h, ud, w);
+                }
+            }
+        };
     for (k, &r) in reference.iter().enumerate() {
         let meas = sensors.measure_theta(x[0]);
         let u = controller.step(r, meas);
@@ -587,27 +653,24 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
                 first.apply(&mut x, &[u_old, w]);
                 second.apply(&mut x, &[u_new, w]);
             }
-            Stepper::Rk4 { substeps } => {
-                let m = *substeps as usize;
-                let h = ts / m as f64;
-                let t_switch = phi * ts;
-                for j in 0..m {
-                    let (t0, t1) = (j as f64 * h, (j + 1) as f64 * h);
-                    if phi > 0.0 && t_switch > t0 && t_switch < t1 {
-                        a.nonlinear
-                            .advance(&mut x, &mut mode, t_switch - t0, u_old, w);
-                        a.nonlinear
-                            .advance(&mut x, &mut mode, t1 - t_switch, u_new, w);
-                    } else {
-                        let ud = if phi > 0.0 && t1 <= t_switch {
-                            u_old
-                        } else {
-                            u_new
-                        };
-                        a.nonlinear.advance(&mut x, &mut mode, h, ud, w);
+            Stepper::Exponential { steps, substeps } => {
+                // one Lawson step per interval; the event-aware RK4 with `substeps` per
+                // sample (pro rata) over an interval that contains an event
+                for (step, old) in steps {
+                    let ud = if *old { u_old } else { u_new };
+                    match a.nonlinear.lawson(step, &x, mode, ud, w) {
+                        Some(x1) => x = x1,
+                        None => {
+                            let parts = (f64::from(*substeps) * step.h() / ts).ceil().max(1.0);
+                            let h = step.h() / parts;
+                            for _ in 0..parts as usize {
+                                a.nonlinear.advance(&mut x, &mut mode, h, ud, w);
+                            }
+                        }
                     }
                 }
             }
+            Stepper::Rk4 { substeps } => rk4_sample(&mut x, &mut mode, *substeps, u_old, u_new, w),
         }
     }
     out.saturated_samples = controller.saturated_samples();

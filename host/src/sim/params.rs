@@ -45,6 +45,11 @@
 //!   35.92 Hz; resonances 17.00, 21.26, 36.14 Hz (the parallel mass on the heavy `J_a1` is
 //!   weakly seen from the motor: its pair nearly cancels).
 //!
+//! The firmware's on-target joint (`jointid_core::joint`, streamed by the emulated board) is
+//! this same three-mass joint with the same controller gains: the three-mass values are
+//! held there, in `JointParams::default_joint()`, and read from there by
+//! [`JointParams::default`] (a unit test pins them and the controller gains).
+//!
 //! Damping is chosen for 1.5–5 % modal damping, the usual range for gearbox/arm
 //! structures: `d_g = 80 N·m·s/rad`, `d_a = 4 N·m·s/rad`, `d_p = 7 N·m·s/rad` give
 //! ζ = 3.0 % at 17 Hz and 4.8 % at 23 Hz (three-mass) and 1.4 % at 36 Hz (four-mass).
@@ -151,21 +156,25 @@ pub struct JointParams {
 }
 
 impl Default for JointParams {
-    /// The IRB1400-like axis 1 derived in the module documentation.
+    /// The IRB1400-like axis 1 derived in the module documentation. The three-mass values
+    /// (`J_m`, `J_a1`, `J_a2`, `k_g`, `k_a`, `d_g`, `d_a`, `f_m`, `r`) are read from the
+    /// firmware's on-target joint, `jointid_core::joint::JointParams::default_joint()`, the
+    /// single source of truth of the default joint; the emulated board streams that joint.
     fn default() -> Self {
+        let core = jointid_core::joint::JointParams::default_joint();
         JointParams {
-            j_m: 1.0e-3,
-            j_a1: 11.66,
-            j_a2: 0.627,
+            j_m: core.j_m,
+            j_a1: core.j_a1,
+            j_a2: core.j_a2,
             j_p: 2.33,
-            k_g: 1.275e5,
-            k_a: 7.26e3,
+            k_g: core.k_g,
+            k_a: core.k_a,
             k_p: 9.42e4,
-            d_g: 80.0,
-            d_a: 4.0,
+            d_g: core.d_g,
+            d_a: core.d_a,
             d_p: 7.0,
-            f_m: 2.0e-3,
-            r: 1.0 / 118.0,
+            f_m: core.f_m,
+            r: core.gear_ratio,
             k3: 3.0e13,
             f_c: 0.03,
         }
@@ -226,5 +235,43 @@ impl Plant {
             kind,
             params: JointParams::default(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::ControllerConfig;
+
+    #[test]
+    fn default_joint_is_the_firmware_joint_with_the_same_controller() {
+        let core = jointid_core::joint::JointParams::default_joint();
+        let p = JointParams::default();
+        // the values the module documentation derives, as the firmware holds them
+        let expected = [
+            (p.j_m, 1.0e-3),
+            (p.j_a1, 11.66),
+            (p.j_a2, 0.627),
+            (p.k_g, 1.275e5),
+            (p.k_a, 7.26e3),
+            (p.d_g, 80.0),
+            (p.d_a, 4.0),
+            (p.f_m, 2.0e-3),
+            (p.r, 1.0 / 118.0),
+        ];
+        for (got, want) in expected {
+            assert_eq!(got, want);
+        }
+        // the board's cascade has the host controller's gains (in f32); its velocity PI
+        // integrates K_i e T with K_i = K_v / T_i
+        let c = ControllerConfig::default();
+        assert_eq!(core.kp, c.kp as f32);
+        assert_eq!(core.kv, c.kv as f32);
+        assert_eq!(core.ki, (c.kv / c.ti) as f32);
+        assert_eq!(core.u_max, c.u_max as f32);
+        assert_eq!(
+            f64::from(core.fs_hz),
+            crate::sim::SimConfig::default().sample_rate_hz
+        );
     }
 }

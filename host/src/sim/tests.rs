@@ -401,28 +401,51 @@ fn all_effects(substeps: u32) -> SimConfig {
     cfg
 }
 
-#[test]
-fn rk4_with_all_effects_converges_to_1e6_against_ten_times_the_rate() {
-    // norm: relative 2-norm over the whole run, ‖x_M − x_10M‖₂ / ‖x_10M‖₂, of the true
-    // motor angle, of u and of the gearbox deflection; M is the default substep count.
-    // Quantisation is off: a one-count flip between the two runs would dominate the
-    // difference (and noise would only add the same values to both runs).
-    let m = IntegrationConfig::default().substeps;
-    let r = ramped(multisine(2000, &special_odd_lines(120), 0.02, 2, 8), 400);
-    let coarse = simulate(&all_effects(m), &r).unwrap();
-    let fine = simulate(&all_effects(10 * m), &r).unwrap();
-    assert_eq!(coarse.integrator, Integrator::Rk4 { substeps: m });
-    let e_th = rel_err(&coarse.theta_m_true, &fine.theta_m_true);
-    let e_u = rel_err(&coarse.u_true, &fine.u_true);
+/// Relative 2-norm differences `(θ_m, u, gearbox deflection)` of two runs.
+fn run_differences(a: &SimOutput, b: &SimOutput) -> (f64, f64, f64) {
     let defl = |o: &SimOutput| -> Vec<f64> {
         let m = o.state_series("theta_m").unwrap();
         let a = o.state_series("theta_a1").unwrap();
         m.iter().zip(&a).map(|(m, a)| m / 118.0 - a).collect()
     };
-    let e_d = rel_err(&defl(&coarse), &defl(&fine));
+    (
+        rel_err(&a.theta_m_true, &b.theta_m_true),
+        rel_err(&a.u_true, &b.u_true),
+        rel_err(&defl(a), &defl(b)),
+    )
+}
+
+#[test]
+fn all_effects_converge_to_1e6_against_an_independent_rk4_at_ten_times_the_rate() {
+    // norm: relative 2-norm over the whole run, ‖x − x_ref‖₂ / ‖x_ref‖₂, of the true motor
+    // angle, of u and of the gearbox deflection. The reference is a different integrator:
+    // the event-aware RK4 alone (no exponential step) at 10 M substeps per sample, M the
+    // default substep count. Quantisation is off: a one-count flip between the two runs
+    // would dominate the difference (and noise would only add the same values to both).
+    let m = IntegrationConfig::default().substeps;
+    let r = ramped(multisine(2000, &special_odd_lines(120), 0.02, 2, 8), 400);
+    let coarse = simulate(&all_effects(m), &r).unwrap();
+    let mut fine_cfg = all_effects(10 * m);
+    fine_cfg.integration.exponential = false;
+    let fine = simulate(&fine_cfg, &r).unwrap();
+    assert_eq!(
+        coarse.integrator,
+        Integrator::ExponentialRk4 { substeps: m }
+    );
+    assert_eq!(fine.integrator, Integrator::Rk4 { substeps: 10 * m });
+    let (e_th, e_u, e_d) = run_differences(&coarse, &fine);
     assert!(
         e_th < 1e-6 && e_u < 1e-6 && e_d < 1e-6,
-        "theta {e_th:e}, u {e_u:e}, deflection {e_d:e}"
+        "exponential: theta {e_th:e}, u {e_u:e}, deflection {e_d:e}"
+    );
+    // the event-aware RK4 at M substeps converges too
+    let mut rk_cfg = all_effects(m);
+    rk_cfg.integration.exponential = false;
+    let rk = simulate(&rk_cfg, &r).unwrap();
+    let (e_th, e_u, e_d) = run_differences(&rk, &fine);
+    assert!(
+        e_th < 1e-6 && e_u < 1e-6 && e_d < 1e-6,
+        "rk4: theta {e_th:e}, u {e_u:e}, deflection {e_d:e}"
     );
     // and the effects do act: the run differs from the linear one by far more than that
     let linear = simulate(&ideal(Plant::default(), vec![]), &r).unwrap();
@@ -554,7 +577,7 @@ fn every_plant_kind_runs_and_tracks_a_slow_reference() {
     for kind in PlantKind::ALL {
         let out = simulate(&ideal(Plant::new(kind), vec![]), &r).unwrap();
         let expected = if kind == PlantKind::NonlinearTwoMass {
-            Integrator::Rk4 { substeps: 5 }
+            Integrator::ExponentialRk4 { substeps: 5 }
         } else {
             Integrator::ExactZoh
         };
