@@ -316,7 +316,16 @@ pub struct ClassLevel {
     pub threshold_db: f64,
     /// distortion detected: `vs_noise_db > threshold_db`
     pub detected: bool,
+    /// detected and within [`SIGNIFICANCE_DB`] of the excited lines: large
+    /// enough to matter for a linear model, not only above the noise
+    pub significant: bool,
 }
+
+/// Distortion this far below the excited lines [dB] or further is reported
+/// as negligible even when it is statistically detected. Seed 000 §3 accepts
+/// the robot as linear because its overtones are "about a factor 1/100"
+/// below the excited lines in amplitude, i.e. 40 dB.
+pub const SIGNIFICANCE_DB: f64 = 40.0;
 
 /// Linearity check of one signal.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -370,11 +379,19 @@ impl FrfAnalysis {
         k as f64 * self.f0_hz
     }
 
-    /// true when either signal shows odd or even distortion
+    /// true when either signal shows odd or even distortion above the noise
     pub fn distortion_detected(&self) -> bool {
         [&self.linearity_u, &self.linearity_y]
             .iter()
             .any(|l| l.odd.detected || l.even.detected)
+    }
+
+    /// true when either signal shows distortion that is detected and within
+    /// [`SIGNIFICANCE_DB`] of the excited lines
+    pub fn distortion_significant(&self) -> bool {
+        [&self.linearity_u, &self.linearity_y]
+            .iter()
+            .any(|l| l.odd.significant || l.even.significant)
     }
 }
 
@@ -759,14 +776,17 @@ fn linearity(name: &str, s: &LineStats, classes: &[LineClass], periods: usize) -
         let (_, ratio) = mean_of(cls, &|k| power(k) / pooled(k));
         let threshold_db = distortion_threshold_db(m, periods);
         let vs_noise_db = db(ratio);
+        let vs_excited_db = db(pw) - db(exc);
+        let detected = m > 0 && vs_noise_db > threshold_db;
         ClassLevel {
             lines: m,
             level_db: db(pw),
-            vs_excited_db: db(pw) - db(exc),
+            vs_excited_db,
             noise_db: db(nv),
             vs_noise_db,
             threshold_db,
-            detected: m > 0 && vs_noise_db > threshold_db,
+            detected,
+            significant: detected && vs_excited_db > -SIGNIFICANCE_DB,
         }
     };
     let odd = level(LineClass::OddNonExcited);
@@ -780,7 +800,13 @@ fn linearity(name: &str, s: &LineStats, classes: &[LineClass], periods: usize) -
                 -c.vs_excited_db,
                 c.vs_noise_db,
                 c.threshold_db,
-                if c.detected { "detected" } else { "not detected" }
+                match (c.detected, c.significant) {
+                    (true, true) => "detected, significant".to_string(),
+                    (true, false) => format!(
+                        "detected, negligible (more than {SIGNIFICANCE_DB:.0} dB below excited)"
+                    ),
+                    _ => "not detected".to_string(),
+                }
             )
         }
     };
