@@ -54,7 +54,7 @@ pub enum Command {
     Analyze(analyze::AnalyzeArgs),
     /// FIT and residual tests of a simulated output against measured data
     Validate(validate::ValidateArgs),
-    /// closed-loop joint simulator with switchable effects; writes a capture CSV
+    /// closed-loop joint simulator with switchable effects; writes a .jcap capture or a capture CSV
     Simulate(simulate::SimulateArgs),
 }
 
