@@ -4,3 +4,5 @@
 mod capture_cli;
 // The thumbv7em firmware on QEMU mps2-an386, streaming over its UART to this test.
 mod emulated_board;
+// Software in the loop: generator -> simulator -> wire -> .jcap -> decoder -> CSV, exact.
+mod sil;
