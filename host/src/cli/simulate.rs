@@ -675,6 +675,21 @@ mod tests {
         std::env::temp_dir().join(format!("jointid-sim-{}-{name}", std::process::id()))
     }
 
+    /// Runs `cli` as the binary does (JSON when `--json` was given); the result and the output.
+    fn run_cli(cli: &Cli) -> (crate::cli::CmdResult, Vec<u8>) {
+        let loaders = default_loaders();
+        let mut buf = Vec::new();
+        let result = crate::cli::run(
+            cli,
+            &mut Context {
+                json: cli.json,
+                loaders: &loaders,
+                out: &mut buf,
+            },
+        );
+        (result, buf)
+    }
+
     #[test]
     fn simulate_writes_a_capture_csv_that_data_reads_back() {
         let csv = temp("out.csv");
@@ -697,17 +712,8 @@ mod tests {
         let Command::Simulate(args) = &cli.command else {
             panic!("parsed {:?}", cli.command)
         };
-        let loaders = default_loaders();
-        let mut buf = Vec::new();
-        let outcome = crate::cli::run(
-            &cli,
-            &mut Context {
-                json: false,
-                loaders: &loaders,
-                out: &mut buf,
-            },
-        )
-        .unwrap();
+        let (result, buf) = run_cli(&cli);
+        let outcome = result.unwrap();
         assert_eq!(outcome, Outcome::Ok);
         let text = String::from_utf8(buf).unwrap();
         assert!(
@@ -744,17 +750,7 @@ mod tests {
             "backlash:widht=1",
         ])
         .unwrap();
-        let loaders = default_loaders();
-        let mut buf = Vec::new();
-        let err = crate::cli::run(
-            &cli,
-            &mut Context {
-                json: false,
-                loaders: &loaders,
-                out: &mut buf,
-            },
-        )
-        .unwrap_err();
+        let err = run_cli(&cli).0.unwrap_err();
         assert!(err.to_string().contains("unknown key `widht`"), "{err}");
         assert!(!temp("never.csv").exists());
     }
@@ -881,17 +877,7 @@ mod tests {
         let out = temp("run.txt");
         let cli =
             Cli::try_parse_from(["jointid", "simulate", "--out", out.to_str().unwrap()]).unwrap();
-        let loaders = default_loaders();
-        let mut buf = Vec::new();
-        let err = crate::cli::run(
-            &cli,
-            &mut Context {
-                json: false,
-                loaders: &loaders,
-                out: &mut buf,
-            },
-        )
-        .unwrap_err();
+        let err = run_cli(&cli).0.unwrap_err();
         assert_eq!(
             err.to_string(),
             format!("{}: --out must end in .jcap or .csv", out.display())
@@ -919,17 +905,8 @@ mod tests {
         let Command::Simulate(args) = &cli.command else {
             unreachable!()
         };
-        let loaders = default_loaders();
-        let mut buf = Vec::new();
-        crate::cli::run(
-            &cli,
-            &mut Context {
-                json: true,
-                loaders: &loaders,
-                out: &mut buf,
-            },
-        )
-        .unwrap();
+        let (result, buf) = run_cli(&cli);
+        result.unwrap();
         let summary: serde_json::Value = serde_json::from_slice(&buf).unwrap();
         let rec = crate::capture::read_jcap(&jcap).unwrap();
         let (cfg, exc) = configure(args).unwrap();
