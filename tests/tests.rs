@@ -6,3 +6,5 @@ mod capture_cli;
 mod emulated_board;
 // identification on simulated joints with known truth and on measured data via the CLI
 mod identify;
+// Software in the loop: generator -> simulator -> wire -> .jcap -> decoder -> CSV, exact.
+mod sil;

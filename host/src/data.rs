@@ -492,7 +492,9 @@ pub enum DataError {
 /// relative tolerance on each sample interval against the nominal one
 pub const SAMPLE_INTERVAL_TOLERANCE: f64 = 0.01;
 
-const EXCITATION_KEYS: [&str; 9] = [
+/// The nine `# key=value` comment keys of an excitation config in a capture CSV, in the
+/// order they are written.
+pub const EXCITATION_KEYS: [&str; 9] = [
     "kind",
     "fs_hz",
     "period_samples",
@@ -764,7 +766,9 @@ pub fn excitation_comment_lines(cfg: &ExcitationConfig) -> String {
 /// Writes `ds` as a capture CSV: the excitation keys (when known),
 /// `sample_interval_s`, every other meta key, the header
 /// `t,theta_ref,u,theta_m` and one row per sample, numbers in shortest
-/// round-trip form, so [`parse_csv`] reads back exactly the same data.
+/// round-trip form, so [`parse_csv`] reads back exactly the same data. The
+/// rows are written by `capture::export::write_table`, the one capture CSV
+/// row writer.
 ///
 /// # Errors
 /// [`std::io::ErrorKind::InvalidInput`] when the dataset has no reference
@@ -776,20 +780,24 @@ pub fn write_capture_csv(out: &mut dyn std::io::Write, ds: &Dataset) -> std::io:
             format!("{}: no reference signal for the theta_ref column", ds.name),
         )
     })?;
-    if let Some(cfg) = &ds.excitation {
-        out.write_all(excitation_comment_lines(cfg).as_bytes())?;
-    }
-    writeln!(out, "# sample_interval_s={}", ds.data.ts)?;
+    let mut comments = ds
+        .excitation
+        .as_ref()
+        .map(excitation_comment_lines)
+        .unwrap_or_default();
+    comments.push_str(&format!("# sample_interval_s={}\n", ds.data.ts));
     for (k, v) in &ds.meta {
         if k != "sample_interval_s" && !k.contains('=') && !v.contains('\n') {
-            writeln!(out, "# {k}={v}")?;
+            comments.push_str(&format!("# {k}={v}\n"));
         }
     }
-    writeln!(out, "t,theta_ref,u,theta_m")?;
-    for (k, ((rk, uk), yk)) in r.iter().zip(&ds.data.u).zip(&ds.data.y).enumerate() {
-        writeln!(out, "{},{rk},{uk},{yk}", ds.t0 + k as f64 * ds.data.ts)?;
-    }
-    Ok(())
+    let rows = r
+        .iter()
+        .zip(&ds.data.u)
+        .zip(&ds.data.y)
+        .enumerate()
+        .map(|(k, ((&rk, &uk), &yk))| [ds.t0 + k as f64 * ds.data.ts, rk, uk, yk]);
+    crate::capture::export::write_table(out, &comments, rows)
 }
 
 /// Reads a CSV file (see [`parse_csv`]).

@@ -63,7 +63,7 @@ pub enum Command {
     Demo(demo::DemoArgs),
     /// seed 000 Table 2 on simulated IRB1400-like data (FIT of black box 11, three-, four-mass)
     Experiment(demo::ExperimentArgs),
-    /// closed-loop joint simulator with switchable effects; writes a capture CSV
+    /// closed-loop joint simulator with switchable effects; writes a .jcap capture or a capture CSV
     Simulate(simulate::SimulateArgs),
 }
 

@@ -1,61 +1,155 @@
-//! `jointid simulate --out FILE.csv`: runs the closed-loop joint simulator ([`crate::sim`])
-//! on the firmware's excitation and writes a capture CSV (DESIGN.md §5) that every analysis
-//! command reads, with the excitation config in its `# key=value` comments so the periods
-//! can be found again. Optionally writes the whole simulator configuration as JSON.
+//! `jointid simulate`: runs the closed-loop joint simulator ([`crate::sim`]) on the
+//! firmware's excitation and writes the run as a board would have delivered it.
+//!
+//! ```text
+//! jointid simulate --model rigid|two-mass|three-mass|four-mass|nonlinear-two-mass
+//!     [--param NAME=VALUE]... [--effect SPEC]... [--excitation odd-multisine|random-odd|noise]
+//!     [--rms RAD] [--periods N] [--seed N] --out FILE.jcap|FILE.csv [--params-out FILE.json]
+//! ```
+//!
+//! - `--out RUN.jcap` puts the run through the real wire encoder
+//!   (`jointid_core::wire`: session header with the excitation config and the scale,
+//!   delta-coded sample batches from `BatchBuilder` with the reference CRC, a `Status`
+//!   every [`WireOptions::status_every`] batches, `End`) into a `.jcap` written by
+//!   [`JcapWriter`], so `jointid info`, `export`, `analyze` and `fit` read it exactly like
+//!   a board capture. The wire carries integer counts: `u` and `θm` are rounded to the
+//!   scale of [`WireOptions::for_sim`] (at most half a count from the simulator's value),
+//!   the reference is regenerated from the header bit-exactly.
+//! - `--out RUN.csv` writes the capture CSV (DESIGN.md §5) with the simulator's values
+//!   unquantised, the excitation config and `sim_*` keys in its comments.
+//!
+//! `--param NAME=VALUE` overrides one physical parameter of the chosen model, named as in
+//! seed 000 Table 1 (`J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r`) plus
+//! seed 001's `k3`, `F_c` for the nonlinear two-mass (see [`crate::sim::params`]); only
+//! the names the model uses are accepted ([`model_params`]).
+// Units in brackets (`[s]`, `[rad]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
-use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 use clap::{Args, ValueEnum};
+use jointid_core::wire::{
+    encode_frame, BatchBuilder, EncodeError, Message, Scale, SessionHeader, Status, MAX_FRAME_LEN,
+    PROTOCOL_VERSION,
+};
 use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
-use crate::data::{excitation_comment_lines, ExcitationConfig, SignalKind};
+use crate::capture::jcap::{events_path, FlushPolicy, JcapError, JcapWriter};
+use crate::data::{write_capture_csv, Dataset, ExcitationConfig, SignalKind};
 use crate::sim::{
-    parse_effects, simulate_excitation, Integrator, Mechanism, Plant, PlantKind, SensorConfig,
-    SimConfig,
+    parse_effects, simulate_excitation, Integrator, JointParams, Mechanism, Plant, PlantKind,
+    SensorConfig, SimConfig, SimOutput,
 };
+
+/// Plant model on the command line (hyphen or underscore spelling).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ModelArg {
+    /// one rigid mass
+    Rigid,
+    /// motor and one arm mass through the gearbox spring
+    #[value(alias = "two_mass")]
+    TwoMass,
+    /// seed 000 eq. (5)-(6): motor and two arm masses
+    #[value(alias = "three_mass")]
+    ThreeMass,
+    /// seed 000 eq. (7)-(8): three-mass plus a parallel mass
+    #[value(alias = "four_mass")]
+    FourMass,
+    /// seed 001: two-mass with cubic spring and Coulomb friction
+    #[value(alias = "nonlinear_two_mass")]
+    NonlinearTwoMass,
+}
+
+impl ModelArg {
+    /// The simulator's plant kind.
+    pub fn kind(self) -> PlantKind {
+        match self {
+            ModelArg::Rigid => PlantKind::Rigid,
+            ModelArg::TwoMass => PlantKind::TwoMass,
+            ModelArg::ThreeMass => PlantKind::ThreeMass,
+            ModelArg::FourMass => PlantKind::FourMass,
+            ModelArg::NonlinearTwoMass => PlantKind::NonlinearTwoMass,
+        }
+    }
+
+    /// Name on the command line (`three-mass`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelArg::Rigid => "rigid",
+            ModelArg::TwoMass => "two-mass",
+            ModelArg::ThreeMass => "three-mass",
+            ModelArg::FourMass => "four-mass",
+            ModelArg::NonlinearTwoMass => "nonlinear-two-mass",
+        }
+    }
+}
 
 /// Excitation signal kind on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum KindArg {
+pub enum ExcitationArg {
     /// special odd multisine (seed 000 eq. (4)), for the linearity check
-    SpecialOdd,
+    #[value(alias = "special-odd")]
+    OddMultisine,
     /// random-phase full odd multisine
     RandomOdd,
     /// band-limited noise (validation data)
     Noise,
 }
 
+impl ExcitationArg {
+    /// The generator's signal kind.
+    pub fn kind(self) -> SignalKind {
+        match self {
+            ExcitationArg::OddMultisine => SignalKind::SpecialOddMultisine,
+            ExcitationArg::RandomOdd => SignalKind::RandomOddMultisine,
+            ExcitationArg::Noise => SignalKind::BandLimitedNoise,
+        }
+    }
+}
+
 /// Arguments of `jointid simulate`.
 #[derive(Debug, Clone, Args)]
 pub struct SimulateArgs {
-    /// capture CSV to write
-    #[arg(long, value_name = "FILE")]
-    pub out: PathBuf,
-    /// plant: rigid, two_mass, three_mass, four_mass, nonlinear_two_mass
-    #[arg(long, value_name = "KIND", default_value = "three_mass", value_parser = parse_plant)]
-    pub plant: PlantKind,
+    /// plant model
+    #[arg(long, visible_alias = "plant", value_enum, value_name = "MODEL",
+          default_value_t = ModelArg::ThreeMass)]
+    pub model: ModelArg,
+    /// override a physical parameter of the model, repeatable (`k_g=1.3e5`); names as in
+    /// seed 000 Table 1 (J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r) and
+    /// seed 001 (k3, F_c), those the model uses
+    #[arg(long = "param", value_name = "NAME=VALUE")]
+    pub params: Vec<String>,
     /// effect spec, repeatable: `name` or `name:key=value,...` (e.g. `backlash:width=2e-5`),
     /// or `none`; names: coulomb_friction, backlash, nonlinear_stiffness, extra_mode,
     /// time_delay, torque_ripple
     #[arg(long = "effect", value_name = "SPEC")]
     pub effects: Vec<String>,
-    /// excitation kind (core's paper default otherwise)
-    #[arg(long, value_enum, default_value_t = KindArg::SpecialOdd)]
-    pub kind: KindArg,
+    /// excitation signal
+    #[arg(long, visible_alias = "kind", value_enum, value_name = "KIND",
+          default_value_t = ExcitationArg::OddMultisine)]
+    pub excitation: ExcitationArg,
     /// RMS of the motor-angle reference [rad] (default: core's paper default, 0.02)
     #[arg(long, value_name = "RAD")]
     pub rms: Option<f32>,
     /// full-amplitude excitation periods (default: core's paper default, 4)
-    #[arg(long, value_name = "P", value_parser = clap::value_parser!(u32).range(1..))]
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub periods: Option<u32>,
-    /// excitation seed (phases / noise)
+    /// seed of the run: the simulator's noise and disturbance (default 1) and, unless
+    /// --excitation-seed is given, the excitation's phases / noise (default: core's)
+    #[arg(long, value_name = "N")]
+    pub seed: Option<u64>,
+    /// excitation seed (phases / noise), when it should differ from --seed
     #[arg(long, value_name = "N")]
     pub excitation_seed: Option<u64>,
-    /// seed of the simulator's noise and disturbance
-    #[arg(long, value_name = "N", default_value_t = 1)]
-    pub seed: u64,
+    /// output: RUN.jcap (through the wire encoder, read like a board capture) or RUN.csv
+    /// (capture CSV)
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+    /// also write every parameter used (the whole simulator configuration) as JSON here
+    #[arg(long, visible_alias = "params-json", value_name = "FILE.json")]
+    pub params_out: Option<PathBuf>,
     /// perfect sensors: no quantisation, no noise, no disturbance
     #[arg(long)]
     pub ideal_sensors: bool,
@@ -66,21 +160,402 @@ pub struct SimulateArgs {
     /// with contact or stick–slip events; the others take one exponential step)
     #[arg(long, value_name = "M", value_parser = clap::value_parser!(u32).range(1..))]
     pub substeps: Option<u32>,
-    /// also write the whole simulator configuration (every parameter) as JSON here
-    #[arg(long, value_name = "FILE")]
-    pub params_json: Option<PathBuf>,
 }
 
-fn parse_plant(s: &str) -> Result<PlantKind, String> {
-    s.parse()
+/// Errors of `jointid simulate` before or after the simulation itself.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SimulateError {
+    /// `--param` without `=`
+    #[error("--param `{spec}`: expected NAME=VALUE (valid names for {model}: {valid})")]
+    ParamSyntax {
+        /// the argument as given
+        spec: String,
+        /// model name
+        model: &'static str,
+        /// the names the model accepts, comma separated
+        valid: String,
+    },
+    /// `--param` naming a parameter the model does not have
+    #[error("--param `{name}`: unknown parameter for {model} (valid: {valid})")]
+    UnknownParam {
+        /// the name given
+        name: String,
+        /// model name
+        model: &'static str,
+        /// the names the model accepts, comma separated
+        valid: String,
+    },
+    /// `--param` with a value that is not a finite number
+    #[error(
+        "--param `{name}`: `{value}` is not a finite number (valid names for {model}: {valid})"
+    )]
+    BadValue {
+        /// parameter name
+        name: String,
+        /// the value as given
+        value: String,
+        /// model name
+        model: &'static str,
+        /// the names the model accepts, comma separated
+        valid: String,
+    },
+    /// `--out` with an extension other than `.jcap` or `.csv`
+    #[error("{path}: --out must end in .jcap or .csv")]
+    OutExtension {
+        /// the path given
+        path: PathBuf,
+    },
+    /// a message did not fit a wire frame (a bug of the encoder's limits)
+    #[error("wire frame of message {index}: {err}")]
+    Encode {
+        /// 0-based index of the message in the stream
+        index: usize,
+        /// what the encoder said
+        err: EncodeError,
+    },
+    /// the `.jcap` could not be written
+    #[error(transparent)]
+    Jcap(#[from] JcapError),
+    /// a CSV or JSON output could not be written
+    #[error("{path}: {err}")]
+    Write {
+        /// the file
+        path: PathBuf,
+        /// what the operating system said
+        err: std::io::Error,
+    },
+}
+
+/// Access to one field of [`JointParams`] (its unit is the field's).
+pub type ParamField = fn(&mut JointParams) -> &mut f64;
+
+/// The physical parameters model `kind` uses, as (name, field) pairs, names as in
+/// [`JointParams::table`] (seed 000 Table 1, seed 001 `k3`, `F_c`).
+pub fn model_params(kind: PlantKind) -> Vec<(&'static str, ParamField)> {
+    type Field = ParamField;
+    let mut v: Vec<(&'static str, Field)> = vec![
+        ("J_m", |p| &mut p.j_m),
+        ("J_a1", |p| &mut p.j_a1),
+        ("J_a2", |p| &mut p.j_a2),
+    ];
+    let gearbox: [(&'static str, Field); 2] = [("k_g", |p| &mut p.k_g), ("d_g", |p| &mut p.d_g)];
+    let arm: [(&'static str, Field); 2] = [("k_a", |p| &mut p.k_a), ("d_a", |p| &mut p.d_a)];
+    match kind {
+        PlantKind::Rigid => {}
+        PlantKind::TwoMass | PlantKind::NonlinearTwoMass => v.extend(gearbox),
+        PlantKind::ThreeMass => v.extend(gearbox.into_iter().chain(arm)),
+        PlantKind::FourMass => {
+            v.push(("J_p", |p| &mut p.j_p));
+            v.extend(gearbox.into_iter().chain(arm));
+            v.extend::<[(&'static str, Field); 2]>([
+                ("k_p", |p| &mut p.k_p),
+                ("d_p", |p| &mut p.d_p),
+            ]);
+        }
+    }
+    v.extend::<[(&'static str, Field); 2]>([("f_m", |p| &mut p.f_m), ("r", |p| &mut p.r)]);
+    if kind == PlantKind::NonlinearTwoMass {
+        v.extend::<[(&'static str, Field); 2]>([("k3", |p| &mut p.k3), ("F_c", |p| &mut p.f_c)]);
+    }
+    v
+}
+
+/// Applies `NAME=VALUE` overrides to the parameters of model `model`.
+///
+/// # Errors
+/// [`SimulateError::ParamSyntax`], [`SimulateError::UnknownParam`] or
+/// [`SimulateError::BadValue`], each naming the parameter and listing the valid names.
+pub fn apply_params(
+    model: ModelArg,
+    specs: &[String],
+    params: &mut JointParams,
+) -> Result<(), SimulateError> {
+    let fields = model_params(model.kind());
+    let valid = || {
+        fields
+            .iter()
+            .map(|(n, _)| *n)
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    for spec in specs {
+        let Some((name, value)) = spec.split_once('=') else {
+            return Err(SimulateError::ParamSyntax {
+                spec: spec.clone(),
+                model: model.name(),
+                valid: valid(),
+            });
+        };
+        let (name, value) = (name.trim(), value.trim());
+        let Some((_, field)) = fields.iter().find(|(n, _)| *n == name) else {
+            return Err(SimulateError::UnknownParam {
+                name: name.to_string(),
+                model: model.name(),
+                valid: valid(),
+            });
+        };
+        match value.parse::<f64>() {
+            Ok(v) if v.is_finite() => *field(params) = v,
+            _ => {
+                return Err(SimulateError::BadValue {
+                    name: name.to_string(),
+                    value: value.to_string(),
+                    model: model.name(),
+                    valid: valid(),
+                })
+            }
+        }
+    }
+    Ok(())
+}
+
+/// What `--out` writes, from its extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OutFormat {
+    /// `.jcap`: the wire stream of a board
+    Jcap,
+    /// `.csv`: the capture CSV
+    Csv,
+}
+
+/// The format `path` asks for (extension `.jcap` or `.csv`, any case).
+///
+/// # Errors
+/// [`SimulateError::OutExtension`] for anything else.
+pub fn out_format(path: &Path) -> Result<OutFormat, SimulateError> {
+    match path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+    {
+        Some(e) if e == "jcap" => Ok(OutFormat::Jcap),
+        Some(e) if e == "csv" => Ok(OutFormat::Csv),
+        _ => Err(SimulateError::OutExtension {
+            path: path.to_path_buf(),
+        }),
+    }
+}
+
+/// The simulator configuration and the excitation these arguments describe.
+///
+/// # Errors
+/// Bad `--param` or `--effect` specs.
+pub fn configure(
+    args: &SimulateArgs,
+) -> Result<(SimConfig, ExcitationConfig), Box<dyn std::error::Error + Send + Sync>> {
+    let mut plant = Plant::new(args.model.kind());
+    apply_params(args.model, &args.params, &mut plant.params)?;
+    let mut cfg = SimConfig {
+        plant,
+        effects: parse_effects(&args.effects)?,
+        ..SimConfig::default()
+    };
+    if let Some(s) = args.seed {
+        cfg.seed = s;
+    }
+    if args.ideal_sensors {
+        cfg.sensors = SensorConfig::ideal();
+    }
+    cfg.controller.feedforward = args.feedforward;
+    if let Some(m) = args.substeps {
+        cfg.integration.substeps = m;
+    }
+    let mut exc = ExcitationConfig::paper_default();
+    exc.kind = args.excitation.kind();
+    if let Some(r) = args.rms {
+        exc.rms_rad = r;
+    }
+    if let Some(p) = args.periods {
+        exc.periods = p;
+    }
+    if let Some(s) = args.excitation_seed.or(args.seed) {
+        exc.seed = s;
+    }
+    cfg.sample_rate_hz = f64::from(exc.fs_hz);
+    Ok((cfg, exc))
+}
+
+/// How a simulated run is put on the wire: the session header's identity and scale, the
+/// batching and the status rate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WireOptions {
+    /// board identifier in the header (`0x5157_0001` for the simulator)
+    pub board_id: u32,
+    /// session identifier in the header (the low 32 bits of the simulator seed)
+    pub session_id: u32,
+    /// rate of the sample timestamps [Hz]
+    pub timer_hz: u32,
+    /// samples per batch (2..=64)
+    pub batch_len: usize,
+    /// a `Status` after every this many batches (0 = never)
+    pub status_every: usize,
+    /// counts to SI
+    pub scale: Scale,
+}
+
+/// Torque scale of a simulated run [N·m/count]: 2^-20, a power of two so that counts ×
+/// scale is exact, far below the simulator's torque noise (2e-3 N·m) and with ±2048 N·m
+/// of range (the controller limits u to 12 N·m).
+pub const SIM_TORQUE_NM_PER_COUNT: f32 = 1.0 / 1_048_576.0;
+/// Angle scale of a simulated run without encoder quantisation [rad/count]: 2^-20
+/// (±2048 rad of range).
+pub const SIM_IDEAL_ANGLE_RAD_PER_COUNT: f32 = 1.0 / 1_048_576.0;
+
+impl WireOptions {
+    /// The options `jointid simulate` uses for `cfg`: the angle scale is the simulated
+    /// encoder's resolution `2π / counts_per_rev` (as `f32`; [`SIM_IDEAL_ANGLE_RAD_PER_COUNT`]
+    /// without an encoder), the torque scale [`SIM_TORQUE_NM_PER_COUNT`], a 1 MHz timer,
+    /// batches of 32 and a status every 16 batches (4 Hz at 2 kHz), as the board does.
+    pub fn for_sim(cfg: &SimConfig) -> Self {
+        WireOptions {
+            board_id: 0x5157_0001,
+            session_id: cfg.seed as u32,
+            timer_hz: 1_000_000,
+            batch_len: 32,
+            status_every: 16,
+            scale: Scale {
+                torque_nm_per_count: SIM_TORQUE_NM_PER_COUNT,
+                angle_rad_per_count: cfg
+                    .sensors
+                    .angle_resolution()
+                    .map_or(SIM_IDEAL_ANGLE_RAD_PER_COUNT, |r| r as f32),
+            },
+        }
+    }
+
+    /// The session header for `excitation` at its sample rate.
+    pub fn header(&self, excitation: &ExcitationConfig) -> SessionHeader {
+        SessionHeader {
+            protocol_version: PROTOCOL_VERSION,
+            board_id: self.board_id,
+            session_id: self.session_id,
+            sample_rate_hz: excitation.fs_hz,
+            timer_hz: self.timer_hz,
+            excitation: *excitation,
+            scale: self.scale,
+        }
+    }
+}
+
+/// Encodes a simulated run as the stream a board sends: session header, sample batches
+/// (`BatchBuilder`, with the reference CRC), a `Status` every `opts.status_every`
+/// batches, `End`; each message one frame of `jointid_core::wire::encode_frame`.
+///
+/// `out` must be `simulate_excitation(cfg, excitation)` (or the same reference through
+/// `simulate_f32`): the reader regenerates the reference from the header and reports
+/// every batch whose reference CRC differs. Samples are `out.to_raw_samples(scale,
+/// timer_hz)`: `u` and `θm` rounded to counts of `opts.scale`.
+///
+/// # Errors
+/// [`SimulateError::Encode`] if a message does not fit a frame.
+pub fn encode_session(
+    out: &SimOutput,
+    excitation: &ExcitationConfig,
+    opts: &WireOptions,
+) -> Result<Vec<u8>, SimulateError> {
+    let header = opts.header(excitation);
+    let raw = out.to_raw_samples(&opts.scale, opts.timer_hz);
+    let tick_step = raw.get(1).map_or(0, |s| s.tick.wrapping_sub(raw[0].tick));
+    let mut bytes = Vec::with_capacity(64 + raw.len() * 6);
+    let mut buf = vec![0u8; MAX_FRAME_LEN];
+    let mut index = 0usize;
+    let mut push = |bytes: &mut Vec<u8>, msg: &Message| {
+        let n = encode_frame(msg, &mut buf).map_err(|err| SimulateError::Encode { index, err })?;
+        bytes.extend_from_slice(&buf[..n]);
+        index += 1;
+        Ok::<(), SimulateError>(())
+    };
+    push(&mut bytes, &Message::Header(header))?;
+    let mut builder = BatchBuilder::new(tick_step, opts.batch_len);
+    let status = |seq: u32| Status {
+        seq,
+        overruns: 0,
+        queue_drops: 0,
+        tx_errors: 0,
+    };
+    let mut batches = 0usize;
+    for (k, (s, &r)) in raw.iter().zip(&out.theta_ref).enumerate() {
+        let last = k + 1 == raw.len();
+        let full = builder.push(*s, r as f32);
+        for b in full
+            .into_iter()
+            .chain(if last { builder.flush() } else { None })
+        {
+            push(&mut bytes, &Message::Batch(b))?;
+            batches += 1;
+            if opts.status_every > 0 && batches.is_multiple_of(opts.status_every) {
+                push(&mut bytes, &Message::Status(status(s.seq.wrapping_add(1))))?;
+            }
+        }
+    }
+    push(&mut bytes, &Message::End(status(raw.len() as u32)))?;
+    Ok(bytes)
+}
+
+/// Writes a stream from [`encode_session`] as the `.jcap` `path` (replacing it and any
+/// stale `.events` sidecar of an earlier capture of that name) with [`JcapWriter`].
+///
+/// # Errors
+/// [`SimulateError::Jcap`] naming the file.
+pub fn write_jcap(path: &Path, stream: &[u8]) -> Result<u64, SimulateError> {
+    let mut w = JcapWriter::create(path, true, FlushPolicy::default())?;
+    w.append(stream, Instant::now())?;
+    let n = w.finish()?;
+    match std::fs::remove_file(events_path(path)) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(SimulateError::Write {
+            path: events_path(path),
+            err: e,
+        }),
+        _ => Ok(n),
+    }
+}
+
+/// The run as a capture CSV dataset: the simulator's values (unquantised), the excitation,
+/// and `sim_plant`, `sim_effects`, `sim_seed` as meta.
+pub fn to_dataset(out: &SimOutput, cfg: &SimConfig, excitation: &ExcitationConfig) -> Dataset {
+    let meta = [
+        ("sim_plant", cfg.plant.kind.name().to_string()),
+        ("sim_effects", effects_text(cfg, ";")),
+        ("sim_seed", cfg.seed.to_string()),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect();
+    Dataset {
+        name: "simulate".to_string(),
+        data: out.to_id_data(),
+        t0: 0.0,
+        excitation: Some(*excitation),
+        meta,
+    }
+}
+
+fn effects_text(cfg: &SimConfig, sep: &str) -> String {
+    if cfg.effects.is_empty() {
+        "none".to_string()
+    } else {
+        cfg.effects
+            .iter()
+            .map(|e| e.to_string())
+            .collect::<Vec<_>>()
+            .join(sep)
+    }
 }
 
 #[derive(Serialize)]
 struct Report<'a> {
     file: String,
-    params_json: Option<String>,
+    format: OutFormat,
+    model: &'static str,
+    effects: Vec<String>,
     samples: usize,
     duration_s: f64,
+    params_out: Option<String>,
+    /// wire scale (`.jcap` only)
+    scale: Option<Scale>,
+    stream_bytes: Option<u64>,
     integrator: Integrator,
     saturated_samples: u64,
     u_rms: f64,
@@ -96,80 +571,46 @@ fn rms(x: &[f64]) -> f64 {
     (x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n).sqrt()
 }
 
-/// The simulator configuration and the excitation these arguments describe.
-///
-/// # Errors
-/// Bad effect specs.
-pub fn configure(
-    args: &SimulateArgs,
-) -> Result<(SimConfig, ExcitationConfig), Box<dyn std::error::Error + Send + Sync>> {
-    let mut cfg = SimConfig {
-        plant: Plant::new(args.plant),
-        effects: parse_effects(&args.effects)?,
-        seed: args.seed,
-        ..SimConfig::default()
-    };
-    if args.ideal_sensors {
-        cfg.sensors = SensorConfig::ideal();
-    }
-    cfg.controller.feedforward = args.feedforward;
-    if let Some(m) = args.substeps {
-        cfg.integration.substeps = m;
-    }
-    let mut exc = ExcitationConfig::paper_default();
-    exc.kind = match args.kind {
-        KindArg::SpecialOdd => SignalKind::SpecialOddMultisine,
-        KindArg::RandomOdd => SignalKind::RandomOddMultisine,
-        KindArg::Noise => SignalKind::BandLimitedNoise,
-    };
-    if let Some(r) = args.rms {
-        exc.rms_rad = r;
-    }
-    if let Some(p) = args.periods {
-        exc.periods = p;
-    }
-    if let Some(s) = args.excitation_seed {
-        exc.seed = s;
-    }
-    cfg.sample_rate_hz = f64::from(exc.fs_hz);
-    Ok((cfg, exc))
-}
-
 /// Runs `jointid simulate`.
 ///
 /// # Errors
-/// Bad effect specs, invalid configuration or excitation, write errors.
+/// Bad `--param`, `--effect` or `--out`, invalid configuration or excitation, write errors.
 pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
+    let format = out_format(&args.out)?;
     let (cfg, exc) = configure(args)?;
     let out = simulate_excitation(&cfg, &exc)?;
-    let effects: Vec<String> = cfg.effects.iter().map(|e| e.to_string()).collect();
-    let mut comments = excitation_comment_lines(&exc);
-    comments.push_str(&format!(
-        "# sim_plant={}\n# sim_effects={}\n# sim_seed={}\n",
-        cfg.plant.kind.name(),
-        if effects.is_empty() {
-            "none".to_string()
-        } else {
-            effects.join(";")
-        },
-        cfg.seed
-    ));
-    let file =
-        std::fs::File::create(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
-    let mut w = std::io::BufWriter::new(file);
-    out.write_csv(&mut w, &comments)
-        .and_then(|()| w.flush())
-        .map_err(|e| format!("{}: {e}", args.out.display()))?;
-    if let Some(p) = &args.params_json {
-        std::fs::write(p, cfg.params_json()? + "\n")
-            .map_err(|e| format!("{}: {e}", p.display()))?;
+    let write_err = |path: &Path| {
+        let path = path.to_path_buf();
+        move |err| SimulateError::Write { path, err }
+    };
+    let (scale, stream_bytes) = match format {
+        OutFormat::Jcap => {
+            let opts = WireOptions::for_sim(&cfg);
+            let stream = encode_session(&out, &exc, &opts)?;
+            (Some(opts.scale), Some(write_jcap(&args.out, &stream)?))
+        }
+        OutFormat::Csv => {
+            let file = std::fs::File::create(&args.out).map_err(write_err(&args.out))?;
+            let mut w = std::io::BufWriter::new(file);
+            write_capture_csv(&mut w, &to_dataset(&out, &cfg, &exc))
+                .map_err(write_err(&args.out))?;
+            (None, None)
+        }
+    };
+    if let Some(p) = &args.params_out {
+        std::fs::write(p, cfg.params_json()? + "\n").map_err(write_err(p))?;
     }
     let modes = Mechanism::new(&cfg.plant, &cfg.effects).modal_frequencies();
     let report = Report {
         file: args.out.display().to_string(),
-        params_json: args.params_json.as_ref().map(|p| p.display().to_string()),
+        format,
+        model: args.model.name(),
+        effects: cfg.effects.iter().map(|e| e.to_string()).collect(),
         samples: out.len(),
         duration_s: out.len() as f64 * out.sample_interval_s,
+        params_out: args.params_out.as_ref().map(|p| p.display().to_string()),
+        scale,
+        stream_bytes,
         integrator: out.integrator,
         saturated_samples: out.saturated_samples,
         u_rms: rms(&out.u),
@@ -180,43 +621,46 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
     };
     if ctx.json {
         print_json(ctx.out, &report)?;
-    } else {
-        let o = &mut *ctx.out;
+        return Ok(Outcome::Ok);
+    }
+    let o = &mut *ctx.out;
+    writeln!(
+        o,
+        "wrote {} ({} samples, {:.2} s at {} Hz)",
+        report.file, report.samples, report.duration_s, exc.fs_hz
+    )?;
+    if let Some(s) = &report.scale {
         writeln!(
             o,
-            "wrote {} ({} samples, {:.2} s at {} Hz)",
-            report.file, report.samples, report.duration_s, exc.fs_hz
+            "wire scale {:e} N·m/count, {:e} rad/count",
+            s.torque_nm_per_count, s.angle_rad_per_count
         )?;
-        writeln!(
-            o,
-            "plant {}, effects: {}",
-            cfg.plant.kind.name(),
-            if effects.is_empty() {
-                "none".to_string()
-            } else {
-                effects.join(" ")
-            }
-        )?;
-        let fmt = |v: &[f64]| {
-            v.iter()
-                .map(|f| format!("{f:.2}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        };
-        writeln!(
-            o,
-            "modes seen from the motor: resonances [{}] Hz, anti-resonances [{}] Hz",
-            fmt(&report.resonances_hz),
-            fmt(&report.anti_resonances_hz)
-        )?;
-        writeln!(
-            o,
-            "integrator {:?}, u rms {:.4} N·m, theta_m rms {:.5} rad, saturated samples {}",
-            report.integrator, report.u_rms, report.theta_m_rms, report.saturated_samples
-        )?;
-        if let Some(p) = &report.params_json {
-            writeln!(o, "parameters: {p}")?;
-        }
+    }
+    writeln!(
+        o,
+        "model {}, effects: {}",
+        report.model,
+        effects_text(&cfg, " ")
+    )?;
+    let fmt = |v: &[f64]| {
+        v.iter()
+            .map(|f| format!("{f:.2}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    writeln!(
+        o,
+        "modes seen from the motor: resonances [{}] Hz, anti-resonances [{}] Hz",
+        fmt(&report.resonances_hz),
+        fmt(&report.anti_resonances_hz)
+    )?;
+    writeln!(
+        o,
+        "integrator {:?}, u rms {:.4} N·m, theta_m rms {:.5} rad, saturated samples {}",
+        report.integrator, report.u_rms, report.theta_m_rms, report.saturated_samples
+    )?;
+    if let Some(p) = &report.params_out {
+        writeln!(o, "parameters: {p}")?;
     }
     Ok(Outcome::Ok)
 }
@@ -230,6 +674,21 @@ mod tests {
 
     fn temp(name: &str) -> PathBuf {
         std::env::temp_dir().join(format!("jointid-sim-{}-{name}", std::process::id()))
+    }
+
+    /// Runs `cli` as the binary does (JSON when `--json` was given); the result and the output.
+    fn run_cli(cli: &Cli) -> (crate::cli::CmdResult, Vec<u8>) {
+        let loaders = default_loaders();
+        let mut buf = Vec::new();
+        let result = crate::cli::run(
+            cli,
+            &mut Context {
+                json: cli.json,
+                loaders: &loaders,
+                out: &mut buf,
+            },
+        );
+        (result, buf)
     }
 
     #[test]
@@ -254,17 +713,8 @@ mod tests {
         let Command::Simulate(args) = &cli.command else {
             panic!("parsed {:?}", cli.command)
         };
-        let loaders = default_loaders();
-        let mut buf = Vec::new();
-        let outcome = crate::cli::run(
-            &cli,
-            &mut Context {
-                json: false,
-                loaders: &loaders,
-                out: &mut buf,
-            },
-        )
-        .unwrap();
+        let (result, buf) = run_cli(&cli);
+        let outcome = result.unwrap();
         assert_eq!(outcome, Outcome::Ok);
         let text = String::from_utf8(buf).unwrap();
         assert!(
@@ -301,18 +751,178 @@ mod tests {
             "backlash:widht=1",
         ])
         .unwrap();
-        let loaders = default_loaders();
-        let mut buf = Vec::new();
-        let err = crate::cli::run(
-            &cli,
-            &mut Context {
-                json: false,
-                loaders: &loaders,
-                out: &mut buf,
-            },
-        )
-        .unwrap_err();
+        let err = run_cli(&cli).0.unwrap_err();
         assert!(err.to_string().contains("unknown key `widht`"), "{err}");
         assert!(!temp("never.csv").exists());
+    }
+
+    fn parse(args: &[&str]) -> SimulateArgs {
+        let mut v = vec!["jointid", "simulate"];
+        v.extend_from_slice(args);
+        match Cli::try_parse_from(v).unwrap().command {
+            Command::Simulate(a) => a,
+            c => panic!("parsed {c:?}"),
+        }
+    }
+
+    #[test]
+    fn simulate_accepts_the_issue_interface_and_the_old_aliases() {
+        let a = parse(&[
+            "--model",
+            "three_mass",
+            "--excitation",
+            "random-odd",
+            "--seed",
+            "9",
+            "--out",
+            "a.jcap",
+            "--params-out",
+            "p.json",
+        ]);
+        assert_eq!(a.model, ModelArg::ThreeMass);
+        assert_eq!(a.excitation, ExcitationArg::RandomOdd);
+        assert_eq!(a.params_out, Some(PathBuf::from("p.json")));
+        let (cfg, exc) = configure(&a).unwrap();
+        assert_eq!((cfg.seed, exc.seed), (9, 9));
+        let b = parse(&[
+            "--plant",
+            "nonlinear-two-mass",
+            "--kind",
+            "special-odd",
+            "--out",
+            "b.csv",
+            "--params-json",
+            "q.json",
+            "--seed",
+            "3",
+            "--excitation-seed",
+            "4",
+        ]);
+        assert_eq!(b.model, ModelArg::NonlinearTwoMass);
+        assert_eq!(b.excitation, ExcitationArg::OddMultisine);
+        assert_eq!(b.params_out, Some(PathBuf::from("q.json")));
+        let (cfg, exc) = configure(&b).unwrap();
+        assert_eq!((cfg.seed, exc.seed), (3, 4));
+        assert_eq!(cfg.plant.kind, PlantKind::NonlinearTwoMass);
+        let d = parse(&["--out", "c.csv"]);
+        let (cfg, exc) = configure(&d).unwrap();
+        assert_eq!(cfg.plant.kind, PlantKind::ThreeMass);
+        assert_eq!(exc, ExcitationConfig::paper_default());
+        assert_eq!(cfg.seed, SimConfig::default().seed);
+        assert!(Cli::try_parse_from([
+            "jointid",
+            "simulate",
+            "--model",
+            "five-mass",
+            "--out",
+            "x.csv"
+        ])
+        .is_err());
+    }
+
+    #[test]
+    fn param_overrides_the_named_parameter_and_rejects_names_the_model_lacks() {
+        let a = parse(&[
+            "--model",
+            "four-mass",
+            "--param",
+            "k_g=1.3e5",
+            "--param",
+            "J_p = 2",
+            "--out",
+            "x.csv",
+        ]);
+        let (cfg, _) = configure(&a).unwrap();
+        assert_eq!(cfg.plant.params.k_g, 1.3e5);
+        assert_eq!(cfg.plant.params.j_p, 2.0);
+        assert_eq!(cfg.plant.params.k_a, JointParams::default().k_a);
+        let mut p = JointParams::default();
+        let err = apply_params(ModelArg::ThreeMass, &["J_p=2".into()], &mut p).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "--param `J_p`: unknown parameter for three-mass (valid: J_m, J_a1, J_a2, k_g, d_g, k_a, d_a, f_m, r)"
+        );
+        let err = apply_params(ModelArg::Rigid, &["k_g=1".into()], &mut p).unwrap_err();
+        assert!(
+            err.to_string().contains("(valid: J_m, J_a1, J_a2, f_m, r)"),
+            "{err}"
+        );
+        let err = apply_params(ModelArg::NonlinearTwoMass, &["k3=abc".into()], &mut p).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "--param `k3`: `abc` is not a finite number (valid names for nonlinear-two-mass: J_m, J_a1, J_a2, k_g, d_g, f_m, r, k3, F_c)"
+        );
+        let err = apply_params(ModelArg::TwoMass, &["k_g".into()], &mut p).unwrap_err();
+        assert!(matches!(err, SimulateError::ParamSyntax { .. }), "{err}");
+        let err = apply_params(ModelArg::TwoMass, &["k_g=inf".into()], &mut p).unwrap_err();
+        assert!(matches!(err, SimulateError::BadValue { .. }), "{err}");
+        assert_eq!(p, JointParams::default(), "nothing applied on error");
+        apply_params(
+            ModelArg::NonlinearTwoMass,
+            &["F_c=0.05".into(), "k3=1e12".into()],
+            &mut p,
+        )
+        .unwrap();
+        assert_eq!((p.f_c, p.k3), (0.05, 1e12));
+        // every name the models accept is a name of the parameter table
+        let table: Vec<&str> = JointParams::default().table().iter().map(|t| t.0).collect();
+        for k in PlantKind::ALL {
+            for (n, _) in model_params(k) {
+                assert!(table.contains(&n), "{n}");
+            }
+        }
+    }
+
+    #[test]
+    fn simulate_refuses_an_out_extension_other_than_jcap_or_csv() {
+        let out = temp("run.txt");
+        let cli =
+            Cli::try_parse_from(["jointid", "simulate", "--out", out.to_str().unwrap()]).unwrap();
+        let err = run_cli(&cli).0.unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            format!("{}: --out must end in .jcap or .csv", out.display())
+        );
+        assert!(!out.exists());
+        assert_eq!(out_format(Path::new("A.JCAP")).unwrap(), OutFormat::Jcap);
+        assert!(out_format(Path::new("run")).is_err());
+    }
+
+    #[test]
+    fn simulate_jcap_reads_back_as_a_board_capture() {
+        let jcap = temp("run.jcap");
+        let cli = Cli::try_parse_from([
+            "jointid",
+            "--json",
+            "simulate",
+            "--model",
+            "two-mass",
+            "--periods",
+            "1",
+            "--out",
+            jcap.to_str().unwrap(),
+        ])
+        .unwrap();
+        let Command::Simulate(args) = &cli.command else {
+            unreachable!()
+        };
+        let (result, buf) = run_cli(&cli);
+        result.unwrap();
+        let summary: serde_json::Value = serde_json::from_slice(&buf).unwrap();
+        let rec = crate::capture::read_jcap(&jcap).unwrap();
+        let (cfg, exc) = configure(args).unwrap();
+        let direct = simulate_excitation(&cfg, &exc).unwrap();
+        assert_eq!(summary["samples"], direct.len());
+        assert_eq!(summary["model"], "two-mass");
+        assert_eq!(summary["format"], "jcap");
+        assert_eq!(rec.header, WireOptions::for_sim(&cfg).header(&exc));
+        assert_eq!(rec.samples.len(), direct.len());
+        assert!(rec.report.damaged_frames.is_empty() && rec.report.gaps.is_empty());
+        assert!(rec.report.reference_mismatches.is_empty());
+        let half = 0.5 * f64::from(SIM_TORQUE_NM_PER_COUNT) * (1.0 + 1e-9);
+        for (s, u) in rec.samples.iter().zip(&direct.u) {
+            assert!((s.u - u).abs() <= half, "{} vs {u}", s.u);
+        }
+        std::fs::remove_file(&jcap).unwrap();
     }
 }
