@@ -9,11 +9,16 @@
 //! noise of the same RMS and band; both 7.5 s at 2 kHz (the paper's "one
 //! period" of 7.5 s is three periods of the 0.4 Hz multisine here, one more
 //! period before them is dropped as transient), decimated by 10 before
-//! identification. Fitted: the 11th-order black box, the three-mass
-//! (eq. (6)) and four-mass (eq. (7)) models; printed: FIT (toolbox `compare`
+//! identification. Fitted: the 11th-order black box on the decimated data,
+//! the three-mass (eq. (6)) and four-mass (eq. (7)) models started on the
+//! decimated data and refined at the capture rate behind the simulator's
+//! known current-loop lag ([`crate::fit::FitData`],
+//! [`crate::fit::DrivenModel`]; the gear ratio is taken as known the same
+//! way), every FIT on the decimated data; printed: FIT (toolbox `compare`
 //! definition) on estimation and validation data, as in Table 2, plus the
 //! resonance / anti-resonance frequencies against the simulator's truth
-//! and, where the model structure is the simulator's, parameter errors.
+//! and, where the model structure is the simulator's, parameter errors in
+//! per cent and in reported standard deviations.
 //!
 //! Truth: the simulator's default four-mass joint ([`crate::sim::params`];
 //! the parallel mass makes the double notch near 17 Hz that needs a black
