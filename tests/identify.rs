@@ -260,6 +260,52 @@ fn black_box_order_11_validation_fit_within_1_point_of_true_model() {
     );
 }
 
+// Seed 000 §6 on the simulated IRB1400-like joint, whose truth is a
+// four-mass chain behind a 0.5 ms current loop: the four-mass model, started
+// on the decimated data and refined at the capture rate with the known
+// current-loop lag, reaches the true model's validation FIT within 1 point,
+// every parameter within 2 % of the truth and within 4 reported standard
+// deviations (measured on seed 3: at most 0.2 % and 1.3 σ).
+#[test]
+fn four_mass_on_paper_experiment_reaches_true_fit_and_parameters() {
+    let runs = paper_runs(3).unwrap();
+    let ds = |out: &sim::SimOutput, exc: ExcitationConfig, name: &str| Dataset {
+        name: name.into(),
+        data: out.to_id_data(),
+        t0: 0.0,
+        excitation: Some(exc),
+        meta: BTreeMap::new(),
+    };
+    let est = ds(&runs.est, runs.est_excitation, "est");
+    let val = ds(&runs.val, runs.val_excitation, "val");
+    let (t, _) = table(&est, &val, &runs.sim, &[ModelKind::FourMass]).unwrap();
+    let row = &t.rows[0];
+    eprintln!(
+        "four-mass: est {:.2}, val {:.2}; true model: est {:.2}, val {:.2}",
+        row.fit_estimation, row.fit_validation, t.true_fit.0, t.true_fit.1
+    );
+    assert!(
+        row.fit_validation >= t.true_fit.1 - 1.0,
+        "validation FIT {:.2} vs true model {:.2}",
+        row.fit_validation,
+        t.true_fit.1
+    );
+    assert_eq!(row.parameter_errors.len(), 11);
+    for p in &row.parameter_errors {
+        eprintln!("{:<5} {:+.2} % ({:+.2} σ)", p.name, p.error_percent, p.z());
+        assert!(
+            p.error_percent.abs() <= 2.0 && p.z().abs() <= 4.0,
+            "{}: {} ± {} vs true {} ({:+.2} %, {:+.2} σ)",
+            p.name,
+            p.estimate,
+            p.std,
+            p.truth,
+            p.error_percent,
+            p.z()
+        );
+    }
+}
+
 /// a file of `shared/` beside the repository or its worktree folder
 fn shared(rel: &str) -> String {
     let base = env!("CARGO_MANIFEST_DIR");

@@ -112,6 +112,16 @@ fn fit_json_has_fields_and_validate_reproduces_saved_model_fit() {
     assert!(fv > 80.0, "validation FIT {fv}");
     assert!(j["residual_tests"]["estimation"]["whiteness"]["bound"].is_number());
     assert!(plots.join("bode.svg").exists());
+    // the physical model runs at the capture rate and is compared after the
+    // same decimation (model format 2)
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    assert_eq!(saved["format"], "jointid-model/2");
+    assert_eq!(saved["decimate_output"], 10);
+    assert!(
+        (saved["ts"].as_f64().unwrap() - 5e-4).abs() < 1e-12,
+        "{saved}"
+    );
 
     let o = jointid(&[
         "validate",

@@ -7,8 +7,10 @@
 //! firmware core's wire encoder into `DIR/estimation.jcap` and
 //! `DIR/validation.jcap`, read and decode them back, analyze (FRF with the
 //! reference as instrument, linearity verdict; `spectrum.svg` as seed 000
-//! Fig. 3, `frf.svg`), fit the 11th-order black box, the three-mass and the
-//! four-mass models on the decimated estimation data and print the
+//! Fig. 3, `frf.svg`), fit the 11th-order black box on the decimated
+//! estimation data and the three-mass and four-mass models at the capture
+//! rate (started on the decimated data, compared after the same
+//! decimation, see [`crate::fit::FitData`]) and print the
 //! Table-2-like comparison with resonances against the simulator's truth
 //! (`bode_3mass.svg`, `bode_4mass.svg` as Figs. 5–6).
 

@@ -5,9 +5,10 @@
 //! optionally Bode plots over the measured FRF (seed 000 Figs. 5–6) and the
 //! model file.
 //!
-//! With `--decimate N > 1` the physical models take the interval mean of
-//! the input ([`crate::fit::InputHold::IntervalMean`]); the model file
-//! records it, so `jointid validate` applies the same.
+//! With `--decimate N > 1` the black box is fitted on the decimated data;
+//! a physical model is started there and refined at the capture rate, and
+//! every FIT is computed on the decimated data ([`crate::fit::FitData`]);
+//! the model file records both rates, so `jointid validate` does the same.
 //!
 //! Column mapping: DATA is a capture CSV, a `.jcap` capture (once its loader
 //! is registered) or any CSV with `--time/--input/--output-col` (`--output`
@@ -24,7 +25,7 @@ use super::args::{DataArgs, DetrendArg, PrepArgs};
 use super::{print_json, CmdResult, Context, Outcome};
 use crate::data::Dataset;
 use crate::fit::{
-    default_f_min, fit_model, log_grid, param_map, DetrendKind, FitOptions, Fitted, InputHold,
+    default_f_min, fit_prepared, log_grid, param_map, DetrendKind, FitData, FitOptions, Fitted,
     ModelKind, ParamJson, Prep,
 };
 use crate::frf::analyze_dataset;
@@ -143,6 +144,10 @@ pub struct FitArgs {
     /// gear ratio r (arm angle per motor angle) of the physical models
     #[arg(long, value_name = "R", default_value_t = DEFAULT_GEAR_RATIO)]
     pub gear_ratio: f64,
+    /// time constant [s] of the drive's current loop, a first-order lag in
+    /// front of the physical models (0: neglected, as in seed 000)
+    #[arg(long, value_name = "S", default_value_t = 0.0, value_parser = parse_tau)]
+    pub current_loop_tau: f64,
     /// lags M of the residual tests
     #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS)]
     pub lags: usize,
@@ -172,6 +177,15 @@ fn parse_fraction(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
         Ok(f) if f > 0.0 && f < 1.0 => Ok(f),
         _ => Err(format!("`{s}` is not a fraction strictly between 0 and 1")),
+    }
+}
+
+fn parse_tau(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(t) if (0.0..1.0).contains(&t) => Ok(t),
+        _ => Err(format!(
+            "`{s}` is not a time constant in seconds, 0 ≤ τ < 1"
+        )),
     }
 }
 
@@ -247,23 +261,24 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         None => None,
     };
     let prep = prep_of(&args.prep);
-    let mut est = prep
-        .apply(&ds.data)
-        .map_err(|e| format!("{}: {e}", ds.name))?;
-    let mut val = match &val_ds {
-        Some(v) => Some(
-            prep.apply(&v.data)
-                .map_err(|e| format!("{}: {e}", v.name))?,
-        ),
-        None => None,
+    let prepare = |d: &crate::data::IdData, name: &str| {
+        FitData::new(d, prep).map_err(|e| format!("{name}: {e}"))
     };
-    let mut val_name = val_ds.as_ref().map(|v| v.name.clone());
-    if let Some(frac) = args.estimation_fraction {
-        let (a, b) = est.split(frac);
-        val_name = Some(format!("{} (last {:.0} %)", ds.name, 100.0 * (1.0 - frac)));
-        est = a;
-        val = Some(b);
-    }
+    let (est, val, val_name) = match (args.estimation_fraction, &val_ds) {
+        (Some(frac), _) => {
+            // split at the capture rate, then prepare each part
+            let (a, b) = ds.data.split(frac);
+            let vn = format!("{} (last {:.0} %)", ds.name, 100.0 * (1.0 - frac));
+            let b = prepare(&b, &vn)?;
+            (prepare(&a, &ds.name)?, Some(b), Some(vn))
+        }
+        (None, Some(v)) => (
+            prepare(&ds.data, &ds.name)?,
+            Some(prepare(&v.data, &v.name)?),
+            Some(v.name.clone()),
+        ),
+        (None, None) => (prepare(&ds.data, &ds.name)?, None, None),
+    };
     let opts = FitOptions {
         kind: args.model,
         coulomb: args.friction == FrictionArg::Coulomb,
@@ -275,27 +290,23 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         r: args.gear_ratio,
         refine: !args.no_refine,
         feedthrough: args.feedthrough,
-        // decimated data are not held over the coarse interval (see InputHold)
-        input_hold: if prep.decimate > 1 {
-            InputHold::IntervalMean
-        } else {
-            InputHold::Zoh
-        },
+        current_loop_tau: args.current_loop_tau,
     };
     let t0 = Instant::now();
-    let fitted = fit_model(&est, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
+    let fitted = fit_prepared(&est, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
     let seconds = t0.elapsed().as_secs_f64();
     let ev = fitted
-        .evaluate(&est, args.lags)
+        .evaluate_on(&est, args.lags)
         .map_err(|e| format!("{}: {e}", ds.name))?;
     let vv = match (&val, &val_name) {
         (Some(v), Some(vn)) => Some(
             fitted
-                .evaluate(v, args.lags)
+                .evaluate_on(v, args.lags)
                 .map_err(|e| format!("{vn}: {e}"))?,
         ),
         _ => None,
     };
+    let est = &est.prepared;
     let mut files = Vec::new();
     if let Some(path) = &args.save {
         let saved = fitted.to_saved(prep, &ds.name, ev.fit);

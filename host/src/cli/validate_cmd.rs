@@ -3,7 +3,9 @@
 //! - `jointid validate MODEL.json DATA [--require-fit X]`: simulate a model
 //!   saved by `jointid fit --save` on new data (prepared as at fitting:
 //!   same decimation and detrending, initial state estimated as the
-//!   toolbox's `compare` does), then FIT and the residual tests.
+//!   toolbox's `compare` does; a physical model saved at the capture rate
+//!   runs there and its output is decimated like the data,
+//!   [`crate::fit::FitData`]), then FIT and the residual tests.
 //! - `jointid validate DATA --simulated COL [--simulated-file FILE]`: the
 //!   simulated output is a column ([`super::validate`], unchanged).
 //!
@@ -21,7 +23,7 @@ use super::args::{DataArgs, PrepArgs};
 use super::fit::print_tests;
 use super::validate::{self as column_validate, ValidateArgs};
 use super::{print_json, CmdResult, Context, Outcome};
-use crate::fit::SavedModel;
+use crate::fit::{FitData, SavedModel};
 use crate::validate::{Validation, DEFAULT_LAGS, FIT_NAME};
 
 /// Arguments of `jointid validate`.
@@ -113,13 +115,11 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         .to_fitted()
         .map_err(|e| format!("{}: {e}", mpath.display()))?;
     let ds = data_args(&args.files[1]).load(ctx.loaders)?;
-    let data = saved
-        .prep
-        .apply(&ds.data)
-        .map_err(|e| format!("{}: {e}", ds.name))?;
+    let both = FitData::new(&ds.data, saved.prep).map_err(|e| format!("{}: {e}", ds.name))?;
     let v = fitted
-        .evaluate(&data, args.lags)
+        .evaluate_on(&both, args.lags)
         .map_err(|e| format!("{}: {e}", ds.name))?;
+    let data = &both.prepared;
     let fit_ok = args.require_fit.is_none_or(|x| v.fit >= x);
     if ctx.json {
         print_json(
