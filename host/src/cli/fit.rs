@@ -11,8 +11,9 @@
 //! the model file records both rates, so `jointid validate` does the same.
 //!
 //! Column mapping: DATA is a capture CSV, a `.jcap` capture (once its loader
-//! is registered) or any CSV with `--time/--input/--output-col` (`--output`
-//! is taken here by the output kind, angle or velocity).
+//! is registered) or any CSV with `--time/--input/--output` (as every
+//! analysis command; `--output-col` is accepted too); `--output-kind` says
+//! whether that column is an angle or a velocity.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -70,21 +71,26 @@ pub enum MethodArg {
     Moesp,
 }
 
-/// A data file with the column mapping of `fit` (`--output-col` for the
-/// output column, since `--output` names the output kind).
+/// A data file with the column mapping of `fit`: the same flags as every
+/// analysis command, `--output-col` accepted as another name of `--output`.
 #[derive(Debug, Clone, Args)]
 pub struct FitDataArgs {
     /// data file: capture CSV (`t,theta_ref,u,theta_m`), a mapped CSV, or `.jcap`
     #[arg(value_name = "DATA")]
     pub path: PathBuf,
-    /// time column [s] (with --input and --output-col)
+    /// time column [s] (with --input and --output)
     #[arg(long, value_name = "COL", requires_all = ["input", "output_col"])]
     pub time: Option<String>,
     /// input column (torque [N·m] or force [N])
     #[arg(long, value_name = "COL", requires_all = ["time", "output_col"])]
     pub input: Option<String>,
-    /// output column (motor angle [rad] or position [m])
-    #[arg(long, value_name = "COL", requires_all = ["time", "input"])]
+    /// output column (motor angle [rad] or position [m]; see --output-kind)
+    #[arg(
+        long = "output",
+        visible_alias = "output-col",
+        value_name = "COL",
+        requires_all = ["time", "input"]
+    )]
     pub output_col: Option<String>,
     /// reference column (default: the capture CSV's `theta_ref`)
     #[arg(long, value_name = "COL")]
@@ -131,7 +137,7 @@ pub struct FitArgs {
     pub plot: Option<PathBuf>,
     /// which motor signal the output column holds
     #[arg(long, value_enum, default_value_t = OutputArg::Angle)]
-    pub output: OutputArg,
+    pub output_kind: OutputArg,
     /// subspace method of the black box
     #[arg(long, value_enum, default_value_t = MethodArg::Pbsid)]
     pub method: MethodArg,
@@ -286,7 +292,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
             MethodArg::Pbsid => Method::Pbsid,
             MethodArg::Moesp => Method::Moesp,
         },
-        output: args.output.into(),
+        output: args.output_kind.into(),
         r: args.gear_ratio,
         refine: !args.no_refine,
         feedthrough: args.feedthrough,
