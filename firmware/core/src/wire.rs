@@ -1947,4 +1947,87 @@ mod tests {
             "corruptions {corruptions}, damaged frames {damaged}, accepted {accepted}, intact frames checked {clean_checked}"
         );
     }
+
+    #[test]
+    fn find_zero_finds_the_first_zero_at_every_position_and_length() {
+        for len in 0..40 {
+            assert_eq!(find_zero(&vec![0x80u8; len]), None, "len {len}");
+            for z in 0..len {
+                let mut v: Vec<u8> = (0..len).map(|i| (i % 255 + 1) as u8).collect();
+                v[z] = 0;
+                if z + 3 < len {
+                    v[z + 3] = 0;
+                }
+                assert_eq!(find_zero(&v), Some(z), "len {len}, zero at {z}");
+            }
+        }
+    }
+
+    #[test]
+    fn crc32_equals_the_bytewise_table_at_every_length_and_alignment() {
+        let mut rng = SplitMix64::new(11);
+        let data: Vec<u8> = (0..200).map(|_| rng.next_u64() as u8).collect();
+        for start in 0..9 {
+            for end in start..data.len() {
+                let mut c = 0xFFFF_FFFFu32;
+                for &b in &data[start..end] {
+                    c = CRC_TABLE[((c ^ b as u32) & 0xFF) as usize] ^ (c >> 8);
+                }
+                // also fed in two uneven parts
+                let mid = start + (end - start) / 3;
+                let mut two = Crc32::new();
+                two.update(&data[start..mid]);
+                two.update(&data[mid..end]);
+                assert_eq!(Crc32::checksum(&data[start..end]), !c, "{start}..{end}");
+                assert_eq!(two.finish(), !c, "{start}..{end} in two parts");
+            }
+        }
+    }
+
+    #[test]
+    fn for_each_sample_gives_the_iterator_samples_and_the_check_errors() {
+        let (samples, refs) = synthetic(300, 5);
+        let mut b = BatchBuilder::new(500, 64);
+        let mut batches = Vec::new();
+        for (s, r) in samples.iter().zip(&refs) {
+            batches.extend(b.push(*s, *r));
+        }
+        batches.extend(b.flush());
+        for batch in &batches {
+            let mut got = Vec::new();
+            assert_eq!(batch.for_each_sample(|s| got.push(s)), Ok(()));
+            assert_eq!(got, batch.samples().collect::<Vec<_>>());
+            // cut data: the same error as check, and only the samples before it
+            let mut cut = batch.clone();
+            let keep = cut.data.len() / 2;
+            cut.data.truncate(keep);
+            let mut part = Vec::new();
+            let err = cut.for_each_sample(|s| part.push(s));
+            assert_eq!(err, cut.check());
+            assert!(err.is_err());
+            assert_eq!(part, cut.samples().collect::<Vec<_>>());
+        }
+    }
+
+    #[test]
+    fn decoder_gives_the_same_events_whatever_the_feed_sizes() {
+        let mut stream = Vec::new();
+        for (_, bytes) in pool_of_messages() {
+            stream.extend_from_slice(&bytes);
+            stream.extend_from_slice(&[0x31, 0x00, 0x00, 0x07]);
+        }
+        let whole = decode_all(&stream);
+        assert!(whole
+            .iter()
+            .any(|e| matches!(e, DecodeEvent::Damaged { .. })));
+        for step in [1, 3, 8, 77] {
+            let mut d = Decoder::new();
+            let mut events = Vec::new();
+            for c in stream.chunks(step) {
+                d.feed(c, |e| events.push(e));
+            }
+            d.finish(|e| events.push(e));
+            assert_eq!(events, whole, "step {step}");
+        }
+    }
 }

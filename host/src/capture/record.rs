@@ -683,9 +683,10 @@ impl Reference {
         let n = cfg.period_samples as usize;
         let r = cfg.ramp_samples as u64;
         let mut table = vec![0.0f32; n];
-        let mut gen = Excitation::new(cfg, &mut table)?;
-        let ramp_in: Vec<f32> = (0..r).map(|_| gen.next().unwrap_or(0.0)).collect();
-        drop(gen);
+        let ramp_in: Vec<f32> = {
+            let mut gen = Excitation::new(cfg, &mut table)?;
+            (0..r).map(|_| gen.next().unwrap_or(0.0)).collect()
+        };
         let ramp_out = match cfg.total_samples() {
             Some(total) => {
                 // the ramp-out of sample `start + i` weighs table[(start + i) mod N] by the
@@ -1130,6 +1131,47 @@ mod tests {
             let (report, record) = par.finish().unwrap();
             assert_eq!(report, want_report, "threads {threads}, piece {piece}");
             assert_eq!(record, want_record, "threads {threads}, piece {piece}");
+        }
+    }
+
+    #[test]
+    fn reference_equals_the_generator_sample_by_sample_with_ramps() {
+        let base = ExcitationConfig {
+            period_samples: 200,
+            max_line: 40,
+            ramp_samples: 150,
+            periods: 3,
+            ..ExcitationConfig::paper_default()
+        };
+        // finite (ramp-in, periods, ramp-out, silence) and endless
+        for cfg in [base, ExcitationConfig { periods: 0, ..base }] {
+            let mut table = vec![0.0f32; cfg.period_samples as usize];
+            let mut gen = Excitation::new(&cfg, &mut table).unwrap();
+            let want: Vec<f32> = (0..1200).map(|_| gen.next().unwrap_or(0.0)).collect();
+            let r = Reference::new(&cfg).unwrap();
+            for (k, w) in want.iter().enumerate() {
+                assert_eq!(
+                    r.at(k as u64).to_bits(),
+                    w.to_bits(),
+                    "k {k}, periods {}",
+                    cfg.periods
+                );
+            }
+            for (from, len) in [
+                (0, 64),
+                (140, 32),
+                (190, 64),
+                (349, 5),
+                (600, 64),
+                (690, 32),
+                (1100, 64),
+            ] {
+                assert_eq!(
+                    r.crc(from as u64, (from + len) as u64),
+                    jointid_core::wire::reference_crc(&want[from..from + len]),
+                    "batch {from}+{len}"
+                );
+            }
         }
     }
 }
