@@ -408,7 +408,6 @@ impl StreamAnalyzer {
         // so change nothing, those at link boundaries end the cut frame as truncated
         let base = self.bytes;
         let spans: Vec<(usize, usize)> = cuts.windows(2).map(|w| (w[0], w[1])).collect();
-        let mut chunks: Vec<Option<Chunk>> = Vec::new();
         std::thread::scope(|scope| {
             let per = spans.len().div_ceil(threads.max(1));
             let handles: Vec<_> = spans
@@ -422,18 +421,13 @@ impl StreamAnalyzer {
                     })
                 })
                 .collect();
+            // applied in stream order as each thread is done, while later ones still run
             for h in handles {
-                chunks.extend(
-                    h.join()
-                        .expect("a decoder thread never panics")
-                        .into_iter()
-                        .map(Some),
-                );
+                for c in h.join().expect("a decoder thread never panics") {
+                    self.apply(c);
+                }
             }
         });
-        for c in chunks.into_iter().flatten() {
-            self.apply(c);
-        }
         self.decoder = Decoder::new();
         self.base = self.bytes;
     }
