@@ -5,9 +5,11 @@
 //! intact frame, lists every damaged one with its stream offset, follows session headers,
 //! tracks which sequence numbers arrived (as sorted ranges, so duplicates and late
 //! arrivals are recognised without a per-sample set) and remembers each batch's reference
-//! CRC. At [`StreamAnalyzer::finish`] it regenerates the excitation from the session
-//! header (`jointid_core::excitation`), checks every batch's reference CRC against it, and
-//! converts the kept raw counts to SI with the header's scale.
+//! CRC. It regenerates the excitation from the session header (`jointid_core::excitation`)
+//! once, as ramp-in, one period and ramp-out (the signal is periodic between the ramps),
+//! gives every kept sample its reference and converts its raw counts to SI with the
+//! header's scale as it arrives; at [`StreamAnalyzer::finish`] it checks every batch's
+//! reference CRC against slices of that period.
 //!
 //! **Invariant**: nothing is interpolated or invented. Samples are kept exactly as they
 //! arrived (each sequence number once); the report says where the holes are.
