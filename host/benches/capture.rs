@@ -26,7 +26,15 @@ use jointid::capture::synth::{synth_stream, SynthOptions};
 use jointid::capture::{decode_stream, export, read_jcap, StreamAnalyzer};
 use jointid_core::wire::{DecodeEvent, Decoder};
 
-const SECONDS: u32 = 3600;
+/// Synthesised duration [s]: one hour, or `JOINTID_BENCH_SECONDS` (shorter runs for
+/// `valgrind --tool=callgrind`, whose instruction counts do not depend on the load).
+fn seconds() -> u32 {
+    std::env::var("JOINTID_BENCH_SECONDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .filter(|&s| s > 0)
+        .unwrap_or(3600)
+}
 
 fn best_of<T>(n: usize, mut f: impl FnMut() -> T) -> (Duration, T) {
     let mut best = Duration::MAX;
@@ -46,7 +54,7 @@ fn line(what: &str, t: Duration, bytes: usize) {
         "{what:<44} {:>9.3} s  {:>8.1} MB/s  {:>9.0}x real time",
         s,
         bytes as f64 / s / 1e6,
-        f64::from(SECONDS) / s
+        f64::from(seconds()) / s
     );
 }
 
@@ -65,10 +73,11 @@ fn main() {
         std::thread::available_parallelism().map_or(0, |n| n.get())
     );
     let t0 = Instant::now();
-    let s = synth_stream(&SynthOptions::paper(SECONDS));
+    let secs = seconds();
+    let s = synth_stream(&SynthOptions::paper(secs));
     let n = s.bytes.len();
     println!(
-        "synthesised {SECONDS} s at 2 kHz: {} samples, {} frames, {:.1} MB ({:.2} bytes/sample) in {:.1} s",
+        "synthesised {secs} s at 2 kHz: {} samples, {} frames, {:.1} MB ({:.2} bytes/sample) in {:.1} s",
         s.samples.len(),
         s.frames.len(),
         n as f64 / 1e6,
@@ -177,7 +186,7 @@ fn main() {
     );
     line("jointid export path: read_jcap + export_csv", t_cmd, n);
     println!();
-    let decode_x = f64::from(SECONDS) / t_decode.as_secs_f64();
+    let decode_x = f64::from(seconds()) / t_decode.as_secs_f64();
     println!(
         "target decode >= 10000x real time: {decode_x:.0}x ({})",
         if decode_x >= 10_000.0 {

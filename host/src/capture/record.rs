@@ -5,16 +5,21 @@
 //! intact frame, lists every damaged one with its stream offset, follows session headers,
 //! tracks which sequence numbers arrived (as sorted ranges, so duplicates and late
 //! arrivals are recognised without a per-sample set) and remembers each batch's reference
-//! CRC. At [`StreamAnalyzer::finish`] it regenerates the excitation from the session
-//! header (`jointid_core::excitation`), checks every batch's reference CRC against it, and
-//! converts the kept raw counts to SI with the header's scale.
+//! CRC. It regenerates the excitation from the session header (`jointid_core::excitation`)
+//! once, as ramp-in, one period and ramp-out (the signal is periodic between the ramps),
+//! gives every kept sample its reference and converts its raw counts to SI with the
+//! header's scale as it arrives; at [`StreamAnalyzer::finish`] it checks every batch's
+//! reference CRC against slices of that period.
 //!
 //! **Invariant**: nothing is interpolated or invented. Samples are kept exactly as they
 //! arrived (each sequence number once); the report says where the holes are.
 
+use std::sync::Arc;
+
 use jointid_core::excitation::{Excitation, ExcitationConfig};
 use jointid_core::wire::{
     Crc32, DecodeError, DecodeEvent, Decoder, Message, RawSample, SessionHeader, Status,
+    BATCH_CAPACITY,
 };
 
 use super::report::{
@@ -70,8 +75,11 @@ pub struct StreamAnalyzer {
     /// sorted, disjoint, non-adjacent inclusive ranges of received sequence numbers
     ranges: Vec<(u32, u32)>,
     samples: u64,
-    /// kept samples in SI, `theta_ref` filled in by the reference pass at the end
+    /// kept samples in SI, with `theta_ref` from `reference`
     kept: Vec<CaptureSample>,
+    /// the reported session's reference, regenerated when its header arrives (only when
+    /// samples are kept); the error message when it cannot be
+    reference: Option<Result<Arc<Reference>, String>>,
     batches: Vec<BatchRef>,
     duplicates: u64,
     out_of_order: u64,
@@ -106,6 +114,7 @@ impl StreamAnalyzer {
             ranges: Vec::new(),
             samples: 0,
             kept: Vec::new(),
+            reference: None,
             batches: Vec::new(),
             duplicates: 0,
             out_of_order: 0,
@@ -218,12 +227,24 @@ impl StreamAnalyzer {
                 self.frames += 1;
                 match &message {
                     Message::Header(h) => self.on_header(h, self.base + offset),
-                    Message::Batch(b) => self.on_batch(
-                        b.first_seq(),
-                        b.len() as u32,
-                        b.reference_crc(),
-                        b.samples(),
-                    ),
+                    Message::Batch(b) => {
+                        // decoded in one tight pass onto the stack (a checked batch
+                        // holds at most BATCH_CAPACITY samples)
+                        let mut raw = [RawSample::default(); BATCH_CAPACITY];
+                        let mut n = 0;
+                        let _ = b.for_each_sample(|s| {
+                            if let Some(slot) = raw.get_mut(n) {
+                                *slot = s;
+                                n += 1;
+                            }
+                        });
+                        self.on_batch(
+                            b.first_seq(),
+                            b.len() as u32,
+                            b.reference_crc(),
+                            raw[..n].iter().copied(),
+                        );
+                    }
                     Message::Status(s) => self.on_status(s, false),
                     Message::End(s) => self.on_status(s, true),
                 }
@@ -265,6 +286,13 @@ impl StreamAnalyzer {
         };
         if self.header.is_none() {
             self.header = Some(*h);
+            if self.keep_samples {
+                self.reference = Some(
+                    Reference::new(&h.excitation)
+                        .map(Arc::new)
+                        .map_err(|e| e.to_string()),
+                );
+            }
         }
         self.current = Some(idx);
     }
@@ -289,9 +317,7 @@ impl StreamAnalyzer {
                         len,
                         crc,
                     });
-                    for s in samples {
-                        self.on_sample(s);
-                    }
+                    self.on_samples(samples);
                 }
             }
         }
@@ -384,7 +410,6 @@ impl StreamAnalyzer {
         // so change nothing, those at link boundaries end the cut frame as truncated
         let base = self.bytes;
         let spans: Vec<(usize, usize)> = cuts.windows(2).map(|w| (w[0], w[1])).collect();
-        let mut chunks: Vec<Option<Chunk>> = Vec::new();
         std::thread::scope(|scope| {
             let per = spans.len().div_ceil(threads.max(1));
             let handles: Vec<_> = spans
@@ -398,23 +423,55 @@ impl StreamAnalyzer {
                     })
                 })
                 .collect();
+            // applied in stream order as each thread is done, while later ones still run
             for h in handles {
-                chunks.extend(
-                    h.join()
-                        .expect("a decoder thread never panics")
-                        .into_iter()
-                        .map(Some),
-                );
+                for c in h.join().expect("a decoder thread never panics") {
+                    self.apply(c);
+                }
             }
         });
-        for c in chunks.into_iter().flatten() {
-            self.apply(c);
-        }
         self.decoder = Decoder::new();
         self.base = self.bytes;
     }
 
-    fn on_sample(&mut self, s: RawSample) {
+    /// A batch's samples: those that continue the highest range in order (the usual
+    /// case) in one tight loop with the scale converted once; the others one by one.
+    fn on_samples(&mut self, samples: impl Iterator<Item = RawSample>) {
+        let scale = self.header.filter(|_| self.keep_samples).map(|h| {
+            (
+                f64::from(h.sample_rate_hz),
+                f64::from(h.scale.torque_nm_per_count),
+                f64::from(h.scale.angle_rad_per_count),
+            )
+        });
+        let reference = match &self.reference {
+            Some(Ok(r)) => Some(Arc::clone(r)),
+            _ => None,
+        };
+        let reference = reference.as_deref();
+        for s in samples {
+            let seq = s.seq;
+            match self.ranges.last_mut() {
+                Some(last) if last.1.checked_add(1) == Some(seq) => {
+                    last.1 = seq;
+                    self.samples += 1;
+                    if let Some((rate, tq, an)) = scale {
+                        self.kept.push(CaptureSample {
+                            seq,
+                            tick: s.tick,
+                            t: f64::from(seq) / rate,
+                            theta_ref: reference.map_or(0.0, |r| f64::from(r.at(u64::from(seq)))),
+                            u: f64::from(s.torque) * tq,
+                            theta_m: f64::from(s.angle) * an,
+                        });
+                    }
+                }
+                _ => self.on_sample(s, reference),
+            }
+        }
+    }
+
+    fn on_sample(&mut self, s: RawSample, reference: Option<&Reference>) {
         let seq = s.seq;
         // fast path: the next one in order
         match self.ranges.last_mut() {
@@ -437,7 +494,7 @@ impl StreamAnalyzer {
                     seq,
                     tick: s.tick,
                     t: f64::from(seq) / f64::from(h.sample_rate_hz),
-                    theta_ref: 0.0,
+                    theta_ref: reference.map_or(0.0, |r| f64::from(r.at(u64::from(seq)))),
                     u: f64::from(s.torque) * f64::from(h.scale.torque_nm_per_count),
                     theta_m: f64::from(s.angle) * f64::from(h.scale.angle_rad_per_count),
                 });
@@ -558,53 +615,142 @@ impl StreamAnalyzer {
         let Some(last) = self.last_seq() else {
             return Ok(Vec::new());
         };
-        let mut table = vec![0.0f32; cfg.period_samples as usize];
-        let mut gen = Excitation::new(cfg, &mut table).map_err(|e| CaptureError::Excitation {
-            message: e.to_string(),
-        })?;
-        let mut mismatches = Vec::new();
-        // batches being checked: (batch, samples still to come, CRC so far)
-        let mut active: Vec<(BatchRef, u32, Crc32)> = Vec::new();
-        let (mut bi, mut ki) = (0, 0);
-        for k in 0..=last {
-            // past the end of a finite run the generator is silent: reference 0
-            let r = gen.next().unwrap_or(0.0);
-            while bi < self.batches.len() && self.batches[bi].first_seq == k {
-                let b = self.batches[bi];
-                active.push((b, b.len, Crc32::new()));
-                bi += 1;
+        // the reference the kept samples were given, or a fresh one
+        let fresh;
+        let (reference, kept_filled) = match &self.reference {
+            Some(Ok(r)) => (&**r, true),
+            Some(Err(message)) => {
+                return Err(CaptureError::Excitation {
+                    message: message.clone(),
+                })
             }
-            if !active.is_empty() {
-                let bytes = r.to_le_bytes();
-                for (_, left, crc) in active.iter_mut() {
-                    crc.update(&bytes);
-                    *left -= 1;
-                }
-                active.retain(|(b, left, crc)| {
-                    if *left > 0 && k < last {
-                        return true;
-                    }
-                    let host_crc = crc.finish();
-                    if host_crc != b.crc {
-                        mismatches.push(ReferenceMismatch {
-                            first_seq: b.first_seq,
-                            len: b.len,
-                            board_crc: b.crc,
-                            host_crc,
-                        });
-                    }
-                    false
+            None => {
+                fresh = Reference::new(cfg).map_err(|e| CaptureError::Excitation {
+                    message: e.to_string(),
+                })?;
+                (&fresh, false)
+            }
+        };
+        let last = u64::from(last);
+        let mut mismatches = Vec::new();
+        for b in &self.batches {
+            // a batch is checked over its samples up to the highest received seq
+            let from = u64::from(b.first_seq);
+            let to = (from + u64::from(b.len)).min(last + 1);
+            let host_crc = reference.crc(from, to);
+            if host_crc != b.crc {
+                mismatches.push(ReferenceMismatch {
+                    first_seq: b.first_seq,
+                    len: b.len,
+                    board_crc: b.crc,
+                    host_crc,
                 });
             }
-            if self.keep_samples {
-                while ki < self.kept.len() && self.kept[ki].seq == k {
-                    self.kept[ki].theta_ref = f64::from(r);
-                    ki += 1;
-                }
+        }
+        if self.keep_samples && !kept_filled {
+            for s in &mut self.kept {
+                s.theta_ref = f64::from(reference.at(u64::from(s.seq)));
             }
         }
         mismatches.sort_by_key(|m| m.first_seq);
         Ok(mismatches)
+    }
+}
+
+/// The reference θref(k) of a session, regenerated once: the ramp-in, one period (the
+/// signal between the ramps is periodic, bit for bit: `Excitation::next` returns the
+/// period's table unscaled there), and for a finite run the ramp-out; 0 after the end,
+/// where the generator is silent. Memory: one period and two ramps, whatever the length
+/// of the run.
+#[derive(Debug)]
+struct Reference {
+    /// one period, k mod N [rad]
+    period: Vec<f32>,
+    /// the same as little-endian bytes, for CRCs over slices
+    period_bytes: Vec<u8>,
+    /// the first R samples [rad]
+    ramp_in: Vec<f32>,
+    /// start of the ramp-out and its R samples [rad] (finite runs)
+    ramp_out: Option<(u64, Vec<f32>)>,
+}
+
+impl Reference {
+    fn new(cfg: &ExcitationConfig) -> Result<Self, jointid_core::excitation::ExcitationError> {
+        let n = cfg.period_samples as usize;
+        let r = cfg.ramp_samples as u64;
+        let mut table = vec![0.0f32; n];
+        let ramp_in: Vec<f32> = {
+            let mut gen = Excitation::new(cfg, &mut table)?;
+            (0..r).map(|_| gen.next().unwrap_or(0.0)).collect()
+        };
+        let ramp_out = match cfg.total_samples() {
+            Some(total) => {
+                // the ramp-out of sample `start + i` weighs table[(start + i) mod N] by the
+                // falling ramp's i-th factor: an endless generator of the same table, ramped
+                // out at a point past its ramp-in with the same phase, gives it bit for bit
+                let start = total - r;
+                let endless = ExcitationConfig { periods: 0, ..*cfg };
+                let mut t2 = vec![0.0f32; n];
+                let mut g2 = Excitation::new(&endless, &mut t2)?;
+                let n64 = n.max(1) as u64;
+                let at = r + (start.saturating_sub(r)) % n64;
+                for _ in 0..at {
+                    g2.next();
+                }
+                g2.begin_ramp_out();
+                let out: Vec<f32> = (0..r).map(|_| g2.next().unwrap_or(0.0)).collect();
+                Some((start, out))
+            }
+            None => None,
+        };
+        let period_bytes = table.iter().flat_map(|x| x.to_le_bytes()).collect();
+        Ok(Self {
+            period: table,
+            period_bytes,
+            ramp_in,
+            ramp_out,
+        })
+    }
+
+    /// θref(k) [rad], as the k-th `Excitation::next` (0 after the end).
+    fn at(&self, k: u64) -> f32 {
+        if k < self.ramp_in.len() as u64 {
+            return self.ramp_in[k as usize];
+        }
+        if let Some((start, out)) = &self.ramp_out {
+            if k >= *start {
+                return out.get((k - start) as usize).copied().unwrap_or(0.0);
+            }
+        }
+        if self.period.is_empty() {
+            return 0.0;
+        }
+        self.period[(k % self.period.len() as u64) as usize]
+    }
+
+    /// First sample of the ramp-out (or never).
+    fn plain_end(&self) -> u64 {
+        self.ramp_out.as_ref().map_or(u64::MAX, |(s, _)| *s)
+    }
+
+    /// CRC-32 of the little-endian f32 bits of θref(from..to).
+    fn crc(&self, from: u64, to: u64) -> u32 {
+        let mut c = Crc32::new();
+        let n = self.period.len() as u64;
+        let mut k = from;
+        while k < to {
+            if k < self.ramp_in.len() as u64 || k >= self.plain_end() || n == 0 {
+                c.update(&self.at(k).to_le_bytes());
+                k += 1;
+                continue;
+            }
+            // a run inside the periodic part, up to the period's end or the ramp-out
+            let i = k % n;
+            let run = (to.min(self.plain_end()) - k).min(n - i);
+            c.update(&self.period_bytes[(4 * i) as usize..(4 * (i + run)) as usize]);
+            k += run;
+        }
+        c.finish()
     }
 }
 
@@ -654,7 +800,8 @@ fn decode_chunk(bytes: &[u8], base: u64) -> Chunk {
                 Message::Header(h) => Piece::Header(h, base + offset),
                 Message::Batch(b) => {
                     let from = c.samples.len();
-                    c.samples.extend(b.samples());
+                    // the decoder checked the batch: all its samples arrive
+                    let _ = b.for_each_sample(|s| c.samples.push(s));
                     Piece::Batch {
                         first_seq: b.first_seq(),
                         len: b.len() as u32,
@@ -980,6 +1127,47 @@ mod tests {
             let (report, record) = par.finish().unwrap();
             assert_eq!(report, want_report, "threads {threads}, piece {piece}");
             assert_eq!(record, want_record, "threads {threads}, piece {piece}");
+        }
+    }
+
+    #[test]
+    fn reference_equals_the_generator_sample_by_sample_with_ramps() {
+        let base = ExcitationConfig {
+            period_samples: 200,
+            max_line: 40,
+            ramp_samples: 150,
+            periods: 3,
+            ..ExcitationConfig::paper_default()
+        };
+        // finite (ramp-in, periods, ramp-out, silence) and endless
+        for cfg in [base, ExcitationConfig { periods: 0, ..base }] {
+            let mut table = vec![0.0f32; cfg.period_samples as usize];
+            let mut gen = Excitation::new(&cfg, &mut table).unwrap();
+            let want: Vec<f32> = (0..1200).map(|_| gen.next().unwrap_or(0.0)).collect();
+            let r = Reference::new(&cfg).unwrap();
+            for (k, w) in want.iter().enumerate() {
+                assert_eq!(
+                    r.at(k as u64).to_bits(),
+                    w.to_bits(),
+                    "k {k}, periods {}",
+                    cfg.periods
+                );
+            }
+            for (from, len) in [
+                (0, 64),
+                (140, 32),
+                (190, 64),
+                (349, 5),
+                (600, 64),
+                (690, 32),
+                (1100, 64),
+            ] {
+                assert_eq!(
+                    r.crc(from as u64, (from + len) as u64),
+                    jointid_core::wire::reference_crc(&want[from..from + len]),
+                    "batch {from}+{len}"
+                );
+            }
         }
     }
 }
