@@ -624,7 +624,6 @@ impl ParamModel for FullSs {
 mod tests {
     use super::*;
     use crate::linalg::GaussRng;
-    use crate::ss::ContinuousSs;
 
     /// Continuous two-mass in log-parameters (J1, J2, k, d, fm), angle output.
     struct TwoMassLog {
@@ -649,35 +648,7 @@ mod tests {
                 th[3].exp(),
                 th[4].exp(),
             ];
-            let f = DMatrix::from_row_slice(
-                4,
-                4,
-                &[
-                    0.0,
-                    1.0,
-                    0.0,
-                    0.0, //
-                    0.0,
-                    -(fm + d) / j1,
-                    -k / j1,
-                    d / j1, //
-                    0.0,
-                    1.0,
-                    0.0,
-                    -1.0, //
-                    0.0,
-                    d / j2,
-                    k / j2,
-                    -d / j2,
-                ],
-            );
-            ContinuousSs {
-                f,
-                g: DVector::from_vec(vec![0.0, 1.0 / j1, 0.0, 0.0]),
-                h: RowDVector::from_vec(vec![1.0, 0.0, 0.0, 0.0]),
-                d: 0.0,
-            }
-            .zoh(self.ts)
+            crate::subspace::tests::two_mass_angle_ct(j1, j2, k, d, fm).zoh(self.ts)
         }
     }
 
@@ -859,18 +830,6 @@ mod tests {
         assert!(jtj[(i, i)] > 0.0);
     }
 
-    fn fit_pct(y: &[f64], yh: &[f64]) -> f64 {
-        let m = y.iter().sum::<f64>() / y.len() as f64;
-        let e: f64 = y
-            .iter()
-            .zip(yh)
-            .map(|(a, b)| (a - b).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        let d: f64 = y.iter().map(|a| (a - m).powi(2)).sum::<f64>().sqrt();
-        100.0 * (1.0 - e / d)
-    }
-
     #[test]
     fn daisy_robot_arm_order_4_subspace_and_pem_fit_second_half() {
         use crate::subspace::{estimate, BdEstimate, Method, Order, SubspaceOptions};
@@ -897,7 +856,7 @@ mod tests {
         let val_fit = |m: &StateSpace| {
             // initial state estimated on the validation record, as the toolbox's compare does
             let x0 = estimate_x0(m, &val.u, &val.y);
-            fit_pct(&val.y, &m.simulate(&val.u, Some(&x0)))
+            crate::validate::fit_percent(&val.y, &m.simulate(&val.u, Some(&x0))).unwrap()
         };
         let mut moesp_pem = f64::NEG_INFINITY;
         let mut report = Vec::new();
