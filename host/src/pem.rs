@@ -652,6 +652,16 @@ mod tests {
         }
     }
 
+    /// [`TwoMassLog`] at 2 ms and its true log-parameters: J1 0.01, J2 0.02
+    /// [kg·m²], k 200 [N·m/rad], d 0.02, fm 0.05 [N·m·s/rad]
+    fn two_mass_log_truth() -> (TwoMassLog, Vec<f64>) {
+        let th = [0.01f64, 0.02, 200.0, 0.02, 0.05]
+            .iter()
+            .map(|v| v.ln())
+            .collect();
+        (TwoMassLog { ts: 2e-3 }, th)
+    }
+
     fn data_for(m: &StateSpace, seed: u64, n: usize, noise: f64) -> IdData {
         let mut rng = GaussRng::new(seed);
         // first-order low-passed noise input, zero mean
@@ -679,9 +689,7 @@ mod tests {
 
     #[test]
     fn pem_recovers_two_mass_within_3_sigma_and_sigma_matches_monte_carlo() {
-        let truth = [0.01f64, 0.02, 200.0, 0.02, 0.05];
-        let th_true: Vec<f64> = truth.iter().map(|v| v.ln()).collect();
-        let model = TwoMassLog { ts: 2e-3 };
+        let (model, th_true) = two_mass_log_truth();
         let m_true = model.to_ss(&th_true);
         let th0: Vec<f64> = th_true
             .iter()
@@ -723,11 +731,7 @@ mod tests {
 
     #[test]
     fn pem_respects_bounds_and_fixed_parameters() {
-        let model = TwoMassLog { ts: 2e-3 };
-        let th_true: Vec<f64> = [0.01f64, 0.02, 200.0, 0.02, 0.05]
-            .iter()
-            .map(|v| v.ln())
-            .collect();
+        let (model, th_true) = two_mass_log_truth();
         let data = data_for(&model.to_ss(&th_true), 5, 2000, 1e-4);
         let mut th0 = th_true.clone();
         th0[0] += 0.3;
@@ -752,11 +756,7 @@ mod tests {
 
     #[test]
     fn full_ss_sensitivities_match_finite_differences() {
-        let model = TwoMassLog { ts: 2e-3 };
-        let th_true: Vec<f64> = [0.01f64, 0.02, 200.0, 0.02, 0.05]
-            .iter()
-            .map(|v| v.ln())
-            .collect();
+        let (model, th_true) = two_mass_log_truth();
         let m = model.to_ss(&th_true);
         let data = data_for(&m, 9, 300, 0.0);
         let (fs, th) = FullSs::from_ss(&m, true, false);
@@ -780,11 +780,7 @@ mod tests {
 
     #[test]
     fn innovations_sensitivities_match_finite_differences() {
-        let model = TwoMassLog { ts: 2e-3 };
-        let th_true: Vec<f64> = [0.01f64, 0.02, 200.0, 0.02, 0.05]
-            .iter()
-            .map(|v| v.ln())
-            .collect();
+        let (model, th_true) = two_mass_log_truth();
         let mut m = model.to_ss(&th_true);
         m.k = Some(DVector::from_vec(vec![0.3, 0.1, -0.2, 0.05]));
         let data = data_for(&model.to_ss(&th_true), 12, 300, 1e-3);
