@@ -95,6 +95,18 @@ fn read_csv(path: &Path) -> (BTreeMap<String, String>, Vec<[f64; 4]>) {
 }
 
 /// Checks that the CSV rows are exactly the synthesised samples whose seq is not in `lost`.
+/// `jointid export <jcap> --csv <csv>` must succeed; the CSV read back
+fn export_csv(jcap: &Path, csv: &Path) -> (BTreeMap<String, String>, Vec<[f64; 4]>) {
+    let e = jointid(&[
+        "export",
+        jcap.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(e.status.success(), "{}", String::from_utf8_lossy(&e.stderr));
+    read_csv(csv)
+}
+
 fn assert_rows_match(s: &SynthStream, rows: &[[f64; 4]], lost: &[u32]) {
     let fs = f64::from(s.header.sample_rate_hz);
     let tq = f64::from(s.header.scale.torque_nm_per_count);
@@ -207,14 +219,7 @@ fn capture_from_file_keeps_every_sample_in_order_bit_exact() {
     assert_eq!(info["header"]["session_id"], 7);
 
     let csv = dir.join("run.csv");
-    let e = jointid(&[
-        "export",
-        out.to_str().unwrap(),
-        "--csv",
-        csv.to_str().unwrap(),
-    ]);
-    assert!(e.status.success(), "{}", String::from_utf8_lossy(&e.stderr));
-    let (meta, rows) = read_csv(&csv);
+    let (meta, rows) = export_csv(&out, &csv);
     assert_rows_match(&s, &rows, &[]);
     let x = s.header.excitation;
     for (k, want) in [
@@ -314,15 +319,7 @@ fn capture_reports_exactly_the_injected_faults_and_keeps_every_intact_frame() {
     assert_eq!(v["ended"], false);
 
     let csv = dir.join("run.csv");
-    assert!(jointid(&[
-        "export",
-        out.to_str().unwrap(),
-        "--csv",
-        csv.to_str().unwrap()
-    ])
-    .status
-    .success());
-    let (meta, rows) = read_csv(&csv);
+    let (meta, rows) = export_csv(&out, &csv);
     assert_rows_match(&s, &rows, &lost);
     let listed: Vec<String> = gaps(&v).iter().map(|(a, b)| format!("{a}..{b}")).collect();
     assert_eq!(meta["gaps"], listed.join(";"));
@@ -366,15 +363,7 @@ fn capture_killed_midway_leaves_a_file_read_up_to_its_last_whole_frame() {
     assert_eq!(v["gaps"], serde_json::json!([]));
 
     let csv = dir.join("run.csv");
-    assert!(jointid(&[
-        "export",
-        out.to_str().unwrap(),
-        "--csv",
-        csv.to_str().unwrap()
-    ])
-    .status
-    .success());
-    let (_, rows) = read_csv(&csv);
+    let (_, rows) = export_csv(&out, &csv);
     let lost: Vec<u32> = (whole..400).collect();
     assert_rows_match(&s, &rows, &lost);
     let _ = std::fs::remove_dir_all(&dir);
@@ -495,15 +484,7 @@ fn capture_from_serial_pty_keeps_every_sample_in_order_bit_exact() {
     assert_eq!(v["damaged_frames"], serde_json::json!([]));
     assert_eq!(&std::fs::read(&out).unwrap()[8..], &s.bytes[..]);
     let csv = dir.join("run.csv");
-    assert!(jointid(&[
-        "export",
-        out.to_str().unwrap(),
-        "--csv",
-        csv.to_str().unwrap()
-    ])
-    .status
-    .success());
-    assert_rows_match(&s, &read_csv(&csv).1, &[]);
+    assert_rows_match(&s, &export_csv(&out, &csv).1, &[]);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
