@@ -792,16 +792,19 @@ mod tests {
         let y0 = predict(&fs.to_ss(&th), &data.u, &data.y, &x0);
         let e0: Vec<f64> = data.y.iter().zip(&y0).map(|(a, b)| a - b).collect();
         let h = 1e-7;
-        for i in [5usize, fs.n_params() - 2] {
-            let mut tp = th.clone();
-            tp[i] += h;
-            let y1 = predict(&fs.to_ss(&tp), &data.u, &data.y, &x0);
-            let g: f64 = y1
-                .iter()
+        // finite-difference Jᵀε of the predictor moved by h in one parameter or state
+        let fd = |tp: &[f64], xp: &DVector<f64>| -> f64 {
+            let y1 = predict(&fs.to_ss(tp), &data.u, &data.y, xp);
+            y1.iter()
                 .zip(&y0)
                 .zip(&e0)
                 .map(|((a, b), e)| (a - b) / h * e)
-                .sum();
+                .sum()
+        };
+        for i in [5usize, fs.n_params() - 2] {
+            let mut tp = th.clone();
+            tp[i] += h;
+            let g = fd(&tp, &x0);
             assert!(
                 (jte[i] - g).abs() < 1e-4 * g.abs().max(1e-12),
                 "param {i}: {} vs {g}",
@@ -810,13 +813,7 @@ mod tests {
         }
         let mut xp = x0.clone();
         xp[2] += h;
-        let y1 = predict(&fs.to_ss(&th), &data.u, &data.y, &xp);
-        let g: f64 = y1
-            .iter()
-            .zip(&y0)
-            .zip(&e0)
-            .map(|((a, b), e)| (a - b) / h * e)
-            .sum();
+        let g = fd(&th, &xp);
         let i = fs.n_params() + 2;
         assert!(
             (jte[i] - g).abs() < 1e-4 * g.abs().max(1e-12),
