@@ -19,7 +19,7 @@ use std::collections::BTreeMap;
 
 use jointid::cli::{default_loaders, Cli, Context};
 use jointid::data::{Dataset, IdData};
-use jointid::experiment::{paper_runs, table};
+use jointid::experiment::{paper_runs, table, Table};
 use jointid::fit::{fit_model, FitOptions, ModelKind};
 use jointid::grey_box::{GreyBoxModel, Output, Structure};
 use jointid::pem::{self, PemOptions};
@@ -232,11 +232,11 @@ fn three_mass_automatic_start_reaches_global_optimum_on_95_of_100_joints() {
     assert!(ok >= 95, "{ok} of 100; misses {failures:?}");
 }
 
-// Seed 000 §6 on the simulated IRB1400-like joint: the black box of order 11
-// reaches a validation FIT within 1 point of the true model's.
-#[test]
-fn black_box_order_11_validation_fit_within_1_point_of_true_model() {
-    let runs = paper_runs(3).unwrap();
+/// Seed 000 §6 table for one model on the simulated paper experiment (noise
+/// `seed`): estimation and validation runs as capture datasets, fitted and
+/// compared with the true model.
+fn paper_table(seed: u64, model: ModelKind) -> Table {
+    let runs = paper_runs(seed).unwrap();
     let ds = |out: &sim::SimOutput, exc: ExcitationConfig, name: &str| Dataset {
         name: name.into(),
         data: out.to_id_data(),
@@ -246,7 +246,14 @@ fn black_box_order_11_validation_fit_within_1_point_of_true_model() {
     };
     let est = ds(&runs.est, runs.est_excitation, "est");
     let val = ds(&runs.val, runs.val_excitation, "val");
-    let (t, _) = table(&est, &val, &runs.sim, &[ModelKind::BlackBox(11)]).unwrap();
+    table(&est, &val, &runs.sim, &[model]).unwrap().0
+}
+
+// Seed 000 §6 on the simulated IRB1400-like joint: the black box of order 11
+// reaches a validation FIT within 1 point of the true model's.
+#[test]
+fn black_box_order_11_validation_fit_within_1_point_of_true_model() {
+    let t = paper_table(3, ModelKind::BlackBox(11));
     let bb = &t.rows[0];
     eprintln!(
         "black box 11: est {:.2}, val {:.2}; true model: est {:.2}, val {:.2}",
@@ -268,17 +275,7 @@ fn black_box_order_11_validation_fit_within_1_point_of_true_model() {
 // deviations (measured on seed 3: at most 0.2 % and 1.3 σ).
 #[test]
 fn four_mass_on_paper_experiment_reaches_true_fit_and_parameters() {
-    let runs = paper_runs(3).unwrap();
-    let ds = |out: &sim::SimOutput, exc: ExcitationConfig, name: &str| Dataset {
-        name: name.into(),
-        data: out.to_id_data(),
-        t0: 0.0,
-        excitation: Some(exc),
-        meta: BTreeMap::new(),
-    };
-    let est = ds(&runs.est, runs.est_excitation, "est");
-    let val = ds(&runs.val, runs.val_excitation, "val");
-    let (t, _) = table(&est, &val, &runs.sim, &[ModelKind::FourMass]).unwrap();
+    let t = paper_table(3, ModelKind::FourMass);
     let row = &t.rows[0];
     eprintln!(
         "four-mass: est {:.2}, val {:.2}; true model: est {:.2}, val {:.2}",

@@ -16,7 +16,7 @@ use std::time::Instant;
 
 use jointid::data::IdData;
 use jointid::grey_box::{
-    self, GreyBoxModel, GreyBoxOptions, Output, Structure, DEFAULT_GEAR_RATIO,
+    self, reference_three_mass, GreyBoxModel, GreyBoxOptions, Output, Structure, DEFAULT_GEAR_RATIO,
 };
 use jointid::linalg::{filtfilt_lowpass, GaussRng};
 use jointid::pem::{self, FullSs, ParamModel, PemOptions};
@@ -25,21 +25,6 @@ use jointid::subspace::{self, estimate_x0, Method, Order, SubspaceOptions};
 use nalgebra::DVector;
 
 const TS: f64 = 5e-4;
-
-fn truth() -> Vec<f64> {
-    let r2 = DEFAULT_GEAR_RATIO * DEFAULT_GEAR_RATIO;
-    // motor side: J_m 5e-3, J_a1' 4e-3, J_a2' 3e-3 kg·m², k_g' 40, k_a' 15 N·m/rad
-    vec![
-        5e-3,
-        4e-3 / r2,
-        3e-3 / r2,
-        40.0 / r2,
-        15.0 / r2,
-        0.004 / r2,
-        0.002 / r2,
-        0.01,
-    ]
-}
 
 /// PD position loop `u = kp (r − y_m) − kd ẏ_m + w`, output noise on y_m,
 /// reference = low-passed Gaussian noise, small torque disturbance `w`.
@@ -84,23 +69,11 @@ fn decimate(d: &IdData, k: usize) -> IdData {
     }
 }
 
-fn fit_percent(y: &[f64], yh: &[f64]) -> f64 {
-    let m = y.iter().sum::<f64>() / y.len() as f64;
-    let e: f64 = y
-        .iter()
-        .zip(yh)
-        .map(|(a, b)| (a - b).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    let d: f64 = y.iter().map(|a| (a - m).powi(2)).sum::<f64>().sqrt();
-    100.0 * (1.0 - e / d)
-}
-
 fn val_fit(m: &StateSpace, val: &IdData) -> f64 {
     let mut m = m.clone();
     m.k = None;
     let x0 = estimate_x0(&m, &val.u, &val.y);
-    fit_percent(&val.y, &m.simulate(&val.u, Some(&x0)))
+    jointid::validate::fit_percent(&val.y, &m.simulate(&val.u, Some(&x0))).unwrap()
 }
 
 fn freqs(m: &StateSpace) -> (Vec<f64>, Vec<f64>) {
@@ -159,7 +132,7 @@ fn main() {
         r: DEFAULT_GEAR_RATIO,
         ts: TS,
     };
-    let p = truth();
+    let p = reference_three_mass();
     let plant = gm.continuous(&p).zoh(TS);
     let (tr_res, tr_anti) = freqs(&plant);
     println!(

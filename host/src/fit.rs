@@ -1143,6 +1143,27 @@ mod tests {
         )
     }
 
+    /// black-box order-3 velocity model of `est`; `refine`: prediction-error
+    /// refinement after the subspace start
+    fn black_box_3(est: &IdData, refine: bool) -> Fitted {
+        fit_model(
+            est,
+            &FitOptions {
+                kind: ModelKind::BlackBox(3),
+                output: Output::Velocity,
+                refine,
+                ..FitOptions::default()
+            },
+        )
+        .unwrap()
+    }
+
+    /// preparation that leaves the record as it is
+    const RAW: Prep = Prep {
+        decimate: 1,
+        detrend: DetrendKind::None,
+    };
+
     #[test]
     fn model_kind_parses_names_and_rejects_unknown() {
         assert_eq!("black-box:11".parse(), Ok(ModelKind::BlackBox(11)));
@@ -1168,25 +1189,14 @@ mod tests {
     fn black_box_recovers_open_loop_system_and_saved_model_reproduces_fit() {
         let (est, truth) = two_mass_data(3000, 3, 0.01);
         let (val, _) = two_mass_data(2000, 4, 0.01);
-        let f = fit_model(
-            &est,
-            &FitOptions {
-                kind: ModelKind::BlackBox(3),
-                output: Output::Velocity,
-                ..FitOptions::default()
-            },
-        )
-        .unwrap();
+        let f = black_box_3(&est, true);
         let v = f.evaluate(&val, 20).unwrap();
         let yt = truth.simulate(&val.u, None);
         let best = validate::fit_percent(&val.y, &yt).unwrap();
         assert!(v.fit > best - 0.5, "fit {} vs truth {best}", v.fit);
         let res = f.resonances(1.0);
         assert_eq!(res.resonances.len(), 1, "{res:?}");
-        let prep = Prep {
-            decimate: 1,
-            detrend: DetrendKind::None,
-        };
+        let prep = RAW;
         let saved = f.to_saved(prep, "est", 0.0);
         let text = serde_json::to_string(&saved).unwrap();
         let back: SavedModel = serde_json::from_str(&text).unwrap();
@@ -1197,16 +1207,7 @@ mod tests {
     #[test]
     fn evaluate_rejects_sample_interval_mismatch() {
         let (est, _) = two_mass_data(600, 5, 0.01);
-        let f = fit_model(
-            &est,
-            &FitOptions {
-                kind: ModelKind::BlackBox(3),
-                output: Output::Velocity,
-                refine: false,
-                ..FitOptions::default()
-            },
-        )
-        .unwrap();
+        let f = black_box_3(&est, false);
         let mut other = est.clone();
         other.ts = 4e-3;
         let e = f.evaluate(&other, 10).unwrap_err().to_string();
@@ -1307,20 +1308,8 @@ mod tests {
     #[test]
     fn format_1_model_files_are_read_and_interval_mean_hold_is_refused() {
         let (est, _) = two_mass_data(600, 6, 0.01);
-        let f = fit_model(
-            &est,
-            &FitOptions {
-                kind: ModelKind::BlackBox(3),
-                output: Output::Velocity,
-                refine: false,
-                ..FitOptions::default()
-            },
-        )
-        .unwrap();
-        let prep = Prep {
-            decimate: 1,
-            detrend: DetrendKind::None,
-        };
+        let f = black_box_3(&est, false);
+        let prep = RAW;
         let mut v: serde_json::Value = serde_json::to_value(f.to_saved(prep, "est", 0.0)).unwrap();
         assert_eq!(v["format"], MODEL_FORMAT);
         // a format-1 file: no decimate_output, zero-order hold

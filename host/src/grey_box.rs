@@ -62,6 +62,25 @@ use crate::subspace::{self, Method, Order, SubspaceOptions};
 /// default gear ratio of seed 000 (arm angle per motor angle)
 pub const DEFAULT_GEAR_RATIO: f64 = 1.0 / 118.0;
 
+/// Reference three-mass joint on the motor side, in the order of
+/// [`Structure::param_names`] for [`Structure::ThreeMass`]: J_m 5e-3, J_a1' 4e-3 and
+/// J_a2' 3e-3 [kg·m²], k_g' 40 and k_a' 15 [N·m/rad], d_g' 0.004 and d_a' 0.002
+/// [N·m·s/rad] (arm-side values divided by r² with [`DEFAULT_GEAR_RATIO`]), f_m 0.01
+/// [N·m·s/rad]. Known truth for tests and benchmarks of the estimators.
+pub fn reference_three_mass() -> Vec<f64> {
+    let r2 = DEFAULT_GEAR_RATIO * DEFAULT_GEAR_RATIO;
+    vec![
+        5e-3,
+        4e-3 / r2,
+        3e-3 / r2,
+        40.0 / r2,
+        15.0 / r2,
+        0.004 / r2,
+        0.002 / r2,
+        0.01,
+    ]
+}
+
 /// Mechanical structure of the joint model.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Structure {
@@ -1159,19 +1178,30 @@ pub(crate) mod tests {
     use super::*;
     use crate::subspace::tests::{closed_loop, LoopSpec};
 
-    fn truth3() -> Vec<f64> {
-        // motor-side chain J_m 5e-3, J1' 4e-3, J2' 3e-3, k_g' 40, k_a' 15 (N·m/rad)
-        let r2 = DEFAULT_GEAR_RATIO * DEFAULT_GEAR_RATIO;
-        vec![
-            5e-3,
-            4e-3 / r2,
-            3e-3 / r2,
-            40.0 / r2,
-            15.0 / r2,
-            0.004 / r2,
-            0.002 / r2,
-            0.01,
-        ]
+    /// Simulates the joint `structure` with `output` and parameters `p`, sampled
+    /// every `ts` [s], in the closed loop of `spec`, and fits the same structure
+    /// to the record: (discrete plant, fit).
+    fn closed_loop_fit(
+        structure: Structure,
+        output: Output,
+        p: &[f64],
+        ts: f64,
+        spec: &LoopSpec,
+    ) -> (StateSpace, GreyBoxFit) {
+        let model = GreyBoxModel {
+            structure,
+            output,
+            r: DEFAULT_GEAR_RATIO,
+            ts,
+        };
+        let plant = model.continuous(p).zoh(ts);
+        let data = closed_loop(&plant, spec);
+        let opts = GreyBoxOptions {
+            structure,
+            output,
+            ..Default::default()
+        };
+        (plant, fit(&data, &opts).unwrap())
     }
 
     #[test]
@@ -1182,7 +1212,7 @@ pub(crate) mod tests {
             r: DEFAULT_GEAR_RATIO,
             ts: 5e-4,
         };
-        let p = truth3();
+        let p = reference_three_mass();
         let c = m.continuous(&p);
         // undamped chain frequencies vs the lightly damped model's modes
         let chain = Chain {
@@ -1270,18 +1300,7 @@ pub(crate) mod tests {
     #[test]
     fn three_mass_fit_recovers_parameters_from_automatic_initial_values() {
         let ts = 2e-3;
-        let model = GreyBoxModel {
-            structure: Structure::ThreeMass,
-            output: Output::Angle,
-            r: DEFAULT_GEAR_RATIO,
-            ts,
-        };
-        let p = truth3();
-        let plant = model.continuous(&p).zoh(ts);
-        let rz = plant.resonances(1.0, 0.3);
-        for m in rz.resonances.iter().chain(&rz.anti_resonances) {
-            assert!((5.0..30.0).contains(&m.freq_hz), "{rz:?}");
-        }
+        let p = reference_three_mass();
         let spec = LoopSpec {
             kp: 1.0,
             kd: 0.02,
@@ -1292,8 +1311,11 @@ pub(crate) mod tests {
             r_smooth: 0.8,
             u_dither: 0.02,
         };
-        let data = closed_loop(&plant, &spec);
-        let f = fit(&data, &GreyBoxOptions::default()).unwrap();
+        let (plant, f) = closed_loop_fit(Structure::ThreeMass, Output::Angle, &p, ts, &spec);
+        let rz = plant.resonances(1.0, 0.3);
+        for m in rz.resonances.iter().chain(&rz.anti_resonances) {
+            assert!((5.0..30.0).contains(&m.freq_hz), "{rz:?}");
+        }
         eprintln!(
             "features {:?}\ninitial {:?}\nestimate {:?}\nfit {:.2} %, iterations {}",
             f.features, f.initial, f.params, f.fit_percent, f.pem.iterations
@@ -1365,14 +1387,7 @@ pub(crate) mod tests {
     #[test]
     fn rigid_fit_recovers_inertia_and_friction_on_closed_loop() {
         let ts = 1e-3;
-        let model = GreyBoxModel {
-            structure: Structure::Rigid,
-            output: Output::Angle,
-            r: DEFAULT_GEAR_RATIO,
-            ts,
-        };
         let p = [0.02, 0.15];
-        let plant = model.continuous(&p).zoh(ts);
         let spec = LoopSpec {
             kp: 3.0,
             kd: 0.05,
@@ -1383,15 +1398,7 @@ pub(crate) mod tests {
             r_smooth: 0.9,
             u_dither: 0.05,
         };
-        let data = closed_loop(&plant, &spec);
-        let f = fit(
-            &data,
-            &GreyBoxOptions {
-                structure: Structure::Rigid,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let (_, f) = closed_loop_fit(Structure::Rigid, Output::Angle, &p, ts, &spec);
         for (est, t) in f.params.iter().zip(&p) {
             assert!(
                 (est.value - t).abs() < 0.02 * t,
@@ -1406,12 +1413,6 @@ pub(crate) mod tests {
     fn four_mass_fit_recovers_parameters_from_automatic_initial_values() {
         let ts = 2e-3;
         let r2 = DEFAULT_GEAR_RATIO * DEFAULT_GEAR_RATIO;
-        let model = GreyBoxModel {
-            structure: Structure::FourMass,
-            output: Output::Angle,
-            r: DEFAULT_GEAR_RATIO,
-            ts,
-        };
         let p = [
             5e-3,
             4e-3 / r2,
@@ -1425,7 +1426,6 @@ pub(crate) mod tests {
             0.001 / r2,
             0.01,
         ];
-        let plant = model.continuous(&p).zoh(ts);
         let spec = LoopSpec {
             kp: 1.0,
             kd: 0.02,
@@ -1436,15 +1436,7 @@ pub(crate) mod tests {
             r_smooth: 0.8,
             u_dither: 0.02,
         };
-        let data = closed_loop(&plant, &spec);
-        let f = fit(
-            &data,
-            &GreyBoxOptions {
-                structure: Structure::FourMass,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let (_, f) = closed_loop_fit(Structure::FourMass, Output::Angle, &p, ts, &spec);
         for (est, t) in f.params.iter().zip(&p) {
             let rel = (est.value - t).abs() / t;
             assert!(rel < 0.05, "{}: {} vs {t}", est.name, est.value);
@@ -1457,14 +1449,7 @@ pub(crate) mod tests {
         // first resonance by 10 %, and only the damping-continuation start
         // reaches the true minimum
         let ts = 5e-4;
-        let model = GreyBoxModel {
-            structure: Structure::ThreeMass,
-            output: Output::Angle,
-            r: DEFAULT_GEAR_RATIO,
-            ts,
-        };
-        let p = truth3();
-        let plant = model.continuous(&p).zoh(ts);
+        let p = reference_three_mass();
         let spec = LoopSpec {
             kp: 1.0,
             kd: 0.02,
@@ -1475,8 +1460,7 @@ pub(crate) mod tests {
             r_smooth: 0.95,
             u_dither: 0.02,
         };
-        let data = closed_loop(&plant, &spec);
-        let f = fit(&data, &GreyBoxOptions::default()).unwrap();
+        let (_, f) = closed_loop_fit(Structure::ThreeMass, Output::Angle, &p, ts, &spec);
         for (est, t) in f.params.iter().zip(&p) {
             let rel = (est.value - t).abs() / t;
             assert!(rel < 0.05, "{}: {} vs {t}", est.name, est.value);
@@ -1494,15 +1478,8 @@ pub(crate) mod tests {
     fn two_mass_fit_recovers_parameters_from_velocity_output() {
         let ts = 1e-3;
         let r2 = DEFAULT_GEAR_RATIO * DEFAULT_GEAR_RATIO;
-        let model = GreyBoxModel {
-            structure: Structure::TwoMass,
-            output: Output::Velocity,
-            r: DEFAULT_GEAR_RATIO,
-            ts,
-        };
         // motor side: J_m 4e-3, J_a1' 6e-3 kg·m², k_g' 30 N·m/rad (resonance 14 Hz, anti-resonance 11 Hz)
         let p = [4e-3, 6e-3 / r2, 30.0 / r2, 0.004 / r2, 0.02];
-        let plant = model.continuous(&p).zoh(ts);
         // velocity loop: the same P-D law acting on the measured velocity
         let spec = LoopSpec {
             kp: 0.3,
@@ -1514,13 +1491,7 @@ pub(crate) mod tests {
             r_smooth: 0.9,
             u_dither: 0.02,
         };
-        let data = closed_loop(&plant, &spec);
-        let opts = GreyBoxOptions {
-            structure: Structure::TwoMass,
-            output: Output::Velocity,
-            ..Default::default()
-        };
-        let f = fit(&data, &opts).unwrap();
+        let (_, f) = closed_loop_fit(Structure::TwoMass, Output::Velocity, &p, ts, &spec);
         for (est, t) in f.params.iter().zip(&p) {
             assert!(
                 (est.value - t).abs() < 0.05 * t,

@@ -624,7 +624,6 @@ impl ParamModel for FullSs {
 mod tests {
     use super::*;
     use crate::linalg::GaussRng;
-    use crate::ss::ContinuousSs;
 
     /// Continuous two-mass in log-parameters (J1, J2, k, d, fm), angle output.
     struct TwoMassLog {
@@ -649,36 +648,18 @@ mod tests {
                 th[3].exp(),
                 th[4].exp(),
             ];
-            let f = DMatrix::from_row_slice(
-                4,
-                4,
-                &[
-                    0.0,
-                    1.0,
-                    0.0,
-                    0.0, //
-                    0.0,
-                    -(fm + d) / j1,
-                    -k / j1,
-                    d / j1, //
-                    0.0,
-                    1.0,
-                    0.0,
-                    -1.0, //
-                    0.0,
-                    d / j2,
-                    k / j2,
-                    -d / j2,
-                ],
-            );
-            ContinuousSs {
-                f,
-                g: DVector::from_vec(vec![0.0, 1.0 / j1, 0.0, 0.0]),
-                h: RowDVector::from_vec(vec![1.0, 0.0, 0.0, 0.0]),
-                d: 0.0,
-            }
-            .zoh(self.ts)
+            crate::subspace::tests::two_mass_angle_ct(j1, j2, k, d, fm).zoh(self.ts)
         }
+    }
+
+    /// [`TwoMassLog`] at 2 ms and its true log-parameters: J1 0.01, J2 0.02
+    /// [kg·m²], k 200 [N·m/rad], d 0.02, fm 0.05 [N·m·s/rad]
+    fn two_mass_log_truth() -> (TwoMassLog, Vec<f64>) {
+        let th = [0.01f64, 0.02, 200.0, 0.02, 0.05]
+            .iter()
+            .map(|v| v.ln())
+            .collect();
+        (TwoMassLog { ts: 2e-3 }, th)
     }
 
     fn data_for(m: &StateSpace, seed: u64, n: usize, noise: f64) -> IdData {
@@ -708,9 +689,7 @@ mod tests {
 
     #[test]
     fn pem_recovers_two_mass_within_3_sigma_and_sigma_matches_monte_carlo() {
-        let truth = [0.01f64, 0.02, 200.0, 0.02, 0.05];
-        let th_true: Vec<f64> = truth.iter().map(|v| v.ln()).collect();
-        let model = TwoMassLog { ts: 2e-3 };
+        let (model, th_true) = two_mass_log_truth();
         let m_true = model.to_ss(&th_true);
         let th0: Vec<f64> = th_true
             .iter()
@@ -752,11 +731,7 @@ mod tests {
 
     #[test]
     fn pem_respects_bounds_and_fixed_parameters() {
-        let model = TwoMassLog { ts: 2e-3 };
-        let th_true: Vec<f64> = [0.01f64, 0.02, 200.0, 0.02, 0.05]
-            .iter()
-            .map(|v| v.ln())
-            .collect();
+        let (model, th_true) = two_mass_log_truth();
         let data = data_for(&model.to_ss(&th_true), 5, 2000, 1e-4);
         let mut th0 = th_true.clone();
         th0[0] += 0.3;
@@ -781,11 +756,7 @@ mod tests {
 
     #[test]
     fn full_ss_sensitivities_match_finite_differences() {
-        let model = TwoMassLog { ts: 2e-3 };
-        let th_true: Vec<f64> = [0.01f64, 0.02, 200.0, 0.02, 0.05]
-            .iter()
-            .map(|v| v.ln())
-            .collect();
+        let (model, th_true) = two_mass_log_truth();
         let m = model.to_ss(&th_true);
         let data = data_for(&m, 9, 300, 0.0);
         let (fs, th) = FullSs::from_ss(&m, true, false);
@@ -809,11 +780,7 @@ mod tests {
 
     #[test]
     fn innovations_sensitivities_match_finite_differences() {
-        let model = TwoMassLog { ts: 2e-3 };
-        let th_true: Vec<f64> = [0.01f64, 0.02, 200.0, 0.02, 0.05]
-            .iter()
-            .map(|v| v.ln())
-            .collect();
+        let (model, th_true) = two_mass_log_truth();
         let mut m = model.to_ss(&th_true);
         m.k = Some(DVector::from_vec(vec![0.3, 0.1, -0.2, 0.05]));
         let data = data_for(&model.to_ss(&th_true), 12, 300, 1e-3);
@@ -825,16 +792,19 @@ mod tests {
         let y0 = predict(&fs.to_ss(&th), &data.u, &data.y, &x0);
         let e0: Vec<f64> = data.y.iter().zip(&y0).map(|(a, b)| a - b).collect();
         let h = 1e-7;
-        for i in [5usize, fs.n_params() - 2] {
-            let mut tp = th.clone();
-            tp[i] += h;
-            let y1 = predict(&fs.to_ss(&tp), &data.u, &data.y, &x0);
-            let g: f64 = y1
-                .iter()
+        // finite-difference Jᵀε of the predictor moved by h in one parameter or state
+        let fd = |tp: &[f64], xp: &DVector<f64>| -> f64 {
+            let y1 = predict(&fs.to_ss(tp), &data.u, &data.y, xp);
+            y1.iter()
                 .zip(&y0)
                 .zip(&e0)
                 .map(|((a, b), e)| (a - b) / h * e)
-                .sum();
+                .sum()
+        };
+        for i in [5usize, fs.n_params() - 2] {
+            let mut tp = th.clone();
+            tp[i] += h;
+            let g = fd(&tp, &x0);
             assert!(
                 (jte[i] - g).abs() < 1e-4 * g.abs().max(1e-12),
                 "param {i}: {} vs {g}",
@@ -843,13 +813,7 @@ mod tests {
         }
         let mut xp = x0.clone();
         xp[2] += h;
-        let y1 = predict(&fs.to_ss(&th), &data.u, &data.y, &xp);
-        let g: f64 = y1
-            .iter()
-            .zip(&y0)
-            .zip(&e0)
-            .map(|((a, b), e)| (a - b) / h * e)
-            .sum();
+        let g = fd(&th, &xp);
         let i = fs.n_params() + 2;
         assert!(
             (jte[i] - g).abs() < 1e-4 * g.abs().max(1e-12),
@@ -857,18 +821,6 @@ mod tests {
             jte[i]
         );
         assert!(jtj[(i, i)] > 0.0);
-    }
-
-    fn fit_pct(y: &[f64], yh: &[f64]) -> f64 {
-        let m = y.iter().sum::<f64>() / y.len() as f64;
-        let e: f64 = y
-            .iter()
-            .zip(yh)
-            .map(|(a, b)| (a - b).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        let d: f64 = y.iter().map(|a| (a - m).powi(2)).sum::<f64>().sqrt();
-        100.0 * (1.0 - e / d)
     }
 
     #[test]
@@ -897,7 +849,7 @@ mod tests {
         let val_fit = |m: &StateSpace| {
             // initial state estimated on the validation record, as the toolbox's compare does
             let x0 = estimate_x0(m, &val.u, &val.y);
-            fit_pct(&val.y, &m.simulate(&val.u, Some(&x0)))
+            crate::validate::fit_percent(&val.y, &m.simulate(&val.u, Some(&x0))).unwrap()
         };
         let mut moesp_pem = f64::NEG_INFINITY;
         let mut report = Vec::new();

@@ -627,12 +627,10 @@ pub(crate) mod tests {
     use crate::linalg::GaussRng;
     use crate::ss::ContinuousSs;
 
-    /// Continuous two-mass (order 3, velocity) or with integrator (order 4,
-    /// angle) motor-side model: motor J1, load J2, spring k, damper d,
-    /// viscous friction fm.
-    pub(crate) fn two_mass_ct(angle: bool) -> ContinuousSs {
-        let (j1, j2, k, d, fm) = (0.01, 0.02, 200.0, 0.02, 0.002);
-        // states: [θm, ωm, θm-θl, ωl] or without θm
+    /// Continuous two-mass motor-side model with angle output, states
+    /// `[θm, ωm, θm-θl, ωl]`: motor inertia `j1` and load inertia `j2` [kg·m²],
+    /// spring `k` [N·m/rad], damper `d` and motor viscous friction `fm` [N·m·s/rad].
+    pub(crate) fn two_mass_angle_ct(j1: f64, j2: f64, k: f64, d: f64, fm: f64) -> ContinuousSs {
         let f = DMatrix::from_row_slice(
             4,
             4,
@@ -657,7 +655,14 @@ pub(crate) mod tests {
         );
         let g = DVector::from_vec(vec![0.0, 1.0 / j1, 0.0, 0.0]);
         let h = RowDVector::from_vec(vec![1.0, 0.0, 0.0, 0.0]);
-        let c = ContinuousSs { f, g, h, d: 0.0 };
+        ContinuousSs { f, g, h, d: 0.0 }
+    }
+
+    /// Continuous two-mass (order 3, velocity) or with integrator (order 4,
+    /// angle) motor-side model: motor J1, load J2, spring k, damper d,
+    /// viscous friction fm.
+    pub(crate) fn two_mass_ct(angle: bool) -> ContinuousSs {
+        let c = two_mass_angle_ct(0.01, 0.02, 200.0, 0.02, 0.002);
         if angle {
             c
         } else {
@@ -813,38 +818,37 @@ pub(crate) mod tests {
         worst(&e.resonances, &t.resonances).max(worst(&e.anti_resonances, &t.anti_resonances))
     }
 
-    #[test]
-    fn pbsid_recovers_order_6_three_mass_resonances_on_closed_loop() {
-        use crate::grey_box::{GreyBoxModel, Output, Structure, DEFAULT_GEAR_RATIO};
-        let r2 = DEFAULT_GEAR_RATIO * DEFAULT_GEAR_RATIO;
-        let p = [
-            5e-3,
-            4e-3 / r2,
-            3e-3 / r2,
-            40.0 / r2,
-            15.0 / r2,
-            0.004 / r2,
-            0.002 / r2,
-            0.01,
-        ];
+    /// The reference three-mass joint (angle output) sampled at 2 ms, and 20 s of
+    /// it in a PD position loop with output noise 1e-4 rad and noise `seed`:
+    /// (discrete plant, record).
+    fn three_mass_closed_loop(seed: u64) -> (StateSpace, IdData) {
+        use crate::grey_box::{
+            reference_three_mass, GreyBoxModel, Output, Structure, DEFAULT_GEAR_RATIO,
+        };
         let gm = GreyBoxModel {
             structure: Structure::ThreeMass,
             output: Output::Angle,
             r: DEFAULT_GEAR_RATIO,
             ts: 2e-3,
         };
-        let plant = gm.continuous(&p).zoh(2e-3);
+        let plant = gm.continuous(&reference_three_mass()).zoh(2e-3);
         let spec = LoopSpec {
             kp: 1.0,
             kd: 0.02,
             noise: 1e-4,
             colour: 0.0,
-            seed: 8,
+            seed,
             n: 10_000,
             r_smooth: 0.8,
             u_dither: 0.02,
         };
         let data = closed_loop(&plant, &spec);
+        (plant, data)
+    }
+
+    #[test]
+    fn pbsid_recovers_order_6_three_mass_resonances_on_closed_loop() {
+        let (plant, data) = three_mass_closed_loop(8);
         let opts = SubspaceOptions {
             method: Method::Pbsid,
             order: Order::Fixed(6),
@@ -904,36 +908,7 @@ pub(crate) mod tests {
 
     #[test]
     fn pbsid_order_20_keeps_three_mass_resonances() {
-        use crate::grey_box::{GreyBoxModel, Output, Structure, DEFAULT_GEAR_RATIO};
-        let r2 = DEFAULT_GEAR_RATIO * DEFAULT_GEAR_RATIO;
-        let p = [
-            5e-3,
-            4e-3 / r2,
-            3e-3 / r2,
-            40.0 / r2,
-            15.0 / r2,
-            0.004 / r2,
-            0.002 / r2,
-            0.01,
-        ];
-        let gm = GreyBoxModel {
-            structure: Structure::ThreeMass,
-            output: Output::Angle,
-            r: DEFAULT_GEAR_RATIO,
-            ts: 2e-3,
-        };
-        let plant = gm.continuous(&p).zoh(2e-3);
-        let spec = LoopSpec {
-            kp: 1.0,
-            kd: 0.02,
-            noise: 1e-4,
-            colour: 0.0,
-            seed: 9,
-            n: 10_000,
-            r_smooth: 0.8,
-            u_dither: 0.02,
-        };
-        let data = closed_loop(&plant, &spec);
+        let (plant, data) = three_mass_closed_loop(9);
         let fit = estimate(
             &data,
             &SubspaceOptions {

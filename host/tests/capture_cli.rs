@@ -15,28 +15,8 @@ use std::time::{Duration, Instant};
 use jointid::capture::synth::{synth_stream, FrameContent, FrameSpan, SynthOptions, SynthStream};
 use serde_json::Value;
 
-const BIN: &str = env!("CARGO_BIN_EXE_jointid");
-
-fn tmpdir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("jointid-cli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn jointid(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).output().expect("run jointid")
-}
-
-fn json_of(out: &Output) -> Value {
-    assert!(
-        out.status.success(),
-        "status {:?}, stderr: {}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("stdout is JSON")
-}
+mod common;
+use common::{jointid, json_of, tmpdir, BIN};
 
 fn small() -> SynthStream {
     synth_stream(&SynthOptions::small())
@@ -115,6 +95,18 @@ fn read_csv(path: &Path) -> (BTreeMap<String, String>, Vec<[f64; 4]>) {
 }
 
 /// Checks that the CSV rows are exactly the synthesised samples whose seq is not in `lost`.
+/// `jointid export <jcap> --csv <csv>` must succeed; the CSV read back
+fn export_csv(jcap: &Path, csv: &Path) -> (BTreeMap<String, String>, Vec<[f64; 4]>) {
+    let e = jointid(&[
+        "export",
+        jcap.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(e.status.success(), "{}", String::from_utf8_lossy(&e.stderr));
+    read_csv(csv)
+}
+
 fn assert_rows_match(s: &SynthStream, rows: &[[f64; 4]], lost: &[u32]) {
     let fs = f64::from(s.header.sample_rate_hz);
     let tq = f64::from(s.header.scale.torque_nm_per_count);
@@ -227,14 +219,7 @@ fn capture_from_file_keeps_every_sample_in_order_bit_exact() {
     assert_eq!(info["header"]["session_id"], 7);
 
     let csv = dir.join("run.csv");
-    let e = jointid(&[
-        "export",
-        out.to_str().unwrap(),
-        "--csv",
-        csv.to_str().unwrap(),
-    ]);
-    assert!(e.status.success(), "{}", String::from_utf8_lossy(&e.stderr));
-    let (meta, rows) = read_csv(&csv);
+    let (meta, rows) = export_csv(&out, &csv);
     assert_rows_match(&s, &rows, &[]);
     let x = s.header.excitation;
     for (k, want) in [
@@ -334,15 +319,7 @@ fn capture_reports_exactly_the_injected_faults_and_keeps_every_intact_frame() {
     assert_eq!(v["ended"], false);
 
     let csv = dir.join("run.csv");
-    assert!(jointid(&[
-        "export",
-        out.to_str().unwrap(),
-        "--csv",
-        csv.to_str().unwrap()
-    ])
-    .status
-    .success());
-    let (meta, rows) = read_csv(&csv);
+    let (meta, rows) = export_csv(&out, &csv);
     assert_rows_match(&s, &rows, &lost);
     let listed: Vec<String> = gaps(&v).iter().map(|(a, b)| format!("{a}..{b}")).collect();
     assert_eq!(meta["gaps"], listed.join(";"));
@@ -355,24 +332,9 @@ fn capture_killed_midway_leaves_a_file_read_up_to_its_last_whole_frame() {
     let dir = tmpdir("sigkill");
     let s = small();
     let fifo = dir.join("board.fifo");
-    assert!(Command::new("mkfifo")
-        .arg(&fifo)
-        .status()
-        .unwrap()
-        .success());
+    mkfifo(&fifo);
     let out = dir.join("run.jcap");
-    let mut child = Command::new(BIN)
-        .args([
-            "capture",
-            "--file",
-            fifo.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut child = spawn_file_capture(&[], &fifo, &out, &[], Stdio::null);
     // send everything up to the middle of batch 15, then nothing more
     let b = batches(&s);
     let cut_frame = b[15];
@@ -401,15 +363,7 @@ fn capture_killed_midway_leaves_a_file_read_up_to_its_last_whole_frame() {
     assert_eq!(v["gaps"], serde_json::json!([]));
 
     let csv = dir.join("run.csv");
-    assert!(jointid(&[
-        "export",
-        out.to_str().unwrap(),
-        "--csv",
-        csv.to_str().unwrap()
-    ])
-    .status
-    .success());
-    let (_, rows) = read_csv(&csv);
+    let (_, rows) = export_csv(&out, &csv);
     let lost: Vec<u32> = (whole..400).collect();
     assert_rows_match(&s, &rows, &lost);
     let _ = std::fs::remove_dir_all(&dir);
@@ -457,6 +411,36 @@ impl Drop for Socat {
     }
 }
 
+/// creates the named pipe that stands in for the board's byte stream
+fn mkfifo(path: &Path) {
+    assert!(Command::new("mkfifo").arg(path).status().unwrap().success());
+}
+
+/// starts `jointid [global] capture --file <fifo> --out <out> [extra]` with stdout and
+/// stderr both set to `stdio()`
+fn spawn_file_capture(
+    global: &[&str],
+    fifo: &Path,
+    out: &Path,
+    extra: &[&str],
+    stdio: fn() -> Stdio,
+) -> Child {
+    Command::new(BIN)
+        .args(global)
+        .args([
+            "capture",
+            "--file",
+            fifo.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .args(extra)
+        .stdout(stdio())
+        .stderr(stdio())
+        .spawn()
+        .unwrap()
+}
+
 fn spawn_serial_capture(port: &Path, out: &Path) -> Child {
     Command::new(BIN)
         .args([
@@ -500,15 +484,7 @@ fn capture_from_serial_pty_keeps_every_sample_in_order_bit_exact() {
     assert_eq!(v["damaged_frames"], serde_json::json!([]));
     assert_eq!(&std::fs::read(&out).unwrap()[8..], &s.bytes[..]);
     let csv = dir.join("run.csv");
-    assert!(jointid(&[
-        "export",
-        out.to_str().unwrap(),
-        "--csv",
-        csv.to_str().unwrap()
-    ])
-    .status
-    .success());
-    assert_rows_match(&s, &read_csv(&csv).1, &[]);
+    assert_rows_match(&s, &export_csv(&out, &csv).1, &[]);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -711,27 +687,15 @@ fn capture_stops_by_itself_after_the_requested_periods_or_duration() {
     let x = s.header.excitation;
     // --periods 2: seq ramp + 2N - 1 = 249 ends the capture while the pipe stays open
     let fifo = dir.join("board.fifo");
-    assert!(Command::new("mkfifo")
-        .arg(&fifo)
-        .status()
-        .unwrap()
-        .success());
+    mkfifo(&fifo);
     let out = dir.join("periods.jcap");
-    let mut child = Command::new(BIN)
-        .args([
-            "capture",
-            "--file",
-            fifo.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--periods",
-            "2",
-            "--json",
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn_file_capture(
+        &[],
+        &fifo,
+        &out,
+        &["--periods", "2", "--json"],
+        Stdio::piped,
+    );
     let target = x.ramp_samples + 2 * x.period_samples - 1;
     let last = batches(&s)
         .into_iter()
@@ -751,11 +715,7 @@ fn capture_stops_by_itself_after_the_requested_periods_or_duration() {
 
     // --duration 0.4 on a silent pipe: a valid, empty capture and a stop event
     let fifo2 = dir.join("silent.fifo");
-    assert!(Command::new("mkfifo")
-        .arg(&fifo2)
-        .status()
-        .unwrap()
-        .success());
+    mkfifo(&fifo2);
     let out2 = dir.join("silent.jcap");
     let t0 = Instant::now();
     let v = json_of(&jointid(&[
@@ -785,25 +745,9 @@ fn capture_stops_cleanly_on_ctrl_c_with_the_summary_and_a_complete_file() {
     let dir = tmpdir("sigint");
     let s = small();
     let fifo = dir.join("board.fifo");
-    assert!(Command::new("mkfifo")
-        .arg(&fifo)
-        .status()
-        .unwrap()
-        .success());
+    mkfifo(&fifo);
     let out = dir.join("run.jcap");
-    let mut child = Command::new(BIN)
-        .args([
-            "--json",
-            "capture",
-            "--file",
-            fifo.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn_file_capture(&["--json"], &fifo, &out, &[], Stdio::piped);
     let half = batches(&s)[12];
     let cut = (half.offset + half.len) as usize;
     let mut w = OpenOptions::new().write(true).open(&fifo).unwrap();

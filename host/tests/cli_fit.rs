@@ -6,18 +6,14 @@
 //! written as capture CSVs with their excitation comments.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use jointid::data::{write_capture_csv, Dataset};
 use jointid::experiment::{estimation_excitation, validation_excitation};
 use jointid::sim::{self, Disturbance, SimConfig};
 use jointid_core::excitation::ExcitationConfig;
 
-fn tmp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("jointid-cli-fit-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+mod common;
+use common::{jointid, json_of, tmpdir};
 
 fn write_run(path: &Path, exc: &ExcitationConfig, seed: u64) {
     let mut cfg = SimConfig {
@@ -51,26 +47,9 @@ fn data(dir: &Path) -> (PathBuf, PathBuf) {
     (e, v)
 }
 
-fn jointid(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_jointid"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn json(o: &Output) -> serde_json::Value {
-    assert!(
-        o.status.success(),
-        "exit {:?}: {}",
-        o.status.code(),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    serde_json::from_slice(&o.stdout).unwrap()
-}
-
 #[test]
 fn fit_json_has_fields_and_validate_reproduces_saved_model_fit() {
-    let dir = tmp_dir("roundtrip");
+    let dir = tmpdir("roundtrip");
     let (est, val) = data(&dir);
     let model = dir.join("m.json");
     let plots = dir.join("plots");
@@ -89,7 +68,7 @@ fn fit_json_has_fields_and_validate_reproduces_saved_model_fit() {
         plots.to_str().unwrap(),
         "--json",
     ]);
-    let j = json(&o);
+    let j = json_of(&o);
     for key in [
         "model",
         "parameters",
@@ -129,7 +108,7 @@ fn fit_json_has_fields_and_validate_reproduces_saved_model_fit() {
         val.to_str().unwrap(),
         "--json",
     ]);
-    let v = json(&o);
+    let v = json_of(&o);
     let f2 = v["fit"].as_f64().unwrap();
     assert!((f2 - fv).abs() < 1e-9, "validate {f2} vs fit {fv}");
 
@@ -152,7 +131,7 @@ fn fit_json_has_fields_and_validate_reproduces_saved_model_fit() {
 
 #[test]
 fn fit_black_box_text_output_names_fit_and_resonances() {
-    let dir = tmp_dir("text");
+    let dir = tmpdir("text");
     let (est, val) = data(&dir);
     let o = jointid(&[
         "fit",
@@ -174,7 +153,7 @@ fn fit_black_box_text_output_names_fit_and_resonances() {
 
 #[test]
 fn bad_input_exits_2_with_one_line_naming_the_file() {
-    let dir = tmp_dir("bad");
+    let dir = tmpdir("bad");
     let missing = dir.join("missing.csv");
     let garbage = dir.join("garbage.csv");
     std::fs::write(&garbage, "t,theta_ref,u,theta_m\n0,0,x,0\n").unwrap();
@@ -209,9 +188,9 @@ fn bad_input_exits_2_with_one_line_naming_the_file() {
 
 #[test]
 fn demo_writes_captures_plots_and_the_table() {
-    let dir = tmp_dir("demo");
+    let dir = tmpdir("demo");
     let o = jointid(&["demo", "--out", dir.to_str().unwrap(), "--json"]);
-    let j = json(&o);
+    let j = json_of(&o);
     for f in [
         "estimation.jcap",
         "validation.jcap",
@@ -224,7 +203,7 @@ fn demo_writes_captures_plots_and_the_table() {
     }
     // the demo's captures load in every analysis command
     let est = dir.join("estimation.jcap");
-    let f = json(&jointid(&[
+    let f = json_of(&jointid(&[
         "fit",
         est.to_str().unwrap(),
         "--model",

@@ -3,9 +3,6 @@
 //! workspace test `tests/sil.rs`), and `info`, `export` and `analyze` read it as a board
 //! capture; bad arguments end with one line and exit code 2.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
-
 use clap::Parser;
 use jointid::cli::simulate::{configure, encode_session, WireOptions};
 use jointid::cli::{Cli, Command as Sub};
@@ -13,28 +10,8 @@ use jointid::data::{parse_csv, ColumnMap};
 use jointid::sim::simulate_excitation;
 use serde_json::Value;
 
-const BIN: &str = env!("CARGO_BIN_EXE_jointid");
-
-fn tmpdir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("jointid-simcli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn jointid(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).output().expect("run jointid")
-}
-
-fn json_of(out: &Output) -> Value {
-    assert!(
-        out.status.success(),
-        "status {:?}, stderr: {}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("stdout is JSON")
-}
+mod common;
+use common::{jointid, json_of, tmpdir};
 
 #[test]
 fn simulate_jcap_is_the_wire_stream_and_reads_like_a_board_capture() {

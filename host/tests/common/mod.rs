@@ -1,0 +1,40 @@
+//! Helpers shared by the command-line test binaries (`capture_cli`, `simulate_cli`,
+//! `cli_fit`): a fresh scratch directory per test, running the built `jointid` binary
+//! and reading its `--json` output.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+/// path of the `jointid` binary built for these tests
+pub const BIN: &str = env!("CARGO_BIN_EXE_jointid");
+
+/// empty scratch directory for one test, unique per test binary, process and `name`
+pub fn tmpdir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "jointid-{}-{}-{name}",
+        env!("CARGO_CRATE_NAME"),
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// runs `jointid` with `args` to completion
+pub fn jointid(args: &[&str]) -> Output {
+    Command::new(BIN).args(args).output().expect("run jointid")
+}
+
+/// stdout of a successful run parsed as JSON; fails the test with the exit status and
+/// stderr when the run failed
+pub fn json_of(out: &Output) -> Value {
+    assert!(
+        out.status.success(),
+        "status {:?}, stderr: {}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("stdout is JSON")
+}
