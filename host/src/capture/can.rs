@@ -178,41 +178,7 @@ mod tests {
     use crate::capture::synth::{synth_stream, FrameContent, SynthOptions};
     use crate::capture::StreamAnalyzer;
     use embedded_can::StandardId;
-    use jointid_core::transport::can::{fd_len, Fragmenter};
-
-    /// In-memory CAN frame, classic or FD.
-    #[derive(Clone, Debug, PartialEq)]
-    struct Mem {
-        id: Id,
-        data: Vec<u8>,
-    }
-
-    impl Frame for Mem {
-        fn new(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
-            (data.len() <= 64 && fd_len(data.len()) == data.len()).then(|| Self {
-                id: id.into(),
-                data: data.to_vec(),
-            })
-        }
-        fn new_remote(_: impl Into<Id>, _: usize) -> Option<Self> {
-            None
-        }
-        fn is_extended(&self) -> bool {
-            matches!(self.id, Id::Extended(_))
-        }
-        fn is_remote_frame(&self) -> bool {
-            false
-        }
-        fn id(&self) -> Id {
-            self.id
-        }
-        fn dlc(&self) -> usize {
-            self.data.len()
-        }
-        fn data(&self) -> &[u8] {
-            &self.data
-        }
-    }
+    use jointid_core::transport::can::{Fragmenter, MemFrame as Mem};
 
     fn board_id() -> Id {
         Id::Standard(StandardId::new(0x101).unwrap())

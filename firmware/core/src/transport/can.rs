@@ -334,6 +334,48 @@ impl Reassembler {
     }
 }
 
+/// In-memory CAN frame, classic (≤ 8 bytes) or FD (valid FD lengths ≤ 64):
+/// tests both ends of the CAN path without a controller (no vcan is needed).
+#[cfg(any(feature = "std", test))]
+#[derive(Clone, Debug, PartialEq)]
+pub struct MemFrame {
+    /// identifier
+    pub id: Id,
+    /// payload [bytes]
+    pub data: std::vec::Vec<u8>,
+}
+
+#[cfg(any(feature = "std", test))]
+impl Frame for MemFrame {
+    fn new(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
+        if data.len() > 64 || fd_len(data.len()) != data.len() {
+            return None;
+        }
+        Some(Self {
+            id: id.into(),
+            data: data.to_vec(),
+        })
+    }
+    fn new_remote(_: impl Into<Id>, _: usize) -> Option<Self> {
+        None
+    }
+    fn is_extended(&self) -> bool {
+        matches!(self.id, Id::Extended(_))
+    }
+    fn is_remote_frame(&self) -> bool {
+        false
+    }
+    fn id(&self) -> Id {
+        self.id
+    }
+    fn dlc(&self) -> usize {
+        self.data.len()
+    }
+    fn data(&self) -> &[u8] {
+        &self.data
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -342,43 +384,6 @@ mod tests {
         encode_frame, BatchBuilder, DecodeEvent, Decoder, Message, RawSample, Status,
     };
     use embedded_can::StandardId;
-
-    /// In-memory CAN frame: classic (≤ 8 bytes) or FD (valid FD lengths ≤ 64).
-    #[derive(Clone, Debug, PartialEq)]
-    struct MemFrame {
-        id: Id,
-        data: Vec<u8>,
-    }
-
-    impl Frame for MemFrame {
-        fn new(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
-            if data.len() > 64 || fd_len(data.len()) != data.len() {
-                return None;
-            }
-            Some(Self {
-                id: id.into(),
-                data: data.to_vec(),
-            })
-        }
-        fn new_remote(_: impl Into<Id>, _: usize) -> Option<Self> {
-            None
-        }
-        fn is_extended(&self) -> bool {
-            matches!(self.id, Id::Extended(_))
-        }
-        fn is_remote_frame(&self) -> bool {
-            false
-        }
-        fn id(&self) -> Id {
-            self.id
-        }
-        fn dlc(&self) -> usize {
-            self.data.len()
-        }
-        fn data(&self) -> &[u8] {
-            &self.data
-        }
-    }
 
     fn id() -> StandardId {
         StandardId::new(0x321).unwrap()
