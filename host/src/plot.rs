@@ -14,7 +14,7 @@ use std::path::Path;
 use plotters::prelude::*;
 use rustfft::num_complex::Complex64;
 
-use crate::frf::{unwrap_deg, LineClass};
+use crate::frf::{unwrap_deg, FrfAnalysis, LineClass, SignalSpectrum};
 use crate::validate::{BodeCurve, FrfBand};
 
 /// Errors of plotting.
@@ -77,6 +77,37 @@ pub struct SpectrumPanel<'a> {
 
 fn to_db(x: f64) -> f64 {
     20.0 * x.max(1e-300).log10()
+}
+
+/// Fig. 3 of seed 000 for one analysis: θm, u and (when present) θref
+/// panels in that order, as the paper stacks them.
+///
+/// # Errors
+/// As [`spectrum_svg`].
+pub fn analysis_spectrum_svg(title: &str, a: &FrfAnalysis) -> Result<String, PlotError> {
+    let freq: Vec<f64> = (0..a.classes.len()).map(|k| a.freq_hz(k)).collect();
+    fn panel<'a>(
+        title: &'a str,
+        freq_hz: &'a [f64],
+        s: &'a SignalSpectrum,
+        classes: &'a [LineClass],
+    ) -> SpectrumPanel<'a> {
+        SpectrumPanel {
+            title,
+            freq_hz,
+            amplitude: &s.amplitude,
+            noise: &s.noise,
+            classes,
+        }
+    }
+    let mut panels = vec![
+        panel("theta_m [rad]", &freq, &a.y, &a.classes),
+        panel("u [N·m]", &freq, &a.u, &a.classes),
+    ];
+    if let Some(r) = &a.r {
+        panels.push(panel("theta_ref [rad]", &freq, r, &a.classes));
+    }
+    spectrum_svg(title, &panels)
 }
 
 /// Fig. 3 of seed 000: one panel per signal (top to bottom as given),

@@ -13,7 +13,7 @@ use crate::frf::{
     amplitude_trend, analyze_dataset, AmplitudeTrend, ClassLevel, ExcitedSource, FrfAnalysis,
     Instrument,
 };
-use crate::plot::{bode_svg, spectrum_svg, write_svg, SpectrumPanel};
+use crate::plot::{analysis_spectrum_svg, bode_svg, write_svg};
 use crate::validate::FrfBand;
 
 /// Arguments of `jointid analyze`.
@@ -64,18 +64,10 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
     let mut plots = Vec::new();
     if let Some(dir) = &args.plot {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-        let freq: Vec<f64> = (0..a.classes.len()).map(|k| a.freq_hz(k)).collect();
-        let mut panels = vec![
-            panel("theta_m (output)", &freq, &a.y, &a.classes),
-            panel("u (input)", &freq, &a.u, &a.classes),
-        ];
-        if let Some(r) = &a.r {
-            panels.push(panel("theta_ref (reference)", &freq, r, &a.classes));
-        }
         let spec = dir.join("spectrum.svg");
         write_svg(
             &spec,
-            &spectrum_svg(&format!("line spectra: {}", ds.name), &panels)?,
+            &analysis_spectrum_svg(&format!("line spectra: {}", ds.name), &a)?,
         )?;
         let frf = dir.join("frf.svg");
         let band = FrfBand::from(&a.frf);
@@ -122,21 +114,6 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
     } else {
         Outcome::Ok
     })
-}
-
-fn panel<'a>(
-    title: &'a str,
-    freq_hz: &'a [f64],
-    s: &'a crate::frf::SignalSpectrum,
-    classes: &'a [crate::frf::LineClass],
-) -> SpectrumPanel<'a> {
-    SpectrumPanel {
-        title,
-        freq_hz,
-        amplitude: &s.amplitude,
-        noise: &s.noise,
-        classes,
-    }
 }
 
 fn print_table(

@@ -25,8 +25,8 @@ use crate::experiment::{
     decode_session, default_scale, encode_session, paper_runs, table, write_jcap, write_table,
     Table, PAPER_MODELS,
 };
-use crate::frf::{analyze_dataset, LineClass, SignalSpectrum};
-use crate::plot::{bode_svg, spectrum_svg, write_svg, SpectrumPanel};
+use crate::frf::analyze_dataset;
+use crate::plot::{analysis_spectrum_svg, bode_svg, write_svg};
 use crate::validate::FrfBand;
 
 /// Arguments of `jointid demo`.
@@ -91,18 +91,10 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
     let mut files = vec![est_name.clone(), val_name.clone()];
 
     let a = analyze_dataset(&est_ds, crate::experiment::SETTLE_PERIODS)?;
-    let freqs: Vec<f64> = (0..a.classes.len()).map(|k| a.freq_hz(k)).collect();
-    let mut panels = vec![
-        panel("theta_m [rad]", &freqs, &a.y, &a.classes),
-        panel("u [N·m]", &freqs, &a.u, &a.classes),
-    ];
-    if let Some(r) = &a.r {
-        panels.push(panel("theta_ref [rad]", &freqs, r, &a.classes));
-    }
     let spec = dir.join("spectrum.svg");
     write_svg(
         &spec,
-        &spectrum_svg("line spectra (seed 000 Fig. 3 style)", &panels)?,
+        &analysis_spectrum_svg("line spectra (seed 000 Fig. 3 style)", &a)?,
     )?;
     files.push(spec.display().to_string());
     let frf_path = dir.join("frf.svg");
@@ -194,21 +186,6 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     writeln!(out, "  done in {seconds:.1} s")?;
     Ok(Outcome::Ok)
-}
-
-fn panel<'a>(
-    title: &'a str,
-    freq_hz: &'a [f64],
-    s: &'a SignalSpectrum,
-    classes: &'a [LineClass],
-) -> SpectrumPanel<'a> {
-    SpectrumPanel {
-        title,
-        freq_hz,
-        amplitude: &s.amplitude,
-        noise: &s.noise,
-        classes,
-    }
 }
 
 #[derive(Serialize)]
