@@ -17,9 +17,10 @@
 //! `u[k]` ([`controller`]), and the plant is propagated over the sample with the inputs held
 //! ([`integrate`]): exactly (zero-order hold, seed 000 eq. (12)–(13)) when the plant is
 //! linear; when an effect makes it nonlinear, by one exponential (Lawson) RK4 step per sample
-//! with the linear part of the current mode exact, and event-aware RK4 (backlash contact
-//! edges, stick–slip of Coulomb friction located as events) in the samples with events. Everything random is drawn
-//! from generators seeded by [`SimConfig::seed`], so a run is reproducible bit for bit.
+//! with the linear part of the current mode exact, cut into two substeps (and event-aware
+//! RK4 where backlash contact edges or stick–slip of Coulomb friction fall) in the samples
+//! with events or a fast sweep of the Stribeck bump. Everything random is drawn from
+//! generators seeded by [`SimConfig::seed`], so a run is reproducible bit for bit.
 //!
 //! See also: [`params`] for the default joint and its modal frequencies, [`effects`] for the
 //! physics and defaults of each effect.
@@ -59,7 +60,7 @@ pub use plant::{Mechanism, ModalFrequencies};
 pub use sensors::{Disturbance, SensorConfig};
 
 use effects::CoulombFriction;
-use integrate::{LawsonStep, NonlinearPlant, State, ZohStep};
+use integrate::{NonlinearPlant, SampleStepper, State, ZohStep};
 use plant::{MAX_BODIES, MAX_STATE};
 use sensors::Sensors;
 
@@ -74,7 +75,8 @@ pub struct IntegrationConfig {
     /// exponential stepper (for checks); default false
     pub force_rk4: bool,
     /// nonlinear plants: exponential (Lawson) RK4, one step per sample with the linear part
-    /// of the current mode exact, event-aware RK4 only in samples with events; default true
+    /// of the current mode exact, two substeps and event-aware RK4 only in samples with
+    /// events; default true
     #[serde(default = "default_true")]
     pub exponential: bool,
 }
@@ -138,8 +140,9 @@ pub enum Integrator {
         /// substeps per sample
         substeps: u32,
     },
-    /// exponential (Lawson) RK4, one step per sample; event-aware RK4 with this many
-    /// substeps in the samples that contain an event
+    /// exponential (Lawson) RK4, one step per sample (two in samples with events or a fast
+    /// Stribeck sweep); event-aware RK4 with this many substeps per sample (pro rata) where
+    /// an event falls
     ExponentialRk4 {
         /// RK4 substeps per sample in samples with events
         substeps: u32,
@@ -531,9 +534,7 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
             substeps: u32,
         },
         Exponential {
-            /// one step per interval of constant delayed input: the whole sample, or the
-            /// parts `φT` (with `u_old`) and `(1 − φ)T` (with `u_new`) of a fractional delay
-            steps: Vec<(LawsonStep, bool)>,
+            stepper: SampleStepper,
             substeps: u32,
         },
     }
@@ -543,19 +544,17 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
             substeps: cfg.integration.substeps,
         }
     } else if a.is_nonlinear {
-        // the delay's switch is kept at a step boundary: a step across it would see the kink
-        // of the current-loop torque inside its quadrature and lose its order
-        let step = |h: f64| LawsonStep::new(&a.mech, tc, &a.nonlinear, h);
-        let steps = if a.delay_frac > 0.0 {
-            vec![
-                (step(a.delay_frac * ts), true),
-                (step((1.0 - a.delay_frac) * ts), false),
-            ]
-        } else {
-            vec![(step(ts), false)]
-        };
+        // one step per sample: the linear part, the delayed input's switch inside the sample
+        // included, is exact, so only the small residual torques see the switch
         Stepper::Exponential {
-            steps,
+            stepper: SampleStepper::new(
+                &a.mech,
+                tc,
+                &a.nonlinear,
+                ts,
+                a.delay_frac,
+                cfg.integration.substeps,
+            ),
             substeps: cfg.integration.substeps,
         }
     } else {
@@ -606,28 +605,6 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
         },
     };
     let (dw, phi) = (a.delay_whole, a.delay_frac);
-    // one sample of the event-aware RK4 at `m` substeps, the delayed torque reference
-    // switching from `u_old` to `u_new` at `phi T`
-    let rk4_sample =
-        |x: &mut State, mode: &mut integrate::Contact, m: u32, u_old: f64, u_new: f64, w: f64| {
-            let m = m as usize;
-            let h = ts / m as f64;
-            let t_switch = phi * ts;
-            for j in 0..m {
-                let (t0, t1) = (j as f64 * h, (j + 1) as f64 * h);
-                if phi > 0.0 && t_switch > t0 && t_switch < t1 {
-                    a.nonlinear.advance(x, mode, t_switch - t0, u_old, w);
-                    a.nonlinear.advance(x, mode, t1 - t_switch, u_new, w);
-                } else {
-                    let ud = if phi > 0.0 && t1 <= t_switch {
-                        u_old
-                    } else {
-                        u_new
-                    };
-                    a.nonlinear.advance(x, mode, h, ud, w);
-                }
-            }
-        };
     for (k, &r) in reference.iter().enumerate() {
         let meas = sensors.measure_theta(x[0]);
         let u = controller.step(r, meas);
@@ -653,24 +630,19 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
                 first.apply(&mut x, &[u_old, w]);
                 second.apply(&mut x, &[u_new, w]);
             }
-            Stepper::Exponential { steps, substeps } => {
-                // one Lawson step per interval; the event-aware RK4 with `substeps` per
-                // sample (pro rata) over an interval that contains an event
-                for (step, old) in steps {
-                    let ud = if *old { u_old } else { u_new };
-                    match a.nonlinear.lawson(step, &x, mode, ud, w) {
-                        Some(x1) => x = x1,
-                        None => {
-                            let parts = (f64::from(*substeps) * step.h() / ts).ceil().max(1.0);
-                            let h = step.h() / parts;
-                            for _ in 0..parts as usize {
-                                a.nonlinear.advance(&mut x, &mut mode, h, ud, w);
-                            }
-                        }
-                    }
-                }
-            }
-            Stepper::Rk4 { substeps } => rk4_sample(&mut x, &mut mode, *substeps, u_old, u_new, w),
+            Stepper::Exponential { stepper, .. } => a
+                .nonlinear
+                .sample(stepper, &mut x, &mut mode, u_old, u_new, w),
+            Stepper::Rk4 { substeps } => a.nonlinear.rk4_sample(
+                &mut x,
+                &mut mode,
+                ts,
+                phi,
+                *substeps as usize,
+                u_old,
+                u_new,
+                w,
+            ),
         }
     }
     out.saturated_samples = controller.saturated_samples();

@@ -139,17 +139,23 @@ impl Rng {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
     }
 
-    /// Standard normal deviate (Box–Muller, both values used).
+    /// Standard normal deviate (Marsaglia's polar form of Box–Muller, both values used: a
+    /// point uniform in the unit disc, accepted with probability π/4, replaces the sine and
+    /// cosine).
     pub fn normal(&mut self) -> f64 {
         if let Some(z) = self.spare.take() {
             return z;
         }
-        let u1 = 1.0 - self.uniform(); // (0, 1]
-        let u2 = self.uniform();
-        let rad = (-2.0 * u1.ln()).sqrt();
-        let (s, c) = (2.0 * PI * u2).sin_cos();
-        self.spare = Some(rad * s);
-        rad * c
+        loop {
+            let a = 2.0 * self.uniform() - 1.0;
+            let b = 2.0 * self.uniform() - 1.0;
+            let r2 = a * a + b * b;
+            if r2 > 0.0 && r2 < 1.0 {
+                let f = (-2.0 * r2.ln() / r2).sqrt();
+                self.spare = Some(b * f);
+                return a * f;
+            }
+        }
     }
 }
 

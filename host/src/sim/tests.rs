@@ -434,6 +434,7 @@ fn all_effects_converge_to_1e6_against_an_independent_rk4_at_ten_times_the_rate(
     );
     assert_eq!(fine.integrator, Integrator::Rk4 { substeps: 10 * m });
     let (e_th, e_u, e_d) = run_differences(&coarse, &fine);
+    eprintln!("exponential: theta {e_th:e}, u {e_u:e}, deflection {e_d:e}");
     assert!(
         e_th < 1e-6 && e_u < 1e-6 && e_d < 1e-6,
         "exponential: theta {e_th:e}, u {e_u:e}, deflection {e_d:e}"
@@ -450,6 +451,63 @@ fn all_effects_converge_to_1e6_against_an_independent_rk4_at_ten_times_the_rate(
     // and the effects do act: the run differs from the linear one by far more than that
     let linear = simulate(&ideal(Plant::default(), vec![]), &r).unwrap();
     assert!(rel_err(&linear.u_true, &fine.u_true) > 1e-2);
+}
+
+/// Relative differences `(θ_m, u, deflection)` of the default stepper from the event-aware
+/// RK4 at ten times its substeps, for `effects` under the convergence test's excitation.
+fn converged(effects: Vec<Effect>) -> (f64, f64, f64) {
+    let m = IntegrationConfig::default().substeps;
+    let r = ramped(multisine(2000, &special_odd_lines(120), 0.02, 2, 8), 400);
+    let mut cfg = ideal(Plant::default(), effects);
+    cfg.integration.substeps = m;
+    let coarse = simulate(&cfg, &r).unwrap();
+    assert_eq!(
+        coarse.integrator,
+        Integrator::ExponentialRk4 { substeps: m }
+    );
+    cfg.integration.substeps = 10 * m;
+    cfg.integration.exponential = false;
+    run_differences(&coarse, &simulate(&cfg, &r).unwrap())
+}
+
+#[test]
+fn each_nonlinear_effect_converges_to_1e6_alone_and_behind_a_fractional_delay() {
+    // the delay (1.5 samples) switches the input inside every sample, which the stepper
+    // takes in one step; friction, backlash, cubic spring and ripple each alone with it
+    let delay = Effect::TimeDelay(TimeDelay::default());
+    for e in Effect::all_defaults() {
+        if matches!(e, Effect::TimeDelay(_) | Effect::ExtraMode(_)) {
+            continue;
+        }
+        for effects in [vec![e], vec![e, delay]] {
+            let (e_th, e_u, e_d) = converged(effects.clone());
+            assert!(
+                e_th < 1e-6 && e_u < 1e-6 && e_d < 1e-6,
+                "{effects:?}: theta {e_th:e}, u {e_u:e}, deflection {e_d:e}"
+            );
+        }
+    }
+}
+
+#[test]
+fn stick_slip_events_inside_a_sample_are_not_stepped_over() {
+    // a small Stribeck bump (F_s just above F_c) keeps the motor creeping near zero speed:
+    // the speed dips through zero and back within one sample and a stuck motor's torque
+    // peaks above breakaway between the sample instants; a step that only looked at its end
+    // state missed those stops and breakaways (8e-5 before the in-step checks)
+    for (fs, v_stribeck) in [(0.031, 0.1), (0.04, 1.0)] {
+        let c = CoulombFriction {
+            fc: 0.03,
+            fs,
+            v_stribeck,
+            ..CoulombFriction::default()
+        };
+        let (e_th, e_u, e_d) = converged(vec![Effect::CoulombFriction(c)]);
+        assert!(
+            e_th < 1e-6 && e_u < 1e-6 && e_d < 1e-6,
+            "F_s {fs}, v_s {v_stribeck}: theta {e_th:e}, u {e_u:e}, deflection {e_d:e}"
+        );
+    }
 }
 
 #[test]
