@@ -72,6 +72,7 @@ fn main() {
         "case", "wall [s]", "x realtime", "cpu [s]", "x realtime"
     );
     let mut rows = Vec::new();
+    let mut all_wall = f64::NAN;
     let rk4_name = format!(
         "all six effects (event RK4, {} substeps)",
         all.integration.substeps
@@ -83,6 +84,9 @@ fn main() {
         (rk4_name.as_str(), &all_rk4),
     ] {
         let (wall, cpu) = best_of_five(cfg, &reference);
+        if std::ptr::eq(cfg, &all) {
+            all_wall = wall;
+        }
         let cpu_txt = cpu.map_or(("n/a".to_string(), "n/a".to_string()), |c| {
             (format!("{c:.4}"), format!("{:.0}", simulated_s / c))
         });
@@ -94,14 +98,12 @@ fn main() {
         );
         rows.push(cpu.unwrap_or(wall));
     }
+    // the thread's CPU time is counted in scheduler ticks on some kernels (4 ms steps seen
+    // here): the best wall-clock time of five runs is the finer figure for the target
+    let x_all = simulated_s / all_wall;
     println!(
-        "all six effects: {:.0}x real time on one core (target 1000x: {})",
-        simulated_s / rows[2],
-        if simulated_s / rows[2] >= 1000.0 {
-            "met"
-        } else {
-            "NOT met"
-        }
+        "all six effects: {x_all:.0}x real time on one core, best wall-clock of five (target 1000x: {})",
+        if x_all >= 1000.0 { "met" } else { "NOT met" }
     );
     println!(
         "time ratios (cpu when available): RK4 / exact = {:.1}, all effects / RK4 linear = {:.2}, all effects / exact = {:.1}, event RK4 / exponential (all effects) = {:.1}",

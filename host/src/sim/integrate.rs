@@ -1260,7 +1260,7 @@ impl SampleStepper {
             sub_switch,
             ts,
             switch,
-            event_parts: (substeps as usize).div_ceil(m).max(1),
+            event_parts: (substeps as usize / m).max(1),
         }
     }
 }

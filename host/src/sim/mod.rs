@@ -68,8 +68,9 @@ use sensors::Sensors;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IntegrationConfig {
     /// RK4 substeps `M` per sample of the event-aware RK4 [-]; default 5 (10 kHz). Used for
-    /// every sample when `exponential` is off or `force_rk4` on, else only in the samples
-    /// that contain an event (contact edge, stick–slip transition)
+    /// every sample when `exponential` is off or `force_rk4` on; with the exponential
+    /// stepper `⌊M/2⌋` (at least 1) in a half sample that contains an event (contact edge,
+    /// stick–slip transition)
     pub substeps: u32,
     /// use RK4 even when the plant is linear, and for nonlinear plants instead of the
     /// exponential stepper (for checks); default false
