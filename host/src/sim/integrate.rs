@@ -52,10 +52,11 @@
 //!
 //! Convergence (tests in `super::tests`, 2 periods of the default-amplitude multisine,
 //! relative 2-norm over the run of θ_m, u and the gearbox deflection, against the
-//! event-aware RK4 at 50 substeps per sample): every effect on, 3.1e-7, 9.3e-7 and 9.1e-7;
-//! Coulomb friction alone behind the 1.5-sample delay 4.2e-7, 9.7e-7, 9.0e-7 (without the
+//! event-aware RK4 at 50 substeps per sample): every effect on, 3.1e-7, 9.4e-7 and 9.1e-7;
+//! Coulomb friction alone behind the 1.5-sample delay 4.3e-7, 9.8e-7, 9.1e-7 (without the
 //! Stribeck refinement 1.1e-6, 3.7e-6, 2.2e-6); backlash, cubic spring and ripple alone
-//! below 3e-7. The reference differs from the same RK4 at 500 substeps by below 1e-10
+//! below 3e-7. The margin under 1e-6 is thin for Coulomb friction with a Stribeck bump:
+//! [`STRIBECK_VARIATION`] trades it against speed. The reference differs from the same RK4 at 500 substeps by below 1e-10
 //! (4e-8 for a Stribeck bump of 3 % of the Coulomb level, where stick–slip decisions are
 //! delicate). Not resolved at 2 kHz: a Stribeck velocity far below the default (0.01 rad/s
 //! on the motor: 5e-5, and 5e-6 for the event-aware RK4 at 5 substeps); raise
@@ -1208,16 +1209,18 @@ fn dips_below_zero(y: &[f64; 5]) -> bool {
 /// motor can sweep the bump within one sample while the current-loop lag (as slow as the
 /// sample) curves its speed, and one RK4 quadrature of the friction torque is then not
 /// accurate to 1e-6; the figure is the largest that keeps Coulomb friction alone converged
-/// to 1e-6 on the default joint (measured: 0.3 → 1.6e-6, 0.15 → 1.07e-6, 0.1 → 9.1e-7).
+/// to 1e-6 in u on the default joint (measured: no refinement 2.8e-6, 0.3 → 1.6e-6,
+/// 0.15 → 1.07e-6, 0.1 → 9.2e-7, 0.01 → 3.3e-7 at twice the cost).
 const STRIBECK_VARIATION: f64 = 0.1;
 
-/// Lawson substeps per sample when the whole-sample step contains an event.
+/// Lawson substeps per sample when the whole-sample step is refused (an event inside, or a
+/// fast sweep of the Stribeck bump).
 const SUBSTEPS: usize = 2;
 
 /// Exponential stepping of one sample of the nonlinear plant: one Lawson step over the whole
 /// sample (the delayed input's switch inside it exact in the linear part); when that step
-/// contains an event, [`SUBSTEPS`] Lawson substeps, and the event-aware RK4 in the substeps
-/// that contain one.
+/// contains an event or sweeps the Stribeck bump too fast, [`SUBSTEPS`] Lawson substeps, and
+/// the event-aware RK4 in the substeps that contain an event.
 #[derive(Clone, Debug)]
 pub struct SampleStepper {
     full: LawsonStep,

@@ -458,7 +458,7 @@ fn all_effects_converge_to_1e6_against_an_independent_rk4_at_ten_times_the_rate(
 fn converged(effects: Vec<Effect>) -> (f64, f64, f64) {
     let m = IntegrationConfig::default().substeps;
     let r = ramped(multisine(2000, &special_odd_lines(120), 0.02, 2, 8), 400);
-    let mut cfg = ideal(Plant::default(), effects);
+    let mut cfg = ideal(Plant::default(), effects.clone());
     cfg.integration.substeps = m;
     let coarse = simulate(&cfg, &r).unwrap();
     assert_eq!(
@@ -467,7 +467,12 @@ fn converged(effects: Vec<Effect>) -> (f64, f64, f64) {
     );
     cfg.integration.substeps = 10 * m;
     cfg.integration.exponential = false;
-    run_differences(&coarse, &simulate(&cfg, &r).unwrap())
+    let d = run_differences(&coarse, &simulate(&cfg, &r).unwrap());
+    eprintln!(
+        "{effects:?}: theta {:.2e}, u {:.2e}, deflection {:.2e}",
+        d.0, d.1, d.2
+    );
+    d
 }
 
 #[test]
