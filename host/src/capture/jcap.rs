@@ -222,25 +222,7 @@ impl JcapWriter {
     /// [`JcapError::Exists`] or [`JcapError::Io`]; on error nothing is left behind that
     /// this call created.
     pub fn create(path: &Path, overwrite: bool, policy: FlushPolicy) -> Result<Self, JcapError> {
-        let mut opts = OpenOptions::new();
-        opts.write(true);
-        if overwrite {
-            opts.create(true).truncate(true);
-        } else {
-            opts.create_new(true);
-        }
-        let mut file = opts.open(path).map_err(|source| {
-            if source.kind() == io::ErrorKind::AlreadyExists {
-                JcapError::Exists {
-                    path: path.to_path_buf(),
-                }
-            } else {
-                JcapError::Io {
-                    path: path.to_path_buf(),
-                    err: source,
-                }
-            }
-        })?;
+        let mut file = create_output(path, overwrite)?;
         if let Err(source) = file.write_all(&MAGIC) {
             drop(file);
             let _ = std::fs::remove_file(path);
@@ -460,6 +442,29 @@ fn civil_from_days(days: i64) -> (i64, u32, u32) {
     (y, m, d)
 }
 
+/// Opens `path` for writing: a new file, or (with `overwrite`) a truncated old one.
+fn create_output(path: &Path, overwrite: bool) -> Result<File, JcapError> {
+    let mut opts = OpenOptions::new();
+    opts.write(true);
+    if overwrite {
+        opts.create(true).truncate(true);
+    } else {
+        opts.create_new(true);
+    }
+    opts.open(path).map_err(|source| {
+        if source.kind() == io::ErrorKind::AlreadyExists {
+            JcapError::Exists {
+                path: path.to_path_buf(),
+            }
+        } else {
+            JcapError::Io {
+                path: path.to_path_buf(),
+                err: source,
+            }
+        }
+    })
+}
+
 /// Append-only writer of the `.events` sidecar; every event is written and flushed at once.
 #[derive(Debug)]
 pub struct EventLog {
@@ -473,25 +478,7 @@ impl EventLog {
     /// # Errors
     /// [`JcapError::Exists`] or [`JcapError::Io`].
     pub fn create(path: &Path, overwrite: bool) -> Result<Self, JcapError> {
-        let mut opts = OpenOptions::new();
-        opts.write(true);
-        if overwrite {
-            opts.create(true).truncate(true);
-        } else {
-            opts.create_new(true);
-        }
-        let file = opts.open(path).map_err(|source| {
-            if source.kind() == io::ErrorKind::AlreadyExists {
-                JcapError::Exists {
-                    path: path.to_path_buf(),
-                }
-            } else {
-                JcapError::Io {
-                    path: path.to_path_buf(),
-                    err: source,
-                }
-            }
-        })?;
+        let file = create_output(path, overwrite)?;
         Ok(Self {
             path: path.to_path_buf(),
             file,
