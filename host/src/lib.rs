@@ -13,6 +13,7 @@ pub mod fit;
 pub mod frf;
 pub mod grey_box;
 pub mod linalg;
+pub mod lm;
 pub mod pem;
 pub mod plot;
 pub mod sim;

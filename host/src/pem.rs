@@ -7,9 +7,9 @@
 //! prediction error of the innovations form eq. (9) when it has one
 //! (`x(t+1) = (A − K C) x + (B − K D) u + K y`, `ŷ = C x + D u`).
 //!
-//! Method: Levenberg–Marquardt with Marquardt's diagonal scaling (Nocedal &
-//! Wright, "Numerical Optimization", 2nd ed., ch. 10), projected onto box
-//! bounds after each step; some parameters may be fixed. The Jacobian
+//! Method: Levenberg–Marquardt ([`crate::lm`]: Marquardt's diagonal
+//! scaling, box bounds, fixed parameters), the initial state a nuisance
+//! parameter of the same step. The Jacobian
 //! `∂ŷ/∂θ` comes from forward sensitivity equations propagated with the
 //! simulation (Ljung, "System Identification: Theory for the User", 2nd ed., ch. 10,
 //! gradient of the state-space predictor): `s_i(t+1) = Ā s_i + ∂Ā x + ∂B̄ [u; y]`,
@@ -29,7 +29,7 @@ use nalgebra::{DMatrix, DVector, RowDVector};
 use thiserror::Error;
 
 use crate::data::IdData;
-use crate::linalg::pinv_sym;
+use crate::lm::{self, LeastSquares, LmOptions, Normal};
 use crate::ss::StateSpace;
 use crate::subspace::estimate_x0;
 
@@ -115,18 +115,7 @@ impl Default for PemOptions {
     }
 }
 
-/// Why the iteration stopped.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Termination {
-    /// relative cost decrease below `rel_cost_tol`
-    CostConverged,
-    /// step below `step_tol`
-    StepConverged,
-    /// `max_iter` reached
-    MaxIterations,
-    /// no step lowered the cost even with very strong damping
-    NoDescent,
-}
+pub use crate::lm::Termination;
 
 /// Result of [`fit`].
 #[derive(Clone, Debug, PartialEq)]
@@ -340,14 +329,53 @@ fn normal_equations<M: ParamModel + ?Sized>(
     (jtj, jte, ssr)
 }
 
-fn clamp(theta: &mut [f64], lower: &[f64], upper: &[f64]) {
-    for (i, t) in theta.iter_mut().enumerate() {
-        if let Some(&l) = lower.get(i) {
-            *t = t.max(l);
-        }
-        if let Some(&u) = upper.get(i) {
-            *t = t.min(u);
-        }
+/// The prediction-error criterion of `model` on `data` as a least-squares
+/// problem for [`crate::lm`]: parameters `θ`, then the initial state when
+/// it is estimated (nuisance parameters).
+struct PemProblem<'a, M: ?Sized> {
+    model: &'a M,
+    data: &'a IdData,
+    /// model parameters `θ` (the initial state follows them)
+    n_theta: usize,
+    /// state dimension when the initial state is estimated, else 0
+    n_x0: usize,
+    /// state dimension
+    n: usize,
+}
+
+impl<M: ParamModel + ?Sized> PemProblem<'_, M> {
+    /// `θ` and the initial state (zero when it is not estimated)
+    fn split<'t>(&self, all: &'t [f64]) -> (&'t [f64], DVector<f64>) {
+        let (th, x0) = all.split_at(self.n_theta);
+        let x0 = if self.n_x0 > 0 {
+            DVector::from_column_slice(x0)
+        } else {
+            DVector::zeros(self.n)
+        };
+        (th, x0)
+    }
+}
+
+impl<M: ParamModel + ?Sized> LeastSquares for PemProblem<'_, M> {
+    fn n_params(&self) -> usize {
+        self.n_theta + self.n_x0
+    }
+
+    fn n_residuals(&self) -> usize {
+        self.data.y.len()
+    }
+
+    fn cost(&self, all: &[f64]) -> f64 {
+        let (th, x0) = self.split(all);
+        cost_of(&self.model.to_ss(th), self.data, &x0)
+    }
+
+    fn normal_equations(&self, all: &[f64], free: &[usize]) -> Normal {
+        let (th, x0) = self.split(all);
+        let free_theta: Vec<usize> = free.iter().copied().filter(|&i| i < self.n_theta).collect();
+        let (jtj, jte, ssr) =
+            normal_equations(self.model, th, &free_theta, &x0, self.n_x0 > 0, self.data);
+        Normal { jtj, jte, ssr }
     }
 }
 
@@ -391,114 +419,77 @@ pub fn fit<M: ParamModel + ?Sized>(
             data.y.len()
         )));
     }
-    let free: Vec<usize> = (0..np)
-        .filter(|&i| !opts.fixed.get(i).copied().unwrap_or(false))
-        .collect();
-    let nf = free.len();
+    // the start, clamped as the loop will clamp it, and its initial state
     let mut theta = theta0.to_vec();
-    clamp(&mut theta, &opts.lower, &opts.upper);
-    let mut m = model.to_ss(&theta);
-    let n = m.order();
-    let mut x0 = if opts.estimate_x0 {
-        let e = estimate_x0(&m, &data.u, &data.y);
+    for (i, t) in theta.iter_mut().enumerate() {
+        if let Some(&l) = opts.lower.get(i) {
+            *t = t.max(l);
+        }
+        if let Some(&u) = opts.upper.get(i) {
+            *t = t.min(u);
+        }
+    }
+    let m0 = model.to_ss(&theta);
+    let n = m0.order();
+    let n_x0 = if opts.estimate_x0 { n } else { 0 };
+    if opts.estimate_x0 {
+        let e = estimate_x0(&m0, &data.u, &data.y);
         if e.iter().all(|v| v.is_finite()) {
-            e
+            theta.extend(e.iter());
         } else {
-            DVector::zeros(n)
+            theta.extend(std::iter::repeat_n(0.0, n));
         }
-    } else {
-        DVector::zeros(n)
+    }
+    let problem = PemProblem {
+        model,
+        data,
+        n_theta: np,
+        n_x0,
+        n,
     };
-    let mut cost = cost_of(&m, data, &x0);
-    if !cost.is_finite() {
-        return Err(PemError::NonFiniteStart);
-    }
-    let mut history = vec![cost];
-    let mut lambda = opts.lambda0;
-    let mut termination = Termination::MaxIterations;
-    let mut iterations = 0;
-    let nobs = data.y.len() as f64;
-    'outer: while iterations < opts.max_iter {
-        iterations += 1;
-        let (jtj, jte, _) = normal_equations(model, &theta, &free, &x0, opts.estimate_x0, data);
-        let p = jtj.nrows();
-        let diag: Vec<f64> = (0..p).map(|i| jtj[(i, i)].max(1e-300)).collect();
-        loop {
-            let mut a = jtj.clone();
-            for i in 0..p {
-                a[(i, i)] += lambda * diag[i];
-            }
-            let step = match a.clone().cholesky() {
-                Some(ch) => ch.solve(&jte),
-                None => pinv_sym(&a, 1e-14) * &jte,
-            };
-            let mut cand = theta.clone();
-            for (j, &i) in free.iter().enumerate() {
-                cand[i] += step[j];
-            }
-            clamp(&mut cand, &opts.lower, &opts.upper);
-            let mut cx0 = x0.clone();
-            if opts.estimate_x0 {
-                for i in 0..n {
-                    cx0[i] += step[nf + i];
-                }
-            }
-            let cm = model.to_ss(&cand);
-            let c = cost_of(&cm, data, &cx0);
-            if c.is_finite() && c < cost {
-                let rel = (cost - c) / cost;
-                let step_norm: f64 = free
-                    .iter()
-                    .map(|&i| (cand[i] - theta[i]).powi(2))
-                    .sum::<f64>()
-                    .sqrt();
-                let th_norm: f64 = free.iter().map(|&i| theta[i].powi(2)).sum::<f64>().sqrt();
-                theta = cand;
-                x0 = cx0;
-                m = cm;
-                cost = c;
-                history.push(cost);
-                lambda = (lambda / 5.0).max(1e-12);
-                if rel < opts.rel_cost_tol {
-                    termination = Termination::CostConverged;
-                    break 'outer;
-                }
-                if step_norm <= opts.step_tol * th_norm.max(1e-300) {
-                    termination = Termination::StepConverged;
-                    break 'outer;
-                }
-                break;
-            }
-            lambda *= 8.0;
-            if lambda > 1e12 {
-                termination = Termination::NoDescent;
-                break 'outer;
-            }
+    let pad = |v: &[f64], fill: f64| -> Vec<f64> {
+        if v.is_empty() {
+            Vec::new()
+        } else {
+            v.iter()
+                .copied()
+                .chain(std::iter::repeat_n(fill, n_x0))
+                .collect()
         }
-    }
-    // covariance at the final point
-    let (jtj, _, ssr) = normal_equations(model, &theta, &free, &x0, opts.estimate_x0, data);
-    let p = jtj.nrows();
-    let sigma2 = ssr / (nobs - p as f64).max(1.0);
-    let cinv = pinv_sym(&jtj, 1e-13) * sigma2;
-    let mut cov = DMatrix::zeros(np, np);
-    let mut std = vec![0.0; np];
-    for (a, &i) in free.iter().enumerate() {
-        for (b, &j) in free.iter().enumerate() {
-            cov[(i, j)] = cinv[(a, b)];
-        }
-        std[i] = cinv[(a, a)].max(0.0).sqrt();
-    }
+    };
+    let lm_opts = LmOptions {
+        max_iter: opts.max_iter,
+        rel_cost_tol: opts.rel_cost_tol,
+        step_tol: opts.step_tol,
+        lower: pad(&opts.lower, f64::NEG_INFINITY),
+        upper: pad(&opts.upper, f64::INFINITY),
+        fixed: if opts.fixed.is_empty() {
+            Vec::new()
+        } else {
+            opts.fixed
+                .iter()
+                .copied()
+                .chain(std::iter::repeat_n(false, n_x0))
+                .collect()
+        },
+        nuisance: n_x0,
+        lambda0: opts.lambda0,
+    };
+    let f = lm::minimize(&problem, &theta, &lm_opts).map_err(|e| match e {
+        lm::LmError::NonFiniteStart => PemError::NonFiniteStart,
+        other => PemError::BadInput(other.to_string()),
+    })?;
+    let (th, x0) = problem.split(&f.theta);
     Ok(PemFit {
-        theta,
-        std,
-        cov,
+        theta: th.to_vec(),
+        std: f.std[..np].to_vec(),
+        cov: f.cov.view((0, 0), (np, np)).into_owned(),
         x0,
-        model: m,
-        cost_history: history,
-        sigma2,
-        termination,
-        iterations,
+        model: model.to_ss(th),
+        cost_history: f.cost_history,
+        sigma2: f.sigma2,
+        termination: f.termination,
+        iterations: f.iterations,
     })
 }
 
