@@ -249,7 +249,55 @@ pub struct Frf {
     pub g: Vec<Complex64>,
     /// standard deviation of Ĝ(k) (complex, E|Ĝ − G|²)^½ [output unit / input unit]
     pub sigma: Vec<f64>,
+    /// the input and output spectra behind `g`, for fits that weight by the
+    /// noise on both ([`crate::frf_fit`]); not serialised
+    #[serde(skip)]
+    pub spectra: FrfSpectra,
 }
+
+/// Period-averaged input and output spectra at the excited lines of an
+/// [`Frf`], and the noise (co)variances of the period means at every line
+/// within [`FIT_POOL_HALF_WIDTH`] of an excited line (DC left out).
+///
+/// A weight for the excited line `k` pools the noise of its window: with the
+/// paper's three periods one line's variance rests on 4 degrees of freedom,
+/// too few to weight by. The pooling is done by the fit with the model's
+/// response at each line of the window ([`crate::frf_fit`]): in closed loop
+/// the noise on `u` and `θ_m` is strongly correlated and the output error's
+/// variance `σ²_Y + |G|² σ²_U − 2 Re(G* σ_YU)` nearly cancels, so pooling the
+/// raw (co)variances with one `G` would overstate it where `G` changes fast
+/// between neighbouring lines (near a resonance).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrfSpectra {
+    /// number of periods P averaged
+    pub periods: usize,
+    /// Ū(k) at the excited lines [input unit]
+    pub u: Vec<Complex64>,
+    /// Ȳ(k) at the excited lines [output unit]
+    pub y: Vec<Complex64>,
+    /// lines whose noise is pooled, ascending [Hz]
+    pub noise_freq_hz: Vec<f64>,
+    /// variance of Ū at each noise line [input unit²]
+    pub var_u: Vec<f64>,
+    /// variance of Ȳ at each noise line [output unit²]
+    pub var_y: Vec<f64>,
+    /// covariance E[(Ȳ − E Ȳ)(Ū − E Ū)*] at each noise line [output unit · input unit]
+    pub cov_yu: Vec<Complex64>,
+    /// for each excited line, the noise lines pooled for it (indices into
+    /// `noise_freq_hz`); the excited line itself is among them
+    pub pool: Vec<std::ops::Range<usize>>,
+}
+
+impl FrfSpectra {
+    /// real degrees of freedom of a pooled variance, `2(P − 1)(2w + 1)`
+    /// (fewer at the ends of the band, where the window is cut)
+    pub fn dof(&self) -> f64 {
+        (2 * self.periods.saturating_sub(1) * (2 * FIT_POOL_HALF_WIDTH + 1)) as f64
+    }
+}
+
+/// half width, in lines, of the noise pooling window of [`FrfSpectra`]
+pub const FIT_POOL_HALF_WIDTH: usize = 1;
 
 fn ser_complex<S: serde::Serializer>(v: &[Complex64], s: S) -> Result<S::Ok, S::Error> {
     use serde::ser::SerializeSeq;
@@ -614,10 +662,13 @@ pub fn analyze(
         freq_hz: Vec::new(),
         g: Vec::new(),
         sigma: Vec::new(),
+        spectra: FrfSpectra::default(),
     };
     for &k in &excited_set {
         let k = k as usize;
         let (yk, uk) = (sty.mean[k], stu.mean[k]);
+        frf.spectra.u.push(uk);
+        frf.spectra.y.push(yk);
         let g = yk / uk;
         let rel = sty.var_mean[k] / yk.norm_sqr() + stu.var_mean[k] / uk.norm_sqr()
             - 2.0 * (cyu[k] / (yk * uk.conj())).re;
@@ -625,6 +676,25 @@ pub fn analyze(
         frf.freq_hz.push(k as f64 * f0);
         frf.g.push(g);
         frf.sigma.push(g.norm() * rel.max(0.0).sqrt());
+    }
+    frf.spectra.periods = layout.count;
+    let window = |k: u32| {
+        let k = k as usize;
+        k.saturating_sub(FIT_POOL_HALF_WIDTH).max(1)..(k + FIT_POOL_HALF_WIDTH + 1).min(nl)
+    };
+    let mut noise: Vec<usize> = excited_set.iter().flat_map(|&k| window(k)).collect();
+    noise.sort_unstable();
+    noise.dedup();
+    for &j in &noise {
+        frf.spectra.noise_freq_hz.push(j as f64 * f0);
+        frf.spectra.var_u.push(stu.var_mean[j]);
+        frf.spectra.var_y.push(sty.var_mean[j]);
+        frf.spectra.cov_yu.push(cyu[j]);
+    }
+    for &k in &excited_set {
+        let w = window(k);
+        let lo = noise.partition_point(|&j| j < w.start);
+        frf.spectra.pool.push(lo..lo + w.len());
     }
     let spectrum = |name: &str, s: &LineStats| SignalSpectrum {
         name: name.into(),

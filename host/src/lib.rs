@@ -11,6 +11,7 @@ pub mod data;
 pub mod experiment;
 pub mod fit;
 pub mod frf;
+pub mod frf_fit;
 pub mod grey_box;
 pub mod linalg;
 pub mod lm;
