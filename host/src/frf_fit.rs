@@ -1252,5 +1252,72 @@ pub fn periodic_fit_percent(frf: &Frf, g: &[Complex64]) -> f64 {
     100.0 * (1.0 - (e / d).sqrt())
 }
 
+/// One period of the periodic steady state (see [`periodic_steady_state`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SteadyState {
+    /// period-averaged input, mean removed [input unit]
+    pub u: Vec<f64>,
+    /// period-averaged output, mean removed [output unit]
+    pub y: Vec<f64>,
+    /// the model's periodic response to `u` [output unit]
+    pub y_hat: Vec<f64>,
+}
+
+/// One period of the steady state: the period-averaged input `ū` and output
+/// `ȳ` of `data` over `layout` (means removed) and the model's periodic
+/// response `ŷ` to `ū`, from the model response `response(f_hz)` at every
+/// line 1 … N/2. What [`crate::validate::validate`] needs for residual
+/// tests that slow disturbances and drift do not dominate.
+///
+/// # Errors
+/// [`crate::frf::FrfError::OutOfRange`] when the layout does not fit the data.
+pub fn periodic_steady_state(
+    data: &crate::data::IdData,
+    layout: &crate::data::PeriodLayout,
+    response: impl Fn(&[f64]) -> Vec<Complex64>,
+) -> Result<SteadyState, crate::frf::FrfError> {
+    let n = layout.period;
+    let range = layout.range();
+    if range.end > data.len() || n < 2 || layout.count == 0 {
+        return Err(crate::frf::FrfError::OutOfRange {
+            start: range.start,
+            end: range.end,
+            len: data.len(),
+        });
+    }
+    let avg = |x: &[f64]| -> Vec<f64> {
+        let mut a = vec![0.0; n];
+        for p in 0..layout.count {
+            let s = layout.start + p * n;
+            for (ai, xi) in a.iter_mut().zip(&x[s..s + n]) {
+                *ai += xi / layout.count as f64;
+            }
+        }
+        let m = a.iter().sum::<f64>() / n as f64;
+        a.iter_mut().for_each(|v| *v -= m);
+        a
+    };
+    let (ub, yb) = (avg(&data.u), avg(&data.y));
+    let mut planner = rustfft::FftPlanner::<f64>::new();
+    let mut buf: Vec<Complex64> = ub.iter().map(|v| Complex64::new(*v, 0.0)).collect();
+    planner.plan_fft_forward(n).process(&mut buf);
+    let f0 = 1.0 / (n as f64 * data.ts);
+    let freqs: Vec<f64> = (1..=n / 2).map(|k| k as f64 * f0).collect();
+    let g = response(&freqs);
+    buf[0] = Complex64::new(0.0, 0.0);
+    for k in 1..=n / 2 {
+        buf[k] *= g[k - 1];
+        if k != n - k {
+            buf[n - k] = buf[k].conj();
+        }
+    }
+    planner.plan_fft_inverse(n).process(&mut buf);
+    Ok(SteadyState {
+        u: ub,
+        y: yb,
+        y_hat: buf.iter().map(|c| c.re / n as f64).collect(),
+    })
+}
+
 #[cfg(test)]
 mod tests;

@@ -228,3 +228,87 @@ fn demo_writes_captures_plots_and_the_table() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The reproduction of issue 10: `jointid simulate` with its default sensors
+/// (quantised encoder, white noise, slow torque disturbance, 0.5 ms current
+/// loop), then `jointid fit --model three-mass` as the README writes it.
+#[test]
+fn three_mass_fit_on_default_simulation_is_right_in_the_frequency_domain() {
+    let dir = tmpdir("fd");
+    let (est, val) = (dir.join("lin.jcap"), dir.join("val.jcap"));
+    for (path, seed) in [(&est, "1"), (&val, "2")] {
+        let o = jointid(&[
+            "simulate",
+            "--model",
+            "three-mass",
+            "--seed",
+            seed,
+            "--out",
+            path.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let o = jointid(&[
+        "fit",
+        est.to_str().unwrap(),
+        "--model",
+        "three-mass",
+        "--validation",
+        val.to_str().unwrap(),
+        "--strict",
+        "--json",
+    ]);
+    let j = json_of(&o);
+    let truth = [
+        ("J_m", 1.0e-3),
+        ("J_a1", 11.66),
+        ("J_a2", 0.627),
+        ("k_g", 1.275e5),
+        ("k_a", 7.26e3),
+        ("d_g", 80.0),
+        ("d_a", 4.0),
+    ];
+    for (name, t) in truth {
+        let v = j["parameters"][name]["value"].as_f64().unwrap();
+        assert!((v - t).abs() < 0.03 * t, "{name} {v} (truth {t}): {j}");
+    }
+    let tau = j["parameters"]["tau_c"]["value"].as_f64().unwrap();
+    assert!((tau - 5e-4).abs() < 5e-5, "current-loop lag {tau} s");
+    assert!(j["fit_name"].as_str().unwrap().contains("period-averaged"));
+    assert!(j["fit_validation"].as_f64().unwrap() > 95.0, "{j}");
+    assert_eq!(j["warnings"].as_array().unwrap().len(), 0, "{j}");
+    assert!(j["method"].as_str().unwrap().contains("frequency domain"));
+
+    // the wrong structure is flagged, and --strict turns that into exit 1
+    let o = jointid(&[
+        "fit",
+        est.to_str().unwrap(),
+        "--model",
+        "two-mass",
+        "--strict",
+        "--json",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let w = j["warnings"].as_array().unwrap();
+    assert!(
+        w.iter().any(|w| w
+            .as_str()
+            .unwrap()
+            .contains("times what the measurement noise explains")),
+        "{j}"
+    );
+
+    // the frequency domain is for physical models
+    let o = jointid(&[
+        "fit",
+        est.to_str().unwrap(),
+        "--model",
+        "black-box:6",
+        "--domain",
+        "frequency",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("physical models"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -29,7 +29,8 @@ use crate::fit::{
     default_f_min, fit_prepared, log_grid, param_map, DetrendKind, FitData, FitOptions, Fitted,
     ModelKind, ParamJson, Prep,
 };
-use crate::frf::analyze_dataset;
+use crate::frf::{analyze_dataset, FrfAnalysis};
+use crate::frf_fit::{self, Drive, FrfFit, FrfFitOptions, PERIODIC_FIT_NAME};
 use crate::grey_box::{Output, DEFAULT_GEAR_RATIO};
 use crate::plot::{bode_svg, write_svg};
 use crate::subspace::Method;
@@ -110,6 +111,17 @@ impl FitDataArgs {
     }
 }
 
+/// Where the model is fitted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DomainArg {
+    /// frequency domain for physical models on periodic data, else time
+    Auto,
+    /// the FRF at the excited lines (periodic data, physical models)
+    Frequency,
+    /// output error on the time record
+    Time,
+}
+
 /// Arguments of `jointid fit`.
 #[derive(Debug, Clone, Args)]
 pub struct FitArgs {
@@ -151,9 +163,21 @@ pub struct FitArgs {
     #[arg(long, value_name = "R", default_value_t = DEFAULT_GEAR_RATIO)]
     pub gear_ratio: f64,
     /// time constant [s] of the drive's current loop, a first-order lag in
-    /// front of the physical models (0: neglected, as in seed 000)
-    #[arg(long, value_name = "S", default_value_t = 0.0, value_parser = parse_tau)]
-    pub current_loop_tau: f64,
+    /// front of the physical models; default: estimated in the frequency
+    /// domain, 0 (neglected, as in seed 000) in the time domain
+    #[arg(long, value_name = "S", value_parser = parse_tau)]
+    pub current_loop_tau: Option<f64>,
+    /// transport delay of the torque [samples] (frequency domain);
+    /// default: estimated
+    #[arg(long, value_name = "SAMPLES", value_parser = parse_delay)]
+    pub delay: Option<f64>,
+    /// where to fit: auto (frequency domain for physical models on periodic
+    /// data), frequency or time
+    #[arg(long, value_enum, default_value_t = DomainArg::Auto)]
+    pub domain: DomainArg,
+    /// exit 1 when the fit raised any warning
+    #[arg(long)]
+    pub strict: bool,
     /// lags M of the residual tests
     #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS)]
     pub lags: usize,
@@ -191,6 +215,16 @@ fn parse_tau(s: &str) -> Result<f64, String> {
         Ok(t) if (0.0..1.0).contains(&t) => Ok(t),
         _ => Err(format!(
             "`{s}` is not a time constant in seconds, 0 ≤ τ < 1"
+        )),
+    }
+}
+
+fn parse_delay(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(d) if (0.0..=frf_fit::MAX_DRIVE_SAMPLES).contains(&d) => Ok(d),
+        _ => Err(format!(
+            "`{s}` is not a delay in samples, 0 ≤ D ≤ {}",
+            frf_fit::MAX_DRIVE_SAMPLES
         )),
     }
 }
@@ -285,6 +319,54 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         ),
         (None, None) => (prepare(&ds.data, &ds.name)?, None, None),
     };
+    let periodic = match (
+        args.domain,
+        args.model.structure(),
+        args.estimation_fraction,
+    ) {
+        (DomainArg::Time, _, _) => None,
+        (DomainArg::Frequency, None, _) => {
+            return Err(format!(
+                "--domain frequency fits physical models; {} is fitted in the time domain",
+                args.model.name()
+            )
+            .into())
+        }
+        (DomainArg::Frequency, _, Some(_)) => {
+            return Err(
+                "--domain frequency takes the whole record: give --validation \
+                        instead of --estimation-fraction"
+                    .into(),
+            )
+        }
+        (DomainArg::Frequency, Some(_), None) => Some(
+            analyze_dataset(&ds, args.settle_periods)
+                .map_err(|e| format!("{}: --domain frequency needs periodic data: {e}", ds.name))?,
+        ),
+        (DomainArg::Auto, Some(_), None) if args.friction == FrictionArg::Viscous => {
+            analyze_dataset(&ds, args.settle_periods).ok()
+        }
+        (DomainArg::Auto, _, _) => None,
+    };
+    if let Some(a) = &periodic {
+        // a validation record that is not periodic (band-limited noise,
+        // say) is compared in the time domain, and so is the estimation
+        // record then, so that both FITs share one definition
+        let vp = val_ds
+            .as_ref()
+            .and_then(|v| analyze_dataset(v, args.settle_periods).ok());
+        return run_frequency_domain(
+            args,
+            ctx,
+            &ds,
+            a,
+            &est,
+            val.as_ref(),
+            val_ds.as_ref(),
+            vp.as_ref(),
+            val_name,
+        );
+    }
     let opts = FitOptions {
         kind: args.model,
         coulomb: args.friction == FrictionArg::Coulomb,
@@ -296,7 +378,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         r: args.gear_ratio,
         refine: !args.no_refine,
         feedthrough: args.feedthrough,
-        current_loop_tau: args.current_loop_tau,
+        current_loop_tau: args.current_loop_tau.unwrap_or(0.0),
     };
     let t0 = Instant::now();
     let fitted = fit_prepared(&est, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
@@ -354,12 +436,177 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         files,
         warnings: fitted.warnings.clone(),
     };
+    emit(ctx, &report, args.strict)
+}
+
+/// prints the report; with `strict`, any warning fails the run
+fn emit(ctx: &mut Context<'_>, report: &FitReport, strict: bool) -> CmdResult {
     if ctx.json {
-        print_json(ctx.out, &report)?;
+        print_json(ctx.out, report)?;
     } else {
-        print_report(ctx.out, &report)?;
+        print_report(ctx.out, report)?;
+    }
+    if strict && !report.warnings.is_empty() {
+        return Ok(Outcome::CheckFailed);
     }
     Ok(Outcome::Ok)
+}
+
+/// The frequency-domain path of `run` ([`crate::frf_fit`]).
+#[allow(clippy::too_many_arguments)]
+fn run_frequency_domain(
+    args: &FitArgs,
+    ctx: &mut Context<'_>,
+    ds: &Dataset,
+    analysis: &FrfAnalysis,
+    est: &FitData,
+    val: Option<&FitData>,
+    val_ds: Option<&Dataset>,
+    val_analysis: Option<&FrfAnalysis>,
+    val_name: Option<String>,
+) -> CmdResult {
+    let structure = args.model.structure().expect("checked by the caller");
+    let ts = ds.data.ts;
+    let mut o = FrfFitOptions::new(structure, ts);
+    o.output = args.output_kind.into();
+    o.r = args.gear_ratio;
+    if let Some(tau) = args.current_loop_tau {
+        o.lag = Drive::Fixed(tau / ts);
+    }
+    if let Some(d) = args.delay {
+        o.delay = Drive::Fixed(d);
+    }
+    let t0 = Instant::now();
+    let ff = frf_fit::fit_frf(&analysis.frf, &o).map_err(|e| format!("{}: {e}", ds.name))?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let fitted = fitted_of(args, &ff, analysis, est.decimate);
+    // residual tests on one period of the steady state (slow disturbances
+    // and drift averaged out), at the capture rate
+    let tests = |d: &Dataset, a: &FrfAnalysis| -> Result<Validation, String> {
+        let s = frf_fit::periodic_steady_state(&d.data, &a.layout, |f| ff.freq_response(f))
+            .map_err(|e| format!("{}: {e}", d.name))?;
+        crate::validate::validate(&s.u, &s.y, &s.y_hat, args.lags)
+            .map_err(|e| format!("{}: {e}", d.name))
+    };
+    let periodic = val_ds.is_none() || val_analysis.is_some();
+    let (ev, vv) = if periodic {
+        let vv = match (val_ds, val_analysis) {
+            (Some(v), Some(a)) => Some(tests(v, a)?),
+            _ => None,
+        };
+        (tests(ds, analysis)?, vv)
+    } else {
+        let ev = fitted
+            .evaluate_on(est, args.lags)
+            .map_err(|e| format!("{}: {e}", ds.name))?;
+        let vv = match (val, &val_name) {
+            (Some(v), Some(vn)) => Some(
+                fitted
+                    .evaluate_on(v, args.lags)
+                    .map_err(|e| format!("{vn}: {e}"))?,
+            ),
+            _ => None,
+        };
+        (ev, vv)
+    };
+    let periodic_fit =
+        |a: &FrfAnalysis| frf_fit::periodic_fit_percent(&a.frf, &ff.freq_response(&a.frf.freq_hz));
+    let (fit_name, fit_estimation, fit_validation) = if periodic {
+        (
+            PERIODIC_FIT_NAME,
+            periodic_fit(analysis),
+            val_analysis.map(periodic_fit),
+        )
+    } else {
+        (FIT_NAME, ev.fit, vv.as_ref().map(|v| v.fit))
+    };
+    let mut files = Vec::new();
+    if let Some(path) = &args.save {
+        let saved = fitted.to_saved(prep_of(&args.prep), &ds.name, fit_estimation);
+        let text = serde_json::to_string_pretty(&saved)?;
+        std::fs::write(path, text + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
+        files.push(path.display().to_string());
+    }
+    if let Some(dir) = &args.plot {
+        let p = write_bode(dir, "bode.svg", ds, args.settle_periods, &[&fitted])?;
+        files.push(p.display().to_string());
+    }
+    let report = FitReport {
+        model: fitted.kind.name(),
+        method: fitted.method.clone(),
+        file: ds.name.clone(),
+        validation_file: val_name,
+        ts,
+        samples: ds.data.len(),
+        parameters: {
+            let mut p = param_map(&fitted.params);
+            if args.linear_axis {
+                for v in p.values_mut() {
+                    v.unit = linear_unit(&v.unit).into();
+                }
+            }
+            p
+        },
+        fit_name: fit_name.into(),
+        fit_estimation,
+        fit_validation,
+        resonances_hz: ff.resonances_hz.clone(),
+        antiresonances_hz: ff.anti_resonances_hz.clone(),
+        residual_tests: ResidualTests {
+            estimation: ev,
+            validation: vv,
+        },
+        seconds,
+        files,
+        warnings: fitted.warnings.clone(),
+    };
+    emit(ctx, &report, args.strict)
+}
+
+/// A frequency-domain fit as a [`Fitted`]: the sampled model with the lag
+/// and the delay, the lag as `tau_c` [s] and the delay as `delay` [s] among
+/// the parameters.
+fn fitted_of(args: &FitArgs, ff: &FrfFit, analysis: &FrfAnalysis, decimate: usize) -> Fitted {
+    let ts = ff.model.ts;
+    let mut params = ff.params.clone();
+    for (name, d) in [("tau_c", ff.lag), ("delay", ff.delay)] {
+        params.push(crate::grey_box::PhysParam {
+            name: name.into(),
+            value: d.value * ts,
+            std: d.std * ts,
+            unit: "s",
+        });
+    }
+    let drive = |d: &frf_fit::DriveEstimate| match (d.estimated, d.value > 0.0) {
+        (true, _) => "estimated",
+        (false, true) => "fixed",
+        (false, false) => "left out",
+    };
+    Fitted {
+        kind: args.model,
+        output: args.output_kind.into(),
+        ts,
+        model: ff.discrete(),
+        continuous: Some(ff.continuous()),
+        params,
+        friction: None,
+        warnings: ff.warnings.iter().map(|w| w.to_string()).collect(),
+        method: format!(
+            "frequency domain: sample maximum likelihood on {} excited lines of {} periods \
+             ({} to {:.1} Hz), current-loop lag {}, delay {}; cost {:.1} = {:.2} × its noise level; \
+             best of {} starts from the FRF's resonances",
+            ff.lines,
+            analysis.layout.count,
+            analysis.frf.freq_hz.first().map_or(0.0, |f| *f),
+            analysis.frf.freq_hz.last().map_or(0.0, |f| *f),
+            drive(&ff.lag),
+            drive(&ff.delay),
+            ff.cost,
+            ff.cost_ratio(),
+            ff.starts
+        ),
+        decimate,
+    }
 }
 
 /// Writes `name` into `dir`: Bode plot of `models` over the FRF of `ds`
@@ -435,7 +682,7 @@ pub(crate) fn print_report(out: &mut dyn Write, r: &FitReport) -> std::io::Resul
             )?;
         }
     }
-    writeln!(out, "  {FIT_NAME}:")?;
+    writeln!(out, "  {}:", r.fit_name)?;
     writeln!(out, "    estimation: {:.2}", r.fit_estimation)?;
     if let Some(v) = r.fit_validation {
         writeln!(out, "    validation: {v:.2}")?;
