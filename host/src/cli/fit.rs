@@ -593,7 +593,7 @@ fn fitted_of(args: &FitArgs, ff: &FrfFit, analysis: &FrfAnalysis, decimate: usiz
         warnings: ff.warnings.iter().map(|w| w.to_string()).collect(),
         method: format!(
             "frequency domain: sample maximum likelihood on {} excited lines of {} periods \
-             ({} to {:.1} Hz), current-loop lag {}, delay {}; cost {:.1} = {:.2} × its noise level; \
+             ({:.1} to {:.1} Hz), current-loop lag {}, delay {}; cost {:.1} = {:.2} × its noise level; \
              best of {} starts from the FRF's resonances",
             ff.lines,
             analysis.layout.count,
