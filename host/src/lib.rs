@@ -19,4 +19,5 @@ pub mod plot;
 pub mod sim;
 pub mod ss;
 pub mod subspace;
+pub mod test_support;
 pub mod validate;

@@ -3,7 +3,10 @@
 //!
 //! Data: the simulated three-mass joint in its position loop (jointid::sim),
 //! special odd multisine for estimation, band-limited noise for validation,
-//! written as capture CSVs with their excitation comments.
+//! written as capture CSVs with their excitation comments; and measured data
+//! from `../shared/data`: the EMPS drive (rigid model with Coulomb friction
+//! against the published IDIM-LS values) and the DaISy robot arm (black box,
+//! FIT on the held-out half).
 
 use std::path::{Path, PathBuf};
 
@@ -227,4 +230,86 @@ fn demo_writes_captures_plots_and_the_table() {
         }
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// a file of `shared/` beside the repository or its worktree folder
+fn shared(rel: &str) -> String {
+    let base = env!("CARGO_MANIFEST_DIR");
+    for up in [
+        "/../../shared/",
+        "/../../../shared/",
+        "/../../../../shared/",
+    ] {
+        let p = format!("{base}{up}{rel}");
+        if std::path::Path::new(&p).exists() {
+            return p;
+        }
+    }
+    panic!("shared file {rel} not found beside {base}");
+}
+
+// EMPS through `jointid fit --model rigid --friction coulomb --json`: M, Fv,
+// Fc within 3 % of the published IDIM-LS values (Janot et al. 2019).
+#[test]
+fn emps_rigid_coulomb_fit_via_cli_matches_published_within_3_percent() {
+    let path = shared("data/emps/emps_train_DATA_EMPS.csv");
+    let j = json_of(&jointid(&[
+        "fit",
+        &path,
+        "--time",
+        "t_s",
+        "--input",
+        "force_N",
+        "--output",
+        "qm_m",
+        "--model",
+        "rigid",
+        "--friction",
+        "coulomb",
+        "--linear-axis",
+        "--json",
+    ]));
+    eprintln!(
+        "{}",
+        serde_json::to_string_pretty(&j["parameters"]).unwrap()
+    );
+    for (name, published) in [("J", 95.1089), ("Fv", 203.5034), ("Fc", 20.3935)] {
+        let v = j["parameters"][name]["value"].as_f64().unwrap();
+        assert!(
+            (v - published).abs() <= 0.03 * published,
+            "{name}: {v} vs published {published}"
+        );
+    }
+    assert_eq!(j["parameters"]["J"]["unit"], "kg");
+    assert_eq!(j["parameters"]["Fv"]["unit"], "N·s/m");
+    assert!(j["fit_estimation"].is_number());
+}
+
+// DaISy 96-009 through `jointid fit --model black-box:4 --estimation-fraction
+// 0.5`: FIT on the second half reported. DaISy publishes no figure; the
+// bound is a regression guard 8 points under the 88.4 % measured when the
+// test was written (PO-MOESP start kept over PBSID on these open-loop data).
+#[test]
+fn daisy_order_4_fit_on_first_half_reports_second_half_fit_via_cli() {
+    let path = shared("data/daisy-robot-arm/robot_arm.csv");
+    let j = json_of(&jointid(&[
+        "fit",
+        &path,
+        "--time",
+        "t_assumed_s",
+        "--input",
+        "u_reaction_torque",
+        "--output",
+        "y_arm_acceleration",
+        "--model",
+        "black-box:4",
+        "--estimation-fraction",
+        "0.5",
+        "--json",
+    ]));
+    let fe = j["fit_estimation"].as_f64().unwrap();
+    let fv = j["fit_validation"].as_f64().unwrap();
+    eprintln!("DaISy robot arm, order 4: FIT estimation {fe:.1} %, validation {fv:.1} %");
+    assert_eq!(j["samples"].as_u64(), Some(512));
+    assert!(fv > 80.0 && fv < 100.0, "validation FIT {fv}");
 }

@@ -1,13 +1,13 @@
 //! `jointid simulate` run as a process: the `.jcap` it writes is byte for byte the stream
-//! of the library chain (`cli::simulate::encode_session`, checked end to end in the
-//! workspace test `tests/sil.rs`), and `info`, `export` and `analyze` read it as a board
-//! capture; bad arguments end with one line and exit code 2.
+//! of the library chain (`sim::board::encode_session` on the configuration the binary
+//! wrote with `--params-out`, checked end to end in the workspace test `tests/sil.rs`), and
+//! `info`, `export` and `analyze` read it as a board capture; bad arguments end with one
+//! line and exit code 2.
 
-use clap::Parser;
-use jointid::cli::simulate::{configure, encode_session, WireOptions};
-use jointid::cli::{Cli, Command as Sub};
 use jointid::data::{parse_csv, ColumnMap};
-use jointid::sim::simulate_excitation;
+use jointid::sim::board::{encode_session, WireOptions};
+use jointid::sim::{simulate_excitation, SimConfig};
+use jointid_core::excitation::{ExcitationConfig, SignalKind};
 use serde_json::Value;
 
 mod common;
@@ -43,15 +43,19 @@ fn simulate_jcap_is_the_wire_stream_and_reads_like_a_board_capture() {
     with_json.extend_from_slice(&args);
     let summary = json_of(&jointid(&with_json));
 
-    // the same arguments through the library: the file is the magic plus that stream
-    let mut argv = vec!["jointid"];
-    argv.extend_from_slice(&args);
-    let Sub::Simulate(parsed) = Cli::try_parse_from(argv).unwrap().command else {
-        panic!("not simulate")
+    // the same run through the library: the configuration the binary wrote, the
+    // excitation the arguments name; the file is the magic plus that stream
+    let cfg: SimConfig = serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
+    let exc = ExcitationConfig {
+        kind: SignalKind::SpecialOddMultisine,
+        rms_rad: 0.015,
+        periods: 3,
+        seed: 3,
+        ..ExcitationConfig::paper_default()
     };
-    let (cfg, exc) = configure(&parsed).unwrap();
     assert_eq!(cfg.plant.params.k_g, 1.3e5);
-    assert_eq!((cfg.seed, exc.seed, exc.periods), (3, 3, 3));
+    assert_eq!(cfg.seed, 3);
+    assert_eq!(cfg.sample_rate_hz, f64::from(exc.fs_hz));
     let sim = simulate_excitation(&cfg, &exc).unwrap();
     let stream = encode_session(&sim, &exc, &WireOptions::for_sim(&cfg)).unwrap();
     let file = std::fs::read(&jcap).unwrap();

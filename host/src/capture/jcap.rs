@@ -179,6 +179,25 @@ pub fn events_path(capture: &Path) -> PathBuf {
     PathBuf::from(s)
 }
 
+/// Writes a whole stream (a simulated board's, from `sim::board::encode_session`) as the
+/// `.jcap` `path` with [`JcapWriter`], replacing the file and removing any stale `.events`
+/// sidecar of an earlier capture of that name; returns the stream bytes written.
+///
+/// # Errors
+/// [`JcapError::Io`] or [`JcapError::Write`] naming the file.
+pub fn write_stream(path: &Path, stream: &[u8]) -> Result<u64, JcapError> {
+    let mut w = JcapWriter::create(path, true, FlushPolicy::default())?;
+    w.append(stream, Instant::now())?;
+    let n = w.finish()?;
+    let events = events_path(path);
+    match std::fs::remove_file(&events) {
+        Err(err) if err.kind() != io::ErrorKind::NotFound => {
+            Err(JcapError::Io { path: events, err })
+        }
+        _ => Ok(n),
+    }
+}
+
 /// When the writer hands bytes to the operating system and when it forces them to disk.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FlushPolicy {

@@ -272,7 +272,7 @@ mod tests {
     fn analyze_prints_table_json_and_plots_for_a_capture_csv() {
         let dir = tmp("ok");
         let csv = dir.join("cap.csv");
-        std::fs::write(&csv, crate::frf::tests::capture_csv(0.0, 4)).unwrap();
+        std::fs::write(&csv, crate::test_support::capture_csv(0.0, 4)).unwrap();
         let csv_s = csv.to_str().unwrap();
         let (r, out) = run_args(&["jointid", "analyze", csv_s, "--require-linear"]);
         assert_eq!(r, Ok(Outcome::Ok), "{out}");
@@ -306,7 +306,7 @@ mod tests {
             .unwrap()
             .starts_with("<svg"));
         // a cubic controller: --require-linear turns the detection into exit 1
-        std::fs::write(&csv, crate::frf::tests::capture_csv(0.5, 4)).unwrap();
+        std::fs::write(&csv, crate::test_support::capture_csv(0.5, 4)).unwrap();
         let (r, out) = run_args(&["jointid", "analyze", csv_s, "--require-linear"]);
         assert_eq!(r, Ok(Outcome::CheckFailed), "{out}");
         assert!(out.contains("DETECTED"));

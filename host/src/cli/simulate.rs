@@ -10,9 +10,9 @@
 //! - `--out RUN.jcap` puts the run through the real wire encoder
 //!   (`jointid_core::wire`: session header with the excitation config and the scale,
 //!   delta-coded sample batches from `BatchBuilder` with the reference CRC, a `Status`
-//!   every [`WireOptions::status_every`] batches, `End`) into a `.jcap` written by
-//!   [`JcapWriter`], so `jointid info`, `export`, `analyze` and `fit` read it exactly like
-//!   a board capture. The wire carries integer counts: `u` and `θm` are rounded to the
+//!   every [`WireOptions::status_every`] batches, `End`; [`crate::sim::board`]) into a
+//!   `.jcap` written by [`crate::capture::jcap::write_stream`], so `jointid info`,
+//!   `export`, `analyze` and `fit` read it exactly like a board capture. The wire carries integer counts: `u` and `θm` are rounded to the
 //!   scale of [`WireOptions::for_sim`] (at most half a count from the simulator's value),
 //!   the reference is regenerated from the header bit-exactly.
 //! - `--out RUN.csv` writes the capture CSV (DESIGN.md §5) with the simulator's values
@@ -26,18 +26,15 @@
 #![allow(rustdoc::broken_intra_doc_links)]
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use clap::{Args, ValueEnum};
-use jointid_core::wire::{
-    encode_frame, BatchBuilder, EncodeError, Message, Scale, SessionHeader, Status, MAX_FRAME_LEN,
-    PROTOCOL_VERSION,
-};
+use jointid_core::wire::Scale;
 use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
-use crate::capture::jcap::{events_path, FlushPolicy, JcapError, JcapWriter};
+use crate::capture::jcap::{write_stream, JcapError};
 use crate::data::{write_capture_csv, Dataset, ExcitationConfig, SignalKind};
+use crate::sim::board::{encode_session, BoardStreamError, WireOptions};
 use crate::sim::{
     parse_effects, simulate_excitation, Integrator, JointParams, Mechanism, Plant, PlantKind,
     SensorConfig, SimConfig, SimOutput,
@@ -207,13 +204,8 @@ pub enum SimulateError {
         path: PathBuf,
     },
     /// a message did not fit a wire frame (a bug of the encoder's limits)
-    #[error("wire frame of message {index}: {err}")]
-    Encode {
-        /// 0-based index of the message in the stream
-        index: usize,
-        /// what the encoder said
-        err: EncodeError,
-    },
+    #[error(transparent)]
+    Encode(#[from] BoardStreamError),
     /// the `.jcap` could not be written
     #[error(transparent)]
     Jcap(#[from] JcapError),
@@ -377,141 +369,6 @@ pub fn configure(
     Ok((cfg, exc))
 }
 
-/// How a simulated run is put on the wire: the session header's identity and scale, the
-/// batching and the status rate.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct WireOptions {
-    /// board identifier in the header (`0x5157_0001` for the simulator)
-    pub board_id: u32,
-    /// session identifier in the header (the low 32 bits of the simulator seed)
-    pub session_id: u32,
-    /// rate of the sample timestamps [Hz]
-    pub timer_hz: u32,
-    /// samples per batch (2..=64)
-    pub batch_len: usize,
-    /// a `Status` after every this many batches (0 = never)
-    pub status_every: usize,
-    /// counts to SI
-    pub scale: Scale,
-}
-
-/// Torque scale of a simulated run [N·m/count]: 2^-20, a power of two so that counts ×
-/// scale is exact, far below the simulator's torque noise (2e-3 N·m) and with ±2048 N·m
-/// of range (the controller limits u to 12 N·m).
-pub const SIM_TORQUE_NM_PER_COUNT: f32 = 1.0 / 1_048_576.0;
-/// Angle scale of a simulated run without encoder quantisation [rad/count]: 2^-20
-/// (±2048 rad of range).
-pub const SIM_IDEAL_ANGLE_RAD_PER_COUNT: f32 = 1.0 / 1_048_576.0;
-
-impl WireOptions {
-    /// The options `jointid simulate` uses for `cfg`: the angle scale is the simulated
-    /// encoder's resolution `2π / counts_per_rev` (as `f32`; [`SIM_IDEAL_ANGLE_RAD_PER_COUNT`]
-    /// without an encoder), the torque scale [`SIM_TORQUE_NM_PER_COUNT`], a 1 MHz timer,
-    /// batches of 32 and a status every 16 batches (4 Hz at 2 kHz), as the board does.
-    pub fn for_sim(cfg: &SimConfig) -> Self {
-        WireOptions {
-            board_id: 0x5157_0001,
-            session_id: cfg.seed as u32,
-            timer_hz: 1_000_000,
-            batch_len: 32,
-            status_every: 16,
-            scale: Scale {
-                torque_nm_per_count: SIM_TORQUE_NM_PER_COUNT,
-                angle_rad_per_count: cfg
-                    .sensors
-                    .angle_resolution()
-                    .map_or(SIM_IDEAL_ANGLE_RAD_PER_COUNT, |r| r as f32),
-            },
-        }
-    }
-
-    /// The session header for `excitation` at its sample rate.
-    pub fn header(&self, excitation: &ExcitationConfig) -> SessionHeader {
-        SessionHeader {
-            protocol_version: PROTOCOL_VERSION,
-            board_id: self.board_id,
-            session_id: self.session_id,
-            sample_rate_hz: excitation.fs_hz,
-            timer_hz: self.timer_hz,
-            excitation: *excitation,
-            scale: self.scale,
-        }
-    }
-}
-
-/// Encodes a simulated run as the stream a board sends: session header, sample batches
-/// (`BatchBuilder`, with the reference CRC), a `Status` every `opts.status_every`
-/// batches, `End`; each message one frame of `jointid_core::wire::encode_frame`.
-///
-/// `out` must be `simulate_excitation(cfg, excitation)` (or the same reference through
-/// `simulate_f32`): the reader regenerates the reference from the header and reports
-/// every batch whose reference CRC differs. Samples are `out.to_raw_samples(scale,
-/// timer_hz)`: `u` and `θm` rounded to counts of `opts.scale`.
-///
-/// # Errors
-/// [`SimulateError::Encode`] if a message does not fit a frame.
-pub fn encode_session(
-    out: &SimOutput,
-    excitation: &ExcitationConfig,
-    opts: &WireOptions,
-) -> Result<Vec<u8>, SimulateError> {
-    let header = opts.header(excitation);
-    let raw = out.to_raw_samples(&opts.scale, opts.timer_hz);
-    let tick_step = raw.get(1).map_or(0, |s| s.tick.wrapping_sub(raw[0].tick));
-    let mut bytes = Vec::with_capacity(64 + raw.len() * 6);
-    let mut buf = vec![0u8; MAX_FRAME_LEN];
-    let mut index = 0usize;
-    let mut push = |bytes: &mut Vec<u8>, msg: &Message| {
-        let n = encode_frame(msg, &mut buf).map_err(|err| SimulateError::Encode { index, err })?;
-        bytes.extend_from_slice(&buf[..n]);
-        index += 1;
-        Ok::<(), SimulateError>(())
-    };
-    push(&mut bytes, &Message::Header(header))?;
-    let mut builder = BatchBuilder::new(tick_step, opts.batch_len);
-    let status = |seq: u32| Status {
-        seq,
-        overruns: 0,
-        queue_drops: 0,
-        tx_errors: 0,
-    };
-    let mut batches = 0usize;
-    for (k, (s, &r)) in raw.iter().zip(&out.theta_ref).enumerate() {
-        let last = k + 1 == raw.len();
-        let full = builder.push(*s, r as f32);
-        for b in full
-            .into_iter()
-            .chain(if last { builder.flush() } else { None })
-        {
-            push(&mut bytes, &Message::Batch(b))?;
-            batches += 1;
-            if opts.status_every > 0 && batches.is_multiple_of(opts.status_every) {
-                push(&mut bytes, &Message::Status(status(s.seq.wrapping_add(1))))?;
-            }
-        }
-    }
-    push(&mut bytes, &Message::End(status(raw.len() as u32)))?;
-    Ok(bytes)
-}
-
-/// Writes a stream from [`encode_session`] as the `.jcap` `path` (replacing it and any
-/// stale `.events` sidecar of an earlier capture of that name) with [`JcapWriter`].
-///
-/// # Errors
-/// [`SimulateError::Jcap`] naming the file.
-pub fn write_jcap(path: &Path, stream: &[u8]) -> Result<u64, SimulateError> {
-    let mut w = JcapWriter::create(path, true, FlushPolicy::default())?;
-    w.append(stream, Instant::now())?;
-    let n = w.finish()?;
-    match std::fs::remove_file(events_path(path)) {
-        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(SimulateError::Write {
-            path: events_path(path),
-            err: e,
-        }),
-        _ => Ok(n),
-    }
-}
-
 /// The run as a capture CSV dataset: the simulator's values (unquantised), the excitation,
 /// and `sim_plant`, `sim_effects`, `sim_seed` as meta.
 pub fn to_dataset(out: &SimOutput, cfg: &SimConfig, excitation: &ExcitationConfig) -> Dataset {
@@ -587,7 +444,7 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         OutFormat::Jcap => {
             let opts = WireOptions::for_sim(&cfg);
             let stream = encode_session(&out, &exc, &opts)?;
-            (Some(opts.scale), Some(write_jcap(&args.out, &stream)?))
+            (Some(opts.scale), Some(write_stream(&args.out, &stream)?))
         }
         OutFormat::Csv => {
             let file = std::fs::File::create(&args.out).map_err(write_err(&args.out))?;
@@ -919,7 +776,7 @@ mod tests {
         assert_eq!(rec.samples.len(), direct.len());
         assert!(rec.report.damaged_frames.is_empty() && rec.report.gaps.is_empty());
         assert!(rec.report.reference_mismatches.is_empty());
-        let half = 0.5 * f64::from(SIM_TORQUE_NM_PER_COUNT) * (1.0 + 1e-9);
+        let half = 0.5 * f64::from(crate::sim::board::SIM_TORQUE_NM_PER_COUNT) * (1.0 + 1e-9);
         for (s, u) in rec.samples.iter().zip(&direct.u) {
             assert!((s.u - u).abs() <= half, "{} vs {u}", s.u);
         }

@@ -40,6 +40,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod board;
 pub mod controller;
 pub mod effects;
 pub mod integrate;
