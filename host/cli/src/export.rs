@@ -1,14 +1,14 @@
 //! `jointid export RUN.jcap --csv RUN.csv`: the capture CSV of DESIGN.md §5.
 //!
 //! Writes only the samples that arrived; the `# gaps=` comment lists what did not (see
-//! [`crate::capture::export`]). The CSV is written to `RUN.csv.tmp` and renamed, so a
+//! [`jointid::capture::export`]). The CSV is written to `RUN.csv.tmp` and renamed, so a
 //! half-written export never looks complete; `--csv -` writes to stdout.
 //! Exit status: 0 exported, 1 `--strict` and something is missing or damaged, 2 error.
 
 use std::path::PathBuf;
 
 use super::{CmdResult, Context, Outcome};
-use crate::capture::{export, read_jcap, CaptureError};
+use jointid::capture::{export, read_jcap, CaptureError};
 
 /// Arguments of `jointid export`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]

@@ -1,5 +1,5 @@
 //! `jointid fit DATA --model KIND`: fit a black-box or physical model
-//! ([`crate::fit`]) and report parameters with standard deviations and
+//! ([`jointid::fit`]) and report parameters with standard deviations and
 //! units, FIT (toolbox `compare` definition) on estimation and validation
 //! data, resonance and anti-resonance frequencies, residual tests, and
 //! optionally Bode plots over the measured FRF (seed 000 Figs. 5–6) and the
@@ -7,7 +7,7 @@
 //!
 //! With `--decimate N > 1` the black box is fitted on the decimated data;
 //! a physical model is started there and refined at the capture rate, and
-//! every FIT is computed on the decimated data ([`crate::fit::FitData`]);
+//! every FIT is computed on the decimated data ([`jointid::fit::FitData`]);
 //! the model file records both rates, so `jointid validate` does the same.
 //!
 //! Column mapping: DATA is a capture CSV, a `.jcap` capture (once its loader
@@ -24,16 +24,16 @@ use serde::Serialize;
 
 use super::args::{DataArgs, DetrendArg, PrepArgs};
 use super::{print_json, CmdResult, Context, Outcome};
-use crate::data::Dataset;
-use crate::fit::{
+use jointid::data::Dataset;
+use jointid::fit::{
     default_f_min, fit_prepared, log_grid, param_map, DetrendKind, FitData, FitOptions, Fitted,
     ModelKind, ParamJson, Prep,
 };
-use crate::frf::analyze_dataset;
-use crate::grey_box::{Output, DEFAULT_GEAR_RATIO};
-use crate::plot::{bode_svg, write_svg};
-use crate::subspace::Method;
-use crate::validate::{BodeCurve, CorrelationTest, FrfBand, Validation, DEFAULT_LAGS, FIT_NAME};
+use jointid::frf::analyze_dataset;
+use jointid::grey_box::{Output, DEFAULT_GEAR_RATIO};
+use jointid::plot::{bode_svg, write_svg};
+use jointid::subspace::Method;
+use jointid::validate::{BodeCurve, CorrelationTest, FrfBand, Validation, DEFAULT_LAGS, FIT_NAME};
 
 /// Friction model of the rigid body.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -267,7 +267,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         None => None,
     };
     let prep = prep_of(&args.prep);
-    let prepare = |d: &crate::data::IdData, name: &str| {
+    let prepare = |d: &jointid::data::IdData, name: &str| {
         FitData::new(d, prep).map_err(|e| format!("{name}: {e}"))
     };
     let (est, val, val_name) = match (args.estimation_fraction, &val_ds) {

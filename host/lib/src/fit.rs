@@ -29,7 +29,7 @@
 //! those of [`crate::validate`] (Ljung 1999, §16.6).
 //!
 //! Why here: the estimators do no IO and know nothing of files or JSON; the
-//! command line ([`crate::cli`]) and the experiments ([`crate::experiment`])
+//! command line (the `jointid` binary) and the experiments ([`crate::experiment`])
 //! share this one path, so a FIT printed by `jointid fit` and one in the
 //! paper-like table are computed the same way.
 //!

@@ -1,4 +1,4 @@
-//! `jointid simulate`: runs the closed-loop joint simulator ([`crate::sim`]) on the
+//! `jointid simulate`: runs the closed-loop joint simulator ([`jointid::sim`]) on the
 //! firmware's excitation and writes the run as a board would have delivered it.
 //!
 //! ```text
@@ -10,8 +10,8 @@
 //! - `--out RUN.jcap` puts the run through the real wire encoder
 //!   (`jointid_core::wire`: session header with the excitation config and the scale,
 //!   delta-coded sample batches from `BatchBuilder` with the reference CRC, a `Status`
-//!   every [`WireOptions::status_every`] batches, `End`; [`crate::sim::board`]) into a
-//!   `.jcap` written by [`crate::capture::jcap::write_stream`], so `jointid info`,
+//!   every [`WireOptions::status_every`] batches, `End`; [`jointid::sim::board`]) into a
+//!   `.jcap` written by [`jointid::capture::jcap::write_stream`], so `jointid info`,
 //!   `export`, `analyze` and `fit` read it exactly like a board capture. The wire carries integer counts: `u` and `θm` are rounded to the
 //!   scale of [`WireOptions::for_sim`] (at most half a count from the simulator's value),
 //!   the reference is regenerated from the header bit-exactly.
@@ -20,7 +20,7 @@
 //!
 //! `--param NAME=VALUE` overrides one physical parameter of the chosen model, named as in
 //! seed 000 Table 1 (`J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r`) plus
-//! seed 001's `k3`, `F_c` for the nonlinear two-mass (see [`crate::sim::params`]); only
+//! seed 001's `k3`, `F_c` for the nonlinear two-mass (see [`jointid::sim::params`]); only
 //! the names the model uses are accepted ([`model_params`]).
 // Units in brackets (`[s]`, `[rad]`) are not intra-doc links.
 #![allow(rustdoc::broken_intra_doc_links)]
@@ -32,10 +32,10 @@ use jointid_core::wire::Scale;
 use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
-use crate::capture::jcap::{write_stream, JcapError};
-use crate::data::{write_capture_csv, Dataset, ExcitationConfig, SignalKind};
-use crate::sim::board::{encode_session, BoardStreamError, WireOptions};
-use crate::sim::{
+use jointid::capture::jcap::{write_stream, JcapError};
+use jointid::data::{write_capture_csv, Dataset, ExcitationConfig, SignalKind};
+use jointid::sim::board::{encode_session, BoardStreamError, WireOptions};
+use jointid::sim::{
     parse_effects, simulate_excitation, Integrator, JointParams, Mechanism, Plant, PlantKind,
     SensorConfig, SimConfig, SimOutput,
 };
@@ -525,19 +525,19 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::{default_loaders, Cli, Command};
-    use crate::data::{load_csv, ColumnMap};
+    use crate::{default_loaders, Cli, Command};
     use clap::Parser;
+    use jointid::data::{load_csv, ColumnMap};
 
     fn temp(name: &str) -> PathBuf {
         std::env::temp_dir().join(format!("jointid-sim-{}-{name}", std::process::id()))
     }
 
     /// Runs `cli` as the binary does (JSON when `--json` was given); the result and the output.
-    fn run_cli(cli: &Cli) -> (crate::cli::CmdResult, Vec<u8>) {
+    fn run_cli(cli: &Cli) -> (crate::CmdResult, Vec<u8>) {
         let loaders = default_loaders();
         let mut buf = Vec::new();
-        let result = crate::cli::run(
+        let result = crate::run(
             cli,
             &mut Context {
                 json: cli.json,
@@ -766,7 +766,7 @@ mod tests {
         let (result, buf) = run_cli(&cli);
         result.unwrap();
         let summary: serde_json::Value = serde_json::from_slice(&buf).unwrap();
-        let rec = crate::capture::read_jcap(&jcap).unwrap();
+        let rec = jointid::capture::read_jcap(&jcap).unwrap();
         let (cfg, exc) = configure(args).unwrap();
         let direct = simulate_excitation(&cfg, &exc).unwrap();
         assert_eq!(summary["samples"], direct.len());
@@ -776,7 +776,7 @@ mod tests {
         assert_eq!(rec.samples.len(), direct.len());
         assert!(rec.report.damaged_frames.is_empty() && rec.report.gaps.is_empty());
         assert!(rec.report.reference_mismatches.is_empty());
-        let half = 0.5 * f64::from(crate::sim::board::SIM_TORQUE_NM_PER_COUNT) * (1.0 + 1e-9);
+        let half = 0.5 * f64::from(jointid::sim::board::SIM_TORQUE_NM_PER_COUNT) * (1.0 + 1e-9);
         for (s, u) in rec.samples.iter().zip(&direct.u) {
             assert!((s.u - u).abs() <= half, "{} vs {u}", s.u);
         }

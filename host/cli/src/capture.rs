@@ -3,12 +3,12 @@
 //! Layers (as ripgrep's `lowargs`/`hiargs`): [`CaptureArgs`] is what clap parsed (one
 //! source out of four is enforced by an argument group, numbers are range-checked by
 //! their value parsers); [`CaptureArgs::validate`] turns it into a
-//! [`crate::capture::SourceSpec`] and [`crate::capture::CaptureOptions`]; [`run`]
+//! [`jointid::capture::SourceSpec`] and [`jointid::capture::CaptureOptions`]; [`run`]
 //! installs the Ctrl-C handler, draws the progress line and prints the summary.
 //!
 //! Output: progress on stderr (hidden when stderr is not a terminal or with `--quiet`),
 //! the summary on stdout, as text or, with `--json`, as one JSON object with the fields
-//! of [`crate::capture::CaptureReport`] plus `out`, `stop` and `elapsed_s`.
+//! of [`jointid::capture::CaptureReport`] plus `out`, `stop` and `elapsed_s`.
 //! Exit status: 0 captured, 1 `--strict` and something is missing or damaged, 2 error.
 
 use std::io::IsTerminal;
@@ -20,7 +20,7 @@ use std::time::Duration;
 use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
-use crate::capture::{
+use jointid::capture::{
     record_capture, CaptureOptions, CaptureReport, Progress, SourceSpec, StopRule,
 };
 
@@ -170,8 +170,8 @@ pub struct CaptureSummary {
 /// missing or damaged.
 ///
 /// # Errors
-/// Setup and capture errors ([`crate::capture::CaptureError`]; see
-/// [`crate::capture::live`] for what stays on disk), output errors.
+/// Setup and capture errors ([`jointid::capture::CaptureError`]; see
+/// [`jointid::capture::live`] for what stays on disk), output errors.
 pub fn run(args: &CaptureArgs, ctx: &mut Context<'_>) -> CmdResult {
     let (spec, opts) = args.validate();
     let interrupt = Arc::new(AtomicBool::new(false));

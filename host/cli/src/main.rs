@@ -1,4 +1,6 @@
-//! Command line: parse (clap derive), validate, dispatch.
+//! `jointid`: the command line of the `jointid` library. Parse (clap derive),
+//! validate, dispatch; exit codes 0 ok, 1 a check failed, 2 error (printed on one
+//! line, or as `{"error": ...}` with `--json`).
 //!
 //! Layers (as ripgrep's `flags/`): each subcommand has one module here with
 //! its `clap::Args` struct and a `run(args, ctx)` that loads data, calls the
@@ -6,31 +8,31 @@
 //! groups (data file + column mapping, preparation) live in [`args`].
 //!
 //! Adding a subcommand (`capture`, `export`, `info`, `simulate`, `fit`,
-//! `demo`, …): create `cli/<name>.rs` with `pub struct <Name>Args` (derive
+//! `demo`, …): create `src/<name>.rs` with `pub struct <Name>Args` (derive
 //! `clap::Args`) and `pub fn run(args: &<Name>Args, ctx: &mut Context<'_>)
-//! -> CmdResult`; add `pub mod <name>;`, one [`Command`] variant and one arm in
+//! -> CmdResult`; add `mod <name>;`, one [`Command`] variant and one arm in
 //! [`run`]. Nothing else changes.
 //!
-//! Exit codes ([`Outcome::code`]): 0 ok, 1 a check failed, 2 error (main.rs).
+//! Exit codes ([`Outcome::code`]): 0 ok, 1 a check failed, 2 error ([`main`]).
 // Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
 #![allow(rustdoc::broken_intra_doc_links)]
 
 use std::io::Write;
+use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use jointid::data::Loaders;
 
-use crate::data::Loaders;
-
-pub mod analyze;
-pub mod args;
-pub mod capture;
-pub mod demo;
-pub mod export;
-pub mod fit;
-pub mod info;
-pub mod simulate;
-pub mod validate;
-pub mod validate_cmd;
+mod analyze;
+mod args;
+mod capture;
+mod demo;
+mod export;
+mod fit;
+mod info;
+mod simulate;
+mod validate;
+mod validate_cmd;
 
 /// `jointid`: identification of one robot joint, from capture to validated models.
 #[derive(Debug, Parser)]
@@ -104,7 +106,7 @@ pub fn default_loaders() -> Loaders {
     let mut l = Loaders::default();
     l.register(
         "jcap",
-        Box::new(|p, _| crate::capture::load_dataset(p).map_err(Into::into)),
+        Box::new(|p, _| jointid::capture::load_dataset(p).map_err(Into::into)),
     );
     l
 }
@@ -139,6 +141,70 @@ pub fn print_json<T: serde::Serialize>(
     serde_json::to_writer_pretty(&mut *out, value)?;
     writeln!(out)?;
     Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) if e.use_stderr() && std::env::args().any(|a| a == "--json") => {
+            let text = e.render().to_string();
+            let lines: Vec<&str> = text
+                .lines()
+                .map(str::trim)
+                .take_while(|l| !l.starts_with("Usage:"))
+                .filter(|l| !l.is_empty())
+                .collect();
+            let msg = lines.join(" ");
+            println!(
+                "{}",
+                serde_json::json!({ "error": msg.trim_start_matches("error: ") })
+            );
+            return ExitCode::from(2);
+        }
+        Err(e) => e.exit(),
+    };
+    let loaders = default_loaders();
+    let mut stdout = std::io::stdout().lock();
+    let result = run(
+        &cli,
+        &mut Context {
+            json: cli.json,
+            loaders: &loaders,
+            out: &mut stdout,
+        },
+    );
+    // output closed early (`jointid analyze x.csv | head`): stop quietly
+    if let Err(e) = &result {
+        let mut cur: Option<&(dyn std::error::Error + 'static)> = Some(e.as_ref());
+        while let Some(c) = cur {
+            if c.downcast_ref::<std::io::Error>()
+                .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+            {
+                return ExitCode::SUCCESS;
+            }
+            cur = c.source();
+        }
+    }
+    match result.map_err(anyhow::Error::from_boxed) {
+        Ok(outcome) => ExitCode::from(outcome.code()),
+        Err(e) => {
+            // the chain, skipping causes the message already states
+            let mut msg = e.to_string();
+            for cause in e.chain().skip(1) {
+                let c = cause.to_string();
+                if !msg.contains(&c) {
+                    msg = format!("{msg}: {c}");
+                }
+            }
+            let msg = msg.replace('\n', " ");
+            if cli.json {
+                println!("{}", serde_json::json!({ "error": msg }));
+            } else {
+                eprintln!("jointid: error: {msg}");
+            }
+            ExitCode::from(2)
+        }
+    }
 }
 
 #[cfg(test)]

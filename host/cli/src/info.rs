@@ -13,8 +13,8 @@ use jointid_core::wire::SessionHeader;
 use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
-use crate::capture::export::kind_name;
-use crate::capture::{read_jcap_report, CaptureReport};
+use jointid::capture::export::kind_name;
+use jointid::capture::{read_jcap_report, CaptureReport};
 
 /// Arguments of `jointid info`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
@@ -43,7 +43,7 @@ pub struct InfoSummary {
 /// missing or damaged.
 ///
 /// # Errors
-/// [`crate::capture::CaptureError::Jcap`] when the file cannot be read or is no jcap
+/// [`jointid::capture::CaptureError::Jcap`] when the file cannot be read or is no jcap
 /// file; output errors.
 pub fn run(args: &InfoArgs, ctx: &mut Context<'_>) -> CmdResult {
     let (report, header) = read_jcap_report(&args.input)?;

@@ -1,5 +1,5 @@
 //! `jointid analyze DATA`: nonparametric FRF u → theta_m with σ, noise level
-//! and nonlinear distortion of a periodic experiment (see [`crate::frf`]).
+//! and nonlinear distortion of a periodic experiment (see [`jointid::frf`]).
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -9,12 +9,12 @@ use serde::Serialize;
 
 use super::args::DataArgs;
 use super::{print_json, CmdResult, Context, Outcome};
-use crate::frf::{
+use jointid::frf::{
     amplitude_trend, analyze_dataset, AmplitudeTrend, ClassLevel, ExcitedSource, FrfAnalysis,
     Instrument,
 };
-use crate::plot::{analysis_spectrum_svg, bode_svg, write_svg};
-use crate::validate::FrfBand;
+use jointid::plot::{analysis_spectrum_svg, bode_svg, write_svg};
+use jointid::validate::FrfBand;
 
 /// Arguments of `jointid analyze`.
 #[derive(Debug, Clone, Args)]
@@ -272,7 +272,7 @@ mod tests {
     fn analyze_prints_table_json_and_plots_for_a_capture_csv() {
         let dir = tmp("ok");
         let csv = dir.join("cap.csv");
-        std::fs::write(&csv, crate::test_support::capture_csv(0.0, 4)).unwrap();
+        std::fs::write(&csv, jointid::test_support::capture_csv(0.0, 4)).unwrap();
         let csv_s = csv.to_str().unwrap();
         let (r, out) = run_args(&["jointid", "analyze", csv_s, "--require-linear"]);
         assert_eq!(r, Ok(Outcome::Ok), "{out}");
@@ -306,7 +306,7 @@ mod tests {
             .unwrap()
             .starts_with("<svg"));
         // a cubic controller: --require-linear turns the detection into exit 1
-        std::fs::write(&csv, crate::test_support::capture_csv(0.5, 4)).unwrap();
+        std::fs::write(&csv, jointid::test_support::capture_csv(0.5, 4)).unwrap();
         let (r, out) = run_args(&["jointid", "analyze", csv_s, "--require-linear"]);
         assert_eq!(r, Ok(Outcome::CheckFailed), "{out}");
         assert!(out.contains("DETECTED"));

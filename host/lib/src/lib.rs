@@ -6,7 +6,6 @@
 //! an [`data::IdData`] and return values.
 
 pub mod capture;
-pub mod cli;
 pub mod data;
 pub mod experiment;
 pub mod fit;

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 
-use crate::data::{ColumnMap, DataError, Dataset, Detrend, IdData, Loaders};
+use jointid::data::{ColumnMap, DataError, Dataset, Detrend, IdData, Loaders};
 
 /// A data file and, for CSV files that are not capture CSVs, its columns.
 #[derive(Debug, Clone, Args)]
