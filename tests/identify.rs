@@ -19,10 +19,10 @@
 use std::collections::BTreeMap;
 
 use jointid::data::{Dataset, IdData};
-use jointid::experiment::{paper_runs, table, Table};
-use jointid::fit::{fit_model, FitOptions, ModelKind};
-use jointid::grey_box::{GreyBoxModel, Output, Structure};
-use jointid::pem::{self, PemOptions};
+use jointid::ident::fit::{fit_model, FitOptions, ModelKind};
+use jointid::ident::grey_box::{GreyBoxModel, Output, Structure};
+use jointid::ident::pem::{self, PemOptions};
+use jointid::scenario::paper::{paper_runs, table, Table};
 use jointid::sim::{self, Disturbance, PlantKind, SensorConfig, SimConfig};
 use jointid_core::excitation::{ExcitationConfig, SignalKind};
 
@@ -177,7 +177,7 @@ fn three_mass_reported_sigma_matches_spread_over_noise_realisations() {
 // the truth (relative 1e-4) on at least 95 of them.
 #[test]
 fn three_mass_automatic_start_reaches_global_optimum_on_95_of_100_joints() {
-    let mut rng = jointid::linalg::GaussRng::new(2024);
+    let mut rng = jointid::ident::linalg::GaussRng::new(2024);
     let exc = excitation(13, 2);
     let mut ok = 0;
     let mut failures = Vec::new();

@@ -1,5 +1,5 @@
 //! `jointid analyze DATA`: nonparametric FRF u → theta_m with σ, noise level
-//! and nonlinear distortion of a periodic experiment (see [`jointid::frf`]).
+//! and nonlinear distortion of a periodic experiment (see [`jointid::ident::frf`]).
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -9,12 +9,12 @@ use serde::Serialize;
 
 use super::args::DataArgs;
 use super::{print_json, CmdResult, Context, Outcome};
-use jointid::frf::{
+use jointid::ident::frf::{
     amplitude_trend, analyze_dataset, AmplitudeTrend, ClassLevel, ExcitedSource, FrfAnalysis,
     Instrument,
 };
-use jointid::plot::{analysis_spectrum_svg, bode_svg, write_svg};
-use jointid::validate::FrfBand;
+use jointid::ident::validate::FrfBand;
+use jointid::report::plot::{analysis_spectrum_svg, bode_svg, write_svg};
 
 /// Arguments of `jointid analyze`.
 #[derive(Debug, Clone, Args)]

@@ -1,7 +1,7 @@
 //! `jointid demo`: the whole path on the built-in simulated joint, no board
 //! needed; `jointid experiment`: seed 000 Table 2 on simulated data.
 //!
-//! Demo steps ([`jointid::experiment`]): simulate the IRB1400-like joint in
+//! Demo steps ([`jointid::scenario::paper`]): simulate the IRB1400-like joint in
 //! its position loop (estimation run: special odd multisine; validation run:
 //! band-limited noise of the same RMS and band), stream both through the
 //! firmware core's wire encoder into `DIR/estimation.jcap` and
@@ -10,7 +10,7 @@
 //! Fig. 3, `frf.svg`), fit the 11th-order black box on the decimated
 //! estimation data and the three-mass and four-mass models at the capture
 //! rate (started on the decimated data, compared after the same
-//! decimation, see [`jointid::fit::FitData`]) and print the
+//! decimation, see [`jointid::ident::fit::FitData`]) and print the
 //! Table-2-like comparison with resonances against the simulator's truth
 //! (`bode_3mass.svg`, `bode_4mass.svg` as Figs. 5–6).
 
@@ -21,13 +21,13 @@ use serde::Serialize;
 
 use super::fit::write_bode;
 use super::{print_json, CmdResult, Context, Outcome};
-use jointid::experiment::{
+use jointid::ident::frf::analyze_dataset;
+use jointid::ident::validate::FrfBand;
+use jointid::report::plot::{analysis_spectrum_svg, bode_svg, write_svg};
+use jointid::scenario::paper::{
     decode_session, default_scale, encode_session, paper_runs, table, write_jcap, write_table,
     Table, PAPER_MODELS,
 };
-use jointid::frf::analyze_dataset;
-use jointid::plot::{analysis_spectrum_svg, bode_svg, write_svg};
-use jointid::validate::FrfBand;
 
 /// Arguments of `jointid demo`.
 #[derive(Debug, Clone, Args)]
@@ -90,7 +90,7 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
     let val_ds = jointid::capture::load_dataset(&val_path)?;
     let mut files = vec![est_name.clone(), val_name.clone()];
 
-    let a = analyze_dataset(&est_ds, jointid::experiment::SETTLE_PERIODS)?;
+    let a = analyze_dataset(&est_ds, jointid::scenario::paper::SETTLE_PERIODS)?;
     let spec = dir.join("spectrum.svg");
     write_svg(
         &spec,
@@ -221,7 +221,7 @@ pub fn run_experiment(args: &ExperimentArgs, ctx: &mut Context<'_>) -> CmdResult
         }
         tables.push(t);
     }
-    let mean = |f: &dyn Fn(&jointid::experiment::ModelRow) -> f64| -> Vec<(String, f64)> {
+    let mean = |f: &dyn Fn(&jointid::scenario::paper::ModelRow) -> f64| -> Vec<(String, f64)> {
         (0..tables[0].rows.len())
             .map(|i| {
                 let m = tables.iter().map(|t| f(&t.rows[i])).sum::<f64>() / tables.len() as f64;

@@ -1,5 +1,5 @@
 //! `jointid fit DATA --model KIND`: fit a black-box or physical model
-//! ([`jointid::fit`]) and report parameters with standard deviations and
+//! ([`jointid::ident::fit`]) and report parameters with standard deviations and
 //! units, FIT (toolbox `compare` definition) on estimation and validation
 //! data, resonance and anti-resonance frequencies, residual tests, and
 //! optionally Bode plots over the measured FRF (seed 000 Figs. 5–6) and the
@@ -7,7 +7,7 @@
 //!
 //! With `--decimate N > 1` the black box is fitted on the decimated data;
 //! a physical model is started there and refined at the capture rate, and
-//! every FIT is computed on the decimated data ([`jointid::fit::FitData`]);
+//! every FIT is computed on the decimated data ([`jointid::ident::fit::FitData`]);
 //! the model file records both rates, so `jointid validate` does the same.
 //!
 //! Column mapping: DATA is a capture CSV, a `.jcap` capture (once its loader
@@ -25,15 +25,17 @@ use serde::Serialize;
 use super::args::{DataArgs, DetrendArg, PrepArgs};
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::data::Dataset;
-use jointid::fit::{
+use jointid::ident::fit::{
     default_f_min, fit_prepared, log_grid, param_map, DetrendKind, FitData, FitOptions, Fitted,
     ModelKind, ParamJson, Prep,
 };
-use jointid::frf::analyze_dataset;
-use jointid::grey_box::{Output, DEFAULT_GEAR_RATIO};
-use jointid::plot::{bode_svg, write_svg};
-use jointid::subspace::Method;
-use jointid::validate::{BodeCurve, CorrelationTest, FrfBand, Validation, DEFAULT_LAGS, FIT_NAME};
+use jointid::ident::frf::analyze_dataset;
+use jointid::ident::grey_box::{Output, DEFAULT_GEAR_RATIO};
+use jointid::ident::subspace::Method;
+use jointid::ident::validate::{
+    BodeCurve, CorrelationTest, FrfBand, Validation, DEFAULT_LAGS, FIT_NAME,
+};
+use jointid::report::plot::{bode_svg, write_svg};
 
 /// Friction model of the rigid body.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

@@ -20,7 +20,7 @@
 //!
 //! `--param NAME=VALUE` overrides one physical parameter of the chosen model, named as in
 //! seed 000 Table 1 (`J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r`) plus
-//! seed 001's `k3`, `F_c` for the nonlinear two-mass (see [`jointid::sim::params`]); only
+//! seed 001's `k3`, `F_c` for the nonlinear two-mass (see [`jointid::model::params`]); only
 //! the names the model uses are accepted ([`model_params`]).
 // Units in brackets (`[s]`, `[rad]`) are not intra-doc links.
 #![allow(rustdoc::broken_intra_doc_links)]

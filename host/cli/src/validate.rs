@@ -1,6 +1,6 @@
 //! `jointid validate DATA --simulated COL`: FIT (toolbox `compare`
 //! definition) and residual tests of a simulated output against measured
-//! data (see [`jointid::validate`]).
+//! data (see [`jointid::ident::validate`]).
 //!
 //! The simulated output ŷ is a column of DATA or of another CSV with the same
 //! time column (`--simulated-file`). When the `fit` command lands, a
@@ -15,7 +15,7 @@ use serde::Serialize;
 use super::args::{DataArgs, PrepArgs};
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::data::ColumnMap;
-use jointid::validate::{validate, CorrelationTest, Validation, DEFAULT_LAGS, FIT_NAME};
+use jointid::ident::validate::{validate, CorrelationTest, Validation, DEFAULT_LAGS, FIT_NAME};
 
 /// Arguments of `jointid validate`.
 #[derive(Debug, Clone, Args)]

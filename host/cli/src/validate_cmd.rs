@@ -5,7 +5,7 @@
 //!   same decimation and detrending, initial state estimated as the
 //!   toolbox's `compare` does; a physical model saved at the capture rate
 //!   runs there and its output is decimated like the data,
-//!   [`jointid::fit::FitData`]), then FIT and the residual tests.
+//!   [`jointid::ident::fit::FitData`]), then FIT and the residual tests.
 //! - `jointid validate DATA --simulated COL [--simulated-file FILE]`: the
 //!   simulated output is a column ([`super::validate`], unchanged).
 //!
@@ -23,8 +23,8 @@ use super::args::{DataArgs, PrepArgs};
 use super::fit::print_tests;
 use super::validate::{self as column_validate, ValidateArgs};
 use super::{print_json, CmdResult, Context, Outcome};
-use jointid::fit::{FitData, SavedModel};
-use jointid::validate::{Validation, DEFAULT_LAGS, FIT_NAME};
+use jointid::ident::fit::{FitData, SavedModel};
+use jointid::ident::validate::{Validation, DEFAULT_LAGS, FIT_NAME};
 
 /// Arguments of `jointid validate`.
 #[derive(Debug, Clone, Args)]

@@ -11,7 +11,7 @@
 use std::path::{Path, PathBuf};
 
 use jointid::data::{write_capture_csv, Dataset};
-use jointid::experiment::{estimation_excitation, validation_excitation};
+use jointid::scenario::paper::{estimation_excitation, validation_excitation};
 use jointid::sim::{self, Disturbance, SimConfig};
 use jointid_core::excitation::ExcitationConfig;
 

@@ -15,13 +15,13 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use jointid::data::IdData;
-use jointid::grey_box::{
+use jointid::ident::grey_box::{
     self, reference_three_mass, GreyBoxModel, GreyBoxOptions, Output, Structure, DEFAULT_GEAR_RATIO,
 };
-use jointid::linalg::{filtfilt_lowpass, GaussRng};
-use jointid::pem::{self, FullSs, ParamModel, PemOptions};
-use jointid::ss::StateSpace;
-use jointid::subspace::{self, estimate_x0, Method, Order, SubspaceOptions};
+use jointid::ident::linalg::{filtfilt_lowpass, GaussRng};
+use jointid::ident::pem::{self, FullSs, ParamModel, PemOptions};
+use jointid::ident::ss::StateSpace;
+use jointid::ident::subspace::{self, estimate_x0, Method, Order, SubspaceOptions};
 use nalgebra::DVector;
 
 const TS: f64 = 5e-4;
@@ -73,7 +73,7 @@ fn val_fit(m: &StateSpace, val: &IdData) -> f64 {
     let mut m = m.clone();
     m.k = None;
     let x0 = estimate_x0(&m, &val.u, &val.y);
-    jointid::validate::fit_percent(&val.y, &m.simulate(&val.u, Some(&x0))).unwrap()
+    jointid::ident::validate::fit_percent(&val.y, &m.simulate(&val.u, Some(&x0))).unwrap()
 }
 
 fn freqs(m: &StateSpace) -> (Vec<f64>, Vec<f64>) {

@@ -15,7 +15,7 @@
 //!
 //! The current loop is modelled as a first-order lag `T_c τ̇_a = u_d − τ_a` (`T_c` ≈ 0.5 ms)
 //! from the (possibly delayed) torque reference to the motor torque; being linear, it is
-//! part of the plant state (see [`super::plant`]).
+//! part of the plant state (see [`crate::model::plant`]).
 //!
 //! Default gains, tuned for the default three-mass joint (rigid inertia
 //! `J = 1.882e-3 kg·m²` at the motor): `K_v = 0.2 N·m·s/rad` puts the rigid-body velocity

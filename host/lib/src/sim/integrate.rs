@@ -66,11 +66,11 @@
 
 use nalgebra::DMatrix;
 
-use super::effects::{CoulombFriction, TorqueRipple};
-use super::plant::{Mechanism, MAX_BODIES, MAX_STATE};
+use crate::model::effects::{CoulombFriction, TorqueRipple};
+use crate::model::plant::{Mechanism, MAX_BODIES, MAX_STATE};
 
 /// Calls a const-generic method with the number of bodies known at compile time, so that
-/// the state loops are unrolled (the body count is at most [`super::plant::MAX_BODIES`]).
+/// the state loops are unrolled (the body count is at most [`crate::model::plant::MAX_BODIES`]).
 macro_rules! dispatch {
     ($n:expr, $nb:ident => $call:expr) => {
         match $n {
@@ -1281,7 +1281,7 @@ mod tests {
         // monotone: the smallest sample is at an end, no interior minimum
         assert!(!dips_below_zero(&[0.5, 0.4, 0.3, 0.2, 0.01]));
     }
-    use crate::sim::params::{Plant, PlantKind};
+    use crate::model::params::{Plant, PlantKind};
 
     #[test]
     fn zoh_of_double_integrator_matches_closed_form() {

@@ -4,9 +4,9 @@
 //! mechanical industrial manipulator", Fig. 2): a reference `θ_ref` goes into the robot's
 //! own controller, whose torque reference `u` drives the motor through a fast current loop;
 //! `u` and the motor angle `θ_m` are measured. The mechanics is one of the plants of
-//! [`params::PlantKind`] (rigid, two-mass, three-mass eq. (5)–(6), four-mass eq. (7)–(8),
+//! [`crate::model::params::PlantKind`] (rigid, two-mass, three-mass eq. (5)–(6), four-mass eq. (7)–(8),
 //! the nonlinear two-mass of seed 001 eq. (4)–(9)), optionally with the effects of
-//! [`effects::Effect`] (Coulomb/Stribeck friction, backlash, cubic spring, extra mode,
+//! [`crate::model::effects::Effect`] (Coulomb/Stribeck friction, backlash, cubic spring, extra mode,
 //! transport delay, torque ripple).
 //!
 //! Why: identification and gap diagnosis need data with a known truth. The simulator gives
@@ -22,8 +22,8 @@
 //! with events or a fast sweep of the Stribeck bump. Everything random is drawn from
 //! generators seeded by [`SimConfig::seed`], so a run is reproducible bit for bit.
 //!
-//! See also: [`params`] for the default joint and its modal frequencies, [`effects`] for the
-//! physics and defaults of each effect.
+//! See also: [`crate::model::params`] for the default joint and its modal frequencies,
+//! [`crate::model::effects`] for the physics and defaults of each effect.
 //!
 //! ```
 //! use jointid::sim::{parse_effects, simulate, SimConfig};
@@ -42,10 +42,7 @@
 
 pub mod board;
 pub mod controller;
-pub mod effects;
 pub mod integrate;
-pub mod params;
-pub mod plant;
 pub mod sensors;
 
 use std::io::Write;
@@ -54,15 +51,15 @@ use jointid_core::excitation::{ExcitationConfig, ExcitationError};
 use jointid_core::wire::{RawSample, Scale};
 use serde::{Deserialize, Serialize};
 
+pub use crate::model::effects::{parse_effects, Effect, EffectParseError};
+pub use crate::model::params::{JointParams, Plant, PlantKind};
+pub use crate::model::plant::{Mechanism, ModalFrequencies};
 pub use controller::{Controller, ControllerConfig};
-pub use effects::{parse_effects, Effect, EffectParseError};
-pub use params::{JointParams, Plant, PlantKind};
-pub use plant::{Mechanism, ModalFrequencies};
 pub use sensors::{Disturbance, SensorConfig};
 
-use effects::CoulombFriction;
+use crate::model::effects::CoulombFriction;
+use crate::model::plant::{MAX_BODIES, MAX_STATE};
 use integrate::{NonlinearPlant, SampleStepper, State, ZohStep};
-use plant::{MAX_BODIES, MAX_STATE};
 use sensors::Sensors;
 
 /// How the plant is integrated between samples.

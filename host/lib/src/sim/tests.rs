@@ -2,8 +2,8 @@
 //! discretised here by a separate matrix exponential, seed 001 eq. (9) written out, RK4
 //! convergence, reproducibility, and the spectral fingerprint of each effect.
 
-use super::effects::*;
 use super::*;
+use crate::model::effects::*;
 use nalgebra::{Complex, DMatrix, DVector};
 use std::f64::consts::PI;
 
@@ -371,13 +371,13 @@ fn generic_plant_rhs_equals_seed001_eq9_for_nonlinear_two_mass() {
         let x2 = (0.5 + rng.uniform()) * if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
         let x3 = r * x2 + 0.01 * rng.normal();
         let u = rng.normal();
-        let mut x = [0.0; plant::MAX_STATE];
+        let mut x = [0.0; crate::model::plant::MAX_STATE];
         x[0] = phi_m;
         x[1] = r * phi_m - x1;
         x[2] = x2;
         x[3] = x3;
         x[4] = u; // current-loop output = torque on the motor
-        let mut dx = [0.0; plant::MAX_STATE];
+        let mut dx = [0.0; crate::model::plant::MAX_STATE];
         a.nonlinear
             .rhs(&x, integrate::Contact::Pos, 0.0, 0.0, &mut dx);
         let dx1 = r * x2 - x3;

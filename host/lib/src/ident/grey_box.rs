@@ -13,7 +13,7 @@
 //! An angle output adds the integrator state `θ_m` in front. The continuous
 //! model is discretised by zero-order hold (seed 000 eq. (12)–(13),
 //! [`ContinuousSs::zoh`]) and fitted by output error (seed 000 eq. (14)–(15),
-//! [`crate::pem`]) in log-parameters, so every parameter stays positive; the
+//! [`crate::ident::pem`]) in log-parameters, so every parameter stays positive; the
 //! standard deviations follow by the delta method, `σ_p = p σ_{ln p}`.
 //!
 //! Initial values come from the data only (DESIGN.md §7, the weak point both
@@ -24,7 +24,7 @@
 //!    inverse-dynamics least squares `u = J q̈ + F_v q̇ (+ F_c sgn q̇ + c)` on
 //!    zero-phase low-passed data ([`rigid_idim`]);
 //! 2. resonance `p_i` and anti-resonance `z_i` frequencies from the poles and
-//!    zeros of that subspace model ([`crate::ss::StateSpace::resonances`]):
+//!    zeros of that subspace model ([`crate::ident::ss::StateSpace::resonances`]):
 //!    the `m − 1` poles standing highest over the rigid-body line
 //!    (`|G| ω²` for the angle), each paired with the deepest notch between
 //!    it and the previous one, so noise-fitted pole/zero pairs that nearly
@@ -48,16 +48,16 @@
 //!    (log-frequency residuals). Dampings start stiffness-proportional,
 //!    `d = β k` with `β = 2 ζ_1 / ω_1` from the first resonance.
 //!
-//! See also: [`crate::subspace`] for the high-order model, [`crate::pem`].
+//! See also: [`crate::ident::subspace`] for the high-order model, [`crate::ident::pem`].
 
 use nalgebra::{DMatrix, DVector, RowDVector, SymmetricEigen};
 use thiserror::Error;
 
 use crate::data::IdData;
-use crate::linalg::{central_diff, filtfilt_lowpass, solve_spd};
-use crate::pem::{self, ParamModel, PemFit, PemOptions};
-use crate::ss::{ContinuousSs, StateSpace};
-use crate::subspace::{self, Method, Order, SubspaceOptions};
+use crate::ident::linalg::{central_diff, filtfilt_lowpass, solve_spd};
+use crate::ident::pem::{self, ParamModel, PemFit, PemOptions};
+use crate::ident::ss::{ContinuousSs, StateSpace};
+use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
 
 /// default gear ratio of seed 000 (arm angle per motor angle)
 pub const DEFAULT_GEAR_RATIO: f64 = 1.0 / 118.0;
@@ -512,7 +512,7 @@ pub fn rigid_idim(data: &IdData, opts: &IdimOptions) -> Result<RigidFit, GreyBox
     let inv = m
         .clone()
         .try_inverse()
-        .unwrap_or_else(|| crate::linalg::pinv_sym(&m, 1e-14));
+        .unwrap_or_else(|| crate::ident::linalg::pinv_sym(&m, 1e-14));
     let params = names
         .iter()
         .enumerate()
@@ -892,14 +892,14 @@ pub fn features(
         let g = sid.model.freq_response(&[f])[0].norm();
         g * (2.0 * std::f64::consts::PI * f).powi(k)
     };
-    let mut res: Vec<(crate::ss::Mode, f64)> = rz
+    let mut res: Vec<(crate::ident::ss::Mode, f64)> = rz
         .resonances
         .iter()
         .map(|m| (*m, height(m.freq_hz)))
         .collect();
     res.sort_by(|a, b| b.1.total_cmp(&a.1));
     res.truncate(masses - 1);
-    let mut res: Vec<crate::ss::Mode> = res.into_iter().map(|x| x.0).collect();
+    let mut res: Vec<crate::ident::ss::Mode> = res.into_iter().map(|x| x.0).collect();
     res.sort_by(|a, b| a.freq_hz.total_cmp(&b.freq_hz));
     let mut pairs = Vec::new();
     let mut lo = f_min;
@@ -1176,7 +1176,7 @@ pub fn fit(data: &IdData, opts: &GreyBoxOptions) -> Result<GreyBoxFit, GreyBoxEr
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::subspace::tests::{closed_loop, LoopSpec};
+    use crate::ident::subspace::tests::{closed_loop, LoopSpec};
 
     /// Simulates the joint `structure` with `output` and parameters `p`, sampled
     /// every `ts` [s], in the closed loop of `spec`, and fits the same structure

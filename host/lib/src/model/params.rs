@@ -117,7 +117,7 @@ impl std::str::FromStr for PlantKind {
 /// Named physical parameters, seed 000 Table 1 plus seed 001's `k3`, `F_c`.
 ///
 /// Each plant kind uses the subset it needs; unused ones are carried along so one set
-/// describes all kinds (and is printed whole by [`super::SimConfig::params_json`]).
+/// describes all kinds (and is printed whole by [`crate::sim::SimConfig::params_json`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct JointParams {
     /// motor inertia `J_m` [kg·m²], motor side

@@ -8,7 +8,7 @@
 //! small: it moves the motor by about 7 mrad RMS, deflects the gearbox by at most about
 //! 6e-5 rad (arm side) and needs about 0.05 N·m RMS of torque, so the defaults are small in
 //! absolute terms (4 arcsec of backlash, 0.03 N·m of Coulomb friction); scale them with the
-//! excitation. Measured by the fingerprint tests in `super::tests` (power at the
+//! excitation. Measured by the fingerprint tests in `crate::sim::tests` (power at the
 //! non-excited odd lines relative to the excited ones, mean of 4 periods):
 //! - backlash, Coulomb friction and the cubic spring raise the non-excited odd lines of `u`
 //!   to 7e-3, 1.2e-2 and 1.4e-3 of the excited power (ideal sensors), 100–1000 times the
@@ -26,7 +26,7 @@
 //!   while sliding, and set-valued at ω = 0: the motor sticks while the net torque on it is
 //!   below the breakaway level `F_s` (friction balances it exactly) and breaks away when it
 //!   exceeds it. The integrator treats sticking, stopping and breakaway as events (see
-//!   [`super::integrate`]); no regularisation is used, so `v_ε` (`v_smooth`) only enters
+//!   [`crate::sim::integrate`]); no regularisation is used, so `v_ε` (`v_smooth`) only enters
 //!   the smooth approximation [`CoulombFriction::torque`], kept for analysis.
 //! - `backlash`: dead zone of total width `w` in the gearbox spring: the spring torque is
 //!   `k_g dz(δ) + k3 dz(δ)³ + d_g δ̇` in contact and 0 in the gap, `dz(δ) = δ − w/2` for

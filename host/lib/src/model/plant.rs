@@ -245,8 +245,8 @@ impl Mechanism {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::effects::ExtraMode;
-    use crate::sim::params::JointParams;
+    use crate::model::effects::ExtraMode;
+    use crate::model::params::JointParams;
 
     fn close(a: &[f64], b: &[f64], tol: f64) -> bool {
         a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() < tol)

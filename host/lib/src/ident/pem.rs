@@ -7,7 +7,7 @@
 //! prediction error of the innovations form eq. (9) when it has one
 //! (`x(t+1) = (A − K C) x + (B − K D) u + K y`, `ŷ = C x + D u`).
 //!
-//! Method: Levenberg–Marquardt ([`crate::lm`]: Marquardt's diagonal
+//! Method: Levenberg–Marquardt ([`crate::ident::lm`]: Marquardt's diagonal
 //! scaling, box bounds, fixed parameters), the initial state a nuisance
 //! parameter of the same step. The Jacobian
 //! `∂ŷ/∂θ` comes from forward sensitivity equations propagated with the
@@ -29,9 +29,9 @@ use nalgebra::{DMatrix, DVector, RowDVector};
 use thiserror::Error;
 
 use crate::data::IdData;
-use crate::lm::{self, LeastSquares, LmOptions, Normal};
-use crate::ss::StateSpace;
-use crate::subspace::estimate_x0;
+use crate::ident::lm::{self, LeastSquares, LmOptions, Normal};
+use crate::ident::ss::StateSpace;
+use crate::ident::subspace::estimate_x0;
 
 /// Derivative of the model matrices with respect to one parameter.
 #[derive(Clone, Debug, PartialEq)]
@@ -115,7 +115,7 @@ impl Default for PemOptions {
     }
 }
 
-pub use crate::lm::Termination;
+pub use crate::ident::lm::Termination;
 
 /// Result of [`fit`].
 #[derive(Clone, Debug, PartialEq)]
@@ -330,7 +330,7 @@ fn normal_equations<M: ParamModel + ?Sized>(
 }
 
 /// The prediction-error criterion of `model` on `data` as a least-squares
-/// problem for [`crate::lm`]: parameters `θ`, then the initial state when
+/// problem for [`crate::ident::lm`]: parameters `θ`, then the initial state when
 /// it is estimated (nuisance parameters).
 struct PemProblem<'a, M: ?Sized> {
     model: &'a M,
@@ -614,7 +614,7 @@ impl ParamModel for FullSs {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::linalg::GaussRng;
+    use crate::ident::linalg::GaussRng;
 
     /// Continuous two-mass in log-parameters (J1, J2, k, d, fm), angle output.
     struct TwoMassLog {
@@ -639,7 +639,7 @@ mod tests {
                 th[3].exp(),
                 th[4].exp(),
             ];
-            crate::subspace::tests::two_mass_angle_ct(j1, j2, k, d, fm).zoh(self.ts)
+            crate::ident::subspace::tests::two_mass_angle_ct(j1, j2, k, d, fm).zoh(self.ts)
         }
     }
 
@@ -816,8 +816,8 @@ mod tests {
 
     #[test]
     fn daisy_robot_arm_order_4_subspace_and_pem_fit_second_half() {
-        use crate::subspace::{estimate, BdEstimate, Method, Order, SubspaceOptions};
-        let text = crate::grey_box::tests::read_shared("data/daisy-robot-arm/robot_arm.csv");
+        use crate::ident::subspace::{estimate, BdEstimate, Method, Order, SubspaceOptions};
+        let text = crate::ident::grey_box::tests::read_shared("data/daisy-robot-arm/robot_arm.csv");
         let (mut u, mut y) = (Vec::new(), Vec::new());
         for line in text.lines().skip(1) {
             let c: Vec<&str> = line.split(',').collect();
@@ -840,7 +840,7 @@ mod tests {
         let val_fit = |m: &StateSpace| {
             // initial state estimated on the validation record, as the toolbox's compare does
             let x0 = estimate_x0(m, &val.u, &val.y);
-            crate::validate::fit_percent(&val.y, &m.simulate(&val.u, Some(&x0))).unwrap()
+            crate::ident::validate::fit_percent(&val.y, &m.simulate(&val.u, Some(&x0))).unwrap()
         };
         let mut moesp_pem = f64::NEG_INFINITY;
         let mut report = Vec::new();

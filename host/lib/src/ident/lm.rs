@@ -4,7 +4,7 @@
 //! Problem: `θ̂ = argmin Σ_t e²(t, θ)`, `e = y − ŷ(θ)` (real residuals; a
 //! complex residual enters as its real and imaginary parts). The problem
 //! ([`LeastSquares`]) owns how `ŷ` and `J = ∂ŷ/∂θ` are computed (forward
-//! sensitivities of a state-space simulation in [`crate::pem`], analytic
+//! sensitivities of a state-space simulation in [`crate::ident::pem`], analytic
 //! derivatives of a frequency response, …) and hands back `JᵀJ`, `Jᵀe` and
 //! `Σe²` accumulated in whatever memory it likes; the loop here never holds
 //! the Jacobian, so memory stays linear in the number of residuals only if
@@ -24,13 +24,13 @@
 //! their standard deviations gets `σ̂² ≈ 1`, and its cost is then a χ²
 //! statistic, see [`LmFit::chi2`]).
 //!
-//! See also: [`crate::pem`] (prediction error of a parameterised state
+//! See also: [`crate::ident::pem`] (prediction error of a parameterised state
 //! space, built on this loop).
 
 use nalgebra::{DMatrix, DVector};
 use thiserror::Error;
 
-use crate::linalg::pinv_sym;
+use crate::ident::linalg::pinv_sym;
 
 /// Normal equations of a least-squares problem at one parameter vector,
 /// over the free parameters in the order the loop asked for them.
@@ -415,7 +415,7 @@ mod tests {
     #[test]
     fn weighted_residuals_give_a_chi2_near_its_degrees_of_freedom() {
         // unit-variance noise: Σe² at the optimum ≈ N − p
-        let mut rng = crate::linalg::GaussRng::new(7);
+        let mut rng = crate::ident::linalg::GaussRng::new(7);
         let noise = rng.normals(2000, 1.0);
         let p = exponential(300.0, 0.01, &noise);
         let f = minimize(&p, &[200.0, 0.02], &LmOptions::default()).unwrap();

@@ -6,12 +6,12 @@
 //! [`Fitted`] model that simulates the motor angle (or velocity) from the
 //! torque:
 //! - black box of order `n` (seed 000 eq. (9)): subspace identification
-//!   ([`crate::subspace`], PBSID by default since the data are closed loop,
+//!   ([`crate::ident::subspace`], PBSID by default since the data are closed loop,
 //!   PO-MOESP on request), then output-error refinement of every matrix entry
-//!   ([`crate::pem::FullSs`], seed 000 eq. (14)–(15)) when the problem is
+//!   ([`crate::ident::pem::FullSs`], seed 000 eq. (14)–(15)) when the problem is
 //!   small enough ([`PEM_BUDGET`]);
 //! - physical models (rigid, two-, three- and four-mass, seed 000 eq. (5)–(8),
-//!   zero-order hold eq. (12)–(13)) through [`crate::grey_box::fit`], with
+//!   zero-order hold eq. (12)–(13)) through [`crate::ident::grey_box::fit`], with
 //!   initial values from the data (best of three starts, see `fit_grey`) and
 //!   standard deviations by the delta method; with decimation the starts
 //!   run on the decimated data and the best one is refined at the capture
@@ -19,17 +19,17 @@
 //!   decimated data through the same anti-alias filter ([`FitData`],
 //!   [`fit_prepared`]);
 //! - the rigid body with Coulomb friction: inverse-dynamics least squares
-//!   ([`crate::grey_box::rigid_idim`], seed 001 steps 1–2), then the
+//!   ([`crate::ident::grey_box::rigid_idim`], seed 001 steps 1–2), then the
 //!   output-error FIT of the resulting nonlinear model (explicit simulation,
 //!   see [`RigidFriction`]).
 //!
 //! FIT is the System Identification Toolbox's `compare` figure
-//! ([`crate::validate::FIT_NAME`], DESIGN.md §7), with the initial state
+//! ([`crate::ident::validate::FIT_NAME`], DESIGN.md §7), with the initial state
 //! estimated on each record as `compare` does by default. Residual tests are
-//! those of [`crate::validate`] (Ljung 1999, §16.6).
+//! those of [`crate::ident::validate`] (Ljung 1999, §16.6).
 //!
 //! Why here: the estimators do no IO and know nothing of files or JSON; the
-//! command line (the `jointid` binary) and the experiments ([`crate::experiment`])
+//! command line (the `jointid` binary) and the experiments ([`crate::scenario::paper`])
 //! share this one path, so a FIT printed by `jointid fit` and one in the
 //! paper-like table are computed the same way.
 //!
@@ -50,11 +50,11 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::data::IdData;
-use crate::grey_box::{self, GreyBoxOptions, IdimOptions, Output, PhysParam, Structure};
-use crate::pem::{self, FullSs, ParamModel, PemFit, PemOptions};
-use crate::ss::{ContinuousSs, Resonances, StateSpace};
-use crate::subspace::{self, Method, Order, SubspaceOptions};
-use crate::validate::{self, Validation};
+use crate::ident::grey_box::{self, GreyBoxOptions, IdimOptions, Output, PhysParam, Structure};
+use crate::ident::pem::{self, FullSs, ParamModel, PemFit, PemOptions};
+use crate::ident::ss::{ContinuousSs, Resonances, StateSpace};
+use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
+use crate::ident::validate::{self, Validation};
 
 /// Largest `N · p²` (samples times squared parameter count) for which the
 /// black-box output-error refinement runs; above it the subspace model is
@@ -368,7 +368,7 @@ pub fn fit_model(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitError> {
 /// the anti-alias filter the input is no longer piecewise constant, so the
 /// zero-order-hold discretisation of a physical model (seed 000 eq. (13))
 /// at the coarse rate is not the model of the decimated data (measured on
-/// the four-mass experiment of [`crate::experiment`], seed 1, true
+/// the four-mass experiment of [`crate::scenario::paper`], seed 1, true
 /// parameters, FIT on the decimated estimation data: 92.5 % discretised at
 /// 200 Hz, 97.8 % simulated at 2 kHz and decimated, 99.9 % with the
 /// simulator's 0.5 ms current loop added, [`DrivenModel`], as the true
@@ -1113,7 +1113,7 @@ pub fn default_f_min(n: usize, ts: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::linalg::GaussRng;
+    use crate::ident::linalg::GaussRng;
 
     fn two_mass_data(n: usize, seed: u64, noise: f64) -> (IdData, StateSpace) {
         // motor-side two-mass: J_m 1e-3, arm 1e-3 (motor side), k' 20 → ~32 Hz

@@ -29,19 +29,19 @@
 //! Assumptions: the truncation `Ã^p ≈ 0` (choose the past horizon long
 //! enough); noise uncorrelated with the reference. Memory is linear in `N`:
 //! the data enter only through the Gram matrix of a sliding window
-//! ([`crate::linalg::window_gram`]); the LQ factor is the Cholesky factor of
+//! ([`crate::ident::linalg::window_gram`]); the LQ factor is the Cholesky factor of
 //! that small matrix, so no `N × N` or `rows × N` matrix is ever formed.
 //! Stability: a model with poles outside the unit circle has them reflected
 //! ([`StateSpace::reflect_unstable`]) and a warning is returned.
 //!
-//! See also: [`crate::pem`] to refine the model by prediction error.
+//! See also: [`crate::ident::pem`] to refine the model by prediction error.
 
 use nalgebra::{DMatrix, DVector, RowDVector};
 use thiserror::Error;
 
 use crate::data::IdData;
-use crate::linalg::{solve_spd, window_gram};
-use crate::ss::StateSpace;
+use crate::ident::linalg::{solve_spd, window_gram};
+use crate::ident::ss::StateSpace;
 
 /// Which subspace estimator to run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -624,8 +624,8 @@ pub fn estimate_x0(model: &StateSpace, u: &[f64], y: &[f64]) -> DVector<f64> {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::linalg::GaussRng;
-    use crate::ss::ContinuousSs;
+    use crate::ident::linalg::GaussRng;
+    use crate::ident::ss::ContinuousSs;
 
     /// Continuous two-mass motor-side model with angle output, states
     /// `[θm, ωm, θm-θl, ωl]`: motor inertia `j1` and load inertia `j2` [kg·m²],
@@ -806,7 +806,7 @@ pub(crate) mod tests {
         // largest relative error of the true resonance / anti-resonance
         // frequencies against the nearest estimated ones
         let (e, t) = (est.resonances(1.0, 0.3), truth.resonances(1.0, 0.3));
-        let worst = |est: &[crate::ss::Mode], tr: &[crate::ss::Mode]| {
+        let worst = |est: &[crate::ident::ss::Mode], tr: &[crate::ident::ss::Mode]| {
             tr.iter()
                 .map(|m| {
                     est.iter()
@@ -822,7 +822,7 @@ pub(crate) mod tests {
     /// it in a PD position loop with output noise 1e-4 rad and noise `seed`:
     /// (discrete plant, record).
     fn three_mass_closed_loop(seed: u64) -> (StateSpace, IdData) {
-        use crate::grey_box::{
+        use crate::ident::grey_box::{
             reference_three_mass, GreyBoxModel, Output, Structure, DEFAULT_GEAR_RATIO,
         };
         let gm = GreyBoxModel {

@@ -302,8 +302,8 @@ pub struct FrfBand {
     pub sigma: Vec<f64>,
 }
 
-impl From<&crate::frf::Frf> for FrfBand {
-    fn from(f: &crate::frf::Frf) -> Self {
+impl From<&crate::ident::frf::Frf> for FrfBand {
+    fn from(f: &crate::ident::frf::Frf) -> Self {
         FrfBand {
             freq_hz: f.freq_hz.clone(),
             g: f.g.clone(),

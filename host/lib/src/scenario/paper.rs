@@ -12,15 +12,15 @@
 //! identification. Fitted: the 11th-order black box on the decimated data,
 //! the three-mass (eq. (6)) and four-mass (eq. (7)) models started on the
 //! decimated data and refined at the capture rate behind the simulator's
-//! known current-loop lag ([`crate::fit::FitData`],
-//! [`crate::fit::DrivenModel`]; the gear ratio is taken as known the same
+//! known current-loop lag ([`crate::ident::fit::FitData`],
+//! [`crate::ident::fit::DrivenModel`]; the gear ratio is taken as known the same
 //! way), every FIT on the decimated data; printed: FIT (toolbox `compare`
 //! definition) on estimation and validation data, as in Table 2, plus the
 //! resonance / anti-resonance frequencies against the simulator's truth
 //! and, where the model structure is the simulator's, parameter errors in
 //! per cent and in reported standard deviations.
 //!
-//! Truth: the simulator's default four-mass joint ([`crate::sim::params`];
+//! Truth: the simulator's default four-mass joint ([`crate::model::params`];
 //! the parallel mass makes the double notch near 17 Hz that needs a black
 //! box of order 11 in the paper), default controller and encoder (2^17
 //! counts per revolution, white noise on θm), current loop. Two defaults of
@@ -59,13 +59,13 @@ use thiserror::Error;
 
 use crate::capture::jcap::{FlushPolicy, JcapWriter};
 use crate::data::{Dataset, IdData};
-use crate::fit::{
+use crate::ident::fit::{
     default_f_min, fit_prepared, DetrendKind, FitData, FitOptions, Fitted, ModelKind, Prep,
 };
-use crate::grey_box::Output;
+use crate::ident::grey_box::Output;
+use crate::ident::ss::StateSpace;
+use crate::ident::validate::fit_percent;
 use crate::sim::{self, Mechanism, PlantKind, SimConfig, SimOutput};
-use crate::ss::StateSpace;
-use crate::validate::fit_percent;
 
 /// timer rate of the simulated board [Hz]
 pub const TIMER_HZ: u32 = 1_000_000;
@@ -96,7 +96,7 @@ pub enum ExperimentError {
         /// model name
         model: String,
         /// the fit error
-        source: crate::fit::FitError,
+        source: crate::ident::fit::FitError,
     },
     /// data preparation failed
     #[error("data: {0}")]
@@ -324,7 +324,7 @@ pub fn true_model(cfg: &SimConfig, ts: f64) -> StateSpace {
     let n = f.nrows();
     let mut h = RowDVector::zeros(n);
     h[0] = 1.0;
-    let c = crate::ss::ContinuousSs {
+    let c = crate::ident::ss::ContinuousSs {
         f: DMatrix::from_fn(n, n, |i, j| f[(i, j)]),
         g: DVector::from_fn(n, |i, _| g[(i, 0)]),
         h,
@@ -557,7 +557,7 @@ pub fn write_table(out: &mut dyn std::io::Write, t: &Table) -> std::io::Result<(
     writeln!(
         out,
         "  ({}, {} / {} samples at Ts = {} s after decimation by {DECIMATE})",
-        crate::validate::FIT_NAME,
+        crate::ident::validate::FIT_NAME,
         t.samples.0,
         t.samples.1,
         t.ts

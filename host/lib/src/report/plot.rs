@@ -14,8 +14,8 @@ use std::path::Path;
 use plotters::prelude::*;
 use rustfft::num_complex::Complex64;
 
-use crate::frf::{unwrap_deg, FrfAnalysis, LineClass, SignalSpectrum};
-use crate::validate::{BodeCurve, FrfBand};
+use crate::ident::frf::{unwrap_deg, FrfAnalysis, LineClass, SignalSpectrum};
+use crate::ident::validate::{BodeCurve, FrfBand};
 
 /// Errors of plotting.
 #[derive(Debug, thiserror::Error)]
