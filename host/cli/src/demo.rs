@@ -21,13 +21,14 @@ use serde::Serialize;
 
 use super::fit::write_bode;
 use super::{print_json, CmdResult, Context, Outcome};
+use jointid::capture::jcap::write_stream;
 use jointid::ident::frf::analyze_dataset;
 use jointid::ident::validate::FrfBand;
 use jointid::report::plot::{analysis_spectrum_svg, bode_svg, write_svg};
 use jointid::scenario::paper::{
-    decode_session, default_scale, encode_session, paper_runs, table, write_jcap, write_table,
-    Table, PAPER_MODELS,
+    decode_session, paper_runs, table, wire_options, write_table, Table, PAPER_MODELS,
 };
+use jointid::sim::board::encode_session;
 
 /// Arguments of `jointid demo`.
 #[derive(Debug, Clone, Args)]
@@ -77,13 +78,12 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
     let dir = &args.out;
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let runs = paper_runs(args.seed)?;
-    let scale = default_scale();
-    let est_stream = encode_session(&runs.est, &runs.est_excitation, scale, 1)?;
-    let val_stream = encode_session(&runs.val, &runs.val_excitation, scale, 2)?;
+    let est_stream = encode_session(&runs.est, &runs.est_excitation, &wire_options(1))?;
+    let val_stream = encode_session(&runs.val, &runs.val_excitation, &wire_options(2))?;
     let est_path = dir.join("estimation.jcap");
     let val_path = dir.join("validation.jcap");
-    write_jcap(&est_path, &est_stream)?;
-    write_jcap(&val_path, &val_stream)?;
+    write_stream(&est_path, &est_stream)?;
+    write_stream(&val_path, &val_stream)?;
     let est_name = est_path.display().to_string();
     let val_name = val_path.display().to_string();
     let est_ds = jointid::capture::load_dataset(&est_path)?;
@@ -205,13 +205,12 @@ pub fn run_experiment(args: &ExperimentArgs, ctx: &mut Context<'_>) -> CmdResult
     let seeds: Vec<u64> = (0..args.runs).map(|i| args.seed + i).collect();
     for &seed in &seeds {
         let runs = paper_runs(seed)?;
-        let scale = default_scale();
         let est = decode_session(
-            &encode_session(&runs.est, &runs.est_excitation, scale, 1)?,
+            &encode_session(&runs.est, &runs.est_excitation, &wire_options(1))?,
             "estimation",
         )?;
         let val = decode_session(
-            &encode_session(&runs.val, &runs.val_excitation, scale, 2)?,
+            &encode_session(&runs.val, &runs.val_excitation, &wire_options(2))?,
             "validation",
         )?;
         let (t, _) = table(&est, &val, &runs.sim, &PAPER_MODELS)?;

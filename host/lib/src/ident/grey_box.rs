@@ -169,6 +169,9 @@ pub enum GreyBoxError {
     /// least squares could not be solved
     #[error("singular least-squares problem in {0}")]
     Singular(&'static str),
+    /// the FIT of the fitted model is undefined (constant output)
+    #[error("fit: {0}")]
+    Fit(#[from] crate::ident::validate::ValidateError),
 }
 
 /// A grey-box model family: structure, output, gear ratio, sample interval;
@@ -842,18 +845,6 @@ fn clamp_vec(v: &mut [f64], lo: &[f64], hi: &[f64]) {
     }
 }
 
-fn fit_percent(y: &[f64], yh: &[f64]) -> f64 {
-    let m = y.iter().sum::<f64>() / y.len() as f64;
-    let e: f64 = y
-        .iter()
-        .zip(yh)
-        .map(|(a, b)| (a - b) * (a - b))
-        .sum::<f64>()
-        .sqrt();
-    let d: f64 = y.iter().map(|a| (a - m) * (a - m)).sum::<f64>().sqrt();
-    100.0 * (1.0 - e / d)
-}
-
 /// Read `J`, `f_m`, resonance / anti-resonance pairs from the data (module
 /// docs, steps 1–2) with a PBSID model of order `order`.
 ///
@@ -1159,7 +1150,7 @@ pub fn fit(data: &IdData, opts: &GreyBoxOptions) -> Result<GreyBoxFit, GreyBoxEr
     let pvals: Vec<f64> = pf.theta.iter().map(|t| t.exp()).collect();
     let continuous = model.continuous(&pvals);
     let yh = pf.model.simulate(&data.u, Some(&pf.x0));
-    let fitp = fit_percent(&data.y, &yh);
+    let fitp = crate::ident::validate::fit_percent(&data.y, &yh)?;
     Ok(GreyBoxFit {
         model,
         params,

@@ -34,7 +34,7 @@ pub const FIT_NAME: &str = "FIT (toolbox compare, NRMSE) [%]";
 pub const Z99: f64 = 2.58;
 
 /// Errors of validation.
-#[derive(Debug, thiserror::Error)]
+#[derive(Debug, PartialEq, thiserror::Error)]
 pub enum ValidateError {
     /// measured and simulated outputs differ in length
     #[error("measured output has {measured} samples, simulated {simulated}")]

@@ -36,9 +36,10 @@
 //! than any of the three models.
 //!
 //! Wire path (DESIGN.md §8, software in the loop): the simulated samples
-//! become [`RawSample`] counts with the session's [`Scale`], are batched by
-//! the firmware core's [`BatchBuilder`], framed by [`encode_frame`], written
-//! as a `.jcap` by the capture module's writer and decoded back by the
+//! become counts with the session's [`Scale`] and are streamed by the
+//! simulated board ([`crate::sim::board::encode_session`] with
+//! [`wire_options`]), written as a `.jcap` by the capture module's writer
+//! ([`crate::capture::jcap::write_stream`]) and decoded back by the
 //! capture module (the reference regenerated from the header's excitation
 //! and checked against each batch's reference CRC), exactly as a capture
 //! from a board is.
@@ -48,16 +49,12 @@
 use std::path::Path;
 use std::time::Instant;
 
-use jointid_core::excitation::{generate, ExcitationConfig, SignalKind};
-use jointid_core::wire::{
-    encode_frame, BatchBuilder, Message, RawSample, Scale, SessionHeader, Status, MAX_FRAME_LEN,
-    PROTOCOL_VERSION,
-};
+use jointid_core::excitation::{ExcitationConfig, SignalKind};
+use jointid_core::wire::Scale;
 use nalgebra::{DMatrix, DVector, RowDVector};
 use serde::Serialize;
 use thiserror::Error;
 
-use crate::capture::jcap::{FlushPolicy, JcapWriter};
 use crate::data::{Dataset, IdData};
 use crate::ident::fit::{
     default_f_min, fit_prepared, DetrendKind, FitData, FitOptions, Fitted, ModelKind, Prep,
@@ -65,6 +62,7 @@ use crate::ident::fit::{
 use crate::ident::grey_box::Output;
 use crate::ident::ss::StateSpace;
 use crate::ident::validate::fit_percent;
+use crate::sim::board::{BoardStreamError, WireOptions};
 use crate::sim::{self, Mechanism, PlantKind, SimConfig, SimOutput};
 
 /// timer rate of the simulated board [Hz]
@@ -76,17 +74,9 @@ pub enum ExperimentError {
     /// the simulator refused the configuration
     #[error("simulation: {0}")]
     Sim(#[from] sim::SimError),
-    /// the excitation cannot be generated
-    #[error("excitation: {0:?}")]
-    Excitation(jointid_core::excitation::ExcitationError),
     /// a frame could not be encoded
-    #[error("wire encoding failed at sample {seq}: {reason}")]
-    Encode {
-        /// first sample of the batch
-        seq: u32,
-        /// encoder error
-        reason: String,
-    },
+    #[error(transparent)]
+    Encode(#[from] BoardStreamError),
     /// the capture could not be written or decoded
     #[error(transparent)]
     Capture(#[from] crate::capture::CaptureError),
@@ -137,60 +127,18 @@ pub fn default_scale() -> Scale {
     }
 }
 
-/// Encodes a simulated run as the board would stream it: header, batches
-/// of 32 samples with the reference CRC, end status.
-///
-/// # Errors
-/// [`ExperimentError::Excitation`], [`ExperimentError::Encode`].
-pub fn encode_session(
-    run: &SimOutput,
-    excitation: &ExcitationConfig,
-    scale: Scale,
-    session_id: u32,
-) -> Result<Vec<u8>, ExperimentError> {
-    let reference = generate(excitation).map_err(ExperimentError::Excitation)?;
-    let header = SessionHeader {
-        protocol_version: PROTOCOL_VERSION,
-        board_id: 0x51_u32,
+/// How the experiment's simulated board streams a run ([`crate::sim::board`]): board
+/// id `0x51`, `session_id`, a [`TIMER_HZ`] timer, batches of 32 samples, no `Status`
+/// messages, [`default_scale`].
+pub fn wire_options(session_id: u32) -> WireOptions {
+    WireOptions {
+        board_id: 0x51,
         session_id,
-        sample_rate_hz: excitation.fs_hz,
         timer_hz: TIMER_HZ,
-        excitation: *excitation,
-        scale,
-    };
-    let mut out = Vec::new();
-    let mut frame = [0u8; MAX_FRAME_LEN];
-    let mut put = |msg: &Message, seq: u32, out: &mut Vec<u8>| {
-        let n = encode_frame(msg, &mut frame).map_err(|e| ExperimentError::Encode {
-            seq,
-            reason: format!("{e:?}"),
-        })?;
-        out.extend_from_slice(&frame[..n]);
-        Ok::<(), ExperimentError>(())
-    };
-    put(&Message::Header(header), 0, &mut out)?;
-    let samples: Vec<RawSample> = run.to_raw_samples(&scale, TIMER_HZ);
-    let tick_step = TIMER_HZ / excitation.fs_hz;
-    let mut builder = BatchBuilder::new(tick_step, 32);
-    for (k, s) in samples.iter().enumerate() {
-        let r = reference.get(k).copied().unwrap_or(0.0);
-        if let Some(b) = builder.push(*s, r) {
-            let seq = b.first_seq();
-            put(&Message::Batch(b), seq, &mut out)?;
-        }
+        batch_len: 32,
+        status_every: 0,
+        scale: default_scale(),
     }
-    if let Some(b) = builder.flush() {
-        let seq = b.first_seq();
-        put(&Message::Batch(b), seq, &mut out)?;
-    }
-    let end = Status {
-        seq: samples.len() as u32,
-        overruns: 0,
-        queue_drops: 0,
-        tx_errors: 0,
-    };
-    put(&Message::End(end), end.seq, &mut out)?;
-    Ok(out)
 }
 
 /// Decodes a byte stream with the capture module's decoder (the path every
@@ -203,20 +151,6 @@ pub fn encode_session(
 /// samples missing (gaps are never filled).
 pub fn decode_session(stream: &[u8], name: &str) -> Result<Dataset, ExperimentError> {
     Ok(crate::capture::decode_stream(stream, &[])?.to_dataset(Path::new(name))?)
-}
-
-/// Writes `stream` as a `.jcap` capture with the capture module's writer
-/// (format version 1: magic, then the bytes), replacing an existing file.
-///
-/// # Errors
-/// [`ExperimentError::Capture`] naming the file.
-pub fn write_jcap(path: &Path, stream: &[u8]) -> Result<(), ExperimentError> {
-    let mut w = JcapWriter::create(path, true, FlushPolicy::default())
-        .map_err(crate::capture::CaptureError::from)?;
-    w.append(stream, Instant::now())
-        .map_err(crate::capture::CaptureError::from)?;
-    w.finish().map_err(crate::capture::CaptureError::from)?;
-    Ok(())
 }
 
 /// The simulated joint of the experiment (see the module docs).
@@ -602,6 +536,7 @@ pub fn write_table(out: &mut dyn std::io::Write, t: &Table) -> std::io::Result<(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sim::board::encode_session;
 
     fn short_excitation() -> ExcitationConfig {
         ExcitationConfig {
@@ -618,7 +553,7 @@ mod tests {
         let exc = short_excitation();
         let run = sim::simulate_excitation(&SimConfig::default(), &exc).unwrap();
         let scale = default_scale();
-        let stream = encode_session(&run, &exc, scale, 7).unwrap();
+        let stream = encode_session(&run, &exc, &wire_options(7)).unwrap();
         let ds = decode_session(&stream, "mem").unwrap();
         assert_eq!(ds.data.len(), run.len());
         assert_eq!(ds.excitation, Some(exc));

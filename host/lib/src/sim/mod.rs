@@ -45,8 +45,6 @@ pub mod controller;
 pub mod integrate;
 pub mod sensors;
 
-use std::io::Write;
-
 use jointid_core::excitation::{ExcitationConfig, ExcitationError};
 use jointid_core::wire::{RawSample, Scale};
 use serde::{Deserialize, Serialize};
@@ -231,30 +229,6 @@ impl SimOutput {
             y: self.theta_m.clone(),
             r: Some(self.theta_ref.clone()),
         }
-    }
-
-    /// Writes the capture CSV of DESIGN.md §5: `# sample_interval_s=T`, then `comments`
-    /// verbatim (whole `# key=value` lines, e.g. `data::excitation_comment_lines`), then
-    /// the header `t,theta_ref,u,theta_m` and one row per sample (shortest round-trip
-    /// formatting, lossless for f64).
-    ///
-    /// # Errors
-    /// Any error of the writer.
-    pub fn write_csv<W: Write>(&self, mut w: W, comments: &str) -> std::io::Result<()> {
-        writeln!(w, "# sample_interval_s={}", self.sample_interval_s)?;
-        w.write_all(comments.as_bytes())?;
-        if !comments.is_empty() && !comments.ends_with('\n') {
-            writeln!(w)?;
-        }
-        writeln!(w, "t,theta_ref,u,theta_m")?;
-        for k in 0..self.len() {
-            writeln!(
-                w,
-                "{:e},{:e},{:e},{:e}",
-                self.t[k], self.theta_ref[k], self.u[k], self.theta_m[k]
-            )?;
-        }
-        Ok(())
     }
 }
 
