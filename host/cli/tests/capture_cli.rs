@@ -1,7 +1,7 @@
 //! End-to-end tests of `jointid capture`, `info` and `export`, run on the built binary.
 //!
 //! Every stream is synthesised with the core's encoder from known samples
-//! (`jointid::capture::synth`), so what must arrive, and what must be reported damaged
+//! (`jointid::test_support::synth`), so what must arrive, and what must be reported damaged
 //! after a fault is injected, is computed here from where the frames lie and where the
 //! fault was put, not from the decoder under test.
 
@@ -12,7 +12,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use jointid::capture::synth::{synth_stream, FrameContent, FrameSpan, SynthOptions, SynthStream};
+use jointid::test_support::synth::{
+    synth_stream, FrameContent, FrameSpan, SynthOptions, SynthStream,
+};
 use serde_json::Value;
 
 mod common;

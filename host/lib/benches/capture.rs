@@ -22,8 +22,8 @@ use std::time::{Duration, Instant};
 
 use jointid::capture::export::write_csv;
 use jointid::capture::jcap::{FlushPolicy, JcapWriter};
-use jointid::capture::synth::{synth_stream, SynthOptions};
 use jointid::capture::{decode_stream, export, read_jcap, StreamAnalyzer};
+use jointid::test_support::synth::{synth_stream, SynthOptions};
 use jointid_core::wire::{DecodeEvent, Decoder};
 
 /// Synthesised duration [s]: one hour, or `JOINTID_BENCH_SECONDS` (shorter runs for

@@ -175,8 +175,8 @@ impl CanStream {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::capture::synth::{synth_stream, FrameContent, SynthOptions};
     use crate::capture::StreamAnalyzer;
+    use crate::test_support::synth::{synth_stream, FrameContent, SynthOptions};
     use embedded_can::StandardId;
     use jointid_core::transport::can::{Fragmenter, MemFrame as Mem};
 
@@ -185,7 +185,13 @@ mod tests {
     }
 
     /// The synthesised stream cut into CAN frames; `owner[i]` = wire frame of CAN frame i.
-    fn fragments(fd: bool) -> (crate::capture::synth::SynthStream, Vec<Mem>, Vec<usize>) {
+    fn fragments(
+        fd: bool,
+    ) -> (
+        crate::test_support::synth::SynthStream,
+        Vec<Mem>,
+        Vec<usize>,
+    ) {
         let mut opts = SynthOptions::small();
         opts.batch_len = 64;
         let s = synth_stream(&opts);

@@ -186,9 +186,9 @@ pub fn export_csv(record: &CaptureRecord, path: &Path) -> Result<(), CaptureErro
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::capture::synth::{synth_stream, FrameContent, SynthOptions};
     use crate::capture::{decode_stream, CaptureError};
     use crate::data::{parse_csv, ColumnMap, DataError};
+    use crate::test_support::synth::{synth_stream, FrameContent, SynthOptions};
 
     #[test]
     fn exported_csv_reads_back_through_data_exactly_as_the_record() {

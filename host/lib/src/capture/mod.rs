@@ -39,7 +39,6 @@ pub mod live;
 pub mod record;
 pub mod report;
 pub mod source;
-pub mod synth;
 
 pub use jcap::{JcapError, JcapEvent};
 pub use live::{record_capture, CaptureOptions, CaptureOutcome, StopReason, StopRule};

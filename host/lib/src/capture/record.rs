@@ -850,7 +850,7 @@ pub fn error_kind(e: &DecodeError) -> &'static str {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::capture::synth::{synth_stream, FrameContent, SynthOptions, SynthStream};
+    use crate::test_support::synth::{synth_stream, FrameContent, SynthOptions, SynthStream};
 
     fn decode(bytes: &[u8], chunk: usize) -> (CaptureReport, CaptureRecord) {
         let mut an = StreamAnalyzer::new(true);

@@ -2,7 +2,9 @@
 //! use them too): signals and captures with a known truth. Not part of the
 //! identification API; nothing here does IO.
 //!
-//! See also: [`crate::capture::synth`] for board streams with known frame spans.
+//! [`synth`]: board streams with known frame spans, for the capture path's tests and
+//! benchmarks; the rest of this module: a closed loop around a lightly damped
+//! resonance and its capture CSV, for the FRF's tests and the `analyze` command's.
 
 use std::f64::consts::PI;
 
@@ -10,6 +12,8 @@ use jointid_core::excitation::{ExcitationConfig, SignalKind};
 use rustfft::num_complex::Complex64;
 
 use crate::data::IdData;
+
+pub mod synth;
 
 /// xorshift64* with Box–Muller: reproducible Gaussian noise for tests
 pub struct Gauss(u64);
