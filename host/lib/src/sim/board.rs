@@ -1,7 +1,9 @@
 //! A simulated run as the byte stream a board sends: the session header, delta-coded
 //! sample batches with the reference CRC, periodic `Status`, `End`, each message one frame
 //! of `jointid_core::wire::encode_frame` (COBS, CRC-32), so the capture path reads a
-//! simulated run exactly as a board capture.
+//! simulated run exactly as a board capture. [`encode_stream`] is the one encoder of such
+//! streams on the host (the simulator's runs, the paper experiment's, the capture
+//! fixtures'); the board itself runs the firmware core's sampler and transport.
 //!
 //! The wire carries integer counts: `u` and `θm` are rounded to the scale of
 //! [`WireOptions`] (at most half a count from the simulator's value); the reader
@@ -12,13 +14,13 @@
 
 use jointid_core::excitation::ExcitationConfig;
 use jointid_core::wire::{
-    encode_frame, BatchBuilder, EncodeError, Message, Scale, SessionHeader, Status, MAX_FRAME_LEN,
-    PROTOCOL_VERSION,
+    encode_frame, BatchBuilder, EncodeError, Message, RawSample, Scale, SessionHeader, Status,
+    MAX_FRAME_LEN, PROTOCOL_VERSION,
 };
 
 use super::{SimConfig, SimOutput};
 
-/// A message of a simulated session did not fit a wire frame (a bug of the encoder's limits).
+/// A message of a board stream did not fit a wire frame (a bug of the encoder's limits).
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum BoardStreamError {
@@ -113,39 +115,138 @@ pub fn encode_session(
     let header = opts.header(excitation);
     let raw = out.to_raw_samples(&opts.scale, opts.timer_hz);
     let tick_step = raw.get(1).map_or(0, |s| s.tick.wrapping_sub(raw[0].tick));
-    let mut bytes = Vec::with_capacity(64 + raw.len() * 6);
+    let layout = StreamLayout {
+        batch_len: opts.batch_len,
+        status_every: opts.status_every,
+        overruns: 0,
+        end: true,
+    };
+    let samples = raw.iter().zip(&out.theta_ref).map(|(s, &r)| (*s, r as f32));
+    Ok(encode_stream(&header, samples, tick_step, &layout)?.bytes)
+}
+
+/// How the messages of a session follow one another after the header.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StreamLayout {
+    /// samples per batch (2..=64)
+    pub batch_len: usize,
+    /// a `Status` after every this many batches (0 = never)
+    pub status_every: usize,
+    /// overruns the board reports in its status messages (constant)
+    pub overruns: u32,
+    /// end with an `End` message
+    pub end: bool,
+}
+
+/// What a frame carries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrameContent {
+    /// the session header
+    Header,
+    /// samples with seq `first..first + len`
+    Batch {
+        /// first seq
+        first: u32,
+        /// number of samples
+        len: u32,
+    },
+    /// a status message
+    Status,
+    /// the end message
+    End,
+}
+
+/// Where one frame lies in the stream.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameSpan {
+    /// stream offset of the frame's first byte [bytes]
+    pub offset: u64,
+    /// bytes including the `0x00` delimiter [bytes]
+    pub len: u64,
+    /// what it carries
+    pub content: FrameContent,
+}
+
+/// An encoded session: the bytes and every frame in them, in order.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BoardStream {
+    /// the stream
+    pub bytes: Vec<u8>,
+    /// every frame of `bytes`
+    pub frames: Vec<FrameSpan>,
+}
+
+/// The one encoder of a board's stream: `header`, then the samples with their reference
+/// `θref` [rad] in batches of `layout.batch_len` (`BatchBuilder` with tick step
+/// `tick_step` [timer ticks], reference CRC), a `Status` (seq of the next sample, the
+/// layout's overruns) after every `layout.status_every` batches, and `End` (seq = the
+/// number of samples) when `layout.end`; each message one frame of
+/// `jointid_core::wire::encode_frame`.
+///
+/// Used by [`encode_session`] (a simulated run) and by the capture fixtures
+/// (`crate::test_support::synth`).
+///
+/// # Errors
+/// [`BoardStreamError::Frame`] if a message does not fit a frame.
+pub fn encode_stream(
+    header: &SessionHeader,
+    samples: impl IntoIterator<Item = (RawSample, f32)>,
+    tick_step: u32,
+    layout: &StreamLayout,
+) -> Result<BoardStream, BoardStreamError> {
+    let mut out = BoardStream {
+        bytes: Vec::new(),
+        frames: Vec::new(),
+    };
     let mut buf = vec![0u8; MAX_FRAME_LEN];
-    let mut index = 0usize;
-    let mut push = |bytes: &mut Vec<u8>, msg: &Message| {
+    let mut push = |out: &mut BoardStream, msg: &Message, content: FrameContent| {
+        let index = out.frames.len();
         let n =
             encode_frame(msg, &mut buf).map_err(|err| BoardStreamError::Frame { index, err })?;
-        bytes.extend_from_slice(&buf[..n]);
-        index += 1;
+        out.frames.push(FrameSpan {
+            offset: out.bytes.len() as u64,
+            len: n as u64,
+            content,
+        });
+        out.bytes.extend_from_slice(&buf[..n]);
         Ok::<(), BoardStreamError>(())
     };
-    push(&mut bytes, &Message::Header(header))?;
-    let mut builder = BatchBuilder::new(tick_step, opts.batch_len);
+    push(&mut out, &Message::Header(*header), FrameContent::Header)?;
+    let mut builder = BatchBuilder::new(tick_step, layout.batch_len);
     let status = |seq: u32| Status {
         seq,
-        overruns: 0,
+        overruns: layout.overruns,
         queue_drops: 0,
         tx_errors: 0,
     };
     let mut batches = 0usize;
-    for (k, (s, &r)) in raw.iter().zip(&out.theta_ref).enumerate() {
-        let last = k + 1 == raw.len();
-        let full = builder.push(*s, r as f32);
+    let mut count = 0u32;
+    let mut samples = samples.into_iter().peekable();
+    while let Some((s, r)) = samples.next() {
+        count += 1;
+        let last = samples.peek().is_none();
+        let full = builder.push(s, r);
         for b in full
             .into_iter()
             .chain(if last { builder.flush() } else { None })
         {
-            push(&mut bytes, &Message::Batch(b))?;
+            let content = FrameContent::Batch {
+                first: b.first_seq(),
+                len: b.len() as u32,
+            };
+            push(&mut out, &Message::Batch(b), content)?;
             batches += 1;
-            if opts.status_every > 0 && batches.is_multiple_of(opts.status_every) {
-                push(&mut bytes, &Message::Status(status(s.seq.wrapping_add(1))))?;
+            if layout.status_every > 0 && batches.is_multiple_of(layout.status_every) {
+                push(
+                    &mut out,
+                    &Message::Status(status(s.seq.wrapping_add(1))),
+                    FrameContent::Status,
+                )?;
             }
         }
     }
-    push(&mut bytes, &Message::End(status(raw.len() as u32)))?;
-    Ok(bytes)
+    if layout.end {
+        push(&mut out, &Message::End(status(count)), FrameContent::End)?;
+    }
+    Ok(out)
 }

@@ -1,9 +1,10 @@
 //! Synthesised board streams with known content, for tests, benchmarks and demos.
 //!
 //! [`synth_stream`] produces what a board would send for a session — header, sample
-//! batches with the excitation's reference CRC, periodic status, end — encoded with the
-//! core's own encoder (`jointid_core::wire::encode_frame`), and says where every frame
-//! lies in the stream ([`FrameSpan`]) and which samples it carries. Tests damage the
+//! batches with the excitation's reference CRC, periodic status, end — encoded by the
+//! host's one board-stream encoder ([`crate::sim::board::encode_stream`], on the core's
+//! `jointid_core::wire::encode_frame`), and says where every frame lies in the stream
+//! ([`FrameSpan`]) and which samples it carries. Tests damage the
 //! bytes and compute from the spans, independently of the decoder, which frames must be
 //! reported damaged and which sequence numbers must go missing.
 //!
@@ -12,10 +13,10 @@
 //! pseudo-random walk; both cover the full delta-coding paths of the batch encoder.
 
 use jointid_core::excitation::{Excitation, ExcitationConfig, SignalKind};
-use jointid_core::wire::{
-    encode_frame, BatchBuilder, Message, RawSample, Scale, SessionHeader, Status, MAX_FRAME_LEN,
-    PROTOCOL_VERSION,
-};
+use jointid_core::wire::{RawSample, Scale, SessionHeader, PROTOCOL_VERSION};
+
+use crate::sim::board::{encode_stream, StreamLayout};
+pub use crate::sim::board::{FrameContent, FrameSpan};
 
 /// What to synthesise.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -86,35 +87,6 @@ impl SynthOptions {
     }
 }
 
-/// What a frame carries.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FrameContent {
-    /// the session header
-    Header,
-    /// samples with seq `first..first + len`
-    Batch {
-        /// first seq
-        first: u32,
-        /// number of samples
-        len: u32,
-    },
-    /// a status message
-    Status,
-    /// the end message
-    End,
-}
-
-/// Where one frame lies in the stream.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct FrameSpan {
-    /// stream offset of the frame's first byte [bytes]
-    pub offset: u64,
-    /// bytes including the `0x00` delimiter [bytes]
-    pub len: u64,
-    /// what it carries
-    pub content: FrameContent,
-}
-
 /// A synthesised session: the bytes, the frames in them, and the truth.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SynthStream {
@@ -169,66 +141,28 @@ pub fn synth_stream(opts: &SynthOptions) -> SynthStream {
     let tick_step = opts.timer_hz / opts.excitation.fs_hz;
     let mut table = vec![0.0f32; opts.excitation.period_samples as usize];
     let mut gen = Excitation::new(&opts.excitation, &mut table).expect("valid synth excitation");
-    let mut out = SynthStream {
-        header,
-        samples: Vec::with_capacity(opts.samples as usize),
-        reference: Vec::with_capacity(opts.samples as usize),
-        bytes: Vec::new(),
-        frames: Vec::new(),
-    };
-    let mut buf = [0u8; MAX_FRAME_LEN];
-    let mut push = |out: &mut SynthStream, msg: &Message, content: FrameContent| {
-        let n = encode_frame(msg, &mut buf).expect("frame fits");
-        out.frames.push(FrameSpan {
-            offset: out.bytes.len() as u64,
-            len: n as u64,
-            content,
-        });
-        out.bytes.extend_from_slice(&buf[..n]);
-    };
-    push(&mut out, &Message::Header(header), FrameContent::Header);
-    let mut builder = BatchBuilder::new(tick_step, opts.batch_len);
-    let mut batches = 0usize;
-    let status = |seq| Status {
-        seq,
-        overruns: opts.overruns,
-        queue_drops: 0,
-        tx_errors: 0,
-    };
+    let mut samples = Vec::with_capacity(opts.samples as usize);
+    let mut reference = Vec::with_capacity(opts.samples as usize);
     for seq in 0..opts.samples {
         let r = gen.next().unwrap_or(0.0);
-        let s = synth_sample(seq, r, &header.scale, tick_step);
-        out.samples.push(s);
-        out.reference.push(r);
-        let done = builder.push(s, r);
-        let last = seq + 1 == opts.samples;
-        for b in done
-            .into_iter()
-            .chain(if last { builder.flush() } else { None })
-        {
-            let content = FrameContent::Batch {
-                first: b.first_seq(),
-                len: b.len() as u32,
-            };
-            push(&mut out, &Message::Batch(b), content);
-            batches += 1;
-            if opts.status_every > 0 && batches.is_multiple_of(opts.status_every) {
-                push(
-                    &mut out,
-                    &Message::Status(status(seq + 1)),
-                    FrameContent::Status,
-                );
-            }
-        }
+        samples.push(synth_sample(seq, r, &header.scale, tick_step));
+        reference.push(r);
     }
-    if opts.end {
-        push(
-            &mut out,
-            &Message::End(status(opts.samples)),
-            FrameContent::End,
-        );
+    let layout = StreamLayout {
+        batch_len: opts.batch_len,
+        status_every: opts.status_every,
+        overruns: opts.overruns,
+        end: opts.end,
+    };
+    let pairs = samples.iter().copied().zip(reference.iter().copied());
+    let stream = encode_stream(&header, pairs, tick_step, &layout).expect("frame fits");
+    SynthStream {
+        header,
+        samples,
+        reference,
+        bytes: stream.bytes,
+        frames: stream.frames,
     }
-    out
 }
 
 #[cfg(test)]
