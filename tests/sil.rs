@@ -2,9 +2,9 @@
 //! `.jcap` → decoder → capture CSV → parsed back, compared with the simulator's own output.
 //!
 //! The chain is the one `jointid simulate --out RUN.jcap` runs
-//! (`jointid::cli::simulate::{encode_session, write_jcap}`), with the reference taken from
-//! the firmware's generator (`jointid_core::excitation::Excitation`, sample by sample as
-//! the board does) and read back by `capture::read_jcap` and `data::parse_csv` as a board
+//! (`jointid::sim::board::encode_session`, `jointid::capture::jcap::write_stream`), with
+//! the reference taken from the firmware's generator
+//! (`jointid_core::excitation::Excitation`, sample by sample as the board does) and read back by `capture::read_jcap` and `data::parse_csv` as a board
 //! capture is. What must come back, and how exactly:
 //! - θref: bit-exact, `f64::from` of the generator's `f32` (regenerated from the session
 //!   header; every batch's reference CRC must agree);
@@ -16,13 +16,13 @@
 //!   board's `End`.
 //!
 //! The binary path (`jointid simulate --out x.jcap` as a process) is tested in
-//! `host/tests/simulate_cli.rs`, where `CARGO_BIN_EXE_jointid` exists.
+//! `host/cli/tests/simulate_cli.rs`, where `CARGO_BIN_EXE_jointid` exists.
 
 use std::path::PathBuf;
 
 use jointid::capture::{export, jcap, read_jcap};
-use jointid::cli::simulate::{encode_session, write_jcap, WireOptions};
 use jointid::data::{parse_csv, ColumnMap};
+use jointid::sim::board::{encode_session, WireOptions};
 use jointid::sim::{parse_effects, simulate_f32, Integrator, SensorConfig, SimConfig};
 use jointid_core::excitation::{Excitation, ExcitationConfig, SignalKind};
 
@@ -55,7 +55,10 @@ fn round_trip(name: &str, cfg: &SimConfig, exc: &ExcitationConfig) -> Integrator
     let opts = WireOptions::for_sim(cfg);
     let stream = encode_session(&sim, exc, &opts).unwrap();
     let path = temp(&format!("{name}.jcap"));
-    assert_eq!(write_jcap(&path, &stream).unwrap(), stream.len() as u64);
+    assert_eq!(
+        jcap::write_stream(&path, &stream).unwrap(),
+        stream.len() as u64
+    );
     let file = std::fs::read(&path).unwrap();
     assert_eq!(file[..8], jcap::MAGIC, "{name}: the jcap header");
     assert_eq!(

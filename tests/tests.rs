@@ -4,7 +4,7 @@
 mod capture_cli;
 // The thumbv7em firmware on QEMU mps2-an386, streaming over its UART to this test.
 mod emulated_board;
-// identification on simulated joints with known truth and on measured data via the CLI
+// identification on simulated joints with known truth (measured data via the CLI: host tests)
 mod identify;
 // Software in the loop: generator -> simulator -> wire -> .jcap -> decoder -> CSV, exact.
 mod sil;

@@ -1,0 +1,331 @@
+//! `jointid analyze DATA`: nonparametric FRF u → theta_m with σ, noise level
+//! and nonlinear distortion of a periodic experiment (see [`jointid::ident::frf`]).
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use clap::Args;
+use serde::Serialize;
+
+use super::args::DataArgs;
+use super::{print_json, CmdResult, Context, Outcome};
+use jointid::ident::frf::{
+    amplitude_trend, analyze_dataset, AmplitudeTrend, ClassLevel, ExcitedSource, FrfAnalysis,
+    Instrument,
+};
+use jointid::ident::validate::FrfBand;
+use jointid::report::plot::{analysis_spectrum_svg, bode_svg, write_svg};
+
+/// Arguments of `jointid analyze`.
+#[derive(Debug, Clone, Args)]
+pub struct AnalyzeArgs {
+    /// data file and columns
+    #[command(flatten)]
+    pub data: DataArgs,
+    /// whole periods dropped after the ramp-in as transient
+    #[arg(long, value_name = "P", default_value_t = 1)]
+    pub settle_periods: usize,
+    /// write spectrum.svg (seed 000 Fig. 3) and frf.svg into this directory
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
+    /// exit with 1 when significant nonlinear distortion is found: detected
+    /// above the noise and within 40 dB of the excited lines (seed 000 §3)
+    #[arg(long)]
+    pub require_linear: bool,
+    /// print every FRF line (default: at most 60 rows)
+    #[arg(long)]
+    pub all_lines: bool,
+    /// a second run of the same excitation at another amplitude (same
+    /// columns): tells distortion that grows with amplitude from distortion
+    /// that falls with it
+    #[arg(long, value_name = "DATA2")]
+    pub compare: Option<PathBuf>,
+}
+
+#[derive(Serialize)]
+struct Report<'a> {
+    file: &'a str,
+    analysis: &'a FrfAnalysis,
+    distortion_detected: bool,
+    /// detected and within 40 dB of the excited lines
+    distortion_significant: bool,
+    plots: Vec<String>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    amplitude_trend: Vec<AmplitudeTrend>,
+}
+
+/// Runs `jointid analyze`.
+///
+/// # Errors
+/// Loading, analysis, plotting and output errors.
+pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
+    let ds = args.data.load(ctx.loaders)?;
+    let a = analyze_dataset(&ds, args.settle_periods)?;
+    let mut plots = Vec::new();
+    if let Some(dir) = &args.plot {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let spec = dir.join("spectrum.svg");
+        write_svg(
+            &spec,
+            &analysis_spectrum_svg(&format!("line spectra: {}", ds.name), &a)?,
+        )?;
+        let frf = dir.join("frf.svg");
+        let band = FrfBand::from(&a.frf);
+        write_svg(
+            &frf,
+            &bode_svg(&format!("FRF u -> theta_m: {}", ds.name), Some(&band), &[])?,
+        )?;
+        plots = vec![spec.display().to_string(), frf.display().to_string()];
+    }
+    let detected = a.distortion_detected();
+    let significant = a.distortion_significant();
+    let mut trend = Vec::new();
+    if let Some(other) = &args.compare {
+        let b = analyze_dataset(
+            &ctx.loaders.load(other, &args.data.column_map())?,
+            args.settle_periods,
+        )?;
+        trend.push(amplitude_trend(&a.linearity_u, &b.linearity_u));
+        trend.push(amplitude_trend(&a.linearity_y, &b.linearity_y));
+    }
+    if ctx.json {
+        print_json(
+            ctx.out,
+            &Report {
+                file: &ds.name,
+                analysis: &a,
+                distortion_detected: detected,
+                distortion_significant: significant,
+                plots,
+                amplitude_trend: trend,
+            },
+        )?;
+    } else {
+        print_table(ctx.out, &ds.name, &a, &plots, args.all_lines)?;
+        if let Some(other) = &args.compare {
+            writeln!(ctx.out, "amplitude comparison with {}", other.display())?;
+            for t in &trend {
+                writeln!(ctx.out, "  {}", t.verdict)?;
+            }
+        }
+    }
+    Ok(if args.require_linear && significant {
+        Outcome::CheckFailed
+    } else {
+        Outcome::Ok
+    })
+}
+
+fn print_table(
+    out: &mut dyn Write,
+    name: &str,
+    a: &FrfAnalysis,
+    plots: &[String],
+    all: bool,
+) -> std::io::Result<()> {
+    let l = &a.layout;
+    writeln!(out, "jointid analyze: {name}")?;
+    writeln!(
+        out,
+        "  periods    N = {} samples ({:.4} s), P = {} from sample {}, fs = {:.6} Hz, f0 = {:.6} Hz",
+        l.period,
+        l.period as f64 * a.ts,
+        l.count,
+        l.start,
+        1.0 / a.ts,
+        a.f0_hz
+    )?;
+    let (flo, fhi) = (
+        a.frf.freq_hz.first().copied().unwrap_or(0.0),
+        a.frf.freq_hz.last().copied().unwrap_or(0.0),
+    );
+    writeln!(
+        out,
+        "  excited    {} lines, {flo:.4} .. {fhi:.4} Hz ({}), band lines 1..{}",
+        a.frf.lines.len(),
+        match a.excited_source {
+            ExcitedSource::Config => "from the excitation config",
+            ExcitedSource::Detected => "detected from the spectrum",
+        },
+        a.band_max_line
+    )?;
+    writeln!(
+        out,
+        "  FRF        u -> theta_m, synchronous period averaging on {}",
+        match a.instrument {
+            Instrument::Reference => "the reference theta_ref (instrument)",
+            Instrument::Input => "the input's own period (no reference column)",
+        }
+    )?;
+    writeln!(out)?;
+    writeln!(
+        out,
+        "linearity (seed 000 Fig. 3; one-sided 99 % test of the lines against the noise floor)"
+    )?;
+    writeln!(
+        out,
+        "  {:<8} {:<16} {:>5} {:>11} {:>15} {:>13} {:>14}  distortion",
+        "signal",
+        "class",
+        "lines",
+        "level [dB]",
+        "vs excited [dB]",
+        "vs noise [dB]",
+        "threshold [dB]"
+    )?;
+    for lin in [&a.linearity_u, &a.linearity_y] {
+        let excited = a.frf.lines.len();
+        writeln!(
+            out,
+            "  {:<8} {:<16} {:>5} {:>11.1}",
+            lin.signal, "excited", excited, lin.excited_db
+        )?;
+        let row = |out: &mut dyn Write, class: &str, c: &ClassLevel| {
+            if c.lines == 0 {
+                return writeln!(out, "  {:<8} {:<16} {:>5}", lin.signal, class, 0);
+            }
+            writeln!(
+                out,
+                "  {:<8} {:<16} {:>5} {:>11.1} {:>15.1} {:>+13.1} {:>14.1}  {}",
+                lin.signal,
+                class,
+                c.lines,
+                c.level_db,
+                c.vs_excited_db,
+                c.vs_noise_db,
+                c.threshold_db,
+                match (c.detected, c.significant) {
+                    (true, true) => "DETECTED",
+                    (true, false) => "detected, negligible",
+                    _ => "no",
+                }
+            )
+        };
+        row(out, "odd non-excited", &lin.odd)?;
+        row(out, "even", &lin.even)?;
+    }
+    writeln!(out, "  verdict  {}", a.linearity_u.verdict)?;
+    writeln!(out, "  verdict  {}", a.linearity_y.verdict)?;
+    writeln!(out)?;
+    let n = a.frf.lines.len();
+    let step = if all || n <= 60 { 1 } else { n.div_ceil(60) };
+    writeln!(
+        out,
+        "FRF u -> theta_m at the excited lines{}",
+        if step > 1 {
+            format!(" (one line in {step}; --all-lines or --json for all)")
+        } else {
+            String::new()
+        }
+    )?;
+    writeln!(
+        out,
+        "  {:>6} {:>12} {:>10} {:>11} {:>12}",
+        "line", "f [Hz]", "|G| [dB]", "phase [deg]", "sigma/|G| %"
+    )?;
+    let (mag, ph) = (a.frf.mag_db(), a.frf.phase_deg());
+    for i in (0..n).step_by(step) {
+        writeln!(
+            out,
+            "  {:>6} {:>12.4} {:>10.2} {:>11.1} {:>12.2}",
+            a.frf.lines[i],
+            a.frf.freq_hz[i],
+            mag[i],
+            ph[i],
+            100.0 * a.frf.sigma[i] / a.frf.g[i].norm()
+        )?;
+    }
+    for p in plots {
+        writeln!(out, "plot: {p}")?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{run as run_cli, Cli};
+    use super::*;
+    use clap::Parser;
+
+    fn run_args(argv: &[&str]) -> (Result<Outcome, String>, String) {
+        let cli = Cli::try_parse_from(argv).unwrap();
+        let loaders = super::super::default_loaders();
+        let mut buf = Vec::new();
+        let r = {
+            let mut ctx = Context {
+                json: cli.json,
+                loaders: &loaders,
+                out: &mut buf,
+            };
+            run_cli(&cli, &mut ctx).map_err(|e| e.to_string())
+        };
+        (r, String::from_utf8(buf).unwrap())
+    }
+
+    fn tmp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("jointid-analyze-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    #[test]
+    fn analyze_prints_table_json_and_plots_for_a_capture_csv() {
+        let dir = tmp("ok");
+        let csv = dir.join("cap.csv");
+        std::fs::write(&csv, jointid::test_support::capture_csv(0.0, 4)).unwrap();
+        let csv_s = csv.to_str().unwrap();
+        let (r, out) = run_args(&["jointid", "analyze", csv_s, "--require-linear"]);
+        assert_eq!(r, Ok(Outcome::Ok), "{out}");
+        assert!(
+            out.contains("N = 500 samples (0.5000 s), P = 5 from sample 800"),
+            "{out}"
+        );
+        assert!(out.contains("30 lines"), "{out}");
+        assert!(
+            out.contains("odd nonlinear distortion not detected"),
+            "{out}"
+        );
+        let plots = dir.join("plots");
+        let (r, out) = run_args(&[
+            "jointid",
+            "--json",
+            "analyze",
+            csv_s,
+            "--plot",
+            plots.to_str().unwrap(),
+        ]);
+        assert_eq!(r, Ok(Outcome::Ok));
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        assert_eq!(v["analysis"]["frf"]["lines"].as_array().unwrap().len(), 30);
+        assert_eq!(v["analysis"]["frf"]["g"][0].as_array().unwrap().len(), 2);
+        assert_eq!(v["distortion_detected"], false);
+        assert!(std::fs::read_to_string(plots.join("spectrum.svg"))
+            .unwrap()
+            .starts_with("<svg"));
+        assert!(std::fs::read_to_string(plots.join("frf.svg"))
+            .unwrap()
+            .starts_with("<svg"));
+        // a cubic controller: --require-linear turns the detection into exit 1
+        std::fs::write(&csv, jointid::test_support::capture_csv(0.5, 4)).unwrap();
+        let (r, out) = run_args(&["jointid", "analyze", csv_s, "--require-linear"]);
+        assert_eq!(r, Ok(Outcome::CheckFailed), "{out}");
+        assert!(out.contains("DETECTED"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn analyze_errors_name_the_file() {
+        let dir = tmp("err");
+        let csv = dir.join("bad.csv");
+        std::fs::write(&csv, "t,theta_ref,u,theta_m\n0,0,0,0\n0.001,0,x,0\n").unwrap();
+        let (r, _) = run_args(&["jointid", "analyze", csv.to_str().unwrap()]);
+        assert_eq!(
+            r,
+            Err(format!(
+                "{}:3: column `u`: `x` is not a number",
+                csv.display()
+            ))
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,75 @@
+//! `jointid export RUN.jcap --csv RUN.csv`: the capture CSV of DESIGN.md §5.
+//!
+//! Writes only the samples that arrived; the `# gaps=` comment lists what did not (see
+//! [`jointid::capture::export`]). The CSV is written to `RUN.csv.tmp` and renamed, so a
+//! half-written export never looks complete; `--csv -` writes to stdout.
+//! Exit status: 0 exported, 1 `--strict` and something is missing or damaged, 2 error.
+
+use std::path::PathBuf;
+
+use super::{CmdResult, Context, Outcome};
+use jointid::capture::{export, read_jcap, CaptureError};
+
+/// Arguments of `jointid export`.
+#[derive(Clone, Debug, PartialEq, clap::Args)]
+pub struct ExportArgs {
+    /// Capture file to read
+    #[arg(value_name = "RUN.jcap")]
+    pub input: PathBuf,
+    /// CSV file to write (`-` for stdout)
+    #[arg(long, value_name = "RUN.csv")]
+    pub csv: PathBuf,
+    /// Exit with status 1 when anything is missing or damaged
+    #[arg(long)]
+    pub strict: bool,
+}
+
+/// Runs `jointid export`: [`Outcome::CheckFailed`] with `--strict` when anything is
+/// missing or damaged. With `--json`, a summary object goes to the output (not with
+/// `--csv -`, where the output is the CSV).
+///
+/// # Errors
+/// Reading the capture ([`CaptureError::Jcap`], [`CaptureError::NoHeader`],
+/// [`CaptureError::Excitation`]) or writing the CSV ([`CaptureError::Export`]).
+pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
+    let record = read_jcap(&args.input)?;
+    let to_stdout = args.csv.as_os_str() == "-";
+    if to_stdout {
+        let mut w = std::io::BufWriter::new(&mut *ctx.out);
+        export::write_csv(&record, &mut w).map_err(|source| CaptureError::Export {
+            path: args.csv.clone(),
+            err: source,
+        })?;
+    } else {
+        export::export_csv(&record, &args.csv)?;
+    }
+    let r = &record.report;
+    eprintln!(
+        "exported {} samples to {} ({} gaps, {} samples missing, {} damaged frames)",
+        record.samples.len(),
+        args.csv.display(),
+        r.gaps.len(),
+        r.missing_samples,
+        r.damaged_frames.len()
+    );
+    if ctx.json && !to_stdout {
+        super::print_json(
+            ctx.out,
+            &serde_json::json!({
+                "file": args.input.display().to_string(),
+                "csv": args.csv.display().to_string(),
+                "rows": record.samples.len(),
+                "samples": r.samples,
+                "gaps": r.gaps,
+                "missing_samples": r.missing_samples,
+                "damaged_frames": r.damaged_frames,
+                "overruns": r.overruns,
+            }),
+        )?;
+    }
+    Ok(if args.strict && !r.is_clean() {
+        Outcome::CheckFailed
+    } else {
+        Outcome::Ok
+    })
+}

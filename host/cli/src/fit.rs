@@ -1,0 +1,738 @@
+//! `jointid fit DATA --model KIND`: fit a black-box or physical model
+//! ([`jointid::ident::fit`]) and report parameters with standard deviations and
+//! units, FIT (toolbox `compare` definition) on estimation and validation
+//! data, resonance and anti-resonance frequencies, residual tests, and
+//! optionally Bode plots over the measured FRF (seed 000 Figs. 5–6) and the
+//! model file.
+//!
+//! With `--decimate N > 1` the black box is fitted on the decimated data;
+//! a physical model is started there and refined at the capture rate, and
+//! every FIT is computed on the decimated data ([`jointid::ident::fit::FitData`]);
+//! the model file records both rates, so `jointid validate` does the same.
+//!
+//! Column mapping: DATA is a capture CSV, a `.jcap` capture (once its loader
+//! is registered) or any CSV with `--time/--input/--output` (as every
+//! analysis command; `--output-col` is accepted too); `--output-kind` says
+//! whether that column is an angle or a velocity.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clap::{Args, ValueEnum};
+use serde::Serialize;
+
+use super::args::{DataArgs, DetrendArg, PrepArgs};
+use super::{print_json, CmdResult, Context, Outcome};
+use jointid::data::Dataset;
+use jointid::ident::fit::{
+    default_f_min, fit_prepared, log_grid, param_map, DetrendKind, FitData, FitOptions, Fitted,
+    ModelKind, ParamJson, Prep,
+};
+use jointid::ident::frf::{analyze_dataset, FrfAnalysis};
+use jointid::ident::frf_fit::{self, Drive, FrfFit, FrfFitOptions, PERIODIC_FIT_NAME};
+use jointid::ident::grey_box::{Output, DEFAULT_GEAR_RATIO};
+use jointid::ident::subspace::Method;
+use jointid::ident::validate::{
+    BodeCurve, CorrelationTest, FrfBand, Validation, DEFAULT_LAGS, FIT_NAME,
+};
+use jointid::report::plot::{bode_svg, write_svg};
+
+/// Friction model of the rigid body.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FrictionArg {
+    /// viscous only
+    Viscous,
+    /// viscous and Coulomb, plus a torque offset (inverse-dynamics LS)
+    Coulomb,
+}
+
+/// Which motor signal the output column holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OutputArg {
+    /// motor angle [rad] (or position [m])
+    Angle,
+    /// motor velocity [rad/s] (or [m/s])
+    Velocity,
+}
+
+impl From<OutputArg> for Output {
+    fn from(o: OutputArg) -> Self {
+        match o {
+            OutputArg::Angle => Output::Angle,
+            OutputArg::Velocity => Output::Velocity,
+        }
+    }
+}
+
+/// Subspace method of the black box.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MethodArg {
+    /// predictor-based subspace identification (closed-loop consistent)
+    Pbsid,
+    /// PO-MOESP (open loop)
+    Moesp,
+}
+
+/// A data file with the column mapping of `fit`: the same flags as every
+/// analysis command, `--output-col` accepted as another name of `--output`.
+#[derive(Debug, Clone, Args)]
+pub struct FitDataArgs {
+    /// data file: capture CSV (`t,theta_ref,u,theta_m`), a mapped CSV, or `.jcap`
+    #[arg(value_name = "DATA")]
+    pub path: PathBuf,
+    /// time column [s] (with --input and --output)
+    #[arg(long, value_name = "COL", requires_all = ["input", "output_col"])]
+    pub time: Option<String>,
+    /// input column (torque [N·m] or force [N])
+    #[arg(long, value_name = "COL", requires_all = ["time", "output_col"])]
+    pub input: Option<String>,
+    /// output column (motor angle [rad] or position [m]; see --output-kind)
+    #[arg(
+        long = "output",
+        visible_alias = "output-col",
+        value_name = "COL",
+        requires_all = ["time", "input"]
+    )]
+    pub output_col: Option<String>,
+    /// reference column (default: the capture CSV's `theta_ref`)
+    #[arg(long, value_name = "COL")]
+    pub reference: Option<String>,
+}
+
+impl FitDataArgs {
+    /// the same mapping as analysis' [`DataArgs`] for `path`
+    pub fn data_args(&self, path: &Path) -> DataArgs {
+        DataArgs {
+            path: path.to_path_buf(),
+            time: self.time.clone(),
+            input: self.input.clone(),
+            output: self.output_col.clone(),
+            reference: self.reference.clone(),
+        }
+    }
+}
+
+/// Where the model is fitted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DomainArg {
+    /// frequency domain for physical models on periodic data, else time
+    Auto,
+    /// the FRF at the excited lines (periodic data, physical models)
+    Frequency,
+    /// output error on the time record
+    Time,
+}
+
+/// Arguments of `jointid fit`.
+#[derive(Debug, Clone, Args)]
+pub struct FitArgs {
+    /// estimation data and columns
+    #[command(flatten)]
+    pub data: FitDataArgs,
+    /// model: black-box:ORDER, rigid, two-mass, three-mass or four-mass
+    #[arg(long, value_name = "KIND", value_parser = parse_kind)]
+    pub model: ModelKind,
+    /// friction of the rigid model
+    #[arg(long, value_enum, default_value_t = FrictionArg::Viscous)]
+    pub friction: FrictionArg,
+    /// validation data (same columns and preparation)
+    #[arg(long, value_name = "VAL")]
+    pub validation: Option<PathBuf>,
+    /// without --validation: estimate on this first fraction of DATA
+    /// (after preparation) and validate on the rest
+    #[arg(long, value_name = "F", conflicts_with = "validation", value_parser = parse_fraction)]
+    pub estimation_fraction: Option<f64>,
+    /// store the model (everything needed to simulate it again)
+    #[arg(long, value_name = "MODEL.json")]
+    pub save: Option<PathBuf>,
+    /// write bode.svg (model over the FRF with ±2σ) into this directory
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
+    /// which motor signal the output column holds
+    #[arg(long, value_enum, default_value_t = OutputArg::Angle)]
+    pub output_kind: OutputArg,
+    /// subspace method of the black box
+    #[arg(long, value_enum, default_value_t = MethodArg::Pbsid)]
+    pub method: MethodArg,
+    /// keep the subspace black box (no output-error refinement)
+    #[arg(long)]
+    pub no_refine: bool,
+    /// black box with a direct feed-through D (e.g. an acceleration output)
+    #[arg(long)]
+    pub feedthrough: bool,
+    /// gear ratio r (arm angle per motor angle) of the physical models
+    #[arg(long, value_name = "R", default_value_t = DEFAULT_GEAR_RATIO)]
+    pub gear_ratio: f64,
+    /// time constant [s] of the drive's current loop, a first-order lag in
+    /// front of the physical models; default: estimated in the frequency
+    /// domain, 0 (neglected, as in seed 000) in the time domain
+    #[arg(long, value_name = "S", value_parser = parse_tau)]
+    pub current_loop_tau: Option<f64>,
+    /// transport delay of the torque [samples] (frequency domain);
+    /// default: estimated
+    #[arg(long, value_name = "SAMPLES", value_parser = parse_delay)]
+    pub delay: Option<f64>,
+    /// where to fit: auto (frequency domain for physical models on periodic
+    /// data), frequency or time
+    #[arg(long, value_enum, default_value_t = DomainArg::Auto)]
+    pub domain: DomainArg,
+    /// exit 1 when the fit raised any warning
+    #[arg(long)]
+    pub strict: bool,
+    /// lags M of the residual tests
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS)]
+    pub lags: usize,
+    /// the axis is linear (force [N] → position [m]): units kg, N·s/m, N, N/m
+    #[arg(long)]
+    pub linear_axis: bool,
+    /// whole periods dropped as transient before the FRF of the plot
+    #[arg(long, value_name = "P", default_value_t = 1)]
+    pub settle_periods: usize,
+    /// decimation and detrending
+    #[command(flatten)]
+    pub prep: PrepArgs,
+}
+
+/// the linear-axis unit of a rotary one
+pub fn linear_unit(rotary: &str) -> &str {
+    match rotary {
+        "kg·m²" => "kg",
+        "N·m·s/rad" => "N·s/m",
+        "N·m/rad" => "N/m",
+        "N·m" => "N",
+        o => o,
+    }
+}
+
+fn parse_fraction(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(f) if f > 0.0 && f < 1.0 => Ok(f),
+        _ => Err(format!("`{s}` is not a fraction strictly between 0 and 1")),
+    }
+}
+
+fn parse_tau(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(t) if (0.0..1.0).contains(&t) => Ok(t),
+        _ => Err(format!(
+            "`{s}` is not a time constant in seconds, 0 ≤ τ < 1"
+        )),
+    }
+}
+
+fn parse_delay(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(d) if (0.0..=frf_fit::MAX_DRIVE_SAMPLES).contains(&d) => Ok(d),
+        _ => Err(format!(
+            "`{s}` is not a delay in samples, 0 ≤ D ≤ {}",
+            frf_fit::MAX_DRIVE_SAMPLES
+        )),
+    }
+}
+
+fn parse_kind(s: &str) -> Result<ModelKind, String> {
+    s.parse()
+}
+
+/// Everything `fit --json` prints.
+#[derive(Debug, Serialize)]
+pub struct FitReport {
+    /// model family
+    pub model: String,
+    /// how it was estimated
+    pub method: String,
+    /// estimation data file
+    pub file: String,
+    /// validation data file
+    pub validation_file: Option<String>,
+    /// model sample interval [s]
+    pub ts: f64,
+    /// estimation samples (after preparation)
+    pub samples: usize,
+    /// parameters by name (empty for a black box)
+    pub parameters: std::collections::BTreeMap<String, ParamJson>,
+    /// name of the FIT definition
+    pub fit_name: String,
+    /// FIT on the estimation data [%]
+    pub fit_estimation: f64,
+    /// FIT on the validation data [%]
+    pub fit_validation: Option<f64>,
+    /// identified resonance frequencies [Hz]
+    pub resonances_hz: Vec<f64>,
+    /// identified anti-resonance frequencies [Hz]
+    pub antiresonances_hz: Vec<f64>,
+    /// residual tests on estimation (and validation) data
+    pub residual_tests: ResidualTests,
+    /// wall time of the fit [s]
+    pub seconds: f64,
+    /// files written
+    pub files: Vec<String>,
+    /// estimator notes
+    pub warnings: Vec<String>,
+}
+
+/// Residual tests per data set.
+#[derive(Debug, Serialize)]
+pub struct ResidualTests {
+    /// on the estimation data
+    pub estimation: Validation,
+    /// on the validation data
+    pub validation: Option<Validation>,
+}
+
+pub(crate) fn prep_of(p: &PrepArgs) -> Prep {
+    Prep {
+        decimate: p.decimate as usize,
+        detrend: match p.detrend {
+            DetrendArg::None => DetrendKind::None,
+            DetrendArg::Mean => DetrendKind::Mean,
+            DetrendArg::Linear => DetrendKind::Linear,
+        },
+    }
+}
+
+/// Runs `jointid fit`.
+///
+/// # Errors
+/// Loading, fitting, plotting and output errors.
+pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
+    let ds = args.data.data_args(&args.data.path).load(ctx.loaders)?;
+    let val_ds = match &args.validation {
+        Some(p) => Some(args.data.data_args(p).load(ctx.loaders)?),
+        None => None,
+    };
+    let prep = prep_of(&args.prep);
+    let prepare = |d: &jointid::data::IdData, name: &str| {
+        FitData::new(d, prep).map_err(|e| format!("{name}: {e}"))
+    };
+    let (est, val, val_name) = match (args.estimation_fraction, &val_ds) {
+        (Some(frac), _) => {
+            // split at the capture rate, then prepare each part
+            let (a, b) = ds.data.split(frac);
+            let vn = format!("{} (last {:.0} %)", ds.name, 100.0 * (1.0 - frac));
+            let b = prepare(&b, &vn)?;
+            (prepare(&a, &ds.name)?, Some(b), Some(vn))
+        }
+        (None, Some(v)) => (
+            prepare(&ds.data, &ds.name)?,
+            Some(prepare(&v.data, &v.name)?),
+            Some(v.name.clone()),
+        ),
+        (None, None) => (prepare(&ds.data, &ds.name)?, None, None),
+    };
+    let periodic = match (
+        args.domain,
+        args.model.structure(),
+        args.estimation_fraction,
+    ) {
+        (DomainArg::Time, _, _) => None,
+        (DomainArg::Frequency, None, _) => {
+            return Err(format!(
+                "--domain frequency fits physical models; {} is fitted in the time domain",
+                args.model.name()
+            )
+            .into())
+        }
+        (DomainArg::Frequency, _, Some(_)) => {
+            return Err(
+                "--domain frequency takes the whole record: give --validation \
+                        instead of --estimation-fraction"
+                    .into(),
+            )
+        }
+        (DomainArg::Frequency, Some(_), None) => Some(
+            analyze_dataset(&ds, args.settle_periods)
+                .map_err(|e| format!("{}: --domain frequency needs periodic data: {e}", ds.name))?,
+        ),
+        (DomainArg::Auto, Some(_), None) if args.friction == FrictionArg::Viscous => {
+            analyze_dataset(&ds, args.settle_periods).ok()
+        }
+        (DomainArg::Auto, _, _) => None,
+    };
+    if let Some(a) = &periodic {
+        // a validation record that is not periodic (band-limited noise,
+        // say) is compared in the time domain, and so is the estimation
+        // record then, so that both FITs share one definition
+        let vp = val_ds
+            .as_ref()
+            .and_then(|v| analyze_dataset(v, args.settle_periods).ok());
+        return run_frequency_domain(
+            args,
+            ctx,
+            &ds,
+            a,
+            &est,
+            val.as_ref(),
+            val_ds.as_ref(),
+            vp.as_ref(),
+            val_name,
+        );
+    }
+    let opts = FitOptions {
+        kind: args.model,
+        coulomb: args.friction == FrictionArg::Coulomb,
+        method: match args.method {
+            MethodArg::Pbsid => Method::Pbsid,
+            MethodArg::Moesp => Method::Moesp,
+        },
+        output: args.output_kind.into(),
+        r: args.gear_ratio,
+        refine: !args.no_refine,
+        feedthrough: args.feedthrough,
+        current_loop_tau: args.current_loop_tau.unwrap_or(0.0),
+    };
+    let t0 = Instant::now();
+    let fitted = fit_prepared(&est, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let ev = fitted
+        .evaluate_on(&est, args.lags)
+        .map_err(|e| format!("{}: {e}", ds.name))?;
+    let vv = match (&val, &val_name) {
+        (Some(v), Some(vn)) => Some(
+            fitted
+                .evaluate_on(v, args.lags)
+                .map_err(|e| format!("{vn}: {e}"))?,
+        ),
+        _ => None,
+    };
+    let est = &est.prepared;
+    let mut files = Vec::new();
+    if let Some(path) = &args.save {
+        let saved = fitted.to_saved(prep, &ds.name, ev.fit);
+        let text = serde_json::to_string_pretty(&saved)?;
+        std::fs::write(path, text + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
+        files.push(path.display().to_string());
+    }
+    if let Some(dir) = &args.plot {
+        let p = write_bode(dir, "bode.svg", &ds, args.settle_periods, &[&fitted])?;
+        files.push(p.display().to_string());
+    }
+    let res = fitted.resonances(default_f_min(est.len(), est.ts));
+    let report = FitReport {
+        model: fitted.kind.name(),
+        method: fitted.method.clone(),
+        file: ds.name.clone(),
+        validation_file: val_name,
+        ts: est.ts,
+        samples: est.len(),
+        parameters: {
+            let mut p = param_map(&fitted.params);
+            if args.linear_axis {
+                for v in p.values_mut() {
+                    v.unit = linear_unit(&v.unit).into();
+                }
+            }
+            p
+        },
+        fit_name: FIT_NAME.into(),
+        fit_estimation: ev.fit,
+        fit_validation: vv.as_ref().map(|v| v.fit),
+        resonances_hz: res.resonances.iter().map(|m| m.freq_hz).collect(),
+        antiresonances_hz: res.anti_resonances.iter().map(|m| m.freq_hz).collect(),
+        residual_tests: ResidualTests {
+            estimation: ev,
+            validation: vv,
+        },
+        seconds,
+        files,
+        warnings: fitted.warnings.clone(),
+    };
+    emit(ctx, &report, args.strict)
+}
+
+/// prints the report; with `strict`, any warning fails the run
+fn emit(ctx: &mut Context<'_>, report: &FitReport, strict: bool) -> CmdResult {
+    if ctx.json {
+        print_json(ctx.out, report)?;
+    } else {
+        print_report(ctx.out, report)?;
+    }
+    if strict && !report.warnings.is_empty() {
+        return Ok(Outcome::CheckFailed);
+    }
+    Ok(Outcome::Ok)
+}
+
+/// The frequency-domain path of `run` ([`jointid::ident::frf_fit`]).
+#[allow(clippy::too_many_arguments)]
+fn run_frequency_domain(
+    args: &FitArgs,
+    ctx: &mut Context<'_>,
+    ds: &Dataset,
+    analysis: &FrfAnalysis,
+    est: &FitData,
+    val: Option<&FitData>,
+    val_ds: Option<&Dataset>,
+    val_analysis: Option<&FrfAnalysis>,
+    val_name: Option<String>,
+) -> CmdResult {
+    let structure = args.model.structure().expect("checked by the caller");
+    let ts = ds.data.ts;
+    let mut o = FrfFitOptions::new(structure, ts);
+    o.output = args.output_kind.into();
+    o.r = args.gear_ratio;
+    if let Some(tau) = args.current_loop_tau {
+        o.lag = Drive::Fixed(tau / ts);
+    }
+    if let Some(d) = args.delay {
+        o.delay = Drive::Fixed(d);
+    }
+    let t0 = Instant::now();
+    let ff = frf_fit::fit_frf(&analysis.frf, &o).map_err(|e| format!("{}: {e}", ds.name))?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let fitted = fitted_of(args, &ff, analysis, est.decimate);
+    // residual tests on one period of the steady state (slow disturbances
+    // and drift averaged out), at the capture rate
+    let tests = |d: &Dataset, a: &FrfAnalysis| -> Result<Validation, String> {
+        let s = frf_fit::periodic_steady_state(&d.data, &a.layout, |f| ff.freq_response(f))
+            .map_err(|e| format!("{}: {e}", d.name))?;
+        jointid::ident::validate::validate(&s.u, &s.y, &s.y_hat, args.lags)
+            .map_err(|e| format!("{}: {e}", d.name))
+    };
+    let periodic = val_ds.is_none() || val_analysis.is_some();
+    let (ev, vv) = if periodic {
+        let vv = match (val_ds, val_analysis) {
+            (Some(v), Some(a)) => Some(tests(v, a)?),
+            _ => None,
+        };
+        (tests(ds, analysis)?, vv)
+    } else {
+        let ev = fitted
+            .evaluate_on(est, args.lags)
+            .map_err(|e| format!("{}: {e}", ds.name))?;
+        let vv = match (val, &val_name) {
+            (Some(v), Some(vn)) => Some(
+                fitted
+                    .evaluate_on(v, args.lags)
+                    .map_err(|e| format!("{vn}: {e}"))?,
+            ),
+            _ => None,
+        };
+        (ev, vv)
+    };
+    let periodic_fit =
+        |a: &FrfAnalysis| frf_fit::periodic_fit_percent(&a.frf, &ff.freq_response(&a.frf.freq_hz));
+    let (fit_name, fit_estimation, fit_validation) = if periodic {
+        (
+            PERIODIC_FIT_NAME,
+            periodic_fit(analysis),
+            val_analysis.map(periodic_fit),
+        )
+    } else {
+        (FIT_NAME, ev.fit, vv.as_ref().map(|v| v.fit))
+    };
+    let mut files = Vec::new();
+    if let Some(path) = &args.save {
+        let saved = fitted.to_saved(prep_of(&args.prep), &ds.name, fit_estimation);
+        let text = serde_json::to_string_pretty(&saved)?;
+        std::fs::write(path, text + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
+        files.push(path.display().to_string());
+    }
+    if let Some(dir) = &args.plot {
+        let p = write_bode(dir, "bode.svg", ds, args.settle_periods, &[&fitted])?;
+        files.push(p.display().to_string());
+    }
+    let report = FitReport {
+        model: fitted.kind.name(),
+        method: fitted.method.clone(),
+        file: ds.name.clone(),
+        validation_file: val_name,
+        ts,
+        samples: ds.data.len(),
+        parameters: {
+            let mut p = param_map(&fitted.params);
+            if args.linear_axis {
+                for v in p.values_mut() {
+                    v.unit = linear_unit(&v.unit).into();
+                }
+            }
+            p
+        },
+        fit_name: fit_name.into(),
+        fit_estimation,
+        fit_validation,
+        resonances_hz: ff.resonances_hz.clone(),
+        antiresonances_hz: ff.anti_resonances_hz.clone(),
+        residual_tests: ResidualTests {
+            estimation: ev,
+            validation: vv,
+        },
+        seconds,
+        files,
+        warnings: fitted.warnings.clone(),
+    };
+    emit(ctx, &report, args.strict)
+}
+
+/// A frequency-domain fit as a [`Fitted`]: the sampled model with the lag
+/// and the delay, the lag as `tau_c` [s] and the delay as `delay` [s] among
+/// the parameters.
+fn fitted_of(args: &FitArgs, ff: &FrfFit, analysis: &FrfAnalysis, decimate: usize) -> Fitted {
+    let ts = ff.model.ts;
+    let mut params = ff.params.clone();
+    for (name, d) in [("tau_c", ff.lag), ("delay", ff.delay)] {
+        params.push(jointid::ident::grey_box::PhysParam {
+            name: name.into(),
+            value: d.value * ts,
+            std: d.std * ts,
+            unit: "s",
+        });
+    }
+    let drive = |d: &frf_fit::DriveEstimate| match (d.estimated, d.value > 0.0) {
+        (true, _) => "estimated",
+        (false, true) => "fixed",
+        (false, false) => "left out",
+    };
+    Fitted {
+        kind: args.model,
+        output: args.output_kind.into(),
+        ts,
+        model: ff.discrete(),
+        continuous: Some(ff.continuous()),
+        params,
+        friction: None,
+        warnings: ff.warnings.iter().map(|w| w.to_string()).collect(),
+        method: format!(
+            "frequency domain: sample maximum likelihood on {} excited lines of {} periods \
+             ({:.1} to {:.1} Hz), current-loop lag {}, delay {}; cost {:.1} = {:.2} × its noise level; \
+             best of {} starts from the FRF's resonances",
+            ff.lines,
+            analysis.layout.count,
+            analysis.frf.freq_hz.first().map_or(0.0, |f| *f),
+            analysis.frf.freq_hz.last().map_or(0.0, |f| *f),
+            drive(&ff.lag),
+            drive(&ff.delay),
+            ff.cost,
+            ff.cost_ratio(),
+            ff.starts
+        ),
+        decimate,
+    }
+}
+
+/// Writes `name` into `dir`: Bode plot of `models` over the FRF of `ds`
+/// (when `ds` is periodic) with ±2σ, up to 0.45 / Ts of the coarsest model.
+///
+/// # Errors
+/// Directory, plot and write errors.
+pub fn write_bode(
+    dir: &Path,
+    name: &str,
+    ds: &Dataset,
+    settle_periods: usize,
+    models: &[&Fitted],
+) -> Result<PathBuf, Box<dyn std::error::Error + Send + Sync>> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let fmax = models
+        .iter()
+        .map(|m| 0.45 / m.ts)
+        .fold(0.45 / ds.data.ts, f64::min);
+    let band = analyze_dataset(ds, settle_periods).ok().map(|a| {
+        let b = FrfBand::from(&a.frf);
+        let keep: Vec<usize> = (0..b.freq_hz.len())
+            .filter(|&i| b.freq_hz[i] > 0.0 && b.freq_hz[i] <= fmax)
+            .collect();
+        FrfBand {
+            freq_hz: keep.iter().map(|&i| b.freq_hz[i]).collect(),
+            g: keep.iter().map(|&i| b.g[i]).collect(),
+            sigma: keep.iter().map(|&i| b.sigma[i]).collect(),
+        }
+    });
+    let fmin = band
+        .as_ref()
+        .and_then(|b| b.freq_hz.first().copied())
+        .unwrap_or(0.1);
+    let grid = log_grid(fmin, fmax, 400);
+    let curves: Vec<BodeCurve> = models
+        .iter()
+        .map(|m| BodeCurve {
+            name: m.kind.name(),
+            freq_hz: grid.clone(),
+            response: m.freq_response(&grid),
+        })
+        .collect();
+    let path = dir.join(name);
+    let title = format!("models over the FRF u -> theta_m: {}", ds.name);
+    write_svg(&path, &bode_svg(&title, band.as_ref(), &curves)?)?;
+    Ok(path)
+}
+
+pub(crate) fn print_report(out: &mut dyn Write, r: &FitReport) -> std::io::Result<()> {
+    writeln!(out, "jointid fit: {} on {}", r.model, r.file)?;
+    writeln!(out, "  method: {}", r.method)?;
+    writeln!(
+        out,
+        "  {} samples, Ts = {} s, fitted in {:.2} s",
+        r.samples, r.ts, r.seconds
+    )?;
+    if !r.parameters.is_empty() {
+        writeln!(
+            out,
+            "  {:<8} {:>14} {:>12} {:>8}  unit",
+            "param", "value", "std", "std %"
+        )?;
+        for (name, p) in &r.parameters {
+            writeln!(
+                out,
+                "  {:<8} {:>14.6e} {:>12.3e} {:>8.2}  {}",
+                name,
+                p.value,
+                p.std,
+                100.0 * p.std / p.value.abs().max(f64::MIN_POSITIVE),
+                p.unit
+            )?;
+        }
+    }
+    writeln!(out, "  {}:", r.fit_name)?;
+    writeln!(out, "    estimation: {:.2}", r.fit_estimation)?;
+    if let Some(v) = r.fit_validation {
+        writeln!(out, "    validation: {v:.2}")?;
+    }
+    let hz = |v: &[f64]| {
+        if v.is_empty() {
+            "none".to_string()
+        } else {
+            v.iter()
+                .map(|f| format!("{f:.2}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    };
+    writeln!(out, "  resonances [Hz]: {}", hz(&r.resonances_hz))?;
+    writeln!(out, "  anti-resonances [Hz]: {}", hz(&r.antiresonances_hz))?;
+    writeln!(out, "  residual tests (99 %):")?;
+    print_tests(out, "estimation", &r.residual_tests.estimation)?;
+    if let Some(v) = &r.residual_tests.validation {
+        print_tests(out, "validation", v)?;
+    }
+    for f in &r.files {
+        writeln!(out, "  wrote {f}")?;
+    }
+    for w in &r.warnings {
+        writeln!(out, "  note: {w}")?;
+    }
+    Ok(())
+}
+
+pub(crate) fn print_tests(out: &mut dyn Write, label: &str, v: &Validation) -> std::io::Result<()> {
+    for t in [&v.whiteness, &v.independence] {
+        print_test(out, label, t)?;
+    }
+    Ok(())
+}
+
+fn print_test(out: &mut dyn Write, label: &str, t: &CorrelationTest) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "    {label:<10} {:<40} {}: max |r| {:.3} vs bound {:.3} ({} of {} lags outside), χ² {:.1} vs {:.1}",
+        t.name,
+        if t.pass { "pass" } else { "FAIL" },
+        t.max_abs,
+        t.bound,
+        t.outside,
+        t.lags.len(),
+        t.statistic,
+        t.critical
+    )
+}

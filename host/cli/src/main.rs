@@ -1,0 +1,235 @@
+//! `jointid`: the command line of the `jointid` library. Parse (clap derive),
+//! validate, dispatch; exit codes 0 ok, 1 a check failed, 2 error (printed on one
+//! line, or as `{"error": ...}` with `--json`).
+//!
+//! Layers (as ripgrep's `flags/`): each subcommand has one module here with
+//! its `clap::Args` struct and a `run(args, ctx)` that loads data, calls the
+//! estimators (which do no IO) and prints a table or JSON. Shared argument
+//! groups (data file + column mapping, preparation) live in [`args`].
+//!
+//! Adding a subcommand (`capture`, `export`, `info`, `simulate`, `fit`,
+//! `demo`, …): create `src/<name>.rs` with `pub struct <Name>Args` (derive
+//! `clap::Args`) and `pub fn run(args: &<Name>Args, ctx: &mut Context<'_>)
+//! -> CmdResult`; add `mod <name>;`, one [`Command`] variant and one arm in
+//! [`run`]. Nothing else changes.
+//!
+//! Exit codes ([`Outcome::code`]): 0 ok, 1 a check failed, 2 error ([`main`]).
+// Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
+
+use std::io::Write;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use jointid::data::Loaders;
+
+mod analyze;
+mod args;
+mod capture;
+mod demo;
+mod export;
+mod fit;
+mod info;
+mod simulate;
+mod validate;
+mod validate_cmd;
+
+/// `jointid`: identification of one robot joint, from capture to validated models.
+#[derive(Debug, Parser)]
+#[command(name = "jointid", version, about, long_about = None)]
+pub struct Cli {
+    /// machine-readable JSON output (results and errors)
+    #[arg(long, global = true)]
+    pub json: bool,
+    /// the subcommand
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Subcommands, in the order of the user's path.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// record the board's stream (serial, CAN, TCP or file) into a .jcap capture
+    Capture(capture::CaptureArgs),
+    /// what a .jcap capture holds: board, excitation, samples, gaps, damaged frames
+    Info(info::InfoArgs),
+    /// write a .jcap capture as the capture CSV (t,theta_ref,u,theta_m)
+    Export(export::ExportArgs),
+    /// nonparametric FRF, noise level and nonlinear distortion of periodic data
+    Analyze(analyze::AnalyzeArgs),
+    /// fit a black-box or physical model: parameters, FIT, resonances, residual tests
+    Fit(fit::FitArgs),
+    /// FIT and residual tests of a saved model (or a simulated column) on data
+    Validate(validate_cmd::ValidateCmdArgs),
+    /// the whole path on the simulated joint, through the wire encoder (no board needed)
+    Demo(demo::DemoArgs),
+    /// seed 000 Table 2 on simulated IRB1400-like data (FIT of black box 11, three-, four-mass)
+    Experiment(demo::ExperimentArgs),
+    /// closed-loop joint simulator with switchable effects; writes a .jcap capture or a capture CSV
+    Simulate(simulate::SimulateArgs),
+}
+
+/// How a command ended when it did not fail with an error.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outcome {
+    /// everything ran and every check passed (exit 0)
+    Ok,
+    /// ran, but a check the user asked for failed (exit 1)
+    CheckFailed,
+}
+
+impl Outcome {
+    /// process exit code
+    pub fn code(self) -> u8 {
+        match self {
+            Outcome::Ok => 0,
+            Outcome::CheckFailed => 1,
+        }
+    }
+}
+
+/// Result of a subcommand; any error ends the process with exit code 2.
+pub type CmdResult = Result<Outcome, Box<dyn std::error::Error + Send + Sync>>;
+
+/// What every subcommand gets besides its arguments.
+pub struct Context<'a> {
+    /// print JSON instead of tables
+    pub json: bool,
+    /// file loaders by extension (CSV built in)
+    pub loaders: &'a Loaders,
+    /// where results go (stdout in the binary, a buffer in tests)
+    pub out: &'a mut dyn Write,
+}
+
+/// Loaders the binary uses: CSV (built in) and the native `.jcap` capture.
+pub fn default_loaders() -> Loaders {
+    let mut l = Loaders::default();
+    l.register(
+        "jcap",
+        Box::new(|p, _| jointid::capture::load_dataset(p).map_err(Into::into)),
+    );
+    l
+}
+
+/// Runs the parsed command line.
+///
+/// # Errors
+/// Whatever the subcommand reports; main.rs prints it on one line (or as
+/// JSON with `--json`) and exits with 2.
+pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
+    match &cli.command {
+        Command::Capture(a) => capture::run(a, ctx),
+        Command::Info(a) => info::run(a, ctx),
+        Command::Export(a) => export::run(a, ctx),
+        Command::Analyze(a) => analyze::run(a, ctx),
+        Command::Fit(a) => fit::run(a, ctx),
+        Command::Validate(a) => validate_cmd::run(a, ctx),
+        Command::Demo(a) => demo::run(a, ctx),
+        Command::Experiment(a) => demo::run_experiment(a, ctx),
+        Command::Simulate(a) => simulate::run(a, ctx),
+    }
+}
+
+/// Prints `value` as pretty JSON on `out`.
+///
+/// # Errors
+/// Serialisation or write errors.
+pub fn print_json<T: serde::Serialize>(
+    out: &mut dyn Write,
+    value: &T,
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    serde_json::to_writer_pretty(&mut *out, value)?;
+    writeln!(out)?;
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) if e.use_stderr() && std::env::args().any(|a| a == "--json") => {
+            let text = e.render().to_string();
+            let lines: Vec<&str> = text
+                .lines()
+                .map(str::trim)
+                .take_while(|l| !l.starts_with("Usage:"))
+                .filter(|l| !l.is_empty())
+                .collect();
+            let msg = lines.join(" ");
+            println!(
+                "{}",
+                serde_json::json!({ "error": msg.trim_start_matches("error: ") })
+            );
+            return ExitCode::from(2);
+        }
+        Err(e) => e.exit(),
+    };
+    let loaders = default_loaders();
+    let mut stdout = std::io::stdout().lock();
+    let result = run(
+        &cli,
+        &mut Context {
+            json: cli.json,
+            loaders: &loaders,
+            out: &mut stdout,
+        },
+    );
+    // output closed early (`jointid analyze x.csv | head`): stop quietly
+    if let Err(e) = &result {
+        let mut cur: Option<&(dyn std::error::Error + 'static)> = Some(e.as_ref());
+        while let Some(c) = cur {
+            if c.downcast_ref::<std::io::Error>()
+                .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+            {
+                return ExitCode::SUCCESS;
+            }
+            cur = c.source();
+        }
+    }
+    match result.map_err(anyhow::Error::from_boxed) {
+        Ok(outcome) => ExitCode::from(outcome.code()),
+        Err(e) => {
+            // the chain, skipping causes the message already states
+            let mut msg = e.to_string();
+            for cause in e.chain().skip(1) {
+                let c = cause.to_string();
+                if !msg.contains(&c) {
+                    msg = format!("{msg}: {c}");
+                }
+            }
+            let msg = msg.replace('\n', " ");
+            if cli.json {
+                println!("{}", serde_json::json!({ "error": msg }));
+            } else {
+                eprintln!("jointid: error: {msg}");
+            }
+            ExitCode::from(2)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn cli_definition_is_consistent() {
+        Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn json_flag_is_global() {
+        let c = Cli::try_parse_from(["jointid", "analyze", "x.csv", "--json"]).unwrap();
+        assert!(c.json);
+        let c = Cli::try_parse_from([
+            "jointid",
+            "--json",
+            "validate",
+            "x.csv",
+            "--simulated",
+            "ys",
+        ])
+        .unwrap();
+        assert!(c.json && matches!(c.command, Command::Validate(_)));
+    }
+}

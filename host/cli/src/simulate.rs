@@ -1,0 +1,785 @@
+//! `jointid simulate`: runs the closed-loop joint simulator ([`jointid::sim`]) on the
+//! firmware's excitation and writes the run as a board would have delivered it.
+//!
+//! ```text
+//! jointid simulate --model rigid|two-mass|three-mass|four-mass|nonlinear-two-mass
+//!     [--param NAME=VALUE]... [--effect SPEC]... [--excitation odd-multisine|random-odd|noise]
+//!     [--rms RAD] [--periods N] [--seed N] --out FILE.jcap|FILE.csv [--params-out FILE.json]
+//! ```
+//!
+//! - `--out RUN.jcap` puts the run through the real wire encoder
+//!   (`jointid_core::wire`: session header with the excitation config and the scale,
+//!   delta-coded sample batches from `BatchBuilder` with the reference CRC, a `Status`
+//!   every [`WireOptions::status_every`] batches, `End`; [`jointid::sim::board`]) into a
+//!   `.jcap` written by [`jointid::capture::jcap::write_stream`], so `jointid info`,
+//!   `export`, `analyze` and `fit` read it exactly like a board capture. The wire carries integer counts: `u` and `θm` are rounded to the
+//!   scale of [`WireOptions::for_sim`] (at most half a count from the simulator's value),
+//!   the reference is regenerated from the header bit-exactly.
+//! - `--out RUN.csv` writes the capture CSV (DESIGN.md §5) with the simulator's values
+//!   unquantised, the excitation config and `sim_*` keys in its comments.
+//!
+//! `--param NAME=VALUE` overrides one physical parameter of the chosen model, named as in
+//! seed 000 Table 1 (`J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r`) plus
+//! seed 001's `k3`, `F_c` for the nonlinear two-mass (see [`jointid::model::params`]); only
+//! the names the model uses are accepted ([`model_params`]).
+// Units in brackets (`[s]`, `[rad]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
+
+use std::path::{Path, PathBuf};
+
+use clap::{Args, ValueEnum};
+use jointid_core::wire::Scale;
+use serde::Serialize;
+
+use super::{print_json, CmdResult, Context, Outcome};
+use jointid::capture::jcap::{write_stream, JcapError};
+use jointid::data::{write_capture_csv, Dataset, ExcitationConfig, SignalKind};
+use jointid::sim::board::{encode_session, BoardStreamError, WireOptions};
+use jointid::sim::{
+    parse_effects, simulate_excitation, Integrator, JointParams, Mechanism, Plant, PlantKind,
+    SensorConfig, SimConfig, SimOutput,
+};
+
+/// Plant model on the command line (hyphen or underscore spelling).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ModelArg {
+    /// one rigid mass
+    Rigid,
+    /// motor and one arm mass through the gearbox spring
+    #[value(alias = "two_mass")]
+    TwoMass,
+    /// seed 000 eq. (5)-(6): motor and two arm masses
+    #[value(alias = "three_mass")]
+    ThreeMass,
+    /// seed 000 eq. (7)-(8): three-mass plus a parallel mass
+    #[value(alias = "four_mass")]
+    FourMass,
+    /// seed 001: two-mass with cubic spring and Coulomb friction
+    #[value(alias = "nonlinear_two_mass")]
+    NonlinearTwoMass,
+}
+
+impl ModelArg {
+    /// The simulator's plant kind.
+    pub fn kind(self) -> PlantKind {
+        match self {
+            ModelArg::Rigid => PlantKind::Rigid,
+            ModelArg::TwoMass => PlantKind::TwoMass,
+            ModelArg::ThreeMass => PlantKind::ThreeMass,
+            ModelArg::FourMass => PlantKind::FourMass,
+            ModelArg::NonlinearTwoMass => PlantKind::NonlinearTwoMass,
+        }
+    }
+
+    /// Name on the command line (`three-mass`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelArg::Rigid => "rigid",
+            ModelArg::TwoMass => "two-mass",
+            ModelArg::ThreeMass => "three-mass",
+            ModelArg::FourMass => "four-mass",
+            ModelArg::NonlinearTwoMass => "nonlinear-two-mass",
+        }
+    }
+}
+
+/// Excitation signal kind on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ExcitationArg {
+    /// special odd multisine (seed 000 eq. (4)), for the linearity check
+    #[value(alias = "special-odd")]
+    OddMultisine,
+    /// random-phase full odd multisine
+    RandomOdd,
+    /// band-limited noise (validation data)
+    Noise,
+}
+
+impl ExcitationArg {
+    /// The generator's signal kind.
+    pub fn kind(self) -> SignalKind {
+        match self {
+            ExcitationArg::OddMultisine => SignalKind::SpecialOddMultisine,
+            ExcitationArg::RandomOdd => SignalKind::RandomOddMultisine,
+            ExcitationArg::Noise => SignalKind::BandLimitedNoise,
+        }
+    }
+}
+
+/// Arguments of `jointid simulate`.
+#[derive(Debug, Clone, Args)]
+pub struct SimulateArgs {
+    /// plant model
+    #[arg(long, visible_alias = "plant", value_enum, value_name = "MODEL",
+          default_value_t = ModelArg::ThreeMass)]
+    pub model: ModelArg,
+    /// override a physical parameter of the model, repeatable (`k_g=1.3e5`); names as in
+    /// seed 000 Table 1 (J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r) and
+    /// seed 001 (k3, F_c), those the model uses
+    #[arg(long = "param", value_name = "NAME=VALUE")]
+    pub params: Vec<String>,
+    /// effect spec, repeatable: `name` or `name:key=value,...` (e.g. `backlash:width=2e-5`),
+    /// or `none`; names: coulomb_friction, backlash, nonlinear_stiffness, extra_mode,
+    /// time_delay, torque_ripple
+    #[arg(long = "effect", value_name = "SPEC")]
+    pub effects: Vec<String>,
+    /// excitation signal
+    #[arg(long, visible_alias = "kind", value_enum, value_name = "KIND",
+          default_value_t = ExcitationArg::OddMultisine)]
+    pub excitation: ExcitationArg,
+    /// RMS of the motor-angle reference [rad] (default: core's paper default, 0.02)
+    #[arg(long, value_name = "RAD")]
+    pub rms: Option<f32>,
+    /// full-amplitude excitation periods (default: core's paper default, 4)
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub periods: Option<u32>,
+    /// seed of the run: the simulator's noise and disturbance (default 1) and, unless
+    /// --excitation-seed is given, the excitation's phases / noise (default: core's)
+    #[arg(long, value_name = "N")]
+    pub seed: Option<u64>,
+    /// excitation seed (phases / noise), when it should differ from --seed
+    #[arg(long, value_name = "N")]
+    pub excitation_seed: Option<u64>,
+    /// output: RUN.jcap (through the wire encoder, read like a board capture) or RUN.csv
+    /// (capture CSV)
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+    /// also write every parameter used (the whole simulator configuration) as JSON here
+    #[arg(long, visible_alias = "params-json", value_name = "FILE.json")]
+    pub params_out: Option<PathBuf>,
+    /// perfect sensors: no quantisation, no noise, no disturbance
+    #[arg(long)]
+    pub ideal_sensors: bool,
+    /// velocity and torque feedforward in the robot's controller
+    #[arg(long)]
+    pub feedforward: bool,
+    /// event-aware RK4 substeps per sample when the plant is nonlinear (used in the samples
+    /// with contact or stick–slip events; the others take one exponential step)
+    #[arg(long, value_name = "M", value_parser = clap::value_parser!(u32).range(1..))]
+    pub substeps: Option<u32>,
+}
+
+/// Errors of `jointid simulate` before or after the simulation itself.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SimulateError {
+    /// `--param` without `=`
+    #[error("--param `{spec}`: expected NAME=VALUE (valid names for {model}: {valid})")]
+    ParamSyntax {
+        /// the argument as given
+        spec: String,
+        /// model name
+        model: &'static str,
+        /// the names the model accepts, comma separated
+        valid: String,
+    },
+    /// `--param` naming a parameter the model does not have
+    #[error("--param `{name}`: unknown parameter for {model} (valid: {valid})")]
+    UnknownParam {
+        /// the name given
+        name: String,
+        /// model name
+        model: &'static str,
+        /// the names the model accepts, comma separated
+        valid: String,
+    },
+    /// `--param` with a value that is not a finite number
+    #[error(
+        "--param `{name}`: `{value}` is not a finite number (valid names for {model}: {valid})"
+    )]
+    BadValue {
+        /// parameter name
+        name: String,
+        /// the value as given
+        value: String,
+        /// model name
+        model: &'static str,
+        /// the names the model accepts, comma separated
+        valid: String,
+    },
+    /// `--out` with an extension other than `.jcap` or `.csv`
+    #[error("{path}: --out must end in .jcap or .csv")]
+    OutExtension {
+        /// the path given
+        path: PathBuf,
+    },
+    /// a message did not fit a wire frame (a bug of the encoder's limits)
+    #[error(transparent)]
+    Encode(#[from] BoardStreamError),
+    /// the `.jcap` could not be written
+    #[error(transparent)]
+    Jcap(#[from] JcapError),
+    /// a CSV or JSON output could not be written
+    #[error("{path}: {err}")]
+    Write {
+        /// the file
+        path: PathBuf,
+        /// what the operating system said
+        err: std::io::Error,
+    },
+}
+
+/// Access to one field of [`JointParams`] (its unit is the field's).
+pub type ParamField = fn(&mut JointParams) -> &mut f64;
+
+/// The physical parameters model `kind` uses, as (name, field) pairs, names as in
+/// [`JointParams::table`] (seed 000 Table 1, seed 001 `k3`, `F_c`).
+pub fn model_params(kind: PlantKind) -> Vec<(&'static str, ParamField)> {
+    type Field = ParamField;
+    let mut v: Vec<(&'static str, Field)> = vec![
+        ("J_m", |p| &mut p.j_m),
+        ("J_a1", |p| &mut p.j_a1),
+        ("J_a2", |p| &mut p.j_a2),
+    ];
+    let gearbox: [(&'static str, Field); 2] = [("k_g", |p| &mut p.k_g), ("d_g", |p| &mut p.d_g)];
+    let arm: [(&'static str, Field); 2] = [("k_a", |p| &mut p.k_a), ("d_a", |p| &mut p.d_a)];
+    match kind {
+        PlantKind::Rigid => {}
+        PlantKind::TwoMass | PlantKind::NonlinearTwoMass => v.extend(gearbox),
+        PlantKind::ThreeMass => v.extend(gearbox.into_iter().chain(arm)),
+        PlantKind::FourMass => {
+            v.push(("J_p", |p| &mut p.j_p));
+            v.extend(gearbox.into_iter().chain(arm));
+            v.extend::<[(&'static str, Field); 2]>([
+                ("k_p", |p| &mut p.k_p),
+                ("d_p", |p| &mut p.d_p),
+            ]);
+        }
+    }
+    v.extend::<[(&'static str, Field); 2]>([("f_m", |p| &mut p.f_m), ("r", |p| &mut p.r)]);
+    if kind == PlantKind::NonlinearTwoMass {
+        v.extend::<[(&'static str, Field); 2]>([("k3", |p| &mut p.k3), ("F_c", |p| &mut p.f_c)]);
+    }
+    v
+}
+
+/// Applies `NAME=VALUE` overrides to the parameters of model `model`.
+///
+/// # Errors
+/// [`SimulateError::ParamSyntax`], [`SimulateError::UnknownParam`] or
+/// [`SimulateError::BadValue`], each naming the parameter and listing the valid names.
+pub fn apply_params(
+    model: ModelArg,
+    specs: &[String],
+    params: &mut JointParams,
+) -> Result<(), SimulateError> {
+    let fields = model_params(model.kind());
+    let valid = || {
+        fields
+            .iter()
+            .map(|(n, _)| *n)
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    for spec in specs {
+        let Some((name, value)) = spec.split_once('=') else {
+            return Err(SimulateError::ParamSyntax {
+                spec: spec.clone(),
+                model: model.name(),
+                valid: valid(),
+            });
+        };
+        let (name, value) = (name.trim(), value.trim());
+        let Some((_, field)) = fields.iter().find(|(n, _)| *n == name) else {
+            return Err(SimulateError::UnknownParam {
+                name: name.to_string(),
+                model: model.name(),
+                valid: valid(),
+            });
+        };
+        match value.parse::<f64>() {
+            Ok(v) if v.is_finite() => *field(params) = v,
+            _ => {
+                return Err(SimulateError::BadValue {
+                    name: name.to_string(),
+                    value: value.to_string(),
+                    model: model.name(),
+                    valid: valid(),
+                })
+            }
+        }
+    }
+    Ok(())
+}
+
+/// What `--out` writes, from its extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OutFormat {
+    /// `.jcap`: the wire stream of a board
+    Jcap,
+    /// `.csv`: the capture CSV
+    Csv,
+}
+
+/// The format `path` asks for (extension `.jcap` or `.csv`, any case).
+///
+/// # Errors
+/// [`SimulateError::OutExtension`] for anything else.
+pub fn out_format(path: &Path) -> Result<OutFormat, SimulateError> {
+    match path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+    {
+        Some(e) if e == "jcap" => Ok(OutFormat::Jcap),
+        Some(e) if e == "csv" => Ok(OutFormat::Csv),
+        _ => Err(SimulateError::OutExtension {
+            path: path.to_path_buf(),
+        }),
+    }
+}
+
+/// The simulator configuration and the excitation these arguments describe.
+///
+/// # Errors
+/// Bad `--param` or `--effect` specs.
+pub fn configure(
+    args: &SimulateArgs,
+) -> Result<(SimConfig, ExcitationConfig), Box<dyn std::error::Error + Send + Sync>> {
+    let mut plant = Plant::new(args.model.kind());
+    apply_params(args.model, &args.params, &mut plant.params)?;
+    let mut cfg = SimConfig {
+        plant,
+        effects: parse_effects(&args.effects)?,
+        ..SimConfig::default()
+    };
+    if let Some(s) = args.seed {
+        cfg.seed = s;
+    }
+    if args.ideal_sensors {
+        cfg.sensors = SensorConfig::ideal();
+    }
+    cfg.controller.feedforward = args.feedforward;
+    if let Some(m) = args.substeps {
+        cfg.integration.substeps = m;
+    }
+    let mut exc = ExcitationConfig::paper_default();
+    exc.kind = args.excitation.kind();
+    if let Some(r) = args.rms {
+        exc.rms_rad = r;
+    }
+    if let Some(p) = args.periods {
+        exc.periods = p;
+    }
+    if let Some(s) = args.excitation_seed.or(args.seed) {
+        exc.seed = s;
+    }
+    cfg.sample_rate_hz = f64::from(exc.fs_hz);
+    Ok((cfg, exc))
+}
+
+/// The run as a capture CSV dataset: the simulator's values (unquantised), the excitation,
+/// and `sim_plant`, `sim_effects`, `sim_seed` as meta.
+pub fn to_dataset(out: &SimOutput, cfg: &SimConfig, excitation: &ExcitationConfig) -> Dataset {
+    let meta = [
+        ("sim_plant", cfg.plant.kind.name().to_string()),
+        ("sim_effects", effects_text(cfg, ";")),
+        ("sim_seed", cfg.seed.to_string()),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect();
+    Dataset {
+        name: "simulate".to_string(),
+        data: out.to_id_data(),
+        t0: 0.0,
+        excitation: Some(*excitation),
+        meta,
+    }
+}
+
+fn effects_text(cfg: &SimConfig, sep: &str) -> String {
+    if cfg.effects.is_empty() {
+        "none".to_string()
+    } else {
+        cfg.effects
+            .iter()
+            .map(|e| e.to_string())
+            .collect::<Vec<_>>()
+            .join(sep)
+    }
+}
+
+#[derive(Serialize)]
+struct Report<'a> {
+    file: String,
+    format: OutFormat,
+    model: &'static str,
+    effects: Vec<String>,
+    samples: usize,
+    duration_s: f64,
+    params_out: Option<String>,
+    /// wire scale (`.jcap` only)
+    scale: Option<Scale>,
+    stream_bytes: Option<u64>,
+    integrator: Integrator,
+    saturated_samples: u64,
+    u_rms: f64,
+    theta_m_rms: f64,
+    resonances_hz: Vec<f64>,
+    anti_resonances_hz: Vec<f64>,
+    config: &'a SimConfig,
+}
+
+fn rms(x: &[f64]) -> f64 {
+    let n = x.len().max(1) as f64;
+    let m = x.iter().sum::<f64>() / n;
+    (x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n).sqrt()
+}
+
+/// Runs `jointid simulate`.
+///
+/// # Errors
+/// Bad `--param`, `--effect` or `--out`, invalid configuration or excitation, write errors.
+pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
+    let format = out_format(&args.out)?;
+    let (cfg, exc) = configure(args)?;
+    let out = simulate_excitation(&cfg, &exc)?;
+    let write_err = |path: &Path| {
+        let path = path.to_path_buf();
+        move |err| SimulateError::Write { path, err }
+    };
+    let (scale, stream_bytes) = match format {
+        OutFormat::Jcap => {
+            let opts = WireOptions::for_sim(&cfg);
+            let stream = encode_session(&out, &exc, &opts)?;
+            (Some(opts.scale), Some(write_stream(&args.out, &stream)?))
+        }
+        OutFormat::Csv => {
+            let file = std::fs::File::create(&args.out).map_err(write_err(&args.out))?;
+            let mut w = std::io::BufWriter::new(file);
+            write_capture_csv(&mut w, &to_dataset(&out, &cfg, &exc))
+                .map_err(write_err(&args.out))?;
+            (None, None)
+        }
+    };
+    if let Some(p) = &args.params_out {
+        std::fs::write(p, cfg.params_json()? + "\n").map_err(write_err(p))?;
+    }
+    let modes = Mechanism::new(&cfg.plant, &cfg.effects).modal_frequencies();
+    let report = Report {
+        file: args.out.display().to_string(),
+        format,
+        model: args.model.name(),
+        effects: cfg.effects.iter().map(|e| e.to_string()).collect(),
+        samples: out.len(),
+        duration_s: out.len() as f64 * out.sample_interval_s,
+        params_out: args.params_out.as_ref().map(|p| p.display().to_string()),
+        scale,
+        stream_bytes,
+        integrator: out.integrator,
+        saturated_samples: out.saturated_samples,
+        u_rms: rms(&out.u),
+        theta_m_rms: rms(&out.theta_m),
+        resonances_hz: modes.resonances_hz,
+        anti_resonances_hz: modes.anti_resonances_hz,
+        config: &cfg,
+    };
+    if ctx.json {
+        print_json(ctx.out, &report)?;
+        return Ok(Outcome::Ok);
+    }
+    let o = &mut *ctx.out;
+    writeln!(
+        o,
+        "wrote {} ({} samples, {:.2} s at {} Hz)",
+        report.file, report.samples, report.duration_s, exc.fs_hz
+    )?;
+    if let Some(s) = &report.scale {
+        writeln!(
+            o,
+            "wire scale {:e} N·m/count, {:e} rad/count",
+            s.torque_nm_per_count, s.angle_rad_per_count
+        )?;
+    }
+    writeln!(
+        o,
+        "model {}, effects: {}",
+        report.model,
+        effects_text(&cfg, " ")
+    )?;
+    let fmt = |v: &[f64]| {
+        v.iter()
+            .map(|f| format!("{f:.2}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    writeln!(
+        o,
+        "modes seen from the motor: resonances [{}] Hz, anti-resonances [{}] Hz",
+        fmt(&report.resonances_hz),
+        fmt(&report.anti_resonances_hz)
+    )?;
+    writeln!(
+        o,
+        "integrator {:?}, u rms {:.4} N·m, theta_m rms {:.5} rad, saturated samples {}",
+        report.integrator, report.u_rms, report.theta_m_rms, report.saturated_samples
+    )?;
+    if let Some(p) = &report.params_out {
+        writeln!(o, "parameters: {p}")?;
+    }
+    Ok(Outcome::Ok)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{default_loaders, Cli, Command};
+    use clap::Parser;
+    use jointid::data::{load_csv, ColumnMap};
+
+    fn temp(name: &str) -> PathBuf {
+        std::env::temp_dir().join(format!("jointid-sim-{}-{name}", std::process::id()))
+    }
+
+    /// Runs `cli` as the binary does (JSON when `--json` was given); the result and the output.
+    fn run_cli(cli: &Cli) -> (crate::CmdResult, Vec<u8>) {
+        let loaders = default_loaders();
+        let mut buf = Vec::new();
+        let result = crate::run(
+            cli,
+            &mut Context {
+                json: cli.json,
+                loaders: &loaders,
+                out: &mut buf,
+            },
+        );
+        (result, buf)
+    }
+
+    #[test]
+    fn simulate_writes_a_capture_csv_that_data_reads_back() {
+        let csv = temp("out.csv");
+        let json = temp("params.json");
+        let cli = Cli::try_parse_from([
+            "jointid",
+            "simulate",
+            "--out",
+            csv.to_str().unwrap(),
+            "--effect",
+            "backlash:width=3e-5",
+            "--effect",
+            "time_delay",
+            "--periods",
+            "1",
+            "--params-json",
+            json.to_str().unwrap(),
+        ])
+        .unwrap();
+        let Command::Simulate(args) = &cli.command else {
+            panic!("parsed {:?}", cli.command)
+        };
+        let (result, buf) = run_cli(&cli);
+        let outcome = result.unwrap();
+        assert_eq!(outcome, Outcome::Ok);
+        let text = String::from_utf8(buf).unwrap();
+        assert!(
+            text.contains("effects: backlash:width=0.00003 time_delay:samples=1.5"),
+            "{text}"
+        );
+        let ds = load_csv(&csv, &ColumnMap::capture()).unwrap();
+        let (cfg, exc) = configure(args).unwrap();
+        assert_eq!(ds.excitation, Some(exc));
+        assert_eq!(
+            ds.meta.get("sim_plant").map(String::as_str),
+            Some("three_mass")
+        );
+        let direct = simulate_excitation(&cfg, &exc).unwrap();
+        assert_eq!(ds.data.u, direct.u);
+        assert_eq!(ds.data.y, direct.theta_m);
+        assert_eq!(ds.data.r.as_deref(), Some(&direct.theta_ref[..]));
+        assert!((ds.data.ts - 5e-4).abs() < 1e-15);
+        let back: SimConfig =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        assert_eq!(back, cfg);
+        std::fs::remove_file(&csv).unwrap();
+        std::fs::remove_file(&json).unwrap();
+    }
+
+    #[test]
+    fn simulate_rejects_a_bad_effect_spec() {
+        let cli = Cli::try_parse_from([
+            "jointid",
+            "simulate",
+            "--out",
+            temp("never.csv").to_str().unwrap(),
+            "--effect",
+            "backlash:widht=1",
+        ])
+        .unwrap();
+        let err = run_cli(&cli).0.unwrap_err();
+        assert!(err.to_string().contains("unknown key `widht`"), "{err}");
+        assert!(!temp("never.csv").exists());
+    }
+
+    fn parse(args: &[&str]) -> SimulateArgs {
+        let mut v = vec!["jointid", "simulate"];
+        v.extend_from_slice(args);
+        match Cli::try_parse_from(v).unwrap().command {
+            Command::Simulate(a) => a,
+            c => panic!("parsed {c:?}"),
+        }
+    }
+
+    #[test]
+    fn simulate_accepts_the_issue_interface_and_the_old_aliases() {
+        let a = parse(&[
+            "--model",
+            "three_mass",
+            "--excitation",
+            "random-odd",
+            "--seed",
+            "9",
+            "--out",
+            "a.jcap",
+            "--params-out",
+            "p.json",
+        ]);
+        assert_eq!(a.model, ModelArg::ThreeMass);
+        assert_eq!(a.excitation, ExcitationArg::RandomOdd);
+        assert_eq!(a.params_out, Some(PathBuf::from("p.json")));
+        let (cfg, exc) = configure(&a).unwrap();
+        assert_eq!((cfg.seed, exc.seed), (9, 9));
+        let b = parse(&[
+            "--plant",
+            "nonlinear-two-mass",
+            "--kind",
+            "special-odd",
+            "--out",
+            "b.csv",
+            "--params-json",
+            "q.json",
+            "--seed",
+            "3",
+            "--excitation-seed",
+            "4",
+        ]);
+        assert_eq!(b.model, ModelArg::NonlinearTwoMass);
+        assert_eq!(b.excitation, ExcitationArg::OddMultisine);
+        assert_eq!(b.params_out, Some(PathBuf::from("q.json")));
+        let (cfg, exc) = configure(&b).unwrap();
+        assert_eq!((cfg.seed, exc.seed), (3, 4));
+        assert_eq!(cfg.plant.kind, PlantKind::NonlinearTwoMass);
+        let d = parse(&["--out", "c.csv"]);
+        let (cfg, exc) = configure(&d).unwrap();
+        assert_eq!(cfg.plant.kind, PlantKind::ThreeMass);
+        assert_eq!(exc, ExcitationConfig::paper_default());
+        assert_eq!(cfg.seed, SimConfig::default().seed);
+        assert!(Cli::try_parse_from([
+            "jointid",
+            "simulate",
+            "--model",
+            "five-mass",
+            "--out",
+            "x.csv"
+        ])
+        .is_err());
+    }
+
+    #[test]
+    fn param_overrides_the_named_parameter_and_rejects_names_the_model_lacks() {
+        let a = parse(&[
+            "--model",
+            "four-mass",
+            "--param",
+            "k_g=1.3e5",
+            "--param",
+            "J_p = 2",
+            "--out",
+            "x.csv",
+        ]);
+        let (cfg, _) = configure(&a).unwrap();
+        assert_eq!(cfg.plant.params.k_g, 1.3e5);
+        assert_eq!(cfg.plant.params.j_p, 2.0);
+        assert_eq!(cfg.plant.params.k_a, JointParams::default().k_a);
+        let mut p = JointParams::default();
+        let err = apply_params(ModelArg::ThreeMass, &["J_p=2".into()], &mut p).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "--param `J_p`: unknown parameter for three-mass (valid: J_m, J_a1, J_a2, k_g, d_g, k_a, d_a, f_m, r)"
+        );
+        let err = apply_params(ModelArg::Rigid, &["k_g=1".into()], &mut p).unwrap_err();
+        assert!(
+            err.to_string().contains("(valid: J_m, J_a1, J_a2, f_m, r)"),
+            "{err}"
+        );
+        let err = apply_params(ModelArg::NonlinearTwoMass, &["k3=abc".into()], &mut p).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "--param `k3`: `abc` is not a finite number (valid names for nonlinear-two-mass: J_m, J_a1, J_a2, k_g, d_g, f_m, r, k3, F_c)"
+        );
+        let err = apply_params(ModelArg::TwoMass, &["k_g".into()], &mut p).unwrap_err();
+        assert!(matches!(err, SimulateError::ParamSyntax { .. }), "{err}");
+        let err = apply_params(ModelArg::TwoMass, &["k_g=inf".into()], &mut p).unwrap_err();
+        assert!(matches!(err, SimulateError::BadValue { .. }), "{err}");
+        assert_eq!(p, JointParams::default(), "nothing applied on error");
+        apply_params(
+            ModelArg::NonlinearTwoMass,
+            &["F_c=0.05".into(), "k3=1e12".into()],
+            &mut p,
+        )
+        .unwrap();
+        assert_eq!((p.f_c, p.k3), (0.05, 1e12));
+        // every name the models accept is a name of the parameter table
+        let table: Vec<&str> = JointParams::default().table().iter().map(|t| t.0).collect();
+        for k in PlantKind::ALL {
+            for (n, _) in model_params(k) {
+                assert!(table.contains(&n), "{n}");
+            }
+        }
+    }
+
+    #[test]
+    fn simulate_refuses_an_out_extension_other_than_jcap_or_csv() {
+        let out = temp("run.txt");
+        let cli =
+            Cli::try_parse_from(["jointid", "simulate", "--out", out.to_str().unwrap()]).unwrap();
+        let err = run_cli(&cli).0.unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            format!("{}: --out must end in .jcap or .csv", out.display())
+        );
+        assert!(!out.exists());
+        assert_eq!(out_format(Path::new("A.JCAP")).unwrap(), OutFormat::Jcap);
+        assert!(out_format(Path::new("run")).is_err());
+    }
+
+    #[test]
+    fn simulate_jcap_reads_back_as_a_board_capture() {
+        let jcap = temp("run.jcap");
+        let cli = Cli::try_parse_from([
+            "jointid",
+            "--json",
+            "simulate",
+            "--model",
+            "two-mass",
+            "--periods",
+            "1",
+            "--out",
+            jcap.to_str().unwrap(),
+        ])
+        .unwrap();
+        let Command::Simulate(args) = &cli.command else {
+            unreachable!()
+        };
+        let (result, buf) = run_cli(&cli);
+        result.unwrap();
+        let summary: serde_json::Value = serde_json::from_slice(&buf).unwrap();
+        let rec = jointid::capture::read_jcap(&jcap).unwrap();
+        let (cfg, exc) = configure(args).unwrap();
+        let direct = simulate_excitation(&cfg, &exc).unwrap();
+        assert_eq!(summary["samples"], direct.len());
+        assert_eq!(summary["model"], "two-mass");
+        assert_eq!(summary["format"], "jcap");
+        assert_eq!(rec.header, WireOptions::for_sim(&cfg).header(&exc));
+        assert_eq!(rec.samples.len(), direct.len());
+        assert!(rec.report.damaged_frames.is_empty() && rec.report.gaps.is_empty());
+        assert!(rec.report.reference_mismatches.is_empty());
+        let half = 0.5 * f64::from(jointid::sim::board::SIM_TORQUE_NM_PER_COUNT) * (1.0 + 1e-9);
+        for (s, u) in rec.samples.iter().zip(&direct.u) {
+            assert!((s.u - u).abs() <= half, "{} vs {u}", s.u);
+        }
+        std::fs::remove_file(&jcap).unwrap();
+    }
+}

@@ -1,0 +1,191 @@
+//! `jointid validate DATA --simulated COL`: FIT (toolbox `compare`
+//! definition) and residual tests of a simulated output against measured
+//! data (see [`jointid::ident::validate`]).
+//!
+//! The simulated output ŷ is a column of DATA or of another CSV with the same
+//! time column (`--simulated-file`). When the `fit` command lands, a
+//! `--model FILE` source of ŷ can be added next to these.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use clap::Args;
+use serde::Serialize;
+
+use super::args::{DataArgs, PrepArgs};
+use super::{print_json, CmdResult, Context, Outcome};
+use jointid::data::ColumnMap;
+use jointid::ident::validate::{validate, CorrelationTest, Validation, DEFAULT_LAGS, FIT_NAME};
+
+/// Arguments of `jointid validate`.
+#[derive(Debug, Clone, Args)]
+pub struct ValidateArgs {
+    /// measured data file and columns
+    #[command(flatten)]
+    pub data: DataArgs,
+    /// column holding the simulated output ŷ
+    #[arg(long, value_name = "COL")]
+    pub simulated: String,
+    /// CSV holding the simulated column (default: DATA); same time column
+    #[arg(long, value_name = "FILE")]
+    pub simulated_file: Option<PathBuf>,
+    /// lags M of the residual tests
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS)]
+    pub lags: usize,
+    /// preparation applied to measured and simulated data alike
+    #[command(flatten)]
+    pub prep: PrepArgs,
+}
+
+#[derive(Serialize)]
+struct Report<'a> {
+    file: &'a str,
+    simulated: &'a str,
+    validation: &'a Validation,
+}
+
+/// Runs `jointid validate`.
+///
+/// # Errors
+/// Loading, length mismatch and output errors.
+pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
+    let map = args.data.column_map();
+    let ds = args.data.load(ctx.loaders)?;
+    let sim_path = args
+        .simulated_file
+        .clone()
+        .unwrap_or_else(|| args.data.path.clone());
+    let sim_map = ColumnMap {
+        time: map.time.clone(),
+        input: args.simulated.clone(),
+        output: args.simulated.clone(),
+        reference: None,
+    };
+    let sim = ctx.loaders.load(&sim_path, &sim_map)?;
+    let meas = args.prep.apply(&ds.data)?;
+    let yhat = args.prep.apply(&sim.data)?.y;
+    let v = validate(&meas.u, &meas.y, &yhat, args.lags)?;
+    if ctx.json {
+        print_json(
+            ctx.out,
+            &Report {
+                file: &ds.name,
+                simulated: &args.simulated,
+                validation: &v,
+            },
+        )?;
+    } else {
+        writeln!(
+            ctx.out,
+            "jointid validate: {} (simulated: {})",
+            ds.name, args.simulated
+        )?;
+        writeln!(ctx.out, "  {FIT_NAME}: {:.2}", v.fit)?;
+        test_line(ctx.out, &v.whiteness)?;
+        test_line(ctx.out, &v.independence)?;
+        writeln!(
+            ctx.out,
+            "  result: {}",
+            if v.pass { "pass" } else { "FAIL" }
+        )?;
+    }
+    Ok(if v.pass {
+        Outcome::Ok
+    } else {
+        Outcome::CheckFailed
+    })
+}
+
+fn test_line(out: &mut dyn Write, t: &CorrelationTest) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "  {}: lags {}..{}, 99 % bound ±{:.4}, {} lag(s) outside, max |r| {:.4}, ζ = {:.1} vs χ²({}) 99 % = {:.1}: {}",
+        t.name,
+        t.lags.first().copied().unwrap_or(0),
+        t.lags.last().copied().unwrap_or(0),
+        t.bound,
+        t.outside,
+        t.max_abs,
+        t.statistic,
+        t.dof,
+        t.critical,
+        if t.pass { "pass" } else { "FAIL" }
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{default_loaders, run as run_cli, Cli};
+    use super::*;
+    use clap::Parser;
+
+    #[test]
+    fn validate_reports_fit_and_fails_on_a_wrong_model() {
+        let dir = std::env::temp_dir().join(format!("jointid-validate-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let csv = dir.join("v.csv");
+        // y(t) = 0.8 u(t−1) + small white noise; `good` is the true model,
+        // `bad` has the wrong gain
+        let mut state = 7u64;
+        let mut rnd = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+        };
+        let u: Vec<f64> = (0..3000).map(|_| rnd()).collect();
+        let mut text = String::from("time,force,pos,good,bad\n");
+        for t in 0..3000 {
+            let ytrue = if t > 0 { 0.8 * u[t - 1] } else { 0.0 };
+            text.push_str(&format!(
+                "{},{},{},{},{}\n",
+                t as f64 * 0.01,
+                u[t],
+                ytrue + 0.01 * rnd(),
+                ytrue,
+                0.5 * ytrue
+            ));
+        }
+        std::fs::write(&csv, text).unwrap();
+        let loaders = default_loaders();
+        let go = |col: &str, json: bool| {
+            let mut argv = vec![
+                "jointid",
+                "validate",
+                csv.to_str().unwrap(),
+                "--time",
+                "time",
+                "--input",
+                "force",
+                "--output",
+                "pos",
+                "--simulated",
+                col,
+            ];
+            if json {
+                argv.push("--json");
+            }
+            let cli = Cli::try_parse_from(argv).unwrap();
+            let mut buf = Vec::new();
+            let r = run_cli(
+                &cli,
+                &mut Context {
+                    json: cli.json,
+                    loaders: &loaders,
+                    out: &mut buf,
+                },
+            )
+            .unwrap();
+            (r, String::from_utf8(buf).unwrap())
+        };
+        let (r, out) = go("good", false);
+        assert_eq!(r, Outcome::Ok, "{out}");
+        assert!(out.contains("FIT (toolbox compare, NRMSE) [%]: 9"), "{out}");
+        let (r, out) = go("bad", true);
+        assert_eq!(r, Outcome::CheckFailed, "{out}");
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        assert_eq!(v["validation"]["independence"]["pass"], false);
+        assert!(v["validation"]["fit"].as_f64().unwrap() < 60.0);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

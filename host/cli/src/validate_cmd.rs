@@ -1,0 +1,177 @@
+//! `jointid validate`: two sources of the simulated output, one command.
+//!
+//! - `jointid validate MODEL.json DATA [--require-fit X]`: simulate a model
+//!   saved by `jointid fit --save` on new data (prepared as at fitting:
+//!   same decimation and detrending, initial state estimated as the
+//!   toolbox's `compare` does; a physical model saved at the capture rate
+//!   runs there and its output is decimated like the data,
+//!   [`jointid::ident::fit::FitData`]), then FIT and the residual tests.
+//! - `jointid validate DATA --simulated COL [--simulated-file FILE]`: the
+//!   simulated output is a column ([`super::validate`], unchanged).
+//!
+//! Exit codes: 0 when it ran, whatever the residual verdicts (they are
+//! reported, pass or fail: closed-loop data often fail the whiteness test
+//! for a model that is still useful); 1 only when `--require-fit X` was
+//! given and the FIT is below X; 2 on any error.
+
+use std::path::PathBuf;
+
+use clap::Args;
+use serde::Serialize;
+
+use super::args::{DataArgs, PrepArgs};
+use super::fit::print_tests;
+use super::validate::{self as column_validate, ValidateArgs};
+use super::{print_json, CmdResult, Context, Outcome};
+use jointid::ident::fit::{FitData, SavedModel};
+use jointid::ident::validate::{Validation, DEFAULT_LAGS, FIT_NAME};
+
+/// Arguments of `jointid validate`.
+#[derive(Debug, Clone, Args)]
+pub struct ValidateCmdArgs {
+    /// MODEL.json DATA (a model saved by `fit --save`), or DATA with --simulated
+    #[arg(value_name = "FILE", num_args = 1..=2, required = true)]
+    pub files: Vec<PathBuf>,
+    /// time column [s] (with --input and --output)
+    #[arg(long, value_name = "COL", requires_all = ["input", "output"])]
+    pub time: Option<String>,
+    /// input column (torque [N·m] or force [N])
+    #[arg(long, value_name = "COL", requires_all = ["time", "output"])]
+    pub input: Option<String>,
+    /// output column (motor angle [rad] or position [m])
+    #[arg(long, value_name = "COL", requires_all = ["time", "input"])]
+    pub output: Option<String>,
+    /// reference column
+    #[arg(long, value_name = "COL")]
+    pub reference: Option<String>,
+    /// column holding a simulated output ŷ (instead of a model file)
+    #[arg(long, value_name = "COL")]
+    pub simulated: Option<String>,
+    /// CSV holding the simulated column (default: DATA)
+    #[arg(long, value_name = "FILE", requires = "simulated")]
+    pub simulated_file: Option<PathBuf>,
+    /// lags M of the residual tests
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS)]
+    pub lags: usize,
+    /// exit with 1 when the FIT [%] is below this
+    #[arg(long, value_name = "X")]
+    pub require_fit: Option<f64>,
+    /// preparation of DATA for --simulated (a model file carries its own)
+    #[command(flatten)]
+    pub prep: PrepArgs,
+}
+
+#[derive(Serialize)]
+struct Report<'a> {
+    model_file: String,
+    model: &'a str,
+    file: &'a str,
+    samples: usize,
+    ts: f64,
+    fit_name: &'a str,
+    fit: f64,
+    fit_estimation: f64,
+    require_fit: Option<f64>,
+    fit_ok: bool,
+    residual_tests: &'a Validation,
+}
+
+/// Runs `jointid validate`.
+///
+/// # Errors
+/// Loading, model-file, preparation and output errors.
+pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
+    let data_args = |path: &PathBuf| DataArgs {
+        path: path.clone(),
+        time: args.time.clone(),
+        input: args.input.clone(),
+        output: args.output.clone(),
+        reference: args.reference.clone(),
+    };
+    if let Some(sim) = &args.simulated {
+        if args.files.len() != 1 {
+            return Err("validate with --simulated takes one DATA file".into());
+        }
+        let a = ValidateArgs {
+            data: data_args(&args.files[0]),
+            simulated: sim.clone(),
+            simulated_file: args.simulated_file.clone(),
+            lags: args.lags,
+            prep: args.prep.clone(),
+        };
+        return column_validate::run(&a, ctx);
+    }
+    if args.files.len() != 2 {
+        return Err(
+            "validate needs MODEL.json DATA (a model saved by `jointid fit --save`), or DATA --simulated COL"
+                .into(),
+        );
+    }
+    let mpath = &args.files[0];
+    let text = std::fs::read_to_string(mpath).map_err(|e| format!("{}: {e}", mpath.display()))?;
+    let saved: SavedModel = serde_json::from_str(&text)
+        .map_err(|e| format!("{}: not a jointid model file: {e}", mpath.display()))?;
+    let fitted = saved
+        .to_fitted()
+        .map_err(|e| format!("{}: {e}", mpath.display()))?;
+    let ds = data_args(&args.files[1]).load(ctx.loaders)?;
+    let both = FitData::new(&ds.data, saved.prep).map_err(|e| format!("{}: {e}", ds.name))?;
+    let v = fitted
+        .evaluate_on(&both, args.lags)
+        .map_err(|e| format!("{}: {e}", ds.name))?;
+    let data = &both.prepared;
+    let fit_ok = args.require_fit.is_none_or(|x| v.fit >= x);
+    if ctx.json {
+        print_json(
+            ctx.out,
+            &Report {
+                model_file: mpath.display().to_string(),
+                model: &saved.model,
+                file: &ds.name,
+                samples: data.len(),
+                ts: data.ts,
+                fit_name: FIT_NAME,
+                fit: v.fit,
+                fit_estimation: saved.fit_estimation,
+                require_fit: args.require_fit,
+                fit_ok,
+                residual_tests: &v,
+            },
+        )?;
+    } else {
+        let out = &mut *ctx.out;
+        writeln!(
+            out,
+            "jointid validate: {} ({}) on {}",
+            mpath.display(),
+            saved.model,
+            ds.name
+        )?;
+        writeln!(
+            out,
+            "  {} samples, Ts = {} s (decimation {})",
+            data.len(),
+            data.ts,
+            saved.prep.decimate
+        )?;
+        writeln!(
+            out,
+            "  {FIT_NAME}: {:.2} (estimation: {:.2})",
+            v.fit, saved.fit_estimation
+        )?;
+        writeln!(out, "  residual tests (99 %):")?;
+        print_tests(out, "data", &v)?;
+        if let Some(x) = args.require_fit {
+            writeln!(
+                out,
+                "  required FIT {x:.2}: {}",
+                if fit_ok { "met" } else { "NOT met" }
+            )?;
+        }
+    }
+    Ok(if fit_ok {
+        Outcome::Ok
+    } else {
+        Outcome::CheckFailed
+    })
+}

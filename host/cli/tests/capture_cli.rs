@@ -1,0 +1,777 @@
+//! End-to-end tests of `jointid capture`, `info` and `export`, run on the built binary.
+//!
+//! Every stream is synthesised with the core's encoder from known samples
+//! (`jointid::test_support::synth`), so what must arrive, and what must be reported damaged
+//! after a fault is injected, is computed here from where the frames lie and where the
+//! fault was put, not from the decoder under test.
+
+use std::collections::BTreeMap;
+use std::fs::OpenOptions;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use jointid::test_support::synth::{
+    synth_stream, FrameContent, FrameSpan, SynthOptions, SynthStream,
+};
+use serde_json::Value;
+
+mod common;
+use common::{jointid, json_of, tmpdir, BIN};
+
+fn small() -> SynthStream {
+    synth_stream(&SynthOptions::small())
+}
+
+fn batches(s: &SynthStream) -> Vec<FrameSpan> {
+    s.frames
+        .iter()
+        .copied()
+        .filter(|f| matches!(f.content, FrameContent::Batch { .. }))
+        .collect()
+}
+
+fn seqs_of(f: &FrameSpan) -> std::ops::Range<u32> {
+    match f.content {
+        FrameContent::Batch { first, len } => first..first + len,
+        _ => 0..0,
+    }
+}
+
+fn bytes_of<'a>(s: &'a SynthStream, f: &FrameSpan) -> &'a [u8] {
+    &s.bytes[f.offset as usize..(f.offset + f.len) as usize]
+}
+
+/// `(offset, len)` of each damaged frame in a report.
+fn damaged(v: &Value) -> Vec<(u64, u64)> {
+    v["damaged_frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| (d["offset"].as_u64().unwrap(), d["len"].as_u64().unwrap()))
+        .collect()
+}
+
+fn gaps(v: &Value) -> Vec<(u64, u64)> {
+    v["gaps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|g| (g["from"].as_u64().unwrap(), g["to"].as_u64().unwrap()))
+        .collect()
+}
+
+/// Inclusive ranges of the sorted sequence numbers in `lost`, merged.
+fn ranges(mut lost: Vec<u32>) -> Vec<(u64, u64)> {
+    lost.sort_unstable();
+    let mut out: Vec<(u64, u64)> = Vec::new();
+    for s in lost {
+        match out.last_mut() {
+            Some(r) if r.1 + 1 == u64::from(s) => r.1 += 1,
+            _ => out.push((u64::from(s), u64::from(s))),
+        }
+    }
+    out
+}
+
+/// Parses a capture CSV: comments and rows.
+fn read_csv(path: &Path) -> (BTreeMap<String, String>, Vec<[f64; 4]>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut meta = BTreeMap::new();
+    let mut rows = Vec::new();
+    let mut header_seen = false;
+    for line in text.lines() {
+        if let Some(c) = line.strip_prefix("# ") {
+            let (k, v) = c.split_once('=').unwrap();
+            meta.insert(k.to_string(), v.to_string());
+        } else if !header_seen {
+            assert_eq!(line, "t,theta_ref,u,theta_m");
+            header_seen = true;
+        } else {
+            let v: Vec<f64> = line.split(',').map(|c| c.parse().unwrap()).collect();
+            rows.push([v[0], v[1], v[2], v[3]]);
+        }
+    }
+    (meta, rows)
+}
+
+/// Checks that the CSV rows are exactly the synthesised samples whose seq is not in `lost`.
+/// `jointid export <jcap> --csv <csv>` must succeed; the CSV read back
+fn export_csv(jcap: &Path, csv: &Path) -> (BTreeMap<String, String>, Vec<[f64; 4]>) {
+    let e = jointid(&[
+        "export",
+        jcap.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(e.status.success(), "{}", String::from_utf8_lossy(&e.stderr));
+    read_csv(csv)
+}
+
+fn assert_rows_match(s: &SynthStream, rows: &[[f64; 4]], lost: &[u32]) {
+    let fs = f64::from(s.header.sample_rate_hz);
+    let tq = f64::from(s.header.scale.torque_nm_per_count);
+    let an = f64::from(s.header.scale.angle_rad_per_count);
+    let expected: Vec<[f64; 4]> = s
+        .samples
+        .iter()
+        .zip(&s.reference)
+        .filter(|(x, _)| !lost.contains(&x.seq))
+        .map(|(x, r)| {
+            [
+                f64::from(x.seq) / fs,
+                f64::from(*r),
+                f64::from(x.torque) * tq,
+                f64::from(x.angle) * an,
+            ]
+        })
+        .collect();
+    assert_eq!(rows.len(), expected.len());
+    for (i, (got, want)) in rows.iter().zip(&expected).enumerate() {
+        assert_eq!(got, want, "row {i}");
+    }
+}
+
+fn wait_until(what: &str, timeout: Duration, mut ok: impl FnMut() -> bool) {
+    let t0 = Instant::now();
+    while !ok() {
+        assert!(t0.elapsed() < timeout, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn events(jcap: &Path) -> String {
+    let mut p = jcap.as_os_str().to_os_string();
+    p.push(".events");
+    std::fs::read_to_string(PathBuf::from(p)).unwrap_or_default()
+}
+
+fn file_len(p: &Path) -> u64 {
+    std::fs::metadata(p).map(|m| m.len()).unwrap_or(0)
+}
+
+fn wait_exit(child: &mut Child, timeout: Duration) -> Output {
+    let t0 = Instant::now();
+    loop {
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        if t0.elapsed() > timeout {
+            let _ = child.kill();
+            panic!("jointid capture did not stop");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let mut stdout = Vec::new();
+    let mut stderr = Vec::new();
+    use std::io::Read;
+    if let Some(mut o) = child.stdout.take() {
+        o.read_to_end(&mut stdout).unwrap();
+    }
+    if let Some(mut e) = child.stderr.take() {
+        e.read_to_end(&mut stderr).unwrap();
+    }
+    Output {
+        status: child.wait().unwrap(),
+        stdout,
+        stderr,
+    }
+}
+
+#[test]
+fn capture_from_file_keeps_every_sample_in_order_bit_exact() {
+    let dir = tmpdir("file");
+    let s = small();
+    let stream = dir.join("stream.bin");
+    std::fs::write(&stream, &s.bytes).unwrap();
+    let out = dir.join("run.jcap");
+    let v = json_of(&jointid(&[
+        "capture",
+        "--file",
+        stream.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(v["samples"], 400);
+    assert_eq!(v["gaps"], serde_json::json!([]));
+    assert_eq!(v["damaged_frames"], serde_json::json!([]));
+    assert_eq!(v["overruns"], 0);
+    assert_eq!(v["ended"], true);
+    assert_eq!(v["reference_mismatches"], serde_json::json!([]));
+    assert_eq!(v["bytes"], s.bytes.len());
+    // the file is the 8-byte header and then exactly the received bytes
+    let raw = std::fs::read(&out).unwrap();
+    assert_eq!(&raw[..8], b"JCAP\x01\r\n\x1a");
+    assert_eq!(&raw[8..], &s.bytes[..]);
+
+    let info = json_of(&jointid(&["info", out.to_str().unwrap(), "--json"]));
+    for key in [
+        "samples",
+        "gaps",
+        "damaged_frames",
+        "overruns",
+        "first_seq",
+        "last_seq",
+        "frames",
+    ] {
+        assert_eq!(info[key], v[key], "{key}");
+    }
+    assert_eq!(info["header"]["session_id"], 7);
+
+    let csv = dir.join("run.csv");
+    let (meta, rows) = export_csv(&out, &csv);
+    assert_rows_match(&s, &rows, &[]);
+    let x = s.header.excitation;
+    for (k, want) in [
+        ("kind", "special_odd_multisine".to_string()),
+        ("fs_hz", x.fs_hz.to_string()),
+        ("period_samples", x.period_samples.to_string()),
+        ("max_line", x.max_line.to_string()),
+        ("cutoff_hz", x.cutoff_hz.to_string()),
+        ("rms_rad", x.rms_rad.to_string()),
+        ("seed", x.seed.to_string()),
+        ("ramp_samples", x.ramp_samples.to_string()),
+        ("periods", x.periods.to_string()),
+        ("sample_interval_s", "0.005".to_string()),
+        ("board_id", s.header.board_id.to_string()),
+        ("session_id", "7".to_string()),
+        ("gaps", "none".to_string()),
+    ] {
+        assert_eq!(meta.get(k), Some(&want), "# {k}");
+    }
+    // every analysis command reads the capture directly through the .jcap loader
+    let mut a = json_of(&jointid(&["analyze", out.to_str().unwrap(), "--json"]));
+    let mut b = json_of(&jointid(&["analyze", csv.to_str().unwrap(), "--json"]));
+    for v in [&mut a, &mut b] {
+        v.as_object_mut().unwrap().remove("file");
+    }
+    assert!(a == b, "analyze reads the .jcap as it reads its CSV export");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn capture_reports_exactly_the_injected_faults_and_keeps_every_intact_frame() {
+    let dir = tmpdir("faults");
+    let s = small();
+    let b = batches(&s);
+    // faults on batches 2 (bit flip), 6 (3 bytes dropped), 10 (garbage inside),
+    // 14 (garbage without delimiter glued in front), a garbage frame of its own
+    // after batch 17, and the stream cut in the middle of the last batch
+    let (flip, drop, inside, glued, after, cut) =
+        (b[2], b[6], b[10], b[14], b[17], *b.last().unwrap());
+    let mut bytes = Vec::new();
+    let mut want_damaged = Vec::new();
+    let mut lost = Vec::new();
+    for f in &s.frames {
+        let at = bytes.len() as u64;
+        let mut frame = bytes_of(&s, f).to_vec();
+        let mid = frame.len() / 2;
+        if *f == flip {
+            frame[mid] ^= if frame[mid] ^ 0x04 != 0 { 0x04 } else { 0x01 };
+            want_damaged.push((at, f.len));
+        } else if *f == drop {
+            frame.drain(mid..mid + 3);
+            want_damaged.push((at, f.len - 3));
+        } else if *f == inside {
+            frame.splice(mid..mid, [0x55, 0xAA, 0x13, 0x37, 0x42]);
+            want_damaged.push((at, f.len + 5));
+        } else if *f == glued {
+            frame.splice(0..0, [0xDE, 0xAD]);
+            want_damaged.push((at, f.len + 2));
+        } else if *f == cut {
+            frame.truncate(6);
+            want_damaged.push((at, 6));
+            bytes.extend_from_slice(&frame);
+            lost.extend(seqs_of(f));
+            break;
+        } else {
+            bytes.extend_from_slice(&frame);
+            if *f == after {
+                want_damaged.push((bytes.len() as u64, 3));
+                bytes.extend_from_slice(&[0x11, 0x22, 0x00]);
+            }
+            continue;
+        }
+        lost.extend(seqs_of(f));
+        bytes.extend_from_slice(&frame);
+    }
+    let stream = dir.join("damaged.bin");
+    std::fs::write(&stream, &bytes).unwrap();
+    let out = dir.join("run.jcap");
+    let v = json_of(&jointid(&[
+        "capture",
+        "--file",
+        stream.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(damaged(&v), want_damaged);
+    assert_eq!(
+        v["damaged_frames"].as_array().unwrap().last().unwrap()["kind"],
+        "truncated"
+    );
+    // the cut last batch is not known to be missing (nothing after it says so)
+    let tail = seqs_of(&cut);
+    let interior: Vec<u32> = lost.iter().copied().filter(|q| !tail.contains(q)).collect();
+    assert_eq!(gaps(&v), ranges(interior));
+    assert_eq!(v["samples"].as_u64().unwrap(), 400 - lost.len() as u64);
+    assert_eq!(v["ended"], false);
+
+    let csv = dir.join("run.csv");
+    let (meta, rows) = export_csv(&out, &csv);
+    assert_rows_match(&s, &rows, &lost);
+    let listed: Vec<String> = gaps(&v).iter().map(|(a, b)| format!("{a}..{b}")).collect();
+    assert_eq!(meta["gaps"], listed.join(";"));
+    assert_eq!(meta["damaged_frames"], want_damaged.len().to_string());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn capture_killed_midway_leaves_a_file_read_up_to_its_last_whole_frame() {
+    let dir = tmpdir("sigkill");
+    let s = small();
+    let fifo = dir.join("board.fifo");
+    mkfifo(&fifo);
+    let out = dir.join("run.jcap");
+    let mut child = spawn_file_capture(&[], &fifo, &out, &[], Stdio::null);
+    // send everything up to the middle of batch 15, then nothing more
+    let b = batches(&s);
+    let cut_frame = b[15];
+    let cut = (cut_frame.offset + 4) as usize;
+    let mut w = OpenOptions::new().write(true).open(&fifo).unwrap();
+    w.write_all(&s.bytes[..cut]).unwrap();
+    w.flush().unwrap();
+    // the flush policy hands the bytes to the OS within ~75 ms, without any stop
+    wait_until("the bytes on disk", Duration::from_secs(5), || {
+        file_len(&out) == 8 + cut as u64
+    });
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    drop(w);
+    assert!(
+        !events(&out).contains("\"stop\""),
+        "a killed capture logs no stop"
+    );
+
+    let v = json_of(&jointid(&["info", out.to_str().unwrap(), "--json"]));
+    let whole: u32 = b[..15].iter().map(|f| seqs_of(f).len() as u32).sum();
+    assert_eq!(v["samples"].as_u64().unwrap(), u64::from(whole));
+    assert_eq!(v["last_seq"].as_u64().unwrap(), u64::from(whole - 1));
+    assert_eq!(damaged(&v), vec![(cut_frame.offset, 4)]);
+    assert_eq!(v["damaged_frames"][0]["kind"], "truncated");
+    assert_eq!(v["gaps"], serde_json::json!([]));
+
+    let csv = dir.join("run.csv");
+    let (_, rows) = export_csv(&out, &csv);
+    let lost: Vec<u32> = (whole..400).collect();
+    assert_rows_match(&s, &rows, &lost);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A socat pty pair: bytes written to `a` come out of `b`.
+struct Socat {
+    child: Child,
+    a: PathBuf,
+    b: PathBuf,
+}
+
+impl Socat {
+    fn start(dir: &Path) -> Self {
+        let (a, b) = (dir.join("ttyA"), dir.join("ttyB"));
+        let child = Command::new("socat")
+            .arg(format!("pty,raw,echo=0,link={}", a.display()))
+            .arg(format!("pty,raw,echo=0,link={}", b.display()))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("socat is installed");
+        wait_until("socat's ptys", Duration::from_secs(5), || {
+            a.exists() && b.exists()
+        });
+        Self { child, a, b }
+    }
+
+    /// Ends socat the way an unplugged adapter ends: its ptys hang up and vanish.
+    fn unplug(mut self) {
+        let _ = Command::new("kill")
+            .arg(self.child.id().to_string())
+            .status();
+        let _ = self.child.wait();
+        wait_until("the ptys to vanish", Duration::from_secs(5), || {
+            !self.b.exists()
+        });
+    }
+}
+
+impl Drop for Socat {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// creates the named pipe that stands in for the board's byte stream
+fn mkfifo(path: &Path) {
+    assert!(Command::new("mkfifo").arg(path).status().unwrap().success());
+}
+
+/// starts `jointid [global] capture --file <fifo> --out <out> [extra]` with stdout and
+/// stderr both set to `stdio()`
+fn spawn_file_capture(
+    global: &[&str],
+    fifo: &Path,
+    out: &Path,
+    extra: &[&str],
+    stdio: fn() -> Stdio,
+) -> Child {
+    Command::new(BIN)
+        .args(global)
+        .args([
+            "capture",
+            "--file",
+            fifo.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .args(extra)
+        .stdout(stdio())
+        .stderr(stdio())
+        .spawn()
+        .unwrap()
+}
+
+fn spawn_serial_capture(port: &Path, out: &Path) -> Child {
+    Command::new(BIN)
+        .args([
+            "capture",
+            "--serial",
+            port.to_str().unwrap(),
+            "--baud",
+            "921600",
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+            "--duration",
+            "30",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+#[test]
+fn capture_from_serial_pty_keeps_every_sample_in_order_bit_exact() {
+    let dir = tmpdir("serial");
+    let s = small();
+    let socat = Socat::start(&dir);
+    let out = dir.join("run.jcap");
+    let mut child = spawn_serial_capture(&socat.b, &out);
+    wait_until(
+        "the capture to open the port",
+        Duration::from_secs(5),
+        || events(&out).contains("\"start\""),
+    );
+    let mut a = OpenOptions::new().write(true).open(&socat.a).unwrap();
+    for chunk in s.bytes.chunks(97) {
+        a.write_all(chunk).unwrap();
+    }
+    let v = json_of(&wait_exit(&mut child, Duration::from_secs(20)));
+    assert_eq!(v["stop"], "board sent end of session");
+    assert_eq!(v["samples"], 400);
+    assert_eq!(v["gaps"], serde_json::json!([]));
+    assert_eq!(v["damaged_frames"], serde_json::json!([]));
+    assert_eq!(&std::fs::read(&out).unwrap()[8..], &s.bytes[..]);
+    let csv = dir.join("run.csv");
+    assert_rows_match(&s, &export_csv(&out, &csv).1, &[]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn capture_survives_the_serial_device_vanishing_and_records_the_gap() {
+    let dir = tmpdir("replug");
+    let s = small();
+    let b = batches(&s);
+    let (x, y) = (b[8], b[12]);
+    // the cable is pulled 5 bytes into batch 8 and plugged back 2 bytes into batch 12
+    let (cut1, cut2) = ((x.offset + 5) as usize, (y.offset + 2) as usize);
+    let socat = Socat::start(&dir);
+    let port = socat.b.clone();
+    let out = dir.join("run.jcap");
+    let mut child = spawn_serial_capture(&port, &out);
+    wait_until(
+        "the capture to open the port",
+        Duration::from_secs(5),
+        || events(&out).contains("\"start\""),
+    );
+    let mut a = OpenOptions::new().write(true).open(&socat.a).unwrap();
+    a.write_all(&s.bytes[..cut1]).unwrap();
+    wait_until("part 1 on disk", Duration::from_secs(5), || {
+        file_len(&out) == 8 + cut1 as u64
+    });
+    drop(a);
+    socat.unplug();
+    wait_until("link lost", Duration::from_secs(5), || {
+        events(&out).contains("link_lost")
+    });
+    let socat = Socat::start(&dir);
+    wait_until("link resumed", Duration::from_secs(10), || {
+        events(&out).contains("link_resumed")
+    });
+    let mut a = OpenOptions::new().write(true).open(&socat.a).unwrap();
+    a.write_all(&s.bytes[cut2..]).unwrap();
+    let v = json_of(&wait_exit(&mut child, Duration::from_secs(20)));
+
+    // the file kept part 1 and part 2, back to back, exactly as received
+    let mut want = s.bytes[..cut1].to_vec();
+    want.extend_from_slice(&s.bytes[cut2..]);
+    assert_eq!(&std::fs::read(&out).unwrap()[8..], &want[..]);
+    // the frame cut by the loss is truncated; the one cut by the return is damaged
+    assert_eq!(damaged(&v), vec![(x.offset, 5), (cut1 as u64, y.len - 2)]);
+    assert_eq!(v["damaged_frames"][0]["kind"], "truncated");
+    assert_eq!(
+        gaps(&v),
+        vec![(u64::from(seqs_of(&x).start), u64::from(seqs_of(&y).end - 1))]
+    );
+    let lost = (seqs_of(&y).end - seqs_of(&x).start) as u64;
+    assert_eq!(v["samples"].as_u64().unwrap(), 400 - lost);
+    let kinds: Vec<&str> = v["link_events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["event"].as_str().unwrap())
+        .collect();
+    assert_eq!(kinds, ["start", "link_lost", "link_resumed", "stop"]);
+    assert_eq!(v["link_events"][1]["offset"], cut1);
+    // `info` reads the same from the file and its sidecar
+    let info = json_of(&jointid(&["info", out.to_str().unwrap(), "--json"]));
+    assert_eq!(info["damaged_frames"], v["damaged_frames"]);
+    assert_eq!(info["gaps"], v["gaps"]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Runs a capture that must fail at setup: exit 2, one line naming `names`, no file.
+fn assert_setup_error(args: &[&str], out: &Path, names: &str) {
+    let o = jointid(args);
+    assert_eq!(o.status.code(), Some(2), "{args:?}");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.lines().count(), 1, "one line: {err}");
+    assert!(
+        err.starts_with("jointid: error: ") && err.contains(names),
+        "{err} should name {names}"
+    );
+    assert!(!out.exists(), "{} left behind", out.display());
+    let mut ev = out.as_os_str().to_os_string();
+    ev.push(".events");
+    assert!(!PathBuf::from(ev).exists());
+}
+
+#[test]
+fn capture_setup_errors_exit_2_with_one_line_and_leave_no_file() {
+    let dir = tmpdir("errors");
+    let out = dir.join("run.jcap");
+    let o = out.to_str().unwrap();
+    assert_setup_error(
+        &["capture", "--serial", "/dev/ttyNOSUCH9", "--out", o],
+        &out,
+        "serial port /dev/ttyNOSUCH9: no such file or directory",
+    );
+    assert_setup_error(
+        &["capture", "--can", "nosuchcan7", "--out", o],
+        &out,
+        "can interface nosuchcan7: no such interface",
+    );
+    assert_setup_error(
+        &[
+            "capture",
+            "--file",
+            dir.join("missing.bin").to_str().unwrap(),
+            "--out",
+            o,
+        ],
+        &out,
+        "missing.bin: no such file or directory",
+    );
+    let unwritable = dir.join("no/such/dir/run.jcap");
+    assert_setup_error(
+        &[
+            "capture",
+            "--file",
+            "/dev/null",
+            "--out",
+            unwritable.to_str().unwrap(),
+        ],
+        &unwritable,
+        "no/such/dir/run.jcap: no such file or directory",
+    );
+    // with --json the error is a JSON object on stdout, still exit 2, still no file
+    let j = jointid(&[
+        "--json",
+        "capture",
+        "--serial",
+        "/dev/ttyNOSUCH9",
+        "--out",
+        o,
+    ]);
+    assert_eq!(j.status.code(), Some(2));
+    let v: Value = serde_json::from_slice(&j.stdout).unwrap();
+    assert_eq!(
+        v["error"],
+        "serial port /dev/ttyNOSUCH9: no such file or directory"
+    );
+    assert!(!out.exists());
+    // a refused TCP connection (port 1 on loopback has no listener)
+    assert_setup_error(
+        &["capture", "--tcp", "127.0.0.1:1", "--out", o],
+        &out,
+        "tcp 127.0.0.1:1",
+    );
+    // an existing capture is never replaced without --force
+    std::fs::write(&out, b"precious").unwrap();
+    let r = jointid(&["capture", "--file", "/dev/null", "--out", o]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("already exists"));
+    assert_eq!(std::fs::read(&out).unwrap(), b"precious");
+    // not even with --force when the output is the input
+    let r = jointid(&["capture", "--file", o, "--out", o, "--force"]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("is both the input and the output"));
+    assert_eq!(std::fs::read(&out).unwrap(), b"precious");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn info_and_export_name_the_problem_of_a_bad_capture_file() {
+    let dir = tmpdir("badfile");
+    let p = dir.join("not.jcap");
+    std::fs::write(&p, b"t,theta_ref,u,theta_m\n").unwrap();
+    let o = jointid(&["info", p.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("not.jcap: not a jcap file (bad magic at byte 0)"),
+        "{err}"
+    );
+    // a capture with no session header cannot be exported, and says why
+    let s = small();
+    let headless = dir.join("headless.jcap");
+    let mut bytes = b"JCAP\x01\r\n\x1a".to_vec();
+    bytes.extend_from_slice(&s.bytes[s.frames[0].len as usize..]);
+    std::fs::write(&headless, bytes).unwrap();
+    let csv = dir.join("x.csv");
+    let o = jointid(&[
+        "export",
+        headless.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no session header"));
+    assert!(!csv.exists());
+    // info still describes it
+    let v = json_of(&jointid(&["info", headless.to_str().unwrap(), "--json"]));
+    assert_eq!(v["samples_without_header"], 400);
+    assert_eq!(v["header"], Value::Null);
+    // and the analysis commands refuse it through the .jcap loader, naming why
+    let o = jointid(&["analyze", headless.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no session header"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn capture_stops_by_itself_after_the_requested_periods_or_duration() {
+    let dir = tmpdir("stops");
+    let s = small();
+    let x = s.header.excitation;
+    // --periods 2: seq ramp + 2N - 1 = 249 ends the capture while the pipe stays open
+    let fifo = dir.join("board.fifo");
+    mkfifo(&fifo);
+    let out = dir.join("periods.jcap");
+    let mut child = spawn_file_capture(
+        &[],
+        &fifo,
+        &out,
+        &["--periods", "2", "--json"],
+        Stdio::piped,
+    );
+    let target = x.ramp_samples + 2 * x.period_samples - 1;
+    let last = batches(&s)
+        .into_iter()
+        .find(|f| seqs_of(f).contains(&target))
+        .unwrap();
+    let mut w = OpenOptions::new().write(true).open(&fifo).unwrap();
+    w.write_all(&s.bytes[..(last.offset + last.len) as usize])
+        .unwrap();
+    let v = json_of(&wait_exit(&mut child, Duration::from_secs(10)));
+    drop(w);
+    assert_eq!(v["stop"], "requested periods received");
+    assert_eq!(
+        v["last_seq"].as_u64().unwrap(),
+        u64::from(seqs_of(&last).end - 1)
+    );
+    assert!(v["last_seq"].as_u64().unwrap() >= u64::from(target));
+
+    // --duration 0.4 on a silent pipe: a valid, empty capture and a stop event
+    let fifo2 = dir.join("silent.fifo");
+    mkfifo(&fifo2);
+    let out2 = dir.join("silent.jcap");
+    let t0 = Instant::now();
+    let v = json_of(&jointid(&[
+        "capture",
+        "--file",
+        fifo2.to_str().unwrap(),
+        "--out",
+        out2.to_str().unwrap(),
+        "--duration",
+        "0.4",
+        "--json",
+    ]));
+    let took = t0.elapsed();
+    assert!(
+        took >= Duration::from_millis(400) && took < Duration::from_secs(5),
+        "{took:?}"
+    );
+    assert_eq!(v["stop"], "duration reached");
+    assert_eq!(v["samples"], 0);
+    assert_eq!(std::fs::read(&out2).unwrap(), b"JCAP\x01\r\n\x1a");
+    assert!(events(&out2).contains("\"stop\""));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn capture_stops_cleanly_on_ctrl_c_with_the_summary_and_a_complete_file() {
+    let dir = tmpdir("sigint");
+    let s = small();
+    let fifo = dir.join("board.fifo");
+    mkfifo(&fifo);
+    let out = dir.join("run.jcap");
+    let mut child = spawn_file_capture(&["--json"], &fifo, &out, &[], Stdio::piped);
+    let half = batches(&s)[12];
+    let cut = (half.offset + half.len) as usize;
+    let mut w = OpenOptions::new().write(true).open(&fifo).unwrap();
+    w.write_all(&s.bytes[..cut]).unwrap();
+    wait_until("the bytes on disk", Duration::from_secs(5), || {
+        file_len(&out) == 8 + cut as u64
+    });
+    let int = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(int.success());
+    let v = json_of(&wait_exit(&mut child, Duration::from_secs(10)));
+    drop(w);
+    assert_eq!(v["stop"], "interrupted");
+    let whole: u32 = batches(&s)[..13]
+        .iter()
+        .map(|f| seqs_of(f).len() as u32)
+        .sum();
+    assert_eq!(v["samples"].as_u64().unwrap(), u64::from(whole));
+    assert_eq!(v["damaged_frames"], serde_json::json!([]));
+    assert!(events(&out).contains("\"detail\":\"interrupted\""));
+    assert_eq!(&std::fs::read(&out).unwrap()[8..], &s.bytes[..cut]);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,399 @@
+//! Command-line tests of `jointid fit`, `validate` (model files) and `demo`,
+//! run through the built binary so exit codes and stderr are checked too.
+//!
+//! Data: the simulated three-mass joint in its position loop (jointid::sim),
+//! special odd multisine for estimation, band-limited noise for validation,
+//! written as capture CSVs with their excitation comments; and measured data
+//! from `../shared/data`: the EMPS drive (rigid model with Coulomb friction
+//! against the published IDIM-LS values) and the DaISy robot arm (black box,
+//! FIT on the held-out half).
+
+use std::path::{Path, PathBuf};
+
+use jointid::data::{write_capture_csv, Dataset};
+use jointid::scenario::paper::{estimation_excitation, validation_excitation};
+use jointid::sim::{self, Disturbance, SimConfig};
+use jointid_core::excitation::ExcitationConfig;
+
+mod common;
+use common::{jointid, json_of, tmpdir};
+
+fn write_run(path: &Path, exc: &ExcitationConfig, seed: u64) {
+    let mut cfg = SimConfig {
+        seed,
+        ..SimConfig::default()
+    };
+    cfg.sensors.disturbance = Disturbance::none();
+    cfg.sensors.u_noise_std = 0.0;
+    let out = sim::simulate_excitation(&cfg, exc).unwrap();
+    let ds = Dataset {
+        name: path.display().to_string(),
+        data: out.to_id_data(),
+        t0: 0.0,
+        excitation: Some(*exc),
+        meta: Default::default(),
+    };
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    write_capture_csv(&mut f, &ds).unwrap();
+}
+
+/// estimation and validation capture CSVs (3 multisine periods; 7.5 s noise)
+fn data(dir: &Path) -> (PathBuf, PathBuf) {
+    let est_exc = ExcitationConfig {
+        periods: 3,
+        ..estimation_excitation(5)
+    };
+    let val_exc = validation_excitation(&est_exc);
+    let (e, v) = (dir.join("est.csv"), dir.join("val.csv"));
+    write_run(&e, &est_exc, 1);
+    write_run(&v, &val_exc, 2);
+    (e, v)
+}
+
+#[test]
+fn fit_json_has_fields_and_validate_reproduces_saved_model_fit() {
+    let dir = tmpdir("roundtrip");
+    let (est, val) = data(&dir);
+    let model = dir.join("m.json");
+    let plots = dir.join("plots");
+    let o = jointid(&[
+        "fit",
+        est.to_str().unwrap(),
+        "--model",
+        "three-mass",
+        "--decimate",
+        "10",
+        "--validation",
+        val.to_str().unwrap(),
+        "--save",
+        model.to_str().unwrap(),
+        "--plot",
+        plots.to_str().unwrap(),
+        "--json",
+    ]);
+    let j = json_of(&o);
+    for key in [
+        "model",
+        "parameters",
+        "fit_estimation",
+        "fit_validation",
+        "seconds",
+        "resonances_hz",
+        "antiresonances_hz",
+        "residual_tests",
+    ] {
+        assert!(!j[key].is_null(), "missing {key}: {j}");
+    }
+    for name in ["J_m", "J_a1", "J_a2", "k_g", "k_a", "d_g", "d_a", "f_m"] {
+        let p = &j["parameters"][name];
+        assert!(p["value"].as_f64().unwrap() > 0.0, "{name}: {p}");
+        assert!(p["std"].as_f64().unwrap() >= 0.0, "{name}: {p}");
+        assert!(!p["unit"].as_str().unwrap().is_empty(), "{name}: {p}");
+    }
+    let fv = j["fit_validation"].as_f64().unwrap();
+    assert!(fv > 80.0, "validation FIT {fv}");
+    assert!(j["residual_tests"]["estimation"]["whiteness"]["bound"].is_number());
+    assert!(plots.join("bode.svg").exists());
+    // the physical model runs at the capture rate and is compared after the
+    // same decimation (model format 2)
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    assert_eq!(saved["format"], "jointid-model/2");
+    assert_eq!(saved["decimate_output"], 10);
+    assert!(
+        (saved["ts"].as_f64().unwrap() - 5e-4).abs() < 1e-12,
+        "{saved}"
+    );
+
+    let o = jointid(&[
+        "validate",
+        model.to_str().unwrap(),
+        val.to_str().unwrap(),
+        "--json",
+    ]);
+    let v = json_of(&o);
+    let f2 = v["fit"].as_f64().unwrap();
+    assert!((f2 - fv).abs() < 1e-9, "validate {f2} vs fit {fv}");
+
+    // an unmet --require-fit is the only check that exits 1
+    let o = jointid(&[
+        "validate",
+        model.to_str().unwrap(),
+        val.to_str().unwrap(),
+        "--require-fit",
+        "99.999",
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn fit_black_box_text_output_names_fit_and_resonances() {
+    let dir = tmpdir("text");
+    let (est, val) = data(&dir);
+    let o = jointid(&[
+        "fit",
+        est.to_str().unwrap(),
+        "--model",
+        "black-box:8",
+        "--decimate",
+        "10",
+        "--validation",
+        val.to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(text.contains("FIT (toolbox compare, NRMSE) [%]"), "{text}");
+    assert!(text.contains("validation:"), "{text}");
+    assert!(text.contains("resonances [Hz]: 1"), "{text}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_input_exits_2_with_one_line_naming_the_file() {
+    let dir = tmpdir("bad");
+    let missing = dir.join("missing.csv");
+    let garbage = dir.join("garbage.csv");
+    std::fs::write(&garbage, "t,theta_ref,u,theta_m\n0,0,x,0\n").unwrap();
+    let model = dir.join("not-a-model.json");
+    std::fs::write(&model, "{\"hello\": 1}").unwrap();
+    for (args, file) in [
+        (
+            vec!["fit", missing.to_str().unwrap(), "--model", "rigid"],
+            "missing.csv",
+        ),
+        (
+            vec!["fit", garbage.to_str().unwrap(), "--model", "rigid"],
+            "garbage.csv",
+        ),
+        (
+            vec![
+                "validate",
+                model.to_str().unwrap(),
+                garbage.to_str().unwrap(),
+            ],
+            "not-a-model.json",
+        ),
+    ] {
+        let o = jointid(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        assert!(err.contains(file), "{args:?}: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn demo_writes_captures_plots_and_the_table() {
+    let dir = tmpdir("demo");
+    let o = jointid(&["demo", "--out", dir.to_str().unwrap(), "--json"]);
+    let j = json_of(&o);
+    for f in [
+        "estimation.jcap",
+        "validation.jcap",
+        "spectrum.svg",
+        "frf.svg",
+        "bode_3mass.svg",
+        "bode_4mass.svg",
+    ] {
+        assert!(dir.join(f).exists(), "{f} missing");
+    }
+    // the demo's captures load in every analysis command
+    let est = dir.join("estimation.jcap");
+    let f = json_of(&jointid(&[
+        "fit",
+        est.to_str().unwrap(),
+        "--model",
+        "black-box:6",
+        "--decimate",
+        "10",
+        "--json",
+    ]));
+    assert!(f["fit_estimation"].as_f64().unwrap() > 50.0, "{f}");
+    let rows = j["table"]["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 3);
+    for r in rows {
+        assert!(r["fit_validation"].as_f64().unwrap() > 50.0, "{r}");
+    }
+    // the simulated joint is linear; only the encoder's quantiser is a (static,
+    // odd) nonlinearity, statistically visible but far below seed 000's
+    // "about a factor 1/100" (−40 dB) of the real robot
+    for key in ["odd_vs_excited_db", "even_vs_excited_db"] {
+        for v in j[key].as_array().unwrap() {
+            assert!(v.as_f64().unwrap() < -40.0, "{key}: {}", j[key]);
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// a file of `shared/` beside the repository or its worktree folder
+fn shared(rel: &str) -> String {
+    let base = env!("CARGO_MANIFEST_DIR");
+    for up in [
+        "/../../shared/",
+        "/../../../shared/",
+        "/../../../../shared/",
+    ] {
+        let p = format!("{base}{up}{rel}");
+        if std::path::Path::new(&p).exists() {
+            return p;
+        }
+    }
+    panic!("shared file {rel} not found beside {base}");
+}
+
+// EMPS through `jointid fit --model rigid --friction coulomb --json`: M, Fv,
+// Fc within 3 % of the published IDIM-LS values (Janot et al. 2019).
+#[test]
+fn emps_rigid_coulomb_fit_via_cli_matches_published_within_3_percent() {
+    let path = shared("data/emps/emps_train_DATA_EMPS.csv");
+    let j = json_of(&jointid(&[
+        "fit",
+        &path,
+        "--time",
+        "t_s",
+        "--input",
+        "force_N",
+        "--output",
+        "qm_m",
+        "--model",
+        "rigid",
+        "--friction",
+        "coulomb",
+        "--linear-axis",
+        "--json",
+    ]));
+    eprintln!(
+        "{}",
+        serde_json::to_string_pretty(&j["parameters"]).unwrap()
+    );
+    for (name, published) in [("J", 95.1089), ("Fv", 203.5034), ("Fc", 20.3935)] {
+        let v = j["parameters"][name]["value"].as_f64().unwrap();
+        assert!(
+            (v - published).abs() <= 0.03 * published,
+            "{name}: {v} vs published {published}"
+        );
+    }
+    assert_eq!(j["parameters"]["J"]["unit"], "kg");
+    assert_eq!(j["parameters"]["Fv"]["unit"], "N·s/m");
+    assert!(j["fit_estimation"].is_number());
+}
+
+// DaISy 96-009 through `jointid fit --model black-box:4 --estimation-fraction
+// 0.5`: FIT on the second half reported. DaISy publishes no figure; the
+// bound is a regression guard 8 points under the 88.4 % measured when the
+// test was written (PO-MOESP start kept over PBSID on these open-loop data).
+#[test]
+fn daisy_order_4_fit_on_first_half_reports_second_half_fit_via_cli() {
+    let path = shared("data/daisy-robot-arm/robot_arm.csv");
+    let j = json_of(&jointid(&[
+        "fit",
+        &path,
+        "--time",
+        "t_assumed_s",
+        "--input",
+        "u_reaction_torque",
+        "--output",
+        "y_arm_acceleration",
+        "--model",
+        "black-box:4",
+        "--estimation-fraction",
+        "0.5",
+        "--json",
+    ]));
+    let fe = j["fit_estimation"].as_f64().unwrap();
+    let fv = j["fit_validation"].as_f64().unwrap();
+    eprintln!("DaISy robot arm, order 4: FIT estimation {fe:.1} %, validation {fv:.1} %");
+    assert_eq!(j["samples"].as_u64(), Some(512));
+    assert!(fv > 80.0 && fv < 100.0, "validation FIT {fv}");
+}
+
+/// The reproduction of issue 10: `jointid simulate` with its default sensors
+/// (quantised encoder, white noise, slow torque disturbance, 0.5 ms current
+/// loop), then `jointid fit --model three-mass` as the README writes it.
+#[test]
+fn three_mass_fit_on_default_simulation_is_right_in_the_frequency_domain() {
+    let dir = tmpdir("fd");
+    let (est, val) = (dir.join("lin.jcap"), dir.join("val.jcap"));
+    for (path, seed) in [(&est, "1"), (&val, "2")] {
+        let o = jointid(&[
+            "simulate",
+            "--model",
+            "three-mass",
+            "--seed",
+            seed,
+            "--out",
+            path.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let o = jointid(&[
+        "fit",
+        est.to_str().unwrap(),
+        "--model",
+        "three-mass",
+        "--validation",
+        val.to_str().unwrap(),
+        "--strict",
+        "--json",
+    ]);
+    let j = json_of(&o);
+    let truth = [
+        ("J_m", 1.0e-3),
+        ("J_a1", 11.66),
+        ("J_a2", 0.627),
+        ("k_g", 1.275e5),
+        ("k_a", 7.26e3),
+        ("d_g", 80.0),
+        ("d_a", 4.0),
+    ];
+    for (name, t) in truth {
+        let v = j["parameters"][name]["value"].as_f64().unwrap();
+        assert!((v - t).abs() < 0.03 * t, "{name} {v} (truth {t}): {j}");
+    }
+    let tau = j["parameters"]["tau_c"]["value"].as_f64().unwrap();
+    assert!((tau - 5e-4).abs() < 5e-5, "current-loop lag {tau} s");
+    assert!(j["fit_name"].as_str().unwrap().contains("period-averaged"));
+    assert!(j["fit_validation"].as_f64().unwrap() > 95.0, "{j}");
+    assert_eq!(j["warnings"].as_array().unwrap().len(), 0, "{j}");
+    assert!(j["method"].as_str().unwrap().contains("frequency domain"));
+
+    // the wrong structure is flagged, and --strict turns that into exit 1
+    let o = jointid(&[
+        "fit",
+        est.to_str().unwrap(),
+        "--model",
+        "two-mass",
+        "--strict",
+        "--json",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let w = j["warnings"].as_array().unwrap();
+    assert!(
+        w.iter().any(|w| w
+            .as_str()
+            .unwrap()
+            .contains("times what the measurement noise explains")),
+        "{j}"
+    );
+
+    // the frequency domain is for physical models
+    let o = jointid(&[
+        "fit",
+        est.to_str().unwrap(),
+        "--model",
+        "black-box:6",
+        "--domain",
+        "frequency",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("physical models"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

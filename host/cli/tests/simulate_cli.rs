@@ -1,0 +1,152 @@
+//! `jointid simulate` run as a process: the `.jcap` it writes is byte for byte the stream
+//! of the library chain (`sim::board::encode_session` on the configuration the binary
+//! wrote with `--params-out`, checked end to end in the workspace test `tests/sil.rs`), and
+//! `info`, `export` and `analyze` read it as a board capture; bad arguments end with one
+//! line and exit code 2.
+
+use jointid::data::{parse_csv, ColumnMap};
+use jointid::sim::board::{encode_session, WireOptions};
+use jointid::sim::{simulate_excitation, SimConfig};
+use jointid_core::excitation::{ExcitationConfig, SignalKind};
+use serde_json::Value;
+
+mod common;
+use common::{jointid, json_of, tmpdir};
+
+#[test]
+fn simulate_jcap_is_the_wire_stream_and_reads_like_a_board_capture() {
+    let dir = tmpdir("jcap");
+    let jcap = dir.join("run.jcap");
+    let params = dir.join("params.json");
+    let args = [
+        "simulate",
+        "--model",
+        "two-mass",
+        "--param",
+        "k_g=1.3e5",
+        "--effect",
+        "backlash:width=2e-5",
+        "--excitation",
+        "odd-multisine",
+        "--rms",
+        "0.015",
+        "--periods",
+        "3",
+        "--seed",
+        "3",
+        "--out",
+        jcap.to_str().unwrap(),
+        "--params-out",
+        params.to_str().unwrap(),
+    ];
+    let mut with_json = vec!["--json"];
+    with_json.extend_from_slice(&args);
+    let summary = json_of(&jointid(&with_json));
+
+    // the same run through the library: the configuration the binary wrote, the
+    // excitation the arguments name; the file is the magic plus that stream
+    let cfg: SimConfig = serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
+    let exc = ExcitationConfig {
+        kind: SignalKind::SpecialOddMultisine,
+        rms_rad: 0.015,
+        periods: 3,
+        seed: 3,
+        ..ExcitationConfig::paper_default()
+    };
+    assert_eq!(cfg.plant.params.k_g, 1.3e5);
+    assert_eq!(cfg.seed, 3);
+    assert_eq!(cfg.sample_rate_hz, f64::from(exc.fs_hz));
+    let sim = simulate_excitation(&cfg, &exc).unwrap();
+    let stream = encode_session(&sim, &exc, &WireOptions::for_sim(&cfg)).unwrap();
+    let file = std::fs::read(&jcap).unwrap();
+    assert_eq!(file[..8], jointid::capture::jcap::MAGIC);
+    assert_eq!(file[8..], stream[..]);
+
+    assert_eq!(summary["samples"], sim.len());
+    assert_eq!(summary["model"], "two-mass");
+    assert_eq!(summary["format"], "jcap");
+    assert_eq!(summary["effects"][0], "backlash:width=0.00002");
+    assert_eq!(summary["file"], jcap.to_str().unwrap());
+    let p: Value = serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
+    assert_eq!(p["plant"]["kind"], "two_mass");
+    assert_eq!(p["plant"]["params"]["k_g"], 1.3e5);
+    assert_eq!(p["seed"], 3);
+
+    let info = json_of(&jointid(&["--json", "info", jcap.to_str().unwrap()]));
+    assert_eq!(info["samples"], sim.len());
+    assert_eq!(info["ended"], true);
+    assert_eq!(info["damaged_frames"].as_array().unwrap().len(), 0);
+    assert_eq!(info["header"]["excitation"]["periods"], 3);
+
+    let csv = dir.join("run.csv");
+    json_of(&jointid(&[
+        "--json",
+        "export",
+        jcap.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]));
+    let ds = parse_csv(
+        &std::fs::read_to_string(&csv).unwrap(),
+        "run.csv",
+        &ColumnMap::capture(),
+    )
+    .unwrap();
+    assert_eq!(ds.excitation, Some(exc));
+    let r: Vec<f64> = jointid_core::excitation::generate(&exc)
+        .unwrap()
+        .into_iter()
+        .map(f64::from)
+        .collect();
+    assert_eq!(ds.data.r.as_ref().unwrap(), &r);
+    let tq = f64::from(WireOptions::for_sim(&cfg).scale.torque_nm_per_count);
+    for (a, b) in ds.data.u.iter().zip(&sim.u) {
+        assert!((a - b).abs() <= 0.5 * tq * (1.0 + 1e-9), "{a} vs {b}");
+    }
+
+    let analysis = json_of(&jointid(&["--json", "analyze", jcap.to_str().unwrap()]));
+    assert_eq!(
+        analysis["analysis"]["excited_source"], "config",
+        "{analysis}"
+    );
+    assert_eq!(analysis["analysis"]["f0_hz"], 0.4);
+    assert_eq!(
+        analysis["analysis"]["layout"]["count"], 2,
+        "3 periods, 1 settling"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn simulate_bad_arguments_end_with_one_line_and_exit_2() {
+    let dir = tmpdir("errors");
+    let out = dir.join("x.jcap");
+    let out = out.to_str().unwrap();
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &["simulate", "--model", "three-mass", "--param", "J_p=2", "--out", out],
+            "--param `J_p`: unknown parameter for three-mass (valid: J_m, J_a1, J_a2, k_g, d_g, k_a, d_a, f_m, r)",
+        ),
+        (
+            &["simulate", "--model", "rigid", "--param", "r=fast", "--out", out],
+            "--param `r`: `fast` is not a finite number (valid names for rigid: J_m, J_a1, J_a2, f_m, r)",
+        ),
+        (
+            &["simulate", "--out", "x.txt"],
+            "x.txt: --out must end in .jcap or .csv",
+        ),
+        (
+            &["simulate", "--model", "three-mass", "--param", "k_g=-1", "--out", out],
+            "parameter `k_g` = -1",
+        ),
+    ];
+    for (args, msg) in cases {
+        let o = jointid(args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8(o.stderr).unwrap();
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(err.contains(msg), "{args:?}: {err}");
+    }
+    assert!(!dir.join("x.jcap").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,0 +1,271 @@
+//! The capture CSV of DESIGN.md §5, written from a [`CaptureRecord`].
+//!
+//! ```text
+//! # format=jointid capture csv
+//! # board_id=…            # session_id=…          # protocol_version=…
+//! # sample_rate_hz=2000   # sample_interval_s=0.0005   # timer_hz=…
+//! # torque_nm_per_count=… # angle_rad_per_count=…
+//! # kind=special_odd_multisine  # fs_hz  # period_samples  # max_line  # cutoff_hz
+//! # rms_rad  # seed  # ramp_samples  # periods      (the nine excitation keys `data` parses)
+//! # samples=…  # first_seq=…  # last_seq=…  # missing_samples=…
+//! # gaps=3..4;7..9        (inclusive missing seq ranges; `none` when there are none)
+//! # damaged_frames=…  # overruns=…  # queue_drops=…  # tx_errors=…  # reference_mismatches=…
+//! t,theta_ref,u,theta_m
+//! ```
+//!
+//! One comment per line, `# key=value`. Rows: `t = seq / sample_rate_hz` [s], the
+//! regenerated reference θref [rad], u = torque counts × scale [N·m], θm = angle counts ×
+//! scale [rad]. Only the samples that arrived are written, in sequence order: a gap shows
+//! as a jump in `t` (which a reader checking uniform sampling rejects, naming the line)
+//! and is listed in `# gaps`. Numbers are written in their shortest form that reads back
+//! to the same `f64` (f32 config values: the same `f32`).
+
+use std::io::{self, Write};
+use std::path::Path;
+
+use jointid_core::excitation::SignalKind;
+
+use super::{CaptureError, CaptureRecord};
+
+/// The name `data` uses for a signal kind in the `# kind=` comment.
+pub fn kind_name(kind: SignalKind) -> &'static str {
+    match kind {
+        SignalKind::SpecialOddMultisine => "special_odd_multisine",
+        SignalKind::RandomOddMultisine => "random_odd_multisine",
+        SignalKind::BandLimitedNoise => "band_limited_noise",
+    }
+}
+
+/// The `# key=value` pairs of a capture CSV, in order (the nine excitation keys among them).
+pub fn comment_pairs(record: &CaptureRecord) -> Vec<(&'static str, String)> {
+    let h = &record.header;
+    let x = &h.excitation;
+    let r = &record.report;
+    let opt = |v: Option<u32>| v.map_or_else(|| "none".to_string(), |v| v.to_string());
+    let gaps = if r.gaps.is_empty() {
+        "none".to_string()
+    } else {
+        r.gaps
+            .iter()
+            .map(|g| format!("{}..{}", g.from, g.to))
+            .collect::<Vec<_>>()
+            .join(";")
+    };
+    vec![
+        ("format", "jointid capture csv".to_string()),
+        ("board_id", h.board_id.to_string()),
+        ("session_id", h.session_id.to_string()),
+        ("protocol_version", h.protocol_version.to_string()),
+        ("sample_rate_hz", h.sample_rate_hz.to_string()),
+        ("sample_interval_s", record.sample_interval_s().to_string()),
+        ("timer_hz", h.timer_hz.to_string()),
+        (
+            "torque_nm_per_count",
+            h.scale.torque_nm_per_count.to_string(),
+        ),
+        (
+            "angle_rad_per_count",
+            h.scale.angle_rad_per_count.to_string(),
+        ),
+        ("kind", kind_name(x.kind).to_string()),
+        ("fs_hz", x.fs_hz.to_string()),
+        ("period_samples", x.period_samples.to_string()),
+        ("max_line", x.max_line.to_string()),
+        ("cutoff_hz", x.cutoff_hz.to_string()),
+        ("rms_rad", x.rms_rad.to_string()),
+        ("seed", x.seed.to_string()),
+        ("ramp_samples", x.ramp_samples.to_string()),
+        ("periods", x.periods.to_string()),
+        ("samples", record.samples.len().to_string()),
+        ("first_seq", opt(r.first_seq)),
+        ("last_seq", opt(r.last_seq)),
+        ("missing_samples", r.missing_samples.to_string()),
+        ("gaps", gaps),
+        ("damaged_frames", r.damaged_frames.len().to_string()),
+        ("overruns", r.board.overruns.to_string()),
+        ("queue_drops", r.board.queue_drops.to_string()),
+        ("tx_errors", r.board.tx_errors.to_string()),
+        (
+            "reference_mismatches",
+            r.reference_mismatches.len().to_string(),
+        ),
+    ]
+}
+
+/// Names of the nine excitation keys among [`comment_pairs`] (the group `data` parses).
+pub use crate::data::EXCITATION_KEYS;
+
+/// The `# key=value` comment block of a capture CSV (each line ends in `\n`).
+pub fn comment_lines(record: &CaptureRecord) -> String {
+    comment_pairs(record)
+        .into_iter()
+        .map(|(k, v)| format!("# {k}={v}\n"))
+        .collect()
+}
+
+/// Writes the capture CSV of `record` to `out`.
+///
+/// # Errors
+/// Whatever `out` returns.
+pub fn write_csv(record: &CaptureRecord, out: &mut impl Write) -> io::Result<()> {
+    write_table(
+        out,
+        &comment_lines(record),
+        record
+            .samples
+            .iter()
+            .map(|s| [s.t, s.theta_ref, s.u, s.theta_m]),
+    )
+}
+
+/// Writes a capture CSV from its parts: `comments` verbatim (whole `# key=value` lines),
+/// the header `t,theta_ref,u,theta_m`, then one row per `[t [s], θref [rad], u [N·m],
+/// θm [rad]]`, each number in its shortest form that reads back to the same `f64`
+/// (non-finite values as `NaN`, `inf`, `-inf`), written in 64 KiB blocks; flushes `out`
+/// at the end. The one writer of capture CSV rows ([`write_csv`] and
+/// `data::write_capture_csv` call it).
+///
+/// # Errors
+/// Whatever `out` returns.
+pub fn write_table<W: Write + ?Sized>(
+    out: &mut W,
+    comments: &str,
+    rows: impl IntoIterator<Item = [f64; 4]>,
+) -> io::Result<()> {
+    out.write_all(comments.as_bytes())?;
+    if !comments.is_empty() && !comments.ends_with('\n') {
+        out.write_all(b"\n")?;
+    }
+    out.write_all(b"t,theta_ref,u,theta_m\n")?;
+    let mut fmt = zmij::Buffer::new();
+    let mut block = Vec::with_capacity(1 << 16);
+    for row in rows {
+        for (i, v) in row.into_iter().enumerate() {
+            if i > 0 {
+                block.push(b',');
+            }
+            block.extend_from_slice(fmt.format(v).as_bytes());
+        }
+        block.push(b'\n');
+        if block.len() >= (1 << 16) - 128 {
+            out.write_all(&block)?;
+            block.clear();
+        }
+    }
+    out.write_all(&block)?;
+    out.flush()
+}
+
+/// Writes the capture CSV to `path` atomically: into `path.tmp`, then renamed, so a
+/// reader never sees half an export.
+///
+/// # Errors
+/// [`CaptureError::Export`] naming the file that could not be written.
+pub fn export_csv(record: &CaptureRecord, path: &Path) -> Result<(), CaptureError> {
+    let mut tmp = path.as_os_str().to_os_string();
+    tmp.push(".tmp");
+    let tmp = std::path::PathBuf::from(tmp);
+    let err = |source| CaptureError::Export {
+        path: path.to_path_buf(),
+        err: source,
+    };
+    let result = (|| {
+        let file = std::fs::File::create(&tmp)?;
+        let mut w = io::BufWriter::with_capacity(1 << 16, file);
+        write_csv(record, &mut w)?;
+        w.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(err(e));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::capture::{decode_stream, CaptureError};
+    use crate::data::{parse_csv, ColumnMap, DataError};
+    use crate::test_support::synth::{synth_stream, FrameContent, SynthOptions};
+
+    #[test]
+    fn exported_csv_reads_back_through_data_exactly_as_the_record() {
+        let s = synth_stream(&SynthOptions::small());
+        let rec = decode_stream(&s.bytes, &[]).unwrap();
+        let mut csv = Vec::new();
+        write_csv(&rec, &mut csv).unwrap();
+        let ds = parse_csv(
+            std::str::from_utf8(&csv).unwrap(),
+            "run.csv",
+            &ColumnMap::capture(),
+        )
+        .unwrap();
+        assert_eq!(ds.excitation, Some(rec.header.excitation));
+        assert_eq!(ds.data.ts, 1.0 / 200.0);
+        assert_eq!(ds.t0, 0.0);
+        assert_eq!(
+            ds.data.u,
+            rec.samples.iter().map(|x| x.u).collect::<Vec<_>>()
+        );
+        assert_eq!(
+            ds.data.y,
+            rec.samples.iter().map(|x| x.theta_m).collect::<Vec<_>>()
+        );
+        assert_eq!(
+            ds.data.r.as_ref().unwrap(),
+            &rec.samples.iter().map(|x| x.theta_ref).collect::<Vec<_>>()
+        );
+        assert_eq!(ds.meta["gaps"], "none");
+        assert_eq!(ds.meta["session_id"], "7");
+        // the loader path gives the same data straight from the capture
+        let direct = rec.to_dataset(std::path::Path::new("run.jcap")).unwrap();
+        assert_eq!(direct.data, ds.data);
+        assert_eq!(direct.excitation, ds.excitation);
+        assert_eq!(direct.meta, ds.meta);
+    }
+
+    #[test]
+    fn a_gap_is_never_filled_the_csv_jumps_and_the_loader_refuses() {
+        let s = synth_stream(&SynthOptions::small());
+        let f = s
+            .frames
+            .iter()
+            .filter(|f| matches!(f.content, FrameContent::Batch { .. }))
+            .nth(3)
+            .unwrap();
+        let FrameContent::Batch { first, len } = f.content else {
+            unreachable!()
+        };
+        let mut bytes = s.bytes[..f.offset as usize].to_vec();
+        bytes.extend_from_slice(&s.bytes[(f.offset + f.len) as usize..]);
+        let rec = decode_stream(&bytes, &[]).unwrap();
+        assert_eq!(rec.samples.len(), 400 - len as usize);
+        let mut csv = Vec::new();
+        write_csv(&rec, &mut csv).unwrap();
+        let text = String::from_utf8(csv).unwrap();
+        assert!(text.contains(&format!("# gaps={}..{}\n", first, first + len - 1)));
+        assert!(text.contains(&format!("# missing_samples={len}\n")));
+        // the row after the gap jumps by len + 1 sample intervals; data names its line
+        let err = parse_csv(&text, "gap.csv", &ColumnMap::capture()).unwrap_err();
+        assert!(matches!(err, DataError::NonUniform { .. }), "{err}");
+        let comments = text.lines().take_while(|l| l.starts_with('#')).count();
+        let line = comments + 1 + first as usize + 1; // header, rows before the gap, the jump
+        assert!(
+            err.to_string().starts_with(&format!("gap.csv:{line}:")),
+            "{err}"
+        );
+        let err = rec
+            .to_dataset(std::path::Path::new("gap.jcap"))
+            .unwrap_err();
+        assert!(matches!(err, CaptureError::NotUniform { .. }));
+        assert_eq!(
+            err.to_string(),
+            format!(
+                "gap.jcap: 1 gap, {len} samples missing (first seq {first}..={}); `jointid info` lists what is missing",
+                first + len - 1
+            )
+        );
+    }
+}

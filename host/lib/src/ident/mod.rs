@@ -1,0 +1,18 @@
+//! Identification: from an [`crate::data::IdData`] to models and how well they explain
+//! the data. Nonparametric FRF ([`frf`]), black box ([`subspace`], refined by [`pem`]),
+//! physical models ([`grey_box`]), one Levenberg–Marquardt loop ([`lm`]), validation
+//! ([`validate`], the only FIT), and the orchestration the command line and the
+//! scenarios share ([`fit`]). State-space algebra in [`ss`] and [`linalg`].
+//!
+//! Nothing here does IO.
+
+pub mod fit;
+pub mod frf;
+pub mod frf_fit;
+pub mod grey_box;
+pub mod linalg;
+pub mod lm;
+pub mod pem;
+pub mod ss;
+pub mod subspace;
+pub mod validate;

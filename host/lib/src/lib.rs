@@ -1,0 +1,24 @@
+//! jointid host library: from a capture of one robot joint to models a control
+//! engineer can trust, and to where the simulation departs from the real joint.
+//!
+//! Modules are grouped by job, in the order of the user's path:
+//!
+//! ```text
+//! capture -> data -> ident (frf, subspace, pem, grey_box, validate, fit) -> diagnose -> report
+//!                    model (the joint's laws: parameters, mechanism, effects)
+//!                      `-> sim (the closed loop around a model; the simulated board)
+//!                    scenario (the paper's experiment on the simulated joint)
+//! ```
+//!
+//! Estimators do no IO: they take an [`data::IdData`] and return values. The library
+//! knows no command line; the `jointid` binary (package `jointid-cli`) is one.
+
+pub mod capture;
+pub mod data;
+pub mod diagnose;
+pub mod ident;
+pub mod model;
+pub mod report;
+pub mod scenario;
+pub mod sim;
+pub mod test_support;

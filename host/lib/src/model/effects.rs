@@ -1,0 +1,674 @@
+//! Unmodelled effects that can be switched on over any plant (DESIGN.md §6), and the spec
+//! strings the CLI uses for them (`--effect backlash:width=0.002`).
+//!
+//! Each effect has its own parameters with documented defaults. The defaults are sized so
+//! that the effect is clearly visible in the spectra of `u` and `θ_m` of the default
+//! three-mass joint under the default excitation, core's `ExcitationConfig::paper_default()`
+//! (special odd multisine, 0.02 rad RMS on the motor-angle reference). That amplitude is
+//! small: it moves the motor by about 7 mrad RMS, deflects the gearbox by at most about
+//! 6e-5 rad (arm side) and needs about 0.05 N·m RMS of torque, so the defaults are small in
+//! absolute terms (4 arcsec of backlash, 0.03 N·m of Coulomb friction); scale them with the
+//! excitation. Measured by the fingerprint tests in `crate::sim::tests` (power at the
+//! non-excited odd lines relative to the excited ones, mean of 4 periods):
+//! - backlash, Coulomb friction and the cubic spring raise the non-excited odd lines of `u`
+//!   to 7e-3, 1.2e-2 and 1.4e-3 of the excited power (ideal sensors), 100–1000 times the
+//!   floor of the default sensors (quantisation, noise, disturbance: 1.3e-5 in `u`);
+//!   backlash and friction relatively more at small amplitude (at 4 times the amplitude:
+//!   1.8e-4, 7.9e-4), the cubic spring more at large amplitude (2.5e-2);
+//! - the extra mode adds a resonance near 10.4 Hz (anti-resonance 9.3 Hz), below the
+//!   gearbox modes, where the motor-side FRF had none;
+//! - the delay bends the phase of the `u → θ_m` FRF by −0.27° per Hz (1.5 samples);
+//! - the torque ripple raises the even lines (it is not an odd function of the motion).
+//!
+//! Physics of each effect (where it acts in the plant):
+//! - `coulomb_friction`: motor-side friction opposing the motor velocity ω with the
+//!   Coulomb level plus a Stribeck bump, `τ_f = sgn(ω) [F_c + (F_s − F_c) e^{−(ω/v_s)²}]`
+//!   while sliding, and set-valued at ω = 0: the motor sticks while the net torque on it is
+//!   below the breakaway level `F_s` (friction balances it exactly) and breaks away when it
+//!   exceeds it. The integrator treats sticking, stopping and breakaway as events (see
+//!   [`crate::sim::integrate`]); no regularisation is used, so `v_ε` (`v_smooth`) only enters
+//!   the smooth approximation [`CoulombFriction::torque`], kept for analysis.
+//! - `backlash`: dead zone of total width `w` in the gearbox spring: the spring torque is
+//!   `k_g dz(δ) + k3 dz(δ)³ + d_g δ̇` in contact and 0 in the gap, `dz(δ) = δ − w/2` for
+//!   `δ > w/2`, `δ + w/2` for `δ < −w/2`, 0 in between (δ = `r θ_m − θ_a1`, arm side). The
+//!   contact edges are located exactly by the integrator (no smoothing).
+//! - `nonlinear_stiffness`: cubic term `k3 δ³` added to the gearbox spring (seed 001 eq. (6)).
+//! - `extra_mode`: one more mass `J` on a spring `k`, `d`, attached either in parallel to the
+//!   first arm mass (as `J_p` in seed 000 eq. (7)) or in series after the last mass. Linear.
+//! - `time_delay`: transport delay of the torque reference `u` before the current loop, in
+//!   samples (whole and fractional). Because `u` is a zero-order-hold staircase, the
+//!   delayed signal over sample `k` is `u[k−n−1]` for the first fraction φ of the sample and
+//!   `u[k−n]` after it (`D = n + φ`). The simulator applies exactly this switch inside the
+//!   sample (no linear interpolation, no Thiran approximation are needed): the delay of the
+//!   continuous torque is exact. Linear.
+//! - `torque_ripple`: `A sin(n θ_m + φ)` added to the motor torque (cogging / commutation
+//!   ripple, `n` periods per motor revolution).
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::str::FromStr;
+
+/// Coulomb friction with a Stribeck bump on the motor (smoothed near zero velocity).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CoulombFriction {
+    /// Coulomb level `F_c` [N·m], motor side; default 0.03
+    pub fc: f64,
+    /// static (breakaway) level `F_s ≥ F_c` [N·m]; default 0.04
+    pub fs: f64,
+    /// Stribeck velocity `v_s` [rad/s], motor side; default 0.1
+    pub v_stribeck: f64,
+    /// regularisation velocity `v_ε` of the smooth approximation [`Self::torque`] [rad/s];
+    /// default 0.01 (the simulator integrates the set-valued law and does not use it)
+    pub v_smooth: f64,
+}
+
+impl Default for CoulombFriction {
+    fn default() -> Self {
+        CoulombFriction {
+            fc: 0.03,
+            fs: 0.04,
+            v_stribeck: 0.1,
+            v_smooth: 0.01,
+        }
+    }
+}
+
+impl CoulombFriction {
+    /// Friction level `F_c + (F_s − F_c) e^{−(ω/v_s)²}` while sliding at `omega` [rad/s] →
+    /// [N·m] (the magnitude of the set-valued law the simulator integrates).
+    pub fn level(&self, omega: f64) -> f64 {
+        let x = omega / self.v_stribeck;
+        if x.abs() < 6.0 {
+            self.fc + (self.fs - self.fc) * (-x * x).exp()
+        } else {
+            self.fc
+        }
+    }
+
+    /// Regularised friction torque `level(ω) tanh(ω/v_ε)` opposing the motor velocity
+    /// `omega` [rad/s] → [N·m]; a smooth approximation of the set-valued law, for analysis
+    /// (the simulator does not use it).
+    pub fn torque(&self, omega: f64) -> f64 {
+        let x = omega / self.v_stribeck;
+        let level = if x.abs() < 6.0 {
+            self.fc + (self.fs - self.fc) * (-x * x).exp()
+        } else {
+            self.fc
+        };
+        let s = omega / self.v_smooth;
+        let sign = if s.abs() < 20.0 { s.tanh() } else { s.signum() };
+        level * sign
+    }
+
+    /// Derivative `dτ_f/dω` at `omega` [N·m·s/rad].
+    pub fn slope(&self, omega: f64) -> f64 {
+        let x = omega / self.v_stribeck;
+        let (level, dlevel) = if x.abs() < 6.0 {
+            let e = (-x * x).exp();
+            (
+                self.fc + (self.fs - self.fc) * e,
+                -(self.fs - self.fc) * e * 2.0 * x / self.v_stribeck,
+            )
+        } else {
+            (self.fc, 0.0)
+        };
+        let s = omega / self.v_smooth;
+        if s.abs() >= 20.0 {
+            return dlevel * s.signum();
+        }
+        let t = s.tanh();
+        dlevel * t + level * (1.0 - t * t) / self.v_smooth
+    }
+
+    /// Upper bound of `|dτ_f/dω|` [N·m·s/rad], used to size refined steps.
+    pub fn max_slope(&self) -> f64 {
+        self.fs.max(self.fc) / self.v_smooth + (self.fs - self.fc).abs() * 0.86 / self.v_stribeck
+    }
+}
+
+/// Dead zone in the gearbox spring.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Backlash {
+    /// total width `w` of the dead zone [rad], arm side; default 2e-5 (4 arcsec)
+    pub width: f64,
+}
+
+impl Default for Backlash {
+    fn default() -> Self {
+        Backlash { width: 2.0e-5 }
+    }
+}
+
+/// Cubic stiffening of the gearbox spring.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NonlinearStiffness {
+    /// cubic coefficient `k3` [N·m/rad³]; default 2e13 (`k3 δ²` = 16 % of `k_g` at δ = 3e-5 rad)
+    pub k3: f64,
+}
+
+impl Default for NonlinearStiffness {
+    fn default() -> Self {
+        NonlinearStiffness { k3: 3.0e13 }
+    }
+}
+
+/// Where an extra mass is attached.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Attach {
+    /// to the first arm mass, in parallel with the rest of the arm (like `J_p`, eq. (7))
+    Parallel,
+    /// to the last mass of the chain
+    Serial,
+}
+
+/// One more mass on a spring.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ExtraMode {
+    /// inertia `J` [kg·m²], arm side; default 3.0 (a quarter of `J_a1`)
+    pub j: f64,
+    /// stiffness `k` [N·m/rad]; default 1.18e4 (10 Hz with `J_a1` held still)
+    pub k: f64,
+    /// damping `d` [N·m·s/rad]; default 7.5 (2 % of critical)
+    pub d: f64,
+    /// attachment; default parallel
+    pub attach: Attach,
+}
+
+impl Default for ExtraMode {
+    fn default() -> Self {
+        ExtraMode {
+            j: 3.0,
+            k: 1.18e4,
+            d: 7.5,
+            attach: Attach::Parallel,
+        }
+    }
+}
+
+/// Transport delay of the torque reference.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TimeDelay {
+    /// delay `D = n + φ` [samples] (≥ 0, fractional allowed); default 1.5 (0.75 ms at 2 kHz)
+    pub samples: f64,
+}
+
+impl Default for TimeDelay {
+    fn default() -> Self {
+        TimeDelay { samples: 1.5 }
+    }
+}
+
+/// Position-dependent motor torque `A sin(n θ_m + φ)`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TorqueRipple {
+    /// amplitude `A` [N·m]; default 0.01
+    pub amplitude: f64,
+    /// periods `n` per motor revolution [-]; default 36 (cogging of a 36-slot motor)
+    pub order: f64,
+    /// phase `φ` [rad]; default 0.5
+    pub phase: f64,
+}
+
+impl Default for TorqueRipple {
+    fn default() -> Self {
+        TorqueRipple {
+            amplitude: 0.02,
+            order: 72.0,
+            phase: 0.5,
+        }
+    }
+}
+
+/// One switchable effect with its parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "effect", rename_all = "snake_case")]
+pub enum Effect {
+    /// see [`CoulombFriction`]
+    CoulombFriction(CoulombFriction),
+    /// see [`Backlash`]
+    Backlash(Backlash),
+    /// see [`NonlinearStiffness`]
+    NonlinearStiffness(NonlinearStiffness),
+    /// see [`ExtraMode`]
+    ExtraMode(ExtraMode),
+    /// see [`TimeDelay`]
+    TimeDelay(TimeDelay),
+    /// see [`TorqueRipple`]
+    TorqueRipple(TorqueRipple),
+}
+
+/// Effect names accepted by [`Effect::from_str`] (plus `none` in [`parse_effects`]).
+pub const EFFECT_NAMES: [&str; 6] = [
+    "coulomb_friction",
+    "backlash",
+    "nonlinear_stiffness",
+    "extra_mode",
+    "time_delay",
+    "torque_ripple",
+];
+
+impl Effect {
+    /// Spec name of the effect (`backlash`, ...).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Effect::CoulombFriction(_) => "coulomb_friction",
+            Effect::Backlash(_) => "backlash",
+            Effect::NonlinearStiffness(_) => "nonlinear_stiffness",
+            Effect::ExtraMode(_) => "extra_mode",
+            Effect::TimeDelay(_) => "time_delay",
+            Effect::TorqueRipple(_) => "torque_ripple",
+        }
+    }
+
+    /// The effect with its default parameters, by spec name.
+    pub fn default_by_name(name: &str) -> Option<Effect> {
+        Some(match name {
+            "coulomb_friction" => Effect::CoulombFriction(CoulombFriction::default()),
+            "backlash" => Effect::Backlash(Backlash::default()),
+            "nonlinear_stiffness" => Effect::NonlinearStiffness(NonlinearStiffness::default()),
+            "extra_mode" => Effect::ExtraMode(ExtraMode::default()),
+            "time_delay" => Effect::TimeDelay(TimeDelay::default()),
+            "torque_ripple" => Effect::TorqueRipple(TorqueRipple::default()),
+            _ => return None,
+        })
+    }
+
+    /// Every default effect, in [`EFFECT_NAMES`] order.
+    pub fn all_defaults() -> Vec<Effect> {
+        EFFECT_NAMES
+            .iter()
+            .filter_map(|n| Effect::default_by_name(n))
+            .collect()
+    }
+
+    /// True for effects that make the plant nonlinear (they need the nonlinear integrators).
+    pub fn is_nonlinear(&self) -> bool {
+        !matches!(self, Effect::ExtraMode(_) | Effect::TimeDelay(_))
+    }
+
+    /// Parameter keys accepted in a spec for this effect.
+    pub fn keys(&self) -> &'static [&'static str] {
+        match self {
+            Effect::CoulombFriction(_) => &["fc", "fs", "v_stribeck", "v_smooth"],
+            Effect::Backlash(_) => &["width"],
+            Effect::NonlinearStiffness(_) => &["k3"],
+            Effect::ExtraMode(_) => &["j", "k", "d", "attach"],
+            Effect::TimeDelay(_) => &["samples"],
+            Effect::TorqueRipple(_) => &["amplitude", "order", "phase"],
+        }
+    }
+
+    /// Sets one parameter from its text; `Err(reason)` when the value is not acceptable and
+    /// `Ok(false)` when the key is unknown.
+    fn set(&mut self, key: &str, value: &str) -> Result<bool, String> {
+        if let (Effect::ExtraMode(m), "attach") = (&mut *self, key) {
+            m.attach = match value {
+                "parallel" => Attach::Parallel,
+                "serial" => Attach::Serial,
+                _ => return Err("expected `parallel` or `serial`".into()),
+            };
+            return Ok(true);
+        }
+        let v: f64 = value
+            .parse()
+            .map_err(|_| "not a number".to_string())
+            .and_then(|v: f64| {
+                if v.is_finite() {
+                    Ok(v)
+                } else {
+                    Err("not finite".to_string())
+                }
+            })?;
+        let nonneg = |v: f64| {
+            if v >= 0.0 {
+                Ok(v)
+            } else {
+                Err("must be >= 0".to_string())
+            }
+        };
+        let pos = |v: f64| {
+            if v > 0.0 {
+                Ok(v)
+            } else {
+                Err("must be > 0".to_string())
+            }
+        };
+        match (self, key) {
+            (Effect::CoulombFriction(c), "fc") => c.fc = nonneg(v)?,
+            (Effect::CoulombFriction(c), "fs") => c.fs = nonneg(v)?,
+            (Effect::CoulombFriction(c), "v_stribeck") => c.v_stribeck = pos(v)?,
+            (Effect::CoulombFriction(c), "v_smooth") => c.v_smooth = pos(v)?,
+            (Effect::Backlash(b), "width") => b.width = nonneg(v)?,
+            (Effect::NonlinearStiffness(s), "k3") => s.k3 = v,
+            (Effect::ExtraMode(m), "j") => m.j = pos(v)?,
+            (Effect::ExtraMode(m), "k") => m.k = pos(v)?,
+            (Effect::ExtraMode(m), "d") => m.d = nonneg(v)?,
+            (Effect::TimeDelay(t), "samples") => t.samples = nonneg(v)?,
+            (Effect::TorqueRipple(t), "amplitude") => t.amplitude = v,
+            (Effect::TorqueRipple(t), "order") => t.order = v,
+            (Effect::TorqueRipple(t), "phase") => t.phase = v,
+            _ => return Ok(false),
+        }
+        Ok(true)
+    }
+
+    /// Checks relations between parameters that single keys cannot (e.g. `F_s ≥ F_c`).
+    pub fn check(&self) -> Result<(), String> {
+        match self {
+            Effect::CoulombFriction(c) if c.fs < c.fc => {
+                Err(format!("fs ({}) must be >= fc ({})", c.fs, c.fc))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+impl fmt::Display for Effect {
+    /// The spec string that parses back to this effect (`backlash:width=0.0002`).
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}:", self.name())?;
+        match self {
+            Effect::CoulombFriction(c) => write!(
+                f,
+                "fc={},fs={},v_stribeck={},v_smooth={}",
+                c.fc, c.fs, c.v_stribeck, c.v_smooth
+            ),
+            Effect::Backlash(b) => write!(f, "width={}", b.width),
+            Effect::NonlinearStiffness(s) => write!(f, "k3={}", s.k3),
+            Effect::ExtraMode(m) => write!(
+                f,
+                "j={},k={},d={},attach={}",
+                m.j,
+                m.k,
+                m.d,
+                match m.attach {
+                    Attach::Parallel => "parallel",
+                    Attach::Serial => "serial",
+                }
+            ),
+            Effect::TimeDelay(t) => write!(f, "samples={}", t.samples),
+            Effect::TorqueRipple(t) => write!(
+                f,
+                "amplitude={},order={},phase={}",
+                t.amplitude, t.order, t.phase
+            ),
+        }
+    }
+}
+
+/// Why an effect spec was rejected; columns are 1-based byte columns in the spec string.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EffectParseError {
+    /// the name before `:` is not an effect
+    #[error("unknown effect `{name}` at column 1 (known: none, {known})")]
+    UnknownEffect {
+        /// the name given
+        name: String,
+        /// the accepted names, comma separated
+        known: String,
+    },
+    /// a key is not a parameter of that effect
+    #[error("effect `{effect}`: unknown key `{key}` at column {column} (known: {known})")]
+    UnknownKey {
+        /// effect name
+        effect: &'static str,
+        /// the key given
+        key: String,
+        /// 1-based column of the key
+        column: usize,
+        /// the accepted keys, comma separated
+        known: String,
+    },
+    /// a value did not parse or is out of range
+    #[error("effect `{effect}`: bad value `{value}` for `{key}` at column {column}: {reason}")]
+    BadValue {
+        /// effect name
+        effect: &'static str,
+        /// the key
+        key: String,
+        /// the value text
+        value: String,
+        /// 1-based column of the value
+        column: usize,
+        /// what is wrong with it
+        reason: String,
+    },
+    /// a parameter is not of the form `key=value`
+    #[error("effect spec `{spec}`: expected key=value at column {column}")]
+    Malformed {
+        /// the whole spec
+        spec: String,
+        /// 1-based column of the offending item
+        column: usize,
+    },
+    /// parameters that are individually fine but inconsistent together
+    #[error("effect `{effect}`: {reason}")]
+    Inconsistent {
+        /// effect name
+        effect: &'static str,
+        /// what is inconsistent
+        reason: String,
+    },
+    /// `none` given together with other effects
+    #[error("effect `none` cannot be combined with other effects")]
+    NoneCombined,
+}
+
+impl FromStr for Effect {
+    type Err = EffectParseError;
+
+    /// Parses `name` or `name:key=value,key=value` (whitespace around items is ignored).
+    fn from_str(spec: &str) -> Result<Self, Self::Err> {
+        let (name, rest, rest_col) = match spec.find(':') {
+            Some(i) => (&spec[..i], Some(&spec[i + 1..]), i + 2),
+            None => (spec, None, 0),
+        };
+        let name = name.trim();
+        let mut effect =
+            Effect::default_by_name(name).ok_or_else(|| EffectParseError::UnknownEffect {
+                name: name.to_string(),
+                known: EFFECT_NAMES.join(", "),
+            })?;
+        if let Some(rest) = rest {
+            let mut col = rest_col;
+            for item in rest.split(',') {
+                let item_col = col + (item.len() - item.trim_start().len());
+                col += item.len() + 1;
+                let trimmed = item.trim();
+                if trimmed.is_empty() {
+                    continue;
+                }
+                let Some(eq) = trimmed.find('=') else {
+                    return Err(EffectParseError::Malformed {
+                        spec: spec.to_string(),
+                        column: item_col,
+                    });
+                };
+                let key = trimmed[..eq].trim();
+                let value = trimmed[eq + 1..].trim();
+                let value_col = item_col + eq + 1;
+                match effect.set(key, value) {
+                    Ok(true) => {}
+                    Ok(false) => {
+                        return Err(EffectParseError::UnknownKey {
+                            effect: effect.name(),
+                            key: key.to_string(),
+                            column: item_col,
+                            known: effect.keys().join(", "),
+                        })
+                    }
+                    Err(reason) => {
+                        return Err(EffectParseError::BadValue {
+                            effect: effect.name(),
+                            key: key.to_string(),
+                            value: value.to_string(),
+                            column: value_col,
+                            reason,
+                        })
+                    }
+                }
+            }
+        }
+        effect
+            .check()
+            .map_err(|reason| EffectParseError::Inconsistent {
+                effect: effect.name(),
+                reason,
+            })?;
+        Ok(effect)
+    }
+}
+
+/// Parses several specs (one per `--effect` flag). `none` alone gives no effects.
+///
+/// # Errors
+/// The first spec that does not parse, or `none` combined with anything else.
+pub fn parse_effects<S: AsRef<str>>(specs: &[S]) -> Result<Vec<Effect>, EffectParseError> {
+    let is_none = |s: &S| s.as_ref().trim() == "none";
+    if specs.iter().any(is_none) {
+        return if specs.len() == 1 {
+            Ok(Vec::new())
+        } else {
+            Err(EffectParseError::NoneCombined)
+        };
+    }
+    specs.iter().map(|s| s.as_ref().parse()).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parse_name_only_gives_defaults() {
+        for name in EFFECT_NAMES {
+            let e: Effect = name.parse().unwrap();
+            assert_eq!(Some(e), Effect::default_by_name(name));
+        }
+        assert_eq!(
+            "backlash".parse::<Effect>().unwrap(),
+            Effect::Backlash(Backlash::default())
+        );
+    }
+
+    #[test]
+    fn parse_keys_set_values_and_keep_other_defaults() {
+        let e: Effect = "backlash:width=0.002".parse().unwrap();
+        assert_eq!(e, Effect::Backlash(Backlash { width: 0.002 }));
+        let e: Effect = "coulomb_friction: fc=0.02 , v_smooth=0.05".parse().unwrap();
+        let Effect::CoulombFriction(c) = e else {
+            panic!("wrong effect {e:?}")
+        };
+        assert_eq!(c.fc, 0.02);
+        assert_eq!(c.v_smooth, 0.05);
+        assert_eq!(c.fs, CoulombFriction::default().fs);
+        let e: Effect = "extra_mode:attach=serial,j=2".parse().unwrap();
+        assert_eq!(
+            e,
+            Effect::ExtraMode(ExtraMode {
+                j: 2.0,
+                attach: Attach::Serial,
+                ..ExtraMode::default()
+            })
+        );
+    }
+
+    #[test]
+    fn parse_round_trips_display() {
+        for e in Effect::all_defaults() {
+            let back: Effect = e.to_string().parse().unwrap();
+            assert_eq!(back, e);
+        }
+        let e = Effect::TimeDelay(TimeDelay { samples: 2.25 });
+        assert_eq!(e.to_string().parse::<Effect>().unwrap(), e);
+    }
+
+    #[test]
+    fn parse_rejects_unknown_effect_key_and_bad_values_with_columns() {
+        let err = "backlsh:width=1".parse::<Effect>().unwrap_err();
+        assert!(
+            matches!(err, EffectParseError::UnknownEffect { ref name, .. } if name == "backlsh")
+        );
+        assert!(err.to_string().contains("known: none, coulomb_friction"));
+
+        let err = "backlash:widht=1".parse::<Effect>().unwrap_err();
+        assert_eq!(
+            err,
+            EffectParseError::UnknownKey {
+                effect: "backlash",
+                key: "widht".into(),
+                column: 10,
+                known: "width".into()
+            }
+        );
+
+        let err = "backlash:width=abc".parse::<Effect>().unwrap_err();
+        assert!(
+            matches!(err, EffectParseError::BadValue { column: 16, ref reason, .. } if reason == "not a number"),
+            "{err:?}"
+        );
+        let err = "time_delay:samples=-1".parse::<Effect>().unwrap_err();
+        assert!(err.to_string().contains("must be >= 0"), "{err}");
+        let err = "backlash:width".parse::<Effect>().unwrap_err();
+        assert_eq!(
+            err,
+            EffectParseError::Malformed {
+                spec: "backlash:width".into(),
+                column: 10
+            }
+        );
+        let err = "coulomb_friction:fc=0.3,fs=0.2"
+            .parse::<Effect>()
+            .unwrap_err();
+        assert!(matches!(err, EffectParseError::Inconsistent { .. }));
+        let err = "extra_mode:attach=sideways".parse::<Effect>().unwrap_err();
+        assert!(err.to_string().contains("parallel"), "{err}");
+        let err = "torque_ripple:amplitude=inf".parse::<Effect>().unwrap_err();
+        assert!(err.to_string().contains("not finite"), "{err}");
+    }
+
+    #[test]
+    fn parse_effects_handles_none_and_lists() {
+        assert!(parse_effects(&["none"]).unwrap().is_empty());
+        assert_eq!(
+            parse_effects(&["none", "backlash"]).unwrap_err(),
+            EffectParseError::NoneCombined
+        );
+        let v = parse_effects(&["backlash", "time_delay:samples=3"]).unwrap();
+        assert_eq!(v.len(), 2);
+        assert_eq!(v[1], Effect::TimeDelay(TimeDelay { samples: 3.0 }));
+        assert!(parse_effects::<&str>(&[]).unwrap().is_empty());
+    }
+
+    #[test]
+    fn coulomb_torque_is_odd_regularised_and_has_stribeck_bump() {
+        let c = CoulombFriction {
+            fc: 0.15,
+            fs: 0.2,
+            v_stribeck: 2.0,
+            v_smooth: 0.02,
+        };
+        assert_eq!(c.torque(0.0), 0.0);
+        for w in [0.001, 0.01, 0.3, 1.0, 5.0, 100.0] {
+            assert_eq!(c.torque(-w), -c.torque(w));
+        }
+        // far above v_smooth and v_stribeck: plain Coulomb level
+        assert!((c.torque(50.0) - c.fc).abs() < 1e-12);
+        // a little above v_smooth but far below v_stribeck: close to the static level
+        assert!((c.torque(0.2) - c.fs).abs() < 0.01 * c.fs);
+        // slope at zero is F_s / v_smooth
+        let h = 1e-7;
+        let slope = (c.torque(h) - c.torque(-h)) / (2.0 * h);
+        assert!((slope - c.fs / c.v_smooth).abs() < 1e-6 * slope);
+        assert!(slope <= c.max_slope());
+        for w in [0.0, 0.003, 0.02, 0.05, 0.5, 3.0, -1.0] {
+            let fd = (c.torque(w + h) - c.torque(w - h)) / (2.0 * h);
+            assert!(
+                (c.slope(w) - fd).abs() < 1e-6 * c.max_slope(),
+                "{w}: {} vs {fd}",
+                c.slope(w)
+            );
+        }
+    }
+}

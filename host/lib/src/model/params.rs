@@ -1,0 +1,277 @@
+//! Physical parameters of the simulated joint and the plant structures built from them.
+//!
+//! Names follow seed 000 (Norrlöf et al., "Modeling and identification of a mechanical
+//! industrial manipulator"), Table 1 and eq. (5)–(8): motor inertia `J_m`, arm inertias
+//! `J_a1`, `J_a2`, parallel inertia `J_p`, spring constants `k_g` (gearbox), `k_a` (arm),
+//! `k_p` (parallel mass), the matching dampings `d_g`, `d_a`, `d_p`, viscous motor
+//! friction `f_m` and the gear ratio `r = 1/118`. The nonlinear two-mass model of seed 001
+//! (eq. (4)–(9), DESIGN.md §6) adds the cubic spring coefficient `k3` and the Coulomb
+//! friction level `F_c`; its `k1`, `d`, `F_v`, `J_a` are `k_g`, `d_g`, `f_m` and
+//! `J_a1 + J_a2` here.
+//!
+//! # Units and sides of the gearbox
+//! Motor quantities are on the motor side (`J_m` [kg·m²], `f_m` [N·m·s/rad], motor angle
+//! [rad]); arm quantities are on the arm side (`J_a1` [kg·m²], `k_g` [N·m/rad] acting on the
+//! arm-side deflection `r·θ_m − θ_a1` [rad]). This is exactly the convention of seed 000
+//! eq. (6), where `x1 = θ_m r − θ_a1`.
+//!
+//! # Default joint (IRB1400-like axis 1): derivation
+//! Seed 000 gives no parameter values. What it gives is qualitative: the motor-side frequency
+//! response of axis 1 of an ABB IRB1400 (r = 1/118) shows two notches between 15 and 20 Hz
+//! (its Fig. 5–6, "the double notch around 17 Hz"), a three-mass model is the least that
+//! explains it, and the regulator leaves little input energy below 10 Hz. The defaults are
+//! therefore *constructed*, not measured: we chose the undamped motor-side spectrum of the
+//! three-mass model to have anti-resonances at 15 and 19 Hz and resonances at 17 and 23 Hz
+//! (inside the band of those figures), and a motor inertia typical of a 1–2 kW servo motor,
+//! `J_m = 1.0e-3 kg·m²`. For a free–free chain seen from the motor, with motor-side masses
+//! `m0 = J_m`, `m1 = r²J_a1`, `m2 = r²J_a2`, springs `c1 = r²k_g`, `c2 = r²k_a` and
+//! `ω = 2πf`:
+//! - product rule: `(p1 p2 / (z1 z2))² = (m0 + m1 + m2) / m0`, so the reflected arm
+//!   inertia is `0.882 J_m`;
+//! - trace rule: `p1² + p2² − z1² − z2² = c1 / m0`, which fixes `k_g`;
+//! - the two remaining relations of the locked-motor (anti-resonance) problem,
+//!   `z1² z2² = c1 c2 / (m1 m2)` and `z1² + z2² = c2/m2 + (c1 + c2)/m1`, give
+//!   `m1 = c1 / (z1² + z2² − z1²z2²(m1 + m2)/c1)`, then `m2` and `c2`.
+//!
+//! Result (rounded): `J_a1 = 11.66 kg·m²`, `J_a2 = 0.627 kg·m²`, `k_g = 1.275e5 N·m/rad`,
+//! `k_a = 7.26e3 N·m/rad`. A gearbox stiffness of ~1e5 N·m/rad is the catalogue range of
+//! the cycloidal reducers used on robots of this size, and an arm inertia of ~12 kg·m² about
+//! axis 1 is plausible for a 1.4 m reach arm; the distal mass `J_a2` is light (5 % of
+//! `J_a1`), a consequence of putting both notches so close together. The computed undamped
+//! modal frequencies of the rounded defaults (checked by unit tests in `plant.rs`) are:
+//! - three-mass: anti-resonances 15.00, 19.00 Hz; resonances 17.00, 23.00 Hz;
+//! - two-mass (arm lumped): anti-resonance 16.21 Hz, resonance 22.24 Hz;
+//! - four-mass (three-mass plus the parallel mass below): anti-resonances 14.02, 18.12,
+//!   35.92 Hz; resonances 17.00, 21.26, 36.14 Hz (the parallel mass on the heavy `J_a1` is
+//!   weakly seen from the motor: its pair nearly cancels).
+//!
+//! The firmware's on-target joint (`jointid_core::joint`, streamed by the emulated board) is
+//! this same three-mass joint with the same controller gains: the three-mass values are
+//! held there, in `JointParams::default_joint()`, and read from there by
+//! [`JointParams::default`] (a unit test pins them and the controller gains).
+//!
+//! Damping is chosen for 1.5–5 % modal damping, the usual range for gearbox/arm
+//! structures: `d_g = 80 N·m·s/rad`, `d_a = 4 N·m·s/rad`, `d_p = 7 N·m·s/rad` give
+//! ζ = 3.0 % at 17 Hz and 4.8 % at 23 Hz (three-mass) and 1.4 % at 36 Hz (four-mass).
+//! Viscous motor friction `f_m = 2e-3 N·m·s/rad` (0.6 N·m at 3000 rpm). The parallel mass of
+//! the four-mass model (seed 000 eq. (7)) is an assumed 20 % of `J_a1` with a locked
+//! frequency of 32 Hz: `J_p = 2.33 kg·m²`, `k_p = 9.42e4 N·m/rad`. Seed 001 defaults use the
+//! defaults of the matching effects (see [`super::effects`]): `k3 = 3e13 N·m/rad³` and
+//! `F_c = 0.03 N·m`, sized to be visible at the small default excitation (0.02 rad RMS).
+
+use serde::{Deserialize, Serialize};
+
+/// Which mechanical structure the plant has.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PlantKind {
+    /// one rigid mass `J = J_m + r²(J_a1 + J_a2)` with viscous friction `f_m`
+    Rigid,
+    /// motor + one arm mass `J_a1 + J_a2` through the gearbox spring `k_g`, `d_g`
+    TwoMass,
+    /// seed 000 eq. (5)–(6): motor, `J_a1`, `J_a2`, springs `k_g`, `k_a`
+    ThreeMass,
+    /// seed 000 eq. (7)–(8): the three-mass plus `J_p` on `J_a1` through `k_p`, `d_p`
+    FourMass,
+    /// seed 001 eq. (4)–(9): two-mass with the cubic spring `k_g x + k3 x³` and Coulomb
+    /// friction `F_c sgn(φ̇_m)` on the motor (sgn regularised, see [`super::effects`])
+    NonlinearTwoMass,
+}
+
+impl PlantKind {
+    /// Every kind, in the order of increasing complexity.
+    pub const ALL: [PlantKind; 5] = [
+        PlantKind::Rigid,
+        PlantKind::TwoMass,
+        PlantKind::ThreeMass,
+        PlantKind::FourMass,
+        PlantKind::NonlinearTwoMass,
+    ];
+
+    /// Name as used in specs and JSON (`three_mass`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            PlantKind::Rigid => "rigid",
+            PlantKind::TwoMass => "two_mass",
+            PlantKind::ThreeMass => "three_mass",
+            PlantKind::FourMass => "four_mass",
+            PlantKind::NonlinearTwoMass => "nonlinear_two_mass",
+        }
+    }
+}
+
+impl std::str::FromStr for PlantKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        PlantKind::ALL
+            .iter()
+            .copied()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| {
+                let known: Vec<&str> = PlantKind::ALL.iter().map(|k| k.name()).collect();
+                format!("unknown plant `{s}` (known: {})", known.join(", "))
+            })
+    }
+}
+
+/// Named physical parameters, seed 000 Table 1 plus seed 001's `k3`, `F_c`.
+///
+/// Each plant kind uses the subset it needs; unused ones are carried along so one set
+/// describes all kinds (and is printed whole by [`crate::sim::SimConfig::params_json`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JointParams {
+    /// motor inertia `J_m` [kg·m²], motor side
+    #[serde(rename = "J_m")]
+    pub j_m: f64,
+    /// first arm inertia `J_a1` [kg·m²], arm side
+    #[serde(rename = "J_a1")]
+    pub j_a1: f64,
+    /// second arm inertia `J_a2` [kg·m²], arm side
+    #[serde(rename = "J_a2")]
+    pub j_a2: f64,
+    /// parallel inertia `J_p` of the four-mass model [kg·m²], arm side
+    #[serde(rename = "J_p")]
+    pub j_p: f64,
+    /// gearbox stiffness `k_g` [N·m/rad] on the arm-side deflection `r θ_m − θ_a1`
+    pub k_g: f64,
+    /// arm stiffness `k_a` between `J_a1` and `J_a2` [N·m/rad]
+    pub k_a: f64,
+    /// stiffness `k_p` between `J_a1` and `J_p` [N·m/rad]
+    pub k_p: f64,
+    /// gearbox damping `d_g` [N·m·s/rad], arm side
+    pub d_g: f64,
+    /// arm damping `d_a` [N·m·s/rad]
+    pub d_a: f64,
+    /// parallel-mass damping `d_p` [N·m·s/rad]
+    pub d_p: f64,
+    /// viscous motor friction `f_m` [N·m·s/rad], motor side
+    pub f_m: f64,
+    /// gear ratio `r` [-] (arm angle per motor angle, 1/118 on the IRB1400 axis 1)
+    pub r: f64,
+    /// cubic spring coefficient `k3` of the nonlinear two-mass model [N·m/rad³]
+    pub k3: f64,
+    /// Coulomb friction level `F_c` of the nonlinear two-mass model [N·m], motor side
+    #[serde(rename = "F_c")]
+    pub f_c: f64,
+}
+
+impl Default for JointParams {
+    /// The IRB1400-like axis 1 derived in the module documentation. The three-mass values
+    /// (`J_m`, `J_a1`, `J_a2`, `k_g`, `k_a`, `d_g`, `d_a`, `f_m`, `r`) are read from the
+    /// firmware's on-target joint, `jointid_core::joint::JointParams::default_joint()`, the
+    /// single source of truth of the default joint; the emulated board streams that joint.
+    fn default() -> Self {
+        let core = jointid_core::joint::JointParams::default_joint();
+        JointParams {
+            j_m: core.j_m,
+            j_a1: core.j_a1,
+            j_a2: core.j_a2,
+            j_p: 2.33,
+            k_g: core.k_g,
+            k_a: core.k_a,
+            k_p: 9.42e4,
+            d_g: core.d_g,
+            d_a: core.d_a,
+            d_p: 7.0,
+            f_m: core.f_m,
+            r: core.gear_ratio,
+            k3: 3.0e13,
+            f_c: 0.03,
+        }
+    }
+}
+
+impl JointParams {
+    /// Total inertia seen at the motor when the joint is rigid,
+    /// `J_m + r²(J_a1 + J_a2)` [kg·m²] (the parallel mass is not included).
+    pub fn rigid_inertia(&self) -> f64 {
+        self.j_m + self.r * self.r * (self.j_a1 + self.j_a2)
+    }
+
+    /// Every parameter as (name, value, unit), names as in seed 000 Table 1.
+    pub fn table(&self) -> [(&'static str, f64, &'static str); 14] {
+        [
+            ("J_m", self.j_m, "kg·m²"),
+            ("J_a1", self.j_a1, "kg·m²"),
+            ("J_a2", self.j_a2, "kg·m²"),
+            ("J_p", self.j_p, "kg·m²"),
+            ("k_g", self.k_g, "N·m/rad"),
+            ("k_a", self.k_a, "N·m/rad"),
+            ("k_p", self.k_p, "N·m/rad"),
+            ("d_g", self.d_g, "N·m·s/rad"),
+            ("d_a", self.d_a, "N·m·s/rad"),
+            ("d_p", self.d_p, "N·m·s/rad"),
+            ("f_m", self.f_m, "N·m·s/rad"),
+            ("r", self.r, "-"),
+            ("k3", self.k3, "N·m/rad³"),
+            ("F_c", self.f_c, "N·m"),
+        ]
+    }
+}
+
+/// A plant: its structure and its physical parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Plant {
+    /// structure
+    pub kind: PlantKind,
+    /// physical parameters (each kind uses the subset it needs)
+    pub params: JointParams,
+}
+
+impl Default for Plant {
+    /// The three-mass default joint.
+    fn default() -> Self {
+        Plant {
+            kind: PlantKind::ThreeMass,
+            params: JointParams::default(),
+        }
+    }
+}
+
+impl Plant {
+    /// Plant of the given kind with the default parameters.
+    pub fn new(kind: PlantKind) -> Self {
+        Plant {
+            kind,
+            params: JointParams::default(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::ControllerConfig;
+
+    #[test]
+    fn default_joint_is_the_firmware_joint_with_the_same_controller() {
+        let core = jointid_core::joint::JointParams::default_joint();
+        let p = JointParams::default();
+        // the values the module documentation derives, as the firmware holds them
+        let expected = [
+            (p.j_m, 1.0e-3),
+            (p.j_a1, 11.66),
+            (p.j_a2, 0.627),
+            (p.k_g, 1.275e5),
+            (p.k_a, 7.26e3),
+            (p.d_g, 80.0),
+            (p.d_a, 4.0),
+            (p.f_m, 2.0e-3),
+            (p.r, 1.0 / 118.0),
+        ];
+        for (got, want) in expected {
+            assert_eq!(got, want);
+        }
+        // the board's cascade has the host controller's gains (in f32); its velocity PI
+        // integrates K_i e T with K_i = K_v / T_i
+        let c = ControllerConfig::default();
+        assert_eq!(core.kp, c.kp as f32);
+        assert_eq!(core.kv, c.kv as f32);
+        assert_eq!(core.ki, (c.kv / c.ti) as f32);
+        assert_eq!(core.u_max, c.u_max as f32);
+        assert_eq!(
+            f64::from(core.fs_hz),
+            crate::sim::SimConfig::default().sample_rate_hz
+        );
+    }
+}

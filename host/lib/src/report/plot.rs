@@ -1,0 +1,464 @@
+//! SVG plots: the line spectrum of a periodic experiment (seed 000 Fig. 3)
+//! and Bode plots of models over a measured FRF with its ±2σ band (seed 000
+//! Figs. 5–6).
+//!
+//! Functions take plain data (frequencies, amplitudes, complex responses),
+//! so any command can call them; they render to a `String` (testable, no
+//! IO) and [`write_svg`] stores it. Only SVG: PNG would need a font
+//! rasteriser and system font files, which this crate does not pull in.
+// Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
+
+use std::path::Path;
+
+use plotters::prelude::*;
+use rustfft::num_complex::Complex64;
+
+use crate::ident::frf::{unwrap_deg, FrfAnalysis, LineClass, SignalSpectrum};
+use crate::ident::validate::{BodeCurve, FrfBand};
+
+/// Errors of plotting.
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    /// the drawing backend failed
+    #[error("plot `{what}`: {msg}")]
+    Draw {
+        /// plot name
+        what: String,
+        /// backend message
+        msg: String,
+    },
+    /// nothing to plot
+    #[error("plot `{0}`: no data")]
+    Empty(String),
+    /// the file could not be written
+    #[error("{file}: {source}")]
+    Io {
+        /// file name
+        file: String,
+        /// underlying error
+        source: std::io::Error,
+    },
+}
+
+fn draw_err<E: std::fmt::Debug>(what: &str) -> impl Fn(E) -> PlotError + '_ {
+    move |e| PlotError::Draw {
+        what: what.into(),
+        msg: format!("{e:?}"),
+    }
+}
+
+/// Writes an SVG string to `path`.
+///
+/// # Errors
+/// [`PlotError::Io`] naming the file.
+pub fn write_svg(path: &Path, svg: &str) -> Result<(), PlotError> {
+    std::fs::write(path, svg).map_err(|source| PlotError::Io {
+        file: path.display().to_string(),
+        source,
+    })
+}
+
+/// One panel of the spectrum plot: a signal's period-averaged amplitude per
+/// line, its noise level and the class of each line.
+#[derive(Clone, Copy, Debug)]
+pub struct SpectrumPanel<'a> {
+    /// panel title (signal name and unit)
+    pub title: &'a str,
+    /// frequency of each line [Hz]
+    pub freq_hz: &'a [f64],
+    /// amplitude per line [signal unit]
+    pub amplitude: &'a [f64],
+    /// noise level (standard deviation of the mean) per line [signal unit]
+    pub noise: &'a [f64],
+    /// class per line
+    pub classes: &'a [LineClass],
+}
+
+fn to_db(x: f64) -> f64 {
+    20.0 * x.max(1e-300).log10()
+}
+
+/// Fig. 3 of seed 000 for one analysis: θm, u and (when present) θref
+/// panels in that order, as the paper stacks them.
+///
+/// # Errors
+/// As [`spectrum_svg`].
+pub fn analysis_spectrum_svg(title: &str, a: &FrfAnalysis) -> Result<String, PlotError> {
+    let freq: Vec<f64> = (0..a.classes.len()).map(|k| a.freq_hz(k)).collect();
+    fn panel<'a>(
+        title: &'a str,
+        freq_hz: &'a [f64],
+        s: &'a SignalSpectrum,
+        classes: &'a [LineClass],
+    ) -> SpectrumPanel<'a> {
+        SpectrumPanel {
+            title,
+            freq_hz,
+            amplitude: &s.amplitude,
+            noise: &s.noise,
+            classes,
+        }
+    }
+    let mut panels = vec![
+        panel("theta_m [rad]", &freq, &a.y, &a.classes),
+        panel("u [N·m]", &freq, &a.u, &a.classes),
+    ];
+    if let Some(r) = &a.r {
+        panels.push(panel("theta_ref [rad]", &freq, r, &a.classes));
+    }
+    spectrum_svg(title, &panels)
+}
+
+/// Fig. 3 of seed 000: one panel per signal (top to bottom as given),
+/// amplitude [dB] against frequency [Hz]; excited lines '+', non-excited
+/// odd lines 'x', even lines 'o', noise level as a grey line. Lines of class
+/// `Dc` and `OutOfBand` are left out.
+///
+/// # Errors
+/// [`PlotError::Empty`] without panels or lines, [`PlotError::Draw`].
+pub fn spectrum_svg(title: &str, panels: &[SpectrumPanel<'_>]) -> Result<String, PlotError> {
+    const W: &str = "spectrum";
+    if panels.is_empty() {
+        return Err(PlotError::Empty(W.into()));
+    }
+    let mut svg = String::new();
+    {
+        let h = 40 + 260 * panels.len() as u32;
+        let root = SVGBackend::with_string(&mut svg, (900, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_err(W))?;
+        let root = root
+            .titled(title, ("sans-serif", 20))
+            .map_err(draw_err(W))?;
+        let last = panels.len() - 1;
+        for (i, (area, p)) in root
+            .split_evenly((panels.len(), 1))
+            .iter()
+            .zip(panels)
+            .enumerate()
+        {
+            let shown: Vec<usize> = (0..p.freq_hz.len())
+                .filter(|&k| {
+                    !matches!(
+                        p.classes.get(k),
+                        None | Some(LineClass::Dc | LineClass::OutOfBand)
+                    )
+                })
+                .collect();
+            if shown.is_empty() {
+                return Err(PlotError::Empty(W.into()));
+            }
+            let fmax = shown.iter().map(|&k| p.freq_hz[k]).fold(0.0, f64::max) * 1.02;
+            let vals = shown
+                .iter()
+                .flat_map(|&k| [to_db(p.amplitude[k]), to_db(p.noise[k])]);
+            let top = vals.clone().fold(f64::NEG_INFINITY, f64::max) + 5.0;
+            let excited_min = shown
+                .iter()
+                .filter(|&&k| p.classes[k] == LineClass::Excited)
+                .map(|&k| to_db(p.amplitude[k]))
+                .fold(f64::INFINITY, f64::min);
+            let bottom = vals
+                .fold(f64::INFINITY, f64::min)
+                .max(excited_min.min(top) - 120.0)
+                - 5.0;
+            let mut chart = ChartBuilder::on(area)
+                .caption(p.title, ("sans-serif", 16))
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(55)
+                .build_cartesian_2d(0.0..fmax, bottom..top)
+                .map_err(draw_err(W))?;
+            chart
+                .configure_mesh()
+                .x_desc("frequency [Hz]")
+                .y_desc("amplitude [dB]")
+                .light_line_style(WHITE.mix(0.0))
+                .draw()
+                .map_err(draw_err(W))?;
+            chart
+                .draw_series(LineSeries::new(
+                    shown
+                        .iter()
+                        .map(|&k| (p.freq_hz[k], to_db(p.noise[k]).max(bottom))),
+                    BLACK.mix(0.35),
+                ))
+                .map_err(draw_err(W))?
+                .label("noise level")
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], BLACK.mix(0.35)));
+            let at = |k: usize| (p.freq_hz[k], to_db(p.amplitude[k]).max(bottom));
+            let of = |c: LineClass| shown.iter().copied().filter(move |&k| p.classes[k] == c);
+            chart
+                .draw_series(of(LineClass::Excited).map(|k| {
+                    EmptyElement::at(at(k))
+                        + PathElement::new(vec![(-4, 0), (4, 0)], BLUE)
+                        + PathElement::new(vec![(0, -4), (0, 4)], BLUE)
+                }))
+                .map_err(draw_err(W))?
+                .label("excited (+)")
+                .legend(|(x, y)| {
+                    EmptyElement::at((x + 4, y))
+                        + PathElement::new(vec![(-4, 0), (4, 0)], BLUE)
+                        + PathElement::new(vec![(0, -4), (0, 4)], BLUE)
+                });
+            chart
+                .draw_series(of(LineClass::OddNonExcited).map(|k| Cross::new(at(k), 3, RED)))
+                .map_err(draw_err(W))?
+                .label("odd non-excited (x)")
+                .legend(|(x, y)| Cross::new((x + 4, y), 3, RED));
+            chart
+                .draw_series(
+                    of(LineClass::Even).map(|k| Circle::new(at(k), 3, GREEN.stroke_width(1))),
+                )
+                .map_err(draw_err(W))?
+                .label("even (o)")
+                .legend(|(x, y)| Circle::new((x + 4, y), 3, GREEN.stroke_width(1)));
+            if i == last {
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.8))
+                    .border_style(BLACK)
+                    .position(SeriesLabelPosition::MiddleRight)
+                    .draw()
+                    .map_err(draw_err(W))?;
+            }
+        }
+        root.present().map_err(draw_err(W))?;
+    }
+    Ok(svg)
+}
+
+const PALETTE: [RGBColor; 5] = [
+    RGBColor(0, 0, 0),
+    RGBColor(200, 30, 30),
+    RGBColor(30, 90, 200),
+    RGBColor(20, 140, 60),
+    RGBColor(150, 60, 170),
+];
+
+/// Bode plot (magnitude [dB] and phase [deg] against log frequency [Hz]) of
+/// `models` over a measured FRF drawn as points with ±2σ bars (magnitude:
+/// |Ĝ| ± 2σ; phase: ± asin(2σ/|Ĝ|), a full ±180° when 2σ ≥ |Ĝ|).
+///
+/// # Errors
+/// [`PlotError::Empty`] when there is nothing with a positive frequency,
+/// [`PlotError::Draw`].
+pub fn bode_svg(
+    title: &str,
+    frf: Option<&FrfBand>,
+    models: &[BodeCurve],
+) -> Result<String, PlotError> {
+    const W: &str = "bode";
+    let freqs = frf
+        .map(|f| f.freq_hz.clone())
+        .into_iter()
+        .chain(models.iter().map(|m| m.freq_hz.clone()))
+        .flatten()
+        .filter(|f| *f > 0.0);
+    let (fmin, fmax) = freqs.fold((f64::INFINITY, 0.0f64), |(a, b), f| (a.min(f), b.max(f)));
+    if !fmin.is_finite() || fmax <= 0.0 {
+        return Err(PlotError::Empty(W.into()));
+    }
+    let (fmin, fmax) = (fmin / 1.1, fmax * 1.1);
+    let mag = |g: &Complex64| to_db(g.norm());
+    let mut mags: Vec<f64> = models
+        .iter()
+        .flat_map(|m| m.response.iter().map(mag))
+        .collect();
+    let mut phs: Vec<f64> = Vec::new();
+    let model_phase: Vec<Vec<f64>> = models
+        .iter()
+        .map(|m| unwrap_deg(m.response.iter().map(|g| g.arg().to_degrees())))
+        .collect();
+    model_phase.iter().for_each(|p| phs.extend(p));
+    let frf_phase = frf.map(|f| unwrap_deg(f.g.iter().map(|g| g.arg().to_degrees())));
+    if let (Some(f), Some(ph)) = (frf, &frf_phase) {
+        for (g, s) in f.g.iter().zip(&f.sigma) {
+            mags.push(mag(g));
+            mags.push(to_db(g.norm() + 2.0 * s));
+        }
+        phs.extend(ph);
+    }
+    let finite = |v: &Vec<f64>| {
+        v.iter()
+            .copied()
+            .filter(|x| x.is_finite() && *x > -600.0)
+            .collect::<Vec<_>>()
+    };
+    let (mags, phs) = (finite(&mags), finite(&phs));
+    let range = |v: &[f64], pad: f64| {
+        let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if lo.is_finite() {
+            (lo - pad, hi + pad)
+        } else {
+            (-1.0, 1.0)
+        }
+    };
+    let (mlo, mhi) = range(&mags, 5.0);
+    let (plo, phi) = range(&phs, 20.0);
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (900, 700)).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_err(W))?;
+        let root = root
+            .titled(title, ("sans-serif", 20))
+            .map_err(draw_err(W))?;
+        let (top, bottom) = root.split_vertically(370);
+        let fmt_hz = |f: &f64| format!("{}", (f * 1e6).round() / 1e6);
+        for (area, is_mag) in [(top, true), (bottom, false)] {
+            let (lo, hi) = if is_mag { (mlo, mhi) } else { (plo, phi) };
+            let mut chart = ChartBuilder::on(&area)
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(55)
+                .build_cartesian_2d((fmin..fmax).log_scale(), lo..hi)
+                .map_err(draw_err(W))?;
+            chart
+                .configure_mesh()
+                .x_desc("frequency [Hz]")
+                .y_desc(if is_mag {
+                    "magnitude [dB]"
+                } else {
+                    "phase [deg]"
+                })
+                .x_label_formatter(&fmt_hz)
+                .light_line_style(WHITE.mix(0.0))
+                .draw()
+                .map_err(draw_err(W))?;
+            if let (Some(f), Some(ph)) = (frf, &frf_phase) {
+                let bars =
+                    f.freq_hz
+                        .iter()
+                        .zip(&f.g)
+                        .zip(&f.sigma)
+                        .zip(ph)
+                        .map(|(((fr, g), s), p)| {
+                            let (a, b) = if is_mag {
+                                let m = g.norm();
+                                (
+                                    to_db((m - 2.0 * s).max(m * 1e-3)).max(lo),
+                                    to_db(m + 2.0 * s).min(hi),
+                                )
+                            } else {
+                                let d = if 2.0 * s >= g.norm() {
+                                    180.0
+                                } else {
+                                    (2.0 * s / g.norm()).asin().to_degrees()
+                                };
+                                ((p - d).max(lo), (p + d).min(hi))
+                            };
+                            PathElement::new(vec![(*fr, a), (*fr, b)], BLACK.mix(0.3))
+                        });
+                chart.draw_series(bars).map_err(draw_err(W))?;
+                chart
+                    .draw_series(f.freq_hz.iter().zip(&f.g).zip(ph).map(|((fr, g), p)| {
+                        Circle::new((*fr, if is_mag { mag(g) } else { *p }), 2, BLACK.filled())
+                    }))
+                    .map_err(draw_err(W))?
+                    .label("FRF ± 2σ")
+                    .legend(|(x, y)| Circle::new((x + 4, y), 2, BLACK.filled()));
+            }
+            for (i, (m, mp)) in models.iter().zip(&model_phase).enumerate() {
+                let color = PALETTE[(i + 1) % PALETTE.len()];
+                let pts = m
+                    .freq_hz
+                    .iter()
+                    .zip(&m.response)
+                    .zip(mp)
+                    .filter(|((f, _), _)| **f > 0.0);
+                chart
+                    .draw_series(LineSeries::new(
+                        pts.map(|((f, g), p)| {
+                            (
+                                *f,
+                                if is_mag {
+                                    mag(g).clamp(lo, hi)
+                                } else {
+                                    p.clamp(lo, hi)
+                                },
+                            )
+                        }),
+                        color.stroke_width(2),
+                    ))
+                    .map_err(draw_err(W))?
+                    .label(m.name.as_str())
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 15, y)], color.stroke_width(2))
+                    });
+            }
+            if is_mag {
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.8))
+                    .border_style(BLACK)
+                    .position(SeriesLabelPosition::LowerLeft)
+                    .draw()
+                    .map_err(draw_err(W))?;
+            }
+        }
+        root.present().map_err(draw_err(W))?;
+    }
+    Ok(svg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spectrum_svg_draws_one_marker_per_line_class() {
+        let freq: Vec<f64> = (0..20).map(|k| k as f64 * 0.5).collect();
+        let classes: Vec<LineClass> = (0..20)
+            .map(|k| match k {
+                0 => LineClass::Dc,
+                1 | 3 | 9 | 11 => LineClass::Excited,
+                k if k > 12 => LineClass::OutOfBand,
+                k if k % 2 == 0 => LineClass::Even,
+                _ => LineClass::OddNonExcited,
+            })
+            .collect();
+        let amp: Vec<f64> = classes
+            .iter()
+            .map(|c| if *c == LineClass::Excited { 1.0 } else { 1e-3 })
+            .collect();
+        let noise = vec![1e-4; 20];
+        let p = SpectrumPanel {
+            title: "u [N·m]",
+            freq_hz: &freq,
+            amplitude: &amp,
+            noise: &noise,
+            classes: &classes,
+        };
+        let svg = spectrum_svg("test", &[p, p, p]).unwrap();
+        assert!(svg.starts_with("<svg"));
+        // 3 panels × 6 even lines (2..12) drawn as circles, plus one legend circle
+        assert_eq!(svg.matches("<circle").count(), 3 * 6 + 1, "{svg}");
+        assert!(svg.contains("odd non-excited (x)"));
+        assert!(matches!(spectrum_svg("x", &[]), Err(PlotError::Empty(_))));
+    }
+
+    #[test]
+    fn bode_svg_draws_frf_points_and_model_lines() {
+        let f: Vec<f64> = (1..=30).map(|k| k as f64).collect();
+        let g: Vec<Complex64> = f
+            .iter()
+            .map(|x| Complex64::new(1.0, 0.0) / Complex64::new(1.0, x / 10.0))
+            .collect();
+        let band = FrfBand {
+            freq_hz: f.clone(),
+            g: g.clone(),
+            sigma: vec![0.01; 30],
+        };
+        let m = BodeCurve {
+            name: "first order".into(),
+            freq_hz: f.clone(),
+            response: g,
+        };
+        let svg = bode_svg("bode", Some(&band), &[m]).unwrap();
+        // 30 points in each of two panels + 1 legend marker
+        assert_eq!(svg.matches("<circle").count(), 61);
+        assert!(svg.contains("first order") && svg.contains("phase [deg]"));
+        assert!(matches!(bode_svg("x", None, &[]), Err(PlotError::Empty(_))));
+    }
+}

@@ -1,0 +1,655 @@
+//! Closed-loop simulator of one flexible robot joint with switchable unmodelled effects.
+//!
+//! What: the joint of seed 000 (Norrlöf et al., "Modeling and identification of a
+//! mechanical industrial manipulator", Fig. 2): a reference `θ_ref` goes into the robot's
+//! own controller, whose torque reference `u` drives the motor through a fast current loop;
+//! `u` and the motor angle `θ_m` are measured. The mechanics is one of the plants of
+//! [`crate::model::params::PlantKind`] (rigid, two-mass, three-mass eq. (5)–(6), four-mass eq. (7)–(8),
+//! the nonlinear two-mass of seed 001 eq. (4)–(9)), optionally with the effects of
+//! [`crate::model::effects::Effect`] (Coulomb/Stribeck friction, backlash, cubic spring, extra mode,
+//! transport delay, torque ripple).
+//!
+//! Why: identification and gap diagnosis need data with a known truth. The simulator gives
+//! the same three signals the robot gives (`θ_ref`, `u`, `θ_m`, sampled at 2 kHz, with
+//! encoder quantisation, noise and a torque disturbance), plus the true states.
+//!
+//! How: per sample `k` the sensors read the true state, the discrete controller computes
+//! `u[k]` ([`controller`]), and the plant is propagated over the sample with the inputs held
+//! ([`integrate`]): exactly (zero-order hold, seed 000 eq. (12)–(13)) when the plant is
+//! linear; when an effect makes it nonlinear, by one exponential (Lawson) RK4 step per sample
+//! with the linear part of the current mode exact, cut into two substeps (and event-aware
+//! RK4 where backlash contact edges or stick–slip of Coulomb friction fall) in the samples
+//! with events or a fast sweep of the Stribeck bump. Everything random is drawn from
+//! generators seeded by [`SimConfig::seed`], so a run is reproducible bit for bit.
+//!
+//! See also: [`crate::model::params`] for the default joint and its modal frequencies,
+//! [`crate::model::effects`] for the physics and defaults of each effect.
+//!
+//! ```
+//! use jointid::sim::{parse_effects, simulate, SimConfig};
+//!
+//! let cfg = SimConfig {
+//!     effects: parse_effects(&["backlash:width=2e-5", "time_delay"]).unwrap(),
+//!     ..SimConfig::default()
+//! };
+//! // 0.5 s of a 2 Hz reference [rad]
+//! let r: Vec<f64> = (0..1000).map(|k| 0.01 * (2.0 * 3.14159 * 2.0 * k as f64 / 2000.0).sin()).collect();
+//! let out = simulate(&cfg, &r).unwrap();
+//! assert_eq!(out.u.len(), 1000);
+//! println!("{}", cfg.params_json().unwrap());
+//! ```
+#![deny(missing_docs)]
+
+pub mod board;
+pub mod controller;
+pub mod integrate;
+pub mod sensors;
+
+use jointid_core::excitation::{ExcitationConfig, ExcitationError};
+use jointid_core::wire::{RawSample, Scale};
+use serde::{Deserialize, Serialize};
+
+pub use crate::model::effects::{parse_effects, Effect, EffectParseError};
+pub use crate::model::params::{JointParams, Plant, PlantKind};
+pub use crate::model::plant::{Mechanism, ModalFrequencies};
+pub use controller::{Controller, ControllerConfig};
+pub use sensors::{Disturbance, SensorConfig};
+
+use crate::model::effects::CoulombFriction;
+use crate::model::plant::{MAX_BODIES, MAX_STATE};
+use integrate::{NonlinearPlant, SampleStepper, State, ZohStep};
+use sensors::Sensors;
+
+/// How the plant is integrated between samples.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IntegrationConfig {
+    /// RK4 substeps `M` per sample of the event-aware RK4 [-]; default 5 (10 kHz). Used for
+    /// every sample when `exponential` is off or `force_rk4` on; with the exponential
+    /// stepper `⌊M/2⌋` (at least 1) in a half sample that contains an event (contact edge,
+    /// stick–slip transition)
+    pub substeps: u32,
+    /// use RK4 even when the plant is linear, and for nonlinear plants instead of the
+    /// exponential stepper (for checks); default false
+    pub force_rk4: bool,
+    /// nonlinear plants: exponential (Lawson) RK4, one step per sample with the linear part
+    /// of the current mode exact, two substeps and event-aware RK4 only in samples with
+    /// events; default true
+    #[serde(default = "default_true")]
+    pub exponential: bool,
+}
+
+fn default_true() -> bool {
+    true
+}
+
+impl Default for IntegrationConfig {
+    fn default() -> Self {
+        IntegrationConfig {
+            substeps: 5,
+            force_rk4: false,
+            exponential: true,
+        }
+    }
+}
+
+/// Everything that defines a simulation run (serialised whole by [`Self::params_json`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SimConfig {
+    /// mechanical structure and physical parameters
+    pub plant: Plant,
+    /// unmodelled effects switched on (any combination; empty for none)
+    pub effects: Vec<Effect>,
+    /// the robot's controller and current loop
+    pub controller: ControllerConfig,
+    /// sensors and torque disturbance
+    pub sensors: SensorConfig,
+    /// seed of every random stream of the run
+    pub seed: u64,
+    /// sample rate of controller and measurements [Hz]; default 2000
+    pub sample_rate_hz: f64,
+    /// integration of the plant between samples
+    pub integration: IntegrationConfig,
+}
+
+impl Default for SimConfig {
+    /// Default three-mass joint, no effects, default controller and sensors, seed 1.
+    fn default() -> Self {
+        SimConfig {
+            plant: Plant::default(),
+            effects: Vec::new(),
+            controller: ControllerConfig::default(),
+            sensors: SensorConfig::default(),
+            seed: 1,
+            sample_rate_hz: 2000.0,
+            integration: IntegrationConfig::default(),
+        }
+    }
+}
+
+/// Which integrator a run used.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Integrator {
+    /// exact zero-order-hold propagation of the linear plant
+    ExactZoh,
+    /// RK4 with this many substeps per sample
+    Rk4 {
+        /// substeps per sample
+        substeps: u32,
+    },
+    /// exponential (Lawson) RK4, one step per sample (two in samples with events or a fast
+    /// Stribeck sweep); event-aware RK4 with this many substeps per sample (pro rata) where
+    /// an event falls
+    ExponentialRk4 {
+        /// RK4 substeps per sample in samples with events
+        substeps: u32,
+    },
+}
+
+/// Result of [`simulate`]: measured signals as the robot would give them, and the truth.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimOutput {
+    /// sample interval `T` [s]
+    pub sample_interval_s: f64,
+    /// time of each sample, `k T` [s]
+    pub t: Vec<f64>,
+    /// motor-angle reference `θ_ref` [rad]
+    pub theta_ref: Vec<f64>,
+    /// recorded torque reference `u` (with measurement noise) [N·m]
+    pub u: Vec<f64>,
+    /// measured motor angle `θ_m` (quantised, with noise) [rad]
+    pub theta_m: Vec<f64>,
+    /// torque reference as the controller computed it (no noise) [N·m]
+    pub u_true: Vec<f64>,
+    /// true motor angle [rad]
+    pub theta_m_true: Vec<f64>,
+    /// torque out of the current loop, `τ_a` [N·m]
+    pub tau_motor: Vec<f64>,
+    /// disturbance torque held over each sample [N·m]
+    pub disturbance: Vec<f64>,
+    /// names of the true state components (see [`plant`] for the layout)
+    pub state_names: Vec<String>,
+    /// true state at each sample, row-major, `state_names.len()` values per sample
+    pub states: Vec<f64>,
+    /// samples where the controller output was limited
+    pub saturated_samples: u64,
+    /// integrator used
+    pub integrator: Integrator,
+}
+
+impl SimOutput {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// True when there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// True state at sample `k`.
+    pub fn state(&self, k: usize) -> &[f64] {
+        let n = self.state_names.len();
+        &self.states[k * n..(k + 1) * n]
+    }
+
+    /// One true state component over time, by name (`theta_a1`, `omega_m`, ...).
+    pub fn state_series(&self, name: &str) -> Option<Vec<f64>> {
+        let i = self.state_names.iter().position(|s| s == name)?;
+        let n = self.state_names.len();
+        Some(self.states.iter().skip(i).step_by(n).copied().collect())
+    }
+
+    /// The measured signals as the board would stream them: `seq = k`, `tick = k ·
+    /// timer_hz / fs` (wrapping), `torque = round(u / torque_nm_per_count)`,
+    /// `angle = round(θ_m / angle_rad_per_count)`, counts saturated to the `i32` range.
+    /// `timer_hz` is the tick rate of [`jointid_core::wire::SessionHeader::timer_hz`].
+    pub fn to_raw_samples(&self, scale: &Scale, timer_hz: u32) -> Vec<RawSample> {
+        let step = (f64::from(timer_hz) * self.sample_interval_s).round() as u64;
+        let counts = |v: f64, per: f32| {
+            let c = (v / f64::from(per)).round();
+            c.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+        };
+        (0..self.len())
+            .map(|k| RawSample {
+                seq: k as u32,
+                tick: (k as u64).wrapping_mul(step) as u32,
+                torque: counts(self.u[k], scale.torque_nm_per_count),
+                angle: counts(self.theta_m[k], scale.angle_rad_per_count),
+            })
+            .collect()
+    }
+
+    /// Identification data `u → θ_m` with the reference (measured signals).
+    pub fn to_id_data(&self) -> crate::data::IdData {
+        crate::data::IdData {
+            ts: self.sample_interval_s,
+            u: self.u.clone(),
+            y: self.theta_m.clone(),
+            r: Some(self.theta_ref.clone()),
+        }
+    }
+}
+
+/// Why a configuration cannot be simulated.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// a parameter is out of its range
+    #[error("parameter `{name}` = {value}: {reason}")]
+    InvalidParameter {
+        /// parameter name (as in the JSON of the config)
+        name: String,
+        /// its value
+        value: f64,
+        /// the accepted range
+        reason: &'static str,
+    },
+    /// an effect that must be unique is given twice
+    #[error("effect `{0}` given more than once")]
+    DuplicateEffect(&'static str),
+    /// an effect acts on the gearbox spring, which a rigid plant does not have
+    #[error("effect `{effect}` needs a gearbox spring; plant `{plant}` has none")]
+    NeedsGearbox {
+        /// effect name
+        effect: &'static str,
+        /// plant name
+        plant: &'static str,
+    },
+    /// more bodies than the simulator supports
+    #[error("{bodies} bodies (plant plus extra modes), at most {max} supported")]
+    TooManyBodies {
+        /// bodies requested
+        bodies: usize,
+        /// limit
+        max: usize,
+    },
+    /// the reference contains a value that is not finite
+    #[error("reference sample {index} is not finite ({value})")]
+    BadReference {
+        /// sample index
+        index: usize,
+        /// its value
+        value: f64,
+    },
+    /// invalid effect parameters (see [`Effect::check`])
+    #[error("effect `{effect}`: {reason}")]
+    BadEffect {
+        /// effect name
+        effect: &'static str,
+        /// what is wrong
+        reason: String,
+    },
+    /// the excitation could not be generated
+    #[error("excitation: {0}")]
+    Excitation(#[from] ExcitationError),
+    /// the excitation's sample rate differs from the simulator's
+    #[error("excitation sample rate {excitation_hz} Hz differs from the simulator's {sim_hz} Hz")]
+    RateMismatch {
+        /// `ExcitationConfig::fs_hz`
+        excitation_hz: u32,
+        /// `SimConfig::sample_rate_hz`
+        sim_hz: f64,
+    },
+    /// serialisation of the configuration failed
+    #[error("cannot serialise the configuration: {0}")]
+    Json(#[from] serde_json::Error),
+}
+
+impl SimConfig {
+    /// The whole configuration (plant parameters, effects with every parameter, controller,
+    /// sensors, seed, rates) as pretty JSON, names as in seed 000 Table 1.
+    ///
+    /// # Errors
+    /// [`SimError::Json`] if serialisation fails.
+    pub fn params_json(&self) -> Result<String, SimError> {
+        Ok(serde_json::to_string_pretty(self)?)
+    }
+
+    /// Checks ranges and combinations.
+    ///
+    /// # Errors
+    /// The first problem found.
+    pub fn validate(&self) -> Result<(), SimError> {
+        let bad = |name: &str, value: f64, reason: &'static str| SimError::InvalidParameter {
+            name: name.to_string(),
+            value,
+            reason,
+        };
+        let p = &self.plant.params;
+        let kind = self.plant.kind;
+        let mut positive = vec![("J_m", p.j_m), ("r", p.r)];
+        let mut nonneg = vec![("f_m", p.f_m)];
+        match kind {
+            PlantKind::Rigid => nonneg.push(("J_a1 + J_a2", p.j_a1 + p.j_a2)),
+            PlantKind::TwoMass | PlantKind::NonlinearTwoMass => {
+                positive.extend([("J_a1 + J_a2", p.j_a1 + p.j_a2), ("k_g", p.k_g)]);
+                nonneg.push(("d_g", p.d_g));
+            }
+            PlantKind::ThreeMass | PlantKind::FourMass => {
+                positive.extend([
+                    ("J_a1", p.j_a1),
+                    ("J_a2", p.j_a2),
+                    ("k_g", p.k_g),
+                    ("k_a", p.k_a),
+                ]);
+                nonneg.extend([("d_g", p.d_g), ("d_a", p.d_a)]);
+            }
+        }
+        if kind == PlantKind::FourMass {
+            positive.extend([("J_p", p.j_p), ("k_p", p.k_p)]);
+            nonneg.push(("d_p", p.d_p));
+        }
+        if kind == PlantKind::NonlinearTwoMass {
+            nonneg.push(("F_c", p.f_c));
+            if !p.k3.is_finite() {
+                return Err(bad("k3", p.k3, "must be finite"));
+            }
+        }
+        let c = &self.controller;
+        positive.extend([
+            ("sample_rate_hz", self.sample_rate_hz),
+            ("controller.ti", c.ti),
+            ("controller.u_max", c.u_max),
+            ("controller.current_loop_tau", c.current_loop_tau),
+        ]);
+        nonneg.extend([
+            ("controller.kp", c.kp),
+            ("controller.kv", c.kv),
+            ("controller.ff_inertia", c.ff_inertia),
+            ("sensors.theta_noise_std", self.sensors.theta_noise_std),
+            ("sensors.u_noise_std", self.sensors.u_noise_std),
+            (
+                "sensors.disturbance.noise_std",
+                self.sensors.disturbance.noise_std,
+            ),
+            (
+                "sensors.disturbance.noise_cutoff_hz",
+                self.sensors.disturbance.noise_cutoff_hz,
+            ),
+        ]);
+        for (name, v) in positive {
+            // `ti` may be +inf (P only)
+            let ok = v > 0.0 && (v.is_finite() || name == "controller.ti");
+            if !ok {
+                return Err(bad(name, v, "must be finite and > 0"));
+            }
+        }
+        for (name, v) in nonneg {
+            let ok = v.is_finite() && v >= 0.0;
+            if !ok {
+                return Err(bad(name, v, "must be finite and >= 0"));
+            }
+        }
+        if self.sensors.counts_per_rev == Some(0) {
+            return Err(bad("sensors.counts_per_rev", 0.0, "must be > 0"));
+        }
+        if self.integration.substeps == 0 {
+            return Err(bad("integration.substeps", 0.0, "must be >= 1"));
+        }
+        let mut seen = Vec::new();
+        for e in &self.effects {
+            e.check().map_err(|reason| SimError::BadEffect {
+                effect: e.name(),
+                reason,
+            })?;
+            let unique = matches!(
+                e,
+                Effect::Backlash(_) | Effect::TimeDelay(_) | Effect::CoulombFriction(_)
+            );
+            if unique && seen.contains(&e.name()) {
+                return Err(SimError::DuplicateEffect(e.name()));
+            }
+            seen.push(e.name());
+            let on_gearbox = matches!(e, Effect::Backlash(_) | Effect::NonlinearStiffness(_));
+            if on_gearbox && kind == PlantKind::Rigid {
+                return Err(SimError::NeedsGearbox {
+                    effect: e.name(),
+                    plant: kind.name(),
+                });
+            }
+        }
+        let bodies = Mechanism::new(&self.plant, &self.effects).n_bodies();
+        if bodies > MAX_BODIES {
+            return Err(SimError::TooManyBodies {
+                bodies,
+                max: MAX_BODIES,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// The plant as the integrator needs it, assembled from plant kind and effects.
+struct Assembled {
+    mech: Mechanism,
+    nonlinear: NonlinearPlant,
+    is_nonlinear: bool,
+    delay_whole: usize,
+    delay_frac: f64,
+}
+
+fn assemble(cfg: &SimConfig) -> Assembled {
+    let p = &cfg.plant.params;
+    let mech = Mechanism::new(&cfg.plant, &cfg.effects);
+    let mut k3 = 0.0;
+    let mut backlash = None;
+    let mut coulomb = Vec::new();
+    let mut ripple = Vec::new();
+    let mut delay = 0.0;
+    if cfg.plant.kind == PlantKind::NonlinearTwoMass {
+        k3 += p.k3;
+        if p.f_c > 0.0 {
+            // seed 001 eq. (7): pure Coulomb, no Stribeck bump (set-valued at rest as usual)
+            coulomb.push(CoulombFriction {
+                fc: p.f_c,
+                fs: p.f_c,
+                ..CoulombFriction::default()
+            });
+        }
+    }
+    for e in &cfg.effects {
+        match *e {
+            Effect::CoulombFriction(c) if c.fs > 0.0 => coulomb.push(c),
+            Effect::Backlash(b) if b.width > 0.0 => backlash = Some(b.width),
+            Effect::NonlinearStiffness(s) => k3 += s.k3,
+            Effect::TimeDelay(d) => delay += d.samples,
+            Effect::TorqueRipple(r) if r.amplitude != 0.0 => ripple.push(r),
+            _ => {}
+        }
+    }
+    let is_nonlinear = k3 != 0.0 || backlash.is_some() || !coulomb.is_empty() || !ripple.is_empty();
+    let mut delay_whole = delay.floor() as usize;
+    let mut delay_frac = delay - delay.floor();
+    if delay_frac < 1e-12 {
+        delay_frac = 0.0;
+    } else if delay_frac > 1.0 - 1e-12 {
+        delay_frac = 0.0;
+        delay_whole += 1;
+    }
+    let tc = cfg.controller.current_loop_tau;
+    let nonlinear = NonlinearPlant::new(&mech, tc, k3, backlash, coulomb, ripple);
+    Assembled {
+        mech,
+        nonlinear,
+        is_nonlinear,
+        delay_whole,
+        delay_frac,
+    }
+}
+
+/// Simulates the closed loop over `reference.len()` samples of `θ_ref` [rad].
+///
+/// The joint starts at rest with zero spring deflections and the motor at `reference[0]`.
+/// Sample `k` is taken at `t = k T`: the measured angle is read, `u[k]` computed and held
+/// (after the optional delay and through the current loop) until `t = (k + 1) T`.
+///
+/// # Errors
+/// [`SimError`] when the configuration is invalid ([`SimConfig::validate`]) or the
+/// reference is not finite.
+pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimError> {
+    cfg.validate()?;
+    if let Some((index, &value)) = reference.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(SimError::BadReference { index, value });
+    }
+    let ts = 1.0 / cfg.sample_rate_hz;
+    let a = assemble(cfg);
+    let nb = a.mech.n_bodies();
+    let nx = a.mech.n_state();
+    let n = reference.len();
+
+    enum Stepper {
+        Exact {
+            full: ZohStep,
+            split: Option<(ZohStep, ZohStep)>,
+        },
+        Rk4 {
+            substeps: u32,
+        },
+        Exponential {
+            stepper: SampleStepper,
+            substeps: u32,
+        },
+    }
+    let tc = cfg.controller.current_loop_tau;
+    let stepper = if cfg.integration.force_rk4 || (a.is_nonlinear && !cfg.integration.exponential) {
+        Stepper::Rk4 {
+            substeps: cfg.integration.substeps,
+        }
+    } else if a.is_nonlinear {
+        // one step per sample: the linear part, the delayed input's switch inside the sample
+        // included, is exact, so only the small residual torques see the switch
+        Stepper::Exponential {
+            stepper: SampleStepper::new(
+                &a.mech,
+                tc,
+                &a.nonlinear,
+                ts,
+                a.delay_frac,
+                cfg.integration.substeps,
+            ),
+            substeps: cfg.integration.substeps,
+        }
+    } else {
+        let (f, g) = a.mech.linear_model(cfg.controller.current_loop_tau);
+        let split = (a.delay_frac > 0.0).then(|| {
+            (
+                ZohStep::new(&f, &g, a.delay_frac * ts),
+                ZohStep::new(&f, &g, (1.0 - a.delay_frac) * ts),
+            )
+        });
+        Stepper::Exact {
+            full: ZohStep::new(&f, &g, ts),
+            split,
+        }
+    };
+
+    let mut x: State = [0.0; MAX_STATE];
+    let theta0 = reference.first().copied().unwrap_or(0.0);
+    for (i, b) in a.mech.bodies.iter().enumerate() {
+        // zero deflection everywhere: arm-side bodies at r θ_m
+        x[i] = if i == 0 {
+            theta0
+        } else {
+            a.mech.bodies[0].gain * theta0 / b.gain
+        };
+    }
+    let mut mode = a.nonlinear.region(a.nonlinear.gearbox_deflection(&x));
+    let mut controller = Controller::new(cfg.controller, ts);
+    let mut sensors = Sensors::new(cfg.sensors, ts, cfg.seed);
+
+    let mut out = SimOutput {
+        sample_interval_s: ts,
+        t: Vec::with_capacity(n),
+        theta_ref: reference.to_vec(),
+        u: Vec::with_capacity(n),
+        theta_m: Vec::with_capacity(n),
+        u_true: Vec::with_capacity(n),
+        theta_m_true: Vec::with_capacity(n),
+        tau_motor: Vec::with_capacity(n),
+        disturbance: Vec::with_capacity(n),
+        state_names: a.mech.state_names(),
+        states: Vec::with_capacity(n * nx),
+        saturated_samples: 0,
+        integrator: match stepper {
+            Stepper::Exact { .. } => Integrator::ExactZoh,
+            Stepper::Rk4 { substeps } => Integrator::Rk4 { substeps },
+            Stepper::Exponential { substeps, .. } => Integrator::ExponentialRk4 { substeps },
+        },
+    };
+    let (dw, phi) = (a.delay_whole, a.delay_frac);
+    for (k, &r) in reference.iter().enumerate() {
+        let meas = sensors.measure_theta(x[0]);
+        let u = controller.step(r, meas);
+        let u_rec = sensors.measure_u(u);
+        let w = sensors.next_disturbance();
+        out.t.push(k as f64 * ts);
+        out.u.push(u_rec);
+        out.theta_m.push(meas);
+        out.u_true.push(u);
+        out.theta_m_true.push(x[0]);
+        out.tau_motor.push(x[2 * nb]);
+        out.disturbance.push(w);
+        out.states.extend_from_slice(&x[..nx]);
+        let past = |lag: usize| k.checked_sub(lag).map_or(0.0, |j| out.u_true[j]);
+        let u_new = past(dw);
+        let u_old = past(dw + 1);
+        match &stepper {
+            Stepper::Exact { full, split: None } => full.apply(&mut x, &[u_new, w]),
+            Stepper::Exact {
+                split: Some((first, second)),
+                ..
+            } => {
+                first.apply(&mut x, &[u_old, w]);
+                second.apply(&mut x, &[u_new, w]);
+            }
+            Stepper::Exponential { stepper, .. } => a
+                .nonlinear
+                .sample(stepper, &mut x, &mut mode, u_old, u_new, w),
+            Stepper::Rk4 { substeps } => a.nonlinear.rk4_sample(
+                &mut x,
+                &mut mode,
+                ts,
+                phi,
+                *substeps as usize,
+                u_old,
+                u_new,
+                w,
+            ),
+        }
+    }
+    out.saturated_samples = controller.saturated_samples();
+    Ok(out)
+}
+
+/// [`simulate`] with the reference the firmware's generator produces for `excitation`
+/// (`jointid_core::excitation::generate`, bit-exact with the board).
+///
+/// # Errors
+/// As [`simulate`], plus [`SimError::Excitation`] when the excitation cannot be generated
+/// (e.g. endless) and [`SimError::RateMismatch`] when its sample rate differs.
+pub fn simulate_excitation(
+    cfg: &SimConfig,
+    excitation: &ExcitationConfig,
+) -> Result<SimOutput, SimError> {
+    if f64::from(excitation.fs_hz) != cfg.sample_rate_hz {
+        return Err(SimError::RateMismatch {
+            excitation_hz: excitation.fs_hz,
+            sim_hz: cfg.sample_rate_hz,
+        });
+    }
+    let r = jointid_core::excitation::generate(excitation)?;
+    simulate_f32(cfg, &r)
+}
+
+/// [`simulate`] with an `f32` reference (as the firmware's excitation generator produces it).
+///
+/// # Errors
+/// As [`simulate`].
+pub fn simulate_f32(cfg: &SimConfig, reference: &[f32]) -> Result<SimOutput, SimError> {
+    let r: Vec<f64> = reference.iter().map(|&v| f64::from(v)).collect();
+    simulate(cfg, &r)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,131 @@
+//! Fixtures shared by the tests of several modules and crates (the command line's tests
+//! use them too): signals and captures with a known truth. Not part of the
+//! identification API; nothing here does IO.
+//!
+//! [`synth`]: board streams with known frame spans, for the capture path's tests and
+//! benchmarks; the rest of this module: a closed loop around a lightly damped
+//! resonance and its capture CSV, for the FRF's tests and the `analyze` command's.
+
+use std::f64::consts::PI;
+
+use jointid_core::excitation::{ExcitationConfig, SignalKind};
+use rustfft::num_complex::Complex64;
+
+use crate::data::IdData;
+
+pub mod synth;
+
+/// xorshift64* with Box–Muller: reproducible Gaussian noise for tests
+pub struct Gauss(u64);
+
+impl Gauss {
+    /// the generator for `seed`
+    pub fn new(seed: u64) -> Self {
+        Gauss(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+    }
+    /// uniform on (0, 1)
+    pub fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    }
+    /// standard normal
+    #[allow(clippy::should_implement_trait)]
+    pub fn next(&mut self) -> f64 {
+        let (a, b) = (self.uniform(), self.uniform());
+        (-2.0 * a.ln()).sqrt() * (2.0 * PI * b).cos()
+    }
+}
+
+/// discrete plant P(q) = b1 q^-1 / (1 + a1 q^-1 + a2 q^-2) (lightly
+/// damped resonance) under proportional feedback u = kp (r − y_meas);
+/// `cubic` adds kp·c·e³ to the controller output; y_meas = y + v
+pub struct Loop {
+    /// `a1` of the denominator
+    pub a1: f64,
+    /// `a2` of the denominator
+    pub a2: f64,
+    /// `b1` of the numerator
+    pub b1: f64,
+    /// proportional gain of the controller
+    pub kp: f64,
+}
+
+impl Loop {
+    /// the plant's frequency response at `z`
+    pub fn plant(&self, z: Complex64) -> Complex64 {
+        let zi = z.inv();
+        self.b1 * zi / (1.0 + self.a1 * zi + self.a2 * zi * zi)
+    }
+
+    /// closed-loop run on reference `r` with measurement noise of `noise_sd` and a cubic
+    /// controller term `cubic`
+    pub fn run(&self, r: &[f64], noise_sd: f64, cubic: f64, seed: u64) -> IdData {
+        self.run_with(r, noise_sd, |e| e + cubic * e * e * e, seed)
+    }
+
+    /// controller u = kp · f(e)
+    pub fn run_with(&self, r: &[f64], noise_sd: f64, f: impl Fn(f64) -> f64, seed: u64) -> IdData {
+        let mut g = Gauss::new(seed);
+        let (mut y1, mut y2, mut u1) = (0.0, 0.0, 0.0);
+        let (mut u, mut y) = (Vec::new(), Vec::new());
+        for &rk in r {
+            let yk = -self.a1 * y1 - self.a2 * y2 + self.b1 * u1;
+            let ym = yk + noise_sd * g.next();
+            let e = rk - ym;
+            let uk = self.kp * f(e);
+            u.push(uk);
+            y.push(ym);
+            y2 = y1;
+            y1 = yk;
+            u1 = uk;
+        }
+        IdData {
+            ts: 1e-3,
+            u,
+            y,
+            r: Some(r.to_vec()),
+        }
+    }
+}
+
+/// the loop around a lightly damped resonance of the FRF tests
+pub fn plant() -> Loop {
+    // poles at 0.97 e^{±j 0.2}: resonance near 32 Hz at 1 kHz
+    let (rho, th): (f64, f64) = (0.97, 0.2);
+    Loop {
+        a1: -2.0 * rho * th.cos(),
+        a2: rho * rho,
+        b1: 0.05,
+        kp: 0.5,
+    }
+}
+
+/// capture CSV text with the `# key=value` contract, reference from the
+/// core generator, closed loop around [`plant`]
+pub fn capture_csv(cubic: f64, seed: u64) -> String {
+    let c = ExcitationConfig {
+        kind: SignalKind::SpecialOddMultisine,
+        fs_hz: 1000,
+        period_samples: 500,
+        max_line: 120,
+        cutoff_hz: 50.0,
+        rms_rad: 0.5,
+        seed: 9,
+        ramp_samples: 300,
+        periods: 6,
+    };
+    let r: Vec<f64> = jointid_core::excitation::generate(&c)
+        .unwrap()
+        .into_iter()
+        .map(f64::from)
+        .collect();
+    let d = plant().run(&r, 0.002, cubic, seed);
+    let mut text = crate::data::excitation_comment_lines(&c);
+    text.push_str("# sample_interval_s=0.001\nt,theta_ref,u,theta_m\n");
+    for (k, ((rk, uk), yk)) in r.iter().zip(&d.u).zip(&d.y).enumerate() {
+        text.push_str(&format!("{},{rk},{uk},{yk}\n", k as f64 * 1e-3));
+    }
+    text
+}
