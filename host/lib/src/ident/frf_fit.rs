@@ -930,10 +930,10 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
     };
     let peaks = frf_peaks(frf, opts.output);
     let n_res = structure.masses() - 1;
-    let mut cand: Vec<f64> = peaks.iter().take(n_res + 2).map(|p| p.freq_hz).collect();
-    cand.sort_by(f64::total_cmp);
-    let choices = subsets(cand.len(), n_res.min(cand.len()));
     let zetas: &[f64] = if n_res == 0 { &[0.05] } else { &[0.03, 0.12] };
+    let nu = frf.spectra.dof();
+    let expected = (2 * frf.g.len()).saturating_sub(needed).max(1) as f64
+        * if nu > 2.0 { nu / (nu - 2.0) } else { 1.0 };
     let drive0 = |d: Drive, start: f64| match d {
         Drive::Estimate => start,
         Drive::Fixed(v) => v,
@@ -965,50 +965,77 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
     let mut pool: Vec<Candidate> = Vec::new();
     let mut starts = 0;
     let mut first_err = None;
-    for choice in &choices {
-        let res_hz: Vec<f64> = choice.iter().map(|&i| cand[i]).collect();
-        for &zeta in zetas {
-            let feat = match features(frf, opts.output, &res_hz, zeta) {
-                Ok(f) => f,
-                Err(e) => {
-                    first_err.get_or_insert(e);
+    let mut tried: Vec<Vec<f64>> = Vec::new();
+    // pass 0: the strongest peaks; pass 1, when the FRF shows fewer peaks
+    // than the structure has modes (two modes close together, one a
+    // shoulder of the other) or no start came near the noise level:
+    // modes also placed around the strongest peaks
+    for pass in 0..2 {
+        let cand = if pass == 0 {
+            let mut c: Vec<f64> = peaks.iter().take(n_res + 2).map(|p| p.freq_hz).collect();
+            c.sort_by(f64::total_cmp);
+            c
+        } else {
+            let best = pool.iter().map(|c| c.cost).fold(f64::INFINITY, f64::min);
+            if n_res == 0 || (peaks.len() >= n_res && best < 10.0 * expected) {
+                break;
+            }
+            augmented_candidates(&peaks, n_res)
+        };
+        let zetas: &[f64] = if pass == 1 && n_res >= 3 {
+            &[0.05]
+        } else {
+            zetas
+        };
+        for choice in subsets(cand.len(), n_res.min(cand.len())) {
+            let res_hz: Vec<f64> = choice.iter().map(|&i| cand[i]).collect();
+            if tried.contains(&res_hz) {
+                continue;
+            }
+            tried.push(res_hz.clone());
+            for &zeta in zetas {
+                let feat = match features(frf, opts.output, &res_hz, zeta) {
+                    Ok(f) => f,
+                    Err(e) => {
+                        first_err.get_or_insert(e);
+                        continue;
+                    }
+                };
+                let p0 = grey_box::initial_values(structure, opts.r, &feat);
+                let mut th0: Vec<f64> = p0.iter().map(|v| v.max(1e-300).ln()).collect();
+                th0.extend([lag0, delay0]);
+                let (lower, upper) = bounds(&th0);
+                starts += 1;
+                // stage 1: losses and drive; stage 2: everything (log cost)
+                let mut fixed: Vec<bool> = names.iter().map(|n| !is_loss(n)).collect();
+                fixed.extend(fixed_drive);
+                let mut o = LmOptions {
+                    max_iter: 20,
+                    rel_cost_tol: 1e-6,
+                    lower,
+                    upper,
+                    fixed,
+                    ..Default::default()
+                };
+                let Ok(f1) = lm::minimize(&log_p, &th0, &o) else {
                     continue;
+                };
+                o.fixed = vec![false; nm];
+                o.fixed.extend(fixed_drive);
+                o.max_iter = 40;
+                let Ok(f2) = lm::minimize(&log_p, &f1.theta, &o) else {
+                    continue;
+                };
+                let c = sml_p.cost(&f2.theta);
+                if c.is_finite() {
+                    pool.push(Candidate {
+                        theta: f2.theta.clone(),
+                        start: th0,
+                        fit: f2,
+                        cost: c,
+                        opts: o,
+                    });
                 }
-            };
-            let p0 = grey_box::initial_values(structure, opts.r, &feat);
-            let mut th0: Vec<f64> = p0.iter().map(|v| v.max(1e-300).ln()).collect();
-            th0.extend([lag0, delay0]);
-            let (lower, upper) = bounds(&th0);
-            starts += 1;
-            // stage 1: losses and drive; stage 2: everything (log cost)
-            let mut fixed: Vec<bool> = names.iter().map(|n| !is_loss(n)).collect();
-            fixed.extend(fixed_drive);
-            let mut o = LmOptions {
-                max_iter: 20,
-                rel_cost_tol: 1e-6,
-                lower,
-                upper,
-                fixed,
-                ..Default::default()
-            };
-            let Ok(f1) = lm::minimize(&log_p, &th0, &o) else {
-                continue;
-            };
-            o.fixed = vec![false; nm];
-            o.fixed.extend(fixed_drive);
-            o.max_iter = 40;
-            let Ok(f2) = lm::minimize(&log_p, &f1.theta, &o) else {
-                continue;
-            };
-            let c = sml_p.cost(&f2.theta);
-            if c.is_finite() {
-                pool.push(Candidate {
-                    theta: f2.theta.clone(),
-                    start: th0,
-                    fit: f2,
-                    cost: c,
-                    opts: o,
-                });
             }
         }
     }
@@ -1060,6 +1087,26 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
         }
     }
     Ok(finish(model, frf, best, peaks, starts, fixed_drive))
+}
+
+/// Candidate mode frequencies for a second search: the peaks, and around the
+/// two strongest of them, frequencies where a mode hidden in their shoulder
+/// may sit; at most nine, none within 3 % of another [Hz].
+fn augmented_candidates(peaks: &[FrfPeak], n_res: usize) -> Vec<f64> {
+    let mut c: Vec<f64> = peaks.iter().take(n_res + 2).map(|p| p.freq_hz).collect();
+    for p in peaks.iter().take(2) {
+        for m in [0.8, 1.2, 0.65, 1.45] {
+            c.push(m * p.freq_hz);
+        }
+    }
+    let mut out: Vec<f64> = Vec::new();
+    for f in c {
+        if out.len() < 9 && !out.iter().any(|g| (g - f).abs() < 0.03 * f) {
+            out.push(f);
+        }
+    }
+    out.sort_by(f64::total_cmp);
+    out
 }
 
 fn structure_name(s: Structure) -> &'static str {
