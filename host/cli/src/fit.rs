@@ -524,7 +524,8 @@ fn run_frequency_domain(
     };
     let mut files = Vec::new();
     if let Some(path) = &args.save {
-        let saved = fitted.to_saved(prep_of(&args.prep), &ds.name, fit_estimation);
+        let mut saved = fitted.to_saved(prep_of(&args.prep), &ds.name, fit_estimation);
+        saved.fit_name = periodic.then(|| PERIODIC_FIT_NAME.to_string());
         let text = serde_json::to_string_pretty(&saved)?;
         std::fs::write(path, text + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
         files.push(path.display().to_string());

@@ -333,6 +333,7 @@ fn three_mass_fit_on_default_simulation_is_right_in_the_frequency_domain() {
         ]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     }
+    let model = dir.join("m3.json");
     let o = jointid(&[
         "fit",
         est.to_str().unwrap(),
@@ -340,10 +341,25 @@ fn three_mass_fit_on_default_simulation_is_right_in_the_frequency_domain() {
         "three-mass",
         "--validation",
         val.to_str().unwrap(),
+        "--save",
+        model.to_str().unwrap(),
         "--strict",
         "--json",
     ]);
     let j = json_of(&o);
+    // `validate` judges the saved model by the same FIT on the same file
+    let v = json_of(&jointid(&[
+        "validate",
+        model.to_str().unwrap(),
+        val.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(v["fit_name"], j["fit_name"]);
+    let (a, b) = (
+        v["fit"].as_f64().unwrap(),
+        j["fit_validation"].as_f64().unwrap(),
+    );
+    assert!((a - b).abs() < 1e-6, "validate {a} vs fit {b}");
     let truth = [
         ("J_m", 1.0e-3),
         ("J_a1", 11.66),

@@ -890,6 +890,7 @@ impl Fitted {
             decimate_output: self.decimate,
             input_hold: None,
             fit_estimation,
+            fit_name: None,
             source: source.into(),
         }
     }
@@ -1013,6 +1014,12 @@ pub struct SavedModel {
     pub input_hold: Option<String>,
     /// FIT on the estimation data [%] (toolbox definition)
     pub fit_estimation: f64,
+    /// which FIT `fit_estimation` is, when not the toolbox's (a model fitted
+    /// in the frequency domain: the periodic steady-state FIT,
+    /// [`crate::ident::frf_fit::PERIODIC_FIT_NAME`]); `validate` reports the
+    /// same one on periodic data
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fit_name: Option<String>,
     /// estimation data file
     pub source: String,
 }
