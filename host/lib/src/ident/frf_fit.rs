@@ -1044,11 +1044,12 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
     }
     pool.sort_by(|a, b| a.cost.total_cmp(&b.cost));
     pool.truncate(3);
-    // SML refinement of the best starts with the drive as asked
+    // SML refinement of the best starts with the drive as asked: a few
+    // iterations each, then the best one to convergence
     let mut best: Option<Candidate> = None;
     for c in pool {
         let mut o = c.opts.clone();
-        o.max_iter = opts.max_iter;
+        o.max_iter = 25;
         o.rel_cost_tol = 1e-10;
         if let Ok(f) = lm::minimize(&sml_p, &c.theta, &o) {
             let cost = f.ssr;
@@ -1063,6 +1064,21 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
             }
         }
     }
+    let best = match best {
+        Some(mut b) if b.fit.termination == Termination::MaxIterations => {
+            b.opts.max_iter = opts.max_iter;
+            if let Ok(f) = lm::minimize(&sml_p, &b.theta, &b.opts) {
+                b.theta = f.theta.clone();
+                b.cost = f.ssr;
+                b.fit = f;
+            }
+            Some(b)
+        }
+        b => b.map(|mut b| {
+            b.opts.max_iter = opts.max_iter;
+            b
+        }),
+    };
     let mut best = best.ok_or(FrfFitError::NoStart)?;
     // drive variants: lag only, delay only (each where estimated), by AIC
     if !fixed_drive[0] && !fixed_drive[1] {
