@@ -31,6 +31,7 @@ use jointid::ident::fit::{
 };
 use jointid::ident::frf::{analyze_dataset, FrfAnalysis};
 use jointid::ident::frf_fit::{self, Drive, FrfFit, FrfFitOptions, PERIODIC_FIT_NAME};
+use jointid::ident::frf_subspace::black_box_frf;
 use jointid::ident::grey_box::{Output, DEFAULT_GEAR_RATIO};
 use jointid::ident::subspace::Method;
 use jointid::ident::validate::{
@@ -327,12 +328,12 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         args.estimation_fraction,
     ) {
         (DomainArg::Time, _, _) => None,
-        (DomainArg::Frequency, None, _) => {
-            return Err(format!(
-                "--domain frequency fits physical models; {} is fitted in the time domain",
-                args.model.name()
+        (DomainArg::Frequency, _, _) if args.friction == FrictionArg::Coulomb => {
+            return Err(
+                "--friction coulomb is nonlinear: the rigid model with Coulomb friction is fitted \
+                 in the time domain"
+                    .into(),
             )
-            .into())
         }
         (DomainArg::Frequency, _, Some(_)) => {
             return Err(
@@ -341,11 +342,11 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
                     .into(),
             )
         }
-        (DomainArg::Frequency, Some(_), None) => Some(
+        (DomainArg::Frequency, _, None) => Some(
             analyze_dataset(&ds, args.settle_periods)
                 .map_err(|e| format!("{}: --domain frequency needs periodic data: {e}", ds.name))?,
         ),
-        (DomainArg::Auto, Some(_), None) if args.friction == FrictionArg::Viscous => {
+        (DomainArg::Auto, _, None) if args.friction == FrictionArg::Viscous => {
             analyze_dataset(&ds, args.settle_periods).ok()
         }
         (DomainArg::Auto, _, _) => None,
@@ -467,25 +468,61 @@ fn run_frequency_domain(
     val_analysis: Option<&FrfAnalysis>,
     val_name: Option<String>,
 ) -> CmdResult {
-    let structure = args.model.structure().expect("checked by the caller");
     let ts = ds.data.ts;
-    let mut o = FrfFitOptions::new(structure, ts);
-    o.output = args.output_kind.into();
-    o.r = args.gear_ratio;
-    if let Some(tau) = args.current_loop_tau {
-        o.lag = Drive::Fixed(tau / ts);
-    }
-    if let Some(d) = args.delay {
-        o.delay = Drive::Fixed(d);
-    }
     let t0 = Instant::now();
-    let ff = frf_fit::fit_frf(&analysis.frf, &o).map_err(|e| format!("{}: {e}", ds.name))?;
+    let fitted = match (args.model.structure(), args.model) {
+        (Some(structure), _) => {
+            let mut o = FrfFitOptions::new(structure, ts);
+            o.output = args.output_kind.into();
+            o.r = args.gear_ratio;
+            if let Some(tau) = args.current_loop_tau {
+                o.lag = Drive::Fixed(tau / ts);
+            }
+            if let Some(d) = args.delay {
+                o.delay = Drive::Fixed(d);
+            }
+            let ff =
+                frf_fit::fit_frf(&analysis.frf, &o).map_err(|e| format!("{}: {e}", ds.name))?;
+            fitted_of(args, &ff, analysis, est.decimate)
+        }
+        (None, ModelKind::BlackBox(n)) => {
+            let iters = if args.no_refine { 0 } else { 100 };
+            let bb = black_box_frf(&analysis.frf, n, ts, args.feedthrough, iters)
+                .map_err(|e| format!("{}: {e}", ds.name))?;
+            Fitted {
+                kind: args.model,
+                output: args.output_kind.into(),
+                ts,
+                method: format!(
+                    "frequency domain: subspace on {} excited lines of {} periods (McKelvey et al. 1996, \
+                     bilinear map), refined by sample maximum likelihood ({} iterations); cost {:.1} = \
+                     {:.2} × its noise level",
+                    analysis.frf.g.len(),
+                    analysis.layout.count,
+                    bb.iterations,
+                    bb.cost,
+                    bb.cost_ratio()
+                ),
+                model: bb.model,
+                continuous: None,
+                params: Vec::new(),
+                friction: None,
+                warnings: bb.warnings.iter().map(|w| w.to_string()).collect(),
+                decimate: est.decimate,
+            }
+        }
+        (None, other) => {
+            return Err(format!("{} has no frequency-domain fit", other.name()).into());
+        }
+    };
     let seconds = t0.elapsed().as_secs_f64();
-    let fitted = fitted_of(args, &ff, analysis, est.decimate);
+    let respond = |f: &[f64]| fitted.model.freq_response(f);
+    let f_min = analysis.frf.freq_hz.first().copied().unwrap_or(0.0);
+    let res = fitted.resonances(f_min);
     // residual tests on one period of the steady state (slow disturbances
     // and drift averaged out), at the capture rate
     let tests = |d: &Dataset, a: &FrfAnalysis| -> Result<Validation, String> {
-        let s = frf_fit::periodic_steady_state(&d.data, &a.layout, |f| ff.freq_response(f))
+        let s = frf_fit::periodic_steady_state(&d.data, &a.layout, respond)
             .map_err(|e| format!("{}: {e}", d.name))?;
         jointid::ident::validate::validate(&s.u, &s.y, &s.y_hat, args.lags)
             .map_err(|e| format!("{}: {e}", d.name))
@@ -512,7 +549,7 @@ fn run_frequency_domain(
         (ev, vv)
     };
     let periodic_fit =
-        |a: &FrfAnalysis| frf_fit::periodic_fit_percent(&a.frf, &ff.freq_response(&a.frf.freq_hz));
+        |a: &FrfAnalysis| frf_fit::periodic_fit_percent(&a.frf, &respond(&a.frf.freq_hz));
     let (fit_name, fit_estimation, fit_validation) = if periodic {
         (
             PERIODIC_FIT_NAME,
@@ -553,8 +590,8 @@ fn run_frequency_domain(
         fit_name: fit_name.into(),
         fit_estimation,
         fit_validation,
-        resonances_hz: ff.resonances_hz.clone(),
-        antiresonances_hz: ff.anti_resonances_hz.clone(),
+        resonances_hz: res.resonances.iter().map(|m| m.freq_hz).collect(),
+        antiresonances_hz: res.anti_resonances.iter().map(|m| m.freq_hz).collect(),
         residual_tests: ResidualTests {
             estimation: ev,
             validation: vv,

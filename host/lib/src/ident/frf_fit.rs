@@ -354,7 +354,7 @@ fn drive_model(model: &GreyBoxModel, lag_samples: f64) -> DrivenModel {
     }
 }
 
-fn unit_circle(f_hz: &[f64], ts: f64) -> Vec<Complex64> {
+pub(crate) fn unit_circle(f_hz: &[f64], ts: f64) -> Vec<Complex64> {
     f_hz.iter()
         .map(|f| Complex64::from_polar(1.0, 2.0 * std::f64::consts::PI * f * ts))
         .collect()
@@ -499,7 +499,7 @@ impl Sampled {
 /// Solves an upper Hessenberg system in place (row-major `m`, `n × n`) by
 /// Gaussian elimination with pivoting between neighbouring rows; the
 /// solution replaces `rhs`. False when singular.
-fn solve_hessenberg(m: &mut [Complex64], rhs: &mut [Complex64], n: usize) -> bool {
+pub(crate) fn solve_hessenberg(m: &mut [Complex64], rhs: &mut [Complex64], n: usize) -> bool {
     for j in 0..n.saturating_sub(1) {
         let (p, q) = (j * n, (j + 1) * n);
         if m[q + j].norm_sqr() > m[p + j].norm_sqr() {
@@ -537,7 +537,7 @@ fn solve_hessenberg(m: &mut [Complex64], rhs: &mut [Complex64], n: usize) -> boo
 }
 
 /// The data of one fit: lines, measured spectra and weights.
-struct Lines {
+pub(crate) struct Lines {
     z: Vec<Complex64>,
     /// the noise lines of the spectra on the unit circle, and where each
     /// excited line sits among them
@@ -550,22 +550,79 @@ struct Lines {
     sigma: Vec<f64>,
 }
 
+impl Lines {
+    /// the lines of `frf` at sample interval `ts` [s]
+    pub(crate) fn new(frf: &Frf, ts: f64) -> Lines {
+        let sp = &frf.spectra;
+        let exc_in_noise: Vec<usize> = frf
+            .freq_hz
+            .iter()
+            .zip(&sp.pool)
+            .filter_map(|(f, pool)| {
+                pool.clone()
+                    .find(|&j| (sp.noise_freq_hz[j] - f).abs() <= 1e-9 * f.abs().max(1e-300))
+            })
+            .collect();
+        let usable = sp.periods >= 2
+            && sp.u.len() == frf.g.len()
+            && exc_in_noise.len() == frf.g.len()
+            && sp.pool.iter().all(|p| p.end <= sp.var_u.len());
+        let spectra = usable.then(|| sp.clone());
+        Lines {
+            z: unit_circle(&frf.freq_hz, ts),
+            z_noise: unit_circle(&sp.noise_freq_hz, ts),
+            exc_in_noise,
+            g: frf.g.clone(),
+            w_log: frf
+                .g
+                .iter()
+                .zip(&frf.sigma)
+                .map(|(g, s)| 1.0 / (s / g.norm().max(1e-300)).max(0.02))
+                .collect(),
+            sigma: frf.sigma.clone(),
+            spectra,
+        }
+    }
+
+    /// SML cost expected at the true model with `p` free parameters
+    pub(crate) fn expected_cost(&self, p: usize) -> f64 {
+        let nu = self.spectra.as_ref().map_or(0.0, FrfSpectra::dof);
+        (2 * self.z.len()).saturating_sub(p).max(1) as f64
+            * if nu > 2.0 { nu / (nu - 2.0) } else { 1.0 }
+    }
+}
+
 /// Which cost a problem evaluates.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Cost {
+pub(crate) enum Cost {
+    /// weighted log-FRF error (wide basin, for starts)
     Log,
+    /// sample maximum likelihood (the estimate)
     Sml,
 }
 
-struct Problem<'a> {
-    model: GreyBoxModel,
-    lines: &'a Lines,
-    cost: Cost,
+/// A model whose sampled frequency response a parameter vector gives.
+pub(crate) trait FrfModel {
+    /// number of parameters
+    fn n_params(&self) -> usize;
+    /// `G(z)` at each `z` (None when `theta` cannot be evaluated)
+    fn response(&self, theta: &[f64], z: &[Complex64]) -> Option<Vec<Complex64>>;
+    /// signed difference step for parameter `i` at `theta`
+    fn step(&self, i: usize, theta: &[f64]) -> f64;
 }
 
-impl Problem<'_> {
+/// The physical model: log-parameters, then lag and delay [samples].
+struct PhysicalFrf(GreyBoxModel);
+
+impl PhysicalFrf {
     fn n_mech(&self) -> usize {
-        self.model.structure.param_names().len()
+        self.0.structure.param_names().len()
+    }
+}
+
+impl FrfModel for PhysicalFrf {
+    fn n_params(&self) -> usize {
+        self.n_mech() + 2
     }
 
     fn response(&self, theta: &[f64], z: &[Complex64]) -> Option<Vec<Complex64>> {
@@ -574,10 +631,33 @@ impl Problem<'_> {
         if p.iter().any(|v| !v.is_finite() || *v <= 0.0) {
             return None;
         }
-        let c = drive_model(&self.model, theta[nm]).continuous(&p);
-        let s = Sampled::new(&c, self.model.ts, theta[nm + 1]);
+        let c = drive_model(&self.0, theta[nm]).continuous(&p);
+        let s = Sampled::new(&c, self.0.ts, theta[nm + 1]);
         let g = s.response(z);
         g.iter().all(|v| v.is_finite()).then_some(g)
+    }
+
+    fn step(&self, i: usize, theta: &[f64]) -> f64 {
+        if i < self.n_mech() {
+            1e-6
+        } else if theta[i] + 1e-4 > MAX_DRIVE_SAMPLES {
+            // backward at the upper bound of the drive
+            -1e-4
+        } else {
+            1e-4
+        }
+    }
+}
+
+pub(crate) struct Problem<'a, M: FrfModel> {
+    pub(crate) model: &'a M,
+    pub(crate) lines: &'a Lines,
+    pub(crate) cost: Cost,
+}
+
+impl<M: FrfModel> Problem<'_, M> {
+    fn response(&self, theta: &[f64], z: &[Complex64]) -> Option<Vec<Complex64>> {
+        self.model.response(theta, z)
     }
 
     fn residuals(&self, theta: &[f64]) -> Option<Vec<f64>> {
@@ -625,19 +705,11 @@ impl Problem<'_> {
         }
         r.iter().all(|v| v.is_finite()).then_some(r)
     }
-
-    fn step(&self, i: usize) -> f64 {
-        if i < self.n_mech() {
-            1e-6
-        } else {
-            1e-4
-        }
-    }
 }
 
-impl LeastSquares for Problem<'_> {
+impl<M: FrfModel> LeastSquares for Problem<'_, M> {
     fn n_params(&self) -> usize {
-        self.n_mech() + 2
+        self.model.n_params()
     }
 
     fn n_residuals(&self) -> usize {
@@ -661,18 +733,12 @@ impl LeastSquares for Problem<'_> {
         let nr = r0.len();
         let mut jac = DMatrix::zeros(nr, p);
         for (col, &i) in free.iter().enumerate() {
-            let h = self.step(i);
+            let h = self.model.step(i, theta);
             let mut th = theta.to_vec();
-            // forward difference, backward at an upper bound of the drive
-            let sign = if i >= self.n_mech() && th[i] + h > MAX_DRIVE_SAMPLES {
-                -1.0
-            } else {
-                1.0
-            };
-            th[i] += sign * h;
+            th[i] += h;
             if let Some(r1) = self.residuals(&th) {
                 for k in 0..nr {
-                    jac[(k, col)] = (r1[k] - r0[k]) / (sign * h);
+                    jac[(k, col)] = (r1[k] - r0[k]) / h;
                 }
             }
         }
@@ -899,35 +965,7 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
         r: opts.r,
         ts: opts.ts,
     };
-    let sp = &frf.spectra;
-    let exc_in_noise: Vec<usize> = frf
-        .freq_hz
-        .iter()
-        .zip(&sp.pool)
-        .filter_map(|(f, pool)| {
-            pool.clone()
-                .find(|&j| (sp.noise_freq_hz[j] - f).abs() <= 1e-9 * f.abs().max(1e-300))
-        })
-        .collect();
-    let usable = sp.periods >= 2
-        && sp.u.len() == frf.g.len()
-        && exc_in_noise.len() == frf.g.len()
-        && sp.pool.iter().all(|p| p.end <= sp.var_u.len());
-    let spectra = usable.then(|| sp.clone());
-    let lines = Lines {
-        z: unit_circle(&frf.freq_hz, opts.ts),
-        z_noise: unit_circle(&sp.noise_freq_hz, opts.ts),
-        exc_in_noise,
-        g: frf.g.clone(),
-        w_log: frf
-            .g
-            .iter()
-            .zip(&frf.sigma)
-            .map(|(g, s)| 1.0 / (s / g.norm().max(1e-300)).max(0.02))
-            .collect(),
-        sigma: frf.sigma.clone(),
-        spectra,
-    };
+    let lines = Lines::new(frf, opts.ts);
     let peaks = frf_peaks(frf, opts.output);
     let n_res = structure.masses() - 1;
     let zetas: &[f64] = if n_res == 0 { &[0.05] } else { &[0.03, 0.12] };
@@ -952,13 +990,14 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
         hi.extend([MAX_DRIVE_SAMPLES, MAX_DRIVE_SAMPLES]);
         (lo, hi)
     };
+    let phys = PhysicalFrf(model);
     let log_p = Problem {
-        model,
+        model: &phys,
         lines: &lines,
         cost: Cost::Log,
     };
     let sml_p = Problem {
-        model,
+        model: &phys,
         lines: &lines,
         cost: Cost::Sml,
     };

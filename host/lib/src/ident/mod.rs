@@ -9,6 +9,7 @@
 pub mod fit;
 pub mod frf;
 pub mod frf_fit;
+pub mod frf_subspace;
 pub mod grey_box;
 pub mod linalg;
 pub mod lm;
