@@ -136,8 +136,10 @@ fn fmt(v: &[f64]) -> String {
 /// default joint: seconds for the FRF and the fit, largest parameter error.
 fn frequency_domain_case(n: usize, td_seconds: f64) {
     use jointid::data::{Dataset, ExcitationConfig};
+    use jointid::ident::fit::DrivenModel;
     use jointid::ident::frf::analyze_dataset;
-    use jointid::ident::frf_fit::{fit_frf, FrfFitOptions};
+    use jointid::ident::frf_fit::{fit_frf, periodic_fit_percent, FrfFitOptions};
+    use jointid::ident::frf_subspace::black_box_frf;
     use jointid::sim::{simulate_excitation, SimConfig};
     // the paper's multisine (f0 = 0.4 Hz, N = 5000, lines up to 121.6 Hz)
     // without its ramp: 15,000 samples are three periods, the first dropped
@@ -145,14 +147,24 @@ fn frequency_domain_case(n: usize, td_seconds: f64) {
     exc.ramp_samples = 0;
     exc.periods = (n / 5000) as u32;
     let cfg = SimConfig::default();
-    let out = simulate_excitation(&cfg, &exc).expect("simulation");
-    let ds = Dataset {
-        name: "sim".into(),
-        data: out.to_id_data(),
-        t0: 0.0,
-        excitation: Some(exc),
-        meta: Default::default(),
+    let record = |seed: u64| {
+        let out = simulate_excitation(
+            &SimConfig {
+                seed,
+                ..cfg.clone()
+            },
+            &exc,
+        )
+        .expect("simulation");
+        Dataset {
+            name: "sim".into(),
+            data: out.to_id_data(),
+            t0: 0.0,
+            excitation: Some(exc),
+            meta: Default::default(),
+        }
     };
+    let ds = record(1);
     let t = Instant::now();
     let a = analyze_dataset(&ds, 1).expect("frf");
     let t_frf = t.elapsed().as_secs_f64();
@@ -181,6 +193,31 @@ fn frequency_domain_case(n: usize, td_seconds: f64) {
         fit.cost_ratio(),
         fmt(&fit.resonances_hz),
         fit.warnings.len()
+    );
+    // the 11th-order black box on the same lines, against the true model on
+    // a second record
+    let t = Instant::now();
+    let bb = black_box_frf(&a.frf, 11, TS, false, 100).expect("black box");
+    let t_bb = t.elapsed().as_secs_f64();
+    let val = analyze_dataset(&record(2), 1).expect("frf").frf;
+    let true_model = DrivenModel {
+        mechanics: GreyBoxModel {
+            structure: Structure::ThreeMass,
+            output: Output::Angle,
+            r: jp.r,
+            ts: TS,
+        },
+        current_loop_tau: cfg.controller.current_loop_tau,
+    }
+    .continuous(&truth)
+    .zoh(TS);
+    let fit_bb = periodic_fit_percent(&val, &bb.model.freq_response(&val.freq_hz));
+    let fit_true = periodic_fit_percent(&val, &true_model.freq_response(&val.freq_hz));
+    println!(
+        "frequency domain black box n=11 N={n:<7} FRF {t_frf:.4} s + fit {t_bb:.4} s ({:.3} x the time-domain grey-box fit), \
+         validation FIT {fit_bb:.2} % (true model {fit_true:.2} %), cost ratio {:.2}",
+        (t_frf + t_bb) / td_seconds,
+        bb.cost_ratio()
     );
 }
 
