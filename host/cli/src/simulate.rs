@@ -21,7 +21,7 @@
 //! `--param NAME=VALUE` overrides one physical parameter of the chosen model, named as in
 //! seed 000 Table 1 (`J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r`) plus
 //! seed 001's `k3`, `F_c` for the nonlinear two-mass (see [`jointid::model::params`]); only
-//! the names the model uses are accepted ([`model_params`]).
+//! the names the model uses are accepted ([`jointid::model::params::model_params`]).
 // Units in brackets (`[s]`, `[rad]`) are not intra-doc links.
 #![allow(rustdoc::broken_intra_doc_links)]
 
@@ -34,6 +34,7 @@ use serde::Serialize;
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::jcap::{write_stream, JcapError};
 use jointid::data::{write_capture_csv, Dataset, ExcitationConfig, SignalKind};
+use jointid::model::params::model_params;
 use jointid::sim::board::{encode_session, BoardStreamError, WireOptions};
 use jointid::sim::{
     parse_effects, simulate_excitation, Integrator, JointParams, Mechanism, Plant, PlantKind,
@@ -217,40 +218,6 @@ pub enum SimulateError {
         /// what the operating system said
         err: std::io::Error,
     },
-}
-
-/// Access to one field of [`JointParams`] (its unit is the field's).
-pub type ParamField = fn(&mut JointParams) -> &mut f64;
-
-/// The physical parameters model `kind` uses, as (name, field) pairs, names as in
-/// [`JointParams::table`] (seed 000 Table 1, seed 001 `k3`, `F_c`).
-pub fn model_params(kind: PlantKind) -> Vec<(&'static str, ParamField)> {
-    type Field = ParamField;
-    let mut v: Vec<(&'static str, Field)> = vec![
-        ("J_m", |p| &mut p.j_m),
-        ("J_a1", |p| &mut p.j_a1),
-        ("J_a2", |p| &mut p.j_a2),
-    ];
-    let gearbox: [(&'static str, Field); 2] = [("k_g", |p| &mut p.k_g), ("d_g", |p| &mut p.d_g)];
-    let arm: [(&'static str, Field); 2] = [("k_a", |p| &mut p.k_a), ("d_a", |p| &mut p.d_a)];
-    match kind {
-        PlantKind::Rigid => {}
-        PlantKind::TwoMass | PlantKind::NonlinearTwoMass => v.extend(gearbox),
-        PlantKind::ThreeMass => v.extend(gearbox.into_iter().chain(arm)),
-        PlantKind::FourMass => {
-            v.push(("J_p", |p| &mut p.j_p));
-            v.extend(gearbox.into_iter().chain(arm));
-            v.extend::<[(&'static str, Field); 2]>([
-                ("k_p", |p| &mut p.k_p),
-                ("d_p", |p| &mut p.d_p),
-            ]);
-        }
-    }
-    v.extend::<[(&'static str, Field); 2]>([("f_m", |p| &mut p.f_m), ("r", |p| &mut p.r)]);
-    if kind == PlantKind::NonlinearTwoMass {
-        v.extend::<[(&'static str, Field); 2]>([("k3", |p| &mut p.k3), ("F_c", |p| &mut p.f_c)]);
-    }
-    v
 }
 
 /// Applies `NAME=VALUE` overrides to the parameters of model `model`.

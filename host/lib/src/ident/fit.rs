@@ -55,6 +55,7 @@ use crate::ident::pem::{self, FullSs, ParamModel, PemFit, PemOptions};
 use crate::ident::ss::{ContinuousSs, Resonances, StateSpace};
 use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
 use crate::ident::validate::{self, Validation};
+use crate::model::params::unit_of;
 
 /// Largest `N · p²` (samples times squared parameter count) for which the
 /// black-box output-error refinement runs; above it the subspace model is
@@ -693,7 +694,7 @@ fn fit_grey(data: &IdData, raw: Option<&IdData>, opts: &FitOptions) -> Result<Fi
                 name: n.to_string(),
                 value: v,
                 std: v * pf.std[i],
-                unit: grey_box::unit_of(n),
+                unit: unit_of(n),
             }
         })
         .collect();
@@ -1078,7 +1079,7 @@ impl SavedModel {
                 name: k.clone(),
                 value: p.value,
                 std: p.std,
-                unit: grey_box::unit_of(k),
+                unit: unit_of(k),
             })
             .collect();
         Ok(Fitted {

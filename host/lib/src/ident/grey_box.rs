@@ -58,6 +58,7 @@ use crate::ident::linalg::{central_diff, filtfilt_lowpass, solve_spd};
 use crate::ident::pem::{self, ParamModel, PemFit, PemOptions};
 use crate::ident::ss::{ContinuousSs, StateSpace};
 use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
+use crate::model::params::unit_of;
 
 /// default gear ratio of seed 000 (arm angle per motor angle)
 pub const DEFAULT_GEAR_RATIO: f64 = 1.0 / 118.0;
@@ -127,20 +128,6 @@ pub enum Output {
     Velocity,
 }
 
-/// unit of a parameter, from its name
-pub fn unit_of(name: &str) -> &'static str {
-    match name.as_bytes().first() {
-        Some(b'J') => "kg·m²",
-        Some(b'k') => "N·m/rad",
-        Some(b'd') | Some(b'f') => "N·m·s/rad",
-        _ => match name {
-            "Fv" => "N·m·s/rad",
-            "Fc" | "offset" => "N·m",
-            _ => "",
-        },
-    }
-}
-
 /// One estimated physical parameter.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PhysParam {
@@ -150,7 +137,7 @@ pub struct PhysParam {
     pub value: f64,
     /// standard deviation, same unit (0 when not estimated)
     pub std: f64,
-    /// unit (rotary joint)
+    /// unit (rotary joint; [`crate::model::params::unit_of`])
     pub unit: &'static str,
 }
 
