@@ -23,7 +23,7 @@ use clap::{Args, ValueEnum};
 use serde::Serialize;
 
 use super::args::{DataArgs, DetrendArg, PrepArgs};
-use super::{print_json, CmdResult, Context, Outcome};
+use super::{print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::Dataset;
 use jointid::ident::fit::{
     default_f_min, fit_prepared, log_grid, param_map, DetrendKind, FitData, FitOptions, Fitted,
@@ -35,7 +35,7 @@ use jointid::ident::subspace::Method;
 use jointid::ident::validate::{
     BodeCurve, CorrelationTest, FrfBand, Validation, DEFAULT_LAGS, FIT_NAME,
 };
-use jointid::report::plot::{bode_svg, write_svg};
+use jointid::report::plot::bode_svg;
 
 /// Friction model of the rigid body.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
