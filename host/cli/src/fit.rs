@@ -22,12 +22,12 @@ use std::time::Instant;
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
-use super::args::{DataArgs, DetrendArg, PrepArgs};
+use super::args::{DataArgs, PrepArgs};
 use super::{print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::Dataset;
 use jointid::ident::fit::{
-    default_f_min, fit_prepared, log_grid, param_map, DetrendKind, FitData, FitOptions, Fitted,
-    ModelKind, ParamJson, Prep,
+    default_f_min, fit_prepared, log_grid, param_map, FitData, FitOptions, Fitted, ModelKind,
+    ParamJson,
 };
 use jointid::ident::frf::analyze_dataset;
 use jointid::ident::grey_box::{Output, DEFAULT_GEAR_RATIO};
@@ -247,17 +247,6 @@ pub struct ResidualTests {
     pub validation: Option<Validation>,
 }
 
-pub(crate) fn prep_of(p: &PrepArgs) -> Prep {
-    Prep {
-        decimate: p.decimate as usize,
-        detrend: match p.detrend {
-            DetrendArg::None => DetrendKind::None,
-            DetrendArg::Mean => DetrendKind::Mean,
-            DetrendArg::Linear => DetrendKind::Linear,
-        },
-    }
-}
-
 /// Runs `jointid fit`.
 ///
 /// # Errors
@@ -268,7 +257,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         Some(p) => Some(args.data.data_args(p).load(ctx.loaders)?),
         None => None,
     };
-    let prep = prep_of(&args.prep);
+    let prep = args.prep.prep();
     let prepare = |d: &jointid::data::IdData, name: &str| {
         FitData::new(d, prep).map_err(|e| format!("{name}: {e}"))
     };

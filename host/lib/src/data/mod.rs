@@ -38,7 +38,7 @@ pub use csv::{
     SAMPLE_INTERVAL_TOLERANCE,
 };
 pub use dsp::{decimate, decimation_taps};
-pub use prep::{detrend, Detrend};
+pub use prep::{detrend, Detrend, Prep};
 
 /// Input/output record of one experiment, uniformly sampled.
 #[derive(Clone, Debug, PartialEq)]

@@ -49,7 +49,7 @@ use nalgebra::{DMatrix, DVector, RowDVector};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::data::IdData;
+use crate::data::{IdData, Prep};
 use crate::ident::grey_box::{self, GreyBoxOptions, IdimOptions, Output, PhysParam, Structure};
 use crate::ident::pem::{self, FullSs, ParamModel, PemFit, PemOptions};
 use crate::ident::ss::{ContinuousSs, Resonances, StateSpace};
@@ -393,12 +393,7 @@ impl FitData {
     /// # Errors
     /// [`FitError::BadData`] when the record is too short to decimate.
     pub fn new(raw: &IdData, prep: Prep) -> Result<Self, FitError> {
-        let mut r = raw.clone();
-        match prep.detrend {
-            DetrendKind::None => {}
-            DetrendKind::Mean => r.detrend(crate::data::Detrend::Mean),
-            DetrendKind::Linear => r.detrend(crate::data::Detrend::Linear),
-        }
+        let r = prep.detrended(raw);
         let q = prep.decimate.max(1);
         let prepared = r
             .decimate(q)
@@ -932,39 +927,6 @@ pub fn param_map(params: &[PhysParam]) -> BTreeMap<String, ParamJson> {
         .collect()
 }
 
-/// Preparation applied to raw data before fitting (and again before
-/// validation with a saved model).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Prep {
-    /// decimation factor (1: none)
-    pub decimate: usize,
-    /// detrending: `none`, `mean` or `linear`
-    pub detrend: DetrendKind,
-}
-
-/// Detrending recorded in a model file.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum DetrendKind {
-    /// none
-    None,
-    /// mean removed
-    Mean,
-    /// least-squares line removed
-    Linear,
-}
-
-impl Prep {
-    /// Detrending at the capture rate, then decimation (the decimated
-    /// record of [`FitData::new`]).
-    ///
-    /// # Errors
-    /// [`FitError::BadData`] when the record is too short to decimate.
-    pub fn apply(&self, data: &IdData) -> Result<IdData, FitError> {
-        Ok(FitData::new(data, *self)?.prepared)
-    }
-}
-
 /// format tag of [`SavedModel`] (format 2: physical models at the capture
 /// rate, [`SavedModel::decimate_output`])
 pub const MODEL_FORMAT: &str = "jointid-model/2";
@@ -1114,6 +1076,7 @@ pub fn default_f_min(n: usize, ts: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::data::Detrend;
     use crate::ident::linalg::GaussRng;
 
     fn two_mass_data(n: usize, seed: u64, noise: f64) -> (IdData, StateSpace) {
@@ -1162,7 +1125,7 @@ mod tests {
     /// preparation that leaves the record as it is
     const RAW: Prep = Prep {
         decimate: 1,
-        detrend: DetrendKind::None,
+        detrend: Detrend::None,
     };
 
     #[test]
@@ -1257,7 +1220,7 @@ mod tests {
         let raw = IdData { ts, u, y, r: None };
         let prep = Prep {
             decimate: q,
-            detrend: DetrendKind::None,
+            detrend: Detrend::None,
         };
         let fd = FitData::new(&raw, prep).unwrap();
         assert_eq!(fd.prepared, prep.apply(&raw).unwrap());
