@@ -1,7 +1,7 @@
 //! Identification checks on data with known truth (the host's closed-loop
 //! joint simulator, fixed seeds) (issue 5, items 6–9); the checks on
 //! measured data through the command line are in
-//! `host/cli/tests/cli_fit.rs`, where the binary exists.
+//! `host/cli/tests/fit_validate_demo_commands.rs`, where the binary exists.
 //!
 //! Simulated three-mass joint for the statistical checks: the default
 //! three-mass plant of `jointid::sim` in its position loop, sampled at

@@ -5,7 +5,7 @@
 //!
 //! Scanned: every `.rs` file under `src/`, without comment lines and without the test
 //! code at the end of a file (from the `#[cfg(test)]` that opens `mod tests`; files named
-//! `tests.rs` are test code as a whole).
+//! `tests.rs` and the files of a `tests/` folder are test code as a whole).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -59,7 +59,7 @@ fn code() -> BTreeMap<String, Vec<(usize, String)>> {
             .unwrap()
             .to_string_lossy()
             .replace('\\', "/");
-        if rel.ends_with("/tests.rs") {
+        if rel.ends_with("/tests.rs") || rel.contains("/tests/") {
             continue;
         }
         let text = std::fs::read_to_string(&f).unwrap();
