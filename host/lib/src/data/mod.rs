@@ -64,6 +64,34 @@ impl IdData {
         self.u.is_empty()
     }
 
+    /// What every estimator checks first: `u` and `y` of equal length, at least
+    /// `min_samples` of them, a positive finite sample interval, every value of `u` and
+    /// `y` finite.
+    ///
+    /// # Errors
+    /// The first [`RecordError`] found, in that order.
+    pub fn check(&self, min_samples: usize) -> Result<(), RecordError> {
+        if self.u.len() != self.y.len() {
+            return Err(RecordError::LengthMismatch {
+                input: self.u.len(),
+                output: self.y.len(),
+            });
+        }
+        if self.len() < min_samples {
+            return Err(RecordError::TooShort {
+                samples: self.len(),
+                min: min_samples,
+            });
+        }
+        if !(self.ts > 0.0 && self.ts.is_finite()) {
+            return Err(RecordError::BadInterval { ts: self.ts });
+        }
+        if let Some(index) = self.u.iter().chain(&self.y).position(|v| !v.is_finite()) {
+            return Err(RecordError::NonFinite { index });
+        }
+        Ok(())
+    }
+
     /// samples `range` of every signal, same sample interval
     pub fn slice(&self, range: std::ops::Range<usize>) -> IdData {
         IdData {
@@ -226,6 +254,40 @@ impl Dataset {
         let lay = self.period_layout(settle_periods)?;
         Ok((self.data.slice(lay.range()), lay))
     }
+}
+
+/// Why a record cannot go to an estimator ([`IdData::check`]).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum RecordError {
+    /// `u` and `y` differ in length
+    #[error("input has {input} samples, output {output}")]
+    LengthMismatch {
+        /// samples of `u`
+        input: usize,
+        /// samples of `y`
+        output: usize,
+    },
+    /// fewer samples than the estimator needs
+    #[error("{samples} samples are too few (need at least {min})")]
+    TooShort {
+        /// samples in the record
+        samples: usize,
+        /// samples needed
+        min: usize,
+    },
+    /// the sample interval is zero, negative or not finite
+    #[error("sample interval {ts} s is not positive and finite")]
+    BadInterval {
+        /// the sample interval [s]
+        ts: f64,
+    },
+    /// a value of `u` or `y` is NaN or infinite
+    #[error("non-finite value at position {index} of u followed by y")]
+    NonFinite {
+        /// position in `u` followed by `y` (`index - len` is the position in `y`)
+        index: usize,
+    },
 }
 
 /// Errors of loading and preparing data.
@@ -483,5 +545,42 @@ mod tests {
         let e = loaders.load(&jcap, &ColumnMap::capture()).unwrap_err();
         assert!(e.to_string().contains("fake loader saw"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn check_names_the_first_fault_with_its_numbers() {
+        let ok = IdData {
+            ts: 0.01,
+            u: vec![1.0; 60],
+            y: vec![2.0; 60],
+            r: None,
+        };
+        assert_eq!(ok.check(50), Ok(()));
+        let mut d = ok.clone();
+        d.y.pop();
+        assert_eq!(
+            d.check(50),
+            Err(RecordError::LengthMismatch {
+                input: 60,
+                output: 59
+            })
+        );
+        assert_eq!(
+            ok.check(61),
+            Err(RecordError::TooShort {
+                samples: 60,
+                min: 61
+            })
+        );
+        let mut d = ok.clone();
+        d.ts = 0.0;
+        assert_eq!(d.check(50), Err(RecordError::BadInterval { ts: 0.0 }));
+        let mut d = ok.clone();
+        d.y[3] = f64::NAN;
+        assert_eq!(d.check(50), Err(RecordError::NonFinite { index: 63 }));
+        assert_eq!(
+            RecordError::NonFinite { index: 63 }.to_string(),
+            "non-finite value at position 63 of u followed by y"
+        );
     }
 }

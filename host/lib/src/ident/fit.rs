@@ -225,10 +225,45 @@ impl pem::ParamModel for DrivenModel {
 pub enum FitError {
     /// the data cannot be used
     #[error("bad data: {0}")]
-    BadData(String),
-    /// the options do not fit together
-    #[error("{0}")]
-    Options(String),
+    BadData(#[from] crate::data::RecordError),
+    /// the record could not be prepared (too short to decimate)
+    #[error("bad data: {0}")]
+    Prepare(#[source] crate::data::DataError),
+    /// the data's sample interval is not the model's
+    #[error(
+        "bad data: sample interval {data_ts} s differs from the model's {model_ts} s \
+         (decimate the data as the model was)"
+    )]
+    RateMismatch {
+        /// sample interval of the data [s]
+        data_ts: f64,
+        /// sample interval of the model [s]
+        model_ts: f64,
+    },
+    /// a model at the capture rate meets data prepared at another rate or decimation
+    #[error(
+        "bad data: the model runs at {model_ts} s and is compared after decimation by \
+         {model_q}; the data are at {data_ts} s, decimated by {data_q}"
+    )]
+    DecimationMismatch {
+        /// sample interval of the model [s]
+        model_ts: f64,
+        /// decimation the model is compared after
+        model_q: usize,
+        /// sample interval of the raw data [s]
+        data_ts: f64,
+        /// decimation of the data
+        data_q: usize,
+    },
+    /// Coulomb friction was asked for a model other than the rigid one
+    #[error("--friction coulomb is available for the rigid model only, not {model}")]
+    CoulombNeedsRigid {
+        /// the model asked for
+        model: String,
+    },
+    /// a model file that cannot be read back
+    #[error(transparent)]
+    ModelFile(#[from] ModelFileError),
     /// subspace step
     #[error("subspace identification failed: {0}")]
     Subspace(#[from] subspace::SubspaceError),
@@ -317,28 +352,7 @@ pub struct Fitted {
 }
 
 fn check(data: &IdData) -> Result<(), FitError> {
-    if data.u.len() != data.y.len() {
-        return Err(FitError::BadData(format!(
-            "input has {} samples, output {}",
-            data.u.len(),
-            data.y.len()
-        )));
-    }
-    if data.len() < 50 {
-        return Err(FitError::BadData(format!(
-            "{} samples are too few (need at least 50)",
-            data.len()
-        )));
-    }
-    if data.ts.is_nan() || data.ts <= 0.0 || data.ts.is_infinite() {
-        return Err(FitError::BadData(format!("sample interval {} s", data.ts)));
-    }
-    if let Some(k) = data.u.iter().chain(&data.y).position(|v| !v.is_finite()) {
-        return Err(FitError::BadData(format!(
-            "non-finite value at position {k}"
-        )));
-    }
-    Ok(())
+    Ok(data.check(50)?)
 }
 
 /// Fits the model family of `opts` to `data` (already decimated and
@@ -349,10 +363,9 @@ fn check(data: &IdData) -> Result<(), FitError> {
 pub fn fit_model(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitError> {
     check(data)?;
     if opts.coulomb && opts.kind != ModelKind::Rigid {
-        return Err(FitError::Options(format!(
-            "--friction coulomb is available for the rigid model only, not {}",
-            opts.kind.name()
-        )));
+        return Err(FitError::CoulombNeedsRigid {
+            model: opts.kind.name(),
+        });
     }
     match opts.kind {
         ModelKind::BlackBox(n) => fit_black_box(data, n, opts),
@@ -391,13 +404,11 @@ impl FitData {
     /// Prepares `raw` with `prep`.
     ///
     /// # Errors
-    /// [`FitError::BadData`] when the record is too short to decimate.
+    /// [`FitError::Prepare`] when the record is too short to decimate.
     pub fn new(raw: &IdData, prep: Prep) -> Result<Self, FitError> {
         let r = prep.detrended(raw);
         let q = prep.decimate.max(1);
-        let prepared = r
-            .decimate(q)
-            .map_err(|e| FitError::BadData(e.to_string()))?;
+        let prepared = r.decimate(q).map_err(FitError::Prepare)?;
         Ok(FitData {
             raw: r,
             prepared,
@@ -798,15 +809,15 @@ impl Fitted {
     /// data's rate; see [`Fitted::evaluate_on`] for a prepared record).
     ///
     /// # Errors
-    /// [`FitError::BadData`] for a sample-interval mismatch or unusable data,
+    /// [`FitError::RateMismatch`], [`FitError::BadData`] for unusable data,
     /// [`FitError::Validate`].
     pub fn evaluate(&self, data: &IdData, lags: usize) -> Result<Validation, FitError> {
         check(data)?;
         if (data.ts - self.ts).abs() > 1e-3 * self.ts {
-            return Err(FitError::BadData(format!(
-                "sample interval {} s differs from the model's {} s (decimate the data as the model was)",
-                data.ts, self.ts
-            )));
+            return Err(FitError::RateMismatch {
+                data_ts: data.ts,
+                model_ts: self.ts,
+            });
         }
         let yh = self.simulate(data);
         Ok(validate::validate(&data.u, &data.y, &yh, lags)?)
@@ -819,26 +830,29 @@ impl Fitted {
     /// data went through, which is exact for a linear model.
     ///
     /// # Errors
-    /// [`FitError::BadData`] when the record's rates do not match the model.
+    /// [`FitError::DecimationMismatch`] when the record's rates do not match the model.
     pub fn simulate_on(&self, data: &FitData) -> Result<Vec<f64>, FitError> {
         if self.decimate <= 1 {
             return Ok(self.simulate(&data.prepared));
         }
         if (data.raw.ts - self.ts).abs() > 1e-3 * self.ts || data.decimate != self.decimate {
-            return Err(FitError::BadData(format!(
-                "the model runs at {} s and is compared after decimation by {}; the data are at {} s, decimated by {}",
-                self.ts, self.decimate, data.raw.ts, data.decimate
-            )));
+            return Err(FitError::DecimationMismatch {
+                model_ts: self.ts,
+                model_q: self.decimate,
+                data_ts: data.raw.ts,
+                data_q: data.decimate,
+            });
         }
         let yh = self.simulate(&data.raw);
-        crate::data::decimate(&yh, self.decimate).map_err(|e| FitError::BadData(e.to_string()))
+        crate::data::decimate(&yh, self.decimate).map_err(FitError::Prepare)
     }
 
     /// FIT and residual tests on the decimated record of `data` (see
     /// [`Fitted::simulate_on`]).
     ///
     /// # Errors
-    /// [`FitError::BadData`] for a rate mismatch or unusable data,
+    /// [`FitError::DecimationMismatch`] for a rate mismatch, [`FitError::BadData`] for
+    /// unusable data,
     /// [`FitError::Validate`].
     pub fn evaluate_on(&self, data: &FitData, lags: usize) -> Result<Validation, FitError> {
         check(&data.prepared)?;
@@ -980,51 +994,112 @@ pub struct SavedModel {
     pub source: String,
 }
 
+/// Why a model file cannot be read back ([`SavedModel::to_fitted`]).
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum ModelFileError {
+    /// a format this build does not read
+    #[error("model format `{format}` is neither `{MODEL_FORMAT}` nor `{MODEL_FORMAT_1}`")]
+    Format {
+        /// the file's format tag
+        format: String,
+    },
+    /// format 1's input hold other than zero-order
+    #[error(
+        "input hold `{hold}` of format 1 is no longer supported: fit the model again \
+         (physical models are now refined at the capture rate)"
+    )]
+    InputHold {
+        /// the hold named in the file
+        hold: String,
+    },
+    /// the output decimation disagrees with the preparation's
+    #[error("output decimation {output} does not match the preparation's decimation {prep}")]
+    Decimation {
+        /// `decimate_output`
+        output: usize,
+        /// `prep.decimate`
+        prep: usize,
+    },
+    /// the matrices do not have the sizes of one state space
+    #[error("model matrices are inconsistent: A {a} rows, B {b}, C {c}")]
+    Matrices {
+        /// rows of A
+        a: usize,
+        /// entries of B
+        b: usize,
+        /// entries of C
+        c: usize,
+    },
+    /// a sample interval that is not positive
+    #[error("sample interval {ts} s")]
+    Interval {
+        /// the interval [s]
+        ts: f64,
+    },
+    /// the model family does not parse
+    #[error("{0}")]
+    Model(String),
+    /// an output other than `angle` or `velocity`
+    #[error("unknown output `{output}`")]
+    Output {
+        /// the output named in the file
+        output: String,
+    },
+}
+
 impl SavedModel {
     /// The model back as a [`Fitted`] (without continuous model).
     ///
     /// # Errors
-    /// [`FitError::Options`] when the file is inconsistent.
+    /// [`ModelFileError`] when the file is inconsistent.
     pub fn to_fitted(&self) -> Result<Fitted, FitError> {
         if self.format != MODEL_FORMAT && self.format != MODEL_FORMAT_1 {
-            return Err(FitError::Options(format!(
-                "model format `{}` is neither `{MODEL_FORMAT}` nor `{MODEL_FORMAT_1}`",
-                self.format
-            )));
+            return Err(ModelFileError::Format {
+                format: self.format.clone(),
+            }
+            .into());
         }
         match self.input_hold.as_deref() {
             None | Some("zoh") => {}
             Some(h) => {
-                return Err(FitError::Options(format!(
-                    "input hold `{h}` of format 1 is no longer supported: fit the model again \
-                     (physical models are now refined at the capture rate)"
-                )))
+                return Err(ModelFileError::InputHold {
+                    hold: h.to_string(),
+                }
+                .into())
             }
         }
         if self.decimate_output == 0
             || self.decimate_output > 1 && self.prep.decimate != self.decimate_output
         {
-            return Err(FitError::Options(format!(
-                "output decimation {} does not match the preparation's decimation {}",
-                self.decimate_output, self.prep.decimate
-            )));
+            return Err(ModelFileError::Decimation {
+                output: self.decimate_output,
+                prep: self.prep.decimate,
+            }
+            .into());
         }
         let n = self.a.len();
         if self.b.len() != n || self.c.len() != n || self.a.iter().any(|r| r.len() != n) {
-            return Err(FitError::Options(format!(
-                "model matrices are inconsistent: A {n} rows, B {}, C {}",
-                self.b.len(),
-                self.c.len()
-            )));
+            return Err(ModelFileError::Matrices {
+                a: n,
+                b: self.b.len(),
+                c: self.c.len(),
+            }
+            .into());
         }
         if self.ts.is_nan() || self.ts <= 0.0 {
-            return Err(FitError::Options(format!("sample interval {} s", self.ts)));
+            return Err(ModelFileError::Interval { ts: self.ts }.into());
         }
-        let kind: ModelKind = self.model.parse().map_err(FitError::Options)?;
+        let kind: ModelKind = self.model.parse().map_err(ModelFileError::Model)?;
         let output = match self.output.as_str() {
             "angle" => Output::Angle,
             "velocity" => Output::Velocity,
-            o => return Err(FitError::Options(format!("unknown output `{o}`"))),
+            o => {
+                return Err(ModelFileError::Output {
+                    output: o.to_string(),
+                }
+                .into())
+            }
         };
         let a = DMatrix::from_fn(n, n, |i, j| self.a[i][j]);
         let model = StateSpace::new(

@@ -146,7 +146,18 @@ pub struct PhysParam {
 pub enum GreyBoxError {
     /// the data are unusable
     #[error("bad data: {0}")]
-    BadData(String),
+    BadData(#[from] crate::data::RecordError),
+    /// too few samples remain after the filter's edges are trimmed
+    #[error("bad data: only {left} samples left after edge trimming for {params} parameters")]
+    TooFewAfterTrim {
+        /// samples left
+        left: usize,
+        /// parameters to estimate
+        params: usize,
+    },
+    /// the data show no positive rigid-body inertia (the initial values need one)
+    #[error("bad data: no positive rigid-body inertia found in the data")]
+    NoInertia,
     /// the high-order subspace model could not be built
     #[error("subspace step failed: {0}")]
     Subspace(#[from] subspace::SubspaceError),
@@ -419,18 +430,11 @@ impl RigidFit {
 ///
 /// # Errors
 /// [`GreyBoxError::BadData`] for short or non-finite data,
+/// [`GreyBoxError::TooFewAfterTrim`],
 /// [`GreyBoxError::Singular`] when the regressors are collinear.
 pub fn rigid_idim(data: &IdData, opts: &IdimOptions) -> Result<RigidFit, GreyBoxError> {
+    data.check(50)?;
     let n = data.u.len();
-    if n != data.y.len() || n < 50 {
-        return Err(GreyBoxError::BadData(format!(
-            "need at least 50 equal-length samples, got u {n}, y {}",
-            data.y.len()
-        )));
-    }
-    if data.u.iter().chain(&data.y).any(|v| !v.is_finite()) {
-        return Err(GreyBoxError::BadData("non-finite sample".into()));
-    }
     let ts = data.ts;
     let fc = if opts.cutoff_hz > 0.0 {
         opts.cutoff_hz
@@ -488,9 +492,10 @@ pub fn rigid_idim(data: &IdData, opts: &IdimOptions) -> Result<RigidFit, GreyBox
         rows.push((phi.clone(), uf[t]));
     }
     if count <= p {
-        return Err(GreyBoxError::BadData(format!(
-            "only {count} samples left after edge trimming"
-        )));
+        return Err(GreyBoxError::TooFewAfterTrim {
+            left: count,
+            params: p,
+        });
     }
     let th = solve_spd(&m, &rhs, 0.0).ok_or(GreyBoxError::Singular("rigid inverse dynamics"))?;
     let mut ssr = 0.0;
@@ -959,9 +964,7 @@ pub fn features(
         }
     }
     if !(j_total > 0.0 && j_total.is_finite()) {
-        return Err(GreyBoxError::BadData(
-            "no positive rigid-body inertia found in the data".into(),
-        ));
+        return Err(GreyBoxError::NoInertia);
     }
     if !(f_m > 0.0 && f_m.is_finite()) {
         // one tenth of a 1 Hz mechanical pole: small but positive

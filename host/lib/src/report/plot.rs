@@ -31,10 +31,10 @@ pub enum PlotError {
     Empty(String),
 }
 
-fn draw_err<E: std::fmt::Debug>(what: &str) -> impl Fn(E) -> PlotError + '_ {
+fn draw_err<E: std::fmt::Display>(what: &str) -> impl Fn(E) -> PlotError + '_ {
     move |e| PlotError::Draw {
         what: what.into(),
-        msg: format!("{e:?}"),
+        msg: e.to_string(),
     }
 }
 
