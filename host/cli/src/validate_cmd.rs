@@ -23,7 +23,8 @@ use super::args::{DataArgs, PrepArgs};
 use super::fit::print_tests;
 use super::validate::{self as column_validate, ValidateArgs};
 use super::{print_json, CmdResult, Context, Outcome};
-use jointid::ident::fit::{FitData, SavedModel};
+use jointid::ident::fit::FitData;
+use jointid::ident::model_file::SavedModel;
 use jointid::ident::validate::{Validation, DEFAULT_LAGS, FIT_NAME};
 
 /// Arguments of `jointid validate`.

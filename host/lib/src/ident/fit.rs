@@ -33,12 +33,7 @@
 //! share this one path, so a FIT printed by `jointid fit` and one in the
 //! paper-like table are computed the same way.
 //!
-//! The model file ([`SavedModel`]) stores the discrete matrices at the
-//! sample interval of the model (the capture rate for a physical model
-//! fitted with decimation), the preparation applied to the data
-//! (decimation, detrending), the physical parameters with their standard
-//! deviations, and for the Coulomb rigid model its four parameters: all that
-//! is needed to simulate the model again on new data.
+//! The model file that `jointid validate` reads is [`crate::ident::model_file`].
 // Units in brackets (`[s]`, `[Hz]`, `[%]`) are not intra-doc links.
 #![allow(rustdoc::broken_intra_doc_links)]
 
@@ -261,9 +256,6 @@ pub enum FitError {
         /// the model asked for
         model: String,
     },
-    /// a model file that cannot be read back
-    #[error(transparent)]
-    ModelFile(#[from] ModelFileError),
     /// subspace step
     #[error("subspace identification failed: {0}")]
     Subspace(#[from] subspace::SubspaceError),
@@ -878,31 +870,6 @@ impl Fitted {
     pub fn freq_response(&self, f_hz: &[f64]) -> Vec<Complex<f64>> {
         self.model.freq_response(f_hz)
     }
-
-    /// The model file.
-    pub fn to_saved(&self, prep: Prep, source: &str, fit_estimation: f64) -> SavedModel {
-        let n = self.model.order();
-        SavedModel {
-            format: MODEL_FORMAT.into(),
-            model: self.kind.name(),
-            method: self.method.clone(),
-            output: output_name(self.output).into(),
-            ts: self.ts,
-            prep,
-            a: (0..n)
-                .map(|i| (0..n).map(|j| self.model.a[(i, j)]).collect())
-                .collect(),
-            b: self.model.b.iter().copied().collect(),
-            c: self.model.c.iter().copied().collect(),
-            d: self.model.d,
-            parameters: param_map(&self.params),
-            friction: self.friction,
-            decimate_output: self.decimate,
-            input_hold: None,
-            fit_estimation,
-            source: source.into(),
-        }
-    }
 }
 
 /// name of an output kind (`angle`, `velocity`)
@@ -941,199 +908,6 @@ pub fn param_map(params: &[PhysParam]) -> BTreeMap<String, ParamJson> {
         .collect()
 }
 
-/// format tag of [`SavedModel`] (format 2: physical models at the capture
-/// rate, [`SavedModel::decimate_output`])
-pub const MODEL_FORMAT: &str = "jointid-model/2";
-/// the earlier format, still read (its `interval_mean` hold excepted)
-pub const MODEL_FORMAT_1: &str = "jointid-model/1";
-
-fn one() -> usize {
-    1
-}
-
-/// Everything needed to simulate a fitted model again (`--save`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct SavedModel {
-    /// [`MODEL_FORMAT`]
-    pub format: String,
-    /// model family (`black-box:11`, `three-mass`, ...)
-    pub model: String,
-    /// how it was estimated
-    pub method: String,
-    /// output signal (`angle` or `velocity`)
-    pub output: String,
-    /// sample interval of the model [s] (after decimation)
-    pub ts: f64,
-    /// preparation of raw data
-    pub prep: Prep,
-    /// `A`, row by row
-    pub a: Vec<Vec<f64>>,
-    /// `B`
-    pub b: Vec<f64>,
-    /// `C`
-    pub c: Vec<f64>,
-    /// `D`
-    pub d: f64,
-    /// physical parameters (empty for a black box)
-    pub parameters: BTreeMap<String, ParamJson>,
-    /// nonlinear rigid model (Coulomb friction), simulated instead of `A, B, C, D`
-    pub friction: Option<RigidFriction>,
-    /// decimation between the model's rate and the prepared data (1: the
-    /// model runs at `ts` = the prepared data's interval; `q`: a physical
-    /// model at the capture rate whose output is decimated, see
-    /// [`FitData`]); absent in format-1 files: 1
-    #[serde(default = "one")]
-    pub decimate_output: usize,
-    /// format 1 only: the held input of a physical model (`zoh` or
-    /// `interval_mean`); format 2 never writes it
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub input_hold: Option<String>,
-    /// FIT on the estimation data [%] (toolbox definition)
-    pub fit_estimation: f64,
-    /// estimation data file
-    pub source: String,
-}
-
-/// Why a model file cannot be read back ([`SavedModel::to_fitted`]).
-#[derive(Debug, Clone, PartialEq, Error)]
-#[non_exhaustive]
-pub enum ModelFileError {
-    /// a format this build does not read
-    #[error("model format `{format}` is neither `{MODEL_FORMAT}` nor `{MODEL_FORMAT_1}`")]
-    Format {
-        /// the file's format tag
-        format: String,
-    },
-    /// format 1's input hold other than zero-order
-    #[error(
-        "input hold `{hold}` of format 1 is no longer supported: fit the model again \
-         (physical models are now refined at the capture rate)"
-    )]
-    InputHold {
-        /// the hold named in the file
-        hold: String,
-    },
-    /// the output decimation disagrees with the preparation's
-    #[error("output decimation {output} does not match the preparation's decimation {prep}")]
-    Decimation {
-        /// `decimate_output`
-        output: usize,
-        /// `prep.decimate`
-        prep: usize,
-    },
-    /// the matrices do not have the sizes of one state space
-    #[error("model matrices are inconsistent: A {a} rows, B {b}, C {c}")]
-    Matrices {
-        /// rows of A
-        a: usize,
-        /// entries of B
-        b: usize,
-        /// entries of C
-        c: usize,
-    },
-    /// a sample interval that is not positive
-    #[error("sample interval {ts} s")]
-    Interval {
-        /// the interval [s]
-        ts: f64,
-    },
-    /// the model family does not parse
-    #[error("{0}")]
-    Model(String),
-    /// an output other than `angle` or `velocity`
-    #[error("unknown output `{output}`")]
-    Output {
-        /// the output named in the file
-        output: String,
-    },
-}
-
-impl SavedModel {
-    /// The model back as a [`Fitted`] (without continuous model).
-    ///
-    /// # Errors
-    /// [`ModelFileError`] when the file is inconsistent.
-    pub fn to_fitted(&self) -> Result<Fitted, FitError> {
-        if self.format != MODEL_FORMAT && self.format != MODEL_FORMAT_1 {
-            return Err(ModelFileError::Format {
-                format: self.format.clone(),
-            }
-            .into());
-        }
-        match self.input_hold.as_deref() {
-            None | Some("zoh") => {}
-            Some(h) => {
-                return Err(ModelFileError::InputHold {
-                    hold: h.to_string(),
-                }
-                .into())
-            }
-        }
-        if self.decimate_output == 0
-            || self.decimate_output > 1 && self.prep.decimate != self.decimate_output
-        {
-            return Err(ModelFileError::Decimation {
-                output: self.decimate_output,
-                prep: self.prep.decimate,
-            }
-            .into());
-        }
-        let n = self.a.len();
-        if self.b.len() != n || self.c.len() != n || self.a.iter().any(|r| r.len() != n) {
-            return Err(ModelFileError::Matrices {
-                a: n,
-                b: self.b.len(),
-                c: self.c.len(),
-            }
-            .into());
-        }
-        if self.ts.is_nan() || self.ts <= 0.0 {
-            return Err(ModelFileError::Interval { ts: self.ts }.into());
-        }
-        let kind: ModelKind = self.model.parse().map_err(ModelFileError::Model)?;
-        let output = match self.output.as_str() {
-            "angle" => Output::Angle,
-            "velocity" => Output::Velocity,
-            o => {
-                return Err(ModelFileError::Output {
-                    output: o.to_string(),
-                }
-                .into())
-            }
-        };
-        let a = DMatrix::from_fn(n, n, |i, j| self.a[i][j]);
-        let model = StateSpace::new(
-            a,
-            DVector::from_vec(self.b.clone()),
-            RowDVector::from_vec(self.c.clone()),
-            self.d,
-            self.ts,
-        );
-        let params = self
-            .parameters
-            .iter()
-            .map(|(k, p)| PhysParam {
-                name: k.clone(),
-                value: p.value,
-                std: p.std,
-                unit: unit_of(k),
-            })
-            .collect();
-        Ok(Fitted {
-            kind,
-            output,
-            ts: self.ts,
-            model,
-            continuous: None,
-            params,
-            friction: self.friction,
-            warnings: Vec::new(),
-            method: self.method.clone(),
-            decimate: self.decimate_output,
-        })
-    }
-}
-
 /// `n` logarithmically spaced frequencies from `f0` to `f1` [Hz]
 pub fn log_grid(f0: f64, f1: f64, n: usize) -> Vec<f64> {
     let (l0, l1) = (f0.ln(), f1.ln());
@@ -1153,6 +927,7 @@ mod tests {
     use super::*;
     use crate::data::Detrend;
     use crate::ident::linalg::GaussRng;
+    use crate::ident::model_file::{SavedModel, MODEL_FORMAT, MODEL_FORMAT_1};
 
     fn two_mass_data(n: usize, seed: u64, noise: f64) -> (IdData, StateSpace) {
         // motor-side two-mass: J_m 1e-3, arm 1e-3 (motor side), k' 20 → ~32 Hz
