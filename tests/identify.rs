@@ -20,8 +20,9 @@ use std::collections::BTreeMap;
 
 use jointid::data::{Dataset, IdData};
 use jointid::ident::fit::{fit_model, FitOptions, ModelKind};
-use jointid::ident::grey_box::{GreyBoxModel, Output, Structure};
+use jointid::ident::grey_box::{GreyBoxModel, Output};
 use jointid::ident::pem::{self, PemOptions};
+use jointid::model::spec::Structure;
 use jointid::scenario::paper::{paper_runs, table, Table};
 use jointid::sim::{self, Disturbance, PlantKind, SensorConfig, SimConfig};
 use jointid_core::excitation::{ExcitationConfig, SignalKind};

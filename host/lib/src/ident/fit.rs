@@ -45,12 +45,13 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::data::{IdData, Prep};
-use crate::ident::grey_box::{self, GreyBoxOptions, IdimOptions, Output, PhysParam, Structure};
+use crate::ident::grey_box::{self, GreyBoxOptions, IdimOptions, Output, PhysParam};
 use crate::ident::pem::{self, FullSs, ParamModel, PemFit, PemOptions};
 use crate::ident::ss::{ContinuousSs, Resonances, StateSpace};
 use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
 use crate::ident::validate::{self, Validation};
 use crate::model::params::unit_of;
+use crate::model::spec::Structure;
 
 /// Largest `N · p²` (samples times squared parameter count) for which the
 /// black-box output-error refinement runs; above it the subspace model is
@@ -75,12 +76,17 @@ pub enum ModelKind {
 impl ModelKind {
     /// name as written on the command line and in model files
     pub fn name(&self) -> String {
+        match self.structure() {
+            None => format!("black-box:{}", self.black_box_order()),
+            Some(s) => s.label().into(),
+        }
+    }
+
+    /// order of the black box (0 for a physical model)
+    fn black_box_order(&self) -> usize {
         match self {
-            ModelKind::BlackBox(n) => format!("black-box:{n}"),
-            ModelKind::Rigid => "rigid".into(),
-            ModelKind::TwoMass => "two-mass".into(),
-            ModelKind::ThreeMass => "three-mass".into(),
-            ModelKind::FourMass => "four-mass".into(),
+            ModelKind::BlackBox(n) => *n,
+            _ => 0,
         }
     }
 
@@ -109,12 +115,12 @@ impl std::str::FromStr for ModelKind {
                 _ => Err(format!("black-box order `{n}` must be an integer 1 … 40")),
             };
         }
-        match s.as_str() {
-            "rigid" => Ok(ModelKind::Rigid),
-            "two-mass" => Ok(ModelKind::TwoMass),
-            "three-mass" => Ok(ModelKind::ThreeMass),
-            "four-mass" => Ok(ModelKind::FourMass),
-            _ => Err(format!(
+        match Structure::ALL.into_iter().find(|st| st.label() == s) {
+            Some(Structure::Rigid) => Ok(ModelKind::Rigid),
+            Some(Structure::TwoMass) => Ok(ModelKind::TwoMass),
+            Some(Structure::ThreeMass) => Ok(ModelKind::ThreeMass),
+            Some(Structure::FourMass) => Ok(ModelKind::FourMass),
+            None => Err(format!(
                 "unknown model `{s}` (known: black-box:ORDER, rigid, two-mass, three-mass, four-mass)"
             )),
         }
@@ -359,10 +365,10 @@ pub fn fit_model(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitError> {
             model: opts.kind.name(),
         });
     }
-    match opts.kind {
-        ModelKind::BlackBox(n) => fit_black_box(data, n, opts),
-        ModelKind::Rigid if opts.coulomb => fit_rigid_coulomb(data, opts),
-        _ => fit_grey(data, None, opts),
+    match opts.kind.structure() {
+        None => fit_black_box(data, opts.kind.black_box_order(), opts),
+        Some(Structure::Rigid) if opts.coulomb => fit_rigid_coulomb(data, opts),
+        Some(structure) => fit_grey(data, None, structure, opts),
     }
 }
 
@@ -417,12 +423,13 @@ impl FitData {
 /// # Errors
 /// [`FitError`] when the data are unusable or an estimator fails.
 pub fn fit_prepared(data: &FitData, opts: &FitOptions) -> Result<Fitted, FitError> {
-    if data.decimate <= 1 || opts.kind.structure().is_none() || opts.coulomb {
-        return fit_model(&data.prepared, opts);
-    }
+    let structure = match opts.kind.structure() {
+        Some(s) if data.decimate > 1 && !opts.coulomb => s,
+        _ => return fit_model(&data.prepared, opts),
+    };
     check(&data.prepared)?;
     check(&data.raw)?;
-    fit_grey(&data.prepared, Some(&data.raw), opts)
+    fit_grey(&data.prepared, Some(&data.raw), structure, opts)
 }
 
 /// One black-box start: the subspace model of `method`, refined by output
@@ -547,8 +554,12 @@ fn fit_black_box(data: &IdData, n: usize, opts: &FitOptions) -> Result<Fitted, F
 /// over each tick), whereas after the anti-alias filter `u` is no longer
 /// piecewise constant and a model discretised at the coarse rate is the
 /// wrong model of decimated data.
-fn fit_grey(data: &IdData, raw: Option<&IdData>, opts: &FitOptions) -> Result<Fitted, FitError> {
-    let structure = opts.kind.structure().expect("grey-box kind");
+fn fit_grey(
+    data: &IdData,
+    raw: Option<&IdData>,
+    structure: Structure,
+    opts: &FitOptions,
+) -> Result<Fitted, FitError> {
     let m = structure.masses();
     // Multi-start over the order of the subspace model the resonance and
     // anti-resonance frequencies are read from: with closely spaced pairs
@@ -996,6 +1007,16 @@ mod tests {
             ModelKind::FourMass,
         ] {
             assert_eq!(k.name().parse(), Ok(k));
+        }
+        // one list of structures: every plant of the simulator and every physical model
+        // family name the same structure by the same label
+        for st in Structure::ALL {
+            let k: ModelKind = st.label().parse().unwrap();
+            assert_eq!(k.structure(), Some(st));
+        }
+        for p in crate::model::params::PlantKind::ALL {
+            let k: ModelKind = p.structure().label().parse().unwrap();
+            assert_eq!(k.structure(), Some(p.structure()));
         }
     }
 

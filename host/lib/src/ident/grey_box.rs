@@ -59,6 +59,7 @@ use crate::ident::pem::{self, ParamModel, PemFit, PemOptions};
 use crate::ident::ss::{ContinuousSs, StateSpace};
 use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
 use crate::model::params::unit_of;
+use crate::model::spec::Structure;
 
 /// default gear ratio of seed 000 (arm angle per motor angle)
 pub const DEFAULT_GEAR_RATIO: f64 = 1.0 / 118.0;
@@ -80,43 +81,6 @@ pub fn reference_three_mass() -> Vec<f64> {
         0.002 / r2,
         0.01,
     ]
-}
-
-/// Mechanical structure of the joint model.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Structure {
-    /// one inertia with viscous friction
-    Rigid,
-    /// motor and arm through the gearbox spring
-    TwoMass,
-    /// seed 000 eq. (6)
-    ThreeMass,
-    /// seed 000 eq. (7)
-    FourMass,
-}
-
-impl Structure {
-    /// number of masses
-    pub fn masses(self) -> usize {
-        match self {
-            Structure::Rigid => 1,
-            Structure::TwoMass => 2,
-            Structure::ThreeMass => 3,
-            Structure::FourMass => 4,
-        }
-    }
-
-    /// parameter names, seed 000 Table 1 (rigid: `J`, `Fv`)
-    pub fn param_names(self) -> &'static [&'static str] {
-        match self {
-            Structure::Rigid => &["J", "Fv"],
-            Structure::TwoMass => &["J_m", "J_a1", "k_g", "d_g", "f_m"],
-            Structure::ThreeMass => &["J_m", "J_a1", "J_a2", "k_g", "k_a", "d_g", "d_a", "f_m"],
-            Structure::FourMass => &[
-                "J_m", "J_a1", "J_a2", "J_p", "k_g", "k_a", "k_p", "d_g", "d_a", "d_p", "f_m",
-            ],
-        }
-    }
 }
 
 /// Which motor signal the model outputs.

@@ -802,8 +802,9 @@ pub(crate) mod tests {
     /// (discrete plant, record).
     fn three_mass_closed_loop(seed: u64) -> (StateSpace, IdData) {
         use crate::ident::grey_box::{
-            reference_three_mass, GreyBoxModel, Output, Structure, DEFAULT_GEAR_RATIO,
+            reference_three_mass, GreyBoxModel, Output, DEFAULT_GEAR_RATIO,
         };
+        use crate::model::spec::Structure;
         let gm = GreyBoxModel {
             structure: Structure::ThreeMass,
             output: Output::Angle,

@@ -61,6 +61,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::spec::Structure;
+
 /// Which mechanical structure the plant has.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -87,6 +89,38 @@ impl PlantKind {
         PlantKind::FourMass,
         PlantKind::NonlinearTwoMass,
     ];
+
+    /// The mechanical structure (the nonlinear two-mass is a two-mass).
+    pub fn structure(self) -> Structure {
+        match self {
+            PlantKind::Rigid => Structure::Rigid,
+            PlantKind::TwoMass | PlantKind::NonlinearTwoMass => Structure::TwoMass,
+            PlantKind::ThreeMass => Structure::ThreeMass,
+            PlantKind::FourMass => Structure::FourMass,
+        }
+    }
+
+    /// Name on the command line (`three-mass`, `nonlinear-two-mass`); [`PlantKind::name`]
+    /// is the JSON spelling.
+    pub fn label(self) -> &'static str {
+        match self {
+            PlantKind::NonlinearTwoMass => "nonlinear-two-mass",
+            k => k.structure().label(),
+        }
+    }
+
+    /// What the plant is, in a few words (the command line's help).
+    pub fn describe(self) -> &'static str {
+        match self {
+            PlantKind::Rigid => "one rigid mass",
+            PlantKind::TwoMass => "motor and one arm mass through the gearbox spring",
+            PlantKind::ThreeMass => "seed 000 eq. (5)-(6): motor and two arm masses",
+            PlantKind::FourMass => "seed 000 eq. (7)-(8): three-mass plus a parallel mass",
+            PlantKind::NonlinearTwoMass => {
+                "seed 001: two-mass with cubic spring and Coulomb friction"
+            }
+        }
+    }
 
     /// Name as used in specs and JSON (`three_mass`, ...).
     pub fn name(self) -> &'static str {
