@@ -1,7 +1,7 @@
 //! Identification checks on data with known truth (the host's closed-loop
 //! joint simulator, fixed seeds) (issue 5, items 6–9); the checks on
 //! measured data through the command line are in
-//! `host/cli/tests/cli_fit.rs`, where the binary exists.
+//! `host/cli/tests/fit_validate_demo_commands.rs`, where the binary exists.
 //!
 //! Simulated three-mass joint for the statistical checks: the default
 //! three-mass plant of `jointid::sim` in its position loop, sampled at
@@ -20,8 +20,9 @@ use std::collections::BTreeMap;
 
 use jointid::data::{Dataset, IdData};
 use jointid::ident::fit::{fit_model, FitOptions, ModelKind};
-use jointid::ident::grey_box::{GreyBoxModel, Output, Structure};
+use jointid::ident::grey_box::{GreyBoxModel, Output};
 use jointid::ident::pem::{self, PemOptions};
+use jointid::model::spec::Structure;
 use jointid::scenario::paper::{paper_runs, table, Table};
 use jointid::sim::{self, Disturbance, PlantKind, SensorConfig, SimConfig};
 use jointid_core::excitation::{ExcitationConfig, SignalKind};

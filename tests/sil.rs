@@ -16,7 +16,7 @@
 //!   board's `End`.
 //!
 //! The binary path (`jointid simulate --out x.jcap` as a process) is tested in
-//! `host/cli/tests/simulate_cli.rs`, where `CARGO_BIN_EXE_jointid` exists.
+//! `host/cli/tests/simulate_command.rs`, where `CARGO_BIN_EXE_jointid` exists.
 
 use std::path::PathBuf;
 

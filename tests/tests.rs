@@ -1,7 +1,7 @@
 //! Workspace-level tests, one binary.
 
 // The emulated board streaming over TCP into `jointid capture`, read back bit-exact.
-mod capture_cli;
+mod board_capture_over_tcp;
 // The thumbv7em firmware on QEMU mps2-an386, streaming over its UART to this test.
 mod emulated_board;
 // identification on simulated joints with known truth (measured data via the CLI: host tests)

@@ -8,13 +8,13 @@ use clap::Args;
 use serde::Serialize;
 
 use super::args::DataArgs;
-use super::{print_json, CmdResult, Context, Outcome};
+use super::{print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::ident::frf::{
     amplitude_trend, analyze_dataset, AmplitudeTrend, ClassLevel, ExcitedSource, FrfAnalysis,
     Instrument,
 };
 use jointid::ident::validate::FrfBand;
-use jointid::report::plot::{analysis_spectrum_svg, bode_svg, write_svg};
+use jointid::report::plot::{analysis_spectrum_svg, bode_svg};
 
 /// Arguments of `jointid analyze`.
 #[derive(Debug, Clone, Args)]

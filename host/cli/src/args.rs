@@ -3,9 +3,10 @@
 
 use std::path::PathBuf;
 
-use clap::{Args, ValueEnum};
+use clap::builder::{PossibleValue, TypedValueParser};
+use clap::Args;
 
-use jointid::data::{ColumnMap, DataError, Dataset, Detrend, IdData, Loaders};
+use jointid::data::{ColumnMap, DataError, Dataset, Detrend, IdData, Loaders, Prep};
 
 /// A data file and, for CSV files that are not capture CSVs, its columns.
 #[derive(Debug, Clone, Args)]
@@ -57,40 +58,39 @@ impl DataArgs {
     }
 }
 
-/// Detrending choice on the command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum DetrendArg {
-    /// leave the data as they are
-    None,
-    /// subtract the mean
-    Mean,
-    /// subtract the least-squares line
-    Linear,
+/// The `--detrend` values, with the help of each ([`Detrend::ALL`]).
+fn detrend_parser() -> impl clap::builder::TypedValueParser<Value = Detrend> {
+    clap::builder::PossibleValuesParser::new(
+        Detrend::ALL.map(|(_, name, help)| PossibleValue::new(name).help(help)),
+    )
+    .map(|name| Detrend::from_name(&name).expect("a possible value"))
 }
 
 /// Data preparation for time-domain estimators and validation.
 #[derive(Debug, Clone, Args)]
 pub struct PrepArgs {
     /// detrend u, y (and r) before use
-    #[arg(long, value_enum, default_value_t = DetrendArg::None)]
-    pub detrend: DetrendArg,
+    #[arg(long, value_parser = detrend_parser(), default_value = "none")]
+    pub detrend: Detrend,
     /// decimate by this integer factor with a zero-phase anti-alias filter
     #[arg(long, value_name = "Q", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub decimate: u32,
 }
 
 impl PrepArgs {
-    /// Applies decimation, then detrending.
+    /// The preparation these arguments describe.
+    pub fn prep(&self) -> Prep {
+        Prep {
+            decimate: self.decimate as usize,
+            detrend: self.detrend,
+        }
+    }
+
+    /// Detrending, then decimation ([`Prep::apply`], the one order).
     ///
     /// # Errors
     /// [`DataError::Decimation`].
     pub fn apply(&self, data: &IdData) -> Result<IdData, DataError> {
-        let mut d = data.decimate(self.decimate as usize)?;
-        match self.detrend {
-            DetrendArg::None => {}
-            DetrendArg::Mean => d.detrend(Detrend::Mean),
-            DetrendArg::Linear => d.detrend(Detrend::Linear),
-        }
-        Ok(d)
+        self.prep().apply(data)
     }
 }

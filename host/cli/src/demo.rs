@@ -20,11 +20,11 @@ use clap::Args;
 use serde::Serialize;
 
 use super::fit::write_bode;
-use super::{print_json, CmdResult, Context, Outcome};
+use super::{print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::capture::jcap::write_stream;
 use jointid::ident::frf::analyze_dataset;
 use jointid::ident::validate::FrfBand;
-use jointid::report::plot::{analysis_spectrum_svg, bode_svg, write_svg};
+use jointid::report::plot::{analysis_spectrum_svg, bode_svg};
 use jointid::scenario::paper::{
     decode_session, paper_runs, table, wire_options, write_table, Table, PAPER_MODELS,
 };

@@ -22,12 +22,12 @@ use std::time::Instant;
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
-use super::args::{DataArgs, DetrendArg, PrepArgs};
-use super::{print_json, CmdResult, Context, Outcome};
+use super::args::{DataArgs, PrepArgs};
+use super::{print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::Dataset;
 use jointid::ident::fit::{
-    default_f_min, fit_prepared, log_grid, param_map, DetrendKind, FitData, FitOptions, Fitted,
-    ModelKind, ParamJson, Prep,
+    default_f_min, fit_prepared, log_grid, param_map, FitData, FitOptions, Fitted, ModelKind,
+    ParamJson,
 };
 use jointid::ident::frf::{analyze_dataset, FrfAnalysis};
 use jointid::ident::frf_fit::{self, Drive, FrfFit, FrfFitOptions, PERIODIC_FIT_NAME};
@@ -37,7 +37,7 @@ use jointid::ident::subspace::Method;
 use jointid::ident::validate::{
     BodeCurve, CorrelationTest, FrfBand, Validation, DEFAULT_LAGS, FIT_NAME,
 };
-use jointid::report::plot::{bode_svg, write_svg};
+use jointid::report::plot::bode_svg;
 
 /// Friction model of the rigid body.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -282,17 +282,6 @@ pub struct ResidualTests {
     pub validation: Option<Validation>,
 }
 
-pub(crate) fn prep_of(p: &PrepArgs) -> Prep {
-    Prep {
-        decimate: p.decimate as usize,
-        detrend: match p.detrend {
-            DetrendArg::None => DetrendKind::None,
-            DetrendArg::Mean => DetrendKind::Mean,
-            DetrendArg::Linear => DetrendKind::Linear,
-        },
-    }
-}
-
 /// Runs `jointid fit`.
 ///
 /// # Errors
@@ -303,7 +292,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         Some(p) => Some(args.data.data_args(p).load(ctx.loaders)?),
         None => None,
     };
-    let prep = prep_of(&args.prep);
+    let prep = args.prep.prep();
     let prepare = |d: &jointid::data::IdData, name: &str| {
         FitData::new(d, prep).map_err(|e| format!("{name}: {e}"))
     };
@@ -561,7 +550,7 @@ fn run_frequency_domain(
     };
     let mut files = Vec::new();
     if let Some(path) = &args.save {
-        let mut saved = fitted.to_saved(prep_of(&args.prep), &ds.name, fit_estimation);
+        let mut saved = fitted.to_saved(args.prep.prep(), &ds.name, fit_estimation);
         saved.fit_name = periodic.then(|| PERIODIC_FIT_NAME.to_string());
         let text = serde_json::to_string_pretty(&saved)?;
         std::fs::write(path, text + "\n").map_err(|e| format!("{}: {e}", path.display()))?;

@@ -130,6 +130,27 @@ pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
     }
 }
 
+/// A file the command was asked to write could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("{file}: {source}")]
+pub struct WriteError {
+    /// file name
+    file: String,
+    /// what the operating system said
+    source: std::io::Error,
+}
+
+/// Writes an SVG string (from [`jointid::report::plot`]) to `path`.
+///
+/// # Errors
+/// [`WriteError`] naming the file.
+pub fn write_svg(path: &std::path::Path, svg: &str) -> Result<(), WriteError> {
+    std::fs::write(path, svg).map_err(|source| WriteError {
+        file: path.display().to_string(),
+        source,
+    })
+}
+
 /// Prints `value` as pretty JSON on `out`.
 ///
 /// # Errors

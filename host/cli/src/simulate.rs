@@ -21,12 +21,13 @@
 //! `--param NAME=VALUE` overrides one physical parameter of the chosen model, named as in
 //! seed 000 Table 1 (`J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r`) plus
 //! seed 001's `k3`, `F_c` for the nonlinear two-mass (see [`jointid::model::params`]); only
-//! the names the model uses are accepted ([`model_params`]).
+//! the names the model uses are accepted ([`jointid::model::params::model_params`]).
 // Units in brackets (`[s]`, `[rad]`) are not intra-doc links.
 #![allow(rustdoc::broken_intra_doc_links)]
 
 use std::path::{Path, PathBuf};
 
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use clap::{Args, ValueEnum};
 use jointid_core::wire::Scale;
 use serde::Serialize;
@@ -34,53 +35,30 @@ use serde::Serialize;
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::jcap::{write_stream, JcapError};
 use jointid::data::{write_capture_csv, Dataset, ExcitationConfig, SignalKind};
+use jointid::model::params::model_params;
 use jointid::sim::board::{encode_session, BoardStreamError, WireOptions};
 use jointid::sim::{
     parse_effects, simulate_excitation, Integrator, JointParams, Mechanism, Plant, PlantKind,
     SensorConfig, SimConfig, SimOutput,
 };
 
-/// Plant model on the command line (hyphen or underscore spelling).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum ModelArg {
-    /// one rigid mass
-    Rigid,
-    /// motor and one arm mass through the gearbox spring
-    #[value(alias = "two_mass")]
-    TwoMass,
-    /// seed 000 eq. (5)-(6): motor and two arm masses
-    #[value(alias = "three_mass")]
-    ThreeMass,
-    /// seed 000 eq. (7)-(8): three-mass plus a parallel mass
-    #[value(alias = "four_mass")]
-    FourMass,
-    /// seed 001: two-mass with cubic spring and Coulomb friction
-    #[value(alias = "nonlinear_two_mass")]
-    NonlinearTwoMass,
-}
-
-impl ModelArg {
-    /// The simulator's plant kind.
-    pub fn kind(self) -> PlantKind {
-        match self {
-            ModelArg::Rigid => PlantKind::Rigid,
-            ModelArg::TwoMass => PlantKind::TwoMass,
-            ModelArg::ThreeMass => PlantKind::ThreeMass,
-            ModelArg::FourMass => PlantKind::FourMass,
-            ModelArg::NonlinearTwoMass => PlantKind::NonlinearTwoMass,
+/// The `--model` values: every plant by its label (`two-mass`), its JSON name
+/// (`two_mass`) as alias, with [`PlantKind::describe`] as help.
+fn plant_parser() -> impl TypedValueParser<Value = PlantKind> {
+    PossibleValuesParser::new(PlantKind::ALL.map(|k| {
+        let v = PossibleValue::new(k.label()).help(k.describe());
+        if k.name() == k.label() {
+            v
+        } else {
+            v.alias(k.name())
         }
-    }
-
-    /// Name on the command line (`three-mass`).
-    pub fn name(self) -> &'static str {
-        match self {
-            ModelArg::Rigid => "rigid",
-            ModelArg::TwoMass => "two-mass",
-            ModelArg::ThreeMass => "three-mass",
-            ModelArg::FourMass => "four-mass",
-            ModelArg::NonlinearTwoMass => "nonlinear-two-mass",
-        }
-    }
+    }))
+    .map(|s| {
+        PlantKind::ALL
+            .into_iter()
+            .find(|k| k.label() == s || k.name() == s)
+            .expect("a possible value")
+    })
 }
 
 /// Excitation signal kind on the command line.
@@ -110,9 +88,9 @@ impl ExcitationArg {
 #[derive(Debug, Clone, Args)]
 pub struct SimulateArgs {
     /// plant model
-    #[arg(long, visible_alias = "plant", value_enum, value_name = "MODEL",
-          default_value_t = ModelArg::ThreeMass)]
-    pub model: ModelArg,
+    #[arg(long, visible_alias = "plant", value_parser = plant_parser(), value_name = "MODEL",
+          default_value = "three-mass")]
+    pub model: PlantKind,
     /// override a physical parameter of the model, repeatable (`k_g=1.3e5`); names as in
     /// seed 000 Table 1 (J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r) and
     /// seed 001 (k3, F_c), those the model uses
@@ -219,51 +197,17 @@ pub enum SimulateError {
     },
 }
 
-/// Access to one field of [`JointParams`] (its unit is the field's).
-pub type ParamField = fn(&mut JointParams) -> &mut f64;
-
-/// The physical parameters model `kind` uses, as (name, field) pairs, names as in
-/// [`JointParams::table`] (seed 000 Table 1, seed 001 `k3`, `F_c`).
-pub fn model_params(kind: PlantKind) -> Vec<(&'static str, ParamField)> {
-    type Field = ParamField;
-    let mut v: Vec<(&'static str, Field)> = vec![
-        ("J_m", |p| &mut p.j_m),
-        ("J_a1", |p| &mut p.j_a1),
-        ("J_a2", |p| &mut p.j_a2),
-    ];
-    let gearbox: [(&'static str, Field); 2] = [("k_g", |p| &mut p.k_g), ("d_g", |p| &mut p.d_g)];
-    let arm: [(&'static str, Field); 2] = [("k_a", |p| &mut p.k_a), ("d_a", |p| &mut p.d_a)];
-    match kind {
-        PlantKind::Rigid => {}
-        PlantKind::TwoMass | PlantKind::NonlinearTwoMass => v.extend(gearbox),
-        PlantKind::ThreeMass => v.extend(gearbox.into_iter().chain(arm)),
-        PlantKind::FourMass => {
-            v.push(("J_p", |p| &mut p.j_p));
-            v.extend(gearbox.into_iter().chain(arm));
-            v.extend::<[(&'static str, Field); 2]>([
-                ("k_p", |p| &mut p.k_p),
-                ("d_p", |p| &mut p.d_p),
-            ]);
-        }
-    }
-    v.extend::<[(&'static str, Field); 2]>([("f_m", |p| &mut p.f_m), ("r", |p| &mut p.r)]);
-    if kind == PlantKind::NonlinearTwoMass {
-        v.extend::<[(&'static str, Field); 2]>([("k3", |p| &mut p.k3), ("F_c", |p| &mut p.f_c)]);
-    }
-    v
-}
-
 /// Applies `NAME=VALUE` overrides to the parameters of model `model`.
 ///
 /// # Errors
 /// [`SimulateError::ParamSyntax`], [`SimulateError::UnknownParam`] or
 /// [`SimulateError::BadValue`], each naming the parameter and listing the valid names.
 pub fn apply_params(
-    model: ModelArg,
+    model: PlantKind,
     specs: &[String],
     params: &mut JointParams,
 ) -> Result<(), SimulateError> {
-    let fields = model_params(model.kind());
+    let fields = model_params(model);
     let valid = || {
         fields
             .iter()
@@ -275,7 +219,7 @@ pub fn apply_params(
         let Some((name, value)) = spec.split_once('=') else {
             return Err(SimulateError::ParamSyntax {
                 spec: spec.clone(),
-                model: model.name(),
+                model: model.label(),
                 valid: valid(),
             });
         };
@@ -283,7 +227,7 @@ pub fn apply_params(
         let Some((_, field)) = fields.iter().find(|(n, _)| *n == name) else {
             return Err(SimulateError::UnknownParam {
                 name: name.to_string(),
-                model: model.name(),
+                model: model.label(),
                 valid: valid(),
             });
         };
@@ -293,7 +237,7 @@ pub fn apply_params(
                 return Err(SimulateError::BadValue {
                     name: name.to_string(),
                     value: value.to_string(),
-                    model: model.name(),
+                    model: model.label(),
                     valid: valid(),
                 })
             }
@@ -337,7 +281,7 @@ pub fn out_format(path: &Path) -> Result<OutFormat, SimulateError> {
 pub fn configure(
     args: &SimulateArgs,
 ) -> Result<(SimConfig, ExcitationConfig), Box<dyn std::error::Error + Send + Sync>> {
-    let mut plant = Plant::new(args.model.kind());
+    let mut plant = Plant::new(args.model);
     apply_params(args.model, &args.params, &mut plant.params)?;
     let mut cfg = SimConfig {
         plant,
@@ -461,7 +405,7 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
     let report = Report {
         file: args.out.display().to_string(),
         format,
-        model: args.model.name(),
+        model: args.model.label(),
         effects: cfg.effects.iter().map(|e| e.to_string()).collect(),
         samples: out.len(),
         duration_s: out.len() as f64 * out.sample_interval_s,
@@ -636,7 +580,7 @@ mod tests {
             "--params-out",
             "p.json",
         ]);
-        assert_eq!(a.model, ModelArg::ThreeMass);
+        assert_eq!(a.model, PlantKind::ThreeMass);
         assert_eq!(a.excitation, ExcitationArg::RandomOdd);
         assert_eq!(a.params_out, Some(PathBuf::from("p.json")));
         let (cfg, exc) = configure(&a).unwrap();
@@ -655,7 +599,7 @@ mod tests {
             "--excitation-seed",
             "4",
         ]);
-        assert_eq!(b.model, ModelArg::NonlinearTwoMass);
+        assert_eq!(b.model, PlantKind::NonlinearTwoMass);
         assert_eq!(b.excitation, ExcitationArg::OddMultisine);
         assert_eq!(b.params_out, Some(PathBuf::from("q.json")));
         let (cfg, exc) = configure(&b).unwrap();
@@ -694,28 +638,29 @@ mod tests {
         assert_eq!(cfg.plant.params.j_p, 2.0);
         assert_eq!(cfg.plant.params.k_a, JointParams::default().k_a);
         let mut p = JointParams::default();
-        let err = apply_params(ModelArg::ThreeMass, &["J_p=2".into()], &mut p).unwrap_err();
+        let err = apply_params(PlantKind::ThreeMass, &["J_p=2".into()], &mut p).unwrap_err();
         assert_eq!(
             err.to_string(),
             "--param `J_p`: unknown parameter for three-mass (valid: J_m, J_a1, J_a2, k_g, d_g, k_a, d_a, f_m, r)"
         );
-        let err = apply_params(ModelArg::Rigid, &["k_g=1".into()], &mut p).unwrap_err();
+        let err = apply_params(PlantKind::Rigid, &["k_g=1".into()], &mut p).unwrap_err();
         assert!(
             err.to_string().contains("(valid: J_m, J_a1, J_a2, f_m, r)"),
             "{err}"
         );
-        let err = apply_params(ModelArg::NonlinearTwoMass, &["k3=abc".into()], &mut p).unwrap_err();
+        let err =
+            apply_params(PlantKind::NonlinearTwoMass, &["k3=abc".into()], &mut p).unwrap_err();
         assert_eq!(
             err.to_string(),
             "--param `k3`: `abc` is not a finite number (valid names for nonlinear-two-mass: J_m, J_a1, J_a2, k_g, d_g, f_m, r, k3, F_c)"
         );
-        let err = apply_params(ModelArg::TwoMass, &["k_g".into()], &mut p).unwrap_err();
+        let err = apply_params(PlantKind::TwoMass, &["k_g".into()], &mut p).unwrap_err();
         assert!(matches!(err, SimulateError::ParamSyntax { .. }), "{err}");
-        let err = apply_params(ModelArg::TwoMass, &["k_g=inf".into()], &mut p).unwrap_err();
+        let err = apply_params(PlantKind::TwoMass, &["k_g=inf".into()], &mut p).unwrap_err();
         assert!(matches!(err, SimulateError::BadValue { .. }), "{err}");
         assert_eq!(p, JointParams::default(), "nothing applied on error");
         apply_params(
-            ModelArg::NonlinearTwoMass,
+            PlantKind::NonlinearTwoMass,
             &["F_c=0.05".into(), "k3=1e12".into()],
             &mut p,
         )

@@ -23,9 +23,10 @@ use super::args::{DataArgs, PrepArgs};
 use super::fit::print_tests;
 use super::validate::{self as column_validate, ValidateArgs};
 use super::{print_json, CmdResult, Context, Outcome};
-use jointid::ident::fit::{FitData, SavedModel};
+use jointid::ident::fit::FitData;
 use jointid::ident::frf::analyze_dataset;
 use jointid::ident::frf_fit::{periodic_fit_percent, PERIODIC_FIT_NAME};
+use jointid::ident::model_file::SavedModel;
 use jointid::ident::validate::{Validation, DEFAULT_LAGS, FIT_NAME};
 
 /// Arguments of `jointid validate`.

@@ -15,8 +15,9 @@ use std::time::Instant;
 use jointid::data::{Dataset, ExcitationConfig};
 use jointid::ident::frf::analyze_dataset;
 use jointid::ident::frf_fit::{fit_frf, FrfFitOptions};
-use jointid::ident::grey_box::{GreyBoxModel, Output, Structure};
+use jointid::ident::grey_box::{GreyBoxModel, Output};
 use jointid::ident::linalg::GaussRng;
+use jointid::model::spec::Structure;
 use jointid::sim::{
     simulate_excitation, ControllerConfig, JointParams, Plant, PlantKind, SimConfig,
 };

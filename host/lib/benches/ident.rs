@@ -23,12 +23,13 @@ use std::time::Instant;
 
 use jointid::data::IdData;
 use jointid::ident::grey_box::{
-    self, reference_three_mass, GreyBoxModel, GreyBoxOptions, Output, Structure, DEFAULT_GEAR_RATIO,
+    self, reference_three_mass, GreyBoxModel, GreyBoxOptions, Output, DEFAULT_GEAR_RATIO,
 };
 use jointid::ident::linalg::{filtfilt_lowpass, GaussRng};
 use jointid::ident::pem::{self, FullSs, ParamModel, PemOptions};
 use jointid::ident::ss::StateSpace;
 use jointid::ident::subspace::{self, estimate_x0, Method, Order, SubspaceOptions};
+use jointid::model::spec::Structure;
 use nalgebra::DVector;
 
 const TS: f64 = 5e-4;

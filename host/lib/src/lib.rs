@@ -13,6 +13,8 @@
 //! Estimators do no IO: they take an [`data::IdData`] and return values. The library
 //! knows no command line; the `jointid` binary (package `jointid-cli`) is one.
 
+#![deny(missing_docs)]
+
 pub mod capture;
 pub mod data;
 pub mod diagnose;

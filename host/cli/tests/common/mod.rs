@@ -1,6 +1,6 @@
-//! Helpers shared by the command-line test binaries (`capture_cli`, `simulate_cli`,
-//! `cli_fit`): a fresh scratch directory per test, running the built `jointid` binary
-//! and reading its `--json` output.
+//! Helpers shared by the command-line test binaries (`capture_info_export_commands`,
+//! `simulate_command`, `fit_validate_demo_commands`): a fresh scratch directory per test,
+//! running the built `jointid` binary and reading its `--json` output.
 
 use std::path::PathBuf;
 use std::process::{Command, Output};

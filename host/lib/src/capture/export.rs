@@ -26,6 +26,7 @@ use std::path::Path;
 use jointid_core::excitation::SignalKind;
 
 use super::{CaptureError, CaptureRecord};
+use crate::data::write_table;
 
 /// The name `data` uses for a signal kind in the `# kind=` comment.
 pub fn kind_name(kind: SignalKind) -> &'static str {
@@ -92,9 +93,6 @@ pub fn comment_pairs(record: &CaptureRecord) -> Vec<(&'static str, String)> {
     ]
 }
 
-/// Names of the nine excitation keys among [`comment_pairs`] (the group `data` parses).
-pub use crate::data::EXCITATION_KEYS;
-
 /// The `# key=value` comment block of a capture CSV (each line ends in `\n`).
 pub fn comment_lines(record: &CaptureRecord) -> String {
     comment_pairs(record)
@@ -116,44 +114,6 @@ pub fn write_csv(record: &CaptureRecord, out: &mut impl Write) -> io::Result<()>
             .iter()
             .map(|s| [s.t, s.theta_ref, s.u, s.theta_m]),
     )
-}
-
-/// Writes a capture CSV from its parts: `comments` verbatim (whole `# key=value` lines),
-/// the header `t,theta_ref,u,theta_m`, then one row per `[t [s], θref [rad], u [N·m],
-/// θm [rad]]`, each number in its shortest form that reads back to the same `f64`
-/// (non-finite values as `NaN`, `inf`, `-inf`), written in 64 KiB blocks; flushes `out`
-/// at the end. The one writer of capture CSV rows ([`write_csv`] and
-/// `data::write_capture_csv` call it).
-///
-/// # Errors
-/// Whatever `out` returns.
-pub fn write_table<W: Write + ?Sized>(
-    out: &mut W,
-    comments: &str,
-    rows: impl IntoIterator<Item = [f64; 4]>,
-) -> io::Result<()> {
-    out.write_all(comments.as_bytes())?;
-    if !comments.is_empty() && !comments.ends_with('\n') {
-        out.write_all(b"\n")?;
-    }
-    out.write_all(b"t,theta_ref,u,theta_m\n")?;
-    let mut fmt = zmij::Buffer::new();
-    let mut block = Vec::with_capacity(1 << 16);
-    for row in rows {
-        for (i, v) in row.into_iter().enumerate() {
-            if i > 0 {
-                block.push(b',');
-            }
-            block.extend_from_slice(fmt.format(v).as_bytes());
-        }
-        block.push(b'\n');
-        if block.len() >= (1 << 16) - 128 {
-            out.write_all(&block)?;
-            block.clear();
-        }
-    }
-    out.write_all(&block)?;
-    out.flush()
 }
 
 /// Writes the capture CSV to `path` atomically: into `path.tmp`, then renamed, so a

@@ -161,7 +161,7 @@ impl CaptureRecord {
         }
         let meta = export::comment_pairs(self)
             .into_iter()
-            .filter(|(k, _)| !export::EXCITATION_KEYS.contains(k))
+            .filter(|(k, _)| !crate::data::EXCITATION_KEYS.contains(k))
             .map(|(k, v)| (k.to_string(), v))
             .collect();
         Ok(Dataset {

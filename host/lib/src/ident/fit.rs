@@ -33,12 +33,7 @@
 //! share this one path, so a FIT printed by `jointid fit` and one in the
 //! paper-like table are computed the same way.
 //!
-//! The model file ([`SavedModel`]) stores the discrete matrices at the
-//! sample interval of the model (the capture rate for a physical model
-//! fitted with decimation), the preparation applied to the data
-//! (decimation, detrending), the physical parameters with their standard
-//! deviations, and for the Coulomb rigid model its four parameters: all that
-//! is needed to simulate the model again on new data.
+//! The model file that `jointid validate` reads is [`crate::ident::model_file`].
 // Units in brackets (`[s]`, `[Hz]`, `[%]`) are not intra-doc links.
 #![allow(rustdoc::broken_intra_doc_links)]
 
@@ -49,12 +44,14 @@ use nalgebra::{DMatrix, DVector, RowDVector};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::data::IdData;
-use crate::ident::grey_box::{self, GreyBoxOptions, IdimOptions, Output, PhysParam, Structure};
+use crate::data::{IdData, Prep};
+use crate::ident::grey_box::{self, GreyBoxOptions, IdimOptions, Output, PhysParam};
 use crate::ident::pem::{self, FullSs, ParamModel, PemFit, PemOptions};
 use crate::ident::ss::{ContinuousSs, Resonances, StateSpace};
 use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
 use crate::ident::validate::{self, Validation};
+use crate::model::params::unit_of;
+use crate::model::spec::Structure;
 
 /// Largest `N · p²` (samples times squared parameter count) for which the
 /// black-box output-error refinement runs; above it the subspace model is
@@ -79,12 +76,17 @@ pub enum ModelKind {
 impl ModelKind {
     /// name as written on the command line and in model files
     pub fn name(&self) -> String {
+        match self.structure() {
+            None => format!("black-box:{}", self.black_box_order()),
+            Some(s) => s.label().into(),
+        }
+    }
+
+    /// order of the black box (0 for a physical model)
+    fn black_box_order(&self) -> usize {
         match self {
-            ModelKind::BlackBox(n) => format!("black-box:{n}"),
-            ModelKind::Rigid => "rigid".into(),
-            ModelKind::TwoMass => "two-mass".into(),
-            ModelKind::ThreeMass => "three-mass".into(),
-            ModelKind::FourMass => "four-mass".into(),
+            ModelKind::BlackBox(n) => *n,
+            _ => 0,
         }
     }
 
@@ -113,12 +115,12 @@ impl std::str::FromStr for ModelKind {
                 _ => Err(format!("black-box order `{n}` must be an integer 1 … 40")),
             };
         }
-        match s.as_str() {
-            "rigid" => Ok(ModelKind::Rigid),
-            "two-mass" => Ok(ModelKind::TwoMass),
-            "three-mass" => Ok(ModelKind::ThreeMass),
-            "four-mass" => Ok(ModelKind::FourMass),
-            _ => Err(format!(
+        match Structure::ALL.into_iter().find(|st| st.label() == s) {
+            Some(Structure::Rigid) => Ok(ModelKind::Rigid),
+            Some(Structure::TwoMass) => Ok(ModelKind::TwoMass),
+            Some(Structure::ThreeMass) => Ok(ModelKind::ThreeMass),
+            Some(Structure::FourMass) => Ok(ModelKind::FourMass),
+            None => Err(format!(
                 "unknown model `{s}` (known: black-box:ORDER, rigid, two-mass, three-mass, four-mass)"
             )),
         }
@@ -224,10 +226,42 @@ impl pem::ParamModel for DrivenModel {
 pub enum FitError {
     /// the data cannot be used
     #[error("bad data: {0}")]
-    BadData(String),
-    /// the options do not fit together
-    #[error("{0}")]
-    Options(String),
+    BadData(#[from] crate::data::RecordError),
+    /// the record could not be prepared (too short to decimate)
+    #[error("bad data: {0}")]
+    Prepare(#[source] crate::data::DataError),
+    /// the data's sample interval is not the model's
+    #[error(
+        "bad data: sample interval {data_ts} s differs from the model's {model_ts} s \
+         (decimate the data as the model was)"
+    )]
+    RateMismatch {
+        /// sample interval of the data [s]
+        data_ts: f64,
+        /// sample interval of the model [s]
+        model_ts: f64,
+    },
+    /// a model at the capture rate meets data prepared at another rate or decimation
+    #[error(
+        "bad data: the model runs at {model_ts} s and is compared after decimation by \
+         {model_q}; the data are at {data_ts} s, decimated by {data_q}"
+    )]
+    DecimationMismatch {
+        /// sample interval of the model [s]
+        model_ts: f64,
+        /// decimation the model is compared after
+        model_q: usize,
+        /// sample interval of the raw data [s]
+        data_ts: f64,
+        /// decimation of the data
+        data_q: usize,
+    },
+    /// Coulomb friction was asked for a model other than the rigid one
+    #[error("--friction coulomb is available for the rigid model only, not {model}")]
+    CoulombNeedsRigid {
+        /// the model asked for
+        model: String,
+    },
     /// subspace step
     #[error("subspace identification failed: {0}")]
     Subspace(#[from] subspace::SubspaceError),
@@ -316,28 +350,7 @@ pub struct Fitted {
 }
 
 fn check(data: &IdData) -> Result<(), FitError> {
-    if data.u.len() != data.y.len() {
-        return Err(FitError::BadData(format!(
-            "input has {} samples, output {}",
-            data.u.len(),
-            data.y.len()
-        )));
-    }
-    if data.len() < 50 {
-        return Err(FitError::BadData(format!(
-            "{} samples are too few (need at least 50)",
-            data.len()
-        )));
-    }
-    if data.ts.is_nan() || data.ts <= 0.0 || data.ts.is_infinite() {
-        return Err(FitError::BadData(format!("sample interval {} s", data.ts)));
-    }
-    if let Some(k) = data.u.iter().chain(&data.y).position(|v| !v.is_finite()) {
-        return Err(FitError::BadData(format!(
-            "non-finite value at position {k}"
-        )));
-    }
-    Ok(())
+    Ok(data.check(50)?)
 }
 
 /// Fits the model family of `opts` to `data` (already decimated and
@@ -348,15 +361,14 @@ fn check(data: &IdData) -> Result<(), FitError> {
 pub fn fit_model(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitError> {
     check(data)?;
     if opts.coulomb && opts.kind != ModelKind::Rigid {
-        return Err(FitError::Options(format!(
-            "--friction coulomb is available for the rigid model only, not {}",
-            opts.kind.name()
-        )));
+        return Err(FitError::CoulombNeedsRigid {
+            model: opts.kind.name(),
+        });
     }
-    match opts.kind {
-        ModelKind::BlackBox(n) => fit_black_box(data, n, opts),
-        ModelKind::Rigid if opts.coulomb => fit_rigid_coulomb(data, opts),
-        _ => fit_grey(data, None, opts),
+    match opts.kind.structure() {
+        None => fit_black_box(data, opts.kind.black_box_order(), opts),
+        Some(Structure::Rigid) if opts.coulomb => fit_rigid_coulomb(data, opts),
+        Some(structure) => fit_grey(data, None, structure, opts),
     }
 }
 
@@ -390,18 +402,11 @@ impl FitData {
     /// Prepares `raw` with `prep`.
     ///
     /// # Errors
-    /// [`FitError::BadData`] when the record is too short to decimate.
+    /// [`FitError::Prepare`] when the record is too short to decimate.
     pub fn new(raw: &IdData, prep: Prep) -> Result<Self, FitError> {
-        let mut r = raw.clone();
-        match prep.detrend {
-            DetrendKind::None => {}
-            DetrendKind::Mean => r.detrend(crate::data::Detrend::Mean),
-            DetrendKind::Linear => r.detrend(crate::data::Detrend::Linear),
-        }
+        let r = prep.detrended(raw);
         let q = prep.decimate.max(1);
-        let prepared = r
-            .decimate(q)
-            .map_err(|e| FitError::BadData(e.to_string()))?;
+        let prepared = r.decimate(q).map_err(FitError::Prepare)?;
         Ok(FitData {
             raw: r,
             prepared,
@@ -418,12 +423,13 @@ impl FitData {
 /// # Errors
 /// [`FitError`] when the data are unusable or an estimator fails.
 pub fn fit_prepared(data: &FitData, opts: &FitOptions) -> Result<Fitted, FitError> {
-    if data.decimate <= 1 || opts.kind.structure().is_none() || opts.coulomb {
-        return fit_model(&data.prepared, opts);
-    }
+    let structure = match opts.kind.structure() {
+        Some(s) if data.decimate > 1 && !opts.coulomb => s,
+        _ => return fit_model(&data.prepared, opts),
+    };
     check(&data.prepared)?;
     check(&data.raw)?;
-    fit_grey(&data.prepared, Some(&data.raw), opts)
+    fit_grey(&data.prepared, Some(&data.raw), structure, opts)
 }
 
 /// One black-box start: the subspace model of `method`, refined by output
@@ -548,8 +554,12 @@ fn fit_black_box(data: &IdData, n: usize, opts: &FitOptions) -> Result<Fitted, F
 /// over each tick), whereas after the anti-alias filter `u` is no longer
 /// piecewise constant and a model discretised at the coarse rate is the
 /// wrong model of decimated data.
-fn fit_grey(data: &IdData, raw: Option<&IdData>, opts: &FitOptions) -> Result<Fitted, FitError> {
-    let structure = opts.kind.structure().expect("grey-box kind");
+fn fit_grey(
+    data: &IdData,
+    raw: Option<&IdData>,
+    structure: Structure,
+    opts: &FitOptions,
+) -> Result<Fitted, FitError> {
     let m = structure.masses();
     // Multi-start over the order of the subspace model the resonance and
     // anti-resonance frequencies are read from: with closely spaced pairs
@@ -693,7 +703,7 @@ fn fit_grey(data: &IdData, raw: Option<&IdData>, opts: &FitOptions) -> Result<Fi
                 name: n.to_string(),
                 value: v,
                 std: v * pf.std[i],
-                unit: grey_box::unit_of(n),
+                unit: unit_of(n),
             }
         })
         .collect();
@@ -802,15 +812,15 @@ impl Fitted {
     /// data's rate; see [`Fitted::evaluate_on`] for a prepared record).
     ///
     /// # Errors
-    /// [`FitError::BadData`] for a sample-interval mismatch or unusable data,
+    /// [`FitError::RateMismatch`], [`FitError::BadData`] for unusable data,
     /// [`FitError::Validate`].
     pub fn evaluate(&self, data: &IdData, lags: usize) -> Result<Validation, FitError> {
         check(data)?;
         if (data.ts - self.ts).abs() > 1e-3 * self.ts {
-            return Err(FitError::BadData(format!(
-                "sample interval {} s differs from the model's {} s (decimate the data as the model was)",
-                data.ts, self.ts
-            )));
+            return Err(FitError::RateMismatch {
+                data_ts: data.ts,
+                model_ts: self.ts,
+            });
         }
         let yh = self.simulate(data);
         Ok(validate::validate(&data.u, &data.y, &yh, lags)?)
@@ -823,26 +833,29 @@ impl Fitted {
     /// data went through, which is exact for a linear model.
     ///
     /// # Errors
-    /// [`FitError::BadData`] when the record's rates do not match the model.
+    /// [`FitError::DecimationMismatch`] when the record's rates do not match the model.
     pub fn simulate_on(&self, data: &FitData) -> Result<Vec<f64>, FitError> {
         if self.decimate <= 1 {
             return Ok(self.simulate(&data.prepared));
         }
         if (data.raw.ts - self.ts).abs() > 1e-3 * self.ts || data.decimate != self.decimate {
-            return Err(FitError::BadData(format!(
-                "the model runs at {} s and is compared after decimation by {}; the data are at {} s, decimated by {}",
-                self.ts, self.decimate, data.raw.ts, data.decimate
-            )));
+            return Err(FitError::DecimationMismatch {
+                model_ts: self.ts,
+                model_q: self.decimate,
+                data_ts: data.raw.ts,
+                data_q: data.decimate,
+            });
         }
         let yh = self.simulate(&data.raw);
-        crate::data::decimate(&yh, self.decimate).map_err(|e| FitError::BadData(e.to_string()))
+        crate::data::decimate(&yh, self.decimate).map_err(FitError::Prepare)
     }
 
     /// FIT and residual tests on the decimated record of `data` (see
     /// [`Fitted::simulate_on`]).
     ///
     /// # Errors
-    /// [`FitError::BadData`] for a rate mismatch or unusable data,
+    /// [`FitError::DecimationMismatch`] for a rate mismatch, [`FitError::BadData`] for
+    /// unusable data,
     /// [`FitError::Validate`].
     pub fn evaluate_on(&self, data: &FitData, lags: usize) -> Result<Validation, FitError> {
         check(&data.prepared)?;
@@ -867,32 +880,6 @@ impl Fitted {
     /// Frequency response of the linear model at `f_hz` [Hz].
     pub fn freq_response(&self, f_hz: &[f64]) -> Vec<Complex<f64>> {
         self.model.freq_response(f_hz)
-    }
-
-    /// The model file.
-    pub fn to_saved(&self, prep: Prep, source: &str, fit_estimation: f64) -> SavedModel {
-        let n = self.model.order();
-        SavedModel {
-            format: MODEL_FORMAT.into(),
-            model: self.kind.name(),
-            method: self.method.clone(),
-            output: output_name(self.output).into(),
-            ts: self.ts,
-            prep,
-            a: (0..n)
-                .map(|i| (0..n).map(|j| self.model.a[(i, j)]).collect())
-                .collect(),
-            b: self.model.b.iter().copied().collect(),
-            c: self.model.c.iter().copied().collect(),
-            d: self.model.d,
-            parameters: param_map(&self.params),
-            friction: self.friction,
-            decimate_output: self.decimate,
-            input_hold: None,
-            fit_estimation,
-            fit_name: None,
-            source: source.into(),
-        }
     }
 }
 
@@ -932,177 +919,6 @@ pub fn param_map(params: &[PhysParam]) -> BTreeMap<String, ParamJson> {
         .collect()
 }
 
-/// Preparation applied to raw data before fitting (and again before
-/// validation with a saved model).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Prep {
-    /// decimation factor (1: none)
-    pub decimate: usize,
-    /// detrending: `none`, `mean` or `linear`
-    pub detrend: DetrendKind,
-}
-
-/// Detrending recorded in a model file.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum DetrendKind {
-    /// none
-    None,
-    /// mean removed
-    Mean,
-    /// least-squares line removed
-    Linear,
-}
-
-impl Prep {
-    /// Detrending at the capture rate, then decimation (the decimated
-    /// record of [`FitData::new`]).
-    ///
-    /// # Errors
-    /// [`FitError::BadData`] when the record is too short to decimate.
-    pub fn apply(&self, data: &IdData) -> Result<IdData, FitError> {
-        Ok(FitData::new(data, *self)?.prepared)
-    }
-}
-
-/// format tag of [`SavedModel`] (format 2: physical models at the capture
-/// rate, [`SavedModel::decimate_output`])
-pub const MODEL_FORMAT: &str = "jointid-model/2";
-/// the earlier format, still read (its `interval_mean` hold excepted)
-pub const MODEL_FORMAT_1: &str = "jointid-model/1";
-
-fn one() -> usize {
-    1
-}
-
-/// Everything needed to simulate a fitted model again (`--save`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct SavedModel {
-    /// [`MODEL_FORMAT`]
-    pub format: String,
-    /// model family (`black-box:11`, `three-mass`, ...)
-    pub model: String,
-    /// how it was estimated
-    pub method: String,
-    /// output signal (`angle` or `velocity`)
-    pub output: String,
-    /// sample interval of the model [s] (after decimation)
-    pub ts: f64,
-    /// preparation of raw data
-    pub prep: Prep,
-    /// `A`, row by row
-    pub a: Vec<Vec<f64>>,
-    /// `B`
-    pub b: Vec<f64>,
-    /// `C`
-    pub c: Vec<f64>,
-    /// `D`
-    pub d: f64,
-    /// physical parameters (empty for a black box)
-    pub parameters: BTreeMap<String, ParamJson>,
-    /// nonlinear rigid model (Coulomb friction), simulated instead of `A, B, C, D`
-    pub friction: Option<RigidFriction>,
-    /// decimation between the model's rate and the prepared data (1: the
-    /// model runs at `ts` = the prepared data's interval; `q`: a physical
-    /// model at the capture rate whose output is decimated, see
-    /// [`FitData`]); absent in format-1 files: 1
-    #[serde(default = "one")]
-    pub decimate_output: usize,
-    /// format 1 only: the held input of a physical model (`zoh` or
-    /// `interval_mean`); format 2 never writes it
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub input_hold: Option<String>,
-    /// FIT on the estimation data [%] (toolbox definition)
-    pub fit_estimation: f64,
-    /// which FIT `fit_estimation` is, when not the toolbox's (a model fitted
-    /// in the frequency domain: the periodic steady-state FIT,
-    /// [`crate::ident::frf_fit::PERIODIC_FIT_NAME`]); `validate` reports the
-    /// same one on periodic data
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub fit_name: Option<String>,
-    /// estimation data file
-    pub source: String,
-}
-
-impl SavedModel {
-    /// The model back as a [`Fitted`] (without continuous model).
-    ///
-    /// # Errors
-    /// [`FitError::Options`] when the file is inconsistent.
-    pub fn to_fitted(&self) -> Result<Fitted, FitError> {
-        if self.format != MODEL_FORMAT && self.format != MODEL_FORMAT_1 {
-            return Err(FitError::Options(format!(
-                "model format `{}` is neither `{MODEL_FORMAT}` nor `{MODEL_FORMAT_1}`",
-                self.format
-            )));
-        }
-        match self.input_hold.as_deref() {
-            None | Some("zoh") => {}
-            Some(h) => {
-                return Err(FitError::Options(format!(
-                    "input hold `{h}` of format 1 is no longer supported: fit the model again \
-                     (physical models are now refined at the capture rate)"
-                )))
-            }
-        }
-        if self.decimate_output == 0
-            || self.decimate_output > 1 && self.prep.decimate != self.decimate_output
-        {
-            return Err(FitError::Options(format!(
-                "output decimation {} does not match the preparation's decimation {}",
-                self.decimate_output, self.prep.decimate
-            )));
-        }
-        let n = self.a.len();
-        if self.b.len() != n || self.c.len() != n || self.a.iter().any(|r| r.len() != n) {
-            return Err(FitError::Options(format!(
-                "model matrices are inconsistent: A {n} rows, B {}, C {}",
-                self.b.len(),
-                self.c.len()
-            )));
-        }
-        if self.ts.is_nan() || self.ts <= 0.0 {
-            return Err(FitError::Options(format!("sample interval {} s", self.ts)));
-        }
-        let kind: ModelKind = self.model.parse().map_err(FitError::Options)?;
-        let output = match self.output.as_str() {
-            "angle" => Output::Angle,
-            "velocity" => Output::Velocity,
-            o => return Err(FitError::Options(format!("unknown output `{o}`"))),
-        };
-        let a = DMatrix::from_fn(n, n, |i, j| self.a[i][j]);
-        let model = StateSpace::new(
-            a,
-            DVector::from_vec(self.b.clone()),
-            RowDVector::from_vec(self.c.clone()),
-            self.d,
-            self.ts,
-        );
-        let params = self
-            .parameters
-            .iter()
-            .map(|(k, p)| PhysParam {
-                name: k.clone(),
-                value: p.value,
-                std: p.std,
-                unit: grey_box::unit_of(k),
-            })
-            .collect();
-        Ok(Fitted {
-            kind,
-            output,
-            ts: self.ts,
-            model,
-            continuous: None,
-            params,
-            friction: self.friction,
-            warnings: Vec::new(),
-            method: self.method.clone(),
-            decimate: self.decimate_output,
-        })
-    }
-}
-
 /// `n` logarithmically spaced frequencies from `f0` to `f1` [Hz]
 pub fn log_grid(f0: f64, f1: f64, n: usize) -> Vec<f64> {
     let (l0, l1) = (f0.ln(), f1.ln());
@@ -1120,7 +936,9 @@ pub fn default_f_min(n: usize, ts: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::data::Detrend;
     use crate::ident::linalg::GaussRng;
+    use crate::ident::model_file::{SavedModel, MODEL_FORMAT, MODEL_FORMAT_1};
 
     fn two_mass_data(n: usize, seed: u64, noise: f64) -> (IdData, StateSpace) {
         // motor-side two-mass: J_m 1e-3, arm 1e-3 (motor side), k' 20 → ~32 Hz
@@ -1168,7 +986,7 @@ mod tests {
     /// preparation that leaves the record as it is
     const RAW: Prep = Prep {
         decimate: 1,
-        detrend: DetrendKind::None,
+        detrend: Detrend::None,
     };
 
     #[test]
@@ -1189,6 +1007,16 @@ mod tests {
             ModelKind::FourMass,
         ] {
             assert_eq!(k.name().parse(), Ok(k));
+        }
+        // one list of structures: every plant of the simulator and every physical model
+        // family name the same structure by the same label
+        for st in Structure::ALL {
+            let k: ModelKind = st.label().parse().unwrap();
+            assert_eq!(k.structure(), Some(st));
+        }
+        for p in crate::model::params::PlantKind::ALL {
+            let k: ModelKind = p.structure().label().parse().unwrap();
+            assert_eq!(k.structure(), Some(p.structure()));
         }
     }
 
@@ -1263,7 +1091,7 @@ mod tests {
         let raw = IdData { ts, u, y, r: None };
         let prep = Prep {
             decimate: q,
-            detrend: DetrendKind::None,
+            detrend: Detrend::None,
         };
         let fd = FitData::new(&raw, prep).unwrap();
         assert_eq!(fd.prepared, prep.apply(&raw).unwrap());

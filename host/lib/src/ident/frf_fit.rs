@@ -66,9 +66,11 @@ use thiserror::Error;
 
 use crate::ident::fit::DrivenModel;
 use crate::ident::frf::{Frf, FrfSpectra};
-use crate::ident::grey_box::{self, Features, GreyBoxModel, Output, PhysParam, Structure};
+use crate::ident::grey_box::{self, Features, GreyBoxModel, Output, PhysParam};
 use crate::ident::lm::{self, LeastSquares, LmFit, LmOptions, Normal, Termination};
 use crate::ident::ss::{ContinuousSs, StateSpace};
+use crate::model::params::unit_of;
+use crate::model::spec::Structure;
 
 /// relative standard deviation above which a line of the FRF is not used to
 /// find resonances or the starting rigid body
@@ -1193,7 +1195,7 @@ fn finish(
                 name: (*n).into(),
                 value: v,
                 std: v * best.fit.std[i],
-                unit: grey_box::unit_of(n),
+                unit: unit_of(n),
             }
         })
         .collect();
@@ -1204,7 +1206,7 @@ fn finish(
             name: (*n).into(),
             value: best.start[i].exp(),
             std: 0.0,
-            unit: grey_box::unit_of(n),
+            unit: unit_of(n),
         })
         .collect();
     let drive = |i: usize, fixed: bool| DriveEstimate {

@@ -58,6 +58,8 @@ use crate::ident::linalg::{central_diff, filtfilt_lowpass, solve_spd};
 use crate::ident::pem::{self, ParamModel, PemFit, PemOptions};
 use crate::ident::ss::{ContinuousSs, StateSpace};
 use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
+use crate::model::params::unit_of;
+use crate::model::spec::Structure;
 
 /// default gear ratio of seed 000 (arm angle per motor angle)
 pub const DEFAULT_GEAR_RATIO: f64 = 1.0 / 118.0;
@@ -81,43 +83,6 @@ pub fn reference_three_mass() -> Vec<f64> {
     ]
 }
 
-/// Mechanical structure of the joint model.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Structure {
-    /// one inertia with viscous friction
-    Rigid,
-    /// motor and arm through the gearbox spring
-    TwoMass,
-    /// seed 000 eq. (6)
-    ThreeMass,
-    /// seed 000 eq. (7)
-    FourMass,
-}
-
-impl Structure {
-    /// number of masses
-    pub fn masses(self) -> usize {
-        match self {
-            Structure::Rigid => 1,
-            Structure::TwoMass => 2,
-            Structure::ThreeMass => 3,
-            Structure::FourMass => 4,
-        }
-    }
-
-    /// parameter names, seed 000 Table 1 (rigid: `J`, `Fv`)
-    pub fn param_names(self) -> &'static [&'static str] {
-        match self {
-            Structure::Rigid => &["J", "Fv"],
-            Structure::TwoMass => &["J_m", "J_a1", "k_g", "d_g", "f_m"],
-            Structure::ThreeMass => &["J_m", "J_a1", "J_a2", "k_g", "k_a", "d_g", "d_a", "f_m"],
-            Structure::FourMass => &[
-                "J_m", "J_a1", "J_a2", "J_p", "k_g", "k_a", "k_p", "d_g", "d_a", "d_p", "f_m",
-            ],
-        }
-    }
-}
-
 /// Which motor signal the model outputs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Output {
@@ -125,20 +90,6 @@ pub enum Output {
     Angle,
     /// motor velocity θ̇_m [rad/s]
     Velocity,
-}
-
-/// unit of a parameter, from its name
-pub fn unit_of(name: &str) -> &'static str {
-    match name.as_bytes().first() {
-        Some(b'J') => "kg·m²",
-        Some(b'k') => "N·m/rad",
-        Some(b'd') | Some(b'f') => "N·m·s/rad",
-        _ => match name {
-            "Fv" => "N·m·s/rad",
-            "Fc" | "offset" => "N·m",
-            _ => "",
-        },
-    }
 }
 
 /// One estimated physical parameter.
@@ -150,7 +101,7 @@ pub struct PhysParam {
     pub value: f64,
     /// standard deviation, same unit (0 when not estimated)
     pub std: f64,
-    /// unit (rotary joint)
+    /// unit (rotary joint; [`crate::model::params::unit_of`])
     pub unit: &'static str,
 }
 
@@ -159,7 +110,18 @@ pub struct PhysParam {
 pub enum GreyBoxError {
     /// the data are unusable
     #[error("bad data: {0}")]
-    BadData(String),
+    BadData(#[from] crate::data::RecordError),
+    /// too few samples remain after the filter's edges are trimmed
+    #[error("bad data: only {left} samples left after edge trimming for {params} parameters")]
+    TooFewAfterTrim {
+        /// samples left
+        left: usize,
+        /// parameters to estimate
+        params: usize,
+    },
+    /// the data show no positive rigid-body inertia (the initial values need one)
+    #[error("bad data: no positive rigid-body inertia found in the data")]
+    NoInertia,
     /// the high-order subspace model could not be built
     #[error("subspace step failed: {0}")]
     Subspace(#[from] subspace::SubspaceError),
@@ -432,18 +394,11 @@ impl RigidFit {
 ///
 /// # Errors
 /// [`GreyBoxError::BadData`] for short or non-finite data,
+/// [`GreyBoxError::TooFewAfterTrim`],
 /// [`GreyBoxError::Singular`] when the regressors are collinear.
 pub fn rigid_idim(data: &IdData, opts: &IdimOptions) -> Result<RigidFit, GreyBoxError> {
+    data.check(50)?;
     let n = data.u.len();
-    if n != data.y.len() || n < 50 {
-        return Err(GreyBoxError::BadData(format!(
-            "need at least 50 equal-length samples, got u {n}, y {}",
-            data.y.len()
-        )));
-    }
-    if data.u.iter().chain(&data.y).any(|v| !v.is_finite()) {
-        return Err(GreyBoxError::BadData("non-finite sample".into()));
-    }
     let ts = data.ts;
     let fc = if opts.cutoff_hz > 0.0 {
         opts.cutoff_hz
@@ -501,9 +456,10 @@ pub fn rigid_idim(data: &IdData, opts: &IdimOptions) -> Result<RigidFit, GreyBox
         rows.push((phi.clone(), uf[t]));
     }
     if count <= p {
-        return Err(GreyBoxError::BadData(format!(
-            "only {count} samples left after edge trimming"
-        )));
+        return Err(GreyBoxError::TooFewAfterTrim {
+            left: count,
+            params: p,
+        });
     }
     let th = solve_spd(&m, &rhs, 0.0).ok_or(GreyBoxError::Singular("rigid inverse dynamics"))?;
     let mut ssr = 0.0;
@@ -972,9 +928,7 @@ pub fn features(
         }
     }
     if !(j_total > 0.0 && j_total.is_finite()) {
-        return Err(GreyBoxError::BadData(
-            "no positive rigid-body inertia found in the data".into(),
-        ));
+        return Err(GreyBoxError::NoInertia);
     }
     if !(f_m > 0.0 && f_m.is_finite()) {
         // one tenth of a 1 Hz mechanical pole: small but positive

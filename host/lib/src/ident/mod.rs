@@ -1,8 +1,8 @@
 //! Identification: from an [`crate::data::IdData`] to models and how well they explain
 //! the data. Nonparametric FRF ([`frf`]), black box ([`subspace`], refined by [`pem`]),
 //! physical models ([`grey_box`]), one Levenberg–Marquardt loop ([`lm`]), validation
-//! ([`validate`], the only FIT), and the orchestration the command line and the
-//! scenarios share ([`fit`]). State-space algebra in [`ss`] and [`linalg`].
+//! ([`validate`], the only FIT), the orchestration the command line and the
+//! scenarios share ([`fit`]) and the model file ([`model_file`]). State-space algebra in [`ss`] and [`linalg`].
 //!
 //! Nothing here does IO.
 
@@ -13,6 +13,7 @@ pub mod frf_subspace;
 pub mod grey_box;
 pub mod linalg;
 pub mod lm;
+pub mod model_file;
 pub mod pem;
 pub mod ss;
 pub mod subspace;

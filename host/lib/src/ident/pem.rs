@@ -143,9 +143,22 @@ pub struct PemFit {
 /// Why a PEM fit failed.
 #[derive(Debug, Error, PartialEq)]
 pub enum PemError {
-    /// data or options inconsistent
+    /// a parameter vector (the start, a bound, the fixed flags) does not match the model
+    #[error("bad input: {what}: {got} entries for {expected} parameters")]
+    ParamCount {
+        /// which vector
+        what: &'static str,
+        /// its length
+        got: usize,
+        /// parameters of the model
+        expected: usize,
+    },
+    /// the data cannot be used
     #[error("bad input: {0}")]
-    BadInput(String),
+    Data(#[from] crate::data::RecordError),
+    /// the optimiser refused its options
+    #[error("bad input: {0}")]
+    Lm(crate::ident::lm::LmError),
     /// the initial parameters give a non-finite cost
     #[error("initial parameters give a non-finite cost")]
     NonFiniteStart,
@@ -383,7 +396,7 @@ impl<M: ParamModel + ?Sized> LeastSquares for PemProblem<'_, M> {
 /// module docs.
 ///
 /// # Errors
-/// [`PemError::BadInput`] when the option vectors or data have the wrong
+/// [`PemError::ParamCount`] or [`PemError::Data`] when the option vectors or data have the wrong
 /// length, [`PemError::NonFiniteStart`] when `theta0` does not simulate.
 pub fn fit<M: ParamModel + ?Sized>(
     model: &M,
@@ -392,33 +405,27 @@ pub fn fit<M: ParamModel + ?Sized>(
     opts: &PemOptions,
 ) -> Result<PemFit, PemError> {
     let np = model.n_params();
-    if theta0.len() != np {
-        return Err(PemError::BadInput(format!(
-            "theta has {} entries, model {np}",
-            theta0.len()
-        )));
-    }
-    for (name, v) in [("lower", &opts.lower), ("upper", &opts.upper)] {
-        if !v.is_empty() && v.len() != np {
-            return Err(PemError::BadInput(format!(
-                "{name} bounds have {} entries, model {np}",
-                v.len()
-            )));
+    let count = |what, got: usize| {
+        if got == np {
+            Ok(())
+        } else {
+            Err(PemError::ParamCount {
+                what,
+                got,
+                expected: np,
+            })
+        }
+    };
+    count("theta", theta0.len())?;
+    for (what, v) in [("lower bounds", &opts.lower), ("upper bounds", &opts.upper)] {
+        if !v.is_empty() {
+            count(what, v.len())?;
         }
     }
-    if !opts.fixed.is_empty() && opts.fixed.len() != np {
-        return Err(PemError::BadInput(format!(
-            "fixed has {} entries, model {np}",
-            opts.fixed.len()
-        )));
+    if !opts.fixed.is_empty() {
+        count("fixed", opts.fixed.len())?;
     }
-    if data.u.len() != data.y.len() || data.u.is_empty() {
-        return Err(PemError::BadInput(format!(
-            "input has {} samples, output {}",
-            data.u.len(),
-            data.y.len()
-        )));
-    }
+    data.check(1)?;
     // the start, clamped as the loop will clamp it, and its initial state
     let mut theta = theta0.to_vec();
     for (i, t) in theta.iter_mut().enumerate() {
@@ -477,7 +484,7 @@ pub fn fit<M: ParamModel + ?Sized>(
     };
     let f = lm::minimize(&problem, &theta, &lm_opts).map_err(|e| match e {
         lm::LmError::NonFiniteStart => PemError::NonFiniteStart,
-        other => PemError::BadInput(other.to_string()),
+        other => PemError::Lm(other),
     })?;
     let (th, x0) = problem.split(&f.theta);
     Ok(PemFit {

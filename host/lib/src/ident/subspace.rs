@@ -148,9 +148,10 @@ pub enum SubspaceError {
         /// largest order
         max: usize,
     },
-    /// input and output differ in length, or contain non-finite values
+    /// input and output differ in length, contain non-finite values, or the sample
+    /// interval is not positive
     #[error("bad data: {0}")]
-    BadData(String),
+    BadData(#[from] crate::data::RecordError),
     /// a least-squares step could not be solved
     #[error("singular least-squares problem in {0}")]
     Singular(&'static str),
@@ -165,28 +166,6 @@ fn rms(x: &[f64]) -> f64 {
     } else {
         1.0
     }
-}
-
-fn check_data(data: &IdData) -> Result<(), SubspaceError> {
-    if data.u.len() != data.y.len() {
-        return Err(SubspaceError::BadData(format!(
-            "input has {} samples, output {}",
-            data.u.len(),
-            data.y.len()
-        )));
-    }
-    if let Some(i) = data.u.iter().chain(&data.y).position(|v| !v.is_finite()) {
-        return Err(SubspaceError::BadData(format!(
-            "non-finite value at index {i} of u followed by y"
-        )));
-    }
-    if data.ts.is_nan() || data.ts <= 0.0 {
-        return Err(SubspaceError::BadData(format!(
-            "sample interval {} is not positive",
-            data.ts
-        )));
-    }
-    Ok(())
 }
 
 fn choose_order(sv: &[f64], order: Order, limit: usize) -> Result<usize, SubspaceError> {
@@ -240,7 +219,7 @@ pub fn default_past(order: usize, ts: f64, n_samples: usize) -> usize {
 /// [`SubspaceError`] when the data are too short for the horizons, contain
 /// non-finite values, or the order exceeds the horizon.
 pub fn estimate(data: &IdData, opts: &SubspaceOptions) -> Result<SubspaceFit, SubspaceError> {
-    check_data(data)?;
+    data.check(0)?;
     let n_hint = match opts.order {
         Order::Fixed(n) => n,
         Order::Auto { max } => max,
@@ -823,8 +802,9 @@ pub(crate) mod tests {
     /// (discrete plant, record).
     fn three_mass_closed_loop(seed: u64) -> (StateSpace, IdData) {
         use crate::ident::grey_box::{
-            reference_three_mass, GreyBoxModel, Output, Structure, DEFAULT_GEAR_RATIO,
+            reference_three_mass, GreyBoxModel, Output, DEFAULT_GEAR_RATIO,
         };
+        use crate::model::spec::Structure;
         let gm = GreyBoxModel {
             structure: Structure::ThreeMass,
             output: Output::Angle,

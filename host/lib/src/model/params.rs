@@ -61,6 +61,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::spec::Structure;
+
 /// Which mechanical structure the plant has.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -87,6 +89,38 @@ impl PlantKind {
         PlantKind::FourMass,
         PlantKind::NonlinearTwoMass,
     ];
+
+    /// The mechanical structure (the nonlinear two-mass is a two-mass).
+    pub fn structure(self) -> Structure {
+        match self {
+            PlantKind::Rigid => Structure::Rigid,
+            PlantKind::TwoMass | PlantKind::NonlinearTwoMass => Structure::TwoMass,
+            PlantKind::ThreeMass => Structure::ThreeMass,
+            PlantKind::FourMass => Structure::FourMass,
+        }
+    }
+
+    /// Name on the command line (`three-mass`, `nonlinear-two-mass`); [`PlantKind::name`]
+    /// is the JSON spelling.
+    pub fn label(self) -> &'static str {
+        match self {
+            PlantKind::NonlinearTwoMass => "nonlinear-two-mass",
+            k => k.structure().label(),
+        }
+    }
+
+    /// What the plant is, in a few words (the command line's help).
+    pub fn describe(self) -> &'static str {
+        match self {
+            PlantKind::Rigid => "one rigid mass",
+            PlantKind::TwoMass => "motor and one arm mass through the gearbox spring",
+            PlantKind::ThreeMass => "seed 000 eq. (5)-(6): motor and two arm masses",
+            PlantKind::FourMass => "seed 000 eq. (7)-(8): three-mass plus a parallel mass",
+            PlantKind::NonlinearTwoMass => {
+                "seed 001: two-mass with cubic spring and Coulomb friction"
+            }
+        }
+    }
 
     /// Name as used in specs and JSON (`three_mass`, ...).
     pub fn name(self) -> &'static str {
@@ -188,25 +222,95 @@ impl JointParams {
         self.j_m + self.r * self.r * (self.j_a1 + self.j_a2)
     }
 
-    /// Every parameter as (name, value, unit), names as in seed 000 Table 1.
+    /// Every parameter as (name, value, unit), names as in seed 000 Table 1, units from
+    /// [`unit_of`].
     pub fn table(&self) -> [(&'static str, f64, &'static str); 14] {
         [
-            ("J_m", self.j_m, "kg·m²"),
-            ("J_a1", self.j_a1, "kg·m²"),
-            ("J_a2", self.j_a2, "kg·m²"),
-            ("J_p", self.j_p, "kg·m²"),
-            ("k_g", self.k_g, "N·m/rad"),
-            ("k_a", self.k_a, "N·m/rad"),
-            ("k_p", self.k_p, "N·m/rad"),
-            ("d_g", self.d_g, "N·m·s/rad"),
-            ("d_a", self.d_a, "N·m·s/rad"),
-            ("d_p", self.d_p, "N·m·s/rad"),
-            ("f_m", self.f_m, "N·m·s/rad"),
-            ("r", self.r, "-"),
-            ("k3", self.k3, "N·m/rad³"),
-            ("F_c", self.f_c, "N·m"),
+            ("J_m", self.j_m),
+            ("J_a1", self.j_a1),
+            ("J_a2", self.j_a2),
+            ("J_p", self.j_p),
+            ("k_g", self.k_g),
+            ("k_a", self.k_a),
+            ("k_p", self.k_p),
+            ("d_g", self.d_g),
+            ("d_a", self.d_a),
+            ("d_p", self.d_p),
+            ("f_m", self.f_m),
+            ("r", self.r),
+            ("k3", self.k3),
+            ("F_c", self.f_c),
         ]
+        .map(|(name, value)| (name, value, unit_of(name)))
     }
+}
+
+/// Access to one field of [`JointParams`] (its unit is the field's, [`unit_of`] its name).
+pub type ParamField = fn(&mut JointParams) -> &mut f64;
+
+/// The physical parameters plant `kind` uses, as (name, field) pairs, names as in
+/// [`JointParams::table`] (seed 000 Table 1, seed 001 `k3`, `F_c`).
+pub fn model_params(kind: PlantKind) -> Vec<(&'static str, ParamField)> {
+    type Field = ParamField;
+    let mut v: Vec<(&'static str, Field)> = vec![
+        ("J_m", |p| &mut p.j_m),
+        ("J_a1", |p| &mut p.j_a1),
+        ("J_a2", |p| &mut p.j_a2),
+    ];
+    let gearbox: [(&'static str, Field); 2] = [("k_g", |p| &mut p.k_g), ("d_g", |p| &mut p.d_g)];
+    let arm: [(&'static str, Field); 2] = [("k_a", |p| &mut p.k_a), ("d_a", |p| &mut p.d_a)];
+    match kind {
+        PlantKind::Rigid => {}
+        PlantKind::TwoMass | PlantKind::NonlinearTwoMass => v.extend(gearbox),
+        PlantKind::ThreeMass => v.extend(gearbox.into_iter().chain(arm)),
+        PlantKind::FourMass => {
+            v.push(("J_p", |p| &mut p.j_p));
+            v.extend(gearbox.into_iter().chain(arm));
+            v.extend::<[(&'static str, Field); 2]>([
+                ("k_p", |p| &mut p.k_p),
+                ("d_p", |p| &mut p.d_p),
+            ]);
+        }
+    }
+    v.extend::<[(&'static str, Field); 2]>([("f_m", |p| &mut p.f_m), ("r", |p| &mut p.r)]);
+    if kind == PlantKind::NonlinearTwoMass {
+        v.extend::<[(&'static str, Field); 2]>([("k3", |p| &mut p.k3), ("F_c", |p| &mut p.f_c)]);
+    }
+    v
+}
+
+/// The one unit table of the joint's physical parameters (rotary joint, SI): every name
+/// the simulator and the estimators use, with its unit. Seed 000 Table 1 (`J_*` [kg·m²],
+/// `k_*` [N·m/rad], `d_*` and `f_m` [N·m·s/rad]), the gear ratio `r` [-], seed 001's cubic
+/// spring `k3` [N·m/rad³] and Coulomb level `F_c` [N·m], and the rigid model of the
+/// estimators: `J` [kg·m²], viscous `Fv` [N·m·s/rad], Coulomb `Fc` and `offset` [N·m].
+pub const UNITS: [(&str, &str); 18] = [
+    ("J_m", "kg·m²"),
+    ("J_a1", "kg·m²"),
+    ("J_a2", "kg·m²"),
+    ("J_p", "kg·m²"),
+    ("k_g", "N·m/rad"),
+    ("k_a", "N·m/rad"),
+    ("k_p", "N·m/rad"),
+    ("d_g", "N·m·s/rad"),
+    ("d_a", "N·m·s/rad"),
+    ("d_p", "N·m·s/rad"),
+    ("f_m", "N·m·s/rad"),
+    ("r", "-"),
+    ("k3", "N·m/rad³"),
+    ("F_c", "N·m"),
+    ("J", "kg·m²"),
+    ("Fv", "N·m·s/rad"),
+    ("Fc", "N·m"),
+    ("offset", "N·m"),
+];
+
+/// Unit of the physical parameter `name` from [`UNITS`]; `""` for a name not there.
+pub fn unit_of(name: &str) -> &'static str {
+    UNITS
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map_or("", |(_, u)| u)
 }
 
 /// A plant: its structure and its physical parameters.
@@ -273,5 +377,19 @@ mod tests {
             f64::from(core.fs_hz),
             crate::sim::SimConfig::default().sample_rate_hz
         );
+    }
+
+    #[test]
+    fn every_parameter_of_every_plant_has_a_unit_and_the_nonlinear_ones_theirs() {
+        for kind in PlantKind::ALL {
+            for (name, _) in model_params(kind) {
+                assert_ne!(unit_of(name), "", "{name}");
+            }
+        }
+        assert_eq!(unit_of("k3"), "N·m/rad³");
+        assert_eq!(unit_of("F_c"), "N·m");
+        assert_eq!(unit_of("k_g"), "N·m/rad");
+        assert_eq!(unit_of("Fc"), "N·m");
+        assert_eq!(unit_of("nope"), "");
     }
 }

@@ -4,12 +4,10 @@
 //!
 //! Functions take plain data (frequencies, amplitudes, complex responses),
 //! so any command can call them; they render to a `String` (testable, no
-//! IO) and [`write_svg`] stores it. Only SVG: PNG would need a font
+//! IO) that the caller stores. Only SVG: PNG would need a font
 //! rasteriser and system font files, which this crate does not pull in.
 // Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
 #![allow(rustdoc::broken_intra_doc_links)]
-
-use std::path::Path;
 
 use plotters::prelude::*;
 use rustfft::num_complex::Complex64;
@@ -31,32 +29,13 @@ pub enum PlotError {
     /// nothing to plot
     #[error("plot `{0}`: no data")]
     Empty(String),
-    /// the file could not be written
-    #[error("{file}: {source}")]
-    Io {
-        /// file name
-        file: String,
-        /// underlying error
-        source: std::io::Error,
-    },
 }
 
-fn draw_err<E: std::fmt::Debug>(what: &str) -> impl Fn(E) -> PlotError + '_ {
+fn draw_err<E: std::fmt::Display>(what: &str) -> impl Fn(E) -> PlotError + '_ {
     move |e| PlotError::Draw {
         what: what.into(),
-        msg: format!("{e:?}"),
+        msg: e.to_string(),
     }
-}
-
-/// Writes an SVG string to `path`.
-///
-/// # Errors
-/// [`PlotError::Io`] naming the file.
-pub fn write_svg(path: &Path, svg: &str) -> Result<(), PlotError> {
-    std::fs::write(path, svg).map_err(|source| PlotError::Io {
-        file: path.display().to_string(),
-        source,
-    })
 }
 
 /// One panel of the spectrum plot: a signal's period-averaged amplitude per

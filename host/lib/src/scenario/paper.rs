@@ -55,10 +55,8 @@ use nalgebra::{DMatrix, DVector, RowDVector};
 use serde::Serialize;
 use thiserror::Error;
 
-use crate::data::{Dataset, IdData};
-use crate::ident::fit::{
-    default_f_min, fit_prepared, DetrendKind, FitData, FitOptions, Fitted, ModelKind, Prep,
-};
+use crate::data::{Dataset, Detrend, IdData, Prep};
+use crate::ident::fit::{default_f_min, fit_prepared, FitData, FitOptions, Fitted, ModelKind};
 use crate::ident::grey_box::Output;
 use crate::ident::ss::StateSpace;
 use crate::ident::validate::fit_percent;
@@ -239,7 +237,7 @@ pub fn prepared(ds: &Dataset, settle: usize, q: usize) -> Result<IdData, Experim
 pub fn prepared_both(ds: &Dataset, settle: usize, q: usize) -> Result<FitData, ExperimentError> {
     let prep = Prep {
         decimate: q,
-        detrend: DetrendKind::None,
+        detrend: Detrend::None,
     };
     FitData::new(&ds.data.slice(steady_range(ds, settle)), prep).map_err(|source| {
         ExperimentError::Fit {

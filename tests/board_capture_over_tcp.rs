@@ -5,9 +5,9 @@
 //! until a client connects, so not one byte is sent before the capture listens. The
 //! capture runs the same library path as `jointid capture --tcp HOST:PORT`
 //! (`jointid::capture::record_capture`; the binary's own tests live in
-//! `host/cli/tests/capture_cli.rs`), stops at the board's end message, and the `.jcap` is
-//! read back with `read_jcap`: every sample must be there once, in order, with no damaged
-//! frame, and the reference regenerated from the session header must equal, bit for bit,
+//! `host/cli/tests/capture_info_export_commands.rs`), stops at the board's end message, and
+//! the `.jcap` is read back with `read_jcap`: every sample must be there once, in order,
+//! with no damaged frame, and the reference regenerated from the session header must equal, bit for bit,
 //! the one the board used (per-batch reference CRC, and sample by sample against
 //! `jointid_core::excitation::generate`).
 

@@ -1,0 +1,636 @@
+//! The capture CSV (DESIGN.md §5) and any CSV with a column mapping: read, checked for
+//! uniform sampling, and written back losslessly.
+//!
+//! # Capture CSV contract (`# key=value` comments)
+//!
+//! A capture CSV may open with comment lines `# key=value` (spaces around the
+//! key and the value are trimmed). Keys this module understands:
+//!
+//! | key | type | meaning |
+//! | --- | --- | --- |
+//! | `kind` | `special_odd_multisine`, `random_odd_multisine` or `band_limited_noise` | [`SignalKind`] |
+//! | `fs_hz` | u32 | sample rate of the excitation [Hz] |
+//! | `period_samples` | u32 | excitation period N [samples] |
+//! | `max_line` | u32 | highest excited harmonic F |
+//! | `cutoff_hz` | f32 | amplitude-shape cut-off [Hz] |
+//! | `rms_rad` | f32 | RMS of the full-amplitude reference [rad] |
+//! | `seed` | u64 | phase / noise seed |
+//! | `ramp_samples` | u32 | raised-cosine ramp length [samples] |
+//! | `periods` | u32 | full-amplitude periods after the ramp-in (0 = endless) |
+//! | `sample_interval_s` | f64 | nominal sample interval [s] (optional) |
+//!
+//! The nine excitation keys come as a group: when `kind` is present all nine
+//! must be, and they are parsed into an [`ExcitationConfig`]. Any other key is
+//! kept verbatim in [`Dataset::meta`]. The sample `k = 0` of the file is the
+//! first sample of the ramp-in (the excitation's first sample).
+//! After the comments comes the header `t,theta_ref,u,theta_m` (extra
+//! columns are allowed and ignored), then one row per sample.
+// Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
+#![allow(rustdoc::broken_intra_doc_links)]
+
+use std::collections::BTreeMap;
+use std::io::{self, Write};
+use std::path::Path;
+
+use super::{ColumnMap, DataError, Dataset, ExcitationConfig, IdData, SignalKind};
+
+/// relative tolerance on each sample interval against the nominal one
+pub const SAMPLE_INTERVAL_TOLERANCE: f64 = 0.01;
+
+/// The nine `# key=value` comment keys of an excitation config in a capture CSV, in the
+/// order they are written.
+pub const EXCITATION_KEYS: [&str; 9] = [
+    "kind",
+    "fs_hz",
+    "period_samples",
+    "max_line",
+    "cutoff_hz",
+    "rms_rad",
+    "seed",
+    "ramp_samples",
+    "periods",
+];
+
+/// Parses a CSV text (capture CSV or any CSV through `map`).
+///
+/// `name` is used in error messages. Rows are split on `,`; blank lines are
+/// skipped; cells are trimmed. The sample interval is
+/// `sample_interval_s` when given, else the median interval; every interval
+/// must be within [`SAMPLE_INTERVAL_TOLERANCE`] of it.
+///
+/// # Errors
+/// Every [`DataError`] naming `name`, the line and the column at fault.
+pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, DataError> {
+    let file = || name.to_string();
+    let mut meta: BTreeMap<String, (usize, String)> = BTreeMap::new();
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l));
+    let (header_line, header) = loop {
+        match lines.next() {
+            None => return Err(DataError::NoHeader { file: file() }),
+            Some((_, l)) if l.trim().is_empty() => continue,
+            Some((ln, l)) if l.trim_start().starts_with('#') => {
+                let body = l.trim_start()[1..].trim();
+                if let Some((k, v)) = body.split_once('=') {
+                    meta.insert(k.trim().to_string(), (ln, v.trim().to_string()));
+                }
+            }
+            Some((ln, l)) => break (ln, l),
+        }
+    };
+    let excitation = parse_excitation(&meta, name)?;
+    let cols: Vec<&str> = header
+        .split(',')
+        .map(|c| c.trim().trim_matches('"').trim())
+        .collect();
+    let find = |c: &str| {
+        cols.iter()
+            .position(|h| *h == c)
+            .ok_or_else(|| DataError::MissingColumn {
+                file: file(),
+                line: header_line,
+                column: c.to_string(),
+                have: cols.join(","),
+            })
+    };
+    let mut wanted = vec![
+        (map.time.as_str(), find(&map.time)?),
+        (map.input.as_str(), find(&map.input)?),
+        (map.output.as_str(), find(&map.output)?),
+    ];
+    if let Some(r) = &map.reference {
+        wanted.push((r.as_str(), find(r)?));
+    }
+    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); wanted.len()];
+    let mut line_of_row = Vec::new();
+    for (ln, l) in lines {
+        if l.trim().is_empty() || l.trim_start().starts_with('#') {
+            continue;
+        }
+        let cells: Vec<&str> = l.split(',').collect();
+        for (slot, (cname, idx)) in wanted.iter().enumerate() {
+            let cell = cells.get(*idx).ok_or_else(|| DataError::ShortRow {
+                file: file(),
+                line: ln,
+                column: cname.to_string(),
+                cells: cells.len(),
+            })?;
+            let cell = cell.trim();
+            let v: f64 = cell.parse().map_err(|_| DataError::NotNumeric {
+                file: file(),
+                line: ln,
+                column: cname.to_string(),
+                cell: cell.to_string(),
+            })?;
+            if !v.is_finite() {
+                return Err(DataError::NotFinite {
+                    file: file(),
+                    line: ln,
+                    column: cname.to_string(),
+                    cell: cell.to_string(),
+                });
+            }
+            columns[slot].push(v);
+        }
+        line_of_row.push(ln);
+    }
+    let rows = line_of_row.len();
+    if rows < 2 {
+        return Err(DataError::TooShort { file: file(), rows });
+    }
+    let t = &columns[0];
+    let nominal =
+        match meta.get("sample_interval_s") {
+            Some((ln, v)) => Some(v.parse::<f64>().ok().filter(|x| *x > 0.0).ok_or_else(|| {
+                DataError::BadMeta {
+                    file: file(),
+                    line: *ln,
+                    key: "sample_interval_s".into(),
+                    reason: format!("`{v}` is not a positive number"),
+                }
+            })?),
+            None => None,
+        };
+    for k in 1..rows {
+        if t[k] <= t[k - 1] {
+            return Err(DataError::NonMonotonic {
+                file: file(),
+                line: line_of_row[k],
+                prev: t[k - 1],
+                next: t[k],
+            });
+        }
+    }
+    let ts = nominal.unwrap_or_else(|| {
+        let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+        d.sort_by(f64::total_cmp);
+        d[d.len() / 2]
+    });
+    for k in 1..rows {
+        let dt = t[k] - t[k - 1];
+        if (dt - ts).abs() > SAMPLE_INTERVAL_TOLERANCE * ts {
+            return Err(DataError::NonUniform {
+                file: file(),
+                line: line_of_row[k],
+                prev: t[k - 1],
+                next: t[k],
+                dt,
+                ts,
+            });
+        }
+    }
+    if let Some(cfg) = &excitation {
+        let fs = 1.0 / ts;
+        if (fs - f64::from(cfg.fs_hz)).abs() > SAMPLE_INTERVAL_TOLERANCE * fs {
+            let (ln, _) = &meta["fs_hz"];
+            return Err(DataError::BadMeta {
+                file: file(),
+                line: *ln,
+                key: "fs_hz".into(),
+                reason: format!(
+                    "{} Hz disagrees with the time column ({fs:.6} Hz)",
+                    cfg.fs_hz
+                ),
+            });
+        }
+    }
+    let t0 = t[0];
+    let r = map
+        .reference
+        .as_ref()
+        .map(|_| columns.pop().unwrap_or_default());
+    let y = columns.pop().unwrap_or_default();
+    let u = columns.pop().unwrap_or_default();
+    Ok(Dataset {
+        name: name.to_string(),
+        data: IdData { ts, u, y, r },
+        t0,
+        excitation,
+        meta: meta
+            .into_iter()
+            .filter(|(k, _)| !EXCITATION_KEYS.contains(&k.as_str()))
+            .map(|(k, (_, v))| (k, v))
+            .collect(),
+    })
+}
+
+fn parse_excitation(
+    meta: &BTreeMap<String, (usize, String)>,
+    file: &str,
+) -> Result<Option<ExcitationConfig>, DataError> {
+    if !EXCITATION_KEYS.iter().any(|k| meta.contains_key(*k)) {
+        return Ok(None);
+    }
+    let first_line = EXCITATION_KEYS
+        .iter()
+        .filter_map(|k| meta.get(*k).map(|(l, _)| *l))
+        .min()
+        .unwrap_or(1);
+    let get = |key: &str| -> Result<(usize, &str), DataError> {
+        meta.get(key)
+            .map(|(l, v)| (*l, v.as_str()))
+            .ok_or_else(|| DataError::BadMeta {
+                file: file.to_string(),
+                line: first_line,
+                key: key.to_string(),
+                reason: "missing: the excitation keys kind, fs_hz, period_samples, max_line, cutoff_hz, rms_rad, seed, ramp_samples, periods come together".into(),
+            })
+    };
+    fn num<T: std::str::FromStr>(
+        file: &str,
+        key: &str,
+        (line, v): (usize, &str),
+    ) -> Result<T, DataError> {
+        v.parse().map_err(|_| DataError::BadMeta {
+            file: file.to_string(),
+            line,
+            key: key.to_string(),
+            reason: format!("`{v}` is not a valid {}", std::any::type_name::<T>()),
+        })
+    }
+    let (kl, kv) = get("kind")?;
+    let kind = match kv {
+        "special_odd_multisine" => SignalKind::SpecialOddMultisine,
+        "random_odd_multisine" => SignalKind::RandomOddMultisine,
+        "band_limited_noise" => SignalKind::BandLimitedNoise,
+        other => {
+            return Err(DataError::BadMeta {
+                file: file.to_string(),
+                line: kl,
+                key: "kind".into(),
+                reason: format!(
+                    "unknown kind `{other}` (special_odd_multisine, random_odd_multisine, band_limited_noise)"
+                ),
+            })
+        }
+    };
+    let cfg = ExcitationConfig {
+        kind,
+        fs_hz: num(file, "fs_hz", get("fs_hz")?)?,
+        period_samples: num(file, "period_samples", get("period_samples")?)?,
+        max_line: num(file, "max_line", get("max_line")?)?,
+        cutoff_hz: num(file, "cutoff_hz", get("cutoff_hz")?)?,
+        rms_rad: num(file, "rms_rad", get("rms_rad")?)?,
+        seed: num(file, "seed", get("seed")?)?,
+        ramp_samples: num(file, "ramp_samples", get("ramp_samples")?)?,
+        periods: num(file, "periods", get("periods")?)?,
+    };
+    if cfg.fs_hz == 0 || cfg.period_samples < 2 {
+        let (l, _) = get("period_samples")?;
+        return Err(DataError::BadMeta {
+            file: file.to_string(),
+            line: l,
+            key: "period_samples".into(),
+            reason: "fs_hz must be positive and period_samples at least 2".into(),
+        });
+    }
+    Ok(Some(cfg))
+}
+
+/// Writes the `# key=value` lines of the capture CSV contract for `cfg`
+/// (the inverse of what [`parse_csv`] reads).
+pub fn excitation_comment_lines(cfg: &ExcitationConfig) -> String {
+    let kind = match cfg.kind {
+        SignalKind::SpecialOddMultisine => "special_odd_multisine",
+        SignalKind::RandomOddMultisine => "random_odd_multisine",
+        SignalKind::BandLimitedNoise => "band_limited_noise",
+    };
+    format!(
+        "# kind={kind}\n# fs_hz={}\n# period_samples={}\n# max_line={}\n# cutoff_hz={}\n# rms_rad={}\n# seed={}\n# ramp_samples={}\n# periods={}\n",
+        cfg.fs_hz,
+        cfg.period_samples,
+        cfg.max_line,
+        cfg.cutoff_hz,
+        cfg.rms_rad,
+        cfg.seed,
+        cfg.ramp_samples,
+        cfg.periods
+    )
+}
+
+/// Writes `ds` as a capture CSV: the excitation keys (when known),
+/// `sample_interval_s`, every other meta key, the header
+/// `t,theta_ref,u,theta_m` and one row per sample, numbers in shortest
+/// round-trip form, so [`parse_csv`] reads back exactly the same data. The
+/// rows are written by [`write_table`], the one capture CSV row writer.
+///
+/// # Errors
+/// [`std::io::ErrorKind::InvalidInput`] when the dataset has no reference
+/// (the capture header needs `theta_ref`), or a write error.
+pub fn write_capture_csv(out: &mut dyn std::io::Write, ds: &Dataset) -> std::io::Result<()> {
+    let r = ds.data.r.as_ref().ok_or_else(|| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("{}: no reference signal for the theta_ref column", ds.name),
+        )
+    })?;
+    let mut comments = ds
+        .excitation
+        .as_ref()
+        .map(excitation_comment_lines)
+        .unwrap_or_default();
+    comments.push_str(&format!("# sample_interval_s={}\n", ds.data.ts));
+    for (k, v) in &ds.meta {
+        if k != "sample_interval_s" && !k.contains('=') && !v.contains('\n') {
+            comments.push_str(&format!("# {k}={v}\n"));
+        }
+    }
+    let rows = r
+        .iter()
+        .zip(&ds.data.u)
+        .zip(&ds.data.y)
+        .enumerate()
+        .map(|(k, ((&rk, &uk), &yk))| [ds.t0 + k as f64 * ds.data.ts, rk, uk, yk]);
+    write_table(out, &comments, rows)
+}
+
+/// Writes a capture CSV from its parts: `comments` verbatim (whole `# key=value` lines),
+/// the header `t,theta_ref,u,theta_m`, then one row per `[t [s], θref [rad], u [N·m],
+/// θm [rad]]`, each number in its shortest form that reads back to the same `f64`
+/// (non-finite values as `NaN`, `inf`, `-inf`), written in 64 KiB blocks; flushes `out`
+/// at the end. The one writer of capture CSV rows ([`write_capture_csv`] and
+/// `capture::export::write_csv` call it).
+///
+/// # Errors
+/// Whatever `out` returns.
+pub fn write_table<W: Write + ?Sized>(
+    out: &mut W,
+    comments: &str,
+    rows: impl IntoIterator<Item = [f64; 4]>,
+) -> io::Result<()> {
+    out.write_all(comments.as_bytes())?;
+    if !comments.is_empty() && !comments.ends_with('\n') {
+        out.write_all(b"\n")?;
+    }
+    out.write_all(b"t,theta_ref,u,theta_m\n")?;
+    let mut fmt = zmij::Buffer::new();
+    let mut block = Vec::with_capacity(1 << 16);
+    for row in rows {
+        for (i, v) in row.into_iter().enumerate() {
+            if i > 0 {
+                block.push(b',');
+            }
+            block.extend_from_slice(fmt.format(v).as_bytes());
+        }
+        block.push(b'\n');
+        if block.len() >= (1 << 16) - 128 {
+            out.write_all(&block)?;
+            block.clear();
+        }
+    }
+    out.write_all(&block)?;
+    out.flush()
+}
+
+/// Reads a CSV file (see [`parse_csv`]).
+///
+/// # Errors
+/// [`DataError::Io`] when the file cannot be read, else as [`parse_csv`].
+pub fn load_csv(path: &Path, map: &ColumnMap) -> Result<Dataset, DataError> {
+    let name = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|source| DataError::Io {
+        file: name.clone(),
+        source,
+    })?;
+    parse_csv(&text, &name, map)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::PeriodLayout;
+
+    fn capture_text(extra_meta: &str, rows: &str) -> String {
+        format!("{extra_meta}t,theta_ref,u,theta_m\n{rows}")
+    }
+
+    fn cfg() -> ExcitationConfig {
+        ExcitationConfig {
+            kind: SignalKind::SpecialOddMultisine,
+            fs_hz: 1000,
+            period_samples: 4,
+            max_line: 1,
+            cutoff_hz: 50.0,
+            rms_rad: 0.01,
+            seed: 7,
+            ramp_samples: 2,
+            periods: 3,
+        }
+    }
+
+    #[test]
+    fn parse_csv_reads_capture_header_and_excitation_keys() {
+        let mut rows = String::new();
+        for k in 0..20 {
+            rows.push_str(&format!(
+                "{},{},{},{},9\n",
+                k as f64 * 0.001,
+                k,
+                2 * k,
+                3 * k
+            ));
+        }
+        let text = format!(
+            "# sample_interval_s=0.001\n# board=nucleo\n{}t,theta_ref,u,theta_m,extra\n{rows}",
+            excitation_comment_lines(&cfg())
+        );
+        let ds = parse_csv(&text, "cap.csv", &ColumnMap::capture()).unwrap();
+        assert_eq!(ds.excitation, Some(cfg()));
+        assert_eq!(ds.meta.get("board").map(String::as_str), Some("nucleo"));
+        assert!(!ds.meta.contains_key("kind"));
+        assert_eq!(ds.data.len(), 20);
+        assert_eq!(ds.data.u[3], 6.0);
+        assert_eq!(ds.data.y[3], 9.0);
+        assert_eq!(ds.data.r.as_ref().unwrap()[3], 3.0);
+        assert!((ds.data.ts - 0.001).abs() < 1e-15);
+        let lay = ds.period_layout(1).unwrap();
+        // ramp 2 + one settling period of 4, then 2 periods (3 - 1), not 4
+        assert_eq!(
+            lay,
+            PeriodLayout {
+                period: 4,
+                start: 6,
+                count: 2
+            }
+        );
+    }
+
+    #[test]
+    fn write_capture_csv_round_trips_through_parse_csv() {
+        let ds = Dataset {
+            name: "rt".into(),
+            data: IdData {
+                ts: 0.001,
+                u: (0..40).map(|k| (k as f64 * 0.37).sin() * 1e-3).collect(),
+                y: (0..40).map(|k| (k as f64 * 0.11).cos() / 3.0).collect(),
+                r: Some((0..40).map(|k| k as f64 / 7.0).collect()),
+            },
+            t0: 0.0,
+            excitation: Some(cfg()),
+            meta: [("board".to_string(), "sim".to_string())]
+                .into_iter()
+                .collect(),
+        };
+        let mut buf = Vec::new();
+        write_capture_csv(&mut buf, &ds).unwrap();
+        let back = parse_csv(
+            std::str::from_utf8(&buf).unwrap(),
+            "rt",
+            &ColumnMap::capture(),
+        )
+        .unwrap();
+        assert_eq!(back.data, ds.data);
+        assert_eq!(back.excitation, ds.excitation);
+        assert_eq!(back.meta.get("board").map(String::as_str), Some("sim"));
+        let mut no_ref = ds.clone();
+        no_ref.data.r = None;
+        assert!(write_capture_csv(&mut Vec::new(), &no_ref).is_err());
+    }
+
+    #[test]
+    fn parse_csv_errors_name_file_line_and_column() {
+        let bad = capture_text("", "0,0,0,0\n0.001,0,abc,0\n");
+        let e = parse_csv(&bad, "a.csv", &ColumnMap::capture()).unwrap_err();
+        assert_eq!(e.to_string(), "a.csv:3: column `u`: `abc` is not a number");
+
+        let nan = capture_text("# x=1\n", "0,0,0,0\n0.001,0,0,NaN\n");
+        let e = parse_csv(&nan, "b.csv", &ColumnMap::capture()).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "b.csv:4: column `theta_m`: value `NaN` is not finite"
+        );
+
+        let inf = capture_text("", "0,inf,0,0\n0.001,0,0,0\n");
+        let e = parse_csv(&inf, "b.csv", &ColumnMap::capture()).unwrap_err();
+        assert!(
+            e.to_string().starts_with("b.csv:2: column `theta_ref`"),
+            "{e}"
+        );
+
+        let short = capture_text("", "0,0,0,0\n0.001,0,0\n");
+        let e = parse_csv(&short, "c.csv", &ColumnMap::capture()).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "c.csv:3: column `theta_m` missing (row has 3 cells)"
+        );
+
+        let map = ColumnMap {
+            time: "t_s".into(),
+            input: "force".into(),
+            output: "q".into(),
+            reference: None,
+        };
+        let e = parse_csv("t_s,force_N,q\n0,1,2\n", "d.csv", &map).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "d.csv:1: column `force` not in header (have: t_s,force_N,q)"
+        );
+
+        let partial = capture_text("# kind=special_odd_multisine\n# fs_hz=1000\n", "0,0,0,0\n");
+        let e = parse_csv(&partial, "e.csv", &ColumnMap::capture()).unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("e.csv:1: `period_samples`: missing"),
+            "{e}"
+        );
+
+        let badkind = format!(
+            "{}t,theta_ref,u,theta_m\n0,0,0,0\n0.001,0,0,0\n",
+            excitation_comment_lines(&cfg()).replace("special_odd_multisine", "chirp")
+        );
+        let e = parse_csv(&badkind, "f.csv", &ColumnMap::capture()).unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("f.csv:1: `kind`: unknown kind `chirp`"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn parse_csv_rejects_non_uniform_and_non_monotonic_time() {
+        let gap = capture_text(
+            "",
+            "0,0,0,0\n0.001,0,0,0\n0.002,0,0,0\n0.004,0,0,0\n0.005,0,0,0\n",
+        );
+        let e = parse_csv(&gap, "g.csv", &ColumnMap::capture()).unwrap_err();
+        assert!(matches!(e, DataError::NonUniform { line: 5, .. }), "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("g.csv:5: non-uniform sampling: interval 0.002 s -> 0.004 s"),
+            "{e}"
+        );
+
+        let back = capture_text("", "0,0,0,0\n0.001,0,0,0\n0.0005,0,0,0\n");
+        let e = parse_csv(&back, "h.csv", &ColumnMap::capture()).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "h.csv:4: time not increasing: 0.001 s -> 0.0005 s"
+        );
+
+        // a 2 % jitter on one interval is caught even with a stated interval
+        let jit = capture_text(
+            "# sample_interval_s=0.001\n",
+            "0,0,0,0\n0.001,0,0,0\n0.00202,0,0,0\n0.003,0,0,0\n",
+        );
+        let e = parse_csv(&jit, "j.csv", &ColumnMap::capture()).unwrap_err();
+        assert!(matches!(e, DataError::NonUniform { line: 5, .. }), "{e}");
+    }
+
+    #[test]
+    fn parse_csv_accepts_bom_crlf_and_quoted_header() {
+        let text = "\u{feff}\"t\", \"theta_ref\",u,theta_m\r\n0,1,2,3\r\n0.5,1,2,3\r\n";
+        let ds = parse_csv(text, "w.csv", &ColumnMap::capture()).unwrap();
+        assert_eq!(ds.data.len(), 2);
+        assert_eq!(ds.data.y, vec![3.0, 3.0]);
+    }
+
+    #[test]
+    fn fs_hz_disagreeing_with_time_column_is_an_error() {
+        let text = format!(
+            "{}t,theta_ref,u,theta_m\n0,0,0,0\n0.002,0,0,0\n0.004,0,0,0\n",
+            excitation_comment_lines(&cfg())
+        );
+        let e = parse_csv(&text, "k.csv", &ColumnMap::capture()).unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("k.csv:2: `fs_hz`: 1000 Hz disagrees"),
+            "{e}"
+        );
+    }
+
+    /// `shared/data/<path>`: the first ancestor of the crate holding
+    /// `shared/data` (the repository sits beside `shared/`)
+    fn shared(path: &str) -> std::path::PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .ancestors()
+            .map(|a| a.join("shared/data"))
+            .find(|d| d.is_dir())
+            .expect("shared/data beside the repository")
+            .join(path)
+    }
+
+    #[test]
+    fn load_csv_reads_emps_and_daisy_with_column_mapping() {
+        let map = ColumnMap {
+            time: "t_s".into(),
+            input: "force_N".into(),
+            output: "qm_m".into(),
+            reference: None,
+        };
+        let ds = load_csv(&shared("emps/emps_train_DATA_EMPS.csv"), &map).unwrap();
+        assert_eq!(ds.data.len(), 24_841);
+        assert!((ds.data.ts - 1e-3).abs() < 1e-7, "{}", ds.data.ts);
+        assert!(ds.excitation.is_none() && ds.data.r.is_none());
+        let map = ColumnMap {
+            time: "t_assumed_s".into(),
+            input: "u_reaction_torque".into(),
+            output: "y_arm_acceleration".into(),
+            reference: None,
+        };
+        let ds = load_csv(&shared("daisy-robot-arm/robot_arm.csv"), &map).unwrap();
+        assert_eq!(ds.data.len(), 1024);
+        assert!((ds.data.ts - 0.01).abs() < 1e-12);
+        assert_eq!(ds.data.u[0], 0.22183165);
+        assert_eq!(ds.data.y[1], -0.11470789);
+    }
+}
