@@ -30,7 +30,7 @@ use jointid::ident::fit::{
     ParamJson,
 };
 use jointid::ident::frf::{analyze_dataset, FrfAnalysis};
-use jointid::ident::frf_fit::{self, Drive, FrfFit, FrfFitOptions, PERIODIC_FIT_NAME};
+use jointid::ident::frf_fit::{self, Drive, FitWarning, FrfFit, FrfFitOptions, PERIODIC_FIT_NAME};
 use jointid::ident::frf_subspace::black_box_frf;
 use jointid::ident::grey_box::{Output, DEFAULT_GEAR_RATIO};
 use jointid::ident::subspace::Method;
@@ -373,8 +373,13 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         current_loop_tau: args.current_loop_tau.unwrap_or(0.0),
     };
     let t0 = Instant::now();
-    let fitted = fit_prepared(&est, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
+    let mut fitted = fit_prepared(&est, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
     let seconds = t0.elapsed().as_secs_f64();
+    if opts.coulomb {
+        // nonlinear: no frequency-domain reference
+    } else if let Some(w) = below_frf(args, &ds, &fitted) {
+        fitted.warnings.push(w.to_string());
+    }
     let ev = fitted
         .evaluate_on(&est, args.lags)
         .map_err(|e| format!("{}: {e}", ds.name))?;
@@ -429,6 +434,35 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         warnings: fitted.warnings.clone(),
     };
     emit(ctx, &report, args.strict)
+}
+
+/// A time-domain fit on periodic data checked against the frequency-domain
+/// fit of the same model family: when its periodic steady-state FIT on the
+/// estimation record is more than 10 points below, the time-domain fit has
+/// followed something else than the joint (drift, a slow disturbance).
+fn below_frf(args: &FitArgs, ds: &Dataset, fitted: &Fitted) -> Option<FitWarning> {
+    let ts = ds.data.ts;
+    if (fitted.ts - ts).abs() > 1e-9 * ts {
+        return None;
+    }
+    let a = analyze_dataset(ds, args.settle_periods).ok()?;
+    let reference = match (args.model.structure(), args.model) {
+        (Some(structure), _) => {
+            let mut o = FrfFitOptions::new(structure, ts);
+            o.output = args.output_kind.into();
+            o.r = args.gear_ratio;
+            let ff = frf_fit::fit_frf(&a.frf, &o).ok()?;
+            ff.freq_response(&a.frf.freq_hz)
+        }
+        (None, ModelKind::BlackBox(n)) => black_box_frf(&a.frf, n, ts, args.feedthrough, 100)
+            .ok()?
+            .model
+            .freq_response(&a.frf.freq_hz),
+        _ => return None,
+    };
+    let frf_fit = frf_fit::periodic_fit_percent(&a.frf, &reference);
+    let fit = frf_fit::periodic_fit_percent(&a.frf, &fitted.model.freq_response(&a.frf.freq_hz));
+    (fit < frf_fit - 10.0).then_some(FitWarning::FitBelowFrf { fit, frf_fit })
 }
 
 /// prints the report; with `strict`, any warning fails the run

@@ -254,7 +254,9 @@ impl std::fmt::Display for FitWarning {
             ),
             FitWarning::FitBelowFrf { fit, frf_fit } => write!(
                 f,
-                "FIT {fit:.1} % is far below the {frf_fit:.1} % a model following the FRF reaches on the same data"
+                "its periodic steady-state FIT on the estimation data, {fit:.1} %, is far below the {frf_fit:.1} % \
+                 the same model family fitted to the FRF reaches (--domain frequency): the time-domain fit \
+                 followed something else than the joint (drift, a slow disturbance)"
             ),
         }
     }
