@@ -1,5 +1,5 @@
 //! `jointid demo`: the whole path on the built-in simulated joint, no board
-//! needed; `jointid experiment`: seed 000 Table 2 on simulated data.
+//! needed (`jointid experiment`, the table alone, is in `experiment.rs`).
 //!
 //! Demo steps ([`jointid::scenario::paper`]): simulate the IRB1400-like joint in
 //! its position loop (estimation run: special odd multisine; validation run:
@@ -25,9 +25,7 @@ use jointid::capture::jcap::write_stream;
 use jointid::ident::frf::analyze_dataset;
 use jointid::ident::validate::FrfBand;
 use jointid::report::plot::{analysis_spectrum_svg, bode_svg};
-use jointid::scenario::paper::{
-    decode_session, paper_runs, table, wire_options, write_table, Table, PAPER_MODELS,
-};
+use jointid::scenario::paper::{paper_runs, table, wire_options, write_table, Table, PAPER_MODELS};
 use jointid::sim::board::encode_session;
 
 /// Arguments of `jointid demo`.
@@ -39,17 +37,6 @@ pub struct DemoArgs {
     /// seed of the simulated runs (noise, excitation phases)
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub seed: u64,
-}
-
-/// Arguments of `jointid experiment`.
-#[derive(Debug, Clone, Args)]
-pub struct ExperimentArgs {
-    /// seed of the first simulated experiment
-    #[arg(long, value_name = "N", default_value_t = 1)]
-    pub seed: u64,
-    /// number of experiments (seeds N, N+1, ...); the mean FIT is printed too
-    #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=50))]
-    pub runs: u64,
 }
 
 #[derive(Serialize)]
@@ -185,66 +172,5 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
         writeln!(out, "  wrote {f}")?;
     }
     writeln!(out, "  done in {seconds:.1} s")?;
-    Ok(Outcome::Ok)
-}
-
-#[derive(Serialize)]
-struct ExperimentReport {
-    seeds: Vec<u64>,
-    tables: Vec<Table>,
-    mean_fit_estimation: Vec<(String, f64)>,
-    mean_fit_validation: Vec<(String, f64)>,
-}
-
-/// Runs `jointid experiment`.
-///
-/// # Errors
-/// Simulation, wire and fit errors.
-pub fn run_experiment(args: &ExperimentArgs, ctx: &mut Context<'_>) -> CmdResult {
-    let mut tables = Vec::new();
-    let seeds: Vec<u64> = (0..args.runs).map(|i| args.seed + i).collect();
-    for &seed in &seeds {
-        let runs = paper_runs(seed)?;
-        let est = decode_session(
-            &encode_session(&runs.est, &runs.est_excitation, &wire_options(1))?,
-            "estimation",
-        )?;
-        let val = decode_session(
-            &encode_session(&runs.val, &runs.val_excitation, &wire_options(2))?,
-            "validation",
-        )?;
-        let (t, _) = table(&est, &val, &runs.sim, &PAPER_MODELS)?;
-        if !ctx.json {
-            writeln!(ctx.out, "experiment seed {seed}:")?;
-            write_table(ctx.out, &t)?;
-        }
-        tables.push(t);
-    }
-    let mean = |f: &dyn Fn(&jointid::scenario::paper::ModelRow) -> f64| -> Vec<(String, f64)> {
-        (0..tables[0].rows.len())
-            .map(|i| {
-                let m = tables.iter().map(|t| f(&t.rows[i])).sum::<f64>() / tables.len() as f64;
-                (tables[0].rows[i].model.clone(), m)
-            })
-            .collect()
-    };
-    let me = mean(&|r| r.fit_estimation);
-    let mv = mean(&|r| r.fit_validation);
-    if ctx.json {
-        print_json(
-            ctx.out,
-            &ExperimentReport {
-                seeds,
-                tables,
-                mean_fit_estimation: me,
-                mean_fit_validation: mv,
-            },
-        )?;
-    } else if tables.len() > 1 {
-        writeln!(ctx.out, "mean over {} experiments:", tables.len())?;
-        for ((m, e), (_, v)) in me.iter().zip(&mv) {
-            writeln!(ctx.out, "  {m:<14} est {e:6.1}  val {v:6.1}")?;
-        }
-    }
     Ok(Outcome::Ok)
 }

@@ -27,6 +27,7 @@ mod analyze;
 mod args;
 mod capture;
 mod demo;
+mod experiment;
 mod export;
 mod fit;
 mod info;
@@ -64,7 +65,7 @@ pub enum Command {
     /// the whole path on the simulated joint, through the wire encoder (no board needed)
     Demo(demo::DemoArgs),
     /// seed 000 Table 2 on simulated IRB1400-like data (FIT of black box 11, three-, four-mass)
-    Experiment(demo::ExperimentArgs),
+    Experiment(experiment::ExperimentArgs),
     /// closed-loop joint simulator with switchable effects; writes a .jcap capture or a capture CSV
     Simulate(simulate::SimulateArgs),
 }
@@ -125,7 +126,7 @@ pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
         Command::Fit(a) => fit::run(a, ctx),
         Command::Validate(a) => validate_cmd::run(a, ctx),
         Command::Demo(a) => demo::run(a, ctx),
-        Command::Experiment(a) => demo::run_experiment(a, ctx),
+        Command::Experiment(a) => experiment::run(a, ctx),
         Command::Simulate(a) => simulate::run(a, ctx),
     }
 }

@@ -60,7 +60,7 @@ use crate::ident::fit::{default_f_min, fit_prepared, FitData, FitOptions, Fitted
 use crate::ident::grey_box::Output;
 use crate::ident::ss::StateSpace;
 use crate::ident::validate::fit_percent;
-use crate::sim::board::{BoardStreamError, WireOptions};
+use crate::sim::board::{encode_session, BoardStreamError, WireOptions};
 use crate::sim::{self, Mechanism, PlantKind, SimConfig, SimOutput};
 
 /// timer rate of the simulated board [Hz]
@@ -463,6 +463,25 @@ pub const PAPER_MODELS: [ModelKind; 3] = [
     ModelKind::FourMass,
 ];
 
+/// One experiment of seed 000 Table 2 for `seed`: the runs of [`paper_runs`] streamed by
+/// the simulated board ([`wire_options`] 1 and 2) and decoded back as captures are, then
+/// the [`table`] of [`PAPER_MODELS`].
+///
+/// # Errors
+/// Simulation, wire, decoding and fit errors ([`ExperimentError`]).
+pub fn experiment(seed: u64) -> Result<Table, ExperimentError> {
+    let runs = paper_runs(seed)?;
+    let est = decode_session(
+        &encode_session(&runs.est, &runs.est_excitation, &wire_options(1))?,
+        "estimation",
+    )?;
+    let val = decode_session(
+        &encode_session(&runs.val, &runs.val_excitation, &wire_options(2))?,
+        "validation",
+    )?;
+    Ok(table(&est, &val, &runs.sim, &PAPER_MODELS)?.0)
+}
+
 /// Prints `t` as seed 000 Table 2 (plus the true model's column).
 pub fn write_table(out: &mut dyn std::io::Write, t: &Table) -> std::io::Result<()> {
     let name = |m: &str| match m {
@@ -534,7 +553,6 @@ pub fn write_table(out: &mut dyn std::io::Write, t: &Table) -> std::io::Result<(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::board::encode_session;
 
     fn short_excitation() -> ExcitationConfig {
         ExcitationConfig {

@@ -1,0 +1,72 @@
+//! `jointid experiment`: seed 000 Table 2 on simulated IRB1400-like data, one table per
+//! seed ([`jointid::scenario::paper::experiment`]: simulated runs through the simulated
+//! board's wire and back, then the fits), and the mean FIT over the seeds.
+
+use clap::Args;
+use serde::Serialize;
+
+use super::{print_json, CmdResult, Context, Outcome};
+use jointid::scenario::paper::{experiment, write_table, ModelRow, Table};
+
+/// Arguments of `jointid experiment`.
+#[derive(Debug, Clone, Args)]
+pub struct ExperimentArgs {
+    /// seed of the first simulated experiment
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub seed: u64,
+    /// number of experiments (seeds N, N+1, ...); the mean FIT is printed too
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=50))]
+    pub runs: u64,
+}
+
+#[derive(Serialize)]
+struct ExperimentReport {
+    seeds: Vec<u64>,
+    tables: Vec<Table>,
+    mean_fit_estimation: Vec<(String, f64)>,
+    mean_fit_validation: Vec<(String, f64)>,
+}
+
+/// Runs `jointid experiment`.
+///
+/// # Errors
+/// Simulation, wire and fit errors.
+pub fn run(args: &ExperimentArgs, ctx: &mut Context<'_>) -> CmdResult {
+    let mut tables = Vec::new();
+    let seeds: Vec<u64> = (0..args.runs).map(|i| args.seed + i).collect();
+    for &seed in &seeds {
+        let t = experiment(seed)?;
+        if !ctx.json {
+            writeln!(ctx.out, "experiment seed {seed}:")?;
+            write_table(ctx.out, &t)?;
+        }
+        tables.push(t);
+    }
+    let mean = |f: &dyn Fn(&ModelRow) -> f64| -> Vec<(String, f64)> {
+        (0..tables[0].rows.len())
+            .map(|i| {
+                let m = tables.iter().map(|t| f(&t.rows[i])).sum::<f64>() / tables.len() as f64;
+                (tables[0].rows[i].model.clone(), m)
+            })
+            .collect()
+    };
+    let me = mean(&|r| r.fit_estimation);
+    let mv = mean(&|r| r.fit_validation);
+    if ctx.json {
+        print_json(
+            ctx.out,
+            &ExperimentReport {
+                seeds,
+                tables,
+                mean_fit_estimation: me,
+                mean_fit_validation: mv,
+            },
+        )?;
+    } else if tables.len() > 1 {
+        writeln!(ctx.out, "mean over {} experiments:", tables.len())?;
+        for ((m, e), (_, v)) in me.iter().zip(&mv) {
+            writeln!(ctx.out, "  {m:<14} est {e:6.1}  val {v:6.1}")?;
+        }
+    }
+    Ok(Outcome::Ok)
+}
