@@ -18,52 +18,20 @@ use jointid::ident::frf_fit::{fit_frf, FrfFitOptions};
 use jointid::ident::grey_box::{GreyBoxModel, Output};
 use jointid::ident::linalg::GaussRng;
 use jointid::model::spec::Structure;
-use jointid::sim::{
-    simulate_excitation, ControllerConfig, JointParams, Plant, PlantKind, SimConfig,
-};
+use jointid::sim::{simulate_excitation, Plant, PlantKind, SimConfig};
+use jointid::test_support::random_joint;
 
 fn main() {
     let draws: usize = std::env::var("DRAWS")
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(100);
-    let tunings = [
-        ControllerConfig::default(),
-        ControllerConfig {
-            kp: 10.0,
-            kv: 0.1,
-            ti: 0.1,
-            ..ControllerConfig::default()
-        },
-        ControllerConfig {
-            kp: 30.0,
-            kv: 0.35,
-            ti: f64::INFINITY,
-            current_loop_tau: 2.5e-4,
-            ..ControllerConfig::default()
-        },
-    ];
     let mut rng = GaussRng::new(2026);
     let (mut ok, mut wrong_warned, mut wrong_silent) = (0, 0, 0);
     let mut worst_time: f64 = 0.0;
     let mut total_time = 0.0;
     for d in 0..draws {
-        let mut p = JointParams::default();
-        for v in [
-            &mut p.j_m,
-            &mut p.j_a1,
-            &mut p.j_a2,
-            &mut p.k_g,
-            &mut p.k_a,
-            &mut p.d_g,
-            &mut p.d_a,
-            &mut p.f_m,
-        ] {
-            *v *= 1.0 + 0.3 * (2.0 * rng.uniform() - 1.0);
-        }
-        let rms = 0.01 * 40f64.powf(rng.uniform());
-        let mut controller = tunings[d % 3];
-        controller.u_max = 1e3;
+        let (p, controller, rms) = random_joint(&mut rng, d);
         let cfg = SimConfig {
             plant: Plant {
                 kind: PlantKind::ThreeMass,

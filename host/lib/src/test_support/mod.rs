@@ -129,3 +129,49 @@ pub fn capture_csv(cubic: f64, seed: u64) -> String {
     }
     text
 }
+
+/// One closed-loop joint of the robustness draws (the `fd_robustness` bench and
+/// the frequency-domain fit's tests): the default joint's eight three-mass
+/// parameters each scaled by U(0.7, 1.3), one of three controller tunings by
+/// `index % 3` (the default PI velocity loop; a softer one; a stiffer P loop
+/// with a faster current loop), torque limit lifted, and a reference RMS
+/// log-uniform in 0.01–0.4 rad.
+pub fn random_joint(
+    rng: &mut crate::ident::linalg::GaussRng,
+    index: usize,
+) -> (crate::sim::JointParams, crate::sim::ControllerConfig, f64) {
+    use crate::sim::{ControllerConfig, JointParams};
+    let tunings = [
+        ControllerConfig::default(),
+        ControllerConfig {
+            kp: 10.0,
+            kv: 0.1,
+            ti: 0.1,
+            ..ControllerConfig::default()
+        },
+        ControllerConfig {
+            kp: 30.0,
+            kv: 0.35,
+            ti: f64::INFINITY,
+            current_loop_tau: 2.5e-4,
+            ..ControllerConfig::default()
+        },
+    ];
+    let mut p = JointParams::default();
+    for v in [
+        &mut p.j_m,
+        &mut p.j_a1,
+        &mut p.j_a2,
+        &mut p.k_g,
+        &mut p.k_a,
+        &mut p.d_g,
+        &mut p.d_a,
+        &mut p.f_m,
+    ] {
+        *v *= 1.0 + 0.3 * (2.0 * rng.uniform() - 1.0);
+    }
+    let rms = 0.01 * 40f64.powf(rng.uniform());
+    let mut controller = tunings[index % 3];
+    controller.u_max = 1e3;
+    (p, controller, rms)
+}

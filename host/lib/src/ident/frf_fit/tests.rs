@@ -5,8 +5,7 @@ use crate::data::{Dataset, ExcitationConfig};
 use crate::ident::frf::analyze_dataset;
 use crate::ident::linalg::GaussRng;
 use crate::sim::{
-    parse_effects, simulate_excitation, ControllerConfig, JointParams, Plant, PlantKind,
-    SensorConfig, SimConfig,
+    parse_effects, simulate_excitation, JointParams, Plant, PlantKind, SensorConfig, SimConfig,
 };
 
 /// excitation of `jointid simulate` with `periods` full periods
@@ -181,42 +180,11 @@ fn three_mass_holds_under_a_tenfold_disturbance() {
 #[test]
 fn three_mass_over_random_joints_controllers_and_amplitudes() {
     // ±30 % joints, three controller tunings, 0.01–0.4 rad RMS
-    let tunings = [
-        ControllerConfig::default(),
-        ControllerConfig {
-            kp: 10.0,
-            kv: 0.1,
-            ti: 0.1,
-            ..ControllerConfig::default()
-        },
-        ControllerConfig {
-            kp: 30.0,
-            kv: 0.35,
-            ti: f64::INFINITY,
-            current_loop_tau: 2.5e-4,
-            ..ControllerConfig::default()
-        },
-    ];
     let mut rng = GaussRng::new(42);
     let draws = 8;
     let mut failed = Vec::new();
     for d in 0..draws {
-        let mut p = JointParams::default();
-        for v in [
-            &mut p.j_m,
-            &mut p.j_a1,
-            &mut p.j_a2,
-            &mut p.k_g,
-            &mut p.k_a,
-            &mut p.d_g,
-            &mut p.d_a,
-            &mut p.f_m,
-        ] {
-            *v *= 1.0 + 0.3 * (2.0 * rng.uniform() - 1.0);
-        }
-        let rms = 0.01 * 40f64.powf(rng.uniform());
-        let mut controller = tunings[d % 3];
-        controller.u_max = 1e3;
+        let (p, controller, rms) = crate::test_support::random_joint(&mut rng, d);
         let cfg = SimConfig {
             plant: Plant {
                 kind: PlantKind::ThreeMass,
