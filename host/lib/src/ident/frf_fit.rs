@@ -213,6 +213,14 @@ pub enum FitWarning {
         /// σ / |value|
         rel_std: f64,
     },
+    /// the FRF's top half-decade falls more slowly than the output kind
+    /// allows (an acceleration output, say, fitted as an angle)
+    OutputKind {
+        /// measured slope [dB/decade]
+        measured_db_per_decade: f64,
+        /// the slope the model's output kind has there [dB/decade]
+        expected_db_per_decade: f64,
+    },
     /// the FIT reached is far below what a model following the FRF reaches
     FitBelowFrf {
         /// the model's FIT [%]
@@ -251,6 +259,16 @@ impl std::fmt::Display for FitWarning {
                 f,
                 "{name} is poorly determined (σ = {:.0} % of its value): the data hardly constrain it",
                 100.0 * rel_std
+            ),
+            FitWarning::OutputKind {
+                measured_db_per_decade,
+                expected_db_per_decade,
+            } => write!(
+                f,
+                "the FRF falls by {:.0} dB/decade at the top of its band where this output kind falls by {:.0}: \
+                 is the output an acceleration? Then fit a black box with --feedthrough (or give the right \
+                 --output-kind)",
+                -measured_db_per_decade, -expected_db_per_decade
             ),
             FitWarning::FitBelowFrf { fit, frf_fit } => write!(
                 f,
@@ -1307,6 +1325,8 @@ fn check(fit: &FrfFit, opts: &LmOptions, frf: &Frf) -> Vec<FitWarning> {
             w.push(FitWarning::ExtraResonance { freq_hz: m.freq_hz });
         }
     }
+    let expected = -20.0 * rigid_power(fit.model.output) as f64;
+    w.extend(output_kind_check(frf, expected));
     for p in &fit.params {
         let rel = p.std / p.value.abs().max(f64::MIN_POSITIVE);
         if rel > POORLY_DETERMINED_REL {
@@ -1317,6 +1337,40 @@ fn check(fit: &FrfFit, opts: &LmOptions, frf: &Frf) -> Vec<FitWarning> {
         }
     }
     w
+}
+
+/// Slope of `20 log10 |Ĝ|` against `log10 f` over the reliable lines of the
+/// top half-decade of the band [dB/decade] (least squares; None with fewer
+/// than four lines).
+pub fn top_slope_db_per_decade(frf: &Frf) -> Option<f64> {
+    let top = frf.freq_hz.last().copied()?;
+    let pts: Vec<(f64, f64)> = reliable_lines(frf)
+        .into_iter()
+        .filter(|&i| frf.freq_hz[i] >= top / 10f64.sqrt())
+        .map(|i| (frf.freq_hz[i].log10(), 20.0 * frf.g[i].norm().log10()))
+        .collect();
+    if pts.len() < 4 {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let (mx, my) = (
+        pts.iter().map(|p| p.0).sum::<f64>() / n,
+        pts.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    (sxx > 0.0).then(|| sxy / sxx)
+}
+
+/// [`FitWarning::OutputKind`] when the FRF's top half-decade falls more than
+/// 20 dB/decade more slowly than `expected_db_per_decade` (−40 for an angle
+/// output of a strictly proper mechanical model, −20 for a velocity).
+pub fn output_kind_check(frf: &Frf, expected_db_per_decade: f64) -> Option<FitWarning> {
+    let measured = top_slope_db_per_decade(frf)?;
+    (measured > expected_db_per_decade + 20.0).then_some(FitWarning::OutputKind {
+        measured_db_per_decade: measured,
+        expected_db_per_decade,
+    })
 }
 
 /// widest spacing between the lines on either side of `f` [Hz]: a peak

@@ -28,7 +28,8 @@ use thiserror::Error;
 
 use crate::ident::frf::Frf;
 use crate::ident::frf_fit::{
-    solve_hessenberg, unit_circle, Cost, FitWarning, FrfModel, Lines, Problem, COST_RATIO_WARN,
+    output_kind_check, solve_hessenberg, unit_circle, Cost, FitWarning, FrfModel, Lines, Problem,
+    COST_RATIO_WARN,
 };
 use crate::ident::lm::{self, LeastSquares, LmOptions, Termination};
 use crate::ident::ss::StateSpace;
@@ -405,6 +406,10 @@ pub fn black_box_frf(
     let ratio = cost / expected_cost;
     if ratio > COST_RATIO_WARN {
         warnings.push(FitWarning::CostAboveNoise { ratio });
+    }
+    if !feedthrough {
+        // a strictly proper mechanical response falls by at least 20 dB/decade
+        warnings.extend(output_kind_check(frf, -20.0));
     }
     Ok(FrfBlackBox {
         model,

@@ -320,3 +320,26 @@ fn bad_options_are_refused() {
         Err(FrfFitError::TooFewLines { .. })
     ));
 }
+
+#[test]
+fn an_acceleration_output_is_recognised_by_the_slope_of_the_frf() {
+    // the default joint's angle FRF, turned into acceleration (−ω² G): flat
+    // above the modes, where an angle output falls by 40 dB/decade
+    let cfg = SimConfig {
+        sensors: SensorConfig::ideal(),
+        ..SimConfig::default()
+    };
+    let angle = frf_of(&cfg, &excitation(3, 0.02));
+    let slope = top_slope_db_per_decade(&angle).unwrap();
+    assert!((-45.0..-30.0).contains(&slope), "angle slope {slope}");
+    assert!(output_kind_check(&angle, -40.0).is_none());
+    let mut acc = angle.clone();
+    for (g, f) in acc.g.iter_mut().zip(&acc.freq_hz) {
+        *g *= -(2.0 * std::f64::consts::PI * f).powi(2);
+    }
+    for (s, f) in acc.sigma.iter_mut().zip(&acc.freq_hz) {
+        *s *= (2.0 * std::f64::consts::PI * f).powi(2);
+    }
+    let w = output_kind_check(&acc, -40.0).expect("acceleration not recognised");
+    assert!(w.to_string().contains("--feedthrough"), "{w}");
+}
