@@ -83,6 +83,9 @@ pub const COST_RATIO_WARN: f64 = 2.0;
 pub const MISSED_PEAK_DB: f64 = 6.0;
 /// a model and an FRF resonance match within this relative distance
 pub const PEAK_MATCH_REL: f64 = 0.05;
+/// a start whose SML cost is below this multiple of its expected value ends
+/// the search for starts
+const GOOD_START_RATIO: f64 = 3.0;
 /// relative standard deviation above which a parameter is "poorly determined"
 pub const POORLY_DETERMINED_REL: f64 = 0.5;
 
@@ -1030,8 +1033,10 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
     // pass 0: the strongest peaks; pass 1, when the FRF shows fewer peaks
     // than the structure has modes (two modes close together, one a
     // shoulder of the other) or no start came near the noise level:
-    // modes also placed around the strongest peaks
-    for pass in 0..2 {
+    // modes also placed around the strongest peaks. A start whose SML cost
+    // is already within a few times the noise level ends the search: it is
+    // in the basin of the estimate (a wrong mode costs orders of magnitude).
+    'search: for pass in 0..2 {
         let cand = if pass == 0 {
             let mut c: Vec<f64> = peaks.iter().take(n_res + 2).map(|p| p.freq_hz).collect();
             c.sort_by(f64::total_cmp);
@@ -1096,6 +1101,9 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
                         cost: c,
                         opts: o,
                     });
+                    if c < GOOD_START_RATIO * expected {
+                        break 'search;
+                    }
                 }
             }
         }
@@ -1195,14 +1203,37 @@ fn structure_name(s: Structure) -> &'static str {
     }
 }
 
+/// The four-mass model's two branches on `J_a1`, `(J_a2, k_a, d_a)` and
+/// `(J_p, k_p, d_p)` (seed 000 eq. (7)), enter the motor-side response alike:
+/// swapping them changes nothing the data can see. The fit reports the
+/// softer branch as `(J_a2, k_a, d_a)` (as in the default joint and seed
+/// 000 Table 1, where the parallel mass sits on the stiffer spring).
+fn canonical_four_mass(c: &mut Candidate) {
+    const PAIRS: [(usize, usize); 3] = [(2, 3), (5, 6), (8, 9)];
+    if c.theta[5] <= c.theta[6] {
+        return;
+    }
+    for (i, j) in PAIRS {
+        c.theta.swap(i, j);
+        c.start.swap(i, j);
+        c.fit.theta.swap(i, j);
+        c.fit.std.swap(i, j);
+        c.fit.cov.swap_rows(i, j);
+        c.fit.cov.swap_columns(i, j);
+    }
+}
+
 fn finish(
     model: GreyBoxModel,
     frf: &Frf,
-    best: Candidate,
+    mut best: Candidate,
     peaks: Vec<FrfPeak>,
     starts: usize,
     fixed_drive: [bool; 2],
 ) -> FrfFit {
+    if model.structure == Structure::FourMass {
+        canonical_four_mass(&mut best);
+    }
     let names = model.structure.param_names();
     let nm = names.len();
     let th = &best.theta;

@@ -248,13 +248,15 @@ fn wrong_structures_are_flagged() {
 }
 
 #[test]
-fn four_mass_is_right_or_says_so() {
-    // the default four-mass joint hides one mode (its FRF shows two peaks)
+fn four_mass_on_its_own_joint_despite_a_hidden_mode() {
+    // the default four-mass joint hides one mode (its FRF shows two peaks);
+    // its two branches on J_a1 are interchangeable and reported softer first
     let cfg = SimConfig {
         plant: Plant::new(PlantKind::FourMass),
         ..SimConfig::default()
     };
     let frf = frf_of(&cfg, &excitation(4, 0.02));
+    assert!(frf_peaks(&frf, Output::Angle).len() < 3);
     let fit = fit_frf(&frf, &FrfFitOptions::new(Structure::FourMass, 5e-4)).unwrap();
     let bad = misses(
         &fit,
@@ -262,10 +264,8 @@ fn four_mass_is_right_or_says_so() {
         0.03,
         3.0,
     );
-    assert!(
-        bad.is_empty() || !fit.warnings.is_empty(),
-        "wrong and silent: {bad:?}"
-    );
+    assert!(bad.is_empty(), "{bad:?} {:?}", fit.warnings);
+    assert!(fit.warnings.is_empty(), "{:?}", fit.warnings);
 }
 
 #[test]
