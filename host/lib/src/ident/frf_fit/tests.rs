@@ -343,3 +343,37 @@ fn an_acceleration_output_is_recognised_by_the_slope_of_the_frf() {
     let w = output_kind_check(&acc, -40.0).expect("acceleration not recognised");
     assert!(w.to_string().contains("--feedthrough"), "{w}");
 }
+
+#[test]
+fn a_drive_with_a_delay_and_no_current_loop_is_told_from_one_with_a_lag() {
+    // another drive: no current-loop lag, a one-sample transport delay
+    let mut cfg = SimConfig {
+        effects: parse_effects(&["time_delay:samples=1"]).unwrap(),
+        ..SimConfig::default()
+    };
+    cfg.controller.current_loop_tau = 1e-7;
+    let frf = frf_of(&cfg, &excitation(4, 0.05));
+    let fit = fit_frf(&frf, &FrfFitOptions::new(Structure::ThreeMass, 5e-4)).unwrap();
+    let bad = misses(
+        &fit,
+        &truth(&cfg.plant.params, Structure::ThreeMass),
+        0.03,
+        3.0,
+    );
+    assert!(bad.is_empty(), "{bad:?} {:?}", fit.warnings);
+    // lag and delay are nearly collinear below the modes: what must hold is
+    // the total low-frequency phase lag, lag + delay ≈ 1 sample
+    let total = fit.lag.value + fit.delay.value;
+    assert!(
+        (total - 1.0).abs() < 0.1,
+        "lag {:?} delay {:?}",
+        fit.lag,
+        fit.delay
+    );
+    assert!(
+        fit.delay.value > 0.9,
+        "the delay was taken for a lag: {:?}",
+        fit.lag
+    );
+    assert!(fit.warnings.is_empty(), "{:?}", fit.warnings);
+}
