@@ -454,7 +454,7 @@ fn below_frf(args: &FitArgs, ds: &Dataset, fitted: &Fitted) -> Option<FitWarning
             let ff = frf_fit::fit_frf(&a.frf, &o).ok()?;
             ff.freq_response(&a.frf.freq_hz)
         }
-        (None, ModelKind::BlackBox(n)) => black_box_frf(&a.frf, n, ts, args.feedthrough, 100)
+        (None, ModelKind::BlackBox(n)) => black_box_frf(&a.frf, n, ts, args.feedthrough, 40)
             .ok()?
             .model
             .freq_response(&a.frf.freq_hz),
@@ -509,7 +509,7 @@ fn run_frequency_domain(
             fitted_of(args, &ff, analysis, est.decimate)
         }
         (None, ModelKind::BlackBox(n)) => {
-            let iters = if args.no_refine { 0 } else { 100 };
+            let iters = if args.no_refine { 0 } else { 40 };
             let bb = black_box_frf(&analysis.frf, n, ts, args.feedthrough, iters)
                 .map_err(|e| format!("{}: {e}", ds.name))?;
             Fitted {

@@ -198,7 +198,7 @@ fn frequency_domain_case(n: usize, td_seconds: f64) {
     // the 11th-order black box on the same lines, against the true model on
     // a second record
     let t = Instant::now();
-    let bb = black_box_frf(&a.frf, 11, TS, false, 100).expect("black box");
+    let bb = black_box_frf(&a.frf, 11, TS, false, 40).expect("black box");
     let t_bb = t.elapsed().as_secs_f64();
     let val = analyze_dataset(&record(2), 1).expect("frf").frf;
     let true_model = DrivenModel {
