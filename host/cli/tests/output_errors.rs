@@ -117,3 +117,67 @@ fn a_full_device_ends_every_writer_with_exit_2_naming_the_file() {
     assert_write_error(&o, "standard output", "simulate summary");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// runs `jointid args` with its standard output on a pipe whose reader reads `keep`
+/// bytes and then closes it (`| head -c keep`)
+fn to_closed_pipe(args: &[&str], keep: usize) -> (std::process::ExitStatus, String) {
+    use std::io::Read;
+    let mut child = Command::new(BIN)
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run jointid");
+    let mut stdout = child.stdout.take().unwrap();
+    let mut head = vec![0u8; keep];
+    stdout.read_exact(&mut head).unwrap();
+    drop(stdout);
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(!err.contains("panicked"), "{args:?}: {err}");
+    (o.status, err)
+}
+
+/// exit 0 or killed by SIGPIPE
+fn assert_quiet_end(status: std::process::ExitStatus, what: &str) {
+    use std::os::unix::process::ExitStatusExt;
+    assert!(
+        status.code() == Some(0) || status.signal() == Some(13),
+        "{what}: {status:?}"
+    );
+}
+
+#[test]
+fn a_closed_pipe_ends_quietly_without_a_panic() {
+    let dir = tmpdir("pipe");
+    let jcap = capture(&dir);
+    let jcap = jcap.to_str().unwrap();
+    let sim = dir.join("sim.jcap");
+    let cases: [(&[&str], usize); 5] = [
+        (&["export", jcap, "--csv", "-"], 10),
+        (&["export", jcap, "--csv", "-"], 0),
+        (&["--json", "info", jcap], 0),
+        (&["info", jcap], 0),
+        (
+            &[
+                "--json",
+                "simulate",
+                "--periods",
+                "1",
+                "--out",
+                sim.to_str().unwrap(),
+            ],
+            0,
+        ),
+    ];
+    for (args, keep) in cases {
+        let (status, err) = to_closed_pipe(args, keep);
+        assert!(err.is_empty(), "{args:?}: {err}");
+        assert_quiet_end(status, &format!("{args:?} | head -c {keep}"));
+    }
+    // a command that fails still fails (its message goes to standard error when the pipe
+    // is already gone)
+    let (status, _) = to_closed_pipe(&["--json", "info", "/nonexistent/x.jcap"], 0);
+    assert_eq!(status.code(), Some(2));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
