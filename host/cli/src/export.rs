@@ -5,10 +5,11 @@
 //! half-written export never looks complete; `--csv -` writes to stdout.
 //! Exit status: 0 exported, 1 `--strict` and something is missing or damaged, 2 error.
 
+use std::io::Write;
 use std::path::PathBuf;
 
 use super::{CmdResult, Context, Outcome};
-use jointid::capture::{export, read_jcap, CaptureError};
+use jointid::capture::{export, read_jcap};
 
 /// Arguments of `jointid export`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
@@ -29,22 +30,22 @@ pub struct ExportArgs {
 /// `--csv -`, where the output is the CSV).
 ///
 /// # Errors
-/// Reading the capture ([`CaptureError::Jcap`], [`CaptureError::NoHeader`],
-/// [`CaptureError::Excitation`]) or writing the CSV ([`CaptureError::Export`]).
+/// Reading the capture ([`jointid::capture::CaptureError::Jcap`], [`jointid::capture::CaptureError::NoHeader`],
+/// [`jointid::capture::CaptureError::Excitation`]) or writing the CSV ([`jointid::capture::CaptureError::Export`]).
 pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
     let record = read_jcap(&args.input)?;
     let to_stdout = args.csv.as_os_str() == "-";
     if to_stdout {
         let mut w = std::io::BufWriter::new(&mut *ctx.out);
-        export::write_csv(&record, &mut w).map_err(|source| CaptureError::Export {
-            path: args.csv.clone(),
-            err: source,
-        })?;
+        // errors name standard output (see main.rs)
+        export::write_csv(&record, &mut w)?;
+        w.into_inner().map_err(|e| e.into_error())?;
     } else {
         export::export_csv(&record, &args.csv)?;
     }
     let r = &record.report;
-    eprintln!(
+    let _ = writeln!(
+        std::io::stderr(),
         "exported {} samples to {} ({} gaps, {} samples missing, {} damaged frames)",
         record.samples.len(),
         args.csv.display(),

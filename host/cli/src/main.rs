@@ -154,15 +154,67 @@ pub fn write_svg(path: &std::path::Path, svg: &str) -> Result<(), WriteError> {
 
 /// Prints `value` as pretty JSON on `out`.
 ///
+/// The document is serialised first and then written, so a write error reaches the
+/// caller as the [`std::io::Error`] itself (a closed pipe stays recognisable) rather than
+/// inside a `serde_json::Error`.
+///
 /// # Errors
 /// Serialisation or write errors.
 pub fn print_json<T: serde::Serialize>(
     out: &mut dyn Write,
     value: &T,
 ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
-    serde_json::to_writer_pretty(&mut *out, value)?;
-    writeln!(out)?;
+    let mut text = serde_json::to_vec_pretty(value)?;
+    text.push(b'\n');
+    out.write_all(&text)?;
     Ok(())
+}
+
+/// The binary's standard output: every write and flush error names it ("standard
+/// output: ..."), keeping the error's kind (a closed pipe is still
+/// [`std::io::ErrorKind::BrokenPipe`]).
+struct StdOut<W>(W);
+
+impl<W: Write> StdOut<W> {
+    fn named(e: std::io::Error) -> std::io::Error {
+        let mut msg = e.to_string();
+        if let Some(i) = msg.find(" (os error ") {
+            msg.truncate(i);
+        }
+        std::io::Error::new(e.kind(), format!("standard output: {msg}"))
+    }
+}
+
+impl<W: Write> Write for StdOut<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0.write(buf).map_err(Self::named)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.0.flush().map_err(Self::named)
+    }
+}
+
+/// True when `e` or one of its causes is a closed pipe.
+fn is_broken_pipe(e: &(dyn std::error::Error + 'static)) -> bool {
+    let mut cur = Some(e);
+    while let Some(c) = cur {
+        if c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+        {
+            return true;
+        }
+        cur = c.source();
+    }
+    false
+}
+
+/// Prints one line of the program's own (an error) on standard output, or on standard
+/// error when standard output cannot take it; never panics.
+fn print_line_stdout(line: &str) {
+    let mut out = std::io::stdout().lock();
+    if writeln!(out, "{line}").and_then(|()| out.flush()).is_err() {
+        let _ = writeln!(std::io::stderr(), "{line}");
+    }
 }
 
 fn main() -> ExitCode {
@@ -177,17 +229,16 @@ fn main() -> ExitCode {
                 .filter(|l| !l.is_empty())
                 .collect();
             let msg = lines.join(" ");
-            println!(
-                "{}",
-                serde_json::json!({ "error": msg.trim_start_matches("error: ") })
+            print_line_stdout(
+                &serde_json::json!({ "error": msg.trim_start_matches("error: ") }).to_string(),
             );
             return ExitCode::from(2);
         }
         Err(e) => e.exit(),
     };
     let loaders = default_loaders();
-    let mut stdout = std::io::stdout().lock();
-    let result = run(
+    let mut stdout = StdOut(std::io::stdout().lock());
+    let mut result = run(
         &cli,
         &mut Context {
             json: cli.json,
@@ -195,16 +246,17 @@ fn main() -> ExitCode {
             out: &mut stdout,
         },
     );
+    // what is still buffered must reach the output too: a failed flush is an error
+    if let Err(e) = stdout.flush() {
+        if result.is_ok() {
+            result = Err(e.into());
+        }
+    }
+    drop(stdout);
     // output closed early (`jointid analyze x.csv | head`): stop quietly
     if let Err(e) = &result {
-        let mut cur: Option<&(dyn std::error::Error + 'static)> = Some(e.as_ref());
-        while let Some(c) = cur {
-            if c.downcast_ref::<std::io::Error>()
-                .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
-            {
-                return ExitCode::SUCCESS;
-            }
-            cur = c.source();
+        if is_broken_pipe(e.as_ref()) {
+            return ExitCode::SUCCESS;
         }
     }
     match result.map_err(anyhow::Error::from_boxed) {
@@ -220,9 +272,9 @@ fn main() -> ExitCode {
             }
             let msg = msg.replace('\n', " ");
             if cli.json {
-                println!("{}", serde_json::json!({ "error": msg }));
+                print_line_stdout(&serde_json::json!({ "error": msg }).to_string());
             } else {
-                eprintln!("jointid: error: {msg}");
+                let _ = writeln!(std::io::stderr(), "jointid: error: {msg}");
             }
             ExitCode::from(2)
         }

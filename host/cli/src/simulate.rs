@@ -393,8 +393,14 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         OutFormat::Csv => {
             let file = std::fs::File::create(&args.out).map_err(write_err(&args.out))?;
             let mut w = std::io::BufWriter::new(file);
-            write_capture_csv(&mut w, &to_dataset(&out, &cfg, &exc))
-                .map_err(write_err(&args.out))?;
+            if let Err(e) = write_capture_csv(&mut w, &to_dataset(&out, &cfg, &exc)) {
+                drop(w);
+                // no half-written CSV left behind (a device or pipe is left alone)
+                if std::fs::metadata(&args.out).is_ok_and(|m| m.is_file()) {
+                    let _ = std::fs::remove_file(&args.out);
+                }
+                return Err(write_err(&args.out)(e).into());
+            }
             (None, None)
         }
     };

@@ -775,3 +775,66 @@ fn capture_stops_cleanly_on_ctrl_c_with_the_summary_and_a_complete_file() {
     assert_eq!(&std::fs::read(&out).unwrap()[8..], &s.bytes[..cut]);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn export_refuses_a_capture_whose_scale_makes_samples_not_finite() {
+    use jointid::sim::board::{encode_stream, StreamLayout};
+    use jointid_core::wire::{RawSample, Scale, SessionHeader, PROTOCOL_VERSION};
+    let dir = tmpdir("inf-scale");
+    let excitation = SynthOptions::small().excitation;
+    let header = SessionHeader {
+        protocol_version: PROTOCOL_VERSION,
+        board_id: 1,
+        session_id: 2,
+        sample_rate_hz: excitation.fs_hz,
+        timer_hz: 1_000_000,
+        excitation,
+        scale: Scale {
+            torque_nm_per_count: 1e-3,
+            angle_rad_per_count: f32::INFINITY,
+        },
+    };
+    let r = jointid_core::excitation::generate(&excitation).unwrap();
+    let samples = r.iter().enumerate().map(|(k, &r)| {
+        (
+            RawSample {
+                seq: k as u32,
+                tick: 5000 * k as u32,
+                torque: 1,
+                angle: 1,
+            },
+            r,
+        )
+    });
+    let layout = StreamLayout {
+        batch_len: 16,
+        status_every: 4,
+        overruns: 0,
+        end: true,
+    };
+    let stream = encode_stream(&header, samples, 5000, &layout).unwrap();
+    let jcap = dir.join("inf.jcap");
+    jointid::capture::jcap::write_stream(&jcap, &stream.bytes).unwrap();
+    let csv = dir.join("inf.csv");
+    let o = jointid(&[
+        "export",
+        jcap.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains(csv.to_str().unwrap()), "{err}");
+    assert!(
+        err.contains("data row 1 (sample 0): theta_m = inf is not a finite number"),
+        "{err}"
+    );
+    assert!(!csv.exists());
+    assert_eq!(
+        std::fs::read_dir(&dir).unwrap().count(),
+        1,
+        "only the capture"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

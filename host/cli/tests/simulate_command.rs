@@ -150,3 +150,57 @@ fn simulate_bad_arguments_end_with_one_line_and_exit_2() {
     assert!(!dir.join("x.jcap").exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `jointid simulate args...` must end with exit 2 and one line on stderr containing every
+/// one of `msgs`, leaving no `out`
+fn assert_refused(args: &[&str], out: &std::path::Path, msgs: &[&str]) {
+    let o = jointid(args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+    assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
+    for m in msgs {
+        assert!(err.contains(m), "{args:?}: `{m}` not in {err}");
+    }
+    assert!(!out.exists(), "{args:?} left {}", out.display());
+}
+
+#[test]
+fn simulate_stops_at_the_first_non_finite_sample_and_never_clamps_to_the_wire() {
+    let dir = tmpdir("nonfinite");
+    // a softening cubic spring of -1e20 N·m/rad³ diverges: named sample and effect, no file
+    for name in ["nl.jcap", "nl.csv"] {
+        let out = dir.join(name);
+        assert_refused(
+            &[
+                "simulate",
+                "--model",
+                "nonlinear-two-mass",
+                "--effect",
+                "nonlinear_stiffness:k3=-1e20",
+                "--periods",
+                "1",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            &out,
+            &["not finite at sample ", "nonlinear_stiffness:k3="],
+        );
+    }
+    // a torque ripple of 1e30 N·m drives theta_m far beyond the i32 counts of the wire:
+    // refused, not clipped
+    let out = dir.join("ripple.jcap");
+    assert_refused(
+        &[
+            "simulate",
+            "--effect",
+            "torque_ripple:amplitude=1e30",
+            "--periods",
+            "1",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &out,
+        &["theta_m", "outside the wire's range", "sample "],
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -117,18 +117,38 @@ pub fn write_csv(record: &CaptureRecord, out: &mut impl Write) -> io::Result<()>
 }
 
 /// Writes the capture CSV to `path` atomically: into `path.tmp`, then renamed, so a
-/// reader never sees half an export.
+/// reader never sees half an export. A `path` that exists and is no regular file (a
+/// device such as `/dev/stdout`, a pipe) is written in place, never replaced; a symlink
+/// to a regular file is followed (the file it names is replaced, not the link). Every
+/// write and the final flush are checked.
 ///
 /// # Errors
 /// [`CaptureError::Export`] naming the file that could not be written.
 pub fn export_csv(record: &CaptureRecord, path: &Path) -> Result<(), CaptureError> {
-    let mut tmp = path.as_os_str().to_os_string();
-    tmp.push(".tmp");
-    let tmp = std::path::PathBuf::from(tmp);
     let err = |source| CaptureError::Export {
         path: path.to_path_buf(),
         err: source,
     };
+    let target = match std::fs::canonicalize(path) {
+        Ok(resolved) => {
+            let meta = std::fs::metadata(&resolved).map_err(err)?;
+            if !meta.is_file() {
+                let file = std::fs::OpenOptions::new()
+                    .write(true)
+                    .open(&resolved)
+                    .map_err(err)?;
+                let mut w = io::BufWriter::with_capacity(1 << 16, file);
+                write_csv(record, &mut w).map_err(err)?;
+                return w.into_inner().map(drop).map_err(|e| err(e.into_error()));
+            }
+            resolved
+        }
+        Err(_) => path.to_path_buf(),
+    };
+    let path = target.as_path();
+    let mut tmp = path.as_os_str().to_os_string();
+    tmp.push(".tmp");
+    let tmp = std::path::PathBuf::from(tmp);
     let result = (|| {
         let file = std::fs::File::create(&tmp)?;
         let mut w = io::BufWriter::with_capacity(1 << 16, file);

@@ -347,12 +347,13 @@ pub fn write_capture_csv(out: &mut dyn std::io::Write, ds: &Dataset) -> std::io:
 /// Writes a capture CSV from its parts: `comments` verbatim (whole `# key=value` lines),
 /// the header `t,theta_ref,u,theta_m`, then one row per `[t [s], θref [rad], u [N·m],
 /// θm [rad]]`, each number in its shortest form that reads back to the same `f64`
-/// (non-finite values as `NaN`, `inf`, `-inf`), written in 64 KiB blocks; flushes `out`
-/// at the end. The one writer of capture CSV rows ([`write_capture_csv`] and
-/// `capture::export::write_csv` call it).
+/// written in 64 KiB blocks; flushes `out` at the end. The one writer of capture CSV
+/// rows ([`write_capture_csv`] and `capture::export::write_csv` call it).
 ///
 /// # Errors
-/// Whatever `out` returns.
+/// Whatever `out` returns; [`io::ErrorKind::InvalidData`] naming the row and the column
+/// of the first value that is not finite (NaN or infinite is never written as data; the
+/// rows before it may have been written).
 pub fn write_table<W: Write + ?Sized>(
     out: &mut W,
     comments: &str,
@@ -365,8 +366,19 @@ pub fn write_table<W: Write + ?Sized>(
     out.write_all(b"t,theta_ref,u,theta_m\n")?;
     let mut fmt = zmij::Buffer::new();
     let mut block = Vec::with_capacity(1 << 16);
-    for row in rows {
+    const COLUMNS: [&str; 4] = ["t", "theta_ref", "u", "theta_m"];
+    for (k, row) in rows.into_iter().enumerate() {
         for (i, v) in row.into_iter().enumerate() {
+            if !v.is_finite() {
+                return Err(io::Error::new(
+                    io::ErrorKind::InvalidData,
+                    format!(
+                        "data row {} (sample {k}): {} = {v} is not a finite number; not written",
+                        k + 1,
+                        COLUMNS[i]
+                    ),
+                ));
+            }
             if i > 0 {
                 block.push(b',');
             }
@@ -632,5 +644,28 @@ mod tests {
         assert!((ds.data.ts - 0.01).abs() < 1e-12);
         assert_eq!(ds.data.u[0], 0.22183165);
         assert_eq!(ds.data.y[1], -0.11470789);
+    }
+
+    #[test]
+    fn write_table_refuses_a_value_that_is_not_finite_naming_row_and_column() {
+        let mut out = Vec::new();
+        write_table(&mut out, "", [[0.0, 1.0, 2.0, 3.0]]).unwrap();
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            "t,theta_ref,u,theta_m\n0.0,1.0,2.0,3.0\n"
+        );
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            let mut out = Vec::new();
+            let err = write_table(&mut out, "", [[0.0, 1.0, 2.0, 3.0], [0.1, 1.0, 2.0, bad]])
+                .unwrap_err();
+            assert_eq!(err.kind(), std::io::ErrorKind::InvalidData);
+            assert_eq!(
+                err.to_string(),
+                format!(
+                    "data row 2 (sample 1): theta_m = {bad} is not a finite number; not written"
+                )
+            );
+            assert!(!String::from_utf8(out).unwrap().contains(&bad.to_string()));
+        }
     }
 }

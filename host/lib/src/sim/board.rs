@@ -18,7 +18,7 @@ use jointid_core::wire::{
     MAX_FRAME_LEN, PROTOCOL_VERSION,
 };
 
-use super::{SimConfig, SimOutput};
+use super::{SimConfig, SimOutput, WireRangeError};
 
 /// A message of a board stream did not fit a wire frame (a bug of the encoder's limits).
 #[derive(Debug, thiserror::Error)]
@@ -32,6 +32,9 @@ pub enum BoardStreamError {
         /// what the encoder said
         err: EncodeError,
     },
+    /// a sample the wire's counts cannot carry (never clamped)
+    #[error(transparent)]
+    Range(#[from] WireRangeError),
 }
 
 /// How a simulated run is put on the wire: the session header's identity and scale, the
@@ -106,14 +109,15 @@ impl WireOptions {
 /// timer_hz)`: `u` and `θm` rounded to counts of `opts.scale`.
 ///
 /// # Errors
-/// [`BoardStreamError::Frame`] if a message does not fit a frame.
+/// [`BoardStreamError::Range`] for a sample that is not finite or beyond the scale's
+/// `i32` counts; [`BoardStreamError::Frame`] if a message does not fit a frame.
 pub fn encode_session(
     out: &SimOutput,
     excitation: &ExcitationConfig,
     opts: &WireOptions,
 ) -> Result<Vec<u8>, BoardStreamError> {
     let header = opts.header(excitation);
-    let raw = out.to_raw_samples(&opts.scale, opts.timer_hz);
+    let raw = out.to_raw_samples(&opts.scale, opts.timer_hz)?;
     let tick_step = raw.get(1).map_or(0, |s| s.tick.wrapping_sub(raw[0].tick));
     let layout = StreamLayout {
         batch_len: opts.batch_len,

@@ -203,20 +203,47 @@ impl SimOutput {
 
     /// The measured signals as the board would stream them: `seq = k`, `tick = k ·
     /// timer_hz / fs` (wrapping), `torque = round(u / torque_nm_per_count)`,
-    /// `angle = round(θ_m / angle_rad_per_count)`, counts saturated to the `i32` range.
+    /// `angle = round(θ_m / angle_rad_per_count)`.
     /// `timer_hz` is the tick rate of [`jointid_core::wire::SessionHeader::timer_hz`].
-    pub fn to_raw_samples(&self, scale: &Scale, timer_hz: u32) -> Vec<RawSample> {
+    ///
+    /// # Errors
+    /// [`WireRangeError`] for the first value that is not finite or whose count does not
+    /// fit an `i32`: nothing is clamped.
+    pub fn to_raw_samples(
+        &self,
+        scale: &Scale,
+        timer_hz: u32,
+    ) -> Result<Vec<RawSample>, WireRangeError> {
         let step = (f64::from(timer_hz) * self.sample_interval_s).round() as u64;
-        let counts = |v: f64, per: f32| {
-            let c = (v / f64::from(per)).round();
-            c.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+        let counts = |index: usize, signal: &'static str, unit: &'static str, v: f64, per: f32| {
+            let per = f64::from(per);
+            let c = (v / per).round();
+            if c.is_finite() && c >= f64::from(i32::MIN) && c <= f64::from(i32::MAX) {
+                Ok(c as i32)
+            } else {
+                Err(WireRangeError {
+                    index,
+                    signal,
+                    value: v,
+                    unit,
+                    per_count: per,
+                })
+            }
         };
         (0..self.len())
-            .map(|k| RawSample {
-                seq: k as u32,
-                tick: (k as u64).wrapping_mul(step) as u32,
-                torque: counts(self.u[k], scale.torque_nm_per_count),
-                angle: counts(self.theta_m[k], scale.angle_rad_per_count),
+            .map(|k| {
+                Ok(RawSample {
+                    seq: k as u32,
+                    tick: (k as u64).wrapping_mul(step) as u32,
+                    torque: counts(k, "u", "N·m", self.u[k], scale.torque_nm_per_count)?,
+                    angle: counts(
+                        k,
+                        "theta_m",
+                        "rad",
+                        self.theta_m[k],
+                        scale.angle_rad_per_count,
+                    )?,
+                })
             })
             .collect()
     }
@@ -230,6 +257,27 @@ impl SimOutput {
             r: Some(self.theta_ref.clone()),
         }
     }
+}
+
+/// A measured value the wire cannot carry: not finite, or beyond the `i32` counts of its
+/// scale.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error(
+    "sample {index}: {signal} = {value:e} {unit} is outside the wire's range \
+     (|{signal}| ≤ {max:.4e} {unit}: i32 counts of {per_count:e} {unit}/count)",
+    max = f64::from(i32::MAX) * per_count.abs()
+)]
+pub struct WireRangeError {
+    /// sample index
+    pub index: usize,
+    /// `u` or `theta_m`
+    pub signal: &'static str,
+    /// the value in SI units
+    pub value: f64,
+    /// its unit
+    pub unit: &'static str,
+    /// the scale of one count [unit/count]
+    pub per_count: f64,
 }
 
 /// Why a configuration cannot be simulated.
@@ -271,6 +319,25 @@ pub enum SimError {
         index: usize,
         /// its value
         value: f64,
+    },
+    /// the run diverged: a state or a measured signal is NaN or infinite
+    #[error(
+        "simulation not finite at sample {index} (t = {t_s} s): {signal} = {value} \
+         (plant {plant}, effects: {effects})"
+    )]
+    NonFinite {
+        /// index of the first sample with a non-finite value
+        index: usize,
+        /// its time [s]
+        t_s: f64,
+        /// the state component or signal (`theta_m`, `u`, a state name)
+        signal: String,
+        /// its value
+        value: f64,
+        /// the plant's name
+        plant: &'static str,
+        /// the effects of the run with their parameters (`none` without effects)
+        effects: String,
     },
     /// invalid effect parameters (see [`Effect::check`])
     #[error("effect `{effect}`: {reason}")]
@@ -582,6 +649,34 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
         let meas = sensors.measure_theta(x[0]);
         let u = controller.step(r, meas);
         let u_rec = sensors.measure_u(u);
+        let bad_state = x[..nx]
+            .iter()
+            .position(|v| !v.is_finite())
+            .map(|i| (out.state_names[i].clone(), x[i]));
+        let bad = bad_state.or_else(|| {
+            [("theta_m", meas), ("u", u_rec), ("u_true", u)]
+                .into_iter()
+                .find(|(_, v)| !v.is_finite())
+                .map(|(n, v)| (n.to_string(), v))
+        });
+        if let Some((signal, value)) = bad {
+            return Err(SimError::NonFinite {
+                index: k,
+                t_s: k as f64 * ts,
+                signal,
+                value,
+                plant: cfg.plant.kind.label(),
+                effects: if cfg.effects.is_empty() {
+                    "none".to_string()
+                } else {
+                    cfg.effects
+                        .iter()
+                        .map(ToString::to_string)
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                },
+            });
+        }
         let w = sensors.next_disturbance();
         out.t.push(k as f64 * ts);
         out.u.push(u_rec);

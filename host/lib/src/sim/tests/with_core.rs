@@ -22,7 +22,7 @@ fn simulate_excitation_uses_the_core_generator_and_raw_samples_round_trip() {
         torque_nm_per_count: 1e-4,
         angle_rad_per_count: res as f32,
     };
-    let raw = out.to_raw_samples(&scale, 1_000_000);
+    let raw = out.to_raw_samples(&scale, 1_000_000).unwrap();
     assert_eq!(raw.len(), out.len());
     for (k, s) in raw.iter().enumerate().step_by(97) {
         assert_eq!(s.seq, k as u32);
@@ -75,4 +75,63 @@ fn all_effects_stay_bounded_on_every_geared_plant_at_large_amplitude() {
         let e = rel_err(&lp(&out.theta_m_true), &lp(&linear.theta_m_true));
         assert!(e < 0.2, "{kind:?}: {e}");
     }
+}
+
+#[test]
+fn raw_samples_refuse_what_the_wire_cannot_carry_instead_of_clamping() {
+    let mut exc = jointid_core::excitation::ExcitationConfig::paper_default();
+    exc.periods = 1;
+    let out = simulate_excitation(&SimConfig::default(), &exc).unwrap();
+    let scale = jointid_core::wire::Scale {
+        torque_nm_per_count: 1.0 / 1_048_576.0,
+        angle_rad_per_count: 1.0 / 1_048_576.0,
+    };
+    assert!(out.to_raw_samples(&scale, 1_000_000).is_ok());
+    let mut big = out.clone();
+    big.u[7] = 1e30;
+    let err = big.to_raw_samples(&scale, 1_000_000).unwrap_err();
+    assert_eq!((err.index, err.signal), (7, "u"));
+    assert!(
+        err.to_string()
+            .starts_with("sample 7: u = 1e30 N·m is outside the wire's range"),
+        "{err}"
+    );
+    let mut nan = out.clone();
+    nan.theta_m[3] = f64::NAN;
+    let err = nan.to_raw_samples(&scale, 1_000_000).unwrap_err();
+    assert_eq!((err.index, err.signal), (3, "theta_m"));
+    // exactly the largest count still fits, one more count does not
+    let mut edge = out;
+    edge.u[0] = f64::from(i32::MAX) / 1_048_576.0;
+    assert_eq!(
+        edge.to_raw_samples(&scale, 1_000_000).unwrap()[0].torque,
+        i32::MAX
+    );
+    edge.u[0] += 1.0 / 1_048_576.0;
+    assert!(edge.to_raw_samples(&scale, 1_000_000).is_err());
+}
+
+#[test]
+fn a_diverging_run_stops_with_the_first_non_finite_sample_and_the_effects() {
+    let mut exc = jointid_core::excitation::ExcitationConfig::paper_default();
+    exc.periods = 1;
+    let cfg = SimConfig {
+        plant: Plant::new(PlantKind::NonlinearTwoMass),
+        effects: parse_effects(&["nonlinear_stiffness:k3=-1e20".to_string()]).unwrap(),
+        ..SimConfig::default()
+    };
+    let err = simulate_excitation(&cfg, &exc).unwrap_err();
+    let SimError::NonFinite { index, .. } = &err else {
+        panic!("{err}")
+    };
+    assert!(
+        err.to_string()
+            .starts_with(&format!("simulation not finite at sample {index} (t = ")),
+        "{err}"
+    );
+    assert!(
+        err.to_string()
+            .contains("(plant nonlinear-two-mass, effects: nonlinear_stiffness:k3="),
+        "{err}"
+    );
 }

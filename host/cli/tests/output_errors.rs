@@ -1,0 +1,183 @@
+//! Output that cannot be written, run on the built binary: a full device (issue 13 item 6)
+//! and a closed pipe (item 18).
+//!
+//! The full device is `/dev/full`, reached through a symlink in the test's scratch
+//! directory, so that a writer that replaced its target (write a temporary file, rename
+//! it over the target) would replace the symlink, never the device.
+
+use std::fs::OpenOptions;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+#[allow(dead_code)] // not every helper is used here
+mod common;
+use common::{jointid, tmpdir, BIN};
+
+/// a one-period simulated capture in `dir`
+fn capture(dir: &Path) -> PathBuf {
+    let jcap = dir.join("run.jcap");
+    let o = jointid(&[
+        "simulate",
+        "--model",
+        "two-mass",
+        "--periods",
+        "1",
+        "--out",
+        jcap.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    jcap
+}
+
+/// `dir/name`, a symlink to `/dev/full`
+fn full_link(dir: &Path, name: &str) -> PathBuf {
+    let link = dir.join(name);
+    std::os::unix::fs::symlink("/dev/full", &link).unwrap();
+    link
+}
+
+/// runs `jointid args` with its standard output on `/dev/full`
+fn to_dev_full(args: &[&str]) -> Output {
+    let full = OpenOptions::new().write(true).open("/dev/full").unwrap();
+    Command::new(BIN)
+        .args(args)
+        .stdout(full)
+        .output()
+        .expect("run jointid")
+}
+
+/// exit 2, one line on stderr naming `file` and the device being full, no panic
+fn assert_write_error(o: &Output, file: &str, what: &str) {
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{what}: {err}");
+    assert!(!err.contains("panicked"), "{what}: {err}");
+    assert_eq!(err.lines().count(), 1, "{what}: {err}");
+    assert!(err.contains(file), "{what}: {err}");
+    assert!(err.contains("o space left on device"), "{what}: {err}");
+}
+
+#[test]
+fn a_full_device_ends_every_writer_with_exit_2_naming_the_file() {
+    let dir = tmpdir("full");
+    let jcap = capture(&dir);
+    let jcap = jcap.to_str().unwrap();
+
+    let csv = full_link(&dir, "full.csv");
+    let o = jointid(&["export", jcap, "--csv", csv.to_str().unwrap()]);
+    assert_write_error(&o, csv.to_str().unwrap(), "export --csv");
+    assert!(
+        std::fs::symlink_metadata(&csv)
+            .unwrap()
+            .file_type()
+            .is_symlink(),
+        "export replaced its target instead of writing to it"
+    );
+    let o = jointid(&["--json", "export", jcap, "--csv", csv.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(
+        v["error"].as_str().unwrap().contains(csv.to_str().unwrap()),
+        "{v}"
+    );
+
+    let o = to_dev_full(&["export", jcap, "--csv", "-"]);
+    assert_write_error(&o, "standard output", "export --csv -");
+    let o = to_dev_full(&["info", jcap]);
+    assert_write_error(&o, "standard output", "info");
+    let o = to_dev_full(&["--json", "info", jcap]);
+    assert_write_error(&o, "standard output", "info --json");
+    let o = to_dev_full(&["--json", "info", "/nonexistent/x.jcap"]);
+    assert_eq!(o.status.code(), Some(2), "{o:?}");
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"));
+
+    let out = full_link(&dir, "sim.csv");
+    let o = jointid(&["simulate", "--periods", "1", "--out", out.to_str().unwrap()]);
+    assert_write_error(&o, out.to_str().unwrap(), "simulate --out .csv");
+    let out = full_link(&dir, "sim.jcap");
+    let o = jointid(&["simulate", "--periods", "1", "--out", out.to_str().unwrap()]);
+    assert_write_error(&o, out.to_str().unwrap(), "simulate --out .jcap");
+    let params = full_link(&dir, "params.json");
+    let o = jointid(&[
+        "simulate",
+        "--periods",
+        "1",
+        "--out",
+        dir.join("p.csv").to_str().unwrap(),
+        "--params-out",
+        params.to_str().unwrap(),
+    ]);
+    assert_write_error(&o, params.to_str().unwrap(), "simulate --params-out");
+    let o = to_dev_full(&[
+        "simulate",
+        "--periods",
+        "1",
+        "--out",
+        dir.join("s.csv").to_str().unwrap(),
+    ]);
+    assert_write_error(&o, "standard output", "simulate summary");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// runs `jointid args` with its standard output on a pipe whose reader reads `keep`
+/// bytes and then closes it (`| head -c keep`)
+fn to_closed_pipe(args: &[&str], keep: usize) -> (std::process::ExitStatus, String) {
+    use std::io::Read;
+    let mut child = Command::new(BIN)
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run jointid");
+    let mut stdout = child.stdout.take().unwrap();
+    let mut head = vec![0u8; keep];
+    stdout.read_exact(&mut head).unwrap();
+    drop(stdout);
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(!err.contains("panicked"), "{args:?}: {err}");
+    (o.status, err)
+}
+
+/// exit 0 or killed by SIGPIPE
+fn assert_quiet_end(status: std::process::ExitStatus, what: &str) {
+    use std::os::unix::process::ExitStatusExt;
+    assert!(
+        status.code() == Some(0) || status.signal() == Some(13),
+        "{what}: {status:?}"
+    );
+}
+
+#[test]
+fn a_closed_pipe_ends_quietly_without_a_panic() {
+    let dir = tmpdir("pipe");
+    let jcap = capture(&dir);
+    let jcap = jcap.to_str().unwrap();
+    let sim = dir.join("sim.jcap");
+    let cases: [(&[&str], usize); 5] = [
+        (&["export", jcap, "--csv", "-"], 10),
+        (&["export", jcap, "--csv", "-"], 0),
+        (&["--json", "info", jcap], 0),
+        (&["info", jcap], 0),
+        (
+            &[
+                "--json",
+                "simulate",
+                "--periods",
+                "1",
+                "--out",
+                sim.to_str().unwrap(),
+            ],
+            0,
+        ),
+    ];
+    for (args, keep) in cases {
+        let (status, err) = to_closed_pipe(args, keep);
+        assert!(err.is_empty(), "{args:?}: {err}");
+        assert_quiet_end(status, &format!("{args:?} | head -c {keep}"));
+    }
+    // a command that fails still fails (its message goes to standard error when the pipe
+    // is already gone)
+    let (status, _) = to_closed_pipe(&["--json", "info", "/nonexistent/x.jcap"], 0);
+    assert_eq!(status.code(), Some(2));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
