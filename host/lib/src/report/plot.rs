@@ -250,7 +250,24 @@ pub fn bode_svg(
         .map(|m| unwrap_deg(m.response.iter().map(|g| g.arg().to_degrees())))
         .collect();
     model_phase.iter().for_each(|p| phs.extend(p));
-    let frf_phase = frf.map(|f| unwrap_deg(f.g.iter().map(|g| g.arg().to_degrees())));
+    // the FRF's phase on the branch of the first model's (within 180° of it
+    // at each line), else unwrapped along its lines: points that are sparse
+    // or noisy at low frequency otherwise land 360° away from the curve
+    let frf_phase = frf.map(|f| {
+        let mut ph = unwrap_deg(f.g.iter().map(|g| g.arg().to_degrees()));
+        if let (Some(m), Some(mp)) = (models.first(), model_phase.first()) {
+            for (p, fr) in ph.iter_mut().zip(&f.freq_hz) {
+                let i = m
+                    .freq_hz
+                    .partition_point(|x| x < fr)
+                    .min(mp.len().saturating_sub(1));
+                if let Some(target) = mp.get(i) {
+                    *p += 360.0 * ((target - *p) / 360.0).round();
+                }
+            }
+        }
+        ph
+    });
     if let (Some(f), Some(ph)) = (frf, &frf_phase) {
         for (g, s) in f.g.iter().zip(&f.sigma) {
             mags.push(mag(g));
