@@ -83,6 +83,9 @@ pub const COST_RATIO_WARN: f64 = 2.0;
 pub const MISSED_PEAK_DB: f64 = 6.0;
 /// a model and an FRF resonance match within this relative distance
 pub const PEAK_MATCH_REL: f64 = 0.05;
+/// relative misfit of the periodic steady state (1 − FIT/100) below which a
+/// cost above the noise level is not reported
+pub const NEGLIGIBLE_MISFIT: f64 = 1e-3;
 /// a start whose SML cost is below this multiple of its expected value ends
 /// the search for starts
 const GOOD_START_RATIO: f64 = 3.0;
@@ -1322,8 +1325,13 @@ fn check(fit: &FrfFit, opts: &LmOptions, frf: &Frf) -> Vec<FitWarning> {
     if !at.is_empty() {
         w.push(FitWarning::AtBounds { names: at });
     }
+    // above the noise, and large enough to matter: a misfit below
+    // NEGLIGIBLE_MISFIT of the response (noise-free simulations, where the
+    // "noise" is rounding) is not reported
     let ratio = fit.cost_ratio();
-    if ratio > COST_RATIO_WARN {
+    let misfit = 1.0 - periodic_fit_percent(frf, &fit.freq_response(&frf.freq_hz)) / 100.0;
+    let negligible = misfit.is_finite() && misfit < NEGLIGIBLE_MISFIT;
+    if ratio > COST_RATIO_WARN && !negligible {
         w.push(FitWarning::CostAboveNoise { ratio });
     }
     let tol = |f: f64| PEAK_MATCH_REL * f + line_gap(frf, f);

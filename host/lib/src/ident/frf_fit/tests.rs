@@ -366,3 +366,25 @@ fn a_drive_with_a_delay_and_no_current_loop_is_told_from_one_with_a_lag() {
     );
     assert!(fit.warnings.is_empty(), "{:?}", fit.warnings);
 }
+
+#[test]
+fn ideal_sensors_give_the_joint_exactly_and_no_false_alarm() {
+    // noise-free: the "noise" is rounding, the cost far above it, the
+    // misfit far below anything that matters
+    let cfg = SimConfig {
+        sensors: SensorConfig::ideal(),
+        ..SimConfig::default()
+    };
+    let frf = frf_of(&cfg, &excitation(4, 0.02));
+    let fit = fit_frf(&frf, &FrfFitOptions::new(Structure::ThreeMass, 5e-4)).unwrap();
+    let t = truth(&cfg.plant.params, Structure::ThreeMass);
+    for (p, t) in fit.params.iter().zip(&t) {
+        assert!(
+            (p.value - t).abs() < 1e-3 * t,
+            "{} {} vs {t}",
+            p.name,
+            p.value
+        );
+    }
+    assert!(fit.warnings.is_empty(), "{:?}", fit.warnings);
+}
