@@ -742,6 +742,57 @@ fn capture_stops_by_itself_after_the_requested_periods_or_duration() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Issue 13 item 3: a recorded stream read from a regular file arrives in large chunks;
+/// `--periods N` must still end the capture at the frame that completes the N-th whole
+/// period after the ramp, keep nothing after it and leave no truncated frame.
+#[test]
+fn capture_periods_from_a_regular_file_ends_at_the_frame_completing_the_last_period() {
+    let dir = tmpdir("periods-file");
+    let s = small();
+    let x = s.header.excitation;
+    let stream = dir.join("stream.bin");
+    std::fs::write(&stream, &s.bytes).unwrap();
+    for n in [1u32, 2] {
+        let out = dir.join(format!("p{n}.jcap"));
+        let o = jointid(&[
+            "capture",
+            "--file",
+            stream.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--periods",
+            &n.to_string(),
+            "--strict",
+            "--json",
+        ]);
+        let v = json_of(&o);
+        let target = x.ramp_samples + n * x.period_samples - 1;
+        let last = batches(&s)
+            .into_iter()
+            .find(|f| seqs_of(f).contains(&target))
+            .unwrap();
+        assert_eq!(v["stop"], "requested periods received");
+        assert_eq!(
+            v["last_seq"].as_u64(),
+            Some(u64::from(seqs_of(&last).end - 1))
+        );
+        assert_eq!(v["samples"].as_u64(), Some(u64::from(seqs_of(&last).end)));
+        assert_eq!(v["damaged_frames"], serde_json::json!([]));
+        let end = (last.offset + last.len) as usize;
+        assert_eq!(v["bytes"].as_u64(), Some(end as u64));
+        let raw = std::fs::read(&out).unwrap();
+        assert_eq!(&raw[8..], &s.bytes[..end], "cut at the end of that frame");
+        let info = jointid(&["info", out.to_str().unwrap(), "--strict", "--json"]);
+        assert_eq!(
+            info.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&info.stdout)
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn capture_stops_cleanly_on_ctrl_c_with_the_summary_and_a_complete_file() {
     let dir = tmpdir("sigint");

@@ -89,6 +89,10 @@ pub struct StreamAnalyzer {
     ended: bool,
     /// `End.seq`: samples the board took in the reported session
     end_seq: Option<u32>,
+    /// stop after this many whole periods after the ramp-in (see [`Self::stop_after_periods`])
+    stop_periods: Option<u32>,
+    /// stream offset just after the frame that completed `stop_periods`
+    cut: Option<u64>,
 }
 
 impl Default for StreamAnalyzer {
@@ -123,16 +127,43 @@ impl StreamAnalyzer {
             board: BoardCounters::default(),
             ended: false,
             end_seq: None,
+            stop_periods: None,
+            cut: None,
         }
     }
 
-    /// Feeds the next received bytes.
+    /// Makes the analyzer stop at the frame that brings the reported session to
+    /// `n` whole excitation periods after the ramp-in (sequence number
+    /// `ramp_samples + n·period_samples − 1` received): [`Self::cut`] is then the stream
+    /// offset just after that frame, and every byte fed after it is ignored.
+    pub fn stop_after_periods(&mut self, n: u32) {
+        self.stop_periods = Some(n);
+    }
+
+    /// The stream offset at which the stream was cut by [`Self::stop_after_periods`]:
+    /// the end of the frame that completed the requested periods.
+    pub fn cut(&self) -> Option<u64> {
+        self.cut
+    }
+
+    /// Feeds the next received bytes; once the stream was cut (see
+    /// [`Self::stop_after_periods`]) the bytes after the cut are ignored and
+    /// [`Self::bytes`] is the cut offset.
     pub fn feed(&mut self, bytes: &[u8]) {
+        if self.cut.is_some() {
+            return;
+        }
         self.bytes += bytes.len() as u64;
         // the decoder is moved out for the call so that events are handled as they come
         let mut decoder = std::mem::take(&mut self.decoder);
         decoder.feed(bytes, |e| self.on_event(e));
         self.decoder = decoder;
+        if let Some(c) = self.cut {
+            self.bytes = c;
+            // the bytes after the cut are not part of the capture
+            self.decoder = Decoder::new();
+            self.base = c;
+        }
     }
 
     /// Reserves room for `n` more kept samples.
@@ -220,9 +251,14 @@ impl StreamAnalyzer {
     }
 
     fn on_event(&mut self, e: DecodeEvent) {
+        if self.cut.is_some() {
+            return;
+        }
         match e {
             DecodeEvent::Frame {
-                offset, message, ..
+                offset,
+                len,
+                message,
             } => {
                 self.frames += 1;
                 match &message {
@@ -244,6 +280,9 @@ impl StreamAnalyzer {
                             b.reference_crc(),
                             raw[..n].iter().copied(),
                         );
+                        if self.periods_complete() {
+                            self.cut = Some(self.base + offset + len as u64);
+                        }
                     }
                     Message::Status(s) => self.on_status(s, false),
                     Message::End(s) => self.on_status(s, true),
@@ -252,6 +291,18 @@ impl StreamAnalyzer {
             DecodeEvent::Damaged { offset, len, error } => {
                 self.on_damaged(self.base + offset, len, &error)
             }
+        }
+    }
+
+    /// True when a period stop was requested and the reported session has reached it.
+    fn periods_complete(&self) -> bool {
+        match (self.stop_periods, self.header.as_ref(), self.last_seq()) {
+            (Some(n), Some(h), Some(last)) if self.current == Some(0) => {
+                let target = u64::from(h.excitation.ramp_samples)
+                    + u64::from(n) * u64::from(h.excitation.period_samples);
+                u64::from(last) + 1 >= target
+            }
+            _ => false,
         }
     }
 
