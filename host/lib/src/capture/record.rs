@@ -70,6 +70,10 @@ pub struct StreamAnalyzer {
     /// the reported session's first header
     header: Option<SessionHeader>,
     sessions: Vec<SessionSummary>,
+    /// the session id asked for ([`Self::select_session`]); the first session otherwise
+    wanted: Option<u32>,
+    /// index into `sessions` of the reported session
+    reported: Option<usize>,
     /// index into `sessions` of the session the next batch belongs to
     current: Option<usize>,
     /// sorted, disjoint, non-adjacent inclusive ranges of received sequence numbers
@@ -114,6 +118,8 @@ impl StreamAnalyzer {
             crc_errors: 0,
             header: None,
             sessions: Vec::new(),
+            wanted: None,
+            reported: None,
             current: None,
             ranges: Vec::new(),
             samples: 0,
@@ -130,6 +136,12 @@ impl StreamAnalyzer {
             stop_periods: None,
             cut: None,
         }
+    }
+
+    /// Reports the session with this id (the first one with it) instead of the first
+    /// session of the stream: its samples are kept and checked, the others only counted.
+    pub fn select_session(&mut self, session_id: u32) {
+        self.wanted = Some(session_id);
     }
 
     /// Makes the analyzer stop at the frame that brings the reported session to
@@ -297,7 +309,9 @@ impl StreamAnalyzer {
     /// True when a period stop was requested and the reported session has reached it.
     fn periods_complete(&self) -> bool {
         match (self.stop_periods, self.header.as_ref(), self.last_seq()) {
-            (Some(n), Some(h), Some(last)) if self.current == Some(0) => {
+            (Some(n), Some(h), Some(last))
+                if self.current.is_some() && self.current == self.reported =>
+            {
                 let target = u64::from(h.excitation.ramp_samples)
                     + u64::from(n) * u64::from(h.excitation.period_samples);
                 u64::from(last) + 1 >= target
@@ -335,8 +349,9 @@ impl StreamAnalyzer {
                 self.sessions.len() - 1
             }
         };
-        if self.header.is_none() {
+        if self.header.is_none() && self.wanted.is_none_or(|w| w == h.session_id) {
             self.header = Some(*h);
+            self.reported = Some(idx);
             if self.keep_samples {
                 self.reference = Some(
                     Reference::new(&h.excitation)
@@ -360,7 +375,7 @@ impl StreamAnalyzer {
             None => self.without_header += n,
             Some(i) => {
                 self.sessions[i].samples += n;
-                if i != 0 {
+                if self.reported != Some(i) {
                     self.other_sessions += n;
                 } else {
                     self.batches.push(BatchRef {
@@ -375,7 +390,7 @@ impl StreamAnalyzer {
     }
 
     fn on_status(&mut self, s: &Status, end: bool) {
-        if self.current == Some(0) {
+        if self.current.is_some() && self.current == self.reported {
             self.board = counters(s);
             if end {
                 self.ended = true;
@@ -630,7 +645,7 @@ impl StreamAnalyzer {
 
     fn report_without_reference(&self) -> CaptureReport {
         let gaps = self.gaps();
-        let session = self.sessions.first();
+        let session = self.reported.and_then(|i| self.sessions.get(i));
         CaptureReport {
             board_id: session.map(|s| s.board_id),
             session_id: session.map(|s| s.session_id),
