@@ -266,7 +266,9 @@ fn main() -> ExitCode {
             let mut msg = e.to_string();
             for cause in e.chain().skip(1) {
                 let c = cause.to_string();
-                if !msg.contains(&c) {
+                // an I/O error's text without its `(os error N)` suffix counts as stated
+                let plain = c.find(" (os error ").map_or(c.as_str(), |i| &c[..i]);
+                if !msg.contains(plain) {
                     msg = format!("{msg}: {c}");
                 }
             }

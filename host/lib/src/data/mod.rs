@@ -294,7 +294,7 @@ pub enum RecordError {
 #[derive(Debug, thiserror::Error)]
 pub enum DataError {
     /// the file could not be read
-    #[error("{file}: {source}")]
+    #[error("{file}: {}", io_phrase(source))]
     Io {
         /// file name
         file: String,
@@ -424,14 +424,34 @@ pub enum DataError {
         /// registered extensions
         known: String,
     },
-    /// a registered loader failed
-    #[error("{file}: {source}")]
+    /// a registered loader failed (its message names the file once)
+    #[error("{}", named_once(file, source.as_ref()))]
     Loader {
         /// file name
         file: String,
         /// the loader's error
         source: Box<dyn std::error::Error + Send + Sync>,
     },
+}
+
+/// An I/O error without the `(os error N)` suffix (still a prefix of the error's own
+/// text, so the command line does not repeat it as the cause).
+fn io_phrase(e: &std::io::Error) -> String {
+    let mut m = e.to_string();
+    if let Some(i) = m.find(" (os error ") {
+        m.truncate(i);
+    }
+    m
+}
+
+/// `file: message`, unless the message already begins with the file's name.
+fn named_once(file: &str, source: &dyn std::error::Error) -> String {
+    let m = source.to_string();
+    if m.starts_with(file) {
+        m
+    } else {
+        format!("{file}: {m}")
+    }
 }
 
 /// A file loader for one extension: path and column mapping in, dataset out.

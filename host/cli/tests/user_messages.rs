@@ -1,0 +1,72 @@
+//! What the user reads (issue 13 item 16), run on the built binary: no Rust debug text,
+//! each file named once in a message, no `(os error N)` suffix, negative numbers accepted
+//! where they make sense.
+
+#[allow(dead_code)] // not every helper is used here
+mod common;
+use common::{jointid, tmpdir};
+
+fn text(o: &std::process::Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+#[test]
+fn simulate_names_its_integrator_in_words_and_takes_negative_effect_values() {
+    let dir = tmpdir("integrator");
+    let csv = dir.join("run.csv");
+    let o = jointid(&[
+        "simulate",
+        "--effect",
+        "nonlinear_stiffness:k3=-1e3",
+        "--effect",
+        "torque_ripple:amplitude=0.01,phase=-1",
+        "--periods",
+        "1",
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    assert!(!t.contains('{') && !t.contains("Rk4"), "{t}");
+    assert!(
+        t.contains("integrator exponential RK4 (5 RK4 substeps per sample at events)"),
+        "{t}"
+    );
+    let o = jointid(&[
+        "simulate",
+        "--model",
+        "nonlinear-two-mass",
+        "--param",
+        "k3=-1e3",
+        "--periods",
+        "1",
+        "--out",
+        dir.join("nl.csv").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_file_that_cannot_be_read_is_named_once_without_os_error_codes() {
+    let dir = tmpdir("names");
+    let bad = dir.join("bad.jcap");
+    std::fs::write(&bad, "hi\n").unwrap();
+    let missing = dir.join("missing.csv");
+    for (file, args) in [
+        (&bad, vec!["analyze", bad.to_str().unwrap()]),
+        (&missing, vec!["analyze", missing.to_str().unwrap()]),
+    ] {
+        let o = jointid(&args);
+        assert_eq!(o.status.code(), Some(2));
+        let err = String::from_utf8_lossy(&o.stderr);
+        let name = file.to_str().unwrap();
+        assert_eq!(err.matches(name).count(), 1, "{err}");
+        assert!(!err.contains("os error"), "{err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
