@@ -70,3 +70,27 @@ fn a_file_that_cannot_be_read_is_named_once_without_os_error_codes() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn analyze_prints_times_and_rates_rounded() {
+    let dir = tmpdir("rounded");
+    let csv = dir.join("run.csv");
+    let o = jointid(&[
+        "simulate",
+        "--model",
+        "two-mass",
+        "--periods",
+        "3",
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let o = jointid(&["analyze", csv.to_str().unwrap()]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    assert!(
+        t.contains("N = 5000 samples (2.5 s)") && t.contains("fs = 2000 Hz, f0 = 0.4 Hz"),
+        "{t}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
