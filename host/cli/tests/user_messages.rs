@@ -94,3 +94,32 @@ fn analyze_prints_times_and_rates_rounded() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn info_names_link_events_in_words() {
+    let dir = tmpdir("events");
+    let jcap = dir.join("run.jcap");
+    let o = jointid(&[
+        "simulate",
+        "--model",
+        "two-mass",
+        "--periods",
+        "1",
+        "--out",
+        jcap.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    std::fs::write(
+        dir.join("run.jcap.events"),
+        "{\"offset\":100,\"unix_ms\":0,\"utc\":\"1970-01-01T00:00:00.000Z\",\"event\":\"link_lost\",\"detail\":\"unplugged\"}\n\
+         {\"offset\":100,\"unix_ms\":5,\"utc\":\"1970-01-01T00:00:00.005Z\",\"event\":\"link_resumed\"}\n",
+    )
+    .unwrap();
+    let o = jointid(&["info", jcap.to_str().unwrap()]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    assert!(t.contains("link lost at byte 100 unplugged"), "{t}");
+    assert!(t.contains("link resumed at byte 100"), "{t}");
+    assert!(!t.contains("LinkLost") && !t.contains("LinkResumed"), "{t}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
