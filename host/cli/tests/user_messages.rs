@@ -68,6 +68,13 @@ fn a_file_that_cannot_be_read_is_named_once_without_os_error_codes() {
         assert_eq!(err.matches(name).count(), 1, "{err}");
         assert!(!err.contains("os error"), "{err}");
     }
+    // a CSV the simulator cannot create
+    let out = dir.join("no-such-dir").join("x.csv");
+    let o = jointid(&["simulate", "--periods", "1", "--out", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.matches(out.to_str().unwrap()).count(), 1, "{err}");
+    assert!(!err.contains("os error"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
