@@ -9,6 +9,7 @@ use serde::Serialize;
 
 use super::args::DataArgs;
 use super::{print_json, write_svg, CmdResult, Context, Outcome};
+use jointid::data::fmt_sig;
 use jointid::ident::frf::{
     amplitude_trend, analyze_dataset, AmplitudeTrend, ClassLevel, ExcitedSource, FrfAnalysis,
     Instrument,
@@ -127,13 +128,13 @@ fn print_table(
     writeln!(out, "jointid analyze: {name}")?;
     writeln!(
         out,
-        "  periods    N = {} samples ({:.4} s), P = {} from sample {}, fs = {:.6} Hz, f0 = {:.6} Hz",
+        "  periods    N = {} samples ({} s), P = {} from sample {}, fs = {} Hz, f0 = {} Hz",
         l.period,
-        l.period as f64 * a.ts,
+        fmt_sig(l.period as f64 * a.ts, 4),
         l.count,
         l.start,
-        1.0 / a.ts,
-        a.f0_hz
+        fmt_sig(1.0 / a.ts, 4),
+        fmt_sig(a.f0_hz, 4)
     )?;
     let (flo, fhi) = (
         a.frf.freq_hz.first().copied().unwrap_or(0.0),
@@ -277,7 +278,7 @@ mod tests {
         let (r, out) = run_args(&["jointid", "analyze", csv_s, "--require-linear"]);
         assert_eq!(r, Ok(Outcome::Ok), "{out}");
         assert!(
-            out.contains("N = 500 samples (0.5000 s), P = 5 from sample 800"),
+            out.contains("N = 500 samples (0.5 s), P = 5 from sample 800"),
             "{out}"
         );
         assert!(out.contains("30 lines"), "{out}");

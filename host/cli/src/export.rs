@@ -9,7 +9,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use super::{CmdResult, Context, Outcome};
-use jointid::capture::{export, read_jcap};
+use jointid::capture::{export, read_jcap_session, session_ids};
 
 /// Arguments of `jointid export`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
@@ -20,6 +20,9 @@ pub struct ExportArgs {
     /// CSV file to write (`-` for stdout)
     #[arg(long, value_name = "RUN.csv")]
     pub csv: PathBuf,
+    /// Session to export, by its id as `jointid info` lists it (default: the first)
+    #[arg(long, value_name = "K")]
+    pub session: Option<u32>,
     /// Exit with status 1 when anything is missing or damaged
     #[arg(long)]
     pub strict: bool,
@@ -33,7 +36,7 @@ pub struct ExportArgs {
 /// Reading the capture ([`jointid::capture::CaptureError::Jcap`], [`jointid::capture::CaptureError::NoHeader`],
 /// [`jointid::capture::CaptureError::Excitation`]) or writing the CSV ([`jointid::capture::CaptureError::Export`]).
 pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
-    let record = read_jcap(&args.input)?;
+    let record = read_jcap_session(&args.input, args.session)?;
     let to_stdout = args.csv.as_os_str() == "-";
     if to_stdout {
         let mut w = std::io::BufWriter::new(&mut *ctx.out);
@@ -44,6 +47,18 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
         export::export_csv(&record, &args.csv)?;
     }
     let r = &record.report;
+    let ids = session_ids(r);
+    if args.session.is_none() && ids.len() > 1 {
+        let list: Vec<String> = ids.iter().map(u32::to_string).collect();
+        let _ = writeln!(
+            std::io::stderr(),
+            "note: {} holds {} sessions ({}); exported session {} (choose another with --session K)",
+            args.input.display(),
+            ids.len(),
+            list.join(", "),
+            record.header.session_id
+        );
+    }
     let _ = writeln!(
         std::io::stderr(),
         "exported {} samples to {} ({} gaps, {} samples missing, {} damaged frames)",
@@ -59,6 +74,7 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
             &serde_json::json!({
                 "file": args.input.display().to_string(),
                 "csv": args.csv.display().to_string(),
+                "session_id": record.header.session_id,
                 "rows": record.samples.len(),
                 "samples": r.samples,
                 "gaps": r.gaps,

@@ -14,7 +14,7 @@ use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::export::kind_name;
-use jointid::capture::{read_jcap_report, CaptureReport};
+use jointid::capture::{read_jcap_session_reports, CaptureReport};
 
 /// Arguments of `jointid info`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
@@ -22,9 +22,22 @@ pub struct InfoArgs {
     /// Capture file to read
     #[arg(value_name = "RUN.jcap")]
     pub input: PathBuf,
+    /// Report only this session, by its id (default: every session, the first one on top)
+    #[arg(long, value_name = "K")]
+    pub session: Option<u32>,
     /// Exit with status 1 when anything is missing or damaged
     #[arg(long)]
     pub strict: bool,
+}
+
+/// One session of `info --json`'s `per_session`.
+#[derive(Debug, Serialize)]
+pub struct SessionInfo {
+    /// the session's header (null when no session header arrived)
+    pub header: Option<SessionHeader>,
+    /// the session's report
+    #[serde(flatten)]
+    pub report: CaptureReport,
 }
 
 /// What `info --json` prints.
@@ -37,6 +50,8 @@ pub struct InfoSummary {
     /// the report
     #[serde(flatten)]
     pub report: CaptureReport,
+    /// every session (or the one asked for), in stream order, each with its own report
+    pub per_session: Vec<SessionInfo>,
 }
 
 /// Runs `jointid info`: [`Outcome::CheckFailed`] with `--strict` when anything is
@@ -46,12 +61,22 @@ pub struct InfoSummary {
 /// [`jointid::capture::CaptureError::Jcap`] when the file cannot be read or is no jcap
 /// file; output errors.
 pub fn run(args: &InfoArgs, ctx: &mut Context<'_>) -> CmdResult {
-    let (report, header) = read_jcap_report(&args.input)?;
-    let clean = report.is_clean();
+    let mut all = read_jcap_session_reports(&args.input, args.session)?;
+    let clean = all.iter().all(|(r, _)| r.is_clean());
+    let (report, header) = all.remove(0);
+    let mut per_session = vec![SessionInfo {
+        header,
+        report: report.clone(),
+    }];
+    per_session.extend(
+        all.into_iter()
+            .map(|(report, header)| SessionInfo { header, report }),
+    );
     let summary = InfoSummary {
         file: args.input.display().to_string(),
         header,
         report,
+        per_session,
     };
     if ctx.json {
         print_json(ctx.out, &summary)?;
@@ -68,12 +93,33 @@ pub fn run(args: &InfoArgs, ctx: &mut Context<'_>) -> CmdResult {
 /// The human-readable description `info` prints.
 pub fn describe(s: &InfoSummary) -> String {
     let mut out = format!("{}\n", s.file);
-    match &s.header {
+    if s.per_session.len() > 1 {
+        out.push_str(&format!("{} sessions\n", s.per_session.len()));
+        for (i, p) in s.per_session.iter().enumerate() {
+            let id = p
+                .report
+                .session_id
+                .map_or_else(|| "-".to_string(), |id| id.to_string());
+            out.push_str(&format!(
+                "\n== session {id} ({} of {})\n",
+                i + 1,
+                s.per_session.len()
+            ));
+            describe_session(&mut out, p.header.as_ref(), &p.report);
+        }
+        return out;
+    }
+    describe_session(&mut out, s.header.as_ref(), &s.report);
+    out
+}
+
+fn describe_session(out: &mut String, header: Option<&SessionHeader>, report: &CaptureReport) {
+    match header {
         None => out.push_str("no session header: counts cannot be scaled to SI\n"),
         Some(h) => {
             let x = &h.excitation;
             let duration =
-                s.report.last_seq.map_or(0.0, |l| f64::from(l) + 1.0) / f64::from(h.sample_rate_hz);
+                report.last_seq.map_or(0.0, |l| f64::from(l) + 1.0) / f64::from(h.sample_rate_hz);
             out.push_str(&format!(
                 "board {:#010x}  session {}  protocol {}\n\
                  sampling    {} Hz (timer {} Hz), {duration:.3} s up to the last sample\n\
@@ -98,7 +144,6 @@ pub fn describe(s: &InfoSummary) -> String {
             ));
         }
     }
-    out.push_str(&s.report.to_string());
+    out.push_str(&report.to_string());
     out.push('\n');
-    out
 }

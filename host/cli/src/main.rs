@@ -170,6 +170,25 @@ pub fn print_json<T: serde::Serialize>(
     Ok(())
 }
 
+/// `msg` without the ` (os error N)` that the standard library appends to I/O errors.
+fn without_os_error_codes(msg: &str) -> String {
+    let mut out = String::with_capacity(msg.len());
+    let mut rest = msg;
+    while let Some(i) = rest.find(" (os error ") {
+        out.push_str(&rest[..i]);
+        let tail = &rest[i + " (os error ".len()..];
+        let digits = tail.bytes().take_while(u8::is_ascii_digit).count();
+        if digits > 0 && tail[digits..].starts_with(')') {
+            rest = &tail[digits + 1..];
+        } else {
+            out.push_str(" (os error ");
+            rest = tail;
+        }
+    }
+    out.push_str(rest);
+    out
+}
+
 /// The binary's standard output: every write and flush error names it ("standard
 /// output: ..."), keeping the error's kind (a closed pipe is still
 /// [`std::io::ErrorKind::BrokenPipe`]).
@@ -266,11 +285,13 @@ fn main() -> ExitCode {
             let mut msg = e.to_string();
             for cause in e.chain().skip(1) {
                 let c = cause.to_string();
-                if !msg.contains(&c) {
+                // an I/O error's text without its `(os error N)` suffix counts as stated
+                let plain = c.find(" (os error ").map_or(c.as_str(), |i| &c[..i]);
+                if !msg.contains(plain) {
                     msg = format!("{msg}: {c}");
                 }
             }
-            let msg = msg.replace('\n', " ");
+            let msg = without_os_error_codes(&msg.replace('\n', " "));
             if cli.json {
                 print_line_stdout(&serde_json::json!({ "error": msg }).to_string());
             } else {

@@ -463,7 +463,7 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
     )?;
     writeln!(
         o,
-        "integrator {:?}, u rms {:.4} N·m, theta_m rms {:.5} rad, saturated samples {}",
+        "integrator {}, u rms {:.4} N·m, theta_m rms {:.5} rad, saturated samples {}",
         report.integrator, report.u_rms, report.theta_m_rms, report.saturated_samples
     )?;
     if let Some(p) = &report.params_out {

@@ -742,6 +742,157 @@ fn capture_stops_by_itself_after_the_requested_periods_or_duration() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Issue 13 item 3: a recorded stream read from a regular file arrives in large chunks;
+/// `--periods N` must still end the capture at the frame that completes the N-th whole
+/// period after the ramp, keep nothing after it and leave no truncated frame.
+#[test]
+fn capture_periods_from_a_regular_file_ends_at_the_frame_completing_the_last_period() {
+    let dir = tmpdir("periods-file");
+    let s = small();
+    let x = s.header.excitation;
+    let stream = dir.join("stream.bin");
+    std::fs::write(&stream, &s.bytes).unwrap();
+    for n in [1u32, 2] {
+        let out = dir.join(format!("p{n}.jcap"));
+        let o = jointid(&[
+            "capture",
+            "--file",
+            stream.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--periods",
+            &n.to_string(),
+            "--strict",
+            "--json",
+        ]);
+        let v = json_of(&o);
+        let target = x.ramp_samples + n * x.period_samples - 1;
+        let last = batches(&s)
+            .into_iter()
+            .find(|f| seqs_of(f).contains(&target))
+            .unwrap();
+        assert_eq!(v["stop"], "requested periods received");
+        assert_eq!(
+            v["last_seq"].as_u64(),
+            Some(u64::from(seqs_of(&last).end - 1))
+        );
+        assert_eq!(v["samples"].as_u64(), Some(u64::from(seqs_of(&last).end)));
+        assert_eq!(v["damaged_frames"], serde_json::json!([]));
+        let end = (last.offset + last.len) as usize;
+        assert_eq!(v["bytes"].as_u64(), Some(end as u64));
+        let raw = std::fs::read(&out).unwrap();
+        assert_eq!(&raw[8..], &s.bytes[..end], "cut at the end of that frame");
+        let info = jointid(&["info", out.to_str().unwrap(), "--strict", "--json"]);
+        assert_eq!(
+            info.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&info.stdout)
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue 13 item 4: a capture holding two sessions (the board restarted with another
+/// excitation); `export --session K` writes session K, `info` reports every session and
+/// `info --session K` that one.
+#[test]
+fn export_and_info_serve_every_session_of_a_capture() {
+    let dir = tmpdir("sessions");
+    let s = small();
+    let mut second = SynthOptions::small();
+    second.session_id = 8;
+    second.samples = 300;
+    second.excitation.seed = 43;
+    let t = synth_stream(&second);
+    let jcap = dir.join("two.jcap");
+    let mut bytes = b"JCAP\x01\r\n\x1a".to_vec();
+    bytes.extend_from_slice(&s.bytes);
+    bytes.extend_from_slice(&t.bytes);
+    std::fs::write(&jcap, &bytes).unwrap();
+    let j = jcap.to_str().unwrap();
+
+    // export: the first session by default (with a note naming the others), any by id
+    let csv7 = dir.join("s7.csv");
+    let e = jointid(&["export", j, "--csv", csv7.to_str().unwrap()]);
+    assert_eq!(
+        e.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&e.stderr)
+    );
+    let note = String::from_utf8_lossy(&e.stderr);
+    assert!(
+        note.contains("2 sessions") && note.contains("--session"),
+        "{note}"
+    );
+    let (meta, rows) = read_csv(&csv7);
+    assert_eq!(meta["session_id"], "7");
+    assert_rows_match(&s, &rows, &[]);
+    let csv8 = dir.join("s8.csv");
+    let e = jointid(&[
+        "export",
+        j,
+        "--session",
+        "8",
+        "--csv",
+        csv8.to_str().unwrap(),
+        "--strict",
+    ]);
+    assert_eq!(
+        e.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&e.stderr)
+    );
+    let (meta, rows) = read_csv(&csv8);
+    assert_eq!(meta["session_id"], "8");
+    assert_eq!(meta["seed"], "43");
+    assert_rows_match(&t, &rows, &[]);
+    // a session that is not there: exit 2, naming it and the ones there are, no CSV
+    let csv9 = dir.join("s9.csv");
+    let e = jointid(&[
+        "export",
+        j,
+        "--session",
+        "9",
+        "--csv",
+        csv9.to_str().unwrap(),
+    ]);
+    assert_eq!(e.status.code(), Some(2));
+    let msg = String::from_utf8_lossy(&e.stderr);
+    assert!(msg.contains("session 9") && msg.contains("7, 8"), "{msg}");
+    assert!(!csv9.exists());
+
+    // info: every session with its header and its own report
+    let v = json_of(&jointid(&["info", j, "--json"]));
+    let per = v["per_session"].as_array().expect("per_session");
+    assert_eq!(per.len(), 2);
+    for (p, (id, n, seed)) in per.iter().zip([(7, 400, 42), (8, 300, 43)]) {
+        assert_eq!(p["session_id"], id);
+        assert_eq!(p["header"]["session_id"], id);
+        assert_eq!(p["header"]["excitation"]["seed"], seed);
+        assert_eq!(p["samples"], n);
+        assert_eq!(p["last_seq"], n - 1);
+        assert_eq!(p["gaps"], serde_json::json!([]));
+        assert_eq!(p["ended"], true);
+    }
+    let v = json_of(&jointid(&["info", j, "--session", "8", "--json"]));
+    assert_eq!(v["session_id"], 8);
+    assert_eq!(v["header"]["session_id"], 8);
+    assert_eq!(v["samples"], 300);
+    assert_eq!(v["per_session"].as_array().map(Vec::len), Some(1));
+    let text = jointid(&["info", j]);
+    let text = String::from_utf8_lossy(&text.stdout);
+    assert!(
+        text.contains("session 7") && text.contains("session 8"),
+        "{text}"
+    );
+    let e = jointid(&["info", j, "--session", "9"]);
+    assert_eq!(e.status.code(), Some(2));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn capture_stops_cleanly_on_ctrl_c_with_the_summary_and_a_complete_file() {
     let dir = tmpdir("sigint");

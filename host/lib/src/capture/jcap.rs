@@ -398,6 +398,18 @@ pub enum EventKind {
     Stop,
 }
 
+impl std::fmt::Display for EventKind {
+    /// In words: `start`, `link lost`, `link resumed`, `stop`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Start => "start",
+            Self::LinkLost => "link lost",
+            Self::LinkResumed => "link resumed",
+            Self::Stop => "stop",
+        })
+    }
+}
+
 /// One host-side event, one JSON object per line of `RUN.jcap.events`.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct JcapEvent {

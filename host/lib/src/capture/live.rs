@@ -17,8 +17,10 @@
 //! # Stop rules
 //! Ctrl-C (the caller's interrupt flag), `--duration` (wall time since the source was
 //! opened), `--periods N` (the reported session has delivered sequence number
-//! `ramp_samples + N·period_samples − 1`, i.e. N whole periods after the ramp-in), the
-//! board's `End` message, or the end of the stream (end of file, peer closed).
+//! `ramp_samples + N·period_samples − 1`, i.e. N whole periods after the ramp-in; the
+//! capture then ends with the frame that carried it, and whatever the source delivered
+//! after that frame is not written, however large the chunks it reads), the board's `End`
+//! message, or the end of the stream (end of file, peer closed).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -165,13 +167,10 @@ pub fn record_capture(
     let start = Instant::now();
     log.log(&JcapEvent::now(0, EventKind::Start, source.name()))?;
     let mut an = StreamAnalyzer::new(false);
+    if let Some(n) = opts.stop.periods {
+        an.stop_after_periods(n);
+    }
     let mut last_progress = start;
-    let periods_target = |an: &StreamAnalyzer, n: u32| {
-        an.header().map(|h| {
-            u64::from(h.excitation.ramp_samples)
-                + u64::from(n) * u64::from(h.excitation.period_samples)
-        })
-    };
     let result: Result<StopReason, CaptureError> = loop {
         if interrupt.load(Ordering::SeqCst) {
             break Ok(StopReason::Interrupted);
@@ -185,10 +184,9 @@ pub fn record_capture(
         match msg {
             None => {}
             Some(SourceMsg::Data(bytes)) => {
-                if let Err(e) = writer.append(&bytes, now) {
+                if let Err(e) = feed_and_append(&mut an, &mut writer, &bytes, now) {
                     break Err(e.into());
                 }
-                an.feed(&bytes);
             }
             Some(SourceMsg::LinkLost(why)) => {
                 if let Err(e) = writer.flush() {
@@ -207,10 +205,8 @@ pub fn record_capture(
         if let Err(e) = writer.tick(now) {
             break Err(e.into());
         }
-        if let (Some(n), Some(last)) = (opts.stop.periods, an.last_seq()) {
-            if periods_target(&an, n).is_some_and(|t| u64::from(last) + 1 >= t) {
-                break Ok(StopReason::Periods);
-            }
+        if an.cut().is_some() {
+            break Ok(StopReason::Periods);
         }
         if an.ended() && !opts.stop.ignore_end {
             break Ok(StopReason::EndMessage);
@@ -225,9 +221,9 @@ pub fn record_capture(
     match result {
         Ok(stop) => {
             // bytes read before the stop but not yet handled still belong to the capture
+            // (after a `--periods` cut, nothing of them)
             for bytes in late {
-                writer.append(&bytes, Instant::now())?;
-                an.feed(&bytes);
+                feed_and_append(&mut an, &mut writer, &bytes, Instant::now())?;
             }
             let received = an.bytes();
             let bytes = writer.finish()?;
@@ -262,4 +258,27 @@ pub fn record_capture(
             Err(e)
         }
     }
+}
+
+/// Feeds `bytes` to the analyzer and appends them to the capture, only up to the
+/// analyzer's `--periods` cut when it falls inside (or before) them: the capture then
+/// ends with the whole frame that completed the requested periods.
+fn feed_and_append(
+    an: &mut StreamAnalyzer,
+    writer: &mut JcapWriter,
+    bytes: &[u8],
+    now: Instant,
+) -> Result<(), jcap::JcapError> {
+    let before = an.bytes();
+    an.feed(bytes);
+    let keep = match an.cut() {
+        Some(c) => {
+            usize::try_from(c.saturating_sub(before)).map_or(bytes.len(), |k| k.min(bytes.len()))
+        }
+        None => bytes.len(),
+    };
+    if keep == 0 {
+        return Ok(());
+    }
+    writer.append(&bytes[..keep], now)
 }

@@ -86,6 +86,19 @@ pub enum CaptureError {
         /// what is wrong (gaps with the first one, too few samples)
         reason: String,
     },
+    /// The session asked for is not in the capture.
+    #[error(
+        "{path}: no session {session} in this capture (sessions: {})",
+        list_ids(available)
+    )]
+    NoSession {
+        /// the capture file
+        path: PathBuf,
+        /// the session id asked for
+        session: u32,
+        /// the session ids the capture holds, in stream order
+        available: Vec<u32>,
+    },
     /// Writing an export failed.
     #[error("{path}: {}", io_msg(err))]
     Export {
@@ -193,7 +206,7 @@ pub fn load_dataset(path: &Path) -> Result<Dataset, CaptureError> {
 /// # Errors
 /// [`CaptureError::NoHeader`] (with `path` empty) or [`CaptureError::Excitation`].
 pub fn decode_stream(stream: &[u8], boundaries: &[u64]) -> Result<CaptureRecord, CaptureError> {
-    decode_named(Path::new(""), stream, boundaries, Vec::new())
+    decode_named(Path::new(""), stream, boundaries, Vec::new(), None)
 }
 
 /// Reads a `.jcap` capture (and its `.events` sidecar when present): the first session's
@@ -207,9 +220,17 @@ pub fn decode_stream(stream: &[u8], boundaries: &[u64]) -> Result<CaptureRecord,
 /// [`CaptureError::NoHeader`] when no session header arrived,
 /// [`CaptureError::Excitation`] when the header's excitation cannot be regenerated.
 pub fn read_jcap(path: &Path) -> Result<CaptureRecord, CaptureError> {
+    read_jcap_session(path, None)
+}
+
+/// Reads one session of a `.jcap` capture, as [`read_jcap`] reads the first: the
+/// session with id `session` (the first one when `None`).
+/// # Errors
+/// As [`read_jcap`]; [`CaptureError::NoSession`] when no session has that id.
+pub fn read_jcap_session(path: &Path, session: Option<u32>) -> Result<CaptureRecord, CaptureError> {
     let (stream, events) = read_jcap_parts(path)?;
     let boundaries = boundaries_of(&events);
-    decode_named(path, &stream, &boundaries, events)
+    decode_named(path, &stream, &boundaries, events, session)
 }
 
 /// Reads only the report of a capture (works without a session header, and when the
@@ -222,12 +243,77 @@ pub fn read_jcap_report(
 ) -> Result<(CaptureReport, Option<SessionHeader>), CaptureError> {
     let (stream, events) = read_jcap_parts(path)?;
     let boundaries = boundaries_of(&events);
+    Ok(report_of(&stream, &boundaries, events, None))
+}
+
+/// The report and header of every session of a capture, in stream order (one entry,
+/// headerless, when no session header arrived), or of the session with id `session`
+/// only. The file is read once and decoded once per session.
+/// # Errors
+/// [`CaptureError::Jcap`] when the file cannot be read or is no jcap file,
+/// [`CaptureError::NoSession`] when `session` is given and no session has that id.
+pub fn read_jcap_session_reports(
+    path: &Path,
+    session: Option<u32>,
+) -> Result<Vec<(CaptureReport, Option<SessionHeader>)>, CaptureError> {
+    let (stream, events) = read_jcap_parts(path)?;
+    let boundaries = boundaries_of(&events);
+    let first = report_of(&stream, &boundaries, events.clone(), None);
+    let ids = session_ids(&first.0);
+    if let Some(k) = session {
+        if !ids.contains(&k) {
+            return Err(CaptureError::NoSession {
+                path: path.to_path_buf(),
+                session: k,
+                available: ids,
+            });
+        }
+        return Ok(vec![report_of(&stream, &boundaries, events, Some(k))]);
+    }
+    let first_id = first.1.map(|h| h.session_id);
+    let mut out = vec![first];
+    for id in ids.into_iter().filter(|id| Some(*id) != first_id) {
+        out.push(report_of(&stream, &boundaries, events.clone(), Some(id)));
+    }
+    Ok(out)
+}
+
+/// The distinct session ids of a report's sessions, in stream order.
+pub fn session_ids(report: &CaptureReport) -> Vec<u32> {
+    let mut ids: Vec<u32> = Vec::new();
+    for s in &report.sessions {
+        if !ids.contains(&s.session_id) {
+            ids.push(s.session_id);
+        }
+    }
+    ids
+}
+
+fn list_ids(ids: &[u32]) -> String {
+    if ids.is_empty() {
+        return "none".to_string();
+    }
+    ids.iter()
+        .map(u32::to_string)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn report_of(
+    stream: &[u8],
+    boundaries: &[u64],
+    events: Vec<JcapEvent>,
+    session: Option<u32>,
+) -> (CaptureReport, Option<SessionHeader>) {
     let mut an = StreamAnalyzer::new(false);
-    an.feed_parallel(&stream, &boundaries, decode_threads(), PARALLEL_PIECE);
+    if let Some(k) = session {
+        an.select_session(k);
+    }
+    an.feed_parallel(stream, boundaries, decode_threads(), PARALLEL_PIECE);
     let header = an.header().copied();
     let mut report = an.finish_report();
     report.link_events = events;
-    Ok((report, header))
+    (report, header)
 }
 
 fn read_jcap_parts(path: &Path) -> Result<(Vec<u8>, Vec<JcapEvent>), CaptureError> {
@@ -262,8 +348,12 @@ fn decode_named(
     stream: &[u8],
     boundaries: &[u64],
     events: Vec<JcapEvent>,
+    session: Option<u32>,
 ) -> Result<CaptureRecord, CaptureError> {
     let mut an = StreamAnalyzer::new(true);
+    if let Some(k) = session {
+        an.select_session(k);
+    }
     // about 5.4 bytes per sample on the wire: reserve once instead of doubling
     an.reserve_samples(stream.len() / 4);
     an.feed_parallel(stream, boundaries, decode_threads(), PARALLEL_PIECE);
@@ -273,6 +363,11 @@ fn decode_named(
             r.report.link_events = events;
             Ok(r)
         }
+        None if session.is_some() => Err(CaptureError::NoSession {
+            path: path.to_path_buf(),
+            session: session.unwrap_or(0),
+            available: session_ids(&report),
+        }),
         None => Err(CaptureError::NoHeader {
             path: path.to_path_buf(),
             bytes: report.bytes,

@@ -70,6 +70,10 @@ pub struct StreamAnalyzer {
     /// the reported session's first header
     header: Option<SessionHeader>,
     sessions: Vec<SessionSummary>,
+    /// the session id asked for ([`Self::select_session`]); the first session otherwise
+    wanted: Option<u32>,
+    /// index into `sessions` of the reported session
+    reported: Option<usize>,
     /// index into `sessions` of the session the next batch belongs to
     current: Option<usize>,
     /// sorted, disjoint, non-adjacent inclusive ranges of received sequence numbers
@@ -89,6 +93,10 @@ pub struct StreamAnalyzer {
     ended: bool,
     /// `End.seq`: samples the board took in the reported session
     end_seq: Option<u32>,
+    /// stop after this many whole periods after the ramp-in (see [`Self::stop_after_periods`])
+    stop_periods: Option<u32>,
+    /// stream offset just after the frame that completed `stop_periods`
+    cut: Option<u64>,
 }
 
 impl Default for StreamAnalyzer {
@@ -110,6 +118,8 @@ impl StreamAnalyzer {
             crc_errors: 0,
             header: None,
             sessions: Vec::new(),
+            wanted: None,
+            reported: None,
             current: None,
             ranges: Vec::new(),
             samples: 0,
@@ -123,16 +133,49 @@ impl StreamAnalyzer {
             board: BoardCounters::default(),
             ended: false,
             end_seq: None,
+            stop_periods: None,
+            cut: None,
         }
     }
 
-    /// Feeds the next received bytes.
+    /// Reports the session with this id (the first one with it) instead of the first
+    /// session of the stream: its samples are kept and checked, the others only counted.
+    pub fn select_session(&mut self, session_id: u32) {
+        self.wanted = Some(session_id);
+    }
+
+    /// Makes the analyzer stop at the frame that brings the reported session to
+    /// `n` whole excitation periods after the ramp-in (sequence number
+    /// `ramp_samples + n·period_samples − 1` received): [`Self::cut`] is then the stream
+    /// offset just after that frame, and every byte fed after it is ignored.
+    pub fn stop_after_periods(&mut self, n: u32) {
+        self.stop_periods = Some(n);
+    }
+
+    /// The stream offset at which the stream was cut by [`Self::stop_after_periods`]:
+    /// the end of the frame that completed the requested periods.
+    pub fn cut(&self) -> Option<u64> {
+        self.cut
+    }
+
+    /// Feeds the next received bytes; once the stream was cut (see
+    /// [`Self::stop_after_periods`]) the bytes after the cut are ignored and
+    /// [`Self::bytes`] is the cut offset.
     pub fn feed(&mut self, bytes: &[u8]) {
+        if self.cut.is_some() {
+            return;
+        }
         self.bytes += bytes.len() as u64;
         // the decoder is moved out for the call so that events are handled as they come
         let mut decoder = std::mem::take(&mut self.decoder);
         decoder.feed(bytes, |e| self.on_event(e));
         self.decoder = decoder;
+        if let Some(c) = self.cut {
+            self.bytes = c;
+            // the bytes after the cut are not part of the capture
+            self.decoder = Decoder::new();
+            self.base = c;
+        }
     }
 
     /// Reserves room for `n` more kept samples.
@@ -220,9 +263,14 @@ impl StreamAnalyzer {
     }
 
     fn on_event(&mut self, e: DecodeEvent) {
+        if self.cut.is_some() {
+            return;
+        }
         match e {
             DecodeEvent::Frame {
-                offset, message, ..
+                offset,
+                len,
+                message,
             } => {
                 self.frames += 1;
                 match &message {
@@ -244,6 +292,9 @@ impl StreamAnalyzer {
                             b.reference_crc(),
                             raw[..n].iter().copied(),
                         );
+                        if self.periods_complete() {
+                            self.cut = Some(self.base + offset + len as u64);
+                        }
                     }
                     Message::Status(s) => self.on_status(s, false),
                     Message::End(s) => self.on_status(s, true),
@@ -252,6 +303,20 @@ impl StreamAnalyzer {
             DecodeEvent::Damaged { offset, len, error } => {
                 self.on_damaged(self.base + offset, len, &error)
             }
+        }
+    }
+
+    /// True when a period stop was requested and the reported session has reached it.
+    fn periods_complete(&self) -> bool {
+        match (self.stop_periods, self.header.as_ref(), self.last_seq()) {
+            (Some(n), Some(h), Some(last))
+                if self.current.is_some() && self.current == self.reported =>
+            {
+                let target = u64::from(h.excitation.ramp_samples)
+                    + u64::from(n) * u64::from(h.excitation.period_samples);
+                u64::from(last) + 1 >= target
+            }
+            _ => false,
         }
     }
 
@@ -284,8 +349,9 @@ impl StreamAnalyzer {
                 self.sessions.len() - 1
             }
         };
-        if self.header.is_none() {
+        if self.header.is_none() && self.wanted.is_none_or(|w| w == h.session_id) {
             self.header = Some(*h);
+            self.reported = Some(idx);
             if self.keep_samples {
                 self.reference = Some(
                     Reference::new(&h.excitation)
@@ -309,7 +375,7 @@ impl StreamAnalyzer {
             None => self.without_header += n,
             Some(i) => {
                 self.sessions[i].samples += n;
-                if i != 0 {
+                if self.reported != Some(i) {
                     self.other_sessions += n;
                 } else {
                     self.batches.push(BatchRef {
@@ -324,7 +390,7 @@ impl StreamAnalyzer {
     }
 
     fn on_status(&mut self, s: &Status, end: bool) {
-        if self.current == Some(0) {
+        if self.current.is_some() && self.current == self.reported {
             self.board = counters(s);
             if end {
                 self.ended = true;
@@ -579,7 +645,7 @@ impl StreamAnalyzer {
 
     fn report_without_reference(&self) -> CaptureReport {
         let gaps = self.gaps();
-        let session = self.sessions.first();
+        let session = self.reported.and_then(|i| self.sessions.get(i));
         CaptureReport {
             board_id: session.map(|s| s.board_id),
             session_id: session.map(|s| s.session_id),

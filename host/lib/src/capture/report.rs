@@ -244,7 +244,7 @@ impl fmt::Display for CaptureReport {
             ) {
                 writeln!(
                     f,
-                    "  {} {:?} at byte {} {}",
+                    "  {} {} at byte {} {}",
                     e.utc, e.event, e.offset, e.detail
                 )?;
             }

@@ -30,6 +30,18 @@ use std::path::Path;
 pub use jointid_core::excitation::{ExcitationConfig, SignalKind};
 
 pub mod csv;
+
+/// `x` rounded to `digits` significant digits (at least 1) and written in its shortest
+/// form: how times and rates are shown to the user (`Ts = 0.001 s` for a sample
+/// interval estimated as 0.0009999839611225525 s, `fs = 2000 Hz`, `f0 = 0.4 Hz`).
+/// Not for values written as data.
+pub fn fmt_sig(x: f64, digits: usize) -> String {
+    if !x.is_finite() {
+        return x.to_string();
+    }
+    let rounded: f64 = format!("{:.*e}", digits.max(1) - 1, x).parse().unwrap_or(x);
+    format!("{rounded}")
+}
 pub mod dsp;
 pub mod prep;
 
@@ -294,7 +306,7 @@ pub enum RecordError {
 #[derive(Debug, thiserror::Error)]
 pub enum DataError {
     /// the file could not be read
-    #[error("{file}: {source}")]
+    #[error("{file}: {}", io_phrase(source))]
     Io {
         /// file name
         file: String,
@@ -424,14 +436,34 @@ pub enum DataError {
         /// registered extensions
         known: String,
     },
-    /// a registered loader failed
-    #[error("{file}: {source}")]
+    /// a registered loader failed (its message names the file once)
+    #[error("{}", named_once(file, source.as_ref()))]
     Loader {
         /// file name
         file: String,
         /// the loader's error
         source: Box<dyn std::error::Error + Send + Sync>,
     },
+}
+
+/// An I/O error without the `(os error N)` suffix (still a prefix of the error's own
+/// text, so the command line does not repeat it as the cause).
+fn io_phrase(e: &std::io::Error) -> String {
+    let mut m = e.to_string();
+    if let Some(i) = m.find(" (os error ") {
+        m.truncate(i);
+    }
+    m
+}
+
+/// `file: message`, unless the message already begins with the file's name.
+fn named_once(file: &str, source: &dyn std::error::Error) -> String {
+    let m = source.to_string();
+    if m.starts_with(file) {
+        m
+    } else {
+        format!("{file}: {m}")
+    }
 }
 
 /// A file loader for one extension: path and column mapping in, dataset out.
@@ -503,6 +535,17 @@ impl Loaders {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn fmt_sig_rounds_times_and_rates_for_the_user() {
+        use super::fmt_sig;
+        assert_eq!(fmt_sig(0.000_999_983_961_122_552_5, 4), "0.001");
+        assert_eq!(fmt_sig(2000.0, 4), "2000");
+        assert_eq!(fmt_sig(1.0 / 2.5, 4), "0.4");
+        assert_eq!(fmt_sig(1.0 / 3.0, 4), "0.3333");
+        assert_eq!(fmt_sig(-0.126, 2), "-0.13");
+        assert_eq!(fmt_sig(f64::NAN, 4), "NaN");
+    }
+
     use super::*;
 
     #[test]

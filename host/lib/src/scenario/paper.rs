@@ -511,7 +511,7 @@ pub fn write_table(out: &mut dyn std::io::Write, t: &Table) -> std::io::Result<(
         crate::ident::validate::FIT_NAME,
         t.samples.0,
         t.samples.1,
-        t.ts
+        crate::data::fmt_sig(t.ts, 4)
     )?;
     let hz = |v: &[f64]| {
         v.iter()

@@ -146,6 +146,21 @@ pub enum Integrator {
     },
 }
 
+impl std::fmt::Display for Integrator {
+    /// In words, for the user: `exact ZOH`, `RK4 (5 substeps per sample)`,
+    /// `exponential RK4 (5 RK4 substeps per sample at events)`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::ExactZoh => write!(f, "exact ZOH"),
+            Self::Rk4 { substeps } => write!(f, "RK4 ({substeps} substeps per sample)"),
+            Self::ExponentialRk4 { substeps } => write!(
+                f,
+                "exponential RK4 ({substeps} RK4 substeps per sample at events)"
+            ),
+        }
+    }
+}
+
 /// Result of [`simulate`]: measured signals as the robot would give them, and the truth.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SimOutput {
