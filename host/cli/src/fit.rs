@@ -725,7 +725,9 @@ pub(crate) fn print_report(out: &mut dyn Write, r: &FitReport) -> std::io::Resul
     writeln!(
         out,
         "  {} samples, Ts = {} s, fitted in {:.2} s",
-        r.samples, r.ts, r.seconds
+        r.samples,
+        jointid::data::fmt_sig(r.ts, 4),
+        r.seconds
     )?;
     if !r.parameters.is_empty() {
         writeln!(

@@ -174,7 +174,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
             out,
             "  {} samples, Ts = {} s (decimation {})",
             data.len(),
-            data.ts,
+            jointid::data::fmt_sig(data.ts, 4),
             saved.prep.decimate
         )?;
         writeln!(
