@@ -554,6 +554,24 @@ fn fit_black_box(data: &IdData, n: usize, opts: &FitOptions) -> Result<Fitted, F
 /// over each tick), whereas after the anti-alias filter `u` is no longer
 /// piecewise constant and a model discretised at the coarse rate is the
 /// wrong model of decimated data.
+/// The four-mass branches in the reported order
+/// ([`grey_box::FOUR_MASS_BRANCHES`]); other structures unchanged. The
+/// model matrices need no change: both orders give the same response.
+fn canonical_branches(mut params: Vec<PhysParam>) -> Vec<PhysParam> {
+    let values: Vec<f64> = params.iter().map(|p| p.value).collect();
+    if grey_box::four_mass_swapped(&values) {
+        for (i, j) in grey_box::FOUR_MASS_BRANCHES {
+            let (a, b) = (params[i].clone(), params[j].clone());
+            params[i] = PhysParam {
+                name: a.name,
+                ..b.clone()
+            };
+            params[j] = PhysParam { name: b.name, ..a };
+        }
+    }
+    params
+}
+
 fn fit_grey(
     data: &IdData,
     raw: Option<&IdData>,
@@ -616,7 +634,7 @@ fn fit_grey(
             ts: data.ts,
             model,
             continuous: Some(f.continuous.clone()),
-            params: f.params.clone(),
+            params: canonical_branches(f.params.clone()),
             friction: None,
             warnings: f.warnings.clone(),
             method: format!(
@@ -716,7 +734,7 @@ fn fit_grey(
         ts: raw.ts,
         model,
         continuous: Some(gm.continuous(&pvals)),
-        params,
+        params: canonical_branches(params),
         friction: None,
         warnings,
         method: format!(
@@ -939,6 +957,29 @@ mod tests {
     use crate::data::Detrend;
     use crate::ident::linalg::GaussRng;
     use crate::ident::model_file::{SavedModel, MODEL_FORMAT, MODEL_FORMAT_1};
+
+    #[test]
+    fn four_mass_branches_are_reported_softer_first() {
+        let names = Structure::FourMass.param_names();
+        let vals = [1.0, 2.0, 3.0, 4.0, 5.0, 9.0, 6.0, 7.0, 8.0, 10.0, 11.0];
+        let params: Vec<PhysParam> = names
+            .iter()
+            .zip(vals)
+            .map(|(n, v)| PhysParam {
+                name: n.to_string(),
+                value: v,
+                std: 0.1 * v,
+                unit: unit_of(n),
+            })
+            .collect();
+        let c = canonical_branches(params.clone());
+        let get = |p: &[PhysParam], n: &str| p.iter().find(|q| q.name == n).unwrap().value;
+        assert_eq!((get(&c, "k_a"), get(&c, "k_p")), (6.0, 9.0));
+        assert_eq!((get(&c, "J_a2"), get(&c, "J_p")), (4.0, 3.0));
+        assert_eq!((get(&c, "d_a"), get(&c, "d_p")), (10.0, 8.0));
+        // already in order: unchanged
+        assert_eq!(canonical_branches(c.clone()), c);
+    }
 
     fn two_mass_data(n: usize, seed: u64, noise: f64) -> (IdData, StateSpace) {
         // motor-side two-mass: J_m 1e-3, arm 1e-3 (motor side), k' 20 → ~32 Hz

@@ -1206,17 +1206,15 @@ fn structure_name(s: Structure) -> &'static str {
     }
 }
 
-/// The four-mass model's two branches on `J_a1`, `(J_a2, k_a, d_a)` and
-/// `(J_p, k_p, d_p)` (seed 000 eq. (7)), enter the motor-side response alike:
-/// swapping them changes nothing the data can see. The fit reports the
-/// softer branch as `(J_a2, k_a, d_a)` (as in the default joint and seed
-/// 000 Table 1, where the parallel mass sits on the stiffer spring).
+/// The reported order of the four-mass model's interchangeable branches
+/// ([`grey_box::FOUR_MASS_BRANCHES`]), applied to a candidate with its
+/// covariance.
 fn canonical_four_mass(c: &mut Candidate) {
-    const PAIRS: [(usize, usize); 3] = [(2, 3), (5, 6), (8, 9)];
-    if c.theta[5] <= c.theta[6] {
+    let nm = Structure::FourMass.param_names().len();
+    if !grey_box::four_mass_swapped(&c.theta[..nm.min(c.theta.len())]) {
         return;
     }
-    for (i, j) in PAIRS {
+    for (i, j) in grey_box::FOUR_MASS_BRANCHES {
         c.theta.swap(i, j);
         c.start.swap(i, j);
         c.fit.theta.swap(i, j);

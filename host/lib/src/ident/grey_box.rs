@@ -61,6 +61,21 @@ use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
 use crate::model::params::unit_of;
 use crate::model::spec::Structure;
 
+/// Index pairs, in the four-mass parameter order, of the two branches on
+/// `J_a1`: `(J_a2, J_p)`, `(k_a, k_p)`, `(d_a, d_p)`. The branches enter the
+/// motor-side response alike (seed 000 eq. (7)): swapping them changes
+/// nothing the data can see, so every fit reports the softer branch as
+/// `(J_a2, k_a, d_a)` (as in the default joint, where the parallel mass sits
+/// on the stiffer spring); see [`four_mass_swapped`].
+pub const FOUR_MASS_BRANCHES: [(usize, usize); 3] = [(2, 3), (5, 6), (8, 9)];
+
+/// True when four-mass values `p` (any monotone map of them, e.g.
+/// logarithms) have the stiffer branch first and must be swapped to the
+/// reported order ([`FOUR_MASS_BRANCHES`]).
+pub fn four_mass_swapped(p: &[f64]) -> bool {
+    p.len() == 11 && p[5] > p[6]
+}
+
 /// default gear ratio of seed 000 (arm angle per motor angle)
 pub const DEFAULT_GEAR_RATIO: f64 = 1.0 / 118.0;
 
