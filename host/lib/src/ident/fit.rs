@@ -50,7 +50,6 @@ use crate::ident::pem::{self, FullSs, ParamModel, PemFit, PemOptions};
 use crate::ident::ss::{ContinuousSs, Resonances, StateSpace};
 use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
 use crate::ident::validate::{self, Validation};
-use crate::model::params::unit_of;
 use crate::model::spec::Structure;
 
 /// Largest `N · p²` (samples times squared parameter count) for which the
@@ -712,19 +711,7 @@ fn fit_grey(
         warnings.push("capture-rate output-error search stopped at the iteration limit".into());
     }
     let names = structure.param_names();
-    let params = names
-        .iter()
-        .enumerate()
-        .map(|(i, n)| {
-            let v = pf.theta[i].exp();
-            PhysParam {
-                name: n.to_string(),
-                value: v,
-                std: v * pf.std[i],
-                unit: unit_of(n),
-            }
-        })
-        .collect();
+    let params = grey_box::phys_params(names, &pf.theta, &pf.std);
     let pvals: Vec<f64> = pf.theta.iter().map(|t| t.exp()).collect();
     let mut model = pf.model.clone();
     model.k = None;
@@ -960,6 +947,7 @@ mod tests {
 
     #[test]
     fn four_mass_branches_are_reported_softer_first() {
+        use crate::model::params::unit_of;
         let names = Structure::FourMass.param_names();
         let vals = [1.0, 2.0, 3.0, 4.0, 5.0, 9.0, 6.0, 7.0, 8.0, 10.0, 11.0];
         let params: Vec<PhysParam> = names

@@ -69,7 +69,6 @@ use crate::ident::frf::{Frf, FrfSpectra};
 use crate::ident::grey_box::{self, Features, GreyBoxModel, Output, PhysParam};
 use crate::ident::lm::{self, LeastSquares, LmFit, LmOptions, Normal, Termination};
 use crate::ident::ss::{ContinuousSs, StateSpace};
-use crate::model::params::unit_of;
 use crate::model::spec::Structure;
 
 /// relative standard deviation above which a line of the FRF is not used to
@@ -1238,29 +1237,8 @@ fn finish(
     let names = model.structure.param_names();
     let nm = names.len();
     let th = &best.theta;
-    let params: Vec<PhysParam> = names
-        .iter()
-        .enumerate()
-        .map(|(i, n)| {
-            let v = th[i].exp();
-            PhysParam {
-                name: (*n).into(),
-                value: v,
-                std: v * best.fit.std[i],
-                unit: unit_of(n),
-            }
-        })
-        .collect();
-    let initial: Vec<PhysParam> = names
-        .iter()
-        .enumerate()
-        .map(|(i, n)| PhysParam {
-            name: (*n).into(),
-            value: best.start[i].exp(),
-            std: 0.0,
-            unit: unit_of(n),
-        })
-        .collect();
+    let params = grey_box::phys_params(names, th, &best.fit.std);
+    let initial = grey_box::phys_params(names, &best.start, &[]);
     let drive = |i: usize, fixed: bool| DriveEstimate {
         value: th[i],
         std: best.fit.std[i],

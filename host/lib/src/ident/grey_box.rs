@@ -61,6 +61,26 @@ use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
 use crate::model::params::unit_of;
 use crate::model::spec::Structure;
 
+/// Physical parameters from log-parameter estimates and their standard
+/// deviations (delta method, `σ_p = p σ_{ln p}`), names and units from
+/// `names`; `log_std` empty for a start (σ 0). Extra trailing entries of
+/// `log_theta` (a lag, a delay, an initial state) are ignored.
+pub fn phys_params(names: &[&str], log_theta: &[f64], log_std: &[f64]) -> Vec<PhysParam> {
+    names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            let v = log_theta[i].exp();
+            PhysParam {
+                name: n.to_string(),
+                value: v,
+                std: log_std.get(i).map_or(0.0, |s| v * s),
+                unit: unit_of(n),
+            }
+        })
+        .collect()
+}
+
 /// Index pairs, in the four-mass parameter order, of the two branches on
 /// `J_a1`: `(J_a2, J_p)`, `(k_a, k_p)`, `(d_a, d_p)`. The branches enter the
 /// motor-side response alike (seed 000 eq. (7)): swapping them changes
@@ -1093,19 +1113,7 @@ pub fn fit(data: &IdData, opts: &GreyBoxOptions) -> Result<GreyBoxFit, GreyBoxEr
     if pf.termination == pem::Termination::MaxIterations {
         warnings.push("prediction-error search stopped at the iteration limit".into());
     }
-    let params = names
-        .iter()
-        .enumerate()
-        .map(|(i, n)| {
-            let v = pf.theta[i].exp();
-            PhysParam {
-                name: n.to_string(),
-                value: v,
-                std: v * pf.std[i],
-                unit: unit_of(n),
-            }
-        })
-        .collect();
+    let params = phys_params(names, &pf.theta, &pf.std);
     let initial = names
         .iter()
         .zip(&p0)
