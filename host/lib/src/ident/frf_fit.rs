@@ -332,10 +332,7 @@ impl FrfFit {
     /// `F` lines, `p` free parameters, `ν` the degrees of freedom of the
     /// noise variances (the inflation of a ratio to an estimated variance).
     pub fn expected_cost(&self) -> f64 {
-        let (_, dof) = self.lm.chi2();
-        let nu = self.noise_dof;
-        let infl = if nu > 2.0 { nu / (nu - 2.0) } else { 1.0 };
-        dof.max(1) as f64 * infl
+        expected_sml_cost(self.lm.chi2().1, self.noise_dof)
     }
 
     /// cost / expected cost: about 1 when the noise explains the misfit
@@ -614,9 +611,15 @@ impl Lines {
     /// SML cost expected at the true model with `p` free parameters
     pub(crate) fn expected_cost(&self, p: usize) -> f64 {
         let nu = self.spectra.as_ref().map_or(0.0, FrfSpectra::dof);
-        (2 * self.z.len()).saturating_sub(p).max(1) as f64
-            * if nu > 2.0 { nu / (nu - 2.0) } else { 1.0 }
+        expected_sml_cost((2 * self.z.len()).saturating_sub(p), nu)
     }
+}
+
+/// SML cost expected at the true model with `dof` real residuals left after
+/// the free parameters: `dof · ν/(ν − 2)`, the inflation of a ratio to a
+/// variance estimated with `ν` degrees of freedom (none when `ν ≤ 2`).
+fn expected_sml_cost(dof: usize, nu: f64) -> f64 {
+    dof.max(1) as f64 * if nu > 2.0 { nu / (nu - 2.0) } else { 1.0 }
 }
 
 /// Which cost a problem evaluates.
@@ -996,9 +999,7 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
     let peaks = frf_peaks(frf, opts.output);
     let n_res = structure.masses() - 1;
     let zetas: &[f64] = if n_res == 0 { &[0.05] } else { &[0.03, 0.12] };
-    let nu = frf.spectra.dof();
-    let expected = (2 * frf.g.len()).saturating_sub(needed).max(1) as f64
-        * if nu > 2.0 { nu / (nu - 2.0) } else { 1.0 };
+    let expected = lines.expected_cost(needed);
     let drive0 = |d: Drive, start: f64| match d {
         Drive::Estimate => start,
         Drive::Fixed(v) => v,
