@@ -1,0 +1,120 @@
+//! The pointwise laws of the plant and its effects, written once over any real scalar so
+//! that the simulator (`f64`) and the estimators (dual numbers, for exact forward-mode
+//! derivatives) evaluate the same equations ([`crate::model::effects`] says what each
+//! effect is and where it acts).
+//!
+//! Two laws are non-smooth and have a smooth counterpart for gradient-based estimation:
+//! - Coulomb friction: the simulator integrates the set-valued law (stick at `ω = 0` while
+//!   the net torque is below the breakaway level, see [`crate::sim::integrate`]); the
+//!   estimator uses [`coulomb_smooth`], `F_c tanh(ω/v_ε)`, which tends to it as `v_ε → 0`.
+//! - Backlash: the simulator locates the contact edges of [`dead_zone`] exactly; the
+//!   estimator uses [`dead_zone_smooth`], whose kink is rounded over `±ε` around each edge.
+//!
+//! The validation FIT of a fitted model is always computed with the exact laws (the
+//! simulator), never with the smooth ones.
+
+use num_traits::Float;
+
+/// `f64` constant as the scalar type.
+#[inline(always)]
+fn c<T: Float>(v: f64) -> T {
+    T::from(v).expect("f64 converts to every Float")
+}
+
+/// Torque of a spring–damper with a cubic stiffening term (seed 001 eq. (6)):
+/// `k e + k3 e³ + d ė`, with `e` the (contact) deflection [rad] and `de` its rate [rad/s]
+/// → [N·m]. The linear spring is `k3 = 0`.
+#[inline(always)]
+pub fn spring_torque<T: Float>(k: T, k3: T, d: T, e: T, de: T) -> T {
+    k * e + k3 * e * e * e + d * de
+}
+
+/// Backlash dead zone of half width `half` [rad]: the contact deflection `δ − h` beyond
+/// the positive flank, `δ + h` beyond the negative one, 0 in the gap (exact law).
+#[inline(always)]
+pub fn dead_zone<T: Float>(delta: T, half: T) -> T {
+    if delta > half {
+        delta - half
+    } else if delta < -half {
+        delta + half
+    } else {
+        T::zero()
+    }
+}
+
+/// Smooth dead zone for the estimator: `½[(δ − h) + s(δ − h)] + ½[(δ + h) − s(δ + h)]`
+/// with `s(x) = √(x² + ε²)`, which equals [`dead_zone`] to within `ε/2` and has a
+/// continuous slope (0 in the gap, 1 in contact) [rad].
+#[inline(always)]
+pub fn dead_zone_smooth<T: Float>(delta: T, half: T, eps: T) -> T {
+    let half_t: T = c(0.5);
+    let s = |x: T| (x * x + eps * eps).sqrt();
+    let p = delta - half;
+    let n = delta + half;
+    half_t * (p + s(p)) + half_t * (n - s(n))
+}
+
+/// Smooth Coulomb friction for the estimator, `F_c tanh(ω/v_ε)` [N·m], opposing the motor
+/// velocity `omega` [rad/s]; the level `fc` [N·m], the smoothing velocity `v_eps` [rad/s].
+#[inline(always)]
+pub fn coulomb_smooth<T: Float>(fc: T, omega: T, v_eps: T) -> T {
+    fc * (omega / v_eps).tanh()
+}
+
+/// Position-dependent torque ripple `A sin(n θ + φ)` [N·m] at motor angle `theta` [rad].
+#[inline(always)]
+pub fn ripple_torque<T: Float>(amplitude: T, order: T, phase: T, theta: T) -> T {
+    amplitude * (order * theta + phase).sin()
+}
+
+/// Output of the current loop (first-order lag with time constant `tc` [s]) after `t` [s]
+/// with its input held at `target` from the value `start` [N·m]: `target + (start −
+/// target) e^{−t/tc}`; `tc = 0` is no lag (the target at once).
+#[inline(always)]
+pub fn current_loop<T: Float>(start: T, target: T, tc: T, t: T) -> T {
+    if tc > T::zero() {
+        target + (start - target) * (-t / tc).exp()
+    } else {
+        target
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn smooth_dead_zone_is_within_half_eps_of_the_exact_one_and_zero_in_the_gap() {
+        let (h, eps) = (1e-3, 1e-5);
+        for i in -300..=300 {
+            let d = i as f64 * 1e-5;
+            let exact = dead_zone(d, h);
+            let smooth = dead_zone_smooth(d, h, eps);
+            assert!((exact - smooth).abs() <= 0.5 * eps + 1e-15, "δ = {d}");
+        }
+        assert!(dead_zone_smooth(0.0, h, eps).abs() < 1e-12);
+        assert_eq!(dead_zone(2e-3, h), 1e-3);
+        assert_eq!(dead_zone(-2e-3, h), -1e-3);
+    }
+
+    #[test]
+    fn smooth_coulomb_tends_to_the_sign_law() {
+        assert!((coulomb_smooth(0.1, 1.0, 1e-3) - 0.1).abs() < 1e-12);
+        assert!((coulomb_smooth(0.1, -1.0, 1e-3) + 0.1).abs() < 1e-12);
+        assert_eq!(coulomb_smooth(0.1, 0.0, 1e-3), 0.0);
+    }
+
+    #[test]
+    fn current_loop_lag_decays_to_its_target() {
+        let tc = 5e-4;
+        let v = current_loop(0.0, 1.0, tc, tc);
+        assert!((v - (1.0 - (-1.0f64).exp())).abs() < 1e-15);
+        assert_eq!(current_loop(0.3, 1.0, 0.0, 1e-4), 1.0);
+    }
+
+    #[test]
+    fn cubic_spring_adds_to_the_linear_one() {
+        let t = spring_torque(1.0e5, 1.6e11, 80.0, 1e-3, 0.01);
+        assert!((t - (100.0 + 160.0 + 0.8)).abs() < 1e-9);
+    }
+}
