@@ -131,6 +131,77 @@ pub fn butter_lowpass_sos(order: usize, fc_hz: f64, ts: f64) -> Vec<[f64; 5]> {
         .collect()
 }
 
+/// Second-order sections of a digital Butterworth high-pass of even `order` with cut-off
+/// `fc_hz` at sample interval `ts`: the low-pass prototype with `s → 1/s`, bilinear
+/// transform with pre-warping; sections `[b0, b1, b2, a1, a2]` (a0 = 1).
+pub fn butter_highpass_sos(order: usize, fc_hz: f64, ts: f64) -> Vec<[f64; 5]> {
+    let order = order.max(2) & !1;
+    let k = (std::f64::consts::PI * fc_hz * ts).tan();
+    (0..order / 2)
+        .map(|i| {
+            let theta = std::f64::consts::PI * (2 * i + 1) as f64 / (2 * order) as f64;
+            let q2 = 2.0 * theta.sin();
+            let a0 = 1.0 + q2 * k + k * k;
+            let b0 = 1.0 / a0;
+            [
+                b0,
+                -2.0 * b0,
+                b0,
+                2.0 * (k * k - 1.0) / a0,
+                (1.0 - q2 * k + k * k) / a0,
+            ]
+        })
+        .collect()
+}
+
+/// A bank of identical causal filters (second-order sections, transposed direct form II),
+/// one per channel, fed one sample of every channel at a time. Each channel starts in the
+/// steady state of its first sample held constant.
+#[derive(Clone, Debug)]
+pub struct SosBank {
+    sos: Vec<[f64; 5]>,
+    /// `[z1, z2]` per section and channel
+    state: Vec<[f64; 2]>,
+    channels: usize,
+    started: bool,
+}
+
+impl SosBank {
+    /// `channels` filters of the sections `sos`.
+    pub fn new(sos: Vec<[f64; 5]>, channels: usize) -> SosBank {
+        let state = vec![[0.0; 2]; sos.len() * channels];
+        SosBank {
+            sos,
+            state,
+            channels,
+            started: false,
+        }
+    }
+
+    /// Filters one sample of every channel in place.
+    pub fn push(&mut self, x: &mut [f64]) {
+        debug_assert_eq!(x.len(), self.channels);
+        for (si, s) in self.sos.iter().enumerate() {
+            let gain = (s[0] + s[1] + s[2]) / (1.0 + s[3] + s[4]);
+            for (c, v) in x.iter_mut().enumerate() {
+                let z = &mut self.state[si * self.channels + c];
+                if !self.started {
+                    // steady state for the input held at v: output gain·v
+                    let y = gain * *v;
+                    z[1] = s[2] * *v - s[4] * y;
+                    z[0] = y - s[0] * *v;
+                }
+                let xin = *v;
+                let y = s[0] * xin + z[0];
+                z[0] = s[1] * xin - s[3] * y + z[1];
+                z[1] = s[2] * xin - s[4] * y;
+                *v = y;
+            }
+        }
+        self.started = true;
+    }
+}
+
 fn sos_filter(sos: &[[f64; 5]], x: &mut [f64]) {
     for s in sos {
         let (mut z1, mut z2) = (0.0, 0.0);
@@ -245,6 +316,23 @@ pub fn dvec(x: &[f64]) -> DVector<f64> {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn highpass_bank_removes_a_constant_and_passes_a_fast_sine() {
+        let ts = 5e-4;
+        let mut bank = SosBank::new(butter_highpass_sos(2, 1.0, ts), 2);
+        let mut peak: f64 = 0.0;
+        for k in 0..20_000 {
+            let t = k as f64 * ts;
+            let mut x = [3.0, (2.0 * std::f64::consts::PI * 50.0 * t).sin()];
+            bank.push(&mut x);
+            assert!(x[0].abs() < 1e-9, "constant leaks: {}", x[0]);
+            if k > 10_000 {
+                peak = peak.max(x[1].abs());
+            }
+        }
+        assert!((peak - 1.0).abs() < 1e-3, "gain at 50 Hz {peak}");
+    }
     use super::*;
 
     #[test]

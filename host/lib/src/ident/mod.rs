@@ -14,6 +14,7 @@ pub mod grey_box;
 pub mod linalg;
 pub mod lm;
 pub mod model_file;
+pub mod nonlinear;
 pub mod pem;
 pub mod ss;
 pub mod subspace;

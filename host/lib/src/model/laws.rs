@@ -54,6 +54,17 @@ pub fn dead_zone_smooth<T: Float>(delta: T, half: T, eps: T) -> T {
     half_t * (p + s(p)) + half_t * (n - s(n))
 }
 
+/// Slope `d/dδ` of [`dead_zone_smooth`]: 0 deep in the gap, 1 in contact; it scales the
+/// gearbox damping, which acts only in contact.
+#[inline(always)]
+pub fn dead_zone_smooth_slope<T: Float>(delta: T, half: T, eps: T) -> T {
+    let half_t: T = c(0.5);
+    let s = |x: T| (x * x + eps * eps).sqrt();
+    let p = delta - half;
+    let n = delta + half;
+    half_t * (T::one() + p / s(p)) + half_t * (T::one() - n / s(n))
+}
+
 /// Smooth Coulomb friction for the estimator, `F_c tanh(ω/v_ε)` [N·m], opposing the motor
 /// velocity `omega` [rad/s]; the level `fc` [N·m], the smoothing velocity `v_eps` [rad/s].
 #[inline(always)]

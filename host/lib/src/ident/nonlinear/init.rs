@@ -1,0 +1,409 @@
+//! Starting values from the data, never from the user (seed 001 §4, its three steps):
+//! 1. **rigid body**: total inertia `J` and viscous friction `F_v` by inverse-dynamics least
+//!    squares on low-passed data ([`grey_box::rigid_idim`]);
+//! 2. **friction**: `F_v`, `F_c` and a torque offset from the same torque–velocity relation
+//!    with the Coulomb regressor `sgn(ω)` (and the ripple's `sin`/`cos` of `n θ_m` when
+//!    `torque_ripple` is attached, which gives its amplitude and phase);
+//! 3. **flexibility**: the linear structure (the caller's linear fit, e.g. the
+//!    frequency-domain one, or modal features of a subspace model,
+//!    [`grey_box::features`]), refined by the output-error fit with friction only; then each
+//!    remaining effect's size from a one-dimensional search of the output-error cost over a
+//!    grid scaled by the data (cubic term against the deflection level, backlash width
+//!    against it, delay in samples, the extra mode's frequency against the first resonance).
+//!
+//! Each step's result is kept ([`Step`]) and reported, as seed 001 reports them.
+
+use super::fit::{fit_output_error, NlError, NlOptions};
+use super::model::NlModel;
+use crate::data::IdData;
+use crate::ident::grey_box::{self, IdimOptions, Output};
+use crate::model::effects::{Attach, Effect, ExtraMode};
+use crate::model::spec::Structure;
+
+/// Low-pass cut-off of the rigid-body and friction regressions [Hz]: below the first
+/// anti-resonance of a robot joint (seed 000: 17 Hz; seed 001: 15 Hz), where the joint moves
+/// as one body, and above the rigid-body corner of the closed loop.
+const RIGID_CUTOFF_HZ: f64 = 8.0;
+
+/// One step of the automatic start and what it found.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Step {
+    /// what the step does (`rigid body`, `friction`, `flexibility`, an effect's name)
+    pub name: String,
+    /// (name, value, unit) it found
+    pub values: Vec<(String, f64, &'static str)>,
+    /// how well: the cost measure the step used, in words
+    pub detail: String,
+}
+
+/// The automatic start and the record of its steps.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Start {
+    /// physical values in the layout order of [`NlModel::layout`]
+    pub values: Vec<f64>,
+    /// the model with the start's effect values
+    pub model: NlModel,
+    /// the steps, in order
+    pub steps: Vec<Step>,
+}
+
+/// The automatic start of `model` on `data` (module documentation). `linear`: the
+/// structure's values from a linear fit the caller trusts (in
+/// [`Structure::param_names`] order), used for step 3 instead of the subspace features.
+///
+/// # Errors
+/// [`NlError::Data`] when a step cannot read the data.
+pub fn automatic_start(
+    data: &IdData,
+    model: &NlModel,
+    linear: Option<&[f64]>,
+) -> Result<Start, NlError> {
+    let mut steps = Vec::new();
+    let err = |e: grey_box::GreyBoxError| NlError::Data(e.to_string());
+    // step 1: rigid body
+    let rigid = grey_box::rigid_idim(
+        data,
+        &IdimOptions {
+            cutoff_hz: RIGID_CUTOFF_HZ,
+            coulomb: false,
+            offset: true,
+            ..IdimOptions::default()
+        },
+    )
+    .map_err(err)?;
+    let j_total = rigid.get("J").unwrap_or(f64::NAN);
+    if j_total.is_nan() || j_total <= 0.0 {
+        return Err(NlError::Data(
+            "no positive rigid-body inertia in the data (step 1 of the start)".into(),
+        ));
+    }
+    steps.push(Step {
+        name: "rigid body".into(),
+        values: rigid
+            .params
+            .iter()
+            .map(|p| (p.name.clone(), p.value, p.unit))
+            .collect(),
+        detail: format!(
+            "inverse-dynamics least squares, torque error {:.1} %",
+            rigid.rel_error_percent
+        ),
+    });
+    // step 2: friction (and ripple by the same regression)
+    let has_coulomb = model
+        .effects
+        .iter()
+        .any(|e| matches!(e, Effect::CoulombFriction(_)));
+    let friction = grey_box::rigid_idim(
+        data,
+        &IdimOptions {
+            cutoff_hz: RIGID_CUTOFF_HZ,
+            coulomb: true,
+            offset: true,
+            ..IdimOptions::default()
+        },
+    )
+    .map_err(err)?;
+    let fv = friction.get("Fv").unwrap_or(0.0);
+    let fc = friction.get("Fc").unwrap_or(0.0);
+    let offset = friction.get("offset").unwrap_or(0.0);
+    steps.push(Step {
+        name: "friction".into(),
+        values: friction
+            .params
+            .iter()
+            .map(|p| (p.name.clone(), p.value, p.unit))
+            .collect(),
+        detail: format!(
+            "torque-velocity least squares, torque error {:.1} %",
+            friction.rel_error_percent
+        ),
+    });
+    let j_used = if has_coulomb {
+        friction.get("J").unwrap_or(j_total)
+    } else {
+        j_total
+    };
+    let fv_used = if has_coulomb {
+        fv
+    } else {
+        rigid.get("Fv").unwrap_or(fv)
+    };
+    // a positive floor keeps the log-parameters finite when friction is not seen
+    let fv_used = fv_used.max(1e-6 * j_used);
+    let u_rms = (data.u.iter().map(|u| u * u).sum::<f64>() / data.u.len() as f64).sqrt();
+    let fc_used = if fc > 0.0 { fc } else { 0.01 * u_rms };
+
+    // step 3: flexibility, linear
+    let plant: Vec<f64> = match (model.structure, linear) {
+        (_, Some(p)) => p.to_vec(),
+        (Structure::Rigid, None) => vec![j_used, fv_used],
+        (Structure::TwoMass, None) => two_mass_grid(data, model, j_used, fv_used, fc_used, offset),
+        (s, None) => {
+            let (mut feat, _) =
+                grey_box::features(data, Output::Angle, s.masses(), 0, 0.0).map_err(err)?;
+            feat.j_total = j_used;
+            feat.f_m = fv_used;
+            grey_box::initial_values(s, model.r, &feat)
+        }
+    };
+    let friction_only: Vec<Effect> = model
+        .effects
+        .iter()
+        .filter(|e| matches!(e, Effect::CoulombFriction(_)))
+        .map(|e| match e {
+            Effect::CoulombFriction(c) => {
+                Effect::CoulombFriction(crate::model::effects::CoulombFriction {
+                    fc: fc_used,
+                    fs: fc_used,
+                    ..*c
+                })
+            }
+            e => *e,
+        })
+        .collect();
+    let lin_model = NlModel {
+        effects: friction_only,
+        ..model.clone()
+    };
+    let lin_start = lin_model.values(&plant, offset, 0.0);
+    let lin = fit_output_error(
+        data,
+        &lin_model,
+        &lin_start,
+        &NlOptions {
+            max_iter: 30,
+            cov_lags: 0,
+            ..NlOptions::default()
+        },
+    )?;
+    steps.push(Step {
+        name: "flexibility".into(),
+        values: lin
+            .params
+            .iter()
+            .filter(|p| p.name != "v0")
+            .map(|p| (p.name.to_string(), p.value, p.unit))
+            .collect(),
+        detail: format!(
+            "linear {} by output error on the motor velocity, FIT {:.2} %",
+            model.structure.label(),
+            lin.fit_velocity_percent
+        ),
+    });
+
+    // the remaining effects, one at a time, on the linear fit
+    let lin_plant = lin.plant.clone();
+    let lin_offset = lin.get("offset").unwrap_or(offset);
+    let lin_fc = lin.get("fc").unwrap_or(fc_used);
+    let mut current: Vec<Effect> = Vec::with_capacity(model.effects.len());
+    for e in &model.effects {
+        current.push(match *e {
+            Effect::CoulombFriction(c) => {
+                Effect::CoulombFriction(crate::model::effects::CoulombFriction {
+                    fc: lin_fc,
+                    fs: lin_fc,
+                    ..c
+                })
+            }
+            other => neutral(other),
+        });
+    }
+    let kg = lin_plant.get(2).copied().unwrap_or(0.0);
+    // deflection level: the arm-side torque the motor torque implies, over the stiffness
+    let delta = if model.structure == Structure::Rigid || kg <= 0.0 {
+        0.0
+    } else {
+        u_rms / model.r / kg
+    };
+    for i in 0..model.effects.len() {
+        let grid: Vec<Effect> = candidates(&model.effects[i], &lin_plant, model, delta, u_rms);
+        if grid.is_empty() {
+            continue;
+        }
+        let mut best: Option<(f64, Effect)> = None;
+        for cand in grid {
+            let mut effects = current.clone();
+            effects[i] = cand;
+            let m = NlModel {
+                effects,
+                ..model.clone()
+            };
+            let values = m.values(&lin_plant, lin_offset, 0.0);
+            if let Some(cost) = super::fit::cost_at(data, &m, &values) {
+                if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+                    best = Some((cost, cand));
+                }
+            }
+        }
+        if let Some((cost, cand)) = best {
+            current[i] = cand;
+            let m = NlModel {
+                effects: vec![cand],
+                ..model.clone()
+            };
+            let layout = m.layout();
+            let vals = m.values(&lin_plant, lin_offset, 0.0);
+            steps.push(Step {
+                name: cand.name().into(),
+                values: layout
+                    .iter()
+                    .zip(&vals)
+                    .filter(|(d, _)| matches!(d.owner, super::model::Owner::Effect(_)))
+                    .map(|(d, &v)| (d.name.to_string(), v, d.unit))
+                    .collect(),
+                detail: format!("best of a grid on the output-error cost ({cost:.4e})"),
+            });
+        }
+    }
+    let start_model = NlModel {
+        effects: current,
+        ..model.clone()
+    };
+    let values = start_model.values(&lin_plant, lin_offset, lin.get("v0").unwrap_or(0.0));
+    Ok(Start {
+        values,
+        model: start_model,
+        steps,
+    })
+}
+
+/// The two-mass start with the lowest output-error cost (friction at its step-2 value) on a
+/// grid of total inertia around the step-1 value, motor share of it, and first resonance
+/// from 3 to 150 Hz (10 % damping): the inverse-dynamics inertia is only as good as the
+/// rigid-body assumption below its low-pass cut-off, and closed-loop data carry little
+/// low-frequency torque, so the grid does not trust it within a factor 2.
+fn two_mass_grid(
+    data: &IdData,
+    model: &NlModel,
+    j: f64,
+    fv: f64,
+    fc: f64,
+    offset: f64,
+) -> Vec<f64> {
+    let r2 = model.r * model.r;
+    let friction: Vec<Effect> = model
+        .effects
+        .iter()
+        .filter_map(|e| match e {
+            Effect::CoulombFriction(c) => Some(Effect::CoulombFriction(
+                crate::model::effects::CoulombFriction { fc, fs: fc, ..*c },
+            )),
+            _ => None,
+        })
+        .collect();
+    let m = NlModel {
+        effects: friction,
+        ..model.clone()
+    };
+    let mut best: Option<(f64, Vec<f64>)> = None;
+    for js in [0.5, 0.7, 1.0, 1.4, 2.0] {
+        let jt = j * js;
+        for alpha in [0.25, 0.5, 0.75] {
+            let jm = alpha * jt;
+            let ja = (1.0 - alpha) * jt / r2;
+            for i in 0..12 {
+                let f_r = 3.0 * (50.0f64).powf(i as f64 / 11.0);
+                let w = 2.0 * std::f64::consts::PI * f_r;
+                let mu = 1.0 / (1.0 / ja + r2 / jm);
+                let kg = w * w * mu;
+                let dg = 2.0 * 0.1 * w * mu;
+                let plant = vec![jm, ja, kg, dg, fv];
+                let values = m.values(&plant, offset, 0.0);
+                if let Some(cost) = super::fit::cost_at(data, &m, &values) {
+                    if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+                        best = Some((cost, plant));
+                    }
+                }
+            }
+        }
+    }
+    best.map_or_else(|| vec![0.5 * j, 0.5 * j / r2, 1.0, 1.0, fv], |(_, p)| p)
+}
+
+/// An effect at a size that leaves the linear model unchanged (or nearly: a log-parameter
+/// cannot be zero) until its search sets it.
+fn neutral(e: Effect) -> Effect {
+    match e {
+        Effect::NonlinearStiffness(mut s) => {
+            s.k3 = 0.0;
+            Effect::NonlinearStiffness(s)
+        }
+        Effect::TorqueRipple(mut r) => {
+            r.amplitude = 0.0;
+            Effect::TorqueRipple(r)
+        }
+        Effect::TimeDelay(mut t) => {
+            t.samples = 0.0;
+            Effect::TimeDelay(t)
+        }
+        Effect::Backlash(mut b) => {
+            b.width = 1e-9;
+            Effect::Backlash(b)
+        }
+        e => e,
+    }
+}
+
+/// The grid of one effect's sizes to search, scaled by the linear fit and the deflection
+/// level `delta` [rad] and the torque level `u_rms` [N·m].
+fn candidates(e: &Effect, plant: &[f64], model: &NlModel, delta: f64, u_rms: f64) -> Vec<Effect> {
+    match *e {
+        Effect::NonlinearStiffness(_) if delta > 0.0 => {
+            let kg = plant[2];
+            let unit = kg / (delta * delta);
+            [-0.1, -0.03, 0.0, 0.03, 0.1, 0.3, 1.0, 3.0]
+                .iter()
+                .map(|f| {
+                    Effect::NonlinearStiffness(crate::model::effects::NonlinearStiffness {
+                        k3: f * unit,
+                    })
+                })
+                .collect()
+        }
+        Effect::Backlash(_) if delta > 0.0 => [0.01, 0.03, 0.1, 0.3, 1.0]
+            .iter()
+            .map(|f| Effect::Backlash(crate::model::effects::Backlash { width: f * delta }))
+            .collect(),
+        Effect::TimeDelay(_) => [0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0]
+            .iter()
+            .map(|&s| Effect::TimeDelay(crate::model::effects::TimeDelay { samples: s }))
+            .collect(),
+        Effect::TorqueRipple(r) => {
+            let mut v = Vec::new();
+            for a in [0.003, 0.01, 0.03, 0.1] {
+                let a = a * u_rms;
+                for k in 0..4 {
+                    v.push(Effect::TorqueRipple(crate::model::effects::TorqueRipple {
+                        amplitude: a,
+                        phase: k as f64 * std::f64::consts::FRAC_PI_2,
+                        ..r
+                    }));
+                }
+            }
+            v
+        }
+        Effect::ExtraMode(x) if model.structure != Structure::Rigid => {
+            // the extra mass a quarter of the first arm mass, its frequency spread around
+            // the first resonance with the arm held still, 5 % damping
+            let j = 0.25 * plant[1];
+            let mut v = Vec::new();
+            for f_hz in [3.0, 5.0, 8.0, 12.0, 18.0, 27.0, 40.0] {
+                let w = 2.0 * std::f64::consts::PI * f_hz;
+                let k = j * w * w;
+                v.push(Effect::ExtraMode(ExtraMode {
+                    j,
+                    k,
+                    d: 2.0 * 0.05 * (k * j).sqrt(),
+                    attach: if x.attach == Attach::Serial {
+                        Attach::Serial
+                    } else {
+                        Attach::Parallel
+                    },
+                }));
+            }
+            v
+        }
+        _ => Vec::new(),
+    }
+}

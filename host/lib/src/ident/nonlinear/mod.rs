@@ -1,0 +1,20 @@
+//! Nonlinear grey-box identification: a physical model (rigid, two-, three-, four-mass)
+//! with any of the simulator's effects attached ([`crate::model::effects`]), fitted by
+//! output error from the measured torque with exact derivatives ([`fit`]), from starting
+//! values found in the data ([`init`], seed 001's three steps). The equations are the
+//! simulator's ([`crate::model::laws`]); the non-smooth ones (Coulomb friction, backlash)
+//! enter the fit in their documented smooth form ([`model`]).
+
+pub mod fit;
+pub mod init;
+pub mod model;
+
+pub use fit::{
+    cost_at, fit_output_error, interval_velocity, simulate_velocity, NlError, NlFit, NlOptions,
+    NlParam,
+};
+pub use init::{automatic_start, Start, Step};
+pub use model::{NlModel, Owner, ParamDef, Scale};
+
+#[cfg(test)]
+mod tests;

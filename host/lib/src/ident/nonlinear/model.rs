@@ -1,0 +1,637 @@
+//! A physical model with effects attached, as the output-error fit sees it: the parameter
+//! vector (names, units, scaling, bounds) and the torque-driven simulation of the motor
+//! velocity, written once over any [`Float`] so that the same code gives the output (`f64`)
+//! and its exact derivatives (dual numbers).
+//!
+//! Plant: the bodies and springs of [`Structure`] (seed 000 eq. (5)–(8); the two-mass is
+//! seed 001 eq. (4)–(9) without its nonlinear terms) with the effects' extra masses, in the
+//! coordinates of [`crate::model::plant`]. Laws from [`crate::model::laws`]: the gearbox
+//! spring `k e + k3 e³ + d ė` on the contact deflection `e` (the smooth dead zone when
+//! backlash is attached), smooth Coulomb friction `F_c tanh(ω/v_ε)` on the motor, ripple
+//! `A sin(n θ_m + φ)`, the current-loop lag in closed form, a torque offset.
+//!
+//! Input: the measured torque reference `u[k]`, held over sample `k` (zero-order hold,
+//! as the board applies it), delayed by `D = n + φ` samples when `time_delay` is
+//! attached: `u[k−n−1]` for the first fraction φ of the sample, `u[k−n]` after.
+//! Integration: classical RK4, `substeps` steps per sample, with the current-loop torque at
+//! the stage times in closed form (exact for the held input); without a current loop the
+//! torque of a step is the mean of the held input over it (exact in the mean, and smooth in
+//! the delay). A delay's switch inside an RK4 step puts a kink in the torque there: with
+//! `time_delay` attached use at least two steps per sample (the fractional delay of the
+//! default joint, 1.5 samples, is 3 % low at one step, within 1 % at two). The outputs are the motor angle and the interval-mean motor velocity
+//! `(θ_m(t_k) − θ_m(t_{k−1}))/T`.
+
+use num_traits::Float;
+
+use crate::model::effects::{Attach, Effect};
+use crate::model::laws;
+use crate::model::params::unit_of;
+use crate::model::spec::Structure;
+
+/// Most bodies: four-mass plus four extra modes.
+pub const MAX_BODIES: usize = 8;
+
+/// How a parameter is scaled for the optimiser.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Scale {
+    /// `p = e^z` (positive parameters; steps are relative)
+    Log,
+    /// `p = s z` with the typical size `s`
+    Linear(f64),
+}
+
+/// Who a parameter belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Owner {
+    /// the mechanical structure (seed 000 Table 1 names)
+    Plant,
+    /// the current-loop lag `tau_c` [s]
+    CurrentLoop,
+    /// the constant torque offset [N·m] on the motor
+    Offset,
+    /// the effect at this index of [`NlModel::effects`]
+    Effect(usize),
+    /// the initial motor velocity [rad/s] (a nuisance parameter)
+    InitialVelocity,
+}
+
+/// One entry of the parameter vector.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamDef {
+    /// name (`J_m`, `tau_c`, `offset`, an effect's key such as `k3`, `v0`)
+    pub name: &'static str,
+    /// what it belongs to
+    pub owner: Owner,
+    /// unit
+    pub unit: &'static str,
+    /// scaling for the optimiser
+    pub scale: Scale,
+    /// lower bound [unit]
+    pub lower: f64,
+    /// upper bound [unit]
+    pub upper: f64,
+}
+
+impl ParamDef {
+    /// Optimiser coordinate of the physical value `p`.
+    pub fn to_z(&self, p: f64) -> f64 {
+        match self.scale {
+            Scale::Log => p.ln(),
+            Scale::Linear(s) => p / s,
+        }
+    }
+
+    /// Physical value of the optimiser coordinate `z`.
+    pub fn from_z<T: Float>(&self, z: T) -> T {
+        match self.scale {
+            Scale::Log => z.exp(),
+            Scale::Linear(s) => z * c(s),
+        }
+    }
+}
+
+/// `f64` constant as the scalar type.
+#[inline(always)]
+pub(crate) fn c<T: Float>(v: f64) -> T {
+    T::from(v).expect("f64 converts to every Float")
+}
+
+/// A physical model with effects, its drive and how it is integrated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NlModel {
+    /// mechanical structure
+    pub structure: Structure,
+    /// gear ratio `r` [-] (known, not estimated)
+    pub r: f64,
+    /// effects attached (their values are the current parameter values)
+    pub effects: Vec<Effect>,
+    /// current-loop lag `tau_c` [s]; 0: none (the torque is the reference at once)
+    pub tau_c: f64,
+    /// smoothing velocity `v_ε` of the Coulomb law in the estimator [rad/s]
+    pub v_eps: f64,
+    /// rounding half-width `ε` of the smooth dead zone [rad]
+    pub dz_eps: f64,
+    /// RK4 steps per sample
+    pub substeps: usize,
+}
+
+/// Structure parameters, their unit, and bounds relative to a typical value.
+fn plant_defs(structure: Structure) -> Vec<ParamDef> {
+    structure
+        .param_names()
+        .iter()
+        .map(|&name| ParamDef {
+            name,
+            owner: Owner::Plant,
+            unit: unit_of(name),
+            scale: Scale::Log,
+            lower: 0.0,
+            upper: f64::INFINITY,
+        })
+        .collect()
+}
+
+impl NlModel {
+    /// The parameter vector's layout: the structure's parameters, `tau_c` (when there is a
+    /// current loop), `offset`, each effect's estimated keys, and the initial velocity `v0`
+    /// (last, a nuisance parameter). Bounds are physical (positive where the law needs it);
+    /// the fit narrows them around its start.
+    pub fn layout(&self) -> Vec<ParamDef> {
+        let mut v = plant_defs(self.structure);
+        if self.tau_c > 0.0 {
+            v.push(ParamDef {
+                name: "tau_c",
+                owner: Owner::CurrentLoop,
+                unit: "s",
+                scale: Scale::Log,
+                lower: 1e-6,
+                upper: 0.1,
+            });
+        }
+        v.push(ParamDef {
+            name: "offset",
+            owner: Owner::Offset,
+            unit: "N·m",
+            scale: Scale::Linear(0.01),
+            lower: f64::NEG_INFINITY,
+            upper: f64::INFINITY,
+        });
+        for (i, e) in self.effects.iter().enumerate() {
+            let d = |name, unit, scale, lower, upper| ParamDef {
+                name,
+                owner: Owner::Effect(i),
+                unit,
+                scale,
+                lower,
+                upper,
+            };
+            match e {
+                Effect::CoulombFriction(_) => v.push(d("fc", "N·m", Scale::Log, 1e-9, 1e3)),
+                Effect::Backlash(_) => v.push(d("width", "rad", Scale::Log, 1e-9, 0.1)),
+                Effect::NonlinearStiffness(s) => v.push(d(
+                    "k3",
+                    "N·m/rad³",
+                    Scale::Linear(s.k3.abs().max(1.0)),
+                    f64::NEG_INFINITY,
+                    f64::INFINITY,
+                )),
+                Effect::ExtraMode(_) => {
+                    v.push(d("j", "kg·m²", Scale::Log, 0.0, f64::INFINITY));
+                    v.push(d("k", "N·m/rad", Scale::Log, 0.0, f64::INFINITY));
+                    v.push(d("d", "N·m·s/rad", Scale::Log, 0.0, f64::INFINITY));
+                }
+                Effect::TimeDelay(_) => {
+                    v.push(d("samples", "samples", Scale::Linear(1.0), 0.0, 20.0))
+                }
+                Effect::TorqueRipple(r) => {
+                    v.push(d(
+                        "amplitude",
+                        "N·m",
+                        Scale::Linear(r.amplitude.abs().max(1e-3)),
+                        f64::NEG_INFINITY,
+                        f64::INFINITY,
+                    ));
+                    v.push(d("phase", "rad", Scale::Linear(1.0), -1e3, 1e3));
+                }
+            }
+        }
+        v.push(ParamDef {
+            name: "v0",
+            owner: Owner::InitialVelocity,
+            unit: "rad/s",
+            scale: Scale::Linear(1.0),
+            lower: f64::NEG_INFINITY,
+            upper: f64::INFINITY,
+        });
+        v
+    }
+
+    /// Physical values of the layout from the structure's values `plant` (in
+    /// [`Structure::param_names`] order), the offset and the initial velocity; effect values
+    /// from [`Self::effects`].
+    pub fn values(&self, plant: &[f64], offset: f64, v0: f64) -> Vec<f64> {
+        let mut v = plant.to_vec();
+        if self.tau_c > 0.0 {
+            v.push(self.tau_c);
+        }
+        v.push(offset);
+        for e in &self.effects {
+            match e {
+                Effect::CoulombFriction(f) => v.push(f.fc),
+                Effect::Backlash(b) => v.push(b.width),
+                Effect::NonlinearStiffness(s) => v.push(s.k3),
+                Effect::ExtraMode(m) => v.extend([m.j, m.k, m.d]),
+                Effect::TimeDelay(t) => v.push(t.samples),
+                Effect::TorqueRipple(r) => v.extend([r.amplitude, r.phase]),
+            }
+        }
+        v.push(v0);
+        v
+    }
+
+    /// This model with the physical values `p` (the layout's order) written into its
+    /// effects and current loop; the structure's values are returned beside it.
+    pub fn with_values(&self, p: &[f64]) -> (NlModel, Vec<f64>) {
+        let mut m = self.clone();
+        let np = self.structure.param_names().len();
+        let mut i = np;
+        if m.tau_c > 0.0 {
+            m.tau_c = p[i];
+            i += 1;
+        }
+        i += 1; // offset
+        for e in &mut m.effects {
+            match e {
+                Effect::CoulombFriction(f) => {
+                    f.fc = p[i];
+                    f.fs = p[i];
+                    i += 1;
+                }
+                Effect::Backlash(b) => {
+                    b.width = p[i];
+                    i += 1;
+                }
+                Effect::NonlinearStiffness(s) => {
+                    s.k3 = p[i];
+                    i += 1;
+                }
+                Effect::ExtraMode(x) => {
+                    (x.j, x.k, x.d) = (p[i], p[i + 1], p[i + 2]);
+                    i += 3;
+                }
+                Effect::TimeDelay(t) => {
+                    t.samples = p[i];
+                    i += 1;
+                }
+                Effect::TorqueRipple(r) => {
+                    (r.amplitude, r.phase) = (p[i], p[i + 1]);
+                    i += 2;
+                }
+            }
+        }
+        (m, p[..np].to_vec())
+    }
+}
+
+/// A spring–damper between two bodies, deflection `g_a θ_a − g_b θ_b`.
+#[derive(Clone, Copy, Debug)]
+struct Spring<T> {
+    a: usize,
+    b: usize,
+    ga: f64,
+    gb: f64,
+    k: T,
+    d: T,
+}
+
+/// The plant at one parameter vector, in the scalar type of the evaluation.
+#[derive(Clone, Debug)]
+pub(crate) struct Plant<T> {
+    nb: usize,
+    inv_j: [T; MAX_BODIES],
+    viscous: [T; MAX_BODIES],
+    springs: [Option<Spring<T>>; MAX_BODIES],
+    k3: T,
+    half_gap: Option<T>,
+    dz_eps: T,
+    fc: Option<T>,
+    v_eps: T,
+    /// (amplitude, order, phase)
+    ripple: Vec<(T, T, T)>,
+    offset: T,
+    tau_c: Option<T>,
+    delay: Option<T>,
+    v0: T,
+}
+
+impl<T: Float> Plant<T> {
+    /// The plant of `model` at the physical parameter values `p` (layout order).
+    pub(crate) fn new(model: &NlModel, p: &[T]) -> Plant<T> {
+        let zero = T::zero();
+        let np = model.structure.param_names().len();
+        let get = |name: &str| -> T {
+            let i = model
+                .structure
+                .param_names()
+                .iter()
+                .position(|n| *n == name)
+                .expect("name of the structure");
+            p[i]
+        };
+        let r = model.r;
+        let mut inertia: Vec<T> = Vec::new();
+        let mut gains: Vec<f64> = Vec::new();
+        let mut springs: Vec<(usize, usize, T, T)> = Vec::new();
+        let viscous_m = match model.structure {
+            Structure::Rigid => {
+                inertia.push(get("J"));
+                gains.push(r);
+                get("Fv")
+            }
+            s => {
+                inertia.extend([get("J_m"), get("J_a1")]);
+                gains.extend([r, 1.0]);
+                springs.push((0, 1, get("k_g"), get("d_g")));
+                if s != Structure::TwoMass {
+                    inertia.push(get("J_a2"));
+                    gains.push(1.0);
+                    springs.push((1, 2, get("k_a"), get("d_a")));
+                }
+                if s == Structure::FourMass {
+                    inertia.push(get("J_p"));
+                    gains.push(1.0);
+                    springs.push((1, 3, get("k_p"), get("d_p")));
+                }
+                get("f_m")
+            }
+        };
+        let mut i = np;
+        let tau_c = (model.tau_c > 0.0).then(|| {
+            i += 1;
+            p[i - 1]
+        });
+        let offset = p[i];
+        i += 1;
+        let (mut k3, mut half_gap, mut fc, mut ripple, mut delay) =
+            (zero, None, None, vec![], None);
+        for e in &model.effects {
+            match e {
+                Effect::CoulombFriction(_) => {
+                    fc = Some(p[i]);
+                    i += 1;
+                }
+                Effect::Backlash(_) => {
+                    half_gap = Some(p[i] * c(0.5));
+                    i += 1;
+                }
+                Effect::NonlinearStiffness(_) => {
+                    k3 = k3 + p[i];
+                    i += 1;
+                }
+                Effect::ExtraMode(x) => {
+                    let to = match x.attach {
+                        Attach::Parallel => usize::from(inertia.len() > 1),
+                        Attach::Serial => inertia.len() - 1,
+                    };
+                    inertia.push(p[i]);
+                    gains.push(1.0);
+                    springs.push((to, inertia.len() - 1, p[i + 1], p[i + 2]));
+                    i += 3;
+                }
+                Effect::TimeDelay(_) => {
+                    delay = Some(p[i]);
+                    i += 1;
+                }
+                Effect::TorqueRipple(r) => {
+                    ripple.push((p[i], c(r.order), p[i + 1]));
+                    i += 2;
+                }
+            }
+        }
+        let v0 = p[i];
+        let nb = inertia.len();
+        assert!(nb <= MAX_BODIES, "at most {MAX_BODIES} bodies");
+        let mut inv_j = [zero; MAX_BODIES];
+        for (d, j) in inv_j.iter_mut().zip(&inertia) {
+            *d = T::one() / *j;
+        }
+        let mut viscous = [zero; MAX_BODIES];
+        viscous[0] = viscous_m;
+        let mut sp = [None; MAX_BODIES];
+        for (slot, &(a, b, k, d)) in sp.iter_mut().zip(&springs) {
+            *slot = Some(Spring {
+                a,
+                b,
+                ga: gains[a],
+                gb: gains[b],
+                k,
+                d,
+            });
+        }
+        Plant {
+            nb,
+            inv_j,
+            viscous,
+            springs: sp,
+            k3,
+            half_gap,
+            dz_eps: c(model.dz_eps),
+            fc,
+            v_eps: c(model.v_eps),
+            ripple,
+            offset,
+            tau_c,
+            delay,
+            v0,
+        }
+    }
+
+    /// Accelerations `[ω̇_0 …]` of the bodies at angles `q`, velocities `w` and motor torque
+    /// `tau` [N·m] from the current loop.
+    #[inline(always)]
+    fn accel(
+        &self,
+        q: &[T; MAX_BODIES],
+        w: &[T; MAX_BODIES],
+        tau: T,
+        ripple_angle: Option<f64>,
+        acc: &mut [T; MAX_BODIES],
+    ) {
+        let n = self.nb;
+        for i in 0..n {
+            acc[i] = -self.viscous[i] * w[i];
+        }
+        let mut motor = tau + self.offset;
+        for &(a, order, phase) in &self.ripple {
+            let theta = ripple_angle.map_or(q[0], |t| c(t));
+            motor = motor + laws::ripple_torque(a, order, phase, theta);
+        }
+        if let Some(fc) = self.fc {
+            motor = motor - laws::coulomb_smooth(fc, w[0], self.v_eps);
+        }
+        acc[0] = acc[0] + motor;
+        for (si, s) in self.springs[..n.saturating_sub(1)].iter().enumerate() {
+            let s = s.as_ref().expect("a tree of n bodies has n - 1 springs");
+            let delta = q[s.a] * c(s.ga) - q[s.b] * c(s.gb);
+            let ddelta = w[s.a] * c(s.ga) - w[s.b] * c(s.gb);
+            let tau_s = if si == 0 {
+                match self.half_gap {
+                    Some(h) => {
+                        let e = laws::dead_zone_smooth(delta, h, self.dz_eps);
+                        let contact = laws::dead_zone_smooth_slope(delta, h, self.dz_eps);
+                        laws::spring_torque(s.k, self.k3, s.d * contact, e, ddelta)
+                    }
+                    None => laws::spring_torque(s.k, self.k3, s.d, delta, ddelta),
+                }
+            } else {
+                laws::spring_torque(s.k, T::zero(), s.d, delta, ddelta)
+            };
+            acc[s.a] = acc[s.a] - tau_s * c(s.ga);
+            acc[s.b] = acc[s.b] + tau_s * c(s.gb);
+        }
+        for (a, ij) in acc.iter_mut().zip(&self.inv_j).take(n) {
+            *a = *a * *ij;
+        }
+    }
+
+    /// Simulates the motor driven by `u` [N·m] over `ts` [s] with `substeps` RK4 steps per
+    /// sample from the motor angle `theta0` [rad], calling `emit(k, θ̂_k − θ_0, v̂_k)`
+    /// (motor angle from its start [rad], interval-mean velocity [rad/s]) for `k ≥ 1`.
+    /// With `measured` angles [rad], the torque ripple is evaluated at the measured motor
+    /// angle (linear between samples) rather than the simulated one: a position-dependent
+    /// torque of order `n` needs the angle to within a fraction of `2π/n`, which an
+    /// open-loop simulation from the measured torque loses to the slow drift the loop
+    /// rejects (encoder noise is far below that fraction). Starts at rest
+    /// in the springs with every body moving at the rigid velocity `v0` (motor side) and the
+    /// current loop at `u[0]`. Returns false when the state stops being finite.
+    pub(crate) fn simulate(
+        &self,
+        u: &[f64],
+        ts: f64,
+        theta0: f64,
+        measured: Option<&[f64]>,
+        substeps: usize,
+        mut emit: impl FnMut(usize, T, T),
+    ) -> bool {
+        let n = self.nb;
+        let zero = T::zero();
+        // the motor at `theta0`, the springs unloaded (arm-side angles `r θ_0`)
+        let mut q = [zero; MAX_BODIES];
+        q[0] = c(theta0);
+        if let Some(s) = self.springs[0] {
+            for qi in q.iter_mut().take(n).skip(1) {
+                *qi = c(theta0 * s.ga);
+            }
+        }
+        let mut w = [zero; MAX_BODIES];
+        // the springs unloaded: arm-side bodies move at r·v0
+        w[0] = self.v0;
+        if let Some(s) = self.springs[0] {
+            for wi in w.iter_mut().take(n).skip(1) {
+                *wi = self.v0 * c(s.ga);
+            }
+        }
+        let m = substeps.max(1);
+        let h = ts / m as f64;
+        let (n_whole, frac): (usize, T) = match self.delay {
+            Some(d) => {
+                let whole = d.to_f64().unwrap_or(0.0).max(0.0).floor();
+                (whole as usize, d - c(whole))
+            }
+            None => (0, zero),
+        };
+        let input = |k: usize| -> f64 { u[k.min(u.len() - 1)] };
+        let mut tau = c::<T>(u[0]);
+        let mut acc = [zero; MAX_BODIES];
+        let (mut k1q, mut k1w) = ([zero; MAX_BODIES], [zero; MAX_BODIES]);
+        let (mut k2q, mut k2w) = ([zero; MAX_BODIES], [zero; MAX_BODIES]);
+        let (mut k3q, mut k3w) = ([zero; MAX_BODIES], [zero; MAX_BODIES]);
+        let (mut qs, mut ws) = ([zero; MAX_BODIES], [zero; MAX_BODIES]);
+        let inv_ts = T::one() / c(ts);
+        for k in 0..u.len() {
+            // held input over sample k: `a` before the switch at frac·T, `b` after
+            let b = c::<T>(if k >= n_whole {
+                input(k - n_whole)
+            } else {
+                u[0]
+            });
+            let a = if self.delay.is_some() {
+                c::<T>(if k > n_whole {
+                    input(k - n_whole - 1)
+                } else {
+                    u[0]
+                })
+            } else {
+                b
+            };
+            let switch = frac * c(ts);
+            let tau0 = tau;
+            // motor torque at time t ∈ [0, T] of the sample
+            let torque_at = |t: T| -> T {
+                match self.tau_c {
+                    Some(tc) => {
+                        if t < switch {
+                            laws::current_loop(tau0, a, tc, t)
+                        } else {
+                            let at_switch = laws::current_loop(tau0, a, tc, switch);
+                            laws::current_loop(at_switch, b, tc, t - switch)
+                        }
+                    }
+                    None => {
+                        if t < switch {
+                            a
+                        } else {
+                            b
+                        }
+                    }
+                }
+            };
+            // mean of the held input over [t0, t0 + h] without a current loop
+            let mean_input = |t0: T| -> T {
+                let t1 = t0 + c(h);
+                let before = (switch.min(t1) - t0).max(zero);
+                (a * before + b * (c::<T>(h) - before)) / c(h)
+            };
+            let theta_prev = q[0];
+            for j in 0..m {
+                let t0: T = c(j as f64 * h);
+                let (ta, tb, tc_) = if self.tau_c.is_some() {
+                    (
+                        torque_at(t0),
+                        torque_at(t0 + c(0.5 * h)),
+                        torque_at(t0 + c(h)),
+                    )
+                } else {
+                    let t = mean_input(t0);
+                    (t, t, t)
+                };
+                // classical RK4 on (q, w)
+                // the ripple at the measured angle, linear between samples (see `simulate`)
+                let at = |f: f64| {
+                    measured.map(|y| {
+                        let a = y[k.min(y.len() - 1)];
+                        let b = y[(k + 1).min(y.len() - 1)];
+                        a + (b - a) * (j as f64 + f) / m as f64
+                    })
+                };
+                self.accel(&q, &w, ta, at(0.0), &mut acc);
+                for i in 0..n {
+                    k1q[i] = w[i];
+                    k1w[i] = acc[i];
+                    qs[i] = q[i] + k1q[i] * c(0.5 * h);
+                    ws[i] = w[i] + k1w[i] * c(0.5 * h);
+                }
+                self.accel(&qs, &ws, tb, at(0.5), &mut acc);
+                for i in 0..n {
+                    k2q[i] = ws[i];
+                    k2w[i] = acc[i];
+                    qs[i] = q[i] + k2q[i] * c(0.5 * h);
+                    ws[i] = w[i] + k2w[i] * c(0.5 * h);
+                }
+                self.accel(&qs, &ws, tb, at(0.5), &mut acc);
+                for i in 0..n {
+                    k3q[i] = ws[i];
+                    k3w[i] = acc[i];
+                    qs[i] = q[i] + k3q[i] * c(h);
+                    ws[i] = w[i] + k3w[i] * c(h);
+                }
+                self.accel(&qs, &ws, tc_, at(1.0), &mut acc);
+                for i in 0..n {
+                    let k4q = ws[i];
+                    let k4w = acc[i];
+                    q[i] = q[i] + (k1q[i] + (k2q[i] + k3q[i]) * c(2.0) + k4q) * c(h / 6.0);
+                    w[i] = w[i] + (k1w[i] + (k2w[i] + k3w[i]) * c(2.0) + k4w) * c(h / 6.0);
+                }
+            }
+            tau = torque_at(c(ts));
+            if !w[0].is_finite() || !q[0].is_finite() {
+                return false;
+            }
+            // θ_m moved from t_k to t_{k+1}: that interval's mean velocity is sample k + 1's
+            if k + 1 < u.len() {
+                emit(k + 1, q[0] - c(theta0), (q[0] - theta_prev) * inv_ts);
+            }
+        }
+        true
+    }
+}

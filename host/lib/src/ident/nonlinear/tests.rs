@@ -1,0 +1,238 @@
+//! The nonlinear grey-box fit on data whose truth is known: seed 001's reference problem
+//! (made outside this project) from the automatic start, and the project's simulator
+//! with one effect each under its default sensors (quantised encoder, noise on both
+//! signals, the slow torque disturbance).
+
+use super::*;
+use crate::data::{load_csv, ColumnMap, IdData};
+use crate::model::effects::{CoulombFriction, Effect, NonlinearStiffness};
+use crate::model::spec::Structure;
+use crate::sim::{simulate_excitation, SimConfig};
+use jointid_core::excitation::ExcitationConfig;
+
+fn shared(path: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .map(|a| a.join("shared/data"))
+        .find(|d| d.is_dir())
+        .expect("shared/data beside the repository")
+        .join(path)
+}
+
+fn seed001_model() -> NlModel {
+    NlModel {
+        structure: Structure::TwoMass,
+        r: 1.0 / 118.0,
+        effects: vec![
+            Effect::NonlinearStiffness(NonlinearStiffness { k3: 1.0 }),
+            Effect::CoulombFriction(CoulombFriction {
+                fc: 0.01,
+                fs: 0.01,
+                ..CoulombFriction::default()
+            }),
+        ],
+        tau_c: 0.0,
+        v_eps: 0.05,
+        dz_eps: 1e-7,
+        substeps: 1,
+    }
+}
+
+#[test]
+fn seed001_from_the_automatic_start_reaches_the_truth_and_its_validation_fit() {
+    let map = ColumnMap::capture();
+    let est = load_csv(&shared("seed001-two-mass/est.csv"), &map)
+        .unwrap()
+        .data;
+    let val = load_csv(&shared("seed001-two-mass/val.csv"), &map)
+        .unwrap()
+        .data;
+    let model = seed001_model();
+    let start = automatic_start(&est, &model, None).unwrap();
+    let names: Vec<&str> = start.steps.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "rigid body",
+            "friction",
+            "flexibility",
+            "nonlinear_stiffness"
+        ]
+    );
+    let fit = fit_output_error(&est, &start.model, &start.values, &NlOptions::default()).unwrap();
+    // README of the reference problem: J_m, J_a, k1, k3, d, F_c within 5 %
+    for (name, truth) in [
+        ("J_m", 1e-3),
+        ("J_a1", 14.6),
+        ("k_g", 1.3e5),
+        ("k3", 1.6e11),
+        ("d_g", 80.0),
+        ("fc", 0.1),
+    ] {
+        let v = fit.get(name).unwrap();
+        assert!(
+            (v / truth - 1.0).abs() < 0.05,
+            "{name} = {v}, truth {truth}"
+        );
+    }
+    // validation: the fitted model's velocity FIT is that of the true parameters
+    let truth = model
+        .with_values(&model.values(&[1e-3, 14.6, 1.3e5, 80.0, 2e-3], 0.0, 0.0))
+        .0;
+    let truth_values = truth.values(&[1e-3, 14.6, 1.3e5, 80.0, 2e-3], 0.0, 0.0);
+    let truth_values: Vec<f64> = {
+        let mut t = truth_values;
+        // k3 and F_c of the truth into the layout (structure, offset, k3, fc, v0)
+        t[6] = 1.6e11;
+        t[7] = 0.1;
+        t
+    };
+    let v = interval_velocity(&val.y, val.ts);
+    let fit_of = |m: &NlModel, p: &[f64]| {
+        let vh = simulate_velocity(m, p, &val.u, val.ts, val.y[0], None).unwrap();
+        crate::ident::validate::fit_percent(&v[1..], &vh[1..]).unwrap()
+    };
+    let fitted = fit_of(&fit.model, &fit.values);
+    let reference = fit_of(&model, &truth_values);
+    assert!(
+        fitted > reference - 0.1,
+        "validation FIT {fitted:.3} % against the truth's {reference:.3} %"
+    );
+}
+
+/// Closed-loop run of the default three-mass joint with `effect` and the default sensors.
+fn three_mass_run(effect: Effect, seed: u64) -> (IdData, SimConfig) {
+    let cfg = SimConfig {
+        effects: vec![effect],
+        seed,
+        ..SimConfig::default()
+    };
+    let exc = ExcitationConfig::paper_default();
+    let out = simulate_excitation(&cfg, &exc).unwrap();
+    (
+        IdData {
+            ts: out.sample_interval_s,
+            u: out.u,
+            y: out.theta_m,
+            r: None,
+        },
+        cfg,
+    )
+}
+
+/// Fits the three-mass with `effect` from the truth moved by +20 % / −15 %, and checks the
+/// identifiable parameters within 3 % and 3 σ of the truth.
+fn check_three_mass(effect: Effect, identifiable: &[&str], substeps: usize) {
+    let (data, cfg) = three_mass_run(effect, 3);
+    let p = cfg.plant.params;
+    let model = NlModel {
+        structure: Structure::ThreeMass,
+        r: p.r,
+        effects: vec![effect],
+        tau_c: cfg.controller.current_loop_tau,
+        v_eps: 0.05,
+        dz_eps: 1e-7,
+        substeps,
+    };
+    let plant = [p.j_m, p.j_a1, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m];
+    let truth = model.values(&plant, 0.0, 0.0);
+    let start: Vec<f64> = truth
+        .iter()
+        .enumerate()
+        .map(|(i, &t)| if i % 2 == 0 { t * 1.2 } else { t * 0.85 })
+        .collect();
+    let fit = fit_output_error(&data, &model, &start, &NlOptions::default()).unwrap();
+    assert_ne!(
+        fit.termination,
+        crate::ident::lm::Termination::MaxIterations
+    );
+    let layout = model.layout();
+    for name in identifiable {
+        let i = layout.iter().position(|d| d.name == *name).unwrap();
+        let (v, s, t) = (fit.params[i].value, fit.params[i].std, truth[i]);
+        assert!(
+            (v / t - 1.0).abs() < 0.03 && (v - t).abs() < 3.0 * s,
+            "{}: {name} = {v:.5e} ± {s:.2e}, truth {t:.5e}",
+            effect.name()
+        );
+    }
+}
+
+#[test]
+fn three_mass_with_a_cubic_spring_under_the_default_disturbance_is_found_within_3_sigma() {
+    check_three_mass(
+        Effect::default_by_name("nonlinear_stiffness").unwrap(),
+        &["J_m", "J_a1", "k_g", "d_g", "tau_c", "k3"],
+        1,
+    );
+}
+
+#[test]
+fn three_mass_with_torque_ripple_is_found_with_the_ripple_at_the_measured_angle() {
+    check_three_mass(
+        Effect::default_by_name("torque_ripple").unwrap(),
+        &["J_m", "J_a1", "k_g", "d_g", "amplitude", "phase"],
+        1,
+    );
+}
+
+#[test]
+fn three_mass_with_a_fractional_delay_and_with_an_extra_mode() {
+    check_three_mass(
+        Effect::default_by_name("time_delay").unwrap(),
+        &["J_m", "J_a1", "J_a2", "k_g", "k_a", "d_g", "samples"],
+        2,
+    );
+    check_three_mass(
+        Effect::default_by_name("extra_mode").unwrap(),
+        &["J_m", "J_a1", "k_g", "d_g", "j", "k"],
+        1,
+    );
+}
+
+#[test]
+fn derivatives_by_dual_numbers_agree_with_central_differences() {
+    let (data, cfg) = three_mass_run(Effect::default_by_name("nonlinear_stiffness").unwrap(), 5);
+    let p = cfg.plant.params;
+    let model = NlModel {
+        structure: Structure::ThreeMass,
+        r: p.r,
+        effects: vec![Effect::default_by_name("nonlinear_stiffness").unwrap()],
+        tau_c: 5e-4,
+        v_eps: 0.05,
+        dz_eps: 1e-7,
+        substeps: 1,
+    };
+    let data = data.slice(0..3000);
+    let values = model.values(
+        &[p.j_m, p.j_a1, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m],
+        0.0,
+        0.0,
+    );
+    let layout = model.layout();
+    let z: Vec<f64> = layout
+        .iter()
+        .zip(&values)
+        .map(|(d, &v)| d.to_z(v))
+        .collect();
+    let ad = fit::jacobian_probe(&data, &model, &z, 1500);
+    for (i, d) in layout.iter().enumerate() {
+        let h = 1e-6 * z[i].abs().max(1.0);
+        let mut zp = z.clone();
+        zp[i] += h;
+        let mut zm = z.clone();
+        zm[i] -= h;
+        let sim = |z: &[f64]| {
+            let p: Vec<f64> = layout.iter().zip(z).map(|(d, &z)| d.from_z(z)).collect();
+            simulate_velocity(&model, &p, &data.u, data.ts, data.y[0], Some(&data.y)).unwrap()[1500]
+        };
+        let fd = (sim(&zp) - sim(&zm)) / (2.0 * h);
+        let scale = fd.abs().max(ad[i].abs()).max(1e-12);
+        assert!(
+            (fd - ad[i]).abs() / scale < 1e-4,
+            "{}: dual {:.6e}, central difference {fd:.6e}",
+            d.name,
+            ad[i]
+        );
+    }
+}
