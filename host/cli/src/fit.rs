@@ -788,14 +788,28 @@ pub(crate) fn print_tests(out: &mut dyn Write, label: &str, v: &Validation) -> s
 fn print_test(out: &mut dyn Write, label: &str, t: &CorrelationTest) -> std::io::Result<()> {
     writeln!(
         out,
-        "    {label:<10} {:<40} {}: max |r| {:.3} vs bound {:.3} ({} of {} lags outside), χ² {:.1} vs {:.1}",
+        "    {label:<10} {:<40} {}: max |r| {:.3} vs bound {:.3} ({} of {} lags outside, {} {} allowed), χ² {:.1} {} {:.1}",
         t.name,
-        if t.pass { "pass" } else { "FAIL" },
+        verdict(t),
         t.max_abs,
         t.bound,
         t.outside,
         t.lags.len(),
+        if t.outside <= t.allowed { "≤" } else { ">" },
+        t.allowed,
         t.statistic,
+        if t.statistic <= t.critical { "≤" } else { ">" },
         t.critical
     )
+}
+
+/// `pass`, `FAIL`, or `FAIL (N residual samples are NaN or infinite)`: the figures
+/// printed beside it (lags outside against those allowed, χ² against its 99 % point)
+/// say which criterion failed.
+pub(crate) fn verdict(t: &CorrelationTest) -> String {
+    match (t.pass, t.non_finite) {
+        (true, _) => "pass".into(),
+        (false, 0) => "FAIL".into(),
+        (false, _) => format!("FAIL ({})", t.failure().unwrap_or_default()),
+    }
 }

@@ -11,8 +11,10 @@
 //!
 //! Exit codes: 0 when it ran, whatever the residual verdicts (they are
 //! reported, pass or fail: closed-loop data often fail the whiteness test
-//! for a model that is still useful); 1 only when `--require-fit X` was
-//! given and the FIT is below X; 2 on any error.
+//! for a model that is still useful); 1 when the FIT or the residual is not
+//! finite (the model's simulation diverged: `fit_ok` false, both residual
+//! tests FAIL) or when `--require-fit X` was given and the FIT is below X;
+//! 2 on any error.
 
 use std::path::PathBuf;
 
@@ -142,7 +144,9 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         Some(f) => (PERIODIC_FIT_NAME, f),
         None => (FIT_NAME, v.fit),
     };
-    let fit_ok = args.require_fit.is_none_or(|x| fit >= x);
+    // a diverged simulation is never ok, with or without --require-fit
+    let finite = fit.is_finite() && v.fit.is_finite() && v.whiteness.non_finite == 0;
+    let fit_ok = finite && args.require_fit.is_none_or(|x| fit >= x);
     if ctx.json {
         print_json(
             ctx.out,
@@ -187,6 +191,15 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         }
         writeln!(out, "  residual tests (99 %):")?;
         print_tests(out, "data", &v)?;
+        if !finite {
+            writeln!(
+                out,
+                "  not ok: the model's simulated output is not finite on {} ({} of {} residual samples NaN or infinite)",
+                ds.name,
+                v.whiteness.non_finite,
+                data.len()
+            )?;
+        }
         if let Some(x) = args.require_fit {
             writeln!(
                 out,

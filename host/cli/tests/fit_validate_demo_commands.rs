@@ -115,7 +115,7 @@ fn fit_json_has_fields_and_validate_reproduces_saved_model_fit() {
     let f2 = v["fit"].as_f64().unwrap();
     assert!((f2 - fv).abs() < 1e-9, "validate {f2} vs fit {fv}");
 
-    // an unmet --require-fit is the only check that exits 1
+    // an unmet --require-fit exits 1 (as does a diverging model, below)
     let o = jointid(&[
         "validate",
         model.to_str().unwrap(),
@@ -186,6 +186,60 @@ fn bad_input_exits_2_with_one_line_naming_the_file() {
         assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
         assert!(err.contains(file), "{args:?}: {err}");
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue item 7: a model whose simulation overflows (A = 1e308) gave FIT NaN, both
+/// residual tests "pass", `fit_ok: true` and exit 0.
+#[test]
+fn validate_of_a_diverging_model_fails_both_tests_and_exits_1() {
+    let dir = tmpdir("diverge");
+    let data = dir.join("run.csv");
+    std::fs::write(&data, jointid::test_support::capture_csv(0.0, 4)).unwrap();
+    let model = dir.join("m.json");
+    std::fs::write(
+        &model,
+        r#"{"format":"jointid-model/2","model":"black-box:1","method":"by hand","output":"angle",
+            "ts":0.001,"prep":{"decimate":1,"detrend":"none"},"a":[[1e308]],"b":[1.0],"c":[1.0],
+            "d":0.0,"parameters":{},"friction":null,"decimate_output":1,"fit_estimation":0.0,
+            "source":"by hand"}"#,
+    )
+    .unwrap();
+    let o = jointid(&[
+        "validate",
+        model.to_str().unwrap(),
+        data.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["fit_ok"], false, "{j}");
+    assert!(j["fit"].is_null(), "NaN FIT: {j}");
+    for t in ["whiteness", "independence"] {
+        let t = &j["residual_tests"][t];
+        assert_eq!(t["pass"], false, "{t}");
+        assert!(t["non_finite"].as_u64().unwrap() > 0, "{t}");
+        assert_eq!(t["outside"], t["lags"].as_array().unwrap().len(), "{t}");
+    }
+    assert_eq!(j["residual_tests"]["pass"], false);
+    let o = jointid(&["validate", model.to_str().unwrap(), data.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(!text.contains(" pass"), "{text}");
+    assert_eq!(text.matches("FAIL (").count(), 2, "{text}");
+    assert!(
+        text.contains("residual samples are NaN or infinite"),
+        "{text}"
+    );
+    assert!(
+        text.contains("not ok: the model's simulated output is not finite"),
+        "{text}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
