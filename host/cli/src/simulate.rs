@@ -29,6 +29,7 @@ use std::path::{Path, PathBuf};
 
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use clap::{Args, ValueEnum};
+use jointid_core::excitation::{ExcitationError, SafetyLimits};
 use jointid_core::wire::Scale;
 use serde::Serialize;
 
@@ -39,7 +40,7 @@ use jointid::model::params::model_params;
 use jointid::sim::board::{encode_session, BoardStreamError, WireOptions};
 use jointid::sim::{
     parse_effects, simulate_excitation, Integrator, JointParams, Mechanism, Plant, PlantKind,
-    SensorConfig, SimConfig, SimOutput,
+    SensorConfig, SimConfig, SimOutput, MAX_SUBSTEPS,
 };
 
 /// The `--model` values: every plant by its label (`two-mass`), its JSON name
@@ -105,8 +106,10 @@ pub struct SimulateArgs {
     #[arg(long, visible_alias = "kind", value_enum, value_name = "KIND",
           default_value_t = ExcitationArg::OddMultisine)]
     pub excitation: ExcitationArg,
-    /// RMS of the motor-angle reference [rad] (default: core's paper default, 0.02)
-    #[arg(long, value_name = "RAD")]
+    /// RMS of the motor-angle reference [rad] (default: core's paper default, 0.02); > 0,
+    /// and the excitation must keep within the board's safety limits (peak angle 0.5 rad,
+    /// peak velocity 100 rad/s, `SafetyLimits::default_joint`) as on the board
+    #[arg(long, value_name = "RAD", value_parser = parse_rms)]
     pub rms: Option<f32>,
     /// full-amplitude excitation periods (default: core's paper default, 4)
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
@@ -132,9 +135,17 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub feedforward: bool,
     /// event-aware RK4 substeps per sample when the plant is nonlinear (used in the samples
-    /// with contact or stick–slip events; the others take one exponential step)
-    #[arg(long, value_name = "M", value_parser = clap::value_parser!(u32).range(1..))]
+    /// with contact or stick–slip events; the others take one exponential step); 1 to 1000
+    #[arg(long, value_name = "M",
+          value_parser = clap::value_parser!(u32).range(1..=i64::from(MAX_SUBSTEPS)))]
     pub substeps: Option<u32>,
+}
+
+fn parse_rms(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("`{s}` is not an RMS in rad > 0")),
+    }
 }
 
 /// Errors of `jointid simulate` before or after the simulation itself.
@@ -180,6 +191,14 @@ pub enum SimulateError {
     OutExtension {
         /// the path given
         path: PathBuf,
+    },
+    /// the excitation breaks the board's safety limits
+    #[error("excitation (--rms {rms_rad} rad): {err}; the board refuses it (SafetyLimits::default_joint)")]
+    Unsafe {
+        /// the excitation's RMS [rad]
+        rms_rad: f32,
+        /// which limit, the value and the bound
+        err: ExcitationError,
     },
     /// a message did not fit a wire frame (a bug of the encoder's limits)
     #[error(transparent)]
@@ -310,6 +329,12 @@ pub fn configure(
         exc.seed = s;
     }
     cfg.sample_rate_hz = f64::from(exc.fs_hz);
+    // what the board checks before it drives the joint (firmware/app/src/app.rs)
+    exc.validate(&SafetyLimits::default_joint())
+        .map_err(|err| SimulateError::Unsafe {
+            rms_rad: exc.rms_rad,
+            err,
+        })?;
     Ok((cfg, exc))
 }
 
