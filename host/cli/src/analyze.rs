@@ -8,7 +8,7 @@ use clap::Args;
 use serde::Serialize;
 
 use super::args::DataArgs;
-use super::{print_json, write_svg, CmdResult, Context, Outcome};
+use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::{fmt_sig, Dataset, SignalKind};
 use jointid::ident::frf::{
     amplitude_trend, analyze_dataset, AmplitudeTrend, ClassLevel, ExcitedSource, FrfAnalysis,
@@ -33,6 +33,9 @@ pub struct AnalyzeArgs {
     /// above the noise and within 40 dB of the excited lines (seed 000 §3)
     #[arg(long)]
     pub require_linear: bool,
+    /// replace spectrum.svg and frf.svg when they exist in the --plot directory
+    #[arg(long)]
+    pub force: bool,
     /// print every FRF line (default: at most 60 rows)
     #[arg(long)]
     pub all_lines: bool,
@@ -61,6 +64,9 @@ struct Report<'a> {
 /// # Errors
 /// Loading, analysis, plotting and output errors.
 pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
+    if let Some(dir) = &args.plot {
+        check_plot_files(dir, &["spectrum.svg", "frf.svg"], args.force)?;
+    }
     let ds = args.data.load(ctx.loaders)?;
     let a = analyze_dataset(&ds, args.settle_periods)?;
     let mut plots = Vec::new();
@@ -70,12 +76,14 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
         write_svg(
             &spec,
             &analysis_spectrum_svg(&format!("line spectra: {}", ds.name), &a)?,
+            args.force,
         )?;
         let frf = dir.join("frf.svg");
         let band = FrfBand::from(&a.frf);
         write_svg(
             &frf,
             &bode_svg(&format!("FRF u -> theta_m: {}", ds.name), Some(&band), &[])?,
+            args.force,
         )?;
         plots = vec![spec.display().to_string(), frf.display().to_string()];
     }

@@ -5,6 +5,7 @@
 //! jointid simulate --model rigid|two-mass|three-mass|four-mass|nonlinear-two-mass
 //!     [--param NAME=VALUE]... [--effect SPEC]... [--excitation odd-multisine|random-odd|noise]
 //!     [--rms RAD] [--periods N] [--seed N] --out FILE.jcap|FILE.csv [--params-out FILE.json]
+//!     [--force]
 //! ```
 //!
 //! - `--out RUN.jcap` puts the run through the real wire encoder
@@ -17,6 +18,9 @@
 //!   the reference is regenerated from the header bit-exactly.
 //! - `--out RUN.csv` writes the capture CSV (DESIGN.md §5) with the simulator's values
 //!   unquantised, the excitation config and `sim_*` keys in its comments.
+//! - Both outputs follow the one rule of every output file ([`jointid::data::output`]): an
+//!   existing file is replaced only with `--force`, checked before the simulation; each
+//!   appears whole or not at all.
 //!
 //! `--param NAME=VALUE` overrides one physical parameter of the chosen model, named as in
 //! seed 000 Table 1 (`J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r`) plus
@@ -35,6 +39,7 @@ use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::jcap::{write_stream, JcapError};
+use jointid::data::output::{check_output, write_file, OutputError};
 use jointid::data::{write_capture_csv, Dataset, ExcitationConfig, SignalKind};
 use jointid::model::params::model_params;
 use jointid::sim::board::{encode_session, BoardStreamError, WireOptions};
@@ -128,6 +133,10 @@ pub struct SimulateArgs {
     /// also write every parameter used (the whole simulator configuration) as JSON here
     #[arg(long, visible_alias = "params-json", value_name = "FILE.json")]
     pub params_out: Option<PathBuf>,
+    /// replace --out and --params-out when they exist (without it they are refused before
+    /// the simulation)
+    #[arg(long)]
+    pub force: bool,
     /// perfect sensors: no quantisation, no noise, no disturbance
     #[arg(long)]
     pub ideal_sensors: bool,
@@ -206,13 +215,14 @@ pub enum SimulateError {
     /// the `.jcap` could not be written
     #[error(transparent)]
     Jcap(#[from] JcapError),
-    /// a CSV or JSON output could not be written
-    #[error("{path}: {err}")]
-    Write {
+    /// a CSV or JSON output could not be written, or exists
+    #[error(transparent)]
+    Output(#[from] OutputError),
+    /// `--out` and `--params-out` name the same file
+    #[error("{path}: is both --out and --params-out")]
+    SameOutput {
         /// the file
         path: PathBuf,
-        /// what the operating system said
-        err: std::io::Error,
     },
 }
 
@@ -403,34 +413,39 @@ fn rms(x: &[f64]) -> f64 {
 /// Bad `--param`, `--effect` or `--out`, invalid configuration or excitation, write errors.
 pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
     let format = out_format(&args.out)?;
+    // both outputs are checked before the work, so that neither is written when the other
+    // cannot be
+    check_output(&args.out, args.force)?;
+    if let Some(p) = &args.params_out {
+        if p == &args.out {
+            return Err(SimulateError::SameOutput { path: p.clone() }.into());
+        }
+        check_output(p, args.force)?;
+    }
     let (cfg, exc) = configure(args)?;
     let out = simulate_excitation(&cfg, &exc)?;
-    let write_err = |path: &Path| {
-        let path = path.to_path_buf();
-        move |err| SimulateError::Write { path, err }
-    };
+    let params = cfg.params_json()? + "\n";
     let (scale, stream_bytes) = match format {
         OutFormat::Jcap => {
             let opts = WireOptions::for_sim(&cfg);
             let stream = encode_session(&out, &exc, &opts)?;
-            (Some(opts.scale), Some(write_stream(&args.out, &stream)?))
+            (
+                Some(opts.scale),
+                Some(write_stream(&args.out, &stream, args.force)?),
+            )
         }
         OutFormat::Csv => {
-            let file = std::fs::File::create(&args.out).map_err(write_err(&args.out))?;
-            let mut w = std::io::BufWriter::new(file);
-            if let Err(e) = write_capture_csv(&mut w, &to_dataset(&out, &cfg, &exc)) {
-                drop(w);
-                // no half-written CSV left behind (a device or pipe is left alone)
-                if std::fs::metadata(&args.out).is_ok_and(|m| m.is_file()) {
-                    let _ = std::fs::remove_file(&args.out);
-                }
-                return Err(write_err(&args.out)(e).into());
-            }
+            let ds = to_dataset(&out, &cfg, &exc);
+            write_file(&args.out, args.force, |mut w| {
+                write_capture_csv(&mut w, &ds)
+            })
+            .map_err(SimulateError::from)?;
             (None, None)
         }
     };
     if let Some(p) = &args.params_out {
-        std::fs::write(p, cfg.params_json()? + "\n").map_err(write_err(p))?;
+        write_file(p, args.force, |w| w.write_all(params.as_bytes()))
+            .map_err(SimulateError::from)?;
     }
     let modes = Mechanism::new(&cfg.plant, &cfg.effects).modal_frequencies();
     let report = Report {

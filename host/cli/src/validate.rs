@@ -30,7 +30,8 @@ pub struct ValidateArgs {
     #[arg(long, value_name = "FILE")]
     pub simulated_file: Option<PathBuf>,
     /// lags M of the residual tests
-    #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS)]
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS,
+          value_parser = super::fit::parse_lags)]
     pub lags: usize,
     /// preparation applied to measured and simulated data alike
     #[command(flatten)]

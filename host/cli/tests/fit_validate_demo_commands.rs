@@ -485,3 +485,112 @@ fn three_mass_fit_on_default_simulation_is_right_in_the_frequency_domain() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("time domain"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue item 11: `fit` and `validate` check `--save`, `--lags`, the columns and the
+/// validation file's sample rate before the work (they failed after 17 s of fitting).
+#[test]
+fn fit_and_validate_check_their_arguments_before_fitting() {
+    let dir = tmpdir("prechecks");
+    let run = dir.join("run.csv"); // 1 kHz
+    std::fs::write(&run, jointid::test_support::capture_csv(0.0, 4)).unwrap();
+    let other = dir.join("other.csv"); // 2 kHz
+    let o = jointid(&[
+        "simulate",
+        "--periods",
+        "3",
+        "--out",
+        other.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r = run.to_str().unwrap();
+    let missing_dir = dir.join("no-such-dir").join("m.json");
+    let cases: Vec<(Vec<&str>, String)> = vec![
+        (
+            vec!["--save", missing_dir.to_str().unwrap()],
+            format!(
+                "{}: directory {} does not exist",
+                missing_dir.display(),
+                dir.join("no-such-dir").display()
+            ),
+        ),
+        (
+            vec!["--save", dir.to_str().unwrap()],
+            format!("{}: is a directory, not a file", dir.display()),
+        ),
+        (
+            vec!["--validation", other.to_str().unwrap()],
+            format!(
+                "--validation {}: sampled at 2000 Hz, {r} at 1000 Hz",
+                other.display()
+            ),
+        ),
+        (
+            vec!["--lags", "5000"],
+            "--lags 5000: the residual tests on one period of".to_string(),
+        ),
+        (
+            vec!["--domain", "time", "--lags", "5000"],
+            format!("--lags 5000: the residual tests on {r} have 3600 samples, they need more than 2 × 5000 = 10000"),
+        ),
+        (
+            vec!["--time", "t", "--input", "u", "--output", "u"],
+            "--input and --output both name column `u`: one column cannot be two signals"
+                .to_string(),
+        ),
+    ];
+    for (extra, msg) in cases {
+        let mut args = vec!["fit", r, "--model", "two-mass"];
+        args.extend_from_slice(&extra);
+        let t0 = std::time::Instant::now();
+        let o = jointid(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
+        assert!(err.contains(&msg), "{args:?}: `{msg}` not in {err}");
+        // refused before the fit: well under the fit's time
+        assert!(t0.elapsed().as_secs_f64() < 5.0, "{args:?}");
+    }
+    let o = jointid(&["fit", r, "--model", "two-mass", "--lags", "0"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("`0` is not a number of lags ≥ 1"));
+
+    // validate: the model's rate, the lags, the columns
+    let model = dir.join("m.json");
+    let o = jointid(&[
+        "fit",
+        r,
+        "--model",
+        "black-box:2",
+        "--domain",
+        "time",
+        "--save",
+        model.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let m = model.to_str().unwrap();
+    for (args, msg) in [
+        (
+            vec!["validate", m, other.to_str().unwrap()],
+            format!(
+                "{}: sampled at 2000 Hz, the model {m} was fitted on data at 1000 Hz",
+                other.display()
+            ),
+        ),
+        (
+            vec!["validate", m, r, "--lags", "5000"],
+            format!("--lags 5000: the residual tests on {r} have 3600 samples"),
+        ),
+        (
+            vec![
+                "validate", m, r, "--time", "t", "--input", "t", "--output", "theta_m",
+            ],
+            "--time and --input both name column `t`".to_string(),
+        ),
+    ] {
+        let o = jointid(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(&msg), "{args:?}: `{msg}` not in {err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
