@@ -56,7 +56,7 @@ fn round_trip(name: &str, cfg: &SimConfig, exc: &ExcitationConfig) -> Integrator
     let stream = encode_session(&sim, exc, &opts).unwrap();
     let path = temp(&format!("{name}.jcap"));
     assert_eq!(
-        jcap::write_stream(&path, &stream).unwrap(),
+        jcap::write_stream(&path, &stream, true).unwrap(),
         stream.len() as u64
     );
     let file = std::fs::read(&path).unwrap();

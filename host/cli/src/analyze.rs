@@ -8,8 +8,8 @@ use clap::Args;
 use serde::Serialize;
 
 use super::args::DataArgs;
-use super::{print_json, write_svg, CmdResult, Context, Outcome};
-use jointid::data::fmt_sig;
+use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
+use jointid::data::{fmt_sig, Dataset, SignalKind};
 use jointid::ident::frf::{
     amplitude_trend, analyze_dataset, AmplitudeTrend, ClassLevel, ExcitedSource, FrfAnalysis,
     Instrument,
@@ -33,12 +33,16 @@ pub struct AnalyzeArgs {
     /// above the noise and within 40 dB of the excited lines (seed 000 §3)
     #[arg(long)]
     pub require_linear: bool,
+    /// replace spectrum.svg and frf.svg when they exist in the --plot directory
+    #[arg(long)]
+    pub force: bool,
     /// print every FRF line (default: at most 60 rows)
     #[arg(long)]
     pub all_lines: bool,
-    /// a second run of the same excitation at another amplitude (same
+    /// a second run of the same multisine at another amplitude (same
     /// columns): tells distortion that grows with amplitude from distortion
-    /// that falls with it
+    /// that falls with it; refused unless both runs are the same multisine
+    /// (kind, sample rate, period, excited lines; only the amplitude may differ)
     #[arg(long, value_name = "DATA2")]
     pub compare: Option<PathBuf>,
 }
@@ -60,6 +64,9 @@ struct Report<'a> {
 /// # Errors
 /// Loading, analysis, plotting and output errors.
 pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
+    if let Some(dir) = &args.plot {
+        check_plot_files(dir, &["spectrum.svg", "frf.svg"], args.force)?;
+    }
     let ds = args.data.load(ctx.loaders)?;
     let a = analyze_dataset(&ds, args.settle_periods)?;
     let mut plots = Vec::new();
@@ -69,12 +76,14 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
         write_svg(
             &spec,
             &analysis_spectrum_svg(&format!("line spectra: {}", ds.name), &a)?,
+            args.force,
         )?;
         let frf = dir.join("frf.svg");
         let band = FrfBand::from(&a.frf);
         write_svg(
             &frf,
             &bode_svg(&format!("FRF u -> theta_m: {}", ds.name), Some(&band), &[])?,
+            args.force,
         )?;
         plots = vec![spec.display().to_string(), frf.display().to_string()];
     }
@@ -82,10 +91,9 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
     let significant = a.distortion_significant();
     let mut trend = Vec::new();
     if let Some(other) = &args.compare {
-        let b = analyze_dataset(
-            &ctx.loaders.load(other, &args.data.column_map())?,
-            args.settle_periods,
-        )?;
+        let other_ds = ctx.loaders.load(other, &args.data.column_map())?;
+        let b = analyze_dataset(&other_ds, args.settle_periods)?;
+        same_multisine((&ds, &a), (&other_ds, &b))?;
         trend.push(amplitude_trend(&a.linearity_u, &b.linearity_u));
         trend.push(amplitude_trend(&a.linearity_y, &b.linearity_y));
     }
@@ -115,6 +123,114 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
     } else {
         Outcome::Ok
     })
+}
+
+/// Why two runs cannot be compared by amplitude: the runs of `--compare` must be the same
+/// multisine (kind, sample rate, period, excited lines), only the amplitude may differ.
+#[derive(Debug, thiserror::Error)]
+#[error("--compare {other}: {what}; the amplitude comparison needs the same multisine as {first} at another amplitude")]
+pub struct NotSameMultisine {
+    /// the first run (DATA)
+    first: String,
+    /// the run given to `--compare`
+    other: String,
+    /// the difference
+    what: String,
+}
+
+fn kind_name(kind: SignalKind) -> &'static str {
+    match kind {
+        SignalKind::SpecialOddMultisine => "special odd multisine",
+        SignalKind::RandomOddMultisine => "random-phase odd multisine",
+        SignalKind::BandLimitedNoise => "band-limited noise",
+    }
+}
+
+/// Checks that `a` and `b` are analyses of the same multisine (see [`NotSameMultisine`]).
+fn same_multisine(
+    (da, a): (&Dataset, &FrfAnalysis),
+    (db, b): (&Dataset, &FrfAnalysis),
+) -> Result<(), NotSameMultisine> {
+    let differ = |what: String| NotSameMultisine {
+        first: da.name.clone(),
+        other: db.name.clone(),
+        what,
+    };
+    for (d, whose) in [(db, String::new()), (da, format!("{} is ", da.name))] {
+        if let Some(c) = d
+            .excitation
+            .filter(|c| c.kind == SignalKind::BandLimitedNoise)
+        {
+            return Err(differ(format!(
+                "{whose}excited by {}, not a multisine (every line 1..{} is excited)",
+                kind_name(c.kind),
+                c.max_line
+            )));
+        }
+    }
+    if let (Some(ca), Some(cb)) = (da.excitation, db.excitation) {
+        if ca.kind != cb.kind {
+            return Err(differ(format!(
+                "excitation is a {}, {} has a {}",
+                kind_name(cb.kind),
+                da.name,
+                kind_name(ca.kind)
+            )));
+        }
+    }
+    if (a.ts - b.ts).abs() > 1e-9 * a.ts {
+        return Err(differ(format!(
+            "sample rate {} Hz, {} has {} Hz",
+            fmt_sig(1.0 / b.ts, 6),
+            da.name,
+            fmt_sig(1.0 / a.ts, 6)
+        )));
+    }
+    if a.layout.period != b.layout.period {
+        return Err(differ(format!(
+            "period {} samples, {} has {} samples",
+            b.layout.period, da.name, a.layout.period
+        )));
+    }
+    if a.frf.lines != b.frf.lines {
+        let only = |x: &FrfAnalysis, y: &FrfAnalysis| {
+            x.frf
+                .lines
+                .iter()
+                .filter(|l| !y.frf.lines.contains(l))
+                .count()
+        };
+        let first_diff = a
+            .frf
+            .lines
+            .iter()
+            .zip(&b.frf.lines)
+            .find(|(x, y)| x != y)
+            .map_or_else(
+                || {
+                    let n = a.frf.lines.len().min(b.frf.lines.len());
+                    a.frf
+                        .lines
+                        .get(n)
+                        .or(b.frf.lines.get(n))
+                        .copied()
+                        .unwrap_or(0)
+                },
+                |(x, y)| (*x).min(*y),
+            );
+        return Err(differ(format!(
+            "excites {} lines, {} excites {} ({} only in {}, {} only in {}, first difference at line {})",
+            b.frf.lines.len(),
+            da.name,
+            a.frf.lines.len(),
+            only(b, a),
+            db.name,
+            only(a, b),
+            da.name,
+            first_diff
+        )));
+    }
+    Ok(())
 }
 
 fn print_table(

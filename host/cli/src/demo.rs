@@ -20,7 +20,7 @@ use clap::Args;
 use serde::Serialize;
 
 use super::fit::write_bode;
-use super::{print_json, write_svg, CmdResult, Context, Outcome};
+use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::capture::jcap::write_stream;
 use jointid::ident::frf::analyze_dataset;
 use jointid::ident::validate::FrfBand;
@@ -37,7 +37,20 @@ pub struct DemoArgs {
     /// seed of the simulated runs (noise, excitation phases)
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub seed: u64,
+    /// replace the files of an earlier demo in DIR (without it they are refused)
+    #[arg(long)]
+    pub force: bool,
 }
+
+/// the files `demo` writes into its directory
+const FILES: [&str; 6] = [
+    "estimation.jcap",
+    "validation.jcap",
+    "spectrum.svg",
+    "frf.svg",
+    "bode_3mass.svg",
+    "bode_4mass.svg",
+];
 
 #[derive(Serialize)]
 struct DemoReport<'a> {
@@ -63,14 +76,15 @@ struct DemoReport<'a> {
 pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
     let t0 = std::time::Instant::now();
     let dir = &args.out;
+    check_plot_files(dir, &FILES, args.force)?;
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let runs = paper_runs(args.seed)?;
     let est_stream = encode_session(&runs.est, &runs.est_excitation, &wire_options(1))?;
     let val_stream = encode_session(&runs.val, &runs.val_excitation, &wire_options(2))?;
-    let est_path = dir.join("estimation.jcap");
-    let val_path = dir.join("validation.jcap");
-    write_stream(&est_path, &est_stream)?;
-    write_stream(&val_path, &val_stream)?;
+    let est_path = dir.join(FILES[0]);
+    let val_path = dir.join(FILES[1]);
+    write_stream(&est_path, &est_stream, args.force)?;
+    write_stream(&val_path, &val_stream, args.force)?;
     let est_name = est_path.display().to_string();
     let val_name = val_path.display().to_string();
     let est_ds = jointid::capture::load_dataset(&est_path)?;
@@ -78,13 +92,14 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
     let mut files = vec![est_name.clone(), val_name.clone()];
 
     let a = analyze_dataset(&est_ds, jointid::scenario::paper::SETTLE_PERIODS)?;
-    let spec = dir.join("spectrum.svg");
+    let spec = dir.join(FILES[2]);
     write_svg(
         &spec,
         &analysis_spectrum_svg("line spectra (seed 000 Fig. 3 style)", &a)?,
+        args.force,
     )?;
     files.push(spec.display().to_string());
-    let frf_path = dir.join("frf.svg");
+    let frf_path = dir.join(FILES[3]);
     write_svg(
         &frf_path,
         &bode_svg(
@@ -92,13 +107,14 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
             Some(&FrfBand::from(&a.frf)),
             &[],
         )?,
+        args.force,
     )?;
     files.push(frf_path.display().to_string());
 
     let (t, models) = table(&est_ds, &val_ds, &runs.sim, &PAPER_MODELS)?;
     let f = &models.fitted;
-    let p5 = write_bode(dir, "bode_3mass.svg", &est_ds, 1, &[&f[0], &f[1]])?;
-    let p6 = write_bode(dir, "bode_4mass.svg", &est_ds, 1, &[&f[0], &f[2]])?;
+    let p5 = write_bode(dir, FILES[4], &est_ds, 1, &[&f[0], &f[1]], args.force)?;
+    let p6 = write_bode(dir, FILES[5], &est_ds, 1, &[&f[0], &f[2]], args.force)?;
     files.push(p5.display().to_string());
     files.push(p6.display().to_string());
     let seconds = t0.elapsed().as_secs_f64();

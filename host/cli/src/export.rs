@@ -1,8 +1,9 @@
 //! `jointid export RUN.jcap --csv RUN.csv`: the capture CSV of DESIGN.md §5.
 //!
 //! Writes only the samples that arrived; the `# gaps=` comment lists what did not (see
-//! [`jointid::capture::export`]). The CSV is written to `RUN.csv.tmp` and renamed, so a
-//! half-written export never looks complete; `--csv -` writes to stdout.
+//! [`jointid::capture::export`]). An existing CSV is replaced only with `--force`; the CSV
+//! is written to a temporary file beside it and renamed, so a half-written export never
+//! looks complete ([`jointid::data::output`]); `--csv -` writes to stdout.
 //! Exit status: 0 exported, 1 `--strict` and something is missing or damaged, 2 error.
 
 use std::io::Write;
@@ -26,6 +27,9 @@ pub struct ExportArgs {
     /// Exit with status 1 when anything is missing or damaged
     #[arg(long)]
     pub strict: bool,
+    /// Replace existing output files (without it, an existing file is refused)
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Runs `jointid export`: [`Outcome::CheckFailed`] with `--strict` when anything is
@@ -34,17 +38,20 @@ pub struct ExportArgs {
 ///
 /// # Errors
 /// Reading the capture ([`jointid::capture::CaptureError::Jcap`], [`jointid::capture::CaptureError::NoHeader`],
-/// [`jointid::capture::CaptureError::Excitation`]) or writing the CSV ([`jointid::capture::CaptureError::Export`]).
+/// [`jointid::capture::CaptureError::Excitation`]) or writing the CSV ([`jointid::capture::CaptureError::Output`]).
 pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
-    let record = read_jcap_session(&args.input, args.session)?;
     let to_stdout = args.csv.as_os_str() == "-";
+    if !to_stdout {
+        jointid::data::output::check_output(&args.csv, args.force)?;
+    }
+    let record = read_jcap_session(&args.input, args.session)?;
     if to_stdout {
         let mut w = std::io::BufWriter::new(&mut *ctx.out);
         // errors name standard output (see main.rs)
         export::write_csv(&record, &mut w)?;
         w.into_inner().map_err(|e| e.into_error())?;
     } else {
-        export::export_csv(&record, &args.csv)?;
+        export::export_csv(&record, &args.csv, args.force)?;
     }
     let r = &record.report;
     let ids = session_ids(r);

@@ -23,7 +23,8 @@ use clap::{Args, ValueEnum};
 use serde::Serialize;
 
 use super::args::{DataArgs, PrepArgs};
-use super::{print_json, write_svg, CmdResult, Context, Outcome};
+use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
+use jointid::data::output::check_output;
 use jointid::data::Dataset;
 use jointid::ident::fit::{
     default_f_min, fit_prepared, log_grid, param_map, FitData, FitOptions, Fitted, ModelKind,
@@ -150,6 +151,10 @@ pub struct FitArgs {
     /// write bode.svg (model over the FRF with ±2σ) into this directory
     #[arg(long, value_name = "DIR")]
     pub plot: Option<PathBuf>,
+    /// replace the --save file and the plot when they exist (without it they are refused
+    /// before any fitting)
+    #[arg(long)]
+    pub force: bool,
     /// which motor signal the output column holds
     #[arg(long, value_enum, default_value_t = OutputArg::Angle)]
     pub output_kind: OutputArg,
@@ -181,8 +186,8 @@ pub struct FitArgs {
     /// exit 1 when the fit raised any warning
     #[arg(long)]
     pub strict: bool,
-    /// lags M of the residual tests
-    #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS)]
+    /// lags M of the residual tests (each record they run on needs more than 2M samples)
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS, value_parser = parse_lags)]
     pub lags: usize,
     /// the axis is linear (force [N] → position [m]): units kg, N·s/m, N, N/m
     #[arg(long)]
@@ -230,6 +235,66 @@ fn parse_delay(s: &str) -> Result<f64, String> {
             frf_fit::MAX_DRIVE_SAMPLES
         )),
     }
+}
+
+/// `--lags M`: at least 1 (the residual tests need one lag)
+pub(crate) fn parse_lags(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(m) if m >= 1 => Ok(m),
+        _ => Err(format!("`{s}` is not a number of lags ≥ 1")),
+    }
+}
+
+/// `--lags M` against a record of `samples` samples that the residual tests run on
+/// (`what`): they need more than 2M.
+pub(crate) fn check_lags(lags: usize, what: &str, samples: usize) -> Result<(), String> {
+    if samples > 2 * lags {
+        return Ok(());
+    }
+    Err(format!(
+        "--lags {lags}: the residual tests on {what} have {samples} samples, they need more than \
+         2 × {lags} = {}",
+        2 * lags
+    ))
+}
+
+/// The column mapping names three (or four) different columns: one column cannot be two
+/// signals.
+pub(crate) fn check_columns(data: &DataArgs) -> Result<(), String> {
+    let named = [
+        ("--time", &data.time),
+        ("--input", &data.input),
+        ("--output", &data.output),
+        ("--reference", &data.reference),
+    ];
+    for (i, (fa, a)) in named.iter().enumerate() {
+        for (fb, b) in &named[i + 1..] {
+            if let (Some(a), Some(b)) = (a, b) {
+                if a == b {
+                    return Err(format!(
+                        "{fa} and {fb} both name column `{a}`: one column cannot be two signals"
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `other` (a validation record) has the sample interval of `first`.
+pub(crate) fn check_same_rate(first: &Dataset, other: &Dataset, flag: &str) -> Result<(), String> {
+    let (a, b) = (first.data.ts, other.data.ts);
+    if (a - b).abs() <= 1e-6 * a {
+        return Ok(());
+    }
+    Err(format!(
+        "{flag} {}: sampled at {} Hz, {} at {} Hz; the validation record needs the estimation \
+         record's sample rate",
+        other.name,
+        jointid::data::fmt_sig(1.0 / b, 6),
+        first.name,
+        jointid::data::fmt_sig(1.0 / a, 6)
+    ))
 }
 
 fn parse_kind(s: &str) -> Result<ModelKind, String> {
@@ -287,11 +352,23 @@ pub struct ResidualTests {
 /// # Errors
 /// Loading, fitting, plotting and output errors.
 pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
+    // what can be checked before the work is checked first: the outputs, the columns,
+    // the validation record's rate, the lags
+    if let Some(path) = &args.save {
+        check_output(path, args.force)?;
+    }
+    if let Some(dir) = &args.plot {
+        check_plot_files(dir, &["bode.svg"], args.force)?;
+    }
+    check_columns(&args.data.data_args(&args.data.path))?;
     let ds = args.data.data_args(&args.data.path).load(ctx.loaders)?;
     let val_ds = match &args.validation {
         Some(p) => Some(args.data.data_args(p).load(ctx.loaders)?),
         None => None,
     };
+    if let Some(v) = &val_ds {
+        check_same_rate(&ds, v, "--validation")?;
+    }
     let prep = args.prep.prep();
     let prepare = |d: &jointid::data::IdData, name: &str| {
         FitData::new(d, prep).map_err(|e| format!("{name}: {e}"))
@@ -347,6 +424,21 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         let vp = val_ds
             .as_ref()
             .and_then(|v| analyze_dataset(v, args.settle_periods).ok());
+        match (&val_ds, &vp) {
+            // residual tests on one period of the steady state
+            (None, _) | (Some(_), Some(_)) => {
+                check_lags(
+                    args.lags,
+                    &format!("one period of {}", ds.name),
+                    a.layout.period,
+                )?;
+                if let (Some(v), Some(p)) = (&val_ds, &vp) {
+                    let what = format!("one period of {}", v.name);
+                    check_lags(args.lags, &what, p.layout.period)?;
+                }
+            }
+            (Some(_), None) => check_records_lags(args, &ds.name, &est, val.as_ref(), &val_name)?,
+        }
         return run_frequency_domain(
             args,
             ctx,
@@ -359,6 +451,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
             val_name,
         );
     }
+    check_records_lags(args, &ds.name, &est, val.as_ref(), &val_name)?;
     let opts = FitOptions {
         kind: args.model,
         coulomb: args.friction == FrictionArg::Coulomb,
@@ -395,12 +488,18 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     let mut files = Vec::new();
     if let Some(path) = &args.save {
         let saved = fitted.to_saved(prep, &ds.name, ev.fit);
-        let text = serde_json::to_string_pretty(&saved)?;
-        std::fs::write(path, text + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
+        save_model(path, &saved, args.force)?;
         files.push(path.display().to_string());
     }
     if let Some(dir) = &args.plot {
-        let p = write_bode(dir, "bode.svg", &ds, args.settle_periods, &[&fitted])?;
+        let p = write_bode(
+            dir,
+            "bode.svg",
+            &ds,
+            args.settle_periods,
+            &[&fitted],
+            args.force,
+        )?;
         files.push(p.display().to_string());
     }
     let res = fitted.resonances(default_f_min(est.len(), est.ts));
@@ -434,6 +533,21 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         warnings: fitted.warnings.clone(),
     };
     emit(ctx, &report, args.strict)
+}
+
+/// `--lags` against the prepared estimation and validation records.
+fn check_records_lags(
+    args: &FitArgs,
+    name: &str,
+    est: &FitData,
+    val: Option<&FitData>,
+    val_name: &Option<String>,
+) -> Result<(), String> {
+    check_lags(args.lags, name, est.prepared.len())?;
+    if let (Some(v), Some(vn)) = (val, val_name) {
+        check_lags(args.lags, vn, v.prepared.len())?;
+    }
+    Ok(())
 }
 
 /// A time-domain fit on periodic data checked against the frequency-domain
@@ -586,12 +700,18 @@ fn run_frequency_domain(
     if let Some(path) = &args.save {
         let mut saved = fitted.to_saved(args.prep.prep(), &ds.name, fit_estimation);
         saved.fit_name = periodic.then(|| PERIODIC_FIT_NAME.to_string());
-        let text = serde_json::to_string_pretty(&saved)?;
-        std::fs::write(path, text + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
+        save_model(path, &saved, args.force)?;
         files.push(path.display().to_string());
     }
     if let Some(dir) = &args.plot {
-        let p = write_bode(dir, "bode.svg", ds, args.settle_periods, &[&fitted])?;
+        let p = write_bode(
+            dir,
+            "bode.svg",
+            ds,
+            args.settle_periods,
+            &[&fitted],
+            args.force,
+        )?;
         files.push(p.display().to_string());
     }
     let report = FitReport {
@@ -672,8 +792,24 @@ fn fitted_of(args: &FitArgs, ff: &FrfFit, analysis: &FrfAnalysis, decimate: usiz
     }
 }
 
+/// Writes the model file `path` ([`jointid::data::output`]: an existing file only with
+/// `force`, whole or not at all).
+///
+/// # Errors
+/// Serialisation and [`jointid::data::output::OutputError`]s naming the file.
+fn save_model(
+    path: &Path,
+    saved: &jointid::ident::model_file::SavedModel,
+    force: bool,
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    let text = serde_json::to_string_pretty(saved)? + "\n";
+    jointid::data::output::write_file(path, force, |w| w.write_all(text.as_bytes()))?;
+    Ok(())
+}
+
 /// Writes `name` into `dir`: Bode plot of `models` over the FRF of `ds`
-/// (when `ds` is periodic) with ±2σ, up to 0.45 / Ts of the coarsest model.
+/// (when `ds` is periodic) with ±2σ, up to 0.45 / Ts of the coarsest model;
+/// an existing file only with `force`.
 ///
 /// # Errors
 /// Directory, plot and write errors.
@@ -683,6 +819,7 @@ pub fn write_bode(
     ds: &Dataset,
     settle_periods: usize,
     models: &[&Fitted],
+    force: bool,
 ) -> Result<PathBuf, Box<dyn std::error::Error + Send + Sync>> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let fmax = models
@@ -715,7 +852,7 @@ pub fn write_bode(
         .collect();
     let path = dir.join(name);
     let title = format!("models over the FRF u -> theta_m: {}", ds.name);
-    write_svg(&path, &bode_svg(&title, band.as_ref(), &curves)?)?;
+    write_svg(&path, &bode_svg(&title, band.as_ref(), &curves)?, force)?;
     Ok(path)
 }
 
@@ -788,14 +925,28 @@ pub(crate) fn print_tests(out: &mut dyn Write, label: &str, v: &Validation) -> s
 fn print_test(out: &mut dyn Write, label: &str, t: &CorrelationTest) -> std::io::Result<()> {
     writeln!(
         out,
-        "    {label:<10} {:<40} {}: max |r| {:.3} vs bound {:.3} ({} of {} lags outside), χ² {:.1} vs {:.1}",
+        "    {label:<10} {:<40} {}: max |r| {:.3} vs bound {:.3} ({} of {} lags outside, {} {} allowed), χ² {:.1} {} {:.1}",
         t.name,
-        if t.pass { "pass" } else { "FAIL" },
+        verdict(t),
         t.max_abs,
         t.bound,
         t.outside,
         t.lags.len(),
+        if t.outside <= t.allowed { "≤" } else { ">" },
+        t.allowed,
         t.statistic,
+        if t.statistic <= t.critical { "≤" } else { ">" },
         t.critical
     )
+}
+
+/// `pass`, `FAIL`, or `FAIL (N residual samples are NaN or infinite)`: the figures
+/// printed beside it (lags outside against those allowed, χ² against its 99 % point)
+/// say which criterion failed.
+pub(crate) fn verdict(t: &CorrelationTest) -> String {
+    match (t.pass, t.non_finite) {
+        (true, _) => "pass".into(),
+        (false, 0) => "FAIL".into(),
+        (false, _) => format!("FAIL ({})", t.failure().unwrap_or_default()),
+    }
 }

@@ -21,6 +21,7 @@ use std::io::Write;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use jointid::data::output::{check_output, OutputError};
 use jointid::data::Loaders;
 
 mod analyze;
@@ -131,25 +132,33 @@ pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
     }
 }
 
-/// A file the command was asked to write could not be written.
-#[derive(Debug, thiserror::Error)]
-#[error("{file}: {source}")]
-pub struct WriteError {
-    /// file name
-    file: String,
-    /// what the operating system said
-    source: std::io::Error,
-}
-
-/// Writes an SVG string (from [`jointid::report::plot`]) to `path`.
+/// Writes an SVG string (from [`jointid::report::plot`]) to `path` under the one rule of
+/// every output file ([`jointid::data::output`]: an existing file only with `--force`,
+/// whole or not at all).
 ///
 /// # Errors
-/// [`WriteError`] naming the file.
-pub fn write_svg(path: &std::path::Path, svg: &str) -> Result<(), WriteError> {
-    std::fs::write(path, svg).map_err(|source| WriteError {
-        file: path.display().to_string(),
-        source,
-    })
+/// [`OutputError`] naming the file.
+pub fn write_svg(path: &std::path::Path, svg: &str, force: bool) -> Result<(), OutputError> {
+    jointid::data::output::write_file(path, force, |w| w.write_all(svg.as_bytes()))
+}
+
+/// Checks, before any work, that the files `names` can be written into the plot directory
+/// `dir` ([`jointid::data::output::check_output`]); a directory that does not exist yet is
+/// created later, with its parents, and holds nothing to overwrite.
+///
+/// # Errors
+/// [`OutputError`] naming the first file that cannot be written.
+pub fn check_plot_files(
+    dir: &std::path::Path,
+    names: &[&str],
+    force: bool,
+) -> Result<(), OutputError> {
+    if !dir.exists() {
+        return Ok(());
+    }
+    names
+        .iter()
+        .try_for_each(|n| check_output(&dir.join(n), force))
 }
 
 /// Prints `value` as pretty JSON on `out`.

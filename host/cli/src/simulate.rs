@@ -5,6 +5,7 @@
 //! jointid simulate --model rigid|two-mass|three-mass|four-mass|nonlinear-two-mass
 //!     [--param NAME=VALUE]... [--effect SPEC]... [--excitation odd-multisine|random-odd|noise]
 //!     [--rms RAD] [--periods N] [--seed N] --out FILE.jcap|FILE.csv [--params-out FILE.json]
+//!     [--force]
 //! ```
 //!
 //! - `--out RUN.jcap` puts the run through the real wire encoder
@@ -17,6 +18,9 @@
 //!   the reference is regenerated from the header bit-exactly.
 //! - `--out RUN.csv` writes the capture CSV (DESIGN.md §5) with the simulator's values
 //!   unquantised, the excitation config and `sim_*` keys in its comments.
+//! - Both outputs follow the one rule of every output file ([`jointid::data::output`]): an
+//!   existing file is replaced only with `--force`, checked before the simulation; each
+//!   appears whole or not at all.
 //!
 //! `--param NAME=VALUE` overrides one physical parameter of the chosen model, named as in
 //! seed 000 Table 1 (`J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r`) plus
@@ -29,17 +33,19 @@ use std::path::{Path, PathBuf};
 
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use clap::{Args, ValueEnum};
+use jointid_core::excitation::{ExcitationError, SafetyLimits};
 use jointid_core::wire::Scale;
 use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::jcap::{write_stream, JcapError};
+use jointid::data::output::{check_output, write_file, OutputError};
 use jointid::data::{write_capture_csv, Dataset, ExcitationConfig, SignalKind};
 use jointid::model::params::model_params;
 use jointid::sim::board::{encode_session, BoardStreamError, WireOptions};
 use jointid::sim::{
     parse_effects, simulate_excitation, Integrator, JointParams, Mechanism, Plant, PlantKind,
-    SensorConfig, SimConfig, SimOutput,
+    SensorConfig, SimConfig, SimOutput, MAX_SUBSTEPS,
 };
 
 /// The `--model` values: every plant by its label (`two-mass`), its JSON name
@@ -105,8 +111,10 @@ pub struct SimulateArgs {
     #[arg(long, visible_alias = "kind", value_enum, value_name = "KIND",
           default_value_t = ExcitationArg::OddMultisine)]
     pub excitation: ExcitationArg,
-    /// RMS of the motor-angle reference [rad] (default: core's paper default, 0.02)
-    #[arg(long, value_name = "RAD")]
+    /// RMS of the motor-angle reference [rad] (default: core's paper default, 0.02); > 0,
+    /// and the excitation must keep within the board's safety limits (peak angle 0.5 rad,
+    /// peak velocity 100 rad/s, `SafetyLimits::default_joint`) as on the board
+    #[arg(long, value_name = "RAD", value_parser = parse_rms)]
     pub rms: Option<f32>,
     /// full-amplitude excitation periods (default: core's paper default, 4)
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
@@ -125,6 +133,10 @@ pub struct SimulateArgs {
     /// also write every parameter used (the whole simulator configuration) as JSON here
     #[arg(long, visible_alias = "params-json", value_name = "FILE.json")]
     pub params_out: Option<PathBuf>,
+    /// replace --out and --params-out when they exist (without it they are refused before
+    /// the simulation)
+    #[arg(long)]
+    pub force: bool,
     /// perfect sensors: no quantisation, no noise, no disturbance
     #[arg(long)]
     pub ideal_sensors: bool,
@@ -132,9 +144,17 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub feedforward: bool,
     /// event-aware RK4 substeps per sample when the plant is nonlinear (used in the samples
-    /// with contact or stick–slip events; the others take one exponential step)
-    #[arg(long, value_name = "M", value_parser = clap::value_parser!(u32).range(1..))]
+    /// with contact or stick–slip events; the others take one exponential step); 1 to 1000
+    #[arg(long, value_name = "M",
+          value_parser = clap::value_parser!(u32).range(1..=i64::from(MAX_SUBSTEPS)))]
     pub substeps: Option<u32>,
+}
+
+fn parse_rms(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("`{s}` is not an RMS in rad > 0")),
+    }
 }
 
 /// Errors of `jointid simulate` before or after the simulation itself.
@@ -181,19 +201,28 @@ pub enum SimulateError {
         /// the path given
         path: PathBuf,
     },
+    /// the excitation breaks the board's safety limits
+    #[error("excitation (--rms {rms_rad} rad): {err}; the board refuses it (SafetyLimits::default_joint)")]
+    Unsafe {
+        /// the excitation's RMS [rad]
+        rms_rad: f32,
+        /// which limit, the value and the bound
+        err: ExcitationError,
+    },
     /// a message did not fit a wire frame (a bug of the encoder's limits)
     #[error(transparent)]
     Encode(#[from] BoardStreamError),
     /// the `.jcap` could not be written
     #[error(transparent)]
     Jcap(#[from] JcapError),
-    /// a CSV or JSON output could not be written
-    #[error("{path}: {err}")]
-    Write {
+    /// a CSV or JSON output could not be written, or exists
+    #[error(transparent)]
+    Output(#[from] OutputError),
+    /// `--out` and `--params-out` name the same file
+    #[error("{path}: is both --out and --params-out")]
+    SameOutput {
         /// the file
         path: PathBuf,
-        /// what the operating system said
-        err: std::io::Error,
     },
 }
 
@@ -310,6 +339,12 @@ pub fn configure(
         exc.seed = s;
     }
     cfg.sample_rate_hz = f64::from(exc.fs_hz);
+    // what the board checks before it drives the joint (firmware/app/src/app.rs)
+    exc.validate(&SafetyLimits::default_joint())
+        .map_err(|err| SimulateError::Unsafe {
+            rms_rad: exc.rms_rad,
+            err,
+        })?;
     Ok((cfg, exc))
 }
 
@@ -378,34 +413,39 @@ fn rms(x: &[f64]) -> f64 {
 /// Bad `--param`, `--effect` or `--out`, invalid configuration or excitation, write errors.
 pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
     let format = out_format(&args.out)?;
+    // both outputs are checked before the work, so that neither is written when the other
+    // cannot be
+    check_output(&args.out, args.force)?;
+    if let Some(p) = &args.params_out {
+        if p == &args.out {
+            return Err(SimulateError::SameOutput { path: p.clone() }.into());
+        }
+        check_output(p, args.force)?;
+    }
     let (cfg, exc) = configure(args)?;
     let out = simulate_excitation(&cfg, &exc)?;
-    let write_err = |path: &Path| {
-        let path = path.to_path_buf();
-        move |err| SimulateError::Write { path, err }
-    };
+    let params = cfg.params_json()? + "\n";
     let (scale, stream_bytes) = match format {
         OutFormat::Jcap => {
             let opts = WireOptions::for_sim(&cfg);
             let stream = encode_session(&out, &exc, &opts)?;
-            (Some(opts.scale), Some(write_stream(&args.out, &stream)?))
+            (
+                Some(opts.scale),
+                Some(write_stream(&args.out, &stream, args.force)?),
+            )
         }
         OutFormat::Csv => {
-            let file = std::fs::File::create(&args.out).map_err(write_err(&args.out))?;
-            let mut w = std::io::BufWriter::new(file);
-            if let Err(e) = write_capture_csv(&mut w, &to_dataset(&out, &cfg, &exc)) {
-                drop(w);
-                // no half-written CSV left behind (a device or pipe is left alone)
-                if std::fs::metadata(&args.out).is_ok_and(|m| m.is_file()) {
-                    let _ = std::fs::remove_file(&args.out);
-                }
-                return Err(write_err(&args.out)(e).into());
-            }
+            let ds = to_dataset(&out, &cfg, &exc);
+            write_file(&args.out, args.force, |mut w| {
+                write_capture_csv(&mut w, &ds)
+            })
+            .map_err(SimulateError::from)?;
             (None, None)
         }
     };
     if let Some(p) = &args.params_out {
-        std::fs::write(p, cfg.params_json()? + "\n").map_err(write_err(p))?;
+        write_file(p, args.force, |w| w.write_all(params.as_bytes()))
+            .map_err(SimulateError::from)?;
     }
     let modes = Mechanism::new(&cfg.plant, &cfg.effects).modal_frequencies();
     let report = Report {

@@ -30,7 +30,8 @@ pub struct ValidateArgs {
     #[arg(long, value_name = "FILE")]
     pub simulated_file: Option<PathBuf>,
     /// lags M of the residual tests
-    #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS)]
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS,
+          value_parser = super::fit::parse_lags)]
     pub lags: usize,
     /// preparation applied to measured and simulated data alike
     #[command(flatten)]
@@ -99,17 +100,20 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
 fn test_line(out: &mut dyn Write, t: &CorrelationTest) -> std::io::Result<()> {
     writeln!(
         out,
-        "  {}: lags {}..{}, 99 % bound ±{:.4}, {} lag(s) outside, max |r| {:.4}, ζ = {:.1} vs χ²({}) 99 % = {:.1}: {}",
+        "  {}: lags {}..{}, 99 % bound ±{:.4}, {} lag(s) outside {} {} allowed, max |r| {:.4}, ζ = {:.1} {} χ²({}) 99 % = {:.1}: {}",
         t.name,
         t.lags.first().copied().unwrap_or(0),
         t.lags.last().copied().unwrap_or(0),
         t.bound,
         t.outside,
+        if t.outside <= t.allowed { "≤" } else { ">" },
+        t.allowed,
         t.max_abs,
         t.statistic,
+        if t.statistic <= t.critical { "≤" } else { ">" },
         t.dof,
         t.critical,
-        if t.pass { "pass" } else { "FAIL" }
+        super::fit::verdict(t)
     )
 }
 

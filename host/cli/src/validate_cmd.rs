@@ -11,8 +11,10 @@
 //!
 //! Exit codes: 0 when it ran, whatever the residual verdicts (they are
 //! reported, pass or fail: closed-loop data often fail the whiteness test
-//! for a model that is still useful); 1 only when `--require-fit X` was
-//! given and the FIT is below X; 2 on any error.
+//! for a model that is still useful); 1 when the FIT or the residual is not
+//! finite (the model's simulation diverged: `fit_ok` false, both residual
+//! tests FAIL) or when `--require-fit X` was given and the FIT is below X;
+//! 2 on any error.
 
 use std::path::PathBuf;
 
@@ -20,7 +22,7 @@ use clap::Args;
 use serde::Serialize;
 
 use super::args::{DataArgs, PrepArgs};
-use super::fit::print_tests;
+use super::fit::{check_columns, check_lags, print_tests};
 use super::validate::{self as column_validate, ValidateArgs};
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::ident::fit::FitData;
@@ -53,8 +55,9 @@ pub struct ValidateCmdArgs {
     /// CSV holding the simulated column (default: DATA)
     #[arg(long, value_name = "FILE", requires = "simulated")]
     pub simulated_file: Option<PathBuf>,
-    /// lags M of the residual tests
-    #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS)]
+    /// lags M of the residual tests (DATA needs more than 2M samples after preparation)
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS,
+          value_parser = super::fit::parse_lags)]
     pub lags: usize,
     /// exit with 1 when the FIT [%] is below this
     #[arg(long, value_name = "X")]
@@ -97,6 +100,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         output: args.output.clone(),
         reference: args.reference.clone(),
     };
+    check_columns(&data_args(&args.files[0]))?;
     if let Some(sim) = &args.simulated {
         if args.files.len() != 1 {
             return Err("validate with --simulated takes one DATA file".into());
@@ -124,7 +128,25 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         .to_fitted()
         .map_err(|e| format!("{}: {e}", mpath.display()))?;
     let ds = data_args(&args.files[1]).load(ctx.loaders)?;
+    // the model runs at the rate it was fitted at: the capture rate (a physical model
+    // with `decimate_output` > 1) or the capture rate decimated by the model's preparation
+    let capture_ts = if saved.decimate_output > 1 {
+        saved.ts
+    } else {
+        saved.ts / saved.prep.decimate.max(1) as f64
+    };
+    if (ds.data.ts - capture_ts).abs() > 1e-6 * capture_ts {
+        return Err(format!(
+            "{}: sampled at {} Hz, the model {} was fitted on data at {} Hz",
+            ds.name,
+            jointid::data::fmt_sig(1.0 / ds.data.ts, 6),
+            mpath.display(),
+            jointid::data::fmt_sig(1.0 / capture_ts, 6)
+        )
+        .into());
+    }
     let both = FitData::new(&ds.data, saved.prep).map_err(|e| format!("{}: {e}", ds.name))?;
+    check_lags(args.lags, &ds.name, both.prepared.len())?;
     let v = fitted
         .evaluate_on(&both, args.lags)
         .map_err(|e| format!("{}: {e}", ds.name))?;
@@ -142,7 +164,9 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         Some(f) => (PERIODIC_FIT_NAME, f),
         None => (FIT_NAME, v.fit),
     };
-    let fit_ok = args.require_fit.is_none_or(|x| fit >= x);
+    // a diverged simulation is never ok, with or without --require-fit
+    let finite = fit.is_finite() && v.fit.is_finite() && v.whiteness.non_finite == 0;
+    let fit_ok = finite && args.require_fit.is_none_or(|x| fit >= x);
     if ctx.json {
         print_json(
             ctx.out,
@@ -187,6 +211,15 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         }
         writeln!(out, "  residual tests (99 %):")?;
         print_tests(out, "data", &v)?;
+        if !finite {
+            writeln!(
+                out,
+                "  not ok: the model's simulated output is not finite on {} ({} of {} residual samples NaN or infinite)",
+                ds.name,
+                v.whiteness.non_finite,
+                data.len()
+            )?;
+        }
         if let Some(x) = args.require_fit {
             writeln!(
                 out,

@@ -965,7 +965,7 @@ fn export_refuses_a_capture_whose_scale_makes_samples_not_finite() {
     };
     let stream = encode_stream(&header, samples, 5000, &layout).unwrap();
     let jcap = dir.join("inf.jcap");
-    jointid::capture::jcap::write_stream(&jcap, &stream.bytes).unwrap();
+    jointid::capture::jcap::write_stream(&jcap, &stream.bytes, false).unwrap();
     let csv = dir.join("inf.csv");
     let o = jointid(&[
         "export",

@@ -115,7 +115,7 @@ fn fit_json_has_fields_and_validate_reproduces_saved_model_fit() {
     let f2 = v["fit"].as_f64().unwrap();
     assert!((f2 - fv).abs() < 1e-9, "validate {f2} vs fit {fv}");
 
-    // an unmet --require-fit is the only check that exits 1
+    // an unmet --require-fit exits 1 (as does a diverging model, below)
     let o = jointid(&[
         "validate",
         model.to_str().unwrap(),
@@ -186,6 +186,60 @@ fn bad_input_exits_2_with_one_line_naming_the_file() {
         assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
         assert!(err.contains(file), "{args:?}: {err}");
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue item 7: a model whose simulation overflows (A = 1e308) gave FIT NaN, both
+/// residual tests "pass", `fit_ok: true` and exit 0.
+#[test]
+fn validate_of_a_diverging_model_fails_both_tests_and_exits_1() {
+    let dir = tmpdir("diverge");
+    let data = dir.join("run.csv");
+    std::fs::write(&data, jointid::test_support::capture_csv(0.0, 4)).unwrap();
+    let model = dir.join("m.json");
+    std::fs::write(
+        &model,
+        r#"{"format":"jointid-model/2","model":"black-box:1","method":"by hand","output":"angle",
+            "ts":0.001,"prep":{"decimate":1,"detrend":"none"},"a":[[1e308]],"b":[1.0],"c":[1.0],
+            "d":0.0,"parameters":{},"friction":null,"decimate_output":1,"fit_estimation":0.0,
+            "source":"by hand"}"#,
+    )
+    .unwrap();
+    let o = jointid(&[
+        "validate",
+        model.to_str().unwrap(),
+        data.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["fit_ok"], false, "{j}");
+    assert!(j["fit"].is_null(), "NaN FIT: {j}");
+    for t in ["whiteness", "independence"] {
+        let t = &j["residual_tests"][t];
+        assert_eq!(t["pass"], false, "{t}");
+        assert!(t["non_finite"].as_u64().unwrap() > 0, "{t}");
+        assert_eq!(t["outside"], t["lags"].as_array().unwrap().len(), "{t}");
+    }
+    assert_eq!(j["residual_tests"]["pass"], false);
+    let o = jointid(&["validate", model.to_str().unwrap(), data.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(!text.contains(" pass"), "{text}");
+    assert_eq!(text.matches("FAIL (").count(), 2, "{text}");
+    assert!(
+        text.contains("residual samples are NaN or infinite"),
+        "{text}"
+    );
+    assert!(
+        text.contains("not ok: the model's simulated output is not finite"),
+        "{text}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -429,5 +483,114 @@ fn three_mass_fit_on_default_simulation_is_right_in_the_frequency_domain() {
     ]);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("time domain"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue item 11: `fit` and `validate` check `--save`, `--lags`, the columns and the
+/// validation file's sample rate before the work (they failed after 17 s of fitting).
+#[test]
+fn fit_and_validate_check_their_arguments_before_fitting() {
+    let dir = tmpdir("prechecks");
+    let run = dir.join("run.csv"); // 1 kHz
+    std::fs::write(&run, jointid::test_support::capture_csv(0.0, 4)).unwrap();
+    let other = dir.join("other.csv"); // 2 kHz
+    let o = jointid(&[
+        "simulate",
+        "--periods",
+        "3",
+        "--out",
+        other.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r = run.to_str().unwrap();
+    let missing_dir = dir.join("no-such-dir").join("m.json");
+    let cases: Vec<(Vec<&str>, String)> = vec![
+        (
+            vec!["--save", missing_dir.to_str().unwrap()],
+            format!(
+                "{}: directory {} does not exist",
+                missing_dir.display(),
+                dir.join("no-such-dir").display()
+            ),
+        ),
+        (
+            vec!["--save", dir.to_str().unwrap()],
+            format!("{}: is a directory, not a file", dir.display()),
+        ),
+        (
+            vec!["--validation", other.to_str().unwrap()],
+            format!(
+                "--validation {}: sampled at 2000 Hz, {r} at 1000 Hz",
+                other.display()
+            ),
+        ),
+        (
+            vec!["--lags", "5000"],
+            "--lags 5000: the residual tests on one period of".to_string(),
+        ),
+        (
+            vec!["--domain", "time", "--lags", "5000"],
+            format!("--lags 5000: the residual tests on {r} have 3600 samples, they need more than 2 × 5000 = 10000"),
+        ),
+        (
+            vec!["--time", "t", "--input", "u", "--output", "u"],
+            "--input and --output both name column `u`: one column cannot be two signals"
+                .to_string(),
+        ),
+    ];
+    for (extra, msg) in cases {
+        let mut args = vec!["fit", r, "--model", "two-mass"];
+        args.extend_from_slice(&extra);
+        let t0 = std::time::Instant::now();
+        let o = jointid(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
+        assert!(err.contains(&msg), "{args:?}: `{msg}` not in {err}");
+        // refused before the fit: well under the fit's time
+        assert!(t0.elapsed().as_secs_f64() < 5.0, "{args:?}");
+    }
+    let o = jointid(&["fit", r, "--model", "two-mass", "--lags", "0"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("`0` is not a number of lags ≥ 1"));
+
+    // validate: the model's rate, the lags, the columns
+    let model = dir.join("m.json");
+    let o = jointid(&[
+        "fit",
+        r,
+        "--model",
+        "black-box:2",
+        "--domain",
+        "time",
+        "--save",
+        model.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let m = model.to_str().unwrap();
+    for (args, msg) in [
+        (
+            vec!["validate", m, other.to_str().unwrap()],
+            format!(
+                "{}: sampled at 2000 Hz, the model {m} was fitted on data at 1000 Hz",
+                other.display()
+            ),
+        ),
+        (
+            vec!["validate", m, r, "--lags", "5000"],
+            format!("--lags 5000: the residual tests on {r} have 3600 samples"),
+        ),
+        (
+            vec![
+                "validate", m, r, "--time", "t", "--input", "t", "--output", "theta_m",
+            ],
+            "--time and --input both name column `t`".to_string(),
+        ),
+    ] {
+        let o = jointid(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(&msg), "{args:?}: `{msg}` not in {err}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -181,3 +181,146 @@ fn a_closed_pipe_ends_quietly_without_a_panic() {
     assert_eq!(status.code(), Some(2));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// the names in `dir`, sorted
+fn names(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+/// exit 2 with one line on stderr naming `file` as existing, and `file` untouched
+fn assert_kept(o: &Output, file: &Path, what: &str) {
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{what}: {err}");
+    assert_eq!(err.lines().count(), 1, "{what}: {err}");
+    assert!(
+        err.contains(&format!(
+            "{}: already exists (pass --force to overwrite)",
+            file.display()
+        )),
+        "{what}: {err}"
+    );
+    assert_eq!(std::fs::read_to_string(file).unwrap(), "precious", "{what}");
+}
+
+/// Issue item 15: one rule for every writer (as `capture`): an existing file is refused
+/// without `--force`, and a failed step leaves no half-written output behind.
+#[test]
+fn every_writer_refuses_an_existing_file_without_force_and_leaves_nothing_half_written() {
+    let dir = tmpdir("overwrite");
+    let jcap = capture(&dir);
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let precious = |name: &str| {
+        let p = dir.join(name);
+        std::fs::write(&p, "precious").unwrap();
+        p
+    };
+    // simulate --out (csv and jcap) and --params-out; the params file is checked before
+    // the run, so --out is not written either
+    for name in ["sim.csv", "sim.jcap"] {
+        let p = precious(name);
+        let o = jointid(&["simulate", "--periods", "1", "--out", &s(&p)]);
+        assert_kept(&o, &p, name);
+    }
+    let params = precious("p.json");
+    let fresh = dir.join("fresh.csv");
+    let o = jointid(&[
+        "simulate",
+        "--periods",
+        "1",
+        "--out",
+        &s(&fresh),
+        "--params-out",
+        &s(&params),
+    ]);
+    assert_kept(&o, &params, "--params-out");
+    assert!(!fresh.exists());
+    // export --csv
+    let csv = precious("run.csv");
+    let o = jointid(&["export", &s(&jcap), "--csv", &s(&csv)]);
+    assert_kept(&o, &csv, "export");
+    // fit --save: refused before any fitting
+    let model = precious("m.json");
+    let o = jointid(&[
+        "fit",
+        &s(&jcap),
+        "--model",
+        "two-mass",
+        "--save",
+        &s(&model),
+    ]);
+    assert_kept(&o, &model, "fit --save");
+    // the plot directories' files
+    let plots = dir.join("plots");
+    std::fs::create_dir(&plots).unwrap();
+    let svg = plots.join("frf.svg");
+    std::fs::write(&svg, "precious").unwrap();
+    let o = jointid(&["analyze", &s(&jcap), "--plot", &s(&plots)]);
+    assert_kept(&o, &svg, "analyze --plot");
+    assert_eq!(names(&plots), ["frf.svg"], "nothing written beside it");
+    let bode = plots.join("bode.svg");
+    std::fs::write(&bode, "precious").unwrap();
+    let o = jointid(&[
+        "fit",
+        &s(&jcap),
+        "--model",
+        "two-mass",
+        "--plot",
+        &s(&plots),
+    ]);
+    assert_kept(&o, &bode, "fit --plot");
+    let demo = dir.join("demo");
+    std::fs::create_dir(&demo).unwrap();
+    let est = demo.join("estimation.jcap");
+    std::fs::write(&est, "precious").unwrap();
+    let o = jointid(&["demo", "--out", &s(&demo)]);
+    assert_kept(&o, &est, "demo");
+    // with --force each is replaced
+    let o = jointid(&["export", &s(&jcap), "--csv", &s(&csv), "--force"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::read_to_string(&csv)
+        .unwrap()
+        .contains("t,theta_ref,u,theta_m"));
+    let o = jointid(&[
+        "simulate",
+        "--periods",
+        "1",
+        "--out",
+        &s(&dir.join("sim.csv")),
+        "--params-out",
+        &s(&params),
+        "--force",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::read_to_string(&params)
+        .unwrap()
+        .contains("\"plant\""));
+    let three = dir.join("three.jcap");
+    let o = jointid(&["simulate", "--periods", "3", "--out", &s(&three)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = jointid(&["analyze", &s(&three), "--plot", &s(&plots), "--force"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::read_to_string(&svg).unwrap().starts_with("<svg"));
+    // a failed step leaves nothing behind: no output, no temporary file
+    let before = names(&dir);
+    for out in ["diverged.csv", "diverged.jcap"] {
+        let o = jointid(&[
+            "simulate",
+            "--effect",
+            "nonlinear_stiffness:k3=-1e16",
+            "--periods",
+            "1",
+            "--out",
+            &s(&dir.join(out)),
+            "--params-out",
+            &s(&dir.join("diverged.json")),
+        ]);
+        assert_eq!(o.status.code(), Some(2));
+    }
+    assert_eq!(names(&dir), before);
+    let _ = std::fs::remove_dir_all(&dir);
+}

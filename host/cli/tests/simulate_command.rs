@@ -167,7 +167,8 @@ fn assert_refused(args: &[&str], out: &std::path::Path, msgs: &[&str]) {
 #[test]
 fn simulate_stops_at_the_first_non_finite_sample_and_never_clamps_to_the_wire() {
     let dir = tmpdir("nonfinite");
-    // a softening cubic spring of -1e20 N·m/rad³ diverges: named sample and effect, no file
+    // a softening cubic spring of -1e16 N·m/rad³ (inside the bounds) diverges: named
+    // sample and effect, no file
     for name in ["nl.jcap", "nl.csv"] {
         let out = dir.join(name);
         assert_refused(
@@ -176,31 +177,101 @@ fn simulate_stops_at_the_first_non_finite_sample_and_never_clamps_to_the_wire() 
                 "--model",
                 "nonlinear-two-mass",
                 "--effect",
-                "nonlinear_stiffness:k3=-1e20",
+                "nonlinear_stiffness:k3=-1e16",
                 "--periods",
                 "1",
                 "--out",
                 out.to_str().unwrap(),
             ],
             &out,
-            &["not finite at sample ", "nonlinear_stiffness:k3="],
+            &[
+                "not finite at sample ",
+                "nonlinear_stiffness:k3=-10000000000000000",
+            ],
         );
     }
-    // a torque ripple of 1e30 N·m drives theta_m far beyond the i32 counts of the wire:
-    // refused, not clipped
-    let out = dir.join("ripple.jcap");
-    assert_refused(
-        &[
-            "simulate",
-            "--effect",
-            "torque_ripple:amplitude=1e30",
-            "--periods",
-            "1",
-            "--out",
-            out.to_str().unwrap(),
-        ],
-        &out,
-        &["theta_m", "outside the wire's range", "sample "],
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue item 10: `--rms 100` saturated 22,723 of 24,000 samples and exited 0; `--rms 0`,
+/// `backlash:width=1e9`, `time_delay:samples=1e12`, `--substeps 100000000`,
+/// `torque_ripple:amplitude=1e30`, `nonlinear_stiffness:k3=-1e20` were accepted.
+#[test]
+fn simulate_applies_the_boards_safety_limits_and_bounds_every_parameter() {
+    let dir = tmpdir("bounds");
+    let out = dir.join("run.jcap");
+    let o = out.to_str().unwrap();
+    let cases: [(&[&str], &[&str]); 6] = [
+        (
+            &["--rms", "100"],
+            &[
+                "excitation (--rms 100 rad): peak angle ",
+                "exceeds the limit of 0.5 rad",
+                "SafetyLimits",
+            ],
+        ),
+        (
+            &["--effect", "backlash:width=1e9"],
+            &[
+                "`backlash`",
+                "`1e9` for `width`",
+                "must be within [0, 0.1] rad",
+            ],
+        ),
+        (
+            &["--effect", "time_delay:samples=1e12"],
+            &["`time_delay`", "`1e12`", "must be within [0, 100] samples"],
+        ),
+        (
+            &["--effect", "torque_ripple:amplitude=1e30"],
+            &[
+                "`torque_ripple`",
+                "`1e30` for `amplitude`",
+                "[-100, 100] N·m",
+            ],
+        ),
+        (
+            &["--effect", "nonlinear_stiffness:k3=-1e20"],
+            &["`-1e20` for `k3`", "must be within [-1e16, 1e16] N·m/rad³"],
+        ),
+        (
+            &["--effect", "coulomb_friction:fs=1e9"],
+            &["`coulomb_friction`", "`1e9` for `fs`", "[0, 100] N·m"],
+        ),
+    ];
+    for (extra, msgs) in cases {
+        let mut args = vec!["simulate", "--periods", "1", "--out", o];
+        args.extend_from_slice(extra);
+        assert_refused(&args, &out, msgs);
+    }
+    // refused by the argument parser (its usual error and usage lines)
+    for (extra, msg) in [
+        (
+            ["--rms", "0"],
+            "invalid value '0' for '--rms <RAD>': `0` is not an RMS in rad > 0",
+        ),
+        (
+            ["--substeps", "100000000"],
+            "invalid value '100000000' for '--substeps <M>': 100000000 is not in 1..=1000",
+        ),
+    ] {
+        let mut args = vec!["simulate", "--periods", "1", "--out", o];
+        args.extend_from_slice(&extra);
+        let r = jointid(&args);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(2), "{err}");
+        assert!(err.contains(msg), "{err}");
+        assert!(!out.exists());
+    }
+    // inside the limits: runs
+    let mut args = vec!["simulate", "--periods", "1", "--out", o];
+    args.extend_from_slice(&["--rms", "0.06", "--substeps", "1000"]);
+    let r = jointid(&args);
+    assert_eq!(
+        r.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }

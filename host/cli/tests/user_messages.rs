@@ -130,3 +130,67 @@ fn info_names_link_events_in_words() {
     assert!(!t.contains("LinkLost") && !t.contains("LinkResumed"), "{t}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue item 8: `analyze run --compare val` with a noise validation run printed
+/// "odd lines −2930 dB … distortion grows with amplitude" and exited 0.
+#[test]
+fn analyze_compare_refuses_runs_that_are_not_the_same_multisine() {
+    let dir = tmpdir("compare");
+    let sim = |name: &str, extra: &[&str]| {
+        let path = dir.join(name);
+        let mut args = vec![
+            "simulate",
+            "--periods",
+            "3",
+            "--out",
+            path.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let o = jointid(&args);
+        assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+        path
+    };
+    let run = sim("run.csv", &[]);
+    let loud = sim("loud.csv", &["--rms", "0.06"]);
+    let noise = sim("noise.csv", &["--excitation", "noise"]);
+    let random = sim("random.csv", &["--excitation", "random-odd"]);
+    let analyze = |other: &std::path::Path| {
+        jointid(&[
+            "analyze",
+            run.to_str().unwrap(),
+            "--compare",
+            other.to_str().unwrap(),
+        ])
+    };
+    // the same multisine at three times the amplitude: compared
+    let o = analyze(&loud);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(
+        text(&o).contains("amplitude comparison with"),
+        "{}",
+        text(&o)
+    );
+    for (other, what) in [
+        (
+            &noise,
+            "noise.csv: excited by band-limited noise, not a multisine (every line 1..",
+        ),
+        (
+            &random,
+            "random.csv: excitation is a random-phase odd multisine, ",
+        ),
+    ] {
+        let o = analyze(other);
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(2), "{t}");
+        assert!(!t.contains("amplitude comparison with"), "{t}");
+        assert_eq!(t.trim_end().lines().count(), 1, "{t}");
+        assert!(t.contains("--compare ") && t.contains(what), "{t}");
+        assert!(
+            t.contains("run.csv has a special odd multisine") || other.ends_with("noise.csv"),
+            "{t}"
+        );
+        assert!(t.contains("same multisine as"), "{t}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -161,7 +161,7 @@ fn main() {
     let csv_path = dir.join("hour.csv");
     let (t_cmd, rows) = best_of(3, || {
         let r = read_jcap(&jcap).expect("read");
-        export::export_csv(&r, &csv_path).expect("export");
+        export::export_csv(&r, &csv_path, true).expect("export");
         r.samples.len()
     });
     assert_eq!(rows, s.samples.len());

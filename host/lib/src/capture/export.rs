@@ -116,50 +116,21 @@ pub fn write_csv(record: &CaptureRecord, out: &mut impl Write) -> io::Result<()>
     )
 }
 
-/// Writes the capture CSV to `path` atomically: into `path.tmp`, then renamed, so a
-/// reader never sees half an export. A `path` that exists and is no regular file (a
-/// device such as `/dev/stdout`, a pipe) is written in place, never replaced; a symlink
-/// to a regular file is followed (the file it names is replaced, not the link). Every
-/// write and the final flush are checked.
+/// Writes the capture CSV to `path` under the one rule of every output file
+/// ([`crate::data::output`]): an existing file only with `overwrite`; written to a
+/// temporary file in the same directory and renamed, so a reader never sees half an
+/// export. A device such as `/dev/stdout` or a pipe is written in place; a symlink to a
+/// regular file is followed (the file it names is replaced, not the link). Every write
+/// and the final flush are checked.
 ///
 /// # Errors
-/// [`CaptureError::Export`] naming the file that could not be written.
-pub fn export_csv(record: &CaptureRecord, path: &Path) -> Result<(), CaptureError> {
-    let err = |source| CaptureError::Export {
-        path: path.to_path_buf(),
-        err: source,
-    };
-    let target = match std::fs::canonicalize(path) {
-        Ok(resolved) => {
-            let meta = std::fs::metadata(&resolved).map_err(err)?;
-            if !meta.is_file() {
-                let file = std::fs::OpenOptions::new()
-                    .write(true)
-                    .open(&resolved)
-                    .map_err(err)?;
-                let mut w = io::BufWriter::with_capacity(1 << 16, file);
-                write_csv(record, &mut w).map_err(err)?;
-                return w.into_inner().map(drop).map_err(|e| err(e.into_error()));
-            }
-            resolved
-        }
-        Err(_) => path.to_path_buf(),
-    };
-    let path = target.as_path();
-    let mut tmp = path.as_os_str().to_os_string();
-    tmp.push(".tmp");
-    let tmp = std::path::PathBuf::from(tmp);
-    let result = (|| {
-        let file = std::fs::File::create(&tmp)?;
-        let mut w = io::BufWriter::with_capacity(1 << 16, file);
-        write_csv(record, &mut w)?;
-        w.into_inner().map_err(|e| e.into_error())?.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(err(e));
-    }
+/// [`CaptureError::Output`] naming the file that could not be written.
+pub fn export_csv(
+    record: &CaptureRecord,
+    path: &Path,
+    overwrite: bool,
+) -> Result<(), CaptureError> {
+    crate::data::output::write_file(path, overwrite, |mut w| write_csv(record, &mut w))?;
     Ok(())
 }
 

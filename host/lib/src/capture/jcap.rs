@@ -77,6 +77,9 @@ pub enum JcapError {
         /// the file concerned
         path: PathBuf,
     },
+    /// A whole `.jcap` could not be written ([`write_stream`]).
+    #[error(transparent)]
+    Output(#[from] crate::data::output::OutputError),
     /// Writing failed at a known place of the stream (full disk, removed medium).
     #[error("{path}: write failed at stream byte {offset}: {}", super::io_msg(err))]
     Write {
@@ -180,21 +183,24 @@ pub fn events_path(capture: &Path) -> PathBuf {
 }
 
 /// Writes a whole stream (a simulated board's, from `sim::board::encode_session`) as the
-/// `.jcap` `path` with [`JcapWriter`], replacing the file and removing any stale `.events`
-/// sidecar of an earlier capture of that name; returns the stream bytes written.
+/// `.jcap` `path` under the one rule of every output file ([`crate::data::output`]: an
+/// existing file only with `overwrite`, whole or not at all), removing any stale
+/// `.events` sidecar of an earlier capture of that name; returns the stream bytes written.
 ///
 /// # Errors
-/// [`JcapError::Io`] or [`JcapError::Write`] naming the file.
-pub fn write_stream(path: &Path, stream: &[u8]) -> Result<u64, JcapError> {
-    let mut w = JcapWriter::create(path, true, FlushPolicy::default())?;
-    w.append(stream, Instant::now())?;
-    let n = w.finish()?;
+/// [`JcapError::Output`] naming the file, [`JcapError::Io`] naming a sidecar that cannot
+/// be removed.
+pub fn write_stream(path: &Path, stream: &[u8], overwrite: bool) -> Result<u64, JcapError> {
+    crate::data::output::write_file(path, overwrite, |w| {
+        w.write_all(&MAGIC)?;
+        w.write_all(stream)
+    })?;
     let events = events_path(path);
     match std::fs::remove_file(&events) {
         Err(err) if err.kind() != io::ErrorKind::NotFound => {
             Err(JcapError::Io { path: events, err })
         }
-        _ => Ok(n),
+        _ => Ok(stream.len() as u64),
     }
 }
 

@@ -99,14 +99,9 @@ pub enum CaptureError {
         /// the session ids the capture holds, in stream order
         available: Vec<u32>,
     },
-    /// Writing an export failed.
-    #[error("{path}: {}", io_msg(err))]
-    Export {
-        /// the output file
-        path: PathBuf,
-        /// what the operating system said
-        err: std::io::Error,
-    },
+    /// Writing an export failed, or the file exists and overwriting was not asked for.
+    #[error(transparent)]
+    Output(#[from] crate::data::output::OutputError),
 }
 
 /// One sample of a capture in SI units, with the regenerated reference.
@@ -376,15 +371,4 @@ fn decode_named(
     }
 }
 
-/// An I/O error as one lowercase phrase without the `(os error N)` suffix.
-pub(crate) fn io_msg(e: &std::io::Error) -> String {
-    let mut m = e.to_string();
-    if let Some(i) = m.find(" (os error ") {
-        m.truncate(i);
-    }
-    if let Some(first) = m.get(..1) {
-        let lower = first.to_lowercase();
-        m.replace_range(..1, &lower);
-    }
-    m
-}
+pub(crate) use crate::data::output::io_msg;

@@ -193,6 +193,19 @@ pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, Dat
                 ),
             });
         }
+        // the period must fit the record: a longer one cannot be the data's
+        if cfg.period_samples as usize > rows {
+            let (ln, _) = &meta["period_samples"];
+            return Err(DataError::BadMeta {
+                file: file(),
+                line: *ln,
+                key: "period_samples".into(),
+                reason: format!(
+                    "{} samples is longer than the record ({rows} rows)",
+                    cfg.period_samples
+                ),
+            });
+        }
     }
     let t0 = t[0];
     let r = map
@@ -275,13 +288,22 @@ fn parse_excitation(
         ramp_samples: num(file, "ramp_samples", get("ramp_samples")?)?,
         periods: num(file, "periods", get("periods")?)?,
     };
-    if cfg.fs_hz == 0 || cfg.period_samples < 2 {
+    if cfg.fs_hz == 0 {
+        let (l, _) = get("fs_hz")?;
+        return Err(DataError::BadMeta {
+            file: file.to_string(),
+            line: l,
+            key: "fs_hz".into(),
+            reason: "0 Hz: the sample rate must be positive".into(),
+        });
+    }
+    if cfg.period_samples < 2 {
         let (l, _) = get("period_samples")?;
         return Err(DataError::BadMeta {
             file: file.to_string(),
             line: l,
             key: "period_samples".into(),
-            reason: "fs_hz must be positive and period_samples at least 2".into(),
+            reason: format!("{} samples: a period needs at least 2", cfg.period_samples),
         });
     }
     Ok(Some(cfg))
@@ -428,6 +450,36 @@ mod tests {
             ramp_samples: 2,
             periods: 3,
         }
+    }
+
+    #[test]
+    fn period_samples_is_checked_against_the_record_naming_its_line() {
+        let rows: String = (0..10)
+            .map(|k| format!("{},0,1,2\n", k as f64 * 1e-3))
+            .collect();
+        let with = |period: &str| {
+            capture_text(
+                &excitation_comment_lines(&cfg())
+                    .replace("# period_samples=4", &format!("# period_samples={period}")),
+                &rows,
+            )
+        };
+        // the comment lines: kind, fs_hz, period_samples (line 3)
+        for (period, reason) in [
+            ("0", "0 samples: a period needs at least 2"),
+            ("11", "11 samples is longer than the record (10 rows)"),
+            ("50000", "50000 samples is longer than the record (10 rows)"),
+        ] {
+            let e = parse_csv(&with(period), "p.csv", &ColumnMap::capture()).unwrap_err();
+            assert_eq!(
+                e.to_string(),
+                format!("p.csv:3: `period_samples`: {reason}"),
+                "{period}"
+            );
+        }
+        // a period that fits is accepted
+        let ds = parse_csv(&with("10"), "p.csv", &ColumnMap::capture()).unwrap();
+        assert_eq!(ds.excitation.unwrap().period_samples, 10);
     }
 
     #[test]

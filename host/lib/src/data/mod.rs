@@ -5,6 +5,8 @@
 //!   column mapping in [`csv`];
 //! - detrending and the order of preparation in [`prep`];
 //! - integer decimation with a zero-phase anti-alias filter in [`dsp`];
+//! - the one rule of every output file (no overwrite without `--force`, whole or not at
+//!   all) in [`output`];
 //! - [`IdData`], [`Dataset`], whole excitation periods and the loader registry here.
 //!
 //! What: read the capture CSV of DESIGN.md §5 (and any CSV with a column
@@ -43,6 +45,7 @@ pub fn fmt_sig(x: f64, digits: usize) -> String {
     format!("{rounded}")
 }
 pub mod dsp;
+pub mod output;
 pub mod prep;
 
 pub use csv::{

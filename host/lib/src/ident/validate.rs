@@ -13,12 +13,22 @@
 //!   τ = 0 … M, inside ±2.58·√(Σ_k r_ε(k) r_u(k) / N) (independence; the sum
 //!   widens the bound for coloured signals). In closed loop ε correlates with
 //!   *future* inputs through the feedback, so only τ ≥ 0 is tested.
-//! - Pass/fail of each test is Ljung's portmanteau χ² test at 1 % (same
-//!   section): whiteness ζ = N Σ_{k=1..M} r_ε(k)² against χ²(M);
-//!   independence ζ = N R̂_εuᵀ R̂_u⁻¹ R̂_εu / R̂_ε(0) against χ²(M+1), with
-//!   R̂_εu the cross-covariances at τ = 0 … M and R̂_u the (M+1)×(M+1)
-//!   Toeplitz autocovariance matrix of u. The per-lag bounds and the lags
-//!   outside them are reported alongside as figures for plots and reports.
+//! - A test passes when both of its figures say so, so that the verdict
+//!   follows every number printed beside it:
+//!   - the lags outside the per-lag 99 % band are no more than chance
+//!     allows: at most [`CorrelationTest::allowed`], the 99 % quantile of the
+//!     binomial count of lags outside when each falls outside with
+//!     probability 1 % ([`allowed_outside`]; 2 of 26 lags);
+//!   - Ljung's portmanteau χ² test at 1 % (same section): whiteness
+//!     ζ = N Σ_{k=1..M} r_ε(k)² against χ²(M); independence
+//!     ζ = N R̂_εuᵀ R̂_u⁻¹ R̂_εu / R̂_ε(0) against χ²(M+1), with R̂_εu the
+//!     cross-covariances at τ = 0 … M and R̂_u the (M+1)×(M+1) Toeplitz
+//!     autocovariance matrix of u. It can fail with no lag outside the band
+//!     (many lags each just inside it).
+//! - A residual with a NaN or infinite sample (a model whose simulation
+//!   diverged) fails both tests: its correlations are NaN, every lag counts
+//!   as outside, ζ is infinite ([`CorrelationTest::non_finite`] counts the
+//!   samples). A FIT that is not finite fails [`Validation::pass`].
 //! - Bode comparison: a measured FRF with its σ against model responses;
 //!   per model, the share of lines where the model lies outside ±2σ.
 // Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
@@ -95,16 +105,65 @@ pub struct CorrelationTest {
     pub bound: f64,
     /// largest |value|
     pub max_abs: f64,
-    /// lags outside the bound
+    /// lags outside the bound (a NaN value counts as outside)
     pub outside: usize,
+    /// most lags outside the bound that the test accepts ([`allowed_outside`])
+    pub allowed: usize,
+    /// residual samples that are NaN or infinite (any fails the test)
+    pub non_finite: usize,
     /// portmanteau statistic ζ
     pub statistic: f64,
     /// degrees of freedom of its χ² distribution
     pub dof: usize,
     /// 99 % quantile of χ²(dof)
     pub critical: f64,
+    /// no residual sample is NaN or infinite, `outside <= allowed` and
     /// `statistic <= critical`
     pub pass: bool,
+}
+
+impl CorrelationTest {
+    /// Why the test failed, in words and figures; `None` when it passed.
+    pub fn failure(&self) -> Option<String> {
+        if self.non_finite > 0 {
+            return Some(format!(
+                "{} residual samples are NaN or infinite",
+                self.non_finite
+            ));
+        }
+        let mut why = Vec::new();
+        if self.outside > self.allowed {
+            why.push(format!(
+                "{} of {} lags outside the band, at most {} allowed",
+                self.outside,
+                self.lags.len(),
+                self.allowed
+            ));
+        }
+        if self.statistic > self.critical || self.statistic.is_nan() {
+            why.push(format!(
+                "ζ = {:.1} above χ²({}) 99 % = {:.1}",
+                self.statistic, self.dof, self.critical
+            ));
+        }
+        (!self.pass).then(|| why.join("; "))
+    }
+}
+
+/// Most of `lags` lags that may fall outside their 99 % band by chance: the
+/// smallest k with P(X ≤ k) ≥ 0.99 for X ~ Binomial(`lags`, 0.01).
+pub fn allowed_outside(lags: usize) -> usize {
+    let p: f64 = 0.01;
+    // P(X = 0), then P(X = k + 1) = P(X = k) (n − k)/(k + 1) p/(1 − p)
+    let mut pmf = (1.0 - p).powi(i32::try_from(lags).unwrap_or(i32::MAX));
+    let mut cdf = pmf;
+    let mut k = 0;
+    while cdf < 0.99 && k < lags {
+        pmf *= (lags - k) as f64 / (k + 1) as f64 * p / (1.0 - p);
+        cdf += pmf;
+        k += 1;
+    }
+    k
 }
 
 /// 99 % quantile of χ²(ν), Wilson–Hilferty approximation
@@ -138,6 +197,16 @@ pub fn whiteness_test(e: &[f64], m: usize) -> Result<CorrelationTest, ValidateEr
             samples: n,
             lags: m,
         });
+    }
+    let non_finite = count_non_finite(e);
+    if non_finite > 0 {
+        return Ok(not_finite(
+            "residual autocorrelation",
+            (1..=m as i64).collect(),
+            Z99 / (n as f64).sqrt(),
+            m,
+            non_finite,
+        ));
     }
     let e = centred(e);
     let r0 = xcov(&e, &e, 0);
@@ -179,6 +248,16 @@ pub fn input_independence_test(
             lags: m,
         });
     }
+    let non_finite = count_non_finite(e);
+    if non_finite > 0 {
+        return Ok(not_finite(
+            "residual-input cross-correlation (past inputs)",
+            (0..=m as i64).collect(),
+            Z99 / (n as f64).sqrt(),
+            m + 1,
+            non_finite,
+        ));
+    }
     let (e, u) = (centred(e), centred(u));
     let (re0, ru0) = (xcov(&e, &e, 0), xcov(&u, &u, 0));
     let norm = (re0 * ru0).sqrt();
@@ -214,6 +293,35 @@ pub fn input_independence_test(
     ))
 }
 
+fn count_non_finite(e: &[f64]) -> usize {
+    e.iter().filter(|v| !v.is_finite()).count()
+}
+
+/// The failed test of a residual with `non_finite` NaN or infinite samples.
+fn not_finite(
+    name: &str,
+    lags: Vec<i64>,
+    bound: f64,
+    dof: usize,
+    non_finite: usize,
+) -> CorrelationTest {
+    let m = lags.len();
+    CorrelationTest {
+        name: name.into(),
+        values: vec![f64::NAN; m],
+        lags,
+        bound,
+        max_abs: f64::NAN,
+        outside: m,
+        allowed: allowed_outside(m),
+        non_finite,
+        statistic: f64::INFINITY,
+        dof,
+        critical: chi2_quantile_99(dof),
+        pass: false,
+    }
+}
+
 fn finish(
     name: &str,
     lags: Vec<i64>,
@@ -222,7 +330,12 @@ fn finish(
     statistic: f64,
     dof: usize,
 ) -> CorrelationTest {
-    let outside = values.iter().filter(|v| v.abs() > bound).count();
+    // a NaN value counts as outside
+    let outside = values
+        .iter()
+        .filter(|v| v.abs() > bound || v.is_nan())
+        .count();
+    let allowed = allowed_outside(values.len());
     let critical = chi2_quantile_99(dof);
     CorrelationTest {
         name: name.into(),
@@ -231,10 +344,12 @@ fn finish(
         values,
         bound,
         outside,
+        allowed,
+        non_finite: 0,
         statistic,
         dof,
         critical,
-        pass: statistic <= critical,
+        pass: outside <= allowed && statistic <= critical,
     }
 }
 
@@ -249,7 +364,7 @@ pub struct Validation {
     pub whiteness: CorrelationTest,
     /// residual / past-input independence test
     pub independence: CorrelationTest,
-    /// both residual tests pass
+    /// FIT is finite and both residual tests pass
     pub pass: bool,
 }
 
@@ -273,7 +388,7 @@ pub fn validate(
     Ok(Validation {
         fit_name: FIT_NAME.into(),
         fit,
-        pass: whiteness.pass && independence.pass,
+        pass: fit.is_finite() && whiteness.pass && independence.pass,
         whiteness,
         independence,
     })
@@ -459,6 +574,84 @@ mod tests {
         }
         assert!(wf <= 3, "{wf} of 50 white sequences failed whiteness");
         assert!(xf <= 3, "{xf} of 50 independent pairs failed independence");
+    }
+
+    #[test]
+    fn allowed_outside_is_the_binomial_99_quantile() {
+        // P(X ≤ 1) = 0.972, P(X ≤ 2) = 0.9976 for X ~ Bin(26, 0.01)
+        assert_eq!(allowed_outside(26), 2);
+        assert_eq!(allowed_outside(25), 2);
+        // P(X ≤ 0) = 0.99^1 = 0.99
+        assert_eq!(allowed_outside(1), 0);
+        assert_eq!(allowed_outside(0), 0);
+        // 200 lags: mean 2, the 99 % point is 6
+        assert_eq!(allowed_outside(200), 6);
+    }
+
+    #[test]
+    fn verdict_follows_the_lags_outside_and_the_statistic() {
+        // every lag far outside its band: fails whatever ζ says
+        let t = finish("t", (0..26).collect(), vec![0.5; 26], 0.1, 0.0, 26);
+        assert_eq!(t.outside, 26);
+        assert!(!t.pass, "{t:?}");
+        assert!(
+            t.failure()
+                .unwrap()
+                .contains("26 of 26 lags outside the band, at most 2 allowed"),
+            "{:?}",
+            t.failure()
+        );
+        // two lags outside are within chance, a small ζ: passes
+        let mut v = vec![0.0; 26];
+        v[3] = 0.2;
+        v[9] = -0.2;
+        let t = finish("t", (0..26).collect(), v.clone(), 0.1, 10.0, 26);
+        assert!(t.pass && t.failure().is_none(), "{t:?}");
+        // the same lags and a large ζ: fails and says why, with 0 of them decisive
+        let t = finish("t", (0..26).collect(), v, 0.1, 80.0, 26);
+        assert!(!t.pass);
+        assert!(t.failure().unwrap().starts_with("ζ = 80.0 above χ²(26)"));
+        // a NaN value is outside, never inside
+        let mut v = vec![0.0; 26];
+        v[0] = f64::NAN;
+        v[1] = f64::NAN;
+        v[2] = f64::NAN;
+        let t = finish("t", (0..26).collect(), v, 0.1, 0.0, 26);
+        assert_eq!(t.outside, 3);
+        assert!(!t.pass);
+    }
+
+    #[test]
+    fn a_diverged_simulation_fails_every_test() {
+        let n = 2000;
+        let mut g = Lcg(7);
+        let u: Vec<f64> = (0..n).map(|_| g.gauss()).collect();
+        let y: Vec<f64> = (0..n).map(|_| g.gauss()).collect();
+        // the simulated output overflows half-way, then is NaN (inf − inf)
+        let yhat: Vec<f64> = (0..n)
+            .map(|t| match t {
+                0..1000 => y[t],
+                1000..1500 => f64::INFINITY,
+                _ => f64::NAN,
+            })
+            .collect();
+        let v = validate(&u, &y, &yhat, 25).unwrap();
+        assert!(v.fit.is_nan());
+        assert!(!v.pass);
+        for t in [&v.whiteness, &v.independence] {
+            assert!(!t.pass, "{t:?}");
+            assert_eq!(t.non_finite, 1000);
+            assert_eq!(t.outside, t.lags.len());
+            assert_eq!(
+                t.failure().unwrap(),
+                "1000 residual samples are NaN or infinite"
+            );
+        }
+        // a NaN FIT alone fails the validation, residual tests aside
+        let mut yhat = y.clone();
+        yhat[5] = f64::NAN;
+        let v = validate(&u, &y, &yhat, 25).unwrap();
+        assert!(v.fit.is_nan() && !v.pass);
     }
 
     #[test]

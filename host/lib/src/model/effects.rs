@@ -43,6 +43,30 @@
 //!   continuous torque is exact. Linear.
 //! - `torque_ripple`: `A sin(n θ_m + φ)` added to the motor torque (cogging / commutation
 //!   ripple, `n` periods per motor revolution).
+//!
+//! Bounds of every parameter ([`Effect::bounds`], checked by [`Effect::check`] on every
+//! spec and every configuration the simulator runs): physically sensible ranges for one
+//! joint of an industrial robot, wide enough for any real one, narrow enough that the
+//! simulator neither allocates without limit nor integrates numbers far outside physics.
+//! Torques are on the motor side, where the controller's default limit `u_max` is 12 N·m.
+//!
+//! | effect | key | range | unit | why |
+//! |---|---|---|---|---|
+//! | `coulomb_friction` | `fc`, `fs` | 0 … 100 | N·m | eight times the default torque limit: a motor that cannot overcome its friction |
+//! | | `v_stribeck`, `v_smooth` | 1e-6 … 1e3 | rad/s | 1e3 rad/s ≈ 9500 rpm, the motor's top speed |
+//! | `backlash` | `width` | 0 … 0.1 | rad | 0.1 rad = 5.7° on the arm side, far beyond any gearbox |
+//! | `nonlinear_stiffness` | `k3` | −1e16 … 1e16 | N·m/rad³ | 300 times the default 3e13; negative: softening |
+//! | `extra_mode` | `j` | 1e-6 … 1e3 | kg·m² | |
+//! | | `k` | 1e-3 … 1e9 | N·m/rad | |
+//! | | `d` | 0 … 1e6 | N·m·s/rad | |
+//! | `time_delay` | `samples` | 0 … 100 | samples | 50 ms at 2 kHz, far beyond a drive's dead time |
+//! | `torque_ripple` | `amplitude` | −100 … 100 | N·m | as the friction levels |
+//! | | `order` | −1e4 … 1e4 | periods per revolution | |
+//! | | `phase` | −2π … 2π | rad | |
+//!
+//! A configuration inside these bounds can still make the run diverge (a softening cubic
+//! spring, say): the simulator then stops at the first non-finite sample and names it
+//! with the effects (`SimError::NonFinite`).
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -320,31 +344,23 @@ impl Effect {
                     Err("not finite".to_string())
                 }
             })?;
-        let nonneg = |v: f64| {
-            if v >= 0.0 {
-                Ok(v)
-            } else {
-                Err("must be >= 0".to_string())
-            }
+        let Some(&(_, lo, hi, unit)) = self.bounds().iter().find(|(k, ..)| *k == key) else {
+            return Ok(false);
         };
-        let pos = |v: f64| {
-            if v > 0.0 {
-                Ok(v)
-            } else {
-                Err("must be > 0".to_string())
-            }
-        };
+        if !(lo..=hi).contains(&v) {
+            return Err(bound_reason(lo, hi, unit));
+        }
         match (self, key) {
-            (Effect::CoulombFriction(c), "fc") => c.fc = nonneg(v)?,
-            (Effect::CoulombFriction(c), "fs") => c.fs = nonneg(v)?,
-            (Effect::CoulombFriction(c), "v_stribeck") => c.v_stribeck = pos(v)?,
-            (Effect::CoulombFriction(c), "v_smooth") => c.v_smooth = pos(v)?,
-            (Effect::Backlash(b), "width") => b.width = nonneg(v)?,
+            (Effect::CoulombFriction(c), "fc") => c.fc = v,
+            (Effect::CoulombFriction(c), "fs") => c.fs = v,
+            (Effect::CoulombFriction(c), "v_stribeck") => c.v_stribeck = v,
+            (Effect::CoulombFriction(c), "v_smooth") => c.v_smooth = v,
+            (Effect::Backlash(b), "width") => b.width = v,
             (Effect::NonlinearStiffness(s), "k3") => s.k3 = v,
-            (Effect::ExtraMode(m), "j") => m.j = pos(v)?,
-            (Effect::ExtraMode(m), "k") => m.k = pos(v)?,
-            (Effect::ExtraMode(m), "d") => m.d = nonneg(v)?,
-            (Effect::TimeDelay(t), "samples") => t.samples = nonneg(v)?,
+            (Effect::ExtraMode(m), "j") => m.j = v,
+            (Effect::ExtraMode(m), "k") => m.k = v,
+            (Effect::ExtraMode(m), "d") => m.d = v,
+            (Effect::TimeDelay(t), "samples") => t.samples = v,
             (Effect::TorqueRipple(t), "amplitude") => t.amplitude = v,
             (Effect::TorqueRipple(t), "order") => t.order = v,
             (Effect::TorqueRipple(t), "phase") => t.phase = v,
@@ -353,8 +369,71 @@ impl Effect {
         Ok(true)
     }
 
-    /// Checks relations between parameters that single keys cannot (e.g. `F_s ≥ F_c`).
+    /// Every numeric parameter of this effect with its range `[lo, hi]` and unit (see the
+    /// table in the module documentation).
+    pub fn bounds(&self) -> &'static [(&'static str, f64, f64, &'static str)] {
+        const TORQUE: f64 = 100.0;
+        match self {
+            Effect::CoulombFriction(_) => &[
+                ("fc", 0.0, TORQUE, "N·m"),
+                ("fs", 0.0, TORQUE, "N·m"),
+                ("v_stribeck", 1e-6, 1e3, "rad/s"),
+                ("v_smooth", 1e-6, 1e3, "rad/s"),
+            ],
+            Effect::Backlash(_) => &[("width", 0.0, 0.1, "rad")],
+            Effect::NonlinearStiffness(_) => &[("k3", -1e16, 1e16, "N·m/rad³")],
+            Effect::ExtraMode(_) => &[
+                ("j", 1e-6, 1e3, "kg·m²"),
+                ("k", 1e-3, 1e9, "N·m/rad"),
+                ("d", 0.0, 1e6, "N·m·s/rad"),
+            ],
+            Effect::TimeDelay(_) => &[("samples", 0.0, 100.0, "samples")],
+            Effect::TorqueRipple(_) => &[
+                ("amplitude", -TORQUE, TORQUE, "N·m"),
+                ("order", -1e4, 1e4, "periods per revolution"),
+                (
+                    "phase",
+                    -std::f64::consts::TAU,
+                    std::f64::consts::TAU,
+                    "rad",
+                ),
+            ],
+        }
+    }
+
+    /// The current value of numeric parameter `key`.
+    fn value(&self, key: &str) -> Option<f64> {
+        Some(match (self, key) {
+            (Effect::CoulombFriction(c), "fc") => c.fc,
+            (Effect::CoulombFriction(c), "fs") => c.fs,
+            (Effect::CoulombFriction(c), "v_stribeck") => c.v_stribeck,
+            (Effect::CoulombFriction(c), "v_smooth") => c.v_smooth,
+            (Effect::Backlash(b), "width") => b.width,
+            (Effect::NonlinearStiffness(s), "k3") => s.k3,
+            (Effect::ExtraMode(m), "j") => m.j,
+            (Effect::ExtraMode(m), "k") => m.k,
+            (Effect::ExtraMode(m), "d") => m.d,
+            (Effect::TimeDelay(t), "samples") => t.samples,
+            (Effect::TorqueRipple(t), "amplitude") => t.amplitude,
+            (Effect::TorqueRipple(t), "order") => t.order,
+            (Effect::TorqueRipple(t), "phase") => t.phase,
+            _ => return None,
+        })
+    }
+
+    /// Checks every parameter against its bounds ([`Effect::bounds`]) and the relations
+    /// between parameters that single keys cannot (e.g. `F_s ≥ F_c`); the error names the
+    /// parameter, its value and the bound.
+    ///
+    /// # Errors
+    /// What is wrong, in words.
     pub fn check(&self) -> Result<(), String> {
+        for &(key, lo, hi, unit) in self.bounds() {
+            let v = self.value(key).unwrap_or(f64::NAN);
+            if !(lo..=hi).contains(&v) {
+                return Err(format!("{key} = {v}: {}", bound_reason(lo, hi, unit)));
+            }
+        }
         match self {
             Effect::CoulombFriction(c) if c.fs < c.fc => {
                 Err(format!("fs ({}) must be >= fc ({})", c.fs, c.fc))
@@ -362,6 +441,18 @@ impl Effect {
             _ => Ok(()),
         }
     }
+}
+
+/// `must be within [lo, hi] unit`
+fn bound_reason(lo: f64, hi: f64, unit: &str) -> String {
+    let num = |v: f64| {
+        if v == 0.0 || (1e-3..1e5).contains(&v.abs()) {
+            format!("{}", (v * 1e4).round() / 1e4)
+        } else {
+            format!("{v:e}")
+        }
+    };
+    format!("must be within [{}, {}] {unit}", num(lo), num(hi))
 }
 
 impl fmt::Display for Effect {
@@ -609,7 +700,12 @@ mod tests {
             "{err:?}"
         );
         let err = "time_delay:samples=-1".parse::<Effect>().unwrap_err();
-        assert!(err.to_string().contains("must be >= 0"), "{err}");
+        assert!(
+            err.to_string().contains(
+                "bad value `-1` for `samples` at column 20: must be within [0, 100] samples"
+            ),
+            "{err}"
+        );
         let err = "backlash:width".parse::<Effect>().unwrap_err();
         assert_eq!(
             err,
@@ -626,6 +722,58 @@ mod tests {
         assert!(err.to_string().contains("parallel"), "{err}");
         let err = "torque_ripple:amplitude=inf".parse::<Effect>().unwrap_err();
         assert!(err.to_string().contains("not finite"), "{err}");
+    }
+
+    #[test]
+    fn every_parameter_is_bounded_and_the_error_names_value_and_bound() {
+        for (spec, msg) in [
+            (
+                "backlash:width=1e9",
+                "`width` at column 16: must be within [0, 0.1] rad",
+            ),
+            ("time_delay:samples=1e12", "must be within [0, 100] samples"),
+            (
+                "torque_ripple:amplitude=1e30",
+                "must be within [-100, 100] N·m",
+            ),
+            (
+                "nonlinear_stiffness:k3=-1e20",
+                "must be within [-1e16, 1e16] N·m/rad³",
+            ),
+            ("coulomb_friction:fc=1e6", "must be within [0, 100] N·m"),
+            (
+                "coulomb_friction:v_smooth=0",
+                "must be within [1e-6, 1000] rad/s",
+            ),
+            ("extra_mode:k=1e12", "must be within [0.001, 1e9] N·m/rad"),
+            (
+                "torque_ripple:phase=100",
+                "must be within [-6.2832, 6.2832] rad",
+            ),
+        ] {
+            let err = spec.parse::<Effect>().unwrap_err();
+            assert!(
+                matches!(err, EffectParseError::BadValue { .. }) && err.to_string().contains(msg),
+                "{spec}: {err}"
+            );
+        }
+        // the bounds hold for effects built in code too, and every default is inside them
+        for e in Effect::all_defaults() {
+            assert_eq!(e.check(), Ok(()), "{e}");
+            for (key, lo, hi, _) in e.bounds() {
+                assert!(lo <= hi && e.keys().contains(key), "{e}: {key}");
+            }
+        }
+        let e = Effect::TimeDelay(TimeDelay { samples: 1e12 });
+        assert_eq!(
+            e.check().unwrap_err(),
+            "samples = 1000000000000: must be within [0, 100] samples"
+        );
+        let e = Effect::TorqueRipple(TorqueRipple {
+            amplitude: f64::NAN,
+            ..TorqueRipple::default()
+        });
+        assert!(e.check().unwrap_err().starts_with("amplitude = NaN: "));
     }
 
     #[test]

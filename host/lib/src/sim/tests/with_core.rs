@@ -117,7 +117,7 @@ fn a_diverging_run_stops_with_the_first_non_finite_sample_and_the_effects() {
     exc.periods = 1;
     let cfg = SimConfig {
         plant: Plant::new(PlantKind::NonlinearTwoMass),
-        effects: parse_effects(&["nonlinear_stiffness:k3=-1e20".to_string()]).unwrap(),
+        effects: parse_effects(&["nonlinear_stiffness:k3=-1e16".to_string()]).unwrap(),
         ..SimConfig::default()
     };
     let err = simulate_excitation(&cfg, &exc).unwrap_err();

@@ -1,0 +1,366 @@
+//! Output files: the one rule every writer of jointid follows (`simulate --out`,
+//! `--params-out`, `export --csv`, `fit --save`, the SVG files of `--plot`, `demo`), the
+//! rule `capture` applies to its `.jcap`:
+//!
+//! - an existing file is refused unless overwriting was asked for (`--force`),
+//!   [`OutputError::Exists`];
+//! - a directory is never an output file, and the file's directory must exist and be
+//!   writable; [`check_output`] says so before any work is done;
+//! - the file appears whole or not at all: [`write_file`] writes a temporary file in the
+//!   same directory, flushes it to disk and renames it over the target; on any failure
+//!   the temporary file is removed and the target left as it was.
+//!
+//! A path that exists and is neither a regular file nor a directory (`/dev/stdout`, a
+//! named pipe, `/dev/full`) is written in place: it holds nothing to protect and cannot
+//! be replaced. A symbolic link to a regular file is followed: the file it names is
+//! replaced, not the link.
+
+use std::io::{self, Write};
+use std::path::{Path, PathBuf};
+
+/// Why an output file cannot be (or was not) written.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum OutputError {
+    /// The file exists and overwriting was not asked for.
+    #[error("{path}: already exists (pass --force to overwrite)")]
+    Exists {
+        /// the file
+        path: PathBuf,
+    },
+    /// The path names a directory.
+    #[error("{path}: is a directory, not a file")]
+    IsDirectory {
+        /// the path
+        path: PathBuf,
+    },
+    /// The file's directory does not exist (or is not a directory).
+    #[error("{path}: directory {dir} does not exist")]
+    NoDirectory {
+        /// the file
+        path: PathBuf,
+        /// its directory
+        dir: PathBuf,
+    },
+    /// The file's directory exists but a file cannot be created in it.
+    #[error("{path}: directory {dir} is not writable: {}", io_msg(err))]
+    NotWritable {
+        /// the file
+        path: PathBuf,
+        /// its directory
+        dir: PathBuf,
+        /// what the operating system said
+        err: io::Error,
+    },
+    /// Writing, flushing or renaming failed.
+    #[error("{path}: {}", io_msg(err))]
+    Io {
+        /// the file
+        path: PathBuf,
+        /// what the operating system said
+        err: io::Error,
+    },
+}
+
+/// An I/O error as one lowercase phrase without the `(os error N)` suffix.
+pub(crate) fn io_msg(e: &io::Error) -> String {
+    let mut m = e.to_string();
+    if let Some(i) = m.find(" (os error ") {
+        m.truncate(i);
+    }
+    if let Some(first) = m.get(..1) {
+        let lower = first.to_lowercase();
+        m.replace_range(..1, &lower);
+    }
+    m
+}
+
+/// The directory a file `path` goes into (`.` for a bare file name).
+fn dir_of(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// What an existing path is.
+enum Existing {
+    /// nothing there
+    Nothing,
+    /// a regular file (through a symlink: the file it names)
+    File(PathBuf),
+    /// a device, a pipe: written in place
+    Special(PathBuf),
+}
+
+fn existing(path: &Path) -> Result<Existing, OutputError> {
+    let io = |err| OutputError::Io {
+        path: path.to_path_buf(),
+        err,
+    };
+    match std::fs::metadata(path) {
+        Err(e) if e.kind() == io::ErrorKind::NotFound => {
+            if std::fs::symlink_metadata(path).is_ok() {
+                // a dangling link: replacing it would write somewhere unexpected
+                return Err(io(e));
+            }
+            Ok(Existing::Nothing)
+        }
+        Err(e) => Err(io(e)),
+        Ok(m) if m.is_dir() => Err(OutputError::IsDirectory {
+            path: path.to_path_buf(),
+        }),
+        Ok(m) => {
+            let resolved = std::fs::canonicalize(path).map_err(io)?;
+            Ok(if m.is_file() {
+                Existing::File(resolved)
+            } else {
+                Existing::Special(resolved)
+            })
+        }
+    }
+}
+
+/// Checks, before any work, that `path` can be written under the rule of this module:
+/// not a directory, its directory exists and takes a new file, and it does not exist
+/// unless `overwrite`.
+///
+/// # Errors
+/// [`OutputError::IsDirectory`], [`OutputError::NoDirectory`],
+/// [`OutputError::NotWritable`], [`OutputError::Exists`].
+pub fn check_output(path: &Path, overwrite: bool) -> Result<(), OutputError> {
+    let target = match existing(path)? {
+        Existing::Special(_) => return Ok(()),
+        Existing::File(_) if !overwrite => {
+            return Err(OutputError::Exists {
+                path: path.to_path_buf(),
+            })
+        }
+        Existing::File(resolved) => resolved,
+        Existing::Nothing => path.to_path_buf(),
+    };
+    let dir = dir_of(&target);
+    if !dir.is_dir() {
+        return Err(OutputError::NoDirectory {
+            path: path.to_path_buf(),
+            dir,
+        });
+    }
+    // the honest test of "writable": create (and remove) a file there
+    let probe = temp_path(&target);
+    match std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&probe)
+    {
+        Ok(f) => {
+            drop(f);
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(err) => Err(OutputError::NotWritable {
+            path: path.to_path_buf(),
+            dir,
+            err,
+        }),
+    }
+}
+
+/// `DIR/.NAME.PID.tmp`: the temporary file beside `target`.
+fn temp_path(target: &Path) -> PathBuf {
+    let name = target
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    dir_of(target).join(format!(".{name}.{}.tmp", std::process::id()))
+}
+
+/// Writes `path` under the rule of this module: `write` fills a buffered temporary file
+/// in the same directory, which is flushed, synced and renamed to `path` only when
+/// `write` succeeded; an existing regular file is replaced only if `overwrite`. A device
+/// or pipe is written in place.
+///
+/// # Errors
+/// As [`check_output`], and [`OutputError::Io`] when writing, flushing or renaming
+/// fails (the temporary file is removed then, `path` untouched).
+pub fn write_file(
+    path: &Path,
+    overwrite: bool,
+    write: impl FnOnce(&mut dyn Write) -> io::Result<()>,
+) -> Result<(), OutputError> {
+    let io_err = |err| OutputError::Io {
+        path: path.to_path_buf(),
+        err,
+    };
+    let target = match existing(path)? {
+        Existing::Special(dev) => {
+            let file = std::fs::OpenOptions::new()
+                .write(true)
+                .open(dev)
+                .map_err(io_err)?;
+            let mut w = io::BufWriter::with_capacity(1 << 16, file);
+            write(&mut w).map_err(io_err)?;
+            return w.into_inner().map(drop).map_err(|e| io_err(e.into_error()));
+        }
+        Existing::File(_) if !overwrite => {
+            return Err(OutputError::Exists {
+                path: path.to_path_buf(),
+            })
+        }
+        Existing::File(resolved) => resolved,
+        Existing::Nothing => path.to_path_buf(),
+    };
+    let dir = dir_of(&target);
+    if !dir.is_dir() {
+        return Err(OutputError::NoDirectory {
+            path: path.to_path_buf(),
+            dir,
+        });
+    }
+    let tmp = temp_path(&target);
+    let written = (|| {
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&tmp)?;
+        let mut w = io::BufWriter::with_capacity(1 << 16, file);
+        write(&mut w)?;
+        w.into_inner().map_err(|e| e.into_error())?.sync_all()
+    })();
+    let result = written.map_err(io_err).and_then(|()| {
+        if overwrite {
+            return std::fs::rename(&tmp, &target).map_err(io_err);
+        }
+        // no overwrite: a link fails when the name appeared meanwhile
+        match std::fs::hard_link(&tmp, &target) {
+            Ok(()) => Ok(()),
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => Err(OutputError::Exists {
+                path: path.to_path_buf(),
+            }),
+            // a file system without hard links: check, then rename
+            Err(_) if target.exists() => Err(OutputError::Exists {
+                path: path.to_path_buf(),
+            }),
+            Err(_) => std::fs::rename(&tmp, &target).map_err(io_err),
+        }
+    });
+    // after a rename the temporary name is gone; after a link or a failure it goes now
+    let _ = std::fs::remove_file(&tmp);
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("jointid-output-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn leftovers(dir: &Path) -> Vec<String> {
+        std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect()
+    }
+
+    #[test]
+    fn an_existing_file_is_kept_unless_overwrite_is_asked_for() {
+        let dir = tmp("exists");
+        let p = dir.join("m.json");
+        std::fs::write(&p, "precious").unwrap();
+        let err = check_output(&p, false).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            format!(
+                "{}: already exists (pass --force to overwrite)",
+                p.display()
+            )
+        );
+        let err = write_file(&p, false, |w| w.write_all(b"new")).unwrap_err();
+        assert!(matches!(err, OutputError::Exists { .. }), "{err}");
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), "precious");
+        check_output(&p, true).unwrap();
+        write_file(&p, true, |w| w.write_all(b"new")).unwrap();
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), "new");
+        // a new file needs no overwrite
+        write_file(&dir.join("n.json"), false, |w| w.write_all(b"n")).unwrap();
+        let mut left = leftovers(&dir);
+        left.sort();
+        assert_eq!(left, ["m.json", "n.json"]);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_failed_write_leaves_nothing_behind_and_the_old_file_intact() {
+        let dir = tmp("fail");
+        let p = dir.join("run.csv");
+        let err = write_file(&p, false, |w| {
+            w.write_all(b"t,u\n0,1\n")?;
+            Err(io::Error::other("the simulation diverged"))
+        })
+        .unwrap_err();
+        assert!(
+            err.to_string().ends_with("the simulation diverged"),
+            "{err}"
+        );
+        assert!(leftovers(&dir).is_empty(), "{:?}", leftovers(&dir));
+        std::fs::write(&p, "old").unwrap();
+        write_file(&p, true, |_| Err(io::Error::other("no"))).unwrap_err();
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), "old");
+        assert_eq!(leftovers(&dir), ["run.csv"]);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn directories_missing_directories_and_devices() {
+        let dir = tmp("dirs");
+        let err = check_output(&dir, true).unwrap_err();
+        assert!(matches!(err, OutputError::IsDirectory { .. }), "{err}");
+        assert!(err.to_string().ends_with("is a directory, not a file"));
+        let p = dir.join("no/such/m.json");
+        let err = check_output(&p, false).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            format!(
+                "{}: directory {} does not exist",
+                p.display(),
+                dir.join("no/such").display()
+            )
+        );
+        let err = write_file(&p, false, |w| w.write_all(b"x")).unwrap_err();
+        assert!(matches!(err, OutputError::NoDirectory { .. }), "{err}");
+        // a device is written in place, without --force
+        check_output(Path::new("/dev/null"), false).unwrap();
+        write_file(Path::new("/dev/null"), false, |w| w.write_all(b"x")).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_read_only_directory_is_named() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tmp("ro");
+        let ro = dir.join("ro");
+        std::fs::create_dir(&ro).unwrap();
+        std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).unwrap();
+        let p = ro.join("m.json");
+        // root may write anyway; then there is nothing to check
+        if std::fs::write(ro.join("probe"), "x").is_err() {
+            let err = check_output(&p, false).unwrap_err();
+            assert!(
+                err.to_string().starts_with(&format!(
+                    "{}: directory {} is not writable: ",
+                    p.display(),
+                    ro.display()
+                )),
+                "{err}"
+            );
+        }
+        std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
