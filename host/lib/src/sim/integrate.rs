@@ -69,7 +69,7 @@
 //! contact deflection [`laws::dead_zone_in`] of the frozen contact region, which
 //! [`laws::contact`] classifies), the current-loop torque at stage times and along the dense
 //! output by [`laws::current_loop`], the ripple by [`laws::ripple_torque`] (within a step by
-//! the angle-sum rule from its value at the step's start, [`RippleBase`]). Coulomb friction's
+//! the angle-sum rule from its value at the step's start, `RippleBase`). Coulomb friction's
 //! sliding level is [`CoulombFriction::level`].
 
 use nalgebra::DMatrix;
