@@ -5,6 +5,10 @@
 //! event-aware RK4 in every sample). The baseline measured in the same run is the linear joint forced through
 //! RK4, which separates the cost of the integrator from the cost of the effects.
 //!
+//! Last, the open-loop run `sim::simulate_driven` (the validation FIT's simulator): the
+//! three-mass joint with Coulomb friction driven by 60,000 samples (30 s) of the closed
+//! loop's recorded torque.
+//!
 //! Run: `cargo bench -p jointid --bench sim`. One thread; best of five runs per case. Both
 //! wall-clock time and this thread's CPU time (Linux `schedstat`) are printed: on a shared,
 //! loaded machine the CPU time is the figure that measures the simulator.
@@ -12,7 +16,7 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use jointid::sim::{simulate, Effect, SimConfig};
+use jointid::sim::{simulate, simulate_driven, DrivenStart, Effect, SimConfig};
 use jointid_core::excitation::{generate, ExcitationConfig};
 
 /// CPU time of this thread [s] from `/proc/thread-self/schedstat` (Linux), if readable.
@@ -22,14 +26,21 @@ fn thread_cpu_s() -> Option<f64> {
     Some(ns * 1e-9)
 }
 
-/// Best of five runs: (wall [s], thread CPU [s]).
+/// Best of five closed-loop runs: (wall [s], thread CPU [s]).
 fn best_of_five(cfg: &SimConfig, reference: &[f64]) -> (f64, Option<f64>) {
+    best_of_five_of(|| {
+        let out = simulate(cfg, reference).expect("valid configuration");
+        black_box(&out);
+    })
+}
+
+/// Best of five runs of `run`: (wall [s], thread CPU [s]).
+fn best_of_five_of(mut run: impl FnMut()) -> (f64, Option<f64>) {
     let mut best = (f64::INFINITY, None::<f64>);
     for _ in 0..5 {
         let c0 = thread_cpu_s();
         let t0 = Instant::now();
-        let out = simulate(cfg, reference).expect("valid configuration");
-        black_box(&out);
+        run();
         let wall = t0.elapsed().as_secs_f64();
         let cpu = c0.and_then(|c0| thread_cpu_s().map(|c1| c1 - c0));
         if wall < best.0 {
@@ -122,6 +133,32 @@ fn main() {
         let t = cpu.unwrap_or(wall);
         println!("  {:<38} {t:>9.4} {:>11.0}", e.name(), simulated_s / t);
     }
+    let coulomb = SimConfig {
+        effects: vec![Effect::default_by_name("coulomb_friction").expect("known effect")],
+        ..SimConfig::default()
+    };
+    let closed = simulate(&coulomb, &reference).expect("valid configuration");
+    let u = &closed.u[..60_000.min(closed.u.len())];
+    let start = DrivenStart::Rest {
+        theta_m: reference[0],
+    };
+    let (wall, cpu) = best_of_five_of(|| {
+        let out = simulate_driven(
+            &coulomb.plant,
+            &coulomb.effects,
+            coulomb.controller.current_loop_tau,
+            closed.sample_interval_s,
+            u,
+            &start,
+        )
+        .expect("valid configuration");
+        black_box(&out);
+    });
+    println!(
+        "driven (open loop), three-mass with coulomb_friction, {} samples: wall {wall:.4} s, cpu {} s",
+        u.len(),
+        cpu.map_or("n/a".to_string(), |c| format!("{c:.4}"))
+    );
     if let Ok(load) = std::fs::read_to_string("/proc/loadavg") {
         println!("load average during the run: {}", load.trim());
     }

@@ -29,17 +29,47 @@ pub fn spring_torque<T: Float>(k: T, k3: T, d: T, e: T, de: T) -> T {
     k * e + k3 * e * e * e + d * de
 }
 
+/// Contact region of the backlash dead zone.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Contact {
+    /// `δ < −h`: negative flank in contact
+    Neg,
+    /// `|δ| ≤ h`: free in the gap
+    Gap,
+    /// `δ > h`: positive flank in contact
+    Pos,
+}
+
+/// Contact region of the deflection `delta` in a dead zone of half width `half` [rad].
+#[inline(always)]
+pub fn contact<T: Float>(delta: T, half: T) -> Contact {
+    if delta > half {
+        Contact::Pos
+    } else if delta < -half {
+        Contact::Neg
+    } else {
+        Contact::Gap
+    }
+}
+
+/// The dead zone's branch for the region `region`, whatever `delta` is: `δ − h` on the
+/// positive flank, `δ + h` on the negative one, 0 in the gap [rad]. An integrator that keeps
+/// the contact region fixed over a step (and locates the edges as events) evaluates this.
+#[inline(always)]
+pub fn dead_zone_in<T: Float>(delta: T, half: T, region: Contact) -> T {
+    match region {
+        Contact::Pos => delta - half,
+        Contact::Neg => delta + half,
+        Contact::Gap => T::zero(),
+    }
+}
+
 /// Backlash dead zone of half width `half` [rad]: the contact deflection `δ − h` beyond
-/// the positive flank, `δ + h` beyond the negative one, 0 in the gap (exact law).
+/// the positive flank, `δ + h` beyond the negative one, 0 in the gap (exact law):
+/// [`dead_zone_in`] of the region [`contact`] of `delta`.
 #[inline(always)]
 pub fn dead_zone<T: Float>(delta: T, half: T) -> T {
-    if delta > half {
-        delta - half
-    } else if delta < -half {
-        delta + half
-    } else {
-        T::zero()
-    }
+    dead_zone_in(delta, half, contact(delta, half))
 }
 
 /// Smooth dead zone for the estimator: `½[(δ − h) + s(δ − h)] + ½[(δ + h) − s(δ + h)]`
@@ -83,11 +113,26 @@ pub fn ripple_torque<T: Float>(amplitude: T, order: T, phase: T, theta: T) -> T 
 /// target) e^{−t/tc}`; `tc = 0` is no lag (the target at once).
 #[inline(always)]
 pub fn current_loop<T: Float>(start: T, target: T, tc: T, t: T) -> T {
+    current_loop_decayed(start, target, current_loop_decay(tc, t))
+}
+
+/// Share of the current loop's initial error left after `t` [s], `e^{−t/tc}` [-] (0 for
+/// `tc = 0`, no lag). Over `t₁ + t₂` it is the product of the shares over `t₁` and `t₂`, so
+/// a stepper can square the half-step share instead of calling `exp` again.
+#[inline(always)]
+pub fn current_loop_decay<T: Float>(tc: T, t: T) -> T {
     if tc > T::zero() {
-        target + (start - target) * (-t / tc).exp()
+        (-t / tc).exp()
     } else {
-        target
+        T::zero()
     }
+}
+
+/// [`current_loop`] with its decay `e^{−t/tc}` given ([`current_loop_decay`]):
+/// `target + (start − target) decay` [N·m].
+#[inline(always)]
+pub fn current_loop_decayed<T: Float>(start: T, target: T, decay: T) -> T {
+    target + (start - target) * decay
 }
 
 #[cfg(test)]
@@ -106,6 +151,19 @@ mod tests {
         assert!(dead_zone_smooth(0.0, h, eps).abs() < 1e-12);
         assert_eq!(dead_zone(2e-3, h), 1e-3);
         assert_eq!(dead_zone(-2e-3, h), -1e-3);
+    }
+
+    #[test]
+    fn dead_zone_is_the_branch_of_its_region() {
+        let h = 1e-3;
+        for d in [-2e-3, -1e-3, -5e-4, 0.0, 5e-4, 1e-3, 2e-3] {
+            let region = contact(d, h);
+            assert_eq!(dead_zone(d, h), dead_zone_in(d, h, region), "δ = {d}");
+        }
+        assert_eq!(contact(1e-3, h), Contact::Gap);
+        assert_eq!(contact(-1.5e-3, h), Contact::Neg);
+        // a frozen region keeps its branch past the edge
+        assert_eq!(dead_zone_in(5e-4, h, Contact::Pos), 5e-4 - h);
     }
 
     #[test]

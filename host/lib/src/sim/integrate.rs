@@ -63,11 +63,22 @@
 //! `IntegrationConfig::substeps` and turn `exponential` off for such joints.
 //!
 //! The cubic spring and the torque ripple are smooth and need nothing special.
+//!
+//! **The laws.** Every pointwise law is evaluated by [`crate::model::laws`], the one place
+//! that says what it is: the gearbox and arm springs by [`laws::spring_torque`] (on the
+//! contact deflection [`laws::dead_zone_in`] of the frozen contact region, which
+//! [`laws::contact`] classifies), the current-loop torque at stage times and along the dense
+//! output by [`laws::current_loop`], the ripple by [`laws::ripple_torque`] (within a step by
+//! the angle-sum rule from its value at the step's start, `RippleBase`). Coulomb friction's
+//! sliding level is [`CoulombFriction::level`].
 
 use nalgebra::DMatrix;
 
 use crate::model::effects::{CoulombFriction, TorqueRipple};
+use crate::model::laws;
 use crate::model::plant::{Mechanism, MAX_BODIES, MAX_STATE};
+
+pub use crate::model::laws::Contact;
 
 /// Calls a const-generic method with the number of bodies known at compile time, so that
 /// the state loops are unrolled (the body count is at most [`crate::model::plant::MAX_BODIES`]).
@@ -171,17 +182,6 @@ pub fn zoh(f: &DMatrix<f64>, g: &DMatrix<f64>, t: f64) -> (DMatrix<f64>, DMatrix
     )
 }
 
-/// Contact mode of the backlash dead zone.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Contact {
-    /// `δ < −w/2`: negative flank in contact
-    Neg,
-    /// `|δ| ≤ w/2`: free in the gap
-    Gap,
-    /// `δ > w/2`: positive flank in contact
-    Pos,
-}
-
 #[derive(Clone, Copy, Debug, Default)]
 struct FastSpring {
     a: usize,
@@ -200,6 +200,8 @@ pub struct NonlinearPlant {
     viscous: [f64; MAX_STATE],
     /// springs; a chain or tree of `n` bodies has exactly `n − 1`
     springs: [FastSpring; MAX_BODIES],
+    /// current-loop time constant `T_c` [s] and its inverse [1/s]
+    tc: f64,
     inv_tc: f64,
     /// cubic coefficient of the gearbox spring (spring 0) [N·m/rad³]
     k3: f64,
@@ -266,6 +268,7 @@ impl NonlinearPlant {
             inv_j,
             viscous,
             springs,
+            tc,
             inv_tc: 1.0 / tc,
             k3,
             half_gap: backlash_width.map(|w| 0.5 * w),
@@ -296,12 +299,10 @@ impl NonlinearPlant {
         }
     }
 
-    /// Contact region of a deflection.
+    /// Contact region of a deflection ([`laws::contact`]; always in contact without backlash).
     pub fn region(&self, delta: f64) -> Contact {
         match self.half_gap {
-            Some(h) if delta > h => Contact::Pos,
-            Some(h) if delta < -h => Contact::Neg,
-            Some(_) => Contact::Gap,
+            Some(h) => laws::contact(delta, h),
             None => Contact::Pos,
         }
     }
@@ -375,29 +376,29 @@ impl NonlinearPlant {
         }
         let mut motor = x[2 * n] + w;
         for (i, r) in self.ripple.iter().enumerate() {
-            motor += r.amplitude
-                * match base {
-                    Some(b) => b.sin(i, r, x[0]),
-                    None => (r.order * x[0] + r.phase).sin(),
-                };
+            motor += match base {
+                Some(b) => b.torque(i, r, x[0]),
+                None => laws::ripple_torque(r.amplitude, r.order, r.phase, x[0]),
+            };
         }
         acc[0] += motor;
         for (si, s) in self.springs[..NB - 1].iter().enumerate() {
             let delta = s.ga * x[s.a] - s.gb * x[s.b];
             let ddelta = s.ga * x[n + s.a] - s.gb * x[n + s.b];
             let tau = if si == 0 {
+                // the gearbox: cubic spring on the contact deflection of the frozen region,
+                // nothing (spring nor damper) in the gap
                 let e = match (self.half_gap, mode) {
                     (Some(_), Contact::Gap) => None,
-                    (Some(h), Contact::Pos) => Some(delta - h),
-                    (Some(h), Contact::Neg) => Some(delta + h),
+                    (Some(h), _) => Some(laws::dead_zone_in(delta, h, mode)),
                     (None, _) => Some(delta),
                 };
                 match e {
-                    Some(e) => s.k * e + self.k3 * e * e * e + s.d * ddelta,
+                    Some(e) => laws::spring_torque(s.k, self.k3, s.d, e, ddelta),
                     None => 0.0,
                 }
             } else {
-                s.k * delta + s.d * ddelta
+                laws::spring_torque(s.k, 0.0, s.d, delta, ddelta)
             };
             acc[s.a] -= s.ga * tau;
             acc[s.b] += s.gb * tau;
@@ -443,13 +444,14 @@ impl NonlinearPlant {
             dx[i] = x[n + i];
             dx[n + i] = acc[i] * self.inv_j[i];
         }
+        // the current loop's lag in differential form (its solution: `laws::current_loop`)
         dx[2 * n] = (u_d - x[2 * n]) * self.inv_tc;
     }
 
     /// One classical RK4 step of length `h` [s] with the modes frozen. The current-loop
     /// torque `τ_a` is not integrated by RK4: with `u_d` held it is known in closed form,
-    /// `τ_a(t) = u_d + (τ_a(0) − u_d) e^{−t/T_c}`, and is set exactly at the stage times (so
-    /// the fast lag does not limit the step; RK4 sees a smooth known input).
+    /// [`laws::current_loop`], and is set exactly at the stage times (so the fast lag does
+    /// not limit the step; RK4 sees a smooth known input).
     fn rk4_n<const NB: usize>(
         &self,
         x: &State,
@@ -461,10 +463,11 @@ impl NonlinearPlant {
     ) -> State {
         let nx = 2 * NB + 1;
         let it = 2 * NB;
-        let e_half = (-0.5 * h * self.inv_tc).exp();
         let base = RippleBase::new(&self.ripple, x[0]);
-        let ta_half = u_d + (x[it] - u_d) * e_half;
-        let ta_full = u_d + (x[it] - u_d) * e_half * e_half;
+        // over h the lag's decay is the square of its decay over h/2
+        let e_half = laws::current_loop_decay(self.tc, 0.5 * h);
+        let ta_half = laws::current_loop_decayed(x[it], u_d, e_half);
+        let ta_full = laws::current_loop_decayed(x[it], u_d, e_half * e_half);
         let mut k1 = [0.0; MAX_STATE];
         let mut k2 = [0.0; MAX_STATE];
         let mut k3 = [0.0; MAX_STATE];
@@ -545,7 +548,7 @@ impl NonlinearPlant {
             for i in 0..nx {
                 o[i] = h00 * x[i] + h10 * f0[i] + h01 * x1[i] + h11 * f1[i];
             }
-            o[it] = u_d + (x[it] - u_d) * (-t * self.inv_tc).exp();
+            o[it] = laws::current_loop(x[it], u_d, self.tc, t);
             g(&o)
         };
         let (mut lo, mut flo) = (0.0, g(x));
@@ -691,14 +694,16 @@ struct ModeTables {
 }
 
 /// `sin(n θ + φ)` of the first ripples at the start `θ_0` of a step, so that the stages
-/// get `sin(n θ + φ)` by the angle-sum rule with short series in `d = n (θ − θ_0)`.
+/// evaluate the ripple law [`laws::ripple_torque`], `A sin(n θ + φ)`, by the angle-sum rule
+/// `sin(n θ_0 + φ + d) = sin(n θ_0 + φ) cos d + cos(n θ_0 + φ) sin d` with short series in
+/// `d = n (θ − θ_0)` instead of a `sin` per stage (agreement with the law: a test below).
 struct RippleBase {
     theta0: f64,
     /// `(sin, cos)` of `n θ_0 + φ` for the first [`RIPPLE_BASES`] ripples
     sc: [(f64, f64); RIPPLE_BASES],
 }
 
-/// Ripples whose stage values use the angle-sum rule (others call `sin` directly).
+/// Ripples whose stage values use the angle-sum rule (others call the law directly).
 const RIPPLE_BASES: usize = 4;
 
 impl RippleBase {
@@ -711,12 +716,13 @@ impl RippleBase {
         RippleBase { theta0, sc }
     }
 
-    /// `sin(n θ + φ)` of ripple `i` (`r`) at `theta` [rad].
+    /// Ripple torque [`laws::ripple_torque`] of ripple `i` (`r`) at motor angle `theta`
+    /// [rad] → [N·m].
     #[inline(always)]
-    fn sin(&self, i: usize, r: &TorqueRipple, theta: f64) -> f64 {
+    fn torque(&self, i: usize, r: &TorqueRipple, theta: f64) -> f64 {
         let d = r.order * (theta - self.theta0);
         if i >= RIPPLE_BASES || d.abs() > 0.5 {
-            return (r.order * theta + r.phase).sin();
+            return laws::ripple_torque(r.amplitude, r.order, r.phase, theta);
         }
         // Taylor series, products with reciprocals folded at compile time: to d⁵ and d⁶ for
         // |d| ≤ 0.05 (the usual case within one step; truncation below 2e-13), to d⁹ and d¹⁰
@@ -744,7 +750,7 @@ impl RippleBase {
             )
         };
         let (s0, c0) = self.sc[i];
-        s0 * cos_d + c0 * sin_d
+        r.amplitude * (s0 * cos_d + c0 * sin_d)
     }
 }
 
@@ -911,19 +917,21 @@ impl NonlinearPlant {
         base: &RippleBase,
     ) -> (f64, f64) {
         let n = NB;
+        // the gearbox spring's law on the contact deflection `e` of the frozen region, less
+        // the linear spring `k δ` the mode's exact part carries (its damper is there whole;
+        // in the gap the mode has no gearbox spring and the law gives nothing)
         let tau = if NB > 1 {
             let s = &self.springs[0];
             let delta = s.ga * x[s.a] - s.gb * x[s.b];
-            let offset = match (self.half_gap, mode) {
+            let e = match (self.half_gap, mode) {
                 (Some(_), Contact::Gap) => None,
-                (Some(h), Contact::Pos) => Some(h),
-                (Some(h), Contact::Neg) => Some(-h),
-                (None, _) => Some(0.0),
+                (Some(h), _) => Some(laws::dead_zone_in(delta, h, mode)),
+                (None, _) => Some(delta),
             };
-            match offset {
-                Some(o) => {
-                    let e = delta - o;
-                    -s.k * o + self.k3 * e * e * e
+            match e {
+                Some(e) => {
+                    laws::spring_torque(s.k, self.k3, 0.0, e, 0.0)
+                        - laws::spring_torque(s.k, 0.0, 0.0, delta, 0.0)
                 }
                 None => 0.0,
             }
@@ -932,7 +940,7 @@ impl NonlinearPlant {
         };
         let mut motor = 0.0;
         for (i, r) in self.ripple.iter().enumerate() {
-            motor += r.amplitude * base.sin(i, r, x[0]);
+            motor += base.torque(i, r, x[0]);
         }
         match motion {
             Motion::SlipPos => motor -= self.sliding_level(x[n]),
@@ -1271,6 +1279,33 @@ impl SampleStepper {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ripple_by_the_angle_sum_rule_agrees_with_the_law() {
+        let ripple = [
+            TorqueRipple::default(),
+            TorqueRipple {
+                amplitude: -0.5,
+                order: 7.0,
+                phase: -2.0,
+            },
+        ];
+        for theta0 in [-3.0, -0.01, 0.0, 0.4, 25.0] {
+            let base = RippleBase::new(&ripple, theta0);
+            // |d| = n |θ − θ_0| from 0 through both series to beyond 0.5 (the law itself)
+            for dtheta in [0.0, 1e-7, -3e-4, 6.9e-4, -2e-3, 5e-3, 7e-3, -0.02, 0.1] {
+                let theta = theta0 + dtheta;
+                for (i, r) in ripple.iter().enumerate() {
+                    let law = laws::ripple_torque(r.amplitude, r.order, r.phase, theta);
+                    let got = base.torque(i, r, theta);
+                    assert!(
+                        (got - law).abs() <= 1e-12 * r.amplitude.abs(),
+                        "θ0 {theta0}, dθ {dtheta}, ripple {i}: {got} vs {law}"
+                    );
+                }
+            }
+        }
+    }
 
     #[test]
     fn a_dip_is_found_between_positive_samples_only_when_the_parabola_crosses_zero() {

@@ -22,6 +22,10 @@
 //! with events or a fast sweep of the Stribeck bump. Everything random is drawn from
 //! generators seeded by [`SimConfig::seed`], so a run is reproducible bit for bit.
 //!
+//! Open loop: [`simulate_driven`] propagates the same plant with the same stepper, driven by
+//! a given torque reference (e.g. the measured one) with no controller and no sensors; the
+//! estimators compute a fitted model's validation FIT with the exact laws by it.
+//!
 //! See also: [`crate::model::params`] for the default joint and its modal frequencies,
 //! [`crate::model::effects`] for the physics and defaults of each effect.
 //!
@@ -42,6 +46,7 @@
 
 pub mod board;
 pub mod controller;
+mod driven;
 pub mod integrate;
 pub mod sensors;
 
@@ -53,11 +58,12 @@ pub use crate::model::effects::{parse_effects, Effect, EffectParseError};
 pub use crate::model::params::{JointParams, Plant, PlantKind};
 pub use crate::model::plant::{Mechanism, ModalFrequencies};
 pub use controller::{Controller, ControllerConfig};
+pub use driven::{simulate_driven, simulate_driven_with, DrivenOutput, DrivenStart};
 pub use sensors::{Disturbance, SensorConfig};
 
 use crate::model::effects::CoulombFriction;
 use crate::model::plant::{MAX_BODIES, MAX_STATE};
-use integrate::{NonlinearPlant, SampleStepper, State, ZohStep};
+use integrate::{Contact, NonlinearPlant, SampleStepper, State, ZohStep};
 use sensors::Sensors;
 
 /// How the plant is integrated between samples.
@@ -340,6 +346,17 @@ pub enum SimError {
         /// its value
         value: f64,
     },
+    /// a torque reference given to [`simulate_driven`] is not finite
+    #[error("torque reference sample {index} is not finite ({value})")]
+    BadTorque {
+        /// sample index
+        index: usize,
+        /// its value
+        value: f64,
+    },
+    /// the start state given to [`simulate_driven`] does not fit the plant
+    #[error("start state: {0}")]
+    BadStart(String),
     /// the run diverged: a state or a measured signal is NaN or infinite
     #[error(
         "simulation not finite at sample {index} (t = {t_s} s): {signal} = {value} \
@@ -398,41 +415,7 @@ impl SimConfig {
     /// # Errors
     /// The first problem found.
     pub fn validate(&self) -> Result<(), SimError> {
-        let bad = |name: &str, value: f64, reason: &'static str| SimError::InvalidParameter {
-            name: name.to_string(),
-            value,
-            reason,
-        };
-        let p = &self.plant.params;
-        let kind = self.plant.kind;
-        let mut positive = vec![("J_m", p.j_m), ("r", p.r)];
-        let mut nonneg = vec![("f_m", p.f_m)];
-        match kind {
-            PlantKind::Rigid => nonneg.push(("J_a1 + J_a2", p.j_a1 + p.j_a2)),
-            PlantKind::TwoMass | PlantKind::NonlinearTwoMass => {
-                positive.extend([("J_a1 + J_a2", p.j_a1 + p.j_a2), ("k_g", p.k_g)]);
-                nonneg.push(("d_g", p.d_g));
-            }
-            PlantKind::ThreeMass | PlantKind::FourMass => {
-                positive.extend([
-                    ("J_a1", p.j_a1),
-                    ("J_a2", p.j_a2),
-                    ("k_g", p.k_g),
-                    ("k_a", p.k_a),
-                ]);
-                nonneg.extend([("d_g", p.d_g), ("d_a", p.d_a)]);
-            }
-        }
-        if kind == PlantKind::FourMass {
-            positive.extend([("J_p", p.j_p), ("k_p", p.k_p)]);
-            nonneg.push(("d_p", p.d_p));
-        }
-        if kind == PlantKind::NonlinearTwoMass {
-            nonneg.push(("F_c", p.f_c));
-            if !p.k3.is_finite() {
-                return Err(bad("k3", p.k3, "must be finite"));
-            }
-        }
+        let (mut positive, mut nonneg) = plant_ranges(&self.plant)?;
         let c = &self.controller;
         positive.extend([
             ("sample_rate_hz", self.sample_rate_hz),
@@ -455,60 +438,129 @@ impl SimConfig {
                 self.sensors.disturbance.noise_cutoff_hz,
             ),
         ]);
-        for (name, v) in positive {
-            // `ti` may be +inf (P only)
-            let ok = v > 0.0 && (v.is_finite() || name == "controller.ti");
-            if !ok {
-                return Err(bad(name, v, "must be finite and > 0"));
-            }
-        }
-        for (name, v) in nonneg {
-            let ok = v.is_finite() && v >= 0.0;
-            if !ok {
-                return Err(bad(name, v, "must be finite and >= 0"));
-            }
-        }
+        check_ranges(&positive, &nonneg)?;
         if self.sensors.counts_per_rev == Some(0) {
             return Err(bad("sensors.counts_per_rev", 0.0, "must be > 0"));
         }
-        if !(1..=MAX_SUBSTEPS).contains(&self.integration.substeps) {
-            return Err(bad(
-                "integration.substeps",
-                f64::from(self.integration.substeps),
-                "must be within [1, 1000]",
-            ));
+        check_integration(&self.integration)?;
+        check_effects(&self.plant, &self.effects)
+    }
+}
+
+/// `SimError::InvalidParameter`.
+fn bad(name: &str, value: f64, reason: &'static str) -> SimError {
+    SimError::InvalidParameter {
+        name: name.to_string(),
+        value,
+        reason,
+    }
+}
+
+/// A parameter's name and value.
+type Named = (&'static str, f64);
+
+/// The plant's parameters that must be positive and those that must be non-negative, in the
+/// order they are checked.
+///
+/// # Errors
+/// [`SimError::InvalidParameter`] when `k3` of the nonlinear two-mass is not finite.
+fn plant_ranges(plant: &Plant) -> Result<(Vec<Named>, Vec<Named>), SimError> {
+    let p = &plant.params;
+    let kind = plant.kind;
+    let mut positive = vec![("J_m", p.j_m), ("r", p.r)];
+    let mut nonneg = vec![("f_m", p.f_m)];
+    match kind {
+        PlantKind::Rigid => nonneg.push(("J_a1 + J_a2", p.j_a1 + p.j_a2)),
+        PlantKind::TwoMass | PlantKind::NonlinearTwoMass => {
+            positive.extend([("J_a1 + J_a2", p.j_a1 + p.j_a2), ("k_g", p.k_g)]);
+            nonneg.push(("d_g", p.d_g));
         }
-        let mut seen = Vec::new();
-        for e in &self.effects {
-            e.check().map_err(|reason| SimError::BadEffect {
+        PlantKind::ThreeMass | PlantKind::FourMass => {
+            positive.extend([
+                ("J_a1", p.j_a1),
+                ("J_a2", p.j_a2),
+                ("k_g", p.k_g),
+                ("k_a", p.k_a),
+            ]);
+            nonneg.extend([("d_g", p.d_g), ("d_a", p.d_a)]);
+        }
+    }
+    if kind == PlantKind::FourMass {
+        positive.extend([("J_p", p.j_p), ("k_p", p.k_p)]);
+        nonneg.push(("d_p", p.d_p));
+    }
+    if kind == PlantKind::NonlinearTwoMass {
+        nonneg.push(("F_c", p.f_c));
+        if !p.k3.is_finite() {
+            return Err(bad("k3", p.k3, "must be finite"));
+        }
+    }
+    Ok((positive, nonneg))
+}
+
+/// Checks that the `positive` values are finite and > 0 (`controller.ti` may be +inf: P
+/// only) and the `nonneg` ones finite and ≥ 0.
+fn check_ranges(positive: &[Named], nonneg: &[Named]) -> Result<(), SimError> {
+    for &(name, v) in positive {
+        let ok = v > 0.0 && (v.is_finite() || name == "controller.ti");
+        if !ok {
+            return Err(bad(name, v, "must be finite and > 0"));
+        }
+    }
+    for &(name, v) in nonneg {
+        let ok = v.is_finite() && v >= 0.0;
+        if !ok {
+            return Err(bad(name, v, "must be finite and >= 0"));
+        }
+    }
+    Ok(())
+}
+
+fn check_integration(integration: &IntegrationConfig) -> Result<(), SimError> {
+    if !(1..=MAX_SUBSTEPS).contains(&integration.substeps) {
+        return Err(bad(
+            "integration.substeps",
+            f64::from(integration.substeps),
+            "must be within [1, 1000]",
+        ));
+    }
+    Ok(())
+}
+
+/// Checks the effects on `plant`: each one's parameters, uniqueness, a gearbox for those
+/// that act on it, and the number of bodies.
+fn check_effects(plant: &Plant, effects: &[Effect]) -> Result<(), SimError> {
+    let kind = plant.kind;
+    let mut seen = Vec::new();
+    for e in effects {
+        e.check().map_err(|reason| SimError::BadEffect {
+            effect: e.name(),
+            reason,
+        })?;
+        let unique = matches!(
+            e,
+            Effect::Backlash(_) | Effect::TimeDelay(_) | Effect::CoulombFriction(_)
+        );
+        if unique && seen.contains(&e.name()) {
+            return Err(SimError::DuplicateEffect(e.name()));
+        }
+        seen.push(e.name());
+        let on_gearbox = matches!(e, Effect::Backlash(_) | Effect::NonlinearStiffness(_));
+        if on_gearbox && kind == PlantKind::Rigid {
+            return Err(SimError::NeedsGearbox {
                 effect: e.name(),
-                reason,
-            })?;
-            let unique = matches!(
-                e,
-                Effect::Backlash(_) | Effect::TimeDelay(_) | Effect::CoulombFriction(_)
-            );
-            if unique && seen.contains(&e.name()) {
-                return Err(SimError::DuplicateEffect(e.name()));
-            }
-            seen.push(e.name());
-            let on_gearbox = matches!(e, Effect::Backlash(_) | Effect::NonlinearStiffness(_));
-            if on_gearbox && kind == PlantKind::Rigid {
-                return Err(SimError::NeedsGearbox {
-                    effect: e.name(),
-                    plant: kind.name(),
-                });
-            }
-        }
-        let bodies = Mechanism::new(&self.plant, &self.effects).n_bodies();
-        if bodies > MAX_BODIES {
-            return Err(SimError::TooManyBodies {
-                bodies,
-                max: MAX_BODIES,
+                plant: kind.name(),
             });
         }
-        Ok(())
     }
+    let bodies = Mechanism::new(plant, effects).n_bodies();
+    if bodies > MAX_BODIES {
+        return Err(SimError::TooManyBodies {
+            bodies,
+            max: MAX_BODIES,
+        });
+    }
+    Ok(())
 }
 
 /// The plant as the integrator needs it, assembled from plant kind and effects.
@@ -521,14 +573,19 @@ struct Assembled {
 }
 
 fn assemble(cfg: &SimConfig) -> Assembled {
-    let p = &cfg.plant.params;
-    let mech = Mechanism::new(&cfg.plant, &cfg.effects);
+    assemble_parts(&cfg.plant, &cfg.effects, cfg.controller.current_loop_tau)
+}
+
+/// [`Assembled`] from the plant, its effects and the current-loop time constant `tc` [s].
+fn assemble_parts(plant: &Plant, effects: &[Effect], tc: f64) -> Assembled {
+    let p = &plant.params;
+    let mech = Mechanism::new(plant, effects);
     let mut k3 = 0.0;
     let mut backlash = None;
     let mut coulomb = Vec::new();
     let mut ripple = Vec::new();
     let mut delay = 0.0;
-    if cfg.plant.kind == PlantKind::NonlinearTwoMass {
+    if plant.kind == PlantKind::NonlinearTwoMass {
         k3 += p.k3;
         if p.f_c > 0.0 {
             // seed 001 eq. (7): pure Coulomb, no Stribeck bump (set-valued at rest as usual)
@@ -539,7 +596,7 @@ fn assemble(cfg: &SimConfig) -> Assembled {
             });
         }
     }
-    for e in &cfg.effects {
+    for e in effects {
         match *e {
             Effect::CoulombFriction(c) if c.fs > 0.0 => coulomb.push(c),
             Effect::Backlash(b) if b.width > 0.0 => backlash = Some(b.width),
@@ -558,7 +615,6 @@ fn assemble(cfg: &SimConfig) -> Assembled {
         delay_frac = 0.0;
         delay_whole += 1;
     }
-    let tc = cfg.controller.current_loop_tau;
     let nonlinear = NonlinearPlant::new(&mech, tc, k3, backlash, coulomb, ripple);
     Assembled {
         mech,
@@ -589,62 +645,10 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
     let nx = a.mech.n_state();
     let n = reference.len();
 
-    enum Stepper {
-        Exact {
-            full: ZohStep,
-            split: Option<(ZohStep, ZohStep)>,
-        },
-        Rk4 {
-            substeps: u32,
-        },
-        Exponential {
-            stepper: SampleStepper,
-            substeps: u32,
-        },
-    }
-    let tc = cfg.controller.current_loop_tau;
-    let stepper = if cfg.integration.force_rk4 || (a.is_nonlinear && !cfg.integration.exponential) {
-        Stepper::Rk4 {
-            substeps: cfg.integration.substeps,
-        }
-    } else if a.is_nonlinear {
-        // one step per sample: the linear part, the delayed input's switch inside the sample
-        // included, is exact, so only the small residual torques see the switch
-        Stepper::Exponential {
-            stepper: SampleStepper::new(
-                &a.mech,
-                tc,
-                &a.nonlinear,
-                ts,
-                a.delay_frac,
-                cfg.integration.substeps,
-            ),
-            substeps: cfg.integration.substeps,
-        }
-    } else {
-        let (f, g) = a.mech.linear_model(cfg.controller.current_loop_tau);
-        let split = (a.delay_frac > 0.0).then(|| {
-            (
-                ZohStep::new(&f, &g, a.delay_frac * ts),
-                ZohStep::new(&f, &g, (1.0 - a.delay_frac) * ts),
-            )
-        });
-        Stepper::Exact {
-            full: ZohStep::new(&f, &g, ts),
-            split,
-        }
-    };
+    let stepper = Stepper::new(&a, cfg.controller.current_loop_tau, ts, &cfg.integration);
 
-    let mut x: State = [0.0; MAX_STATE];
     let theta0 = reference.first().copied().unwrap_or(0.0);
-    for (i, b) in a.mech.bodies.iter().enumerate() {
-        // zero deflection everywhere: arm-side bodies at r θ_m
-        x[i] = if i == 0 {
-            theta0
-        } else {
-            a.mech.bodies[0].gain * theta0 / b.gain
-        };
-    }
+    let mut x = at_rest(&a.mech, theta0);
     let mut mode = a.nonlinear.region(a.nonlinear.gearbox_deflection(&x));
     let mut controller = Controller::new(cfg.controller, ts);
     let mut sensors = Sensors::new(cfg.sensors, ts, cfg.seed);
@@ -662,13 +666,8 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
         state_names: a.mech.state_names(),
         states: Vec::with_capacity(n * nx),
         saturated_samples: 0,
-        integrator: match stepper {
-            Stepper::Exact { .. } => Integrator::ExactZoh,
-            Stepper::Rk4 { substeps } => Integrator::Rk4 { substeps },
-            Stepper::Exponential { substeps, .. } => Integrator::ExponentialRk4 { substeps },
-        },
+        integrator: stepper.integrator(),
     };
-    let (dw, phi) = (a.delay_whole, a.delay_frac);
     for (k, &r) in reference.iter().enumerate() {
         let meas = sensors.measure_theta(x[0]);
         let u = controller.step(r, meas);
@@ -690,15 +689,7 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
                 signal,
                 value,
                 plant: cfg.plant.kind.label(),
-                effects: if cfg.effects.is_empty() {
-                    "none".to_string()
-                } else {
-                    cfg.effects
-                        .iter()
-                        .map(ToString::to_string)
-                        .collect::<Vec<_>>()
-                        .join(" ")
-                },
+                effects: effects_text(&cfg.effects),
             });
         }
         let w = sensors.next_disturbance();
@@ -710,35 +701,134 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
         out.tau_motor.push(x[2 * nb]);
         out.disturbance.push(w);
         out.states.extend_from_slice(&x[..nx]);
-        let past = |lag: usize| k.checked_sub(lag).map_or(0.0, |j| out.u_true[j]);
-        let u_new = past(dw);
-        let u_old = past(dw + 1);
-        match &stepper {
-            Stepper::Exact { full, split: None } => full.apply(&mut x, &[u_new, w]),
+        stepper.sample(&a, &mut x, &mut mode, &out.u_true, w);
+    }
+    out.saturated_samples = controller.saturated_samples();
+    Ok(out)
+}
+
+/// The effects as their spec strings, space separated (`none` without effects).
+fn effects_text(effects: &[Effect]) -> String {
+    if effects.is_empty() {
+        "none".to_string()
+    } else {
+        effects
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(" ")
+    }
+}
+
+/// State at rest with zero spring deflections and the motor at `theta0` [rad]: arm-side
+/// bodies at `r θ_m`, every velocity and the current-loop torque 0.
+fn at_rest(mech: &Mechanism, theta0: f64) -> State {
+    let mut x: State = [0.0; MAX_STATE];
+    for (i, b) in mech.bodies.iter().enumerate() {
+        x[i] = if i == 0 {
+            theta0
+        } else {
+            mech.bodies[0].gain * theta0 / b.gain
+        };
+    }
+    x
+}
+
+/// How a run propagates the plant over one sample, chosen once per run: the one place that
+/// picks the integrator, shared by [`simulate`] and [`simulate_driven`].
+enum Stepper {
+    /// linear plant: exact ZOH over the sample, split at a fractional delay's switch
+    Exact {
+        full: ZohStep,
+        split: Option<(ZohStep, ZohStep)>,
+    },
+    /// event-aware RK4 at `substeps` per sample (forced, or exponential off)
+    Rk4 { substeps: u32, ts: f64, switch: f64 },
+    /// exponential (Lawson) RK4, event-aware RK4 at `substeps` per sample at events
+    Exponential {
+        stepper: SampleStepper,
+        substeps: u32,
+    },
+}
+
+impl Stepper {
+    /// The stepper of the assembled plant `a` with current-loop time constant `tc` [s] and
+    /// sample interval `ts` [s].
+    fn new(a: &Assembled, tc: f64, ts: f64, integration: &IntegrationConfig) -> Stepper {
+        if integration.force_rk4 || (a.is_nonlinear && !integration.exponential) {
+            Stepper::Rk4 {
+                substeps: integration.substeps,
+                ts,
+                switch: a.delay_frac,
+            }
+        } else if a.is_nonlinear {
+            // one step per sample: the linear part, the delayed input's switch inside the
+            // sample included, is exact, so only the small residual torques see the switch
+            Stepper::Exponential {
+                stepper: SampleStepper::new(
+                    &a.mech,
+                    tc,
+                    &a.nonlinear,
+                    ts,
+                    a.delay_frac,
+                    integration.substeps,
+                ),
+                substeps: integration.substeps,
+            }
+        } else {
+            let (f, g) = a.mech.linear_model(tc);
+            let split = (a.delay_frac > 0.0).then(|| {
+                (
+                    ZohStep::new(&f, &g, a.delay_frac * ts),
+                    ZohStep::new(&f, &g, (1.0 - a.delay_frac) * ts),
+                )
+            });
+            Stepper::Exact {
+                full: ZohStep::new(&f, &g, ts),
+                split,
+            }
+        }
+    }
+
+    fn integrator(&self) -> Integrator {
+        match *self {
+            Stepper::Exact { .. } => Integrator::ExactZoh,
+            Stepper::Rk4 { substeps, .. } => Integrator::Rk4 { substeps },
+            Stepper::Exponential { substeps, .. } => Integrator::ExponentialRk4 { substeps },
+        }
+    }
+
+    /// Propagates `x` over the sample `k = u.len() − 1`, from `k T` to `(k + 1) T`: the
+    /// torque reference `u[k − n − 1]` until the delay's switch and `u[k − n]` after it
+    /// (0 before the first sample; delay `n + φ` samples), through the current loop, with
+    /// the disturbance `w` [N·m] held.
+    #[inline]
+    fn sample(&self, a: &Assembled, x: &mut State, mode: &mut Contact, u: &[f64], w: f64) {
+        let k = u.len() - 1;
+        let past = |lag: usize| k.checked_sub(lag).map_or(0.0, |j| u[j]);
+        let u_new = past(a.delay_whole);
+        let u_old = past(a.delay_whole + 1);
+        match self {
+            Stepper::Exact { full, split: None } => full.apply(x, &[u_new, w]),
             Stepper::Exact {
                 split: Some((first, second)),
                 ..
             } => {
-                first.apply(&mut x, &[u_old, w]);
-                second.apply(&mut x, &[u_new, w]);
+                first.apply(x, &[u_old, w]);
+                second.apply(x, &[u_new, w]);
             }
-            Stepper::Exponential { stepper, .. } => a
-                .nonlinear
-                .sample(stepper, &mut x, &mut mode, u_old, u_new, w),
-            Stepper::Rk4 { substeps } => a.nonlinear.rk4_sample(
-                &mut x,
-                &mut mode,
+            Stepper::Exponential { stepper, .. } => {
+                a.nonlinear.sample(stepper, x, mode, u_old, u_new, w)
+            }
+            Stepper::Rk4 {
+                substeps,
                 ts,
-                phi,
-                *substeps as usize,
-                u_old,
-                u_new,
-                w,
-            ),
+                switch,
+            } => a
+                .nonlinear
+                .rk4_sample(x, mode, *ts, *switch, *substeps as usize, u_old, u_new, w),
         }
     }
-    out.saturated_samples = controller.saturated_samples();
-    Ok(out)
 }
 
 /// [`simulate`] with the reference the firmware's generator produces for `excitation`

@@ -10,6 +10,7 @@ use std::f64::consts::PI;
 
 mod closed_loop;
 mod config;
+mod driven;
 mod exact_linear;
 mod fingerprints;
 mod nonlinear;
