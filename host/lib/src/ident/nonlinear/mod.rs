@@ -8,6 +8,7 @@
 pub mod fit;
 pub mod init;
 pub mod model;
+pub mod run;
 
 pub use fit::{
     cost_at, fit_output_error, interval_velocity, simulate_velocity, NlError, NlFit, NlOptions,
@@ -15,6 +16,7 @@ pub use fit::{
 };
 pub use init::{automatic_start, Start, Step};
 pub use model::{NlModel, Owner, ParamDef, Scale};
+pub use run::{identify, sim_plant, validate, NlRequest, NlResult, NlValidation};
 
 #[cfg(test)]
 mod tests;
