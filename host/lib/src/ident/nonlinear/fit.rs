@@ -78,6 +78,18 @@ pub struct NlOptions {
     pub highpass_order: usize,
     /// which motor signal the residual compares
     pub residual: Residual,
+    /// how the Jacobian is computed
+    pub gradient: Gradient,
+}
+
+/// How the fit differentiates the simulation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Gradient {
+    /// forward-mode automatic differentiation (dual numbers): exact, one pass (the default)
+    Dual,
+    /// central differences of the simulation, `2 n + 1` passes: the reference of the
+    /// benchmark
+    CentralDifferences,
 }
 
 /// The motor signal the output-error cost compares.
@@ -101,6 +113,7 @@ impl Default for NlOptions {
             highpass_hz: DEFAULT_HIGHPASS_HZ,
             highpass_order: 2,
             residual: Residual::Velocity,
+            gradient: Gradient::Dual,
         }
     }
 }
@@ -242,6 +255,7 @@ struct Problem<'a> {
     theta0: f64,
     /// measured motor angle [rad] (for the ripple)
     y: &'a [f64],
+    gradient: Gradient,
     ts: f64,
     first: usize,
     /// high-pass sections applied to the residual and its derivatives alike
@@ -255,11 +269,19 @@ macro_rules! with_dual {
                 type $d = Hyperdual<f64, 5>;
                 $body
             }
-            5..=8 => {
+            5..=6 => {
+                type $d = Hyperdual<f64, 7>;
+                $body
+            }
+            7..=8 => {
                 type $d = Hyperdual<f64, 9>;
                 $body
             }
-            9..=12 => {
+            9..=10 => {
+                type $d = Hyperdual<f64, 11>;
+                $body
+            }
+            11..=12 => {
                 type $d = Hyperdual<f64, 13>;
                 $body
             }
@@ -288,6 +310,71 @@ impl Problem<'_> {
             .collect()
     }
 
+    /// The simulated output (angle or velocity, per `self.output`) at samples `k ≥ 1`
+    /// (sample 0 repeats sample 1), `None` when not finite.
+    fn output_f64(&self, z: &[f64]) -> Option<Vec<f64>> {
+        let p = self.physical(z);
+        let plant = Plant::<f64>::new(self.model, &p);
+        let mut out = vec![0.0; self.u.len()];
+        let ok = plant.simulate(
+            self.u,
+            self.ts,
+            self.theta0,
+            Some(self.y),
+            self.model.substeps,
+            |k, th, vel| {
+                out[k] = match self.output {
+                    Residual::Angle => th,
+                    Residual::Velocity => vel,
+                };
+            },
+        );
+        ok.then_some(out)
+    }
+
+    /// [`Self::jacobian_rows`] by central differences of the `f64` simulation (step
+    /// `1e-6 max(|z|, 1)` in the optimiser's coordinates): the reference the dual numbers are
+    /// measured against, `2 n_free + 1` simulations per evaluation.
+    fn jacobian_rows_fd(
+        &self,
+        z: &[f64],
+        free: &[usize],
+        mut visit: impl FnMut(usize, f64, &[f64]),
+    ) -> bool {
+        let nf = free.len();
+        let Some(base) = self.output_f64(z) else {
+            return false;
+        };
+        let mut cols = Vec::with_capacity(nf);
+        for &i in free {
+            let h = 1e-6 * z[i].abs().max(1.0);
+            let mut zp = z.to_vec();
+            zp[i] += h;
+            let mut zm = z.to_vec();
+            zm[i] -= h;
+            let (Some(a), Some(b)) = (self.output_f64(&zp), self.output_f64(&zm)) else {
+                return false;
+            };
+            cols.push(
+                a.iter()
+                    .zip(&b)
+                    .map(|(a, b)| (a - b) / (2.0 * h))
+                    .collect::<Vec<f64>>(),
+            );
+        }
+        let mut buf = vec![0.0; nf + 1];
+        let mut bank = SosBank::new(self.highpass.clone(), nf + 1);
+        for k in self.first..self.u.len() {
+            buf[0] = self.v[k] - base[k];
+            for j in 0..nf {
+                buf[j + 1] = cols[j][k];
+            }
+            bank.push(&mut buf);
+            visit(k, buf[0], &buf[1..]);
+        }
+        true
+    }
+
     /// Visits `(k, e_k, ∂ŷ_k/∂z_free)` for every residual; false when not finite.
     fn jacobian_rows(
         &self,
@@ -296,6 +383,9 @@ impl Problem<'_> {
         mut visit: impl FnMut(usize, f64, &[f64]),
     ) -> bool {
         let nf = free.len();
+        if self.gradient == Gradient::CentralDifferences {
+            return self.jacobian_rows_fd(z, free, visit);
+        }
         with_dual!(nf, D => {
             let width = D::from_real(0.0).len() - 1;
             debug_assert!(nf <= width);
@@ -435,6 +525,7 @@ pub fn fit_output_error(
         output: opts.residual,
         theta0: data.y[0],
         y: &data.y,
+        gradient: opts.gradient,
         ts: data.ts,
         first,
         highpass: if opts.highpass_hz > 0.0 {
@@ -541,6 +632,7 @@ pub(crate) fn jacobian_probe(data: &IdData, model: &NlModel, z: &[f64], k: usize
         output: Residual::Velocity,
         theta0: data.y[0],
         y: &data.y,
+        gradient: Gradient::Dual,
         ts: data.ts,
         first: 1,
         highpass: Vec::new(),
@@ -579,23 +671,30 @@ fn sandwich_covariance(problem: &Problem, z: &[f64], free: &[usize], lags: usize
         }
     }
     let lags = lags.min(n / 10);
+    // weighted residual autocovariance w_τ r_e(τ), then S = Jᵀ R J with R the banded
+    // Toeplitz matrix of it: Y = R J row by row, S = Jᵀ Y
+    let wr: Vec<f64> = (0..=lags)
+        .map(|tau| {
+            let re: f64 = (0..n - tau).map(|t| e[t] * e[t + tau]).sum::<f64>() / n as f64;
+            re * (1.0 - tau as f64 / (lags + 1) as f64)
+        })
+        .collect();
     let mut s = DMatrix::zeros(nf, nf);
-    for tau in 0..=lags {
-        let re: f64 = (0..n - tau).map(|t| e[t] * e[t + tau]).sum::<f64>() / n as f64;
-        let w = 1.0 - tau as f64 / (lags + 1) as f64;
-        let mut g = DMatrix::zeros(nf, nf);
-        for t in 0..n - tau {
-            let (ra, rb) = (row(t), row(t + tau));
-            for a in 0..nf {
-                for b in 0..nf {
-                    g[(a, b)] += ra[a] * rb[b];
-                }
+    let mut y = vec![0.0; nf];
+    for t in 0..n {
+        y.iter_mut().for_each(|v| *v = 0.0);
+        let lo = t.saturating_sub(lags);
+        let hi = (t + lags).min(n - 1);
+        for (tt, w) in (lo..=hi).map(|tt| (tt, wr[tt.abs_diff(t)])) {
+            for (yv, r) in y.iter_mut().zip(row(tt)) {
+                *yv += w * r;
             }
         }
-        if tau == 0 {
-            s += g * (w * re);
-        } else {
-            s += (&g + g.transpose()) * (w * re);
+        let r = row(t);
+        for a in 0..nf {
+            for b in 0..nf {
+                s[(a, b)] += r[a] * y[b];
+            }
         }
     }
     let hinv = pinv_sym(&h, 1e-14);

@@ -11,8 +11,8 @@ pub mod model;
 pub mod run;
 
 pub use fit::{
-    cost_at, fit_output_error, interval_velocity, simulate_velocity, NlError, NlFit, NlOptions,
-    NlParam,
+    cost_at, fit_output_error, interval_velocity, simulate_velocity, Gradient, NlError, NlFit,
+    NlOptions, NlParam,
 };
 pub use init::{automatic_start, Start, Step};
 pub use model::{NlModel, Owner, ParamDef, Scale};
