@@ -543,6 +543,9 @@ pub fn fit_output_error(
     if n_free > 32 {
         return Err(NlError::TooManyParameters(n_free));
     }
+    // a Coulomb level or a ripple above the largest torque applied would hold the motor
+    // still for good: the smooth law then mimics a stiff viscous term, a false minimum
+    let u_max = data.u.iter().fold(0.0f64, |m, u| m.max(u.abs()));
     let (lower, upper): (Vec<f64>, Vec<f64>) = layout
         .iter()
         .zip(start)
@@ -551,6 +554,10 @@ pub fn fit_output_error(
             if d.owner == Owner::Plant {
                 lo = lo.max(p / opts.plant_range);
                 hi = hi.min(p * opts.plant_range);
+            }
+            if matches!(d.owner, Owner::Effect(_)) && matches!(d.name, "fc" | "amplitude") {
+                hi = hi.min(u_max.max(p.abs()));
+                lo = lo.max(-hi);
             }
             match d.scale {
                 Scale::Log => (if lo > 0.0 { lo.ln() } else { f64::NEG_INFINITY }, hi.ln()),
