@@ -81,7 +81,8 @@ pub fn model_of(req: &NlRequest, data: &IdData) -> NlModel {
 }
 
 /// Identifies `req` on `data`: the automatic start (seed 001's three steps) unless a start
-/// is given, then the output-error fit, then its checks.
+/// is given, then the output-error fit, then its checks. The rigid structure is fitted
+/// without the high-pass prefilter (its information lies below it).
 ///
 /// # Errors
 /// [`NlError`] when the data or the start cannot be used.
@@ -94,7 +95,13 @@ pub fn identify(data: &IdData, req: &NlRequest) -> Result<NlResult, NlError> {
             (st.steps, st.model, st.values)
         }
     };
-    let fit = fit_output_error(data, &start_model, &start, &req.options)?;
+    let mut options = req.options.clone();
+    if req.structure == Structure::Rigid {
+        // a rigid body's inertia and friction show at the low frequencies the prefilter
+        // would remove (EMPS moves below 5 Hz); its torque offset is estimated instead
+        options.highpass_hz = 0.0;
+    }
+    let fit = fit_output_error(data, &start_model, &start, &options)?;
     let warnings = checks(&fit);
     Ok(NlResult {
         steps,
