@@ -22,7 +22,6 @@
 //! same files (scipy TRF with finite differences 30.5 s, JAX + scipy 1.0 s, jax-sysid 6.1 s
 //! median per fit; validation FIT 96.87 %) are printed beside ours.
 
-use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use jointid::data::{load_csv, ColumnMap, IdData};
@@ -43,14 +42,7 @@ fn cpu_s(wall: &Instant) -> f64 {
         .map_or_else(|| wall.elapsed().as_secs_f64(), |ns| ns * 1e-9)
 }
 
-fn shared(path: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .ancestors()
-        .map(|a| a.join("shared/data"))
-        .find(|d| d.is_dir())
-        .expect("shared/data beside the repository")
-        .join(path)
-}
+use jointid::test_support::shared_data as shared;
 
 /// J_m, J_a, k1, d, F_v (structure order), then k3, F_c.
 const TRUTH: [f64; 7] = [1e-3, 14.6, 1.3e5, 80.0, 2e-3, 1.6e11, 0.1];

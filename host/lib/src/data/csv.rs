@@ -662,16 +662,7 @@ mod tests {
         );
     }
 
-    /// `shared/data/<path>`: the first ancestor of the crate holding
-    /// `shared/data` (the repository sits beside `shared/`)
-    fn shared(path: &str) -> std::path::PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .ancestors()
-            .map(|a| a.join("shared/data"))
-            .find(|d| d.is_dir())
-            .expect("shared/data beside the repository")
-            .join(path)
-    }
+    use crate::test_support::shared_data as shared;
 
     #[test]
     fn load_csv_reads_emps_and_daisy_with_column_mapping() {

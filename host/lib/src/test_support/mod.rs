@@ -175,3 +175,17 @@ pub fn random_joint(
     controller.u_max = 1e3;
     (p, controller, rms)
 }
+
+/// `shared/data/<path>`: the first ancestor of this crate that holds `shared/data` (the
+/// repository sits beside `shared/`, the reference data the tests and benches read).
+///
+/// # Panics
+/// When no ancestor holds `shared/data`.
+pub fn shared_data(path: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .map(|a| a.join("shared/data"))
+        .find(|d| d.is_dir())
+        .expect("shared/data beside the repository")
+        .join(path)
+}

@@ -10,14 +10,7 @@ use crate::model::spec::Structure;
 use crate::sim::{simulate_excitation, SimConfig};
 use jointid_core::excitation::ExcitationConfig;
 
-fn shared(path: &str) -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .ancestors()
-        .map(|a| a.join("shared/data"))
-        .find(|d| d.is_dir())
-        .expect("shared/data beside the repository")
-        .join(path)
-}
+use crate::test_support::shared_data as shared;
 
 fn seed001_model() -> NlModel {
     NlModel {
