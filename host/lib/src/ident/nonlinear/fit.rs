@@ -546,14 +546,21 @@ pub fn fit_output_error(
     // a Coulomb level or a ripple above the largest torque applied would hold the motor
     // still for good: the smooth law then mimics a stiff viscous term, a false minimum
     let u_max = data.u.iter().fold(0.0f64, |m, u| m.max(u.abs()));
+    let v_max = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
     let (lower, upper): (Vec<f64>, Vec<f64>) = layout
         .iter()
         .zip(start)
         .map(|(d, &p)| {
             let (mut lo, mut hi) = (d.lower, d.upper);
-            if d.owner == Owner::Plant {
+            let log_effect = matches!(d.owner, Owner::Effect(_)) && d.scale == Scale::Log;
+            if d.owner == Owner::Plant || log_effect {
                 lo = lo.max(p / opts.plant_range);
                 hi = hi.min(p * opts.plant_range);
+            }
+            if d.owner == Owner::InitialVelocity {
+                // the motion never exceeds its measured range by much
+                hi = 10.0 * v_max.max(1e-6);
+                lo = -hi;
             }
             if matches!(d.owner, Owner::Effect(_)) && matches!(d.name, "fc" | "amplitude") {
                 hi = hi.min(u_max.max(p.abs()));
@@ -573,7 +580,8 @@ pub fn fit_output_error(
         lower: lower.clone(),
         upper: upper.clone(),
         fixed: fixed.clone(),
-        nuisance: 1,
+        // v0 is bounded (see above), so it is not one of the loop's unbounded nuisances
+        nuisance: 0,
         ..LmOptions::default()
     };
     let res =

@@ -134,49 +134,84 @@ pub fn automatic_start(
     let u_rms = (data.u.iter().map(|u| u * u).sum::<f64>() / data.u.len() as f64).sqrt();
     let fc_used = if fc > 0.0 { fc } else { 0.01 * u_rms };
 
-    // step 3: flexibility, linear
-    let plant: Vec<f64> = match (model.structure, linear) {
-        (_, Some(p)) => p.to_vec(),
-        (Structure::Rigid, None) => vec![j_used, fv_used],
-        (Structure::TwoMass, None) => two_mass_grid(data, model, j_used, fv_used, fc_used, offset),
-        (s, None) => {
-            let (mut feat, _) =
-                grey_box::features(data, Output::Angle, s.masses(), 0, 0.0).map_err(err)?;
-            feat.j_total = j_used;
-            feat.f_m = fv_used;
-            grey_box::initial_values(s, model.r, &feat)
+    // step 3: flexibility, linear; every start the data offer (the caller's linear fit, the
+    // subspace model's modal features, for the two-mass a grid), each refined, the best kept
+    let mut plants: Vec<Vec<f64>> = Vec::new();
+    if let Some(p) = linear {
+        plants.push(p.to_vec());
+    }
+    match model.structure {
+        Structure::Rigid => plants.push(vec![j_used, fv_used]),
+        Structure::TwoMass => {
+            plants.push(two_mass_grid(data, model, j_used, fv_used, fc_used, offset));
         }
-    };
-    let friction_only: Vec<Effect> = model
-        .effects
-        .iter()
-        .filter(|e| matches!(e, Effect::CoulombFriction(_)))
-        .map(|e| match e {
-            Effect::CoulombFriction(c) => {
-                Effect::CoulombFriction(crate::model::effects::CoulombFriction {
-                    fc: fc_used,
-                    fs: fc_used,
-                    ..*c
-                })
+        s => {
+            if let Ok((mut feat, _)) = grey_box::features(data, Output::Angle, s.masses(), 0, 0.0) {
+                feat.j_total = j_used;
+                feat.f_m = fv_used;
+                plants.push(grey_box::initial_values(s, model.r, &feat));
             }
-            e => *e,
-        })
-        .collect();
-    let lin_model = NlModel {
-        effects: friction_only,
-        ..model.clone()
+        }
+    }
+    if plants.is_empty() {
+        return Err(NlError::Data(
+            "no linear start for the flexible structure (step 3 of the start)".into(),
+        ));
+    }
+    let with_fc = |fc: f64| -> Vec<Effect> {
+        model
+            .effects
+            .iter()
+            .filter_map(|e| match e {
+                Effect::CoulombFriction(c) => Some(Effect::CoulombFriction(
+                    crate::model::effects::CoulombFriction { fc, fs: fc, ..*c },
+                )),
+                _ => None,
+            })
+            .collect()
     };
-    let lin_start = lin_model.values(&plant, offset, 0.0);
-    let lin = fit_output_error(
-        data,
-        &lin_model,
-        &lin_start,
-        &NlOptions {
-            max_iter: 30,
-            cov_lags: 0,
-            ..NlOptions::default()
-        },
-    )?;
+    let mut lin: Option<super::fit::NlFit> = None;
+    for plant in &plants {
+        // the Coulomb level: the regression's, or the grid value that explains the data best
+        // with this linear start (the regression misses friction that shows only at reversals)
+        let mut fc = fc_used;
+        if has_coulomb {
+            let mut best = f64::INFINITY;
+            for f in [fc_used, 0.03 * u_rms, 0.1 * u_rms, 0.3 * u_rms, 0.6 * u_rms] {
+                let m = NlModel {
+                    effects: with_fc(f),
+                    ..model.clone()
+                };
+                if let Some(c) = super::fit::cost_at(data, &m, &m.values(plant, offset, 0.0)) {
+                    if c < best {
+                        best = c;
+                        fc = f;
+                    }
+                }
+            }
+        }
+        let lin_model = NlModel {
+            effects: with_fc(fc),
+            ..model.clone()
+        };
+        let lin_start = lin_model.values(plant, offset, 0.0);
+        let Ok(f) = fit_output_error(
+            data,
+            &lin_model,
+            &lin_start,
+            &NlOptions {
+                max_iter: 30,
+                cov_lags: 0,
+                ..NlOptions::default()
+            },
+        ) else {
+            continue;
+        };
+        if lin.as_ref().is_none_or(|l| f.ssr < l.ssr) {
+            lin = Some(f);
+        }
+    }
+    let lin = lin.ok_or(NlError::Unstable)?;
     steps.push(Step {
         name: "flexibility".into(),
         values: lin
@@ -209,7 +244,12 @@ pub fn automatic_start(
             other => neutral(other),
         });
     }
-    let kg = lin_plant.get(2).copied().unwrap_or(0.0);
+    let kg_index = model
+        .structure
+        .param_names()
+        .iter()
+        .position(|n| *n == "k_g");
+    let kg = kg_index.map_or(0.0, |i| lin_plant[i]);
     // deflection level: the arm-side torque the motor torque implies, over the stiffness
     let delta = if model.structure == Structure::Rigid || kg <= 0.0 {
         0.0
@@ -350,7 +390,12 @@ fn neutral(e: Effect) -> Effect {
 fn candidates(e: &Effect, plant: &[f64], model: &NlModel, delta: f64, u_rms: f64) -> Vec<Effect> {
     match *e {
         Effect::NonlinearStiffness(_) if delta > 0.0 => {
-            let kg = plant[2];
+            let kg = model
+                .structure
+                .param_names()
+                .iter()
+                .position(|n| *n == "k_g")
+                .map_or(0.0, |i| plant[i]);
             let unit = kg / (delta * delta);
             [-0.1, -0.03, 0.0, 0.03, 0.1, 0.3, 1.0, 3.0]
                 .iter()

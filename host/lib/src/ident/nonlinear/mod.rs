@@ -16,7 +16,7 @@ pub use fit::{
 };
 pub use init::{automatic_start, Start, Step};
 pub use model::{NlModel, Owner, ParamDef, Scale};
-pub use run::{identify, sim_plant, validate, NlRequest, NlResult, NlValidation};
+pub use run::{identify, linear_start, sim_plant, validate, NlRequest, NlResult, NlValidation};
 
 #[cfg(test)]
 mod tests;

@@ -110,6 +110,45 @@ pub fn identify(data: &IdData, req: &NlRequest) -> Result<NlResult, NlError> {
     })
 }
 
+/// The linear start of step 3 from periodic data: the frequency-domain fit of `structure`
+/// to the FRF at the excited lines ([`crate::ident::frf_fit`]), which transients, drift
+/// and the nonlinear distortion at the non-excited lines leave alone. Returns the
+/// structure's values and the current-loop lag `tau_c` [s] it estimated (0 when none).
+///
+/// # Errors
+/// In words, when the data are not periodic or the fit fails.
+pub fn linear_start(
+    ds: &crate::data::Dataset,
+    structure: Structure,
+    r: f64,
+) -> Result<(Vec<f64>, f64), String> {
+    use crate::ident::frf_fit::{fit_frf, FrfFitOptions};
+    let analysis = crate::ident::frf::analyze_dataset(ds, 1).map_err(|e| e.to_string())?;
+    let ts = ds.data.ts;
+    let opts = FrfFitOptions {
+        r,
+        ..FrfFitOptions::new(structure, ts)
+    };
+    let fit = fit_frf(&analysis.frf, &opts).map_err(|e| e.to_string())?;
+    let values = structure
+        .param_names()
+        .iter()
+        .map(|n| {
+            fit.params
+                .iter()
+                .find(|p| p.name == *n)
+                .map(|p| p.value)
+                .ok_or_else(|| format!("the frequency-domain fit has no `{n}`"))
+        })
+        .collect::<Result<Vec<f64>, String>>()?;
+    let tau_c = if fit.lag.value > 0.0 {
+        fit.lag.value * ts
+    } else {
+        0.0
+    };
+    Ok((values, tau_c))
+}
+
 /// Warnings of a finished fit: iteration limit, parameters on a bound, parameters the data
 /// do not determine (σ above half the value).
 pub fn checks(fit: &NlFit) -> Vec<String> {
