@@ -209,7 +209,15 @@ pub fn automatic_start(
             other => neutral(other),
         });
     }
-    let kg = lin_plant.get(2).copied().unwrap_or(0.0);
+    // the gearbox stiffness by name: its index differs between the structures
+    let kg = model
+        .structure
+        .param_names()
+        .iter()
+        .position(|n| *n == "k_g")
+        .and_then(|i| lin_plant.get(i))
+        .copied()
+        .unwrap_or(0.0);
     // deflection level: the arm-side torque the motor torque implies, over the stiffness
     let delta = if model.structure == Structure::Rigid || kg <= 0.0 {
         0.0
@@ -350,7 +358,12 @@ fn neutral(e: Effect) -> Effect {
 fn candidates(e: &Effect, plant: &[f64], model: &NlModel, delta: f64, u_rms: f64) -> Vec<Effect> {
     match *e {
         Effect::NonlinearStiffness(_) if delta > 0.0 => {
-            let kg = plant[2];
+            let kg = model
+                .structure
+                .param_names()
+                .iter()
+                .position(|n| *n == "k_g")
+                .map_or(0.0, |i| plant[i]);
             let unit = kg / (delta * delta);
             [-0.1, -0.03, 0.0, 0.03, 0.1, 0.3, 1.0, 3.0]
                 .iter()
