@@ -331,17 +331,22 @@ pub fn run(
     let mut linear = None;
     let mut tau_c = fixed_tau.unwrap_or(0.0);
     let periodic = args.estimation_fraction.is_none() && args.start.is_none();
-    if fixed_tau.is_none() && periodic {
+    if periodic {
         if let Ok(a) = analyze_dataset(ds, args.settle_periods) {
             let mut o = FrfFitOptions::new(structure, ts);
             o.r = args.gear_ratio;
+            if let Some(t) = fixed_tau {
+                o.lag = Drive::Fixed(t / ts);
+            }
             if effects.iter().any(|e| matches!(e, Effect::TimeDelay(_))) {
                 o.delay = Drive::Fixed(0.0);
             }
             match frf_fit::fit_frf(&a.frf, &o) {
                 Ok(ff) => {
                     let lag = ff.lag.value * ts;
-                    tau_c = if lag >= 2e-6 { lag } else { 0.0 };
+                    if fixed_tau.is_none() {
+                        tau_c = if lag >= 2e-6 { lag } else { 0.0 };
+                    }
                     let mut values: Vec<(String, f64, &'static str)> = ff
                         .params
                         .iter()
@@ -352,10 +357,15 @@ pub fn run(
                         name: "frequency-domain linear fit".into(),
                         values,
                         detail: format!(
-                            "sample maximum likelihood on {} excited lines; the linear {} and \
-                             the current-loop lag the steps below start from",
+                            "sample maximum likelihood on {} excited lines; the linear {} {} \
+                             the steps below start from",
                             ff.lines,
-                            structure.label()
+                            structure.label(),
+                            if fixed_tau.is_some() {
+                                "(current-loop lag held)"
+                            } else {
+                                "and the current-loop lag"
+                            }
                         ),
                     });
                     linear = Some(ff.values());
@@ -429,10 +439,7 @@ pub fn run(
     let layout = start_model.layout();
     for (name, value) in &fixes {
         if name == "tau_c" {
-            if let Some(i) = layout.iter().position(|d| d.name == "tau_c") {
-                start[i] = *value;
-                options.fixed.push(name.clone());
-            }
+            // held below with --current-loop-tau
             continue;
         }
         let hits: Vec<usize> = (0..layout.len())
@@ -442,6 +449,13 @@ pub fn run(
             start[i] = *value;
         }
         options.fixed.push(name.clone());
+    }
+    // --current-loop-tau S or --fix tau_c=S: the lag held (S = 0: the model has none)
+    if let Some(t) = fixed_tau {
+        if let Some(i) = layout.iter().position(|d| d.name == "tau_c") {
+            start[i] = t;
+            options.fixed.push("tau_c".into());
+        }
     }
     // one effect per spec (`none` gives none)
     for (i, spec) in specs.iter().enumerate().take(effects.len()) {

@@ -480,3 +480,102 @@ impl SavedModel {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ident::nonlinear::{NlModel, NlParam};
+    use crate::model::effects::{CoulombFriction, NonlinearStiffness};
+
+    /// a nonlinear fit as the engine returns it (values by hand)
+    fn nl_fit() -> NlFit {
+        let model = NlModel {
+            structure: Structure::TwoMass,
+            r: 1.0 / 118.0,
+            effects: vec![
+                Effect::NonlinearStiffness(NonlinearStiffness { k3: 1.6e11 }),
+                Effect::CoulombFriction(CoulombFriction {
+                    fc: 0.1,
+                    fs: 0.1,
+                    ..CoulombFriction::default()
+                }),
+            ],
+            tau_c: 4e-4,
+            v_eps: 0.05,
+            dz_eps: 1e-7,
+            substeps: 1,
+        };
+        let plant = vec![1e-3, 14.6, 1.3e5, 80.0, 2e-3];
+        let values = model.values(&plant, 1e-3, 0.0);
+        let params = model
+            .layout()
+            .iter()
+            .zip(&values)
+            .map(|(d, &value)| NlParam {
+                name: d.name,
+                owner: d.owner,
+                value,
+                std: 0.01 * value.abs(),
+                unit: d.unit,
+                fixed: false,
+                at_bound: false,
+            })
+            .collect();
+        NlFit {
+            model,
+            plant,
+            params,
+            values,
+            ssr: 1.0,
+            n_residuals: 10,
+            iterations: 3,
+            termination: Termination::CostConverged,
+            fit_velocity_percent: 96.0,
+        }
+    }
+
+    #[test]
+    fn nonlinear_model_file_round_trips_and_has_no_state_space() {
+        let fit = nl_fit();
+        let saved = SavedModel::from_nonlinear(&fit, 5e-4, "by hand", "est.csv", 96.5, "v", 5.0);
+        assert_eq!(saved.format, MODEL_FORMAT);
+        assert_eq!(saved.model, "two-mass+nonlinear_stiffness+coulomb_friction");
+        let text = serde_json::to_string(&saved).unwrap();
+        // the effects in the simulator's own form
+        assert!(text.contains(r#""effect":"nonlinear_stiffness","k3":160000000000.0"#));
+        let back: SavedModel = serde_json::from_str(&text).unwrap();
+        let nl = back.to_nonlinear().unwrap();
+        assert_eq!(nl.model, fit.model);
+        assert_eq!(nl.plant, fit.plant);
+        assert_eq!(
+            nl.values[..nl.values.len() - 1],
+            fit.values[..fit.values.len() - 1]
+        );
+        for (a, b) in nl.params.iter().zip(&fit.params) {
+            if b.name != "v0" {
+                assert_eq!((a.name, a.value, a.std), (b.name, b.value, b.std));
+            }
+        }
+        let e = back.to_fitted().unwrap_err().to_string();
+        assert!(e.contains("nonlinear"), "{e}");
+        // the simulate arguments name every parameter of the simulator's two-mass
+        let args = &back.nonlinear.as_ref().unwrap().simulate_args;
+        assert_eq!(args[..2], ["--model", "two-mass"]);
+        assert!(args.contains(&"k_g=130000".to_string()), "{args:?}");
+        assert!(args.contains(&"J_a2=0".to_string()), "{args:?}");
+        assert!(args
+            .iter()
+            .any(|a| a.starts_with("nonlinear_stiffness:k3=")));
+    }
+
+    #[test]
+    fn a_missing_plant_value_or_a_bad_format_is_named() {
+        let mut saved = SavedModel::from_nonlinear(&nl_fit(), 5e-4, "", "", 0.0, "v", 5.0);
+        saved.parameters.remove("k_g");
+        let e = saved.to_nonlinear().unwrap_err().to_string();
+        assert!(e.contains("`k_g`"), "{e}");
+        saved.format = "jointid-model/9".into();
+        let e = saved.to_nonlinear().unwrap_err().to_string();
+        assert!(e.contains("jointid-model/9"), "{e}");
+    }
+}
