@@ -132,9 +132,25 @@ pub struct FitArgs {
     /// estimation data and columns
     #[command(flatten)]
     pub data: FitDataArgs,
-    /// model: black-box:ORDER, rigid, two-mass, three-mass or four-mass
+    /// model: black-box:ORDER, rigid, two-mass, three-mass, four-mass, or
+    /// nonlinear-two-mass (seed 001: two-mass with nonlinear_stiffness and coulomb_friction)
     #[arg(long, value_name = "KIND", value_parser = parse_kind)]
-    pub model: ModelKind,
+    pub model: FitModel,
+    /// attach an effect to the physical model, repeatable, spelled as `simulate --effect`
+    /// (`name` or `name:key=value,...`; names: coulomb_friction, backlash,
+    /// nonlinear_stiffness, extra_mode, time_delay, torque_ripple); sends the fit to the
+    /// nonlinear grey-box engine. Estimated keys given a value start there; the others
+    /// (an extra mode's `attach`, the ripple's `order`) are taken as given
+    #[arg(long = "effect", value_name = "SPEC")]
+    pub effects: Vec<String>,
+    /// nonlinear fit: hold a parameter at this value (`J_m`, `k_g`, `tau_c`, `offset`, an
+    /// effect's key such as `k3` or `fc`), repeatable
+    #[arg(long = "fix", value_name = "NAME=VALUE")]
+    pub fix: Vec<String>,
+    /// nonlinear fit: start from this model file (written by `fit --save` with effects)
+    /// instead of the automatic start
+    #[arg(long, value_name = "MODEL.json")]
+    pub start: Option<PathBuf>,
     /// friction of the rigid model
     #[arg(long, value_enum, default_value_t = FrictionArg::Viscous)]
     pub friction: FrictionArg,
@@ -297,8 +313,32 @@ pub(crate) fn check_same_rate(first: &Dataset, other: &Dataset, flag: &str) -> R
     ))
 }
 
-fn parse_kind(s: &str) -> Result<ModelKind, String> {
+/// `--model`: a model family, or seed 001's nonlinear two-mass (the two-mass with
+/// `nonlinear_stiffness` and `coulomb_friction` attached).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FitModel {
+    /// the family (the two-mass for `nonlinear-two-mass`)
+    pub kind: ModelKind,
+    /// `nonlinear-two-mass` was asked for
+    pub nonlinear_two_mass: bool,
+}
+
+fn parse_kind(s: &str) -> Result<FitModel, String> {
+    if s.trim().to_ascii_lowercase().replace('_', "-") == "nonlinear-two-mass" {
+        return Ok(FitModel {
+            kind: ModelKind::TwoMass,
+            nonlinear_two_mass: true,
+        });
+    }
     s.parse()
+        .map(|kind| FitModel {
+            kind,
+            nonlinear_two_mass: false,
+        })
+        .map_err(|e: String| match e.strip_suffix(')') {
+            Some(head) if head.contains("(known:") => format!("{head}, nonlinear-two-mass)"),
+            _ => e,
+        })
 }
 
 /// Everything `fit --json` prints.
@@ -357,8 +397,17 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     if let Some(path) = &args.save {
         check_output(path, args.force)?;
     }
+    let nonlinear = super::fit_nl::wanted(args);
     if let Some(dir) = &args.plot {
-        check_plot_files(dir, &["bode.svg"], args.force)?;
+        let name = if nonlinear {
+            super::fit_nl::PLOT_FILE
+        } else {
+            "bode.svg"
+        };
+        check_plot_files(dir, &[name], args.force)?;
+    }
+    if !nonlinear {
+        super::fit_nl::refuse_nonlinear_flags(args)?;
     }
     check_columns(&args.data.data_args(&args.data.path))?;
     let ds = args.data.data_args(&args.data.path).load(ctx.loaders)?;
@@ -368,6 +417,9 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     };
     if let Some(v) = &val_ds {
         check_same_rate(&ds, v, "--validation")?;
+    }
+    if nonlinear {
+        return super::fit_nl::run(args, ctx, &ds, val_ds.as_ref());
     }
     let prep = args.prep.prep();
     let prepare = |d: &jointid::data::IdData, name: &str| {
@@ -390,7 +442,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     };
     let periodic = match (
         args.domain,
-        args.model.structure(),
+        args.model.kind.structure(),
         args.estimation_fraction,
     ) {
         (DomainArg::Time, _, _) => None,
@@ -453,7 +505,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     check_records_lags(args, &ds.name, &est, val.as_ref(), &val_name)?;
     let opts = FitOptions {
-        kind: args.model,
+        kind: args.model.kind,
         coulomb: args.friction == FrictionArg::Coulomb,
         method: match args.method {
             MethodArg::Pbsid => Method::Pbsid,
@@ -560,7 +612,7 @@ fn below_frf(args: &FitArgs, ds: &Dataset, fitted: &Fitted) -> Option<FitWarning
         return None;
     }
     let a = analyze_dataset(ds, args.settle_periods).ok()?;
-    let reference = match (args.model.structure(), args.model) {
+    let reference = match (args.model.kind.structure(), args.model.kind) {
         (Some(structure), _) => {
             let mut o = FrfFitOptions::new(structure, ts);
             o.output = args.output_kind.into();
@@ -607,7 +659,7 @@ fn run_frequency_domain(
 ) -> CmdResult {
     let ts = ds.data.ts;
     let t0 = Instant::now();
-    let fitted = match (args.model.structure(), args.model) {
+    let fitted = match (args.model.kind.structure(), args.model.kind) {
         (Some(structure), _) => {
             let mut o = FrfFitOptions::new(structure, ts);
             o.output = args.output_kind.into();
@@ -627,7 +679,7 @@ fn run_frequency_domain(
             let bb = black_box_frf(&analysis.frf, n, ts, args.feedthrough, iters)
                 .map_err(|e| format!("{}: {e}", ds.name))?;
             Fitted {
-                kind: args.model,
+                kind: args.model.kind,
                 output: args.output_kind.into(),
                 ts,
                 method: format!(
@@ -766,7 +818,7 @@ fn fitted_of(args: &FitArgs, ff: &FrfFit, analysis: &FrfAnalysis, decimate: usiz
         (false, false) => "left out",
     };
     Fitted {
-        kind: args.model,
+        kind: args.model.kind,
         output: args.output_kind.into(),
         ts,
         model: ff.discrete(),
@@ -797,7 +849,7 @@ fn fitted_of(args: &FitArgs, ff: &FrfFit, analysis: &FrfAnalysis, decimate: usiz
 ///
 /// # Errors
 /// Serialisation and [`jointid::data::output::OutputError`]s naming the file.
-fn save_model(
+pub(crate) fn save_model(
     path: &Path,
     saved: &jointid::ident::model_file::SavedModel,
     force: bool,

@@ -31,6 +31,7 @@ mod demo;
 mod experiment;
 mod export;
 mod fit;
+mod fit_nl;
 mod info;
 mod simulate;
 mod validate;

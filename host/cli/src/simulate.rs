@@ -41,6 +41,8 @@ use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::jcap::{write_stream, JcapError};
 use jointid::data::output::{check_output, write_file, OutputError};
 use jointid::data::{write_capture_csv, Dataset, ExcitationConfig, SignalKind};
+use jointid::ident::model_file::SavedModel;
+use jointid::ident::nonlinear::sim_plant;
 use jointid::model::params::model_params;
 use jointid::sim::board::{encode_session, BoardStreamError, WireOptions};
 use jointid::sim::{
@@ -102,6 +104,10 @@ pub struct SimulateArgs {
     /// seed 001 (k3, F_c), those the model uses
     #[arg(long = "param", value_name = "NAME=VALUE")]
     pub params: Vec<String>,
+    /// the plant and effects of a model fitted with effects (`jointid fit --effect ...
+    /// --save MODEL.json`) instead of --model; --param and --effect apply on top of it
+    #[arg(long, value_name = "MODEL.json")]
+    pub model_file: Option<PathBuf>,
     /// effect spec, repeatable: `name` or `name:key=value,...` (e.g. `backlash:width=2e-5`),
     /// or `none`; names: coulomb_friction, backlash, nonlinear_stiffness, extra_mode,
     /// time_delay, torque_ripple
@@ -310,11 +316,15 @@ pub fn out_format(path: &Path) -> Result<OutFormat, SimulateError> {
 pub fn configure(
     args: &SimulateArgs,
 ) -> Result<(SimConfig, ExcitationConfig), Box<dyn std::error::Error + Send + Sync>> {
-    let mut plant = Plant::new(args.model);
-    apply_params(args.model, &args.params, &mut plant.params)?;
+    let (mut plant, mut effects) = match &args.model_file {
+        Some(path) => fitted_plant(path)?,
+        None => (Plant::new(args.model), Vec::new()),
+    };
+    apply_params(plant.kind, &args.params, &mut plant.params)?;
+    effects.extend(parse_effects(&args.effects)?);
     let mut cfg = SimConfig {
         plant,
-        effects: parse_effects(&args.effects)?,
+        effects,
         ..SimConfig::default()
     };
     if let Some(s) = args.seed {
@@ -346,6 +356,33 @@ pub fn configure(
             err,
         })?;
     Ok((cfg, exc))
+}
+
+/// The simulator's plant and effects of a model file written by `fit --save` for a model
+/// with effects ([`SavedModel::to_nonlinear`], [`sim_plant`]).
+///
+/// # Errors
+/// The file cannot be read, is not a model file, or holds a linear model.
+fn fitted_plant(
+    path: &Path,
+) -> Result<(Plant, Vec<jointid::model::effects::Effect>), Box<dyn std::error::Error + Send + Sync>>
+{
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("--model-file {}: {e}", path.display()))?;
+    let saved: SavedModel = serde_json::from_str(&text).map_err(|e| {
+        format!(
+            "--model-file {}: not a jointid model file: {e}",
+            path.display()
+        )
+    })?;
+    let fit = saved.to_nonlinear().map_err(|e| {
+        format!(
+            "--model-file {}: {e} (a linear model file has no plant for the simulator; \
+             use --model and --param)",
+            path.display()
+        )
+    })?;
+    Ok((sim_plant(&fit.model, &fit.plant), fit.model.effects.clone()))
 }
 
 /// The run as a capture CSV dataset: the simulator's values (unquantised), the excitation,
@@ -451,7 +488,7 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
     let report = Report {
         file: args.out.display().to_string(),
         format,
-        model: args.model.label(),
+        model: cfg.plant.kind.label(),
         effects: cfg.effects.iter().map(|e| e.to_string()).collect(),
         samples: out.len(),
         duration_s: out.len() as f64 * out.sample_interval_s,

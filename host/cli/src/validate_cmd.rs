@@ -23,12 +23,14 @@ use serde::Serialize;
 
 use super::args::{DataArgs, PrepArgs};
 use super::fit::{check_columns, check_lags, print_tests};
+use super::fit_nl::{FitsJson, NL_FIT_NAME};
 use super::validate::{self as column_validate, ValidateArgs};
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::ident::fit::FitData;
 use jointid::ident::frf::analyze_dataset;
 use jointid::ident::frf_fit::{periodic_fit_percent, PERIODIC_FIT_NAME};
 use jointid::ident::model_file::SavedModel;
+use jointid::ident::nonlinear::{validate as nl_validate, NlOptions};
 use jointid::ident::validate::{Validation, DEFAULT_LAGS, FIT_NAME};
 
 /// Arguments of `jointid validate`.
@@ -124,6 +126,9 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
     let text = std::fs::read_to_string(mpath).map_err(|e| format!("{}: {e}", mpath.display()))?;
     let saved: SavedModel = serde_json::from_str(&text)
         .map_err(|e| format!("{}: not a jointid model file: {e}", mpath.display()))?;
+    if saved.nonlinear.is_some() {
+        return run_nonlinear(args, ctx, &saved, mpath, &data_args(&args.files[1]));
+    }
     let fitted = saved
         .to_fitted()
         .map_err(|e| format!("{}: {e}", mpath.display()))?;
@@ -218,6 +223,127 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
                 ds.name,
                 v.whiteness.non_finite,
                 data.len()
+            )?;
+        }
+        if let Some(x) = args.require_fit {
+            writeln!(
+                out,
+                "  required FIT {x:.2}: {}",
+                if fit_ok { "met" } else { "NOT met" }
+            )?;
+        }
+    }
+    Ok(if fit_ok {
+        Outcome::Ok
+    } else {
+        Outcome::CheckFailed
+    })
+}
+
+#[derive(Serialize)]
+struct NlReport<'a> {
+    model_file: String,
+    model: &'a str,
+    file: &'a str,
+    samples: usize,
+    ts: f64,
+    fit_name: &'a str,
+    /// velocity FIT with the simulator's exact laws [%]
+    fit: f64,
+    fit_estimation: f64,
+    require_fit: Option<f64>,
+    fit_ok: bool,
+    /// the three FITs of the model on DATA
+    validation: FitsJson,
+}
+
+/// `validate MODEL.json DATA` for a model with effects (format 3's `nonlinear` section):
+/// simulated from the measured torque with the simulator's exact laws
+/// ([`jointid::ident::nonlinear::validate`]); the same FITs `fit` reports, the same exit
+/// codes as for a linear model.
+fn run_nonlinear(
+    args: &ValidateCmdArgs,
+    ctx: &mut Context<'_>,
+    saved: &SavedModel,
+    mpath: &std::path::Path,
+    data: &DataArgs,
+) -> CmdResult {
+    let fit = saved
+        .to_nonlinear()
+        .map_err(|e| format!("{}: {e}", mpath.display()))?;
+    let nl = saved.nonlinear.as_ref().expect("a nonlinear section");
+    let ds = data.load(ctx.loaders)?;
+    if (ds.data.ts - saved.ts).abs() > 1e-6 * saved.ts {
+        return Err(format!(
+            "{}: sampled at {} Hz, the model {} was fitted on data at {} Hz",
+            ds.name,
+            jointid::data::fmt_sig(1.0 / ds.data.ts, 6),
+            mpath.display(),
+            jointid::data::fmt_sig(1.0 / saved.ts, 6)
+        )
+        .into());
+    }
+    let opts = NlOptions {
+        highpass_hz: nl.highpass_hz,
+        ..NlOptions::default()
+    };
+    let v = nl_validate(&fit, &ds.data, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
+    let fit_pct = v.velocity_fit_percent;
+    let fit_name = saved.fit_name.as_deref().unwrap_or(NL_FIT_NAME);
+    let finite = fit_pct.is_finite();
+    let fit_ok = finite && args.require_fit.is_none_or(|x| fit_pct >= x);
+    if ctx.json {
+        print_json(
+            ctx.out,
+            &NlReport {
+                model_file: mpath.display().to_string(),
+                model: &saved.model,
+                file: &ds.name,
+                samples: ds.data.len(),
+                ts: ds.data.ts,
+                fit_name,
+                fit: fit_pct,
+                fit_estimation: saved.fit_estimation,
+                require_fit: args.require_fit,
+                fit_ok,
+                validation: v.into(),
+            },
+        )?;
+    } else {
+        let out = &mut *ctx.out;
+        writeln!(
+            out,
+            "jointid validate: {} ({}) on {}",
+            mpath.display(),
+            saved.model,
+            ds.name
+        )?;
+        writeln!(
+            out,
+            "  {} samples, Ts = {} s; simulated from the measured torque with the simulator's exact laws",
+            ds.data.len(),
+            jointid::data::fmt_sig(ds.data.ts, 4)
+        )?;
+        writeln!(
+            out,
+            "  {fit_name}: {fit_pct:.2} (estimation: {:.2})",
+            saved.fit_estimation
+        )?;
+        writeln!(
+            out,
+            "  velocity FIT with the estimator's smooth laws [%]: {:.2}",
+            v.velocity_fit_smooth_percent
+        )?;
+        writeln!(
+            out,
+            "  motor-angle FIT [%] (toolbox compare, exact laws, unfiltered): {:.2}",
+            v.angle_fit_percent
+        )?;
+        if !finite {
+            writeln!(
+                out,
+                "  not ok: the model's simulated velocity is not finite on {}",
+                ds.name
             )?;
         }
         if let Some(x) = args.require_fit {

@@ -16,7 +16,8 @@ const ALLOWED: [(&str, &[&str]); 9] = [
     ("capture", &["data"]),
     ("model", &[]),
     ("sim", &["data", "model"]),
-    ("ident", &["data", "model"]),
+    // the nonlinear models are validated with the simulator's exact laws (ident::nonlinear)
+    ("ident", &["data", "model", "sim"]),
     ("diagnose", &["data", "model", "sim", "ident"]),
     ("report", &["data", "model", "ident"]),
     (

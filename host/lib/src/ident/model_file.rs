@@ -3,7 +3,10 @@
 //! fitted with decimation), the preparation applied to the data (decimation,
 //! detrending), the physical parameters with their standard deviations and units, and
 //! for the Coulomb rigid model its four parameters: all that is needed to simulate the
-//! model again on new data. Format `jointid-model/2`; format 1 is still read.
+//! model again on new data. Format `jointid-model/3`; formats 1 and 2 are still read.
+//! Format 3 adds the optional `nonlinear` section ([`SavedNonlinear`]): a physical model
+//! with effects fitted by [`crate::ident::nonlinear`], which `validate` simulates with the
+//! simulator's exact laws and `simulate --model-file` runs again (its matrices are empty).
 //!
 //! This module maps a [`Fitted`] to its file contents and back; the command line reads
 //! and writes the JSON text.
@@ -19,8 +22,12 @@ use thiserror::Error;
 use crate::data::Prep;
 use crate::ident::fit::{output_name, param_map, Fitted, ModelKind, ParamJson, RigidFriction};
 use crate::ident::grey_box::{Output, PhysParam};
+use crate::ident::lm::Termination;
+use crate::ident::nonlinear::{simulate_args, NlFit, NlModel, NlParam, Owner};
 use crate::ident::ss::StateSpace;
+use crate::model::effects::Effect;
 use crate::model::params::unit_of;
+use crate::model::spec::Structure;
 
 impl Fitted {
     /// The model file.
@@ -46,13 +53,17 @@ impl Fitted {
             fit_estimation,
             fit_name: None,
             source: source.into(),
+            nonlinear: None,
         }
     }
 }
 
 /// format tag of [`SavedModel`] (format 2: physical models at the capture
-/// rate, [`SavedModel::decimate_output`])
-pub const MODEL_FORMAT: &str = "jointid-model/2";
+/// rate, [`SavedModel::decimate_output`]; format 3: the optional
+/// [`SavedModel::nonlinear`] section)
+pub const MODEL_FORMAT: &str = "jointid-model/3";
+/// format 2, still read (a linear model file of format 3 without `nonlinear`)
+pub const MODEL_FORMAT_2: &str = "jointid-model/2";
 /// the earlier format, still read (its `interval_mean` hold excepted)
 pub const MODEL_FORMAT_1: &str = "jointid-model/1";
 
@@ -75,13 +86,17 @@ pub struct SavedModel {
     pub ts: f64,
     /// preparation of raw data
     pub prep: Prep,
-    /// `A`, row by row
+    /// `A`, row by row (empty for a nonlinear model)
+    #[serde(default)]
     pub a: Vec<Vec<f64>>,
     /// `B`
+    #[serde(default)]
     pub b: Vec<f64>,
     /// `C`
+    #[serde(default)]
     pub c: Vec<f64>,
     /// `D`
+    #[serde(default)]
     pub d: f64,
     /// physical parameters (empty for a black box)
     pub parameters: BTreeMap<String, ParamJson>,
@@ -107,6 +122,10 @@ pub struct SavedModel {
     pub fit_name: Option<String>,
     /// estimation data file
     pub source: String,
+    /// format 3: a physical model with effects ([`crate::ident::nonlinear`]), simulated
+    /// with the simulator's exact laws instead of `A, B, C, D`
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nonlinear: Option<SavedNonlinear>,
 }
 
 /// Why a model file cannot be read back ([`SavedModel::to_fitted`]).
@@ -114,7 +133,9 @@ pub struct SavedModel {
 #[non_exhaustive]
 pub enum ModelFileError {
     /// a format this build does not read
-    #[error("model format `{format}` is neither `{MODEL_FORMAT}` nor `{MODEL_FORMAT_1}`")]
+    #[error(
+        "model format `{format}` is none of `{MODEL_FORMAT}`, `{MODEL_FORMAT_2}`, `{MODEL_FORMAT_1}`"
+    )]
     Format {
         /// the file's format tag
         format: String,
@@ -161,18 +182,36 @@ pub enum ModelFileError {
         /// the output named in the file
         output: String,
     },
+    /// the nonlinear section is inconsistent (or asked of a linear model)
+    #[error("nonlinear model: {0}")]
+    Nonlinear(String),
 }
 
 impl SavedModel {
+    /// The format tag is one this build reads.
+    ///
+    /// # Errors
+    /// [`ModelFileError::Format`].
+    pub fn check_format(&self) -> Result<(), ModelFileError> {
+        if [MODEL_FORMAT, MODEL_FORMAT_2, MODEL_FORMAT_1].contains(&self.format.as_str()) {
+            Ok(())
+        } else {
+            Err(ModelFileError::Format {
+                format: self.format.clone(),
+            })
+        }
+    }
+
     /// The model back as a [`Fitted`] (without continuous model).
     ///
     /// # Errors
     /// [`ModelFileError`] when the file is inconsistent.
     pub fn to_fitted(&self) -> Result<Fitted, ModelFileError> {
-        if self.format != MODEL_FORMAT && self.format != MODEL_FORMAT_1 {
-            return Err(ModelFileError::Format {
-                format: self.format.clone(),
-            });
+        self.check_format()?;
+        if self.nonlinear.is_some() {
+            return Err(ModelFileError::Nonlinear(
+                "no state-space form; it is simulated with the exact laws".into(),
+            ));
         }
         match self.input_hold.as_deref() {
             None | Some("zoh") => {}
@@ -241,5 +280,302 @@ impl SavedModel {
             method: self.method.clone(),
             decimate: self.decimate_output,
         })
+    }
+}
+
+/// A physical model with effects ([`crate::ident::nonlinear`]) in the model file (format
+/// 3). The structure's values, `tau_c` and `offset` with their σ are in
+/// [`SavedModel::parameters`]; the effects in the simulator's own form.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SavedNonlinear {
+    /// mechanical structure (`two-mass`, ...)
+    pub structure: String,
+    /// gear ratio `r` [-]
+    pub r: f64,
+    /// current-loop lag `tau_c` [s]; 0: none
+    pub tau_c: f64,
+    /// constant torque offset on the motor [N·m]
+    pub offset: f64,
+    /// the effects with their fitted values, as the simulator reads them
+    /// ([`crate::model::effects::Effect`]'s serde form)
+    pub effects: Vec<Effect>,
+    /// the estimated keys of each effect (same order) with σ and unit
+    pub effect_parameters: Vec<BTreeMap<String, ParamJson>>,
+    /// each effect as `jointid simulate --effect` spells it
+    pub effect_specs: Vec<String>,
+    /// smoothing velocity of the estimator's Coulomb law [rad/s]
+    pub v_eps: f64,
+    /// rounding of the estimator's smooth dead zone [rad]
+    pub dz_eps: f64,
+    /// RK4 steps per sample of the estimator
+    pub substeps: usize,
+    /// cut-off of the velocity FIT's high-pass prefilter [Hz]
+    pub highpass_hz: f64,
+    /// the `jointid simulate` arguments that rebuild the plant and effects
+    pub simulate_args: Vec<String>,
+}
+
+/// One estimated parameter as JSON.
+fn param_json(p: &NlParam) -> ParamJson {
+    ParamJson {
+        value: p.value,
+        std: p.std,
+        unit: p.unit.into(),
+    }
+}
+
+impl SavedModel {
+    /// The model file of a nonlinear fit on data sampled every `ts` [s] from `source`,
+    /// `fit_estimation` the velocity FIT on the estimation data [%] (`fit_name` names it),
+    /// `highpass_hz` that FIT's prefilter.
+    pub fn from_nonlinear(
+        fit: &NlFit,
+        ts: f64,
+        method: &str,
+        source: &str,
+        fit_estimation: f64,
+        fit_name: &str,
+        highpass_hz: f64,
+    ) -> SavedModel {
+        let m = &fit.model;
+        let parameters = fit
+            .params
+            .iter()
+            .filter(|p| matches!(p.owner, Owner::Plant | Owner::CurrentLoop | Owner::Offset))
+            .map(|p| (p.name.to_string(), param_json(p)))
+            .collect();
+        let effect_parameters = (0..m.effects.len())
+            .map(|i| {
+                fit.params
+                    .iter()
+                    .filter(|p| p.owner == Owner::Effect(i))
+                    .map(|p| (p.name.to_string(), param_json(p)))
+                    .collect()
+            })
+            .collect();
+        let name = std::iter::once(m.structure.label())
+            .chain(m.effects.iter().map(|e| e.name()))
+            .collect::<Vec<_>>()
+            .join("+");
+        SavedModel {
+            format: MODEL_FORMAT.into(),
+            model: name,
+            method: method.into(),
+            output: "angle".into(),
+            ts,
+            prep: Prep::default(),
+            a: Vec::new(),
+            b: Vec::new(),
+            c: Vec::new(),
+            d: 0.0,
+            parameters,
+            friction: None,
+            decimate_output: 1,
+            input_hold: None,
+            fit_estimation,
+            fit_name: Some(fit_name.into()),
+            source: source.into(),
+            nonlinear: Some(SavedNonlinear {
+                structure: m.structure.label().into(),
+                r: m.r,
+                tau_c: m.tau_c,
+                offset: fit.get("offset").unwrap_or(0.0),
+                effects: m.effects.clone(),
+                effect_parameters,
+                effect_specs: m.effects.iter().map(|e| e.to_string()).collect(),
+                v_eps: m.v_eps,
+                dz_eps: m.dz_eps,
+                substeps: m.substeps,
+                highpass_hz,
+                simulate_args: simulate_args(fit),
+            }),
+        }
+    }
+
+    /// The nonlinear model back as an [`NlFit`] (the fit's statistics empty, σ as saved),
+    /// ready for [`crate::ident::nonlinear::validate`].
+    ///
+    /// # Errors
+    /// [`ModelFileError`] when the file has no nonlinear section or it is inconsistent.
+    pub fn to_nonlinear(&self) -> Result<NlFit, ModelFileError> {
+        self.check_format()?;
+        let bad = |m: String| ModelFileError::Nonlinear(m);
+        let nl = self
+            .nonlinear
+            .as_ref()
+            .ok_or_else(|| bad("the file holds a linear model".into()))?;
+        let structure = Structure::ALL
+            .into_iter()
+            .find(|s| s.label() == nl.structure)
+            .ok_or_else(|| bad(format!("unknown structure `{}`", nl.structure)))?;
+        let plant = structure
+            .param_names()
+            .iter()
+            .map(|n| {
+                self.parameters
+                    .get(*n)
+                    .map(|p| p.value)
+                    .filter(|v| v.is_finite() && *v >= 0.0)
+                    .ok_or_else(|| bad(format!("`{n}` missing or not a finite value ≥ 0")))
+            })
+            .collect::<Result<Vec<f64>, _>>()?;
+        for e in &nl.effects {
+            e.check()
+                .map_err(|m| bad(format!("effect `{}`: {m}", e.name())))?;
+        }
+        let finite = [nl.r, nl.tau_c, nl.offset, nl.v_eps, nl.dz_eps];
+        if finite.iter().any(|v| !v.is_finite()) || nl.r <= 0.0 || nl.tau_c < 0.0 {
+            return Err(bad(format!(
+                "r = {}, tau_c = {} s, offset = {} N·m: need finite values, r > 0, tau_c ≥ 0",
+                nl.r, nl.tau_c, nl.offset
+            )));
+        }
+        if nl.effect_parameters.len() != nl.effects.len() {
+            return Err(bad(format!(
+                "{} effects but {} sets of effect parameters",
+                nl.effects.len(),
+                nl.effect_parameters.len()
+            )));
+        }
+        let model = NlModel {
+            structure,
+            r: nl.r,
+            effects: nl.effects.clone(),
+            tau_c: nl.tau_c,
+            v_eps: nl.v_eps,
+            dz_eps: nl.dz_eps,
+            substeps: nl.substeps.max(1),
+        };
+        let values = model.values(&plant, nl.offset, 0.0);
+        let params = model
+            .layout()
+            .iter()
+            .zip(&values)
+            .map(|(d, &value)| {
+                let saved = match d.owner {
+                    Owner::Effect(i) => nl.effect_parameters[i].get(d.name),
+                    _ => self.parameters.get(d.name),
+                };
+                NlParam {
+                    name: d.name,
+                    owner: d.owner,
+                    value,
+                    std: saved.map_or(0.0, |p| p.std),
+                    unit: d.unit,
+                    fixed: false,
+                    at_bound: false,
+                }
+            })
+            .collect();
+        Ok(NlFit {
+            model,
+            plant,
+            params,
+            values,
+            ssr: f64::NAN,
+            n_residuals: 0,
+            iterations: 0,
+            termination: Termination::CostConverged,
+            fit_velocity_percent: self.fit_estimation,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ident::nonlinear::{NlModel, NlParam};
+    use crate::model::effects::{CoulombFriction, NonlinearStiffness};
+
+    /// a nonlinear fit as the engine returns it (values by hand)
+    fn nl_fit() -> NlFit {
+        let model = NlModel {
+            structure: Structure::TwoMass,
+            r: 1.0 / 118.0,
+            effects: vec![
+                Effect::NonlinearStiffness(NonlinearStiffness { k3: 1.6e11 }),
+                Effect::CoulombFriction(CoulombFriction {
+                    fc: 0.1,
+                    fs: 0.1,
+                    ..CoulombFriction::default()
+                }),
+            ],
+            tau_c: 4e-4,
+            v_eps: 0.05,
+            dz_eps: 1e-7,
+            substeps: 1,
+        };
+        let plant = vec![1e-3, 14.6, 1.3e5, 80.0, 2e-3];
+        let values = model.values(&plant, 1e-3, 0.0);
+        let params = model
+            .layout()
+            .iter()
+            .zip(&values)
+            .map(|(d, &value)| NlParam {
+                name: d.name,
+                owner: d.owner,
+                value,
+                std: 0.01 * value.abs(),
+                unit: d.unit,
+                fixed: false,
+                at_bound: false,
+            })
+            .collect();
+        NlFit {
+            model,
+            plant,
+            params,
+            values,
+            ssr: 1.0,
+            n_residuals: 10,
+            iterations: 3,
+            termination: Termination::CostConverged,
+            fit_velocity_percent: 96.0,
+        }
+    }
+
+    #[test]
+    fn nonlinear_model_file_round_trips_and_has_no_state_space() {
+        let fit = nl_fit();
+        let saved = SavedModel::from_nonlinear(&fit, 5e-4, "by hand", "est.csv", 96.5, "v", 5.0);
+        assert_eq!(saved.format, MODEL_FORMAT);
+        assert_eq!(saved.model, "two-mass+nonlinear_stiffness+coulomb_friction");
+        let text = serde_json::to_string(&saved).unwrap();
+        // the effects in the simulator's own form
+        assert!(text.contains(r#""effect":"nonlinear_stiffness","k3":160000000000.0"#));
+        let back: SavedModel = serde_json::from_str(&text).unwrap();
+        let nl = back.to_nonlinear().unwrap();
+        assert_eq!(nl.model, fit.model);
+        assert_eq!(nl.plant, fit.plant);
+        assert_eq!(
+            nl.values[..nl.values.len() - 1],
+            fit.values[..fit.values.len() - 1]
+        );
+        for (a, b) in nl.params.iter().zip(&fit.params) {
+            if b.name != "v0" {
+                assert_eq!((a.name, a.value, a.std), (b.name, b.value, b.std));
+            }
+        }
+        let e = back.to_fitted().unwrap_err().to_string();
+        assert!(e.contains("nonlinear"), "{e}");
+        // the simulate arguments name every parameter of the simulator's two-mass
+        let args = &back.nonlinear.as_ref().unwrap().simulate_args;
+        assert_eq!(args[..2], ["--model", "two-mass"]);
+        assert!(args.contains(&"k_g=130000".to_string()), "{args:?}");
+        assert!(args.contains(&"J_a2=0".to_string()), "{args:?}");
+        assert!(args
+            .iter()
+            .any(|a| a.starts_with("nonlinear_stiffness:k3=")));
+    }
+
+    #[test]
+    fn a_missing_plant_value_or_a_bad_format_is_named() {
+        let mut saved = SavedModel::from_nonlinear(&nl_fit(), 5e-4, "", "", 0.0, "v", 5.0);
+        saved.parameters.remove("k_g");
+        let e = saved.to_nonlinear().unwrap_err().to_string();
+        assert!(e.contains("`k_g`"), "{e}");
+        saved.format = "jointid-model/9".into();
+        let e = saved.to_nonlinear().unwrap_err().to_string();
+        assert!(e.contains("jointid-model/9"), "{e}");
     }
 }

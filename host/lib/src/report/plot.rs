@@ -458,3 +458,89 @@ mod tests {
         assert!(matches!(bode_svg("x", None, &[]), Err(PlotError::Empty(_))));
     }
 }
+
+/// One signal of a [`time_svg`] plot.
+#[derive(Clone, Copy, Debug)]
+pub struct TimeSeries<'a> {
+    /// legend
+    pub name: &'a str,
+    /// value per sample (time from `t0` in steps of `ts`)
+    pub values: &'a [f64],
+}
+
+/// Signals over time in one panel (e.g. measured against simulated motor velocity):
+/// sample `k` at `t0 + k ts` [s], `y_desc` the axis label with its unit.
+///
+/// # Errors
+/// [`PlotError::Empty`] without finite samples, [`PlotError::Draw`].
+pub fn time_svg(
+    title: &str,
+    y_desc: &str,
+    t0: f64,
+    ts: f64,
+    series: &[TimeSeries<'_>],
+) -> Result<String, PlotError> {
+    const W: &str = "time";
+    let n = series.iter().map(|s| s.values.len()).max().unwrap_or(0);
+    let finite = series
+        .iter()
+        .flat_map(|s| s.values.iter().copied())
+        .filter(|v| v.is_finite());
+    let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    if n < 2 || !lo.is_finite() {
+        return Err(PlotError::Empty(W.into()));
+    }
+    let pad = 0.05 * (hi - lo).max(1e-12);
+    let (lo, hi) = (lo - pad, hi + pad);
+    let t1 = t0 + (n - 1) as f64 * ts;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (900, 450)).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_err(W))?;
+        let root = root
+            .titled(title, ("sans-serif", 18))
+            .map_err(draw_err(W))?;
+        let mut chart = ChartBuilder::on(&root)
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(65)
+            .build_cartesian_2d(t0..t1, lo..hi)
+            .map_err(draw_err(W))?;
+        chart
+            .configure_mesh()
+            .x_desc("time [s]")
+            .y_desc(y_desc)
+            .light_line_style(WHITE.mix(0.0))
+            .draw()
+            .map_err(draw_err(W))?;
+        for (i, s) in series.iter().enumerate() {
+            let color = PALETTE[i % PALETTE.len()];
+            let width = if i == 0 { 2 } else { 1 };
+            chart
+                .draw_series(LineSeries::new(
+                    s.values
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, v)| v.is_finite())
+                        .map(|(k, v)| (t0 + k as f64 * ts, v.clamp(lo, hi))),
+                    color.stroke_width(width),
+                ))
+                .map_err(draw_err(W))?
+                .label(s.name)
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 15, y)], color.stroke_width(2))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(draw_err(W))?;
+        root.present().map_err(draw_err(W))?;
+    }
+    Ok(svg)
+}

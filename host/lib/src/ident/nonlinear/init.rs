@@ -244,12 +244,15 @@ pub fn automatic_start(
             other => neutral(other),
         });
     }
-    let kg_index = model
+    // the gearbox stiffness by name: its index differs between the structures
+    let kg = model
         .structure
         .param_names()
         .iter()
-        .position(|n| *n == "k_g");
-    let kg = kg_index.map_or(0.0, |i| lin_plant[i]);
+        .position(|n| *n == "k_g")
+        .and_then(|i| lin_plant.get(i))
+        .copied()
+        .unwrap_or(0.0);
     // deflection level: the arm-side torque the motor torque implies, over the stiffness
     let delta = if model.structure == Structure::Rigid || kg <= 0.0 {
         0.0
@@ -390,13 +393,8 @@ fn neutral(e: Effect) -> Effect {
 fn candidates(e: &Effect, plant: &[f64], model: &NlModel, delta: f64, u_rms: f64) -> Vec<Effect> {
     match *e {
         Effect::NonlinearStiffness(_) if delta > 0.0 => {
-            let kg = model
-                .structure
-                .param_names()
-                .iter()
-                .position(|n| *n == "k_g")
-                .map_or(0.0, |i| plant[i]);
-            let unit = kg / (delta * delta);
+            // the cubic term's size where it equals the linear spring at the deflection level
+            let unit = u_rms / model.r / (delta * delta * delta);
             [-0.1, -0.03, 0.0, 0.03, 0.1, 0.3, 1.0, 3.0]
                 .iter()
                 .map(|f| {

@@ -5,18 +5,22 @@
 //! simulator's ([`crate::model::laws`]); the non-smooth ones (Coulomb friction, backlash)
 //! enter the fit in their documented smooth form ([`model`]).
 
+pub mod export;
 pub mod fit;
 pub mod init;
 pub mod model;
 pub mod run;
 
+pub use export::{simulate_args, simulate_exact};
 pub use fit::{
     cost_at, fit_output_error, interval_velocity, simulate_velocity, Gradient, NlError, NlFit,
     NlOptions, NlParam,
 };
 pub use init::{automatic_start, Start, Step};
 pub use model::{NlModel, Owner, ParamDef, Scale};
-pub use run::{identify, linear_start, sim_plant, validate, NlRequest, NlResult, NlValidation};
+pub use run::{
+    identify, linear_start, model_of, sim_plant, validate, NlRequest, NlResult, NlValidation,
+};
 
 #[cfg(test)]
 mod tests;
