@@ -102,6 +102,15 @@ pub fn coulomb_smooth<T: Float>(fc: T, omega: T, v_eps: T) -> T {
     fc * (omega / v_eps).tanh()
 }
 
+/// Friction level with a Stribeck bump, `F_c + (F_s − F_c) e^{−(ω/v_s)²}` [N·m] at motor
+/// velocity `omega` [rad/s] (the magnitude of the sliding friction; seed 000's joint,
+/// [`crate::model::effects::CoulombFriction::level`] evaluates the same law).
+#[inline(always)]
+pub fn stribeck_level<T: Float>(fc: T, fs: T, v_stribeck: T, omega: T) -> T {
+    let x = omega / v_stribeck;
+    fc + (fs - fc) * (-(x * x)).exp()
+}
+
 /// Position-dependent torque ripple `A sin(n θ + φ)` [N·m] at motor angle `theta` [rad].
 #[inline(always)]
 pub fn ripple_torque<T: Float>(amplitude: T, order: T, phase: T, theta: T) -> T {

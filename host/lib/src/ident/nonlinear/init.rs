@@ -163,9 +163,7 @@ pub fn automatic_start(
             .effects
             .iter()
             .filter_map(|e| match e {
-                Effect::CoulombFriction(c) => Some(Effect::CoulombFriction(
-                    crate::model::effects::CoulombFriction { fc, fs: fc, ..*c },
-                )),
+                Effect::CoulombFriction(c) => Some(Effect::CoulombFriction(friction_at(c, fc))),
                 _ => None,
             })
             .collect()
@@ -234,13 +232,13 @@ pub fn automatic_start(
     let mut current: Vec<Effect> = Vec::with_capacity(model.effects.len());
     for e in &model.effects {
         current.push(match *e {
-            Effect::CoulombFriction(c) => {
-                Effect::CoulombFriction(crate::model::effects::CoulombFriction {
-                    fc: lin_fc,
-                    fs: lin_fc,
-                    ..c
-                })
-            }
+            Effect::CoulombFriction(c) => lin
+                .model
+                .effects
+                .iter()
+                .find(|e| matches!(e, Effect::CoulombFriction(_)))
+                .copied()
+                .unwrap_or(Effect::CoulombFriction(friction_at(&c, lin_fc))),
             other => neutral(other),
         });
     }
@@ -329,9 +327,7 @@ fn two_mass_grid(
         .effects
         .iter()
         .filter_map(|e| match e {
-            Effect::CoulombFriction(c) => Some(Effect::CoulombFriction(
-                crate::model::effects::CoulombFriction { fc, fs: fc, ..*c },
-            )),
+            Effect::CoulombFriction(c) => Some(Effect::CoulombFriction(friction_at(c, fc))),
             _ => None,
         })
         .collect();
@@ -362,6 +358,19 @@ fn two_mass_grid(
         }
     }
     best.map_or_else(|| vec![0.5 * j, 0.5 * j / r2, 1.0, 1.0, fv], |(_, p)| p)
+}
+
+/// Coulomb friction `c` at level `fc` [N·m], its Stribeck bump (if any) scaled alike.
+fn friction_at(
+    c: &crate::model::effects::CoulombFriction,
+    fc: f64,
+) -> crate::model::effects::CoulombFriction {
+    let fs = if super::model::has_bump(c) && c.fc > 0.0 {
+        fc * c.fs / c.fc
+    } else {
+        fc
+    };
+    crate::model::effects::CoulombFriction { fc, fs, ..*c }
 }
 
 /// An effect at a size that leaves the linear model unchanged (or nearly: a log-parameter

@@ -115,6 +115,13 @@ pub struct NlModel {
     pub substeps: usize,
 }
 
+/// Whether a Coulomb friction spec has a Stribeck bump (`F_s > F_c`): then `fs` and
+/// `v_stribeck` are estimated beside `fc`; without one (seed 001's pure Coulomb law) only
+/// `fc` is, and `F_s = F_c` is kept.
+pub fn has_bump(f: &crate::model::effects::CoulombFriction) -> bool {
+    f.fs > f.fc
+}
+
 /// Structure parameters, their unit, and bounds relative to a typical value.
 fn plant_defs(structure: Structure) -> Vec<ParamDef> {
     structure
@@ -166,7 +173,13 @@ impl NlModel {
                 upper,
             };
             match e {
-                Effect::CoulombFriction(_) => v.push(d("fc", "N·m", Scale::Log, 1e-9, 1e3)),
+                Effect::CoulombFriction(f) => {
+                    v.push(d("fc", "N·m", Scale::Log, 1e-9, 1e3));
+                    if has_bump(f) {
+                        v.push(d("fs", "N·m", Scale::Log, 1e-9, 1e3));
+                        v.push(d("v_stribeck", "rad/s", Scale::Log, 1e-4, 1e2));
+                    }
+                }
                 Effect::Backlash(_) => v.push(d("width", "rad", Scale::Log, 1e-9, 0.1)),
                 Effect::NonlinearStiffness(s) => v.push(d(
                     "k3",
@@ -217,7 +230,12 @@ impl NlModel {
         v.push(offset);
         for e in &self.effects {
             match e {
-                Effect::CoulombFriction(f) => v.push(f.fc),
+                Effect::CoulombFriction(f) => {
+                    v.push(f.fc);
+                    if has_bump(f) {
+                        v.extend([f.fs, f.v_stribeck]);
+                    }
+                }
                 Effect::Backlash(b) => v.push(b.width),
                 Effect::NonlinearStiffness(s) => v.push(s.k3),
                 Effect::ExtraMode(m) => v.extend([m.j, m.k, m.d]),
@@ -243,9 +261,13 @@ impl NlModel {
         for e in &mut m.effects {
             match e {
                 Effect::CoulombFriction(f) => {
-                    f.fc = p[i];
-                    f.fs = p[i];
-                    i += 1;
+                    if has_bump(f) {
+                        (f.fc, f.fs, f.v_stribeck) = (p[i], p[i + 1], p[i + 2]);
+                        i += 3;
+                    } else {
+                        (f.fc, f.fs) = (p[i], p[i]);
+                        i += 1;
+                    }
                 }
                 Effect::Backlash(b) => {
                     b.width = p[i];
@@ -295,6 +317,8 @@ pub(crate) struct Plant<T> {
     half_gap: Option<T>,
     dz_eps: T,
     fc: Option<T>,
+    /// Stribeck bump `(F_s, v_s)` of the Coulomb friction, when the model has one
+    bump: Option<(T, T)>,
     v_eps: T,
     /// (amplitude, order, phase)
     ripple: Vec<(T, T, T)>,
@@ -354,11 +378,17 @@ impl<T: Float> Plant<T> {
         i += 1;
         let (mut k3, mut half_gap, mut fc, mut ripple, mut delay) =
             (zero, None, None, vec![], None);
+        let mut bump = None;
         for e in &model.effects {
             match e {
-                Effect::CoulombFriction(_) => {
+                Effect::CoulombFriction(f) => {
                     fc = Some(p[i]);
-                    i += 1;
+                    if has_bump(f) {
+                        bump = Some((p[i + 1], p[i + 2]));
+                        i += 3;
+                    } else {
+                        i += 1;
+                    }
                 }
                 Effect::Backlash(_) => {
                     half_gap = Some(p[i] * c(0.5));
@@ -417,6 +447,7 @@ impl<T: Float> Plant<T> {
             half_gap,
             dz_eps: c(model.dz_eps),
             fc,
+            bump,
             v_eps: c(model.v_eps),
             ripple,
             offset,
@@ -447,7 +478,11 @@ impl<T: Float> Plant<T> {
             motor = motor + laws::ripple_torque(a, order, phase, theta);
         }
         if let Some(fc) = self.fc {
-            motor = motor - laws::coulomb_smooth(fc, w[0], self.v_eps);
+            let level = match self.bump {
+                Some((fs, vs)) => laws::stribeck_level(fc, fs, vs, w[0]),
+                None => fc,
+            };
+            motor = motor - laws::coulomb_smooth(level, w[0], self.v_eps);
         }
         acc[0] = acc[0] + motor;
         for (si, s) in self.springs[..n.saturating_sub(1)].iter().enumerate() {
