@@ -188,8 +188,34 @@ pub fn automatic_start(
                 }
             }
         }
+        // a torque ripple is a torque at the measured angle, like an input: its size and
+        // phase from a grid on this linear start, so that the linear fit does not bend
+        // the structure to explain it
+        let mut effects = with_fc(fc);
+        if let Some(r) = model.effects.iter().find_map(|e| match e {
+            Effect::TorqueRipple(r) => Some(*r),
+            _ => None,
+        }) {
+            let mut best: Option<(f64, Effect)> = None;
+            for cand in candidates(&Effect::TorqueRipple(r), plant, model, 0.0, u_rms) {
+                let mut with = effects.clone();
+                with.push(cand);
+                let m = NlModel {
+                    effects: with,
+                    ..model.clone()
+                };
+                if let Some(c) = super::fit::cost_at(data, &m, &m.values(plant, offset, 0.0)) {
+                    if best.as_ref().is_none_or(|(b, _)| c < *b) {
+                        best = Some((c, cand));
+                    }
+                }
+            }
+            if let Some((_, cand)) = best {
+                effects.push(cand);
+            }
+        }
         let lin_model = NlModel {
-            effects: with_fc(fc),
+            effects,
             ..model.clone()
         };
         let lin_start = lin_model.values(plant, offset, 0.0);
@@ -239,6 +265,13 @@ pub fn automatic_start(
                 .find(|e| matches!(e, Effect::CoulombFriction(_)))
                 .copied()
                 .unwrap_or(Effect::CoulombFriction(friction_at(&c, lin_fc))),
+            Effect::TorqueRipple(r) => lin
+                .model
+                .effects
+                .iter()
+                .find(|e| matches!(e, Effect::TorqueRipple(_)))
+                .copied()
+                .unwrap_or(neutral(Effect::TorqueRipple(r))),
             other => neutral(other),
         });
     }
@@ -258,6 +291,9 @@ pub fn automatic_start(
         u_rms / model.r / kg
     };
     for i in 0..model.effects.len() {
+        if matches!(model.effects[i], Effect::TorqueRipple(_)) {
+            continue; // sized with the linear fit of step 3
+        }
         let grid: Vec<Effect> = candidates(&model.effects[i], &lin_plant, model, delta, u_rms);
         if grid.is_empty() {
             continue;
