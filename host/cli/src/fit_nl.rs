@@ -309,7 +309,20 @@ pub fn run(
         }
     }
     specs.extend(args.effects.iter().cloned());
-    let effects = parse_effects(&specs).map_err(|e| format!("--effect: {e}"))?;
+    let mut effects = parse_effects(&specs).map_err(|e| format!("--effect: {e}"))?;
+    // Coulomb friction is seed 001's pure law unless the spec names a breakaway level `fs`:
+    // only then are `fs` and `v_stribeck` estimated beside `fc`
+    for (e, spec) in effects.iter_mut().zip(&specs) {
+        if let Effect::CoulombFriction(c) = e {
+            let keys = spec.split_once(':').map_or("", |(_, k)| k);
+            if !keys
+                .split(',')
+                .any(|kv| kv.split('=').next().map(str::trim) == Some("fs"))
+            {
+                c.fs = c.fc;
+            }
+        }
+    }
     let fixes = parse_fixes(&args.fix)?;
     check_fix_names(structure, args.gear_ratio, &effects, &fixes)?;
     let (est, val) = records(args, ds, val_ds);
