@@ -225,19 +225,9 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
                 data.len()
             )?;
         }
-        if let Some(x) = args.require_fit {
-            writeln!(
-                out,
-                "  required FIT {x:.2}: {}",
-                if fit_ok { "met" } else { "NOT met" }
-            )?;
-        }
+        required_fit_line(out, args.require_fit, fit_ok)?;
     }
-    Ok(if fit_ok {
-        Outcome::Ok
-    } else {
-        Outcome::CheckFailed
-    })
+    Ok(outcome(fit_ok))
 }
 
 #[derive(Serialize)]
@@ -346,17 +336,32 @@ fn run_nonlinear(
                 ds.name
             )?;
         }
-        if let Some(x) = args.require_fit {
-            writeln!(
-                out,
-                "  required FIT {x:.2}: {}",
-                if fit_ok { "met" } else { "NOT met" }
-            )?;
-        }
+        required_fit_line(out, args.require_fit, fit_ok)?;
     }
-    Ok(if fit_ok {
+    Ok(outcome(fit_ok))
+}
+
+/// The `--require-fit` line of the text report, when one was asked for.
+fn required_fit_line(
+    out: &mut dyn std::io::Write,
+    required: Option<f64>,
+    fit_ok: bool,
+) -> std::io::Result<()> {
+    if let Some(x) = required {
+        writeln!(
+            out,
+            "  required FIT {x:.2}: {}",
+            if fit_ok { "met" } else { "NOT met" }
+        )?;
+    }
+    Ok(())
+}
+
+/// The command's outcome from whether the FIT checks held.
+fn outcome(fit_ok: bool) -> Outcome {
+    if fit_ok {
         Outcome::Ok
     } else {
         Outcome::CheckFailed
-    })
+    }
 }
