@@ -174,6 +174,8 @@ pub struct Candidate {
     pub significant: bool,
     /// the effects' fitted parameters, `effect.key` for pairs
     pub parameters: BTreeMap<String, ParamValue>,
+    /// the structure's values, lag and offset refitted with the effect
+    pub structure_parameters: BTreeMap<String, ParamValue>,
     /// the evidence in words
     pub reason: String,
     /// what makes the fit doubtful (engine warnings) or why it failed
@@ -369,6 +371,24 @@ fn effect_parameters(fit: &NlFit, prefix: bool) -> BTreeMap<String, ParamValue> 
                 ))
             }
             _ => None,
+        })
+        .collect()
+}
+
+/// The structure's values, lag and offset of a fit.
+fn linear_parameters(fit: &NlFit) -> BTreeMap<String, ParamValue> {
+    fit.params
+        .iter()
+        .filter(|p| matches!(p.owner, Owner::Plant | Owner::CurrentLoop | Owner::Offset))
+        .map(|p| {
+            (
+                p.name.to_string(),
+                ParamValue {
+                    value: p.value,
+                    std: p.std,
+                    unit: p.unit.to_string(),
+                },
+            )
         })
         .collect()
 }
@@ -632,6 +652,7 @@ pub fn diagnose(
                         fit_angle_val: f.scored.angle_fit,
                         significant,
                         parameters: effect_parameters(&f.fit, false),
+                        structure_parameters: linear_parameters(&f.fit),
                         reason,
                         warnings: f.warnings.clone(),
                     },
@@ -648,6 +669,7 @@ pub fn diagnose(
                     fit_angle_val: f64::NAN,
                     significant: false,
                     parameters: BTreeMap::new(),
+                    structure_parameters: BTreeMap::new(),
                     reason: format!("the fit failed: {e}"),
                     warnings: vec![e],
                 },
@@ -707,6 +729,7 @@ pub fn diagnose(
                             fit_angle_val: f.scored.angle_fit,
                             significant,
                             parameters: effect_parameters(&f.fit, true),
+                            structure_parameters: linear_parameters(&f.fit),
                             reason: format!(
                                 "{} added to {}: validation FIT {score:+.1} ± {score_se:.1} \
                                  points over {} alone{}",
@@ -803,22 +826,7 @@ pub fn diagnose(
             best_fit - nom_fit
         )
     };
-    let nominal_parameters = nominal
-        .fit
-        .params
-        .iter()
-        .filter(|p| matches!(p.owner, Owner::Plant | Owner::CurrentLoop | Owner::Offset))
-        .map(|p| {
-            (
-                p.name.to_string(),
-                ParamValue {
-                    value: p.value,
-                    std: p.std,
-                    unit: p.unit.to_string(),
-                },
-            )
-        })
-        .collect();
+    let nominal_parameters = linear_parameters(&nominal.fit);
     Ok(Diagnosis {
         verdict,
         metric: metric::METRIC_NAME.into(),

@@ -113,16 +113,27 @@ fn check_extra_mode(scale: f64) {
     );
     assert!(d.best.starts_with("extra_mode"), "{}", d.verdict);
     let (j, k) = (param(&d, "j"), param(&d, "k"));
-    // the extra branch and the arm's J_a2 on k_a hang on J_a1 alike: either may carry it
+    // the extra branch and the arm's J_a2 on k_a hang on J_a1 alike: either may carry the
+    // hidden mode (the other then carries the arm's J_a2, k_a)
     let p = crate::sim::JointParams::default();
-    let swapped = within(d.nominal_parameters["J_a2"].value, p.j_a2, 10.0)
-        && within(j, p.j_a2, 0.2)
-        && within(k, p.k_a, 0.2);
+    let c = d.effects.iter().find(|c| c.name == "extra_mode").unwrap();
+    let (ja2, ka) = (
+        c.structure_parameters["J_a2"].value,
+        c.structure_parameters["k_a"].value,
+    );
+    let direct = within(j, m.j, 0.2) && within(k, m.k, 0.2);
+    let swapped = within(j, p.j_a2, 0.2)
+        && within(k, p.k_a, 0.2)
+        && within(ja2, m.j, 0.2)
+        && within(ka, m.k, 0.2);
+    eprintln!(
+        "[battery]   extra_mode: j = {j:.4}, k = {k:.4e}, J_a2 = {ja2:.4}, k_a = {ka:.4e}; \
+         truth j = {}, k = {:.4e}, J_a2 = {}, k_a = {:.4e}",
+        m.j, m.k, p.j_a2, p.k_a
+    );
     assert!(
-        (within(j, m.j, 0.2) && within(k, m.k, 0.2)) || swapped,
-        "j = {j}, k = {k}; truth j = {}, k = {}",
-        m.j,
-        m.k
+        direct || swapped,
+        "neither the branch nor J_a2, k_a carry the hidden mode"
     );
 }
 
