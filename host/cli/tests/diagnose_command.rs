@@ -24,7 +24,8 @@ fn simulate(dir: &std::path::Path, name: &str, seed: &str, exc_seed: &str) -> St
 }
 
 /// `simulate --effect nonlinear_stiffness`, then `diagnose` with three candidates: the
-/// cubic spring ranks first, significant, with `k3` near the simulator's value.
+/// cubic spring ranks first among the single effects, significant, with `k3` near the
+/// simulator's value, and heads the best model.
 #[test]
 fn diagnose_finds_the_hidden_cubic_spring_of_a_simulated_capture() {
     let dir = tmpdir("cubic");
@@ -39,7 +40,15 @@ fn diagnose_finds_the_hidden_cubic_spring_of_a_simulated_capture() {
         "nonlinear_stiffness,time_delay,extra_mode",
         "--json",
     ]));
-    assert_eq!(j["best"], "nonlinear_stiffness", "{j}");
+    // the best single; a pair with it may follow (the single's fit can stop at its
+    // iteration limit, and a second effect then still gains)
+    assert!(
+        j["best"]
+            .as_str()
+            .unwrap()
+            .starts_with("nonlinear_stiffness"),
+        "{j}"
+    );
     assert_eq!(j["effects"][0]["name"], "nonlinear_stiffness");
     assert_eq!(j["effects"][0]["significant"], true);
     let k3 = j["effects"][0]["parameters"]["k3"]["value"]
