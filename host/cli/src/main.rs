@@ -28,6 +28,7 @@ mod analyze;
 mod args;
 mod capture;
 mod demo;
+mod diagnose;
 mod experiment;
 mod export;
 mod fit;
@@ -70,6 +71,8 @@ pub enum Command {
     Experiment(experiment::ExperimentArgs),
     /// closed-loop joint simulator with switchable effects; writes a .jcap capture or a capture CSV
     Simulate(simulate::SimulateArgs),
+    /// which unmodelled effect makes the simulated joint depart from the measured one
+    Diagnose(diagnose::DiagnoseArgs),
 }
 
 /// How a command ended when it did not fail with an error.
@@ -130,6 +133,7 @@ pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
         Command::Demo(a) => demo::run(a, ctx),
         Command::Experiment(a) => experiment::run(a, ctx),
         Command::Simulate(a) => simulate::run(a, ctx),
+        Command::Diagnose(a) => diagnose::run(a, ctx),
     }
 }
 

@@ -1,4 +1,853 @@
-//! Sim-to-real gap diagnosis: where the simulated joint departs from the measured one.
+//! Sim-to-real gap diagnosis (DESIGN.md §7): which unmodelled effect makes the simulated
+//! joint depart from the measured one, how much of the gap it closes, and where the gap
+//! lies.
 //!
-//! Reserved: empty until the diagnosis issue lands. It will take identified models and
-//! the model description of [`crate::model`], and do no IO.
+//! [`diagnose`] takes one or two estimation captures and a validation capture:
+//!
+//! 1. **Nominal**: the linear physical model of the structure fitted on the (first)
+//!    estimation capture by the nonlinear engine with no effect
+//!    ([`crate::ident::nonlinear::identify`]), started from the frequency-domain linear
+//!    fit ([`crate::ident::nonlinear::linear_start`]) when the capture is periodic.
+//! 2. **Gap metric** ([`metric::METRIC_NAME`]): the toolbox FIT of the band-passed motor
+//!    velocity (1–150 Hz) on the validation capture, the model simulated with the
+//!    simulator's exact laws from the measured torque; the toolbox FIT of `θ_m` is
+//!    reported beside it for reference.
+//! 3. **Candidates**: the nominal plus each candidate effect, linear parameters refitted
+//!    jointly, on [`DiagnoseOptions::threads`] threads. Each is scored on the validation
+//!    capture. **Significance test**: the scored range is split into K =
+//!    [`DiagnoseOptions::segments`] (4) equal segments; the gain of the metric over the
+//!    nominal is computed on each; the score is the mean gain; the candidate is
+//!    *significant* only when `mean − 2·SE > ` [`DiagnoseOptions::min_gain`] (0.3 FIT
+//!    point), SE the standard error of the mean over the segments. When none is
+//!    significant the answer is `none`.
+//! 4. **Pair**: when the best single effect is significant, it is refitted with each other
+//!    significant candidate; a pair is reported when it gains significantly over the
+//!    single by the same test.
+//! 5. **Where** ([`locate`]): the nominal's validation residual by operating region and
+//!    frequency band; the odd/even non-excited line levels of periodic captures
+//!    ([`crate::ident::frf`]); with two estimation captures, how distortion and gap change
+//!    with amplitude ([`crate::ident::frf::amplitude_trend`]).
+//!
+//! The second estimation capture serves the amplitude analysis only; the fits use the
+//! first.
+
+pub mod locate;
+pub mod metric;
+
+#[cfg(test)]
+mod tests;
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use serde::Serialize;
+use thiserror::Error;
+
+use crate::data::{Dataset, IdData};
+use crate::ident::frf::{amplitude_trend, analyze_dataset, AmplitudeTrend, Linearity};
+use crate::ident::grey_box::DEFAULT_GEAR_RATIO;
+use crate::ident::nonlinear::{identify, linear_start, NlFit, NlOptions, NlRequest, Owner};
+use crate::model::effects::Effect;
+use crate::model::params::{model_params, Plant};
+use crate::model::spec::Structure;
+use locate::{Band, Regions};
+use metric::{segment_gain, DrivenModel, Measured, Scored};
+
+/// The user's simulation, for the parameter-against-structure split of the gap.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UserSim {
+    /// where it came from (a file name)
+    pub name: String,
+    /// the simulator's plant
+    pub plant: Plant,
+    /// its effects
+    pub effects: Vec<Effect>,
+    /// its current-loop lag [s]
+    pub tau_c: f64,
+}
+
+/// Options of [`diagnose`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct DiagnoseOptions {
+    /// band of the gap metric [Hz]
+    pub band_hz: (f64, f64),
+    /// segments K of the significance test
+    pub segments: usize,
+    /// smallest gain counted [FIT points]: significant when `mean − 2·SE` exceeds it
+    pub min_gain: f64,
+    /// threads fitting candidates
+    pub threads: usize,
+    /// try pairs of effects
+    pub pairs: bool,
+    /// scored range starts this long into the validation record [s]
+    pub skip_s: f64,
+    /// periods dropped before the FRF analyses
+    pub settle_periods: usize,
+    /// options of every nonlinear fit
+    pub nl: NlOptions,
+}
+
+impl Default for DiagnoseOptions {
+    fn default() -> Self {
+        DiagnoseOptions {
+            band_hz: metric::DEFAULT_BAND_HZ,
+            segments: 4,
+            min_gain: 0.3,
+            threads: 2,
+            pairs: true,
+            skip_s: 0.5,
+            settle_periods: 1,
+            nl: NlOptions::default(),
+        }
+    }
+}
+
+/// What to diagnose.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DiagnoseRequest {
+    /// mechanical structure of the nominal model
+    pub structure: Structure,
+    /// gear ratio `r` [-]
+    pub r: f64,
+    /// candidate effects (their values are ignored: each fit starts automatically)
+    pub candidates: Vec<Effect>,
+    /// the user's simulation, when given
+    pub user: Option<UserSim>,
+    /// options
+    pub options: DiagnoseOptions,
+}
+
+impl Default for DiagnoseRequest {
+    /// Three-mass, the default gear ratio, all six effects, no user simulation.
+    fn default() -> Self {
+        DiagnoseRequest {
+            structure: Structure::ThreeMass,
+            r: DEFAULT_GEAR_RATIO,
+            candidates: Effect::all_defaults(),
+            user: None,
+            options: DiagnoseOptions::default(),
+        }
+    }
+}
+
+/// Why a diagnosis could not run.
+#[derive(Clone, Debug, PartialEq, Error)]
+pub enum DiagnoseError {
+    /// the request or the records cannot be used
+    #[error("{0}")]
+    Input(String),
+    /// the nominal model could not be fitted or simulated
+    #[error("the nominal model: {0}")]
+    Nominal(String),
+}
+
+/// One estimated parameter.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ParamValue {
+    /// estimate [unit]
+    pub value: f64,
+    /// standard deviation [unit]
+    pub std: f64,
+    /// unit
+    pub unit: String,
+}
+
+/// One candidate (an effect, or a pair `a+b`) scored on the validation capture.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Candidate {
+    /// effect name, or `a+b` for a pair
+    pub name: String,
+    /// the fitted effects as `simulate --effect` specs
+    pub specs: Vec<String>,
+    /// mean over the segments of the gain of the gap metric over the nominal (over the
+    /// single best for a pair) [FIT points]
+    pub score: f64,
+    /// standard error of that mean [FIT points]
+    pub score_se: f64,
+    /// gap metric on the whole validation range [%]
+    pub fit_val: f64,
+    /// toolbox FIT of `θ_m` on the validation capture [%]
+    pub fit_angle_val: f64,
+    /// passes the significance test (module documentation)
+    pub significant: bool,
+    /// the effects' fitted parameters, `effect.key` for pairs
+    pub parameters: BTreeMap<String, ParamValue>,
+    /// the structure's values, lag and offset refitted with the effect
+    pub structure_parameters: BTreeMap<String, ParamValue>,
+    /// the evidence in words
+    pub reason: String,
+    /// what makes the fit doubtful (engine warnings) or why it failed
+    pub warnings: Vec<String>,
+}
+
+/// Distortion of `θ_m` at the non-excited lines of one periodic capture.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Distortion {
+    /// capture name
+    pub capture: String,
+    /// the linearity check of `θ_m` ([`crate::ident::frf`])
+    pub linearity: Linearity,
+}
+
+/// One estimation capture in the amplitude analysis.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AmplitudeLevel {
+    /// capture name
+    pub capture: String,
+    /// RMS of the measured torque [N·m]
+    pub u_rms: f64,
+    /// gap `100 − ` the nominal's gap metric on this capture [FIT points] (in-sample on the
+    /// first capture)
+    pub gap: f64,
+}
+
+/// How distortion and gap change between the two estimation captures.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Amplitude {
+    /// the captures, lower amplitude first
+    pub levels: Vec<AmplitudeLevel>,
+    /// the distortion trend of `θ_m` (both captures periodic)
+    pub distortion: Option<AmplitudeTrend>,
+    /// `grows`, `falls` or `unclear` (changes by less than 1 point)
+    pub gap_trend: String,
+}
+
+/// Where the nominal's residual lies.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Where {
+    /// residual against measured energy by band
+    pub bands_hz: Vec<Band>,
+    /// residual by operating region
+    pub regions: Regions,
+    /// with two estimation captures
+    pub amplitude: Option<Amplitude>,
+    /// non-excited line levels of the periodic captures
+    pub distortion: Vec<Distortion>,
+}
+
+/// One parameter of the user's simulation against the nominal fit.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Mismatch {
+    /// parameter name (seed 000 Table 1)
+    pub name: String,
+    /// the user's value
+    pub sim: f64,
+    /// the nominal fit's value
+    pub fitted: f64,
+    /// `100·(fitted − sim)/sim` [%]
+    pub percent: f64,
+}
+
+/// The user's simulation against the nominal and the best model.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ParameterMismatch {
+    /// where the simulation came from
+    pub sim: String,
+    /// gap metric of the user's simulation on the validation capture [%]
+    pub fit_sim_val: f64,
+    /// FIT points the parameters alone account for (nominal − simulation)
+    pub parameter_part: f64,
+    /// FIT points the structure accounts for (best − nominal)
+    pub structure_part: f64,
+    /// parameter by parameter
+    pub parameters: Vec<Mismatch>,
+}
+
+/// Result of [`diagnose`].
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Diagnosis {
+    /// the verdict in one sentence
+    pub verdict: String,
+    /// name of the gap metric
+    pub metric: String,
+    /// structure of the nominal model
+    pub structure: String,
+    /// the nominal's gap metric on the validation capture [%]
+    pub fit_nominal_val: f64,
+    /// the nominal's toolbox FIT of `θ_m` on the validation capture [%]
+    pub fit_nominal_angle_val: f64,
+    /// the nominal's structure values, lag and offset
+    pub nominal_parameters: BTreeMap<String, ParamValue>,
+    /// the best model's gap metric (the nominal's when `best` is `none`) [%]
+    pub fit_augmented_val: f64,
+    /// share of the gap `100 − fit_nominal_val` the best closes [-]
+    pub gap_closed_share: f64,
+    /// the best effect, `a+b` for a pair, or `none`
+    pub best: String,
+    /// the pair tried with the best single effect that passed the test, if any
+    pub pair: Option<Candidate>,
+    /// the candidates, best score first
+    pub effects: Vec<Candidate>,
+    /// where the gap lies
+    #[serde(rename = "where")]
+    pub location: Where,
+    /// with a user simulation
+    pub parameter_mismatch: Option<ParameterMismatch>,
+    /// the significance test in words
+    pub test: String,
+    /// wall time [s]
+    pub seconds: f64,
+    /// notes
+    pub warnings: Vec<String>,
+}
+
+/// One fitted model with its score.
+struct Fitted {
+    fit: NlFit,
+    scored: Scored,
+    warnings: Vec<String>,
+}
+
+/// Fits `effects` on `est` and scores on `val`.
+fn fit_and_score(
+    est: &IdData,
+    val: &IdData,
+    measured: &Measured,
+    req: &DiagnoseRequest,
+    effects: Vec<Effect>,
+    linear: &Option<(Vec<f64>, f64)>,
+) -> Result<Fitted, String> {
+    let nl = NlRequest {
+        structure: req.structure,
+        r: req.r,
+        effects,
+        tau_c: linear.as_ref().map_or(0.0, |l| l.1),
+        start: None,
+        linear: linear.as_ref().map(|l| l.0.clone()),
+        options: req.options.nl.clone(),
+    };
+    let res = identify(est, &nl).map_err(|e| e.to_string())?;
+    let model = DrivenModel::of_fit(&res.fit);
+    let scored = measured.score(&model, val, req.options.segments)?;
+    Ok(Fitted {
+        fit: res.fit,
+        scored,
+        warnings: res.warnings,
+    })
+}
+
+/// Runs `jobs` on `threads` threads, results in job order.
+fn parallel<T: Send, J: Sync>(jobs: &[J], threads: usize, f: impl Fn(&J) -> T + Sync) -> Vec<T> {
+    let next = AtomicUsize::new(0);
+    let out: Mutex<Vec<Option<T>>> = Mutex::new((0..jobs.len()).map(|_| None).collect());
+    std::thread::scope(|s| {
+        for _ in 0..threads.clamp(1, jobs.len().max(1)) {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                if i >= jobs.len() {
+                    break;
+                }
+                let r = f(&jobs[i]);
+                out.lock().expect("no panic while holding the lock")[i] = Some(r);
+            });
+        }
+    });
+    out.into_inner()
+        .expect("no panic while holding the lock")
+        .into_iter()
+        .map(|r| r.expect("every job ran"))
+        .collect()
+}
+
+fn effect_parameters(fit: &NlFit, prefix: bool) -> BTreeMap<String, ParamValue> {
+    fit.params
+        .iter()
+        .filter_map(|p| match p.owner {
+            Owner::Effect(i) => {
+                let key = if prefix {
+                    format!("{}.{}", fit.model.effects[i].name(), p.name)
+                } else {
+                    p.name.to_string()
+                };
+                Some((
+                    key,
+                    ParamValue {
+                        value: p.value,
+                        std: p.std,
+                        unit: p.unit.to_string(),
+                    },
+                ))
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+/// The structure's values, lag and offset of a fit.
+fn linear_parameters(fit: &NlFit) -> BTreeMap<String, ParamValue> {
+    fit.params
+        .iter()
+        .filter(|p| matches!(p.owner, Owner::Plant | Owner::CurrentLoop | Owner::Offset))
+        .map(|p| {
+            (
+                p.name.to_string(),
+                ParamValue {
+                    value: p.value,
+                    std: p.std,
+                    unit: p.unit.to_string(),
+                },
+            )
+        })
+        .collect()
+}
+
+fn rms(x: &[f64]) -> f64 {
+    (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt()
+}
+
+/// The evidence for `effect` in the residual's location, in words.
+fn evidence(effect: &str, w: &Where) -> String {
+    let times = |r: &locate::Region, what: &str| {
+        if r.energy_ratio.is_finite() {
+            format!("residual {:.1}× the average {what}", r.energy_ratio)
+        } else {
+            format!("no samples {what}")
+        }
+    };
+    let top_band = w
+        .bands_hz
+        .iter()
+        .filter(|b| b.residual_ratio.is_finite())
+        .max_by(|a, b| a.residual_ratio.total_cmp(&b.residual_ratio));
+    let band = |b: Option<&Band>| match b {
+        Some(b) => format!(
+            "residual {:.0} % of the measured motion at {}–{} Hz (its largest band)",
+            100.0 * b.residual_ratio.sqrt(),
+            b.lo_hz,
+            b.hi_hz
+        ),
+        None => "no band to compare".into(),
+    };
+    let odd = w.distortion.first().map(|d| {
+        format!(
+            "odd non-excited lines {:.1} dB below the excited ones{}",
+            -d.linearity.odd.vs_excited_db,
+            if d.linearity.odd.detected {
+                ""
+            } else {
+                " (noise level)"
+            }
+        )
+    });
+    let r = &w.regions;
+    match effect {
+        "coulomb_friction" => times(&r.near_zero_velocity, "near zero velocity"),
+        "backlash" => times(&r.torque_sign_change, "at torque sign changes"),
+        "nonlinear_stiffness" => {
+            let mut s = times(&r.large_deflection, "at large gearbox deflection");
+            if let Some(o) = odd {
+                s = format!("{s}; {o}");
+            }
+            s
+        }
+        "torque_ripple" => format!(
+            "a pattern of order {} per motor revolution explains {:.1} % of the residual",
+            r.angle_pattern.order,
+            100.0 * r.angle_pattern.share
+        ),
+        "extra_mode" => band(top_band),
+        "time_delay" => band(w.bands_hz.last()),
+        _ => String::new(),
+    }
+}
+
+fn linear_of(
+    ds: &Dataset,
+    req: &DiagnoseRequest,
+    warnings: &mut Vec<String>,
+) -> Option<(Vec<f64>, f64)> {
+    match linear_start(ds, req.structure, req.r) {
+        Ok(l) => Some(l),
+        Err(e) => {
+            if ds.excitation.is_some() {
+                warnings.push(format!(
+                    "{}: the frequency-domain linear start failed ({e}); the fits start \
+                     automatically in the time domain",
+                    ds.name
+                ));
+            }
+            None
+        }
+    }
+}
+
+/// Diagnoses the gap between the nominal model of `req.structure` fitted on `est` and the
+/// measured joint, on the validation capture `val` (module documentation).
+///
+/// # Errors
+/// [`DiagnoseError::Input`] for no or more than two estimation captures, different sample
+/// rates, short records or no candidate; [`DiagnoseError::Nominal`] when the nominal cannot
+/// be fitted or simulated.
+pub fn diagnose(
+    est: &[Dataset],
+    val: &Dataset,
+    req: &DiagnoseRequest,
+) -> Result<Diagnosis, DiagnoseError> {
+    let t0 = Instant::now();
+    let o = &req.options;
+    if est.is_empty() || est.len() > 2 {
+        return Err(DiagnoseError::Input(format!(
+            "{} estimation captures: one or two are needed",
+            est.len()
+        )));
+    }
+    if req.candidates.is_empty() {
+        return Err(DiagnoseError::Input("no candidate effect".into()));
+    }
+    if !(req.r.is_finite() && req.r > 0.0) {
+        return Err(DiagnoseError::Input(format!(
+            "gear ratio {}: must be finite and > 0",
+            req.r
+        )));
+    }
+    let ts = val.data.ts;
+    for ds in est.iter().chain(std::iter::once(val)) {
+        ds.data
+            .check(200)
+            .map_err(|e| DiagnoseError::Input(format!("{}: {e}", ds.name)))?;
+        if (ds.data.ts - ts).abs() > 1e-6 * ts {
+            return Err(DiagnoseError::Input(format!(
+                "{}: sampled every {} s, the validation capture every {ts} s",
+                ds.name, ds.data.ts
+            )));
+        }
+    }
+    let skip = ((o.skip_s / ts).round() as usize).min(val.data.len() / 4);
+    let measured = Measured::new(&val.data, o.band_hz, skip);
+    let mut warnings = Vec::new();
+    let linear = linear_of(&est[0], req, &mut warnings);
+
+    // nominal and singles, in parallel
+    let mut jobs: Vec<Vec<Effect>> = vec![Vec::new()];
+    jobs.extend(req.candidates.iter().map(|e| vec![*e]));
+    let results = parallel(&jobs, o.threads, |effects| {
+        fit_and_score(
+            &est[0].data,
+            &val.data,
+            &measured,
+            req,
+            effects.clone(),
+            &linear,
+        )
+    });
+    let mut results = results.into_iter();
+    let nominal = results
+        .next()
+        .expect("the nominal job")
+        .map_err(|e| DiagnoseError::Nominal(format!("{}: {e}", est[0].name)))?;
+    warnings.extend(nominal.warnings.iter().map(|w| format!("nominal: {w}")));
+    let nom_fit = nominal.scored.fit;
+
+    // where the nominal's residual lies
+    let s = skip;
+    let residual: Vec<f64> = measured.velocity[s..]
+        .iter()
+        .zip(&nominal.scored.velocity[s..])
+        .map(|(a, b)| a - b)
+        .collect();
+    let regions = locate::regions(
+        &residual,
+        &val.data.u[s..],
+        &val.data.y[s..],
+        &nominal.scored.driven.omega_m[s..],
+        &nominal.scored.driven.gearbox_deflection[s..],
+    );
+    let bands = locate::bands(&residual, &measured.velocity[s..], ts);
+    let mut distortion = Vec::new();
+    let mut lin_of: Vec<Option<Linearity>> = Vec::new();
+    for ds in est.iter().chain(std::iter::once(val)) {
+        let lin = if ds.excitation.is_some() {
+            analyze_dataset(ds, o.settle_periods)
+                .ok()
+                .map(|a| a.linearity_y)
+        } else {
+            None
+        };
+        if let Some(l) = &lin {
+            distortion.push(Distortion {
+                capture: ds.name.clone(),
+                linearity: l.clone(),
+            });
+        }
+        lin_of.push(lin);
+    }
+    let amplitude = if est.len() == 2 {
+        let nom_model = DrivenModel::of_fit(&nominal.fit);
+        let mut levels = Vec::new();
+        for ds in est {
+            let m = Measured::new(&ds.data, o.band_hz, skip.min(ds.data.len() / 4));
+            let gap = m
+                .score(&nom_model, &ds.data, 1)
+                .map(|sc| 100.0 - sc.fit)
+                .unwrap_or(f64::NAN);
+            levels.push(AmplitudeLevel {
+                capture: ds.name.clone(),
+                u_rms: rms(&ds.data.u),
+                gap,
+            });
+        }
+        let swap = levels[0].u_rms > levels[1].u_rms;
+        let (lo, hi) = if swap { (1, 0) } else { (0, 1) };
+        let distortion = match (&lin_of[lo], &lin_of[hi]) {
+            (Some(a), Some(b)) => Some(amplitude_trend(a, b)),
+            _ => None,
+        };
+        let dg = levels[hi].gap - levels[lo].gap;
+        let gap_trend = if dg > 1.0 {
+            "grows"
+        } else if dg < -1.0 {
+            "falls"
+        } else {
+            "unclear"
+        };
+        if swap {
+            levels.swap(0, 1);
+        }
+        Some(Amplitude {
+            levels,
+            distortion,
+            gap_trend: gap_trend.into(),
+        })
+    } else {
+        None
+    };
+    let location = Where {
+        bands_hz: bands,
+        regions,
+        amplitude,
+        distortion,
+    };
+
+    // the singles, scored
+    let judge = |seg: &[f64], base: &[f64]| {
+        let (m, se) = segment_gain(seg, base);
+        (m, se, m - 2.0 * se > o.min_gain)
+    };
+    let mut singles: Vec<(Candidate, Option<Fitted>)> = Vec::new();
+    for (effect, r) in req.candidates.iter().zip(results) {
+        let c = match r {
+            Ok(f) => {
+                let (score, score_se, significant) =
+                    judge(&f.scored.segments, &nominal.scored.segments);
+                let reason = format!(
+                    "{}; validation FIT {:+.1} ± {:.1} points{}",
+                    evidence(effect.name(), &location),
+                    score,
+                    score_se,
+                    if significant {
+                        ""
+                    } else {
+                        " (not significant)"
+                    }
+                );
+                (
+                    Candidate {
+                        name: effect.name().into(),
+                        specs: f.fit.model.effects.iter().map(|e| e.to_string()).collect(),
+                        score,
+                        score_se,
+                        fit_val: f.scored.fit,
+                        fit_angle_val: f.scored.angle_fit,
+                        significant,
+                        parameters: effect_parameters(&f.fit, false),
+                        structure_parameters: linear_parameters(&f.fit),
+                        reason,
+                        warnings: f.warnings.clone(),
+                    },
+                    Some(f),
+                )
+            }
+            Err(e) => (
+                Candidate {
+                    name: effect.name().into(),
+                    specs: Vec::new(),
+                    score: f64::NAN,
+                    score_se: f64::NAN,
+                    fit_val: f64::NAN,
+                    fit_angle_val: f64::NAN,
+                    significant: false,
+                    parameters: BTreeMap::new(),
+                    structure_parameters: BTreeMap::new(),
+                    reason: format!("the fit failed: {e}"),
+                    warnings: vec![e],
+                },
+                None,
+            ),
+        };
+        singles.push(c);
+    }
+    singles.sort_by(|a, b| {
+        let key = |c: &Candidate| {
+            if c.score.is_finite() {
+                c.score
+            } else {
+                f64::NEG_INFINITY
+            }
+        };
+        key(&b.0).total_cmp(&key(&a.0))
+    });
+
+    // the pair
+    let mut pair: Option<Candidate> = None;
+    let mut best_fit = nom_fit;
+    let mut best = "none".to_string();
+    if let Some((top, Some(top_fit))) = singles.first().filter(|c| c.0.significant) {
+        best = top.name.clone();
+        best_fit = top.fit_val;
+        let partners: Vec<Effect> = singles[1..]
+            .iter()
+            .filter(|c| c.0.significant)
+            .filter_map(|c| c.1.as_ref().map(|f| f.fit.model.effects[0]))
+            .collect();
+        if o.pairs && !partners.is_empty() {
+            let first = top_fit.fit.model.effects[0];
+            let jobs: Vec<Vec<Effect>> = partners.iter().map(|p| vec![first, *p]).collect();
+            let res = parallel(&jobs, o.threads, |effects| {
+                fit_and_score(
+                    &est[0].data,
+                    &val.data,
+                    &measured,
+                    req,
+                    effects.clone(),
+                    &linear,
+                )
+            });
+            for (effects, r) in jobs.iter().zip(res) {
+                let name = format!("{}+{}", effects[0].name(), effects[1].name());
+                match r {
+                    Ok(f) => {
+                        let (score, score_se, significant) =
+                            judge(&f.scored.segments, &top_fit.scored.segments);
+                        let cand = Candidate {
+                            name: name.clone(),
+                            specs: f.fit.model.effects.iter().map(|e| e.to_string()).collect(),
+                            score,
+                            score_se,
+                            fit_val: f.scored.fit,
+                            fit_angle_val: f.scored.angle_fit,
+                            significant,
+                            parameters: effect_parameters(&f.fit, true),
+                            structure_parameters: linear_parameters(&f.fit),
+                            reason: format!(
+                                "{} added to {}: validation FIT {score:+.1} ± {score_se:.1} \
+                                 points over {} alone{}",
+                                effects[1].name(),
+                                effects[0].name(),
+                                effects[0].name(),
+                                if significant {
+                                    ""
+                                } else {
+                                    " (not significant)"
+                                }
+                            ),
+                            warnings: f.warnings,
+                        };
+                        let better = pair.as_ref().is_none_or(|p| cand.score > p.score);
+                        if significant && better {
+                            pair = Some(cand);
+                        }
+                    }
+                    Err(e) => warnings.push(format!("pair {name}: {e}")),
+                }
+            }
+        }
+        if let Some(p) = &pair {
+            best = p.name.clone();
+            best_fit = p.fit_val;
+        }
+    }
+    let gap = 100.0 - nom_fit;
+    let gap_closed_share = if gap > 0.0 {
+        (best_fit - nom_fit) / gap
+    } else {
+        0.0
+    };
+
+    // the user's simulation
+    let parameter_mismatch = match &req.user {
+        Some(u) => {
+            let model = DrivenModel {
+                plant: u.plant,
+                effects: u.effects.clone(),
+                tau_c: u.tau_c,
+                offset: 0.0,
+            };
+            let fit_sim_val = measured
+                .score(&model, &val.data, 1)
+                .map(|s| s.fit)
+                .unwrap_or_else(|e| {
+                    warnings.push(format!("{}: {e}", u.name));
+                    f64::NAN
+                });
+            let nom_plant = DrivenModel::of_fit(&nominal.fit).plant;
+            let mut up = u.plant.params;
+            let mut np = nom_plant.params;
+            let user_names: Vec<&str> = model_params(u.plant.kind).iter().map(|p| p.0).collect();
+            let parameters = model_params(nom_plant.kind)
+                .into_iter()
+                .filter(|(n, _)| user_names.contains(n))
+                .map(|(name, field)| {
+                    let sim = *field(&mut up);
+                    let fitted = *field(&mut np);
+                    Mismatch {
+                        name: name.into(),
+                        sim,
+                        fitted,
+                        percent: 100.0 * (fitted - sim) / sim,
+                    }
+                })
+                .collect();
+            Some(ParameterMismatch {
+                sim: u.name.clone(),
+                fit_sim_val,
+                parameter_part: nom_fit - fit_sim_val,
+                structure_part: best_fit - nom_fit,
+                parameters,
+            })
+        }
+        None => None,
+    };
+
+    let verdict = if best == "none" {
+        format!(
+            "no candidate effect closes a significant part of the gap: the nominal {} reaches \
+             {nom_fit:.1} % (band-passed motor-velocity FIT on the validation data) and no \
+             effect gains more than {} FIT point beyond twice its standard error",
+            req.structure.label(),
+            o.min_gain
+        )
+    } else {
+        format!(
+            "{best} closes {:.0} % of the gap: band-passed motor-velocity FIT on the validation \
+             data {nom_fit:.1} % → {best_fit:.1} % ({:+.1} points)",
+            100.0 * gap_closed_share,
+            best_fit - nom_fit
+        )
+    };
+    let nominal_parameters = linear_parameters(&nominal.fit);
+    Ok(Diagnosis {
+        verdict,
+        metric: metric::METRIC_NAME.into(),
+        structure: req.structure.label().into(),
+        fit_nominal_val: nom_fit,
+        fit_nominal_angle_val: nominal.scored.angle_fit,
+        nominal_parameters,
+        fit_augmented_val: best_fit,
+        gap_closed_share,
+        best,
+        pair,
+        effects: singles.into_iter().map(|c| c.0).collect(),
+        location,
+        parameter_mismatch,
+        test: format!(
+            "the validation record (after {:.2} s) is split into {} equal segments; the gain \
+             of the metric over the nominal is computed on each; score = mean gain; significant \
+             when mean − 2·(standard error over the segments) > {} FIT point",
+            o.skip_s, o.segments, o.min_gain
+        ),
+        seconds: t0.elapsed().as_secs_f64(),
+        warnings,
+    })
+}

@@ -1,0 +1,261 @@
+//! `jointid diagnose EST [EST2] --validation VAL`: which unmodelled effect makes the
+//! simulated joint depart from the measured one ([`jointid::diagnose`]): the nominal
+//! physical model fitted on EST, each candidate effect added and refitted, ranked by the
+//! gain of the band-passed motor-velocity FIT on VAL with a significance test over
+//! segments, and where the nominal's residual lies.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use clap::Args;
+
+use super::fit::{check_same_rate, FitDataArgs};
+use super::{print_json, CmdResult, Context, Outcome};
+use jointid::data::Dataset;
+use jointid::diagnose::{diagnose, DiagnoseRequest, Diagnosis, UserSim};
+use jointid::ident::grey_box::DEFAULT_GEAR_RATIO;
+use jointid::ident::model_file::SavedModel;
+use jointid::ident::nonlinear::sim_plant;
+use jointid::model::effects::{Effect, EFFECT_NAMES};
+use jointid::model::spec::Structure;
+use jointid::sim::SimConfig;
+
+/// Arguments of `jointid diagnose`.
+#[derive(Debug, Clone, Args)]
+pub struct DiagnoseArgs {
+    /// estimation capture and its columns (the same flags as `fit`)
+    #[command(flatten)]
+    pub data: FitDataArgs,
+    /// a second estimation capture at another amplitude (amplitude analysis)
+    #[arg(value_name = "EST2")]
+    pub second: Option<PathBuf>,
+    /// validation capture (same columns), on which every candidate is scored
+    #[arg(long, value_name = "VAL")]
+    pub validation: PathBuf,
+    /// the user's simulation: `simulate --params-json` output or a jointid model file
+    #[arg(long, value_name = "SIM.json", conflicts_with = "model")]
+    pub sim: Option<PathBuf>,
+    /// structure of the nominal model: rigid, two-mass, three-mass, four-mass
+    #[arg(long, value_name = "STRUCTURE")]
+    pub model: Option<String>,
+    /// candidate effects: `all` or a comma-separated list of names
+    #[arg(long, value_name = "all|NAME,...", default_value = "all")]
+    pub effects: String,
+    /// gear ratio r = arm angle / motor angle
+    #[arg(long, value_name = "R", default_value_t = DEFAULT_GEAR_RATIO)]
+    pub gear_ratio: f64,
+}
+
+fn structure_of(label: &str) -> Result<Structure, String> {
+    Structure::ALL
+        .iter()
+        .copied()
+        .find(|s| s.label() == label)
+        .ok_or_else(|| {
+            format!(
+                "--model {label}: expected one of {}",
+                Structure::ALL
+                    .iter()
+                    .map(|s| s.label())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        })
+}
+
+fn candidates(spec: &str) -> Result<Vec<Effect>, String> {
+    if spec.trim() == "all" {
+        return Ok(Effect::all_defaults());
+    }
+    spec.split(',')
+        .map(|n| {
+            Effect::default_by_name(n.trim()).ok_or_else(|| {
+                format!(
+                    "--effects: unknown effect `{}` (known: all, {})",
+                    n.trim(),
+                    EFFECT_NAMES.join(", ")
+                )
+            })
+        })
+        .collect()
+}
+
+/// The user's simulation from `simulate --params-json` output or a model file.
+fn user_sim(path: &std::path::Path) -> Result<UserSim, String> {
+    let text =
+        std::fs::read_to_string(path).map_err(|e| format!("--sim {}: {e}", path.display()))?;
+    let name = path.display().to_string();
+    if let Ok(cfg) = serde_json::from_str::<SimConfig>(&text) {
+        return Ok(UserSim {
+            name,
+            plant: cfg.plant,
+            effects: cfg.effects,
+            tau_c: cfg.controller.current_loop_tau,
+        });
+    }
+    let saved: SavedModel = serde_json::from_str(&text).map_err(|e| {
+        format!(
+            "--sim {}: neither `simulate --params-json` output nor a jointid model file: {e}",
+            path.display()
+        )
+    })?;
+    let fit = saved
+        .to_nonlinear()
+        .map_err(|e| format!("--sim {}: {e}", path.display()))?;
+    Ok(UserSim {
+        name,
+        plant: sim_plant(&fit.model, &fit.plant),
+        effects: fit.model.effects.clone(),
+        tau_c: fit.model.tau_c,
+    })
+}
+
+/// Runs `jointid diagnose`.
+///
+/// # Errors
+/// Bad flags or files (exit 2 naming them), the diagnosis' errors, output errors.
+pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
+    if !(args.gear_ratio.is_finite() && args.gear_ratio > 0.0) {
+        return Err(format!("--gear-ratio {}: must be finite and > 0", args.gear_ratio).into());
+    }
+    let cands = candidates(&args.effects)?;
+    let user = args.sim.as_deref().map(user_sim).transpose()?;
+    let structure = match (&args.model, &user) {
+        (Some(m), _) => structure_of(m)?,
+        (None, Some(u)) => u.plant.kind.structure(),
+        (None, None) => Structure::ThreeMass,
+    };
+    let mut est: Vec<Dataset> = vec![args
+        .data
+        .data_args(&args.data.path)
+        .load(ctx.loaders)
+        .map_err(|e| format!("{}: {e}", args.data.path.display()))?];
+    if let Some(p) = &args.second {
+        let ds = args
+            .data
+            .data_args(p)
+            .load(ctx.loaders)
+            .map_err(|e| format!("{}: {e}", p.display()))?;
+        check_same_rate(&est[0], &ds, "EST2")?;
+        est.push(ds);
+    }
+    let val = args
+        .data
+        .data_args(&args.validation)
+        .load(ctx.loaders)
+        .map_err(|e| format!("--validation {}: {e}", args.validation.display()))?;
+    check_same_rate(&est[0], &val, "--validation")?;
+    let req = DiagnoseRequest {
+        structure,
+        r: args.gear_ratio,
+        candidates: cands,
+        user,
+        ..DiagnoseRequest::default()
+    };
+    let d = diagnose(&est, &val, &req)?;
+    if ctx.json {
+        print_json(ctx.out, &d)?;
+    } else {
+        print_summary(ctx.out, &d, &val.name)?;
+    }
+    Ok(Outcome::Ok)
+}
+
+fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Result<()> {
+    writeln!(out, "jointid diagnose: {}", d.verdict)?;
+    writeln!(out, "  metric: {}", d.metric)?;
+    writeln!(
+        out,
+        "  nominal {} on {val}: {:.2} % (motor-angle FIT {:.2} %); best {}: {:.2} % ({:.0} % of \
+         the gap closed)",
+        d.structure,
+        d.fit_nominal_val,
+        d.fit_nominal_angle_val,
+        d.best,
+        d.fit_augmented_val,
+        100.0 * d.gap_closed_share
+    )?;
+    writeln!(out, "  test: {}", d.test)?;
+    writeln!(out, "  candidates (gain over the nominal, FIT points):")?;
+    for c in &d.effects {
+        writeln!(
+            out,
+            "    {:<20} {:+7.2} ± {:5.2} {:<16} {}",
+            c.name,
+            c.score,
+            c.score_se,
+            if c.significant {
+                "significant"
+            } else {
+                "not significant"
+            },
+            c.parameters
+                .iter()
+                .map(|(k, v)| format!("{k} = {:.4e} {}", v.value, v.unit))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )?;
+        writeln!(out, "      {}", c.reason)?;
+    }
+    if let Some(p) = &d.pair {
+        writeln!(out, "  pair {}: {}", p.name, p.reason)?;
+    }
+    let w = &d.location;
+    writeln!(out, "  where the nominal's residual lies:")?;
+    let r = &w.regions;
+    writeln!(
+        out,
+        "    residual energy / average: near zero velocity {:.2}, at torque sign changes \
+         {:.2}, at large deflection {:.2}; angle pattern order {} explains {:.1} %",
+        r.near_zero_velocity.energy_ratio,
+        r.torque_sign_change.energy_ratio,
+        r.large_deflection.energy_ratio,
+        r.angle_pattern.order,
+        100.0 * r.angle_pattern.share
+    )?;
+    writeln!(
+        out,
+        "    residual / measured energy by band: {}",
+        w.bands_hz
+            .iter()
+            .map(|b| format!("{}–{} Hz {:.3}", b.lo_hz, b.hi_hz, b.residual_ratio))
+            .collect::<Vec<_>>()
+            .join(", ")
+    )?;
+    for dist in &w.distortion {
+        writeln!(out, "    {}: {}", dist.capture, dist.linearity.verdict)?;
+    }
+    if let Some(a) = &w.amplitude {
+        for l in &a.levels {
+            writeln!(
+                out,
+                "    amplitude: {} u RMS {:.3e} N·m, gap {:.2} points",
+                l.capture, l.u_rms, l.gap
+            )?;
+        }
+        writeln!(out, "    the gap {} with amplitude", a.gap_trend)?;
+        if let Some(t) = &a.distortion {
+            writeln!(out, "    {}", t.verdict)?;
+        }
+    }
+    if let Some(m) = &d.parameter_mismatch {
+        writeln!(
+            out,
+            "  {}: {:.2} % on the validation data; parameters account for {:+.2} points, \
+             structure for {:+.2}",
+            m.sim, m.fit_sim_val, m.parameter_part, m.structure_part
+        )?;
+        for p in &m.parameters {
+            writeln!(
+                out,
+                "    {:<6} sim {:.4e}, fitted {:.4e} ({:+.1} %)",
+                p.name, p.sim, p.fitted, p.percent
+            )?;
+        }
+    }
+    writeln!(out, "  {:.1} s", d.seconds)?;
+    for n in &d.warnings {
+        writeln!(out, "  note: {n}")?;
+    }
+    Ok(())
+}
