@@ -192,13 +192,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         )?;
     } else {
         let out = &mut *ctx.out;
-        writeln!(
-            out,
-            "jointid validate: {} ({}) on {}",
-            mpath.display(),
-            saved.model,
-            ds.name
-        )?;
+        writeln!(out, "{}", title(mpath, &saved.model, &ds.name))?;
         writeln!(
             out,
             "  {} samples, Ts = {} s (decimation {})",
@@ -301,13 +295,7 @@ fn run_nonlinear(
         )?;
     } else {
         let out = &mut *ctx.out;
-        writeln!(
-            out,
-            "jointid validate: {} ({}) on {}",
-            mpath.display(),
-            saved.model,
-            ds.name
-        )?;
+        writeln!(out, "{}", title(mpath, &saved.model, &ds.name))?;
         writeln!(
             out,
             "  {} samples, Ts = {} s; simulated from the measured torque with the simulator's exact laws",
@@ -364,4 +352,9 @@ fn outcome(fit_ok: bool) -> Outcome {
     } else {
         Outcome::CheckFailed
     }
+}
+
+/// The first line of the text report: `jointid validate: MODEL (FAMILY) on DATA`.
+fn title(mpath: &std::path::Path, model: &str, data: &str) -> String {
+    format!("jointid validate: {} ({model}) on {data}", mpath.display())
 }
