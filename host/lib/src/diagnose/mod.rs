@@ -522,7 +522,8 @@ pub fn diagnose(
     // nominal and singles, in parallel
     let mut jobs: Vec<Vec<Effect>> = vec![Vec::new()];
     jobs.extend(req.candidates.iter().map(|e| vec![*e]));
-    let results = parallel(&jobs, o.threads, |effects| {
+    // one candidate model (nominal + `effects`) fitted on the estimation data and scored
+    let score = |effects: &Vec<Effect>| {
         fit_and_score(
             &est[0].data,
             &val.data,
@@ -531,7 +532,8 @@ pub fn diagnose(
             effects.clone(),
             &linear,
         )
-    });
+    };
+    let results = parallel(&jobs, o.threads, score);
     let mut results = results.into_iter();
     let nominal = results
         .next()
@@ -704,16 +706,7 @@ pub fn diagnose(
         if o.pairs && !partners.is_empty() {
             let first = top_fit.fit.model.effects[0];
             let jobs: Vec<Vec<Effect>> = partners.iter().map(|p| vec![first, *p]).collect();
-            let res = parallel(&jobs, o.threads, |effects| {
-                fit_and_score(
-                    &est[0].data,
-                    &val.data,
-                    &measured,
-                    req,
-                    effects.clone(),
-                    &linear,
-                )
-            });
+            let res = parallel(&jobs, o.threads, score);
             for (effects, r) in jobs.iter().zip(res) {
                 let name = format!("{}+{}", effects[0].name(), effects[1].name());
                 match r {
