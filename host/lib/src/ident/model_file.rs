@@ -477,6 +477,7 @@ impl SavedModel {
             iterations: 0,
             termination: Termination::CostConverged,
             fit_velocity_percent: self.fit_estimation,
+            correlated: Vec::new(),
         })
     }
 }
@@ -531,6 +532,7 @@ mod tests {
             iterations: 3,
             termination: Termination::CostConverged,
             fit_velocity_percent: 96.0,
+            correlated: Vec::new(),
         }
     }
 

@@ -160,6 +160,23 @@ pub struct NlFit {
     /// signals through the cost's high-pass prefilter, with the estimator's (smooth) laws
     /// [%] ([`velocity_fit`])
     pub fit_velocity_percent: f64,
+    /// pairs of free parameters whose estimates are strongly correlated
+    /// (`|ρ| ≥` [`CORRELATED`]), from the sandwich covariance; the initial velocity is left out
+    pub correlated: Vec<Correlation>,
+}
+
+/// `|ρ|` from which two estimates are reported as correlated ([`NlFit::correlated`]).
+pub const CORRELATED: f64 = 0.95;
+
+/// Correlation of two estimates.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Correlation {
+    /// layout name of the first parameter
+    pub a: &'static str,
+    /// layout name of the second parameter
+    pub b: &'static str,
+    /// correlation coefficient of their estimates [-]
+    pub rho: f64,
 }
 
 impl NlFit {
@@ -615,6 +632,25 @@ pub fn fit_output_error(
             at_bound,
         });
     }
+    let mut correlated = Vec::new();
+    for (ja, &a) in free.iter().enumerate() {
+        for (jb, &b) in free.iter().enumerate().skip(ja + 1) {
+            if layout[a].owner == Owner::InitialVelocity
+                || layout[b].owner == Owner::InitialVelocity
+            {
+                continue;
+            }
+            let den = (cov_z[(ja, ja)] * cov_z[(jb, jb)]).sqrt();
+            let rho = cov_z[(ja, jb)] / den;
+            if den > 0.0 && rho.abs() >= CORRELATED {
+                correlated.push(Correlation {
+                    a: layout[a].name,
+                    b: layout[b].name,
+                    rho,
+                });
+            }
+        }
+    }
     let (fitted, plant) = model.with_values(&values);
     let vh = simulate_velocity(model, &values, &data.u, data.ts, data.y[0], Some(&data.y))
         .ok_or(NlError::Unstable)?;
@@ -630,6 +666,7 @@ pub fn fit_output_error(
         iterations: res.iterations,
         termination: res.termination,
         fit_velocity_percent,
+        correlated,
     })
 }
 

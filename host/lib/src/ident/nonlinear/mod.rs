@@ -13,8 +13,8 @@ pub mod run;
 
 pub use export::{simulate_args, simulate_exact};
 pub use fit::{
-    cost_at, fit_output_error, interval_velocity, simulate_velocity, Gradient, NlError, NlFit,
-    NlOptions, NlParam,
+    cost_at, fit_output_error, interval_velocity, simulate_velocity, Correlation, Gradient,
+    NlError, NlFit, NlOptions, NlParam,
 };
 pub use init::{automatic_start, Start, Step};
 pub use model::{NlModel, Owner, ParamDef, Scale};

@@ -150,7 +150,9 @@ pub fn linear_start(
 }
 
 /// Warnings of a finished fit: iteration limit, parameters on a bound, parameters the data
-/// do not determine (σ above half the value).
+/// do not determine (σ above half the value), and pairs the data hardly tell apart
+/// (`|ρ| ≥ 0.98` with either σ above 5 % of its value: a current-loop lag and a delay
+/// under a soft controller, whose phase lags look alike below the loop's bandwidth).
 pub fn checks(fit: &NlFit) -> Vec<String> {
     let mut w = Vec::new();
     if fit.termination == Termination::MaxIterations {
@@ -173,6 +175,27 @@ pub fn checks(fit: &NlFit) -> Vec<String> {
             w.push(format!(
                 "`{}` = {:.4e} ± {:.1e} {} is poorly determined by these data",
                 p.name, p.value, p.std, p.unit
+            ));
+        }
+    }
+    let relative_std = |name: &str| {
+        fit.params
+            .iter()
+            .find(|p| p.name == name)
+            .map_or(0.0, |p| p.std / p.value.abs())
+    };
+    for c in fit.correlated.iter().filter(|c| c.rho.abs() >= 0.98) {
+        let (sa, sb) = (relative_std(c.a), relative_std(c.b));
+        if sa.max(sb) > 0.05 {
+            w.push(format!(
+                "`{}` and `{}` trade against each other (correlation {:+.3}): the data fix a \
+                 combination of them, each alone only to ±{:.0} % and ±{:.0} %; fix one \
+                 (`--fix`) if it is known",
+                c.a,
+                c.b,
+                c.rho,
+                100.0 * sa,
+                100.0 * sb
             ));
         }
     }
