@@ -29,8 +29,9 @@ use jointid::ident::frf::analyze_dataset;
 use jointid::ident::frf_fit::{self, Drive, FrfFitOptions};
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::{
-    automatic_start, fit_output_error, interval_velocity, model_of, run::checks, simulate_args,
-    simulate_exact, validate, NlFit, NlModel, NlOptions, NlRequest, NlValidation, Owner, Step,
+    automatic_start, fit_output_error, interval_velocity, model_of, run::checks, run::velocity_rms,
+    simulate_args, simulate_exact, validate, NlFit, NlModel, NlOptions, NlRequest, NlValidation,
+    Owner, Step,
 };
 use jointid::model::effects::{parse_effects, Effect};
 use jointid::model::spec::Structure;
@@ -485,6 +486,7 @@ pub fn run(
         }
     }
     let (fit_model, _) = start_model.with_values(&start);
+    let fit_model = fit_model.refined_for(&start, velocity_rms(&est), est.ts);
     let fit = fit_output_error(&est, &fit_model, &start, &options)
         .map_err(|e| format!("{}: {e}", ds.name))?;
     let seconds = t0.elapsed().as_secs_f64();

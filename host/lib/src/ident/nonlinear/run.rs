@@ -61,8 +61,7 @@ pub struct NlValidation {
 /// The model the estimator integrates for `req` (smoothing of the non-smooth laws, RK4
 /// steps per sample).
 pub fn model_of(req: &NlRequest, data: &IdData) -> NlModel {
-    let v = interval_velocity(&data.y, data.ts);
-    let v_rms = (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
+    let v_rms = velocity_rms(data);
     let delay = req
         .effects
         .iter()
@@ -78,6 +77,12 @@ pub fn model_of(req: &NlRequest, data: &IdData) -> NlModel {
         dz_eps: 1e-7,
         substeps: if delay { 2 } else { 1 },
     }
+}
+
+/// RMS of the interval-mean motor velocity [rad/s].
+pub fn velocity_rms(data: &IdData) -> f64 {
+    let v = interval_velocity(&data.y, data.ts);
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
 }
 
 /// Identifies `req` on `data`: the automatic start (seed 001's three steps) unless a start
@@ -101,6 +106,7 @@ pub fn identify(data: &IdData, req: &NlRequest) -> Result<NlResult, NlError> {
         // would remove (EMPS moves below 5 Hz); its torque offset is estimated instead
         options.highpass_hz = 0.0;
     }
+    let start_model = start_model.refined_for(&start, velocity_rms(data), data.ts);
     let fit = fit_output_error(data, &start_model, &start, &options)?;
     let warnings = checks(&fit);
     Ok(NlResult {
@@ -177,6 +183,21 @@ pub fn checks(fit: &NlFit) -> Vec<String> {
                 p.name, p.value, p.std, p.unit
             ));
         }
+    }
+    // a Jacobian of rank one or nought (a simulation gone flat or unstable on the way)
+    // gives standard deviations of nought and every pair a correlation of ±1
+    let degenerate = fit.params.iter().any(|p| {
+        !p.fixed
+            && p.owner != Owner::InitialVelocity
+            && (p.std.is_nan() || p.std <= 1e-9 * p.value.abs())
+    });
+    if degenerate {
+        w.push(
+            "the covariance is degenerate (a standard deviation of nought): the model's \
+             sensitivity to its parameters vanished at this point; the estimates are not to \
+             be trusted"
+                .to_string(),
+        );
     }
     let relative_std = |name: &str| {
         fit.params

@@ -194,6 +194,50 @@ fn three_mass_with_a_fractional_delay_and_with_an_extra_mode() {
 }
 
 #[test]
+fn coulomb_friction_at_the_default_size_is_found_with_the_refined_smoothing() {
+    // F_c = 0.03 N·m against 0.057 N·m RMS torque and 0.19 rad/s RMS motor velocity:
+    // the coarse smoothing of the automatic start (v_ε = 0.05) ends at the iteration
+    // limit with d_g −22 % and F_c +14 %; the refined one must not
+    let effect = crate::model::effects::parse_effects(&["coulomb_friction:fs=0.03"]).unwrap()[0];
+    let (data, cfg) = three_mass_run(effect, 3);
+    let p = cfg.plant.params;
+    let coarse = NlModel {
+        structure: Structure::ThreeMass,
+        r: p.r,
+        effects: vec![effect],
+        tau_c: cfg.controller.current_loop_tau,
+        v_eps: 0.05,
+        dz_eps: 1e-7,
+        substeps: 1,
+    };
+    let plant = [p.j_m, p.j_a1, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m];
+    let truth = coarse.values(&plant, 0.0, 0.0);
+    let start: Vec<f64> = truth
+        .iter()
+        .enumerate()
+        .map(|(i, &t)| if i % 2 == 0 { t * 1.2 } else { t * 0.85 })
+        .collect();
+    let model = coarse.refined_for(&start, run::velocity_rms(&data), data.ts);
+    assert!(model.v_eps < 0.005 && model.substeps > 1, "{model:?}");
+    let fit = fit_output_error(&data, &model, &start, &NlOptions::default()).unwrap();
+    assert_ne!(
+        fit.termination,
+        crate::ident::lm::Termination::MaxIterations
+    );
+    for (name, tol) in [
+        ("J_m", 0.02),
+        ("J_a1", 0.03),
+        ("k_g", 0.03),
+        ("d_g", 0.06),
+        ("fc", 0.05),
+    ] {
+        let i = model.layout().iter().position(|d| d.name == name).unwrap();
+        let (v, t) = (fit.values[i], truth[i]);
+        assert!((v / t - 1.0).abs() < tol, "{name} = {v:.5e}, truth {t:.5e}");
+    }
+}
+
+#[test]
 fn a_delay_under_a_soft_controller_is_within_its_sigma_and_its_trade_with_the_lag_is_named() {
     // below a soft loop's bandwidth the current-loop lag and the delay lag the phase
     // alike: the fit must say so rather than report each as if it were known
