@@ -65,11 +65,11 @@ fn structure_of(label: &str) -> Result<Structure, String> {
 
 fn candidates(spec: &str) -> Result<Vec<Effect>, String> {
     if spec.trim() == "all" {
-        return Ok(Effect::all_defaults());
+        return Ok(jointid::diagnose::all_candidates());
     }
     spec.split(',')
         .map(|n| {
-            Effect::default_by_name(n.trim()).ok_or_else(|| {
+            jointid::diagnose::candidate(n.trim()).ok_or_else(|| {
                 format!(
                     "--effects: unknown effect `{}` (known: all, {})",
                     n.trim(),

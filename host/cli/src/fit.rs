@@ -300,7 +300,7 @@ pub(crate) fn check_columns(data: &DataArgs) -> Result<(), String> {
 /// `other` (a validation record) has the sample interval of `first`.
 pub(crate) fn check_same_rate(first: &Dataset, other: &Dataset, flag: &str) -> Result<(), String> {
     let (a, b) = (first.data.ts, other.data.ts);
-    if (a - b).abs() <= 1e-6 * a {
+    if jointid::data::same_rate(a, b) {
         return Ok(());
     }
     Err(format!(

@@ -140,7 +140,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
     } else {
         saved.ts / saved.prep.decimate.max(1) as f64
     };
-    if (ds.data.ts - capture_ts).abs() > 1e-6 * capture_ts {
+    if !jointid::data::same_rate(ds.data.ts, capture_ts) {
         return Err(format!(
             "{}: sampled at {} Hz, the model {} was fitted on data at {} Hz",
             ds.name,
@@ -257,7 +257,7 @@ fn run_nonlinear(
         .map_err(|e| format!("{}: {e}", mpath.display()))?;
     let nl = saved.nonlinear.as_ref().expect("a nonlinear section");
     let ds = data.load(ctx.loaders)?;
-    if (ds.data.ts - saved.ts).abs() > 1e-6 * saved.ts {
+    if !jointid::data::same_rate(ds.data.ts, saved.ts) {
         return Err(format!(
             "{}: sampled at {} Hz, the model {} was fitted on data at {} Hz",
             ds.name,

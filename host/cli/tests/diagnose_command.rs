@@ -1,8 +1,9 @@
 //! Command-line tests of `jointid diagnose`: the simulator's joint with a hidden cubic
-//! spring, diagnosed from its capture against a second run; and the refusals.
+//! spring, diagnosed from its capture against a second run; the measured EMPS drive, whose
+//! friction a rigid model lacks; and the refusals.
 
 mod common;
-use common::{jointid, json_of, tmpdir};
+use common::{jointid, json_of, shared, tmpdir};
 
 fn simulate(dir: &std::path::Path, name: &str, seed: &str, exc_seed: &str) -> String {
     let out = dir.join(name);
@@ -61,6 +62,50 @@ fn diagnose_finds_the_hidden_cubic_spring_of_a_simulated_capture() {
         .as_str()
         .unwrap()
         .contains("band-passed motor-velocity FIT"));
+}
+
+/// EMPS (measured, `../shared/data/emps`): the nominal is the rigid model with viscous
+/// friction; Coulomb friction is named, significant, closes most of the gap, and its level
+/// is near the published 20.39 N (Janot et al. 2019, IDIM-LS). The gearbox effects are no
+/// candidates of a rigid model and are said to be left out.
+#[test]
+fn diagnose_names_coulomb_friction_on_the_measured_emps_drive() {
+    let j = json_of(&jointid(&[
+        "diagnose",
+        &shared("data/emps/emps_train_DATA_EMPS.csv"),
+        "--validation",
+        &shared("data/emps/emps_test_DATA_EMPS_PULSES.csv"),
+        "--time",
+        "t_s",
+        "--input",
+        "force_N",
+        "--output",
+        "qm_m",
+        "--model",
+        "rigid",
+        "--gear-ratio",
+        "1",
+        "--effects",
+        "coulomb_friction,time_delay,backlash",
+        "--json",
+    ]));
+    assert!(
+        j["best"].as_str().unwrap().starts_with("coulomb_friction"),
+        "{j}"
+    );
+    assert_eq!(j["effects"][0]["name"], "coulomb_friction");
+    assert_eq!(j["effects"][0]["significant"], true);
+    let fc = j["effects"][0]["parameters"]["fc"]["value"]
+        .as_f64()
+        .unwrap();
+    assert!((fc / 20.39 - 1.0).abs() < 0.10, "F_c = {fc}");
+    let share = j["gap_closed_share"].as_f64().unwrap();
+    assert!(share > 0.6, "closed share {share}");
+    let notes = j["warnings"].to_string();
+    assert!(
+        notes.contains("backlash: not candidates of a rigid model"),
+        "{notes}"
+    );
 }
 
 #[test]

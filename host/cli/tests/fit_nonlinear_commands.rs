@@ -14,23 +14,7 @@ use jointid::ident::nonlinear::{validate, NlOptions};
 use serde_json::Value;
 
 mod common;
-use common::{jointid, json_of, tmpdir};
-
-/// a file of `shared/` beside the repository or its worktree folder
-fn shared(rel: &str) -> String {
-    let base = env!("CARGO_MANIFEST_DIR");
-    for up in [
-        "/../../shared/",
-        "/../../../shared/",
-        "/../../../../shared/",
-    ] {
-        let p = format!("{base}{up}{rel}");
-        if Path::new(&p).exists() {
-            return p;
-        }
-    }
-    panic!("shared file {rel} not found beside {base}");
-}
+use common::{jointid, json_of, shared, tmpdir};
 
 fn num(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))

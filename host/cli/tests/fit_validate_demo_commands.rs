@@ -16,7 +16,7 @@ use jointid::sim::{self, Disturbance, SimConfig};
 use jointid_core::excitation::ExcitationConfig;
 
 mod common;
-use common::{jointid, json_of, tmpdir};
+use common::{jointid, json_of, shared, tmpdir};
 
 fn write_run(path: &Path, exc: &ExcitationConfig, seed: u64) {
     let mut cfg = SimConfig {
@@ -284,22 +284,6 @@ fn demo_writes_captures_plots_and_the_table() {
         }
     }
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// a file of `shared/` beside the repository or its worktree folder
-fn shared(rel: &str) -> String {
-    let base = env!("CARGO_MANIFEST_DIR");
-    for up in [
-        "/../../shared/",
-        "/../../../shared/",
-        "/../../../../shared/",
-    ] {
-        let p = format!("{base}{up}{rel}");
-        if std::path::Path::new(&p).exists() {
-            return p;
-        }
-    }
-    panic!("shared file {rel} not found beside {base}");
 }
 
 // EMPS through `jointid fit --model rigid --friction coulomb --json`: M, Fv,

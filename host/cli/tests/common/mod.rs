@@ -38,3 +38,20 @@ pub fn json_of(out: &Output) -> Value {
     );
     serde_json::from_slice(&out.stdout).expect("stdout is JSON")
 }
+
+/// a file of `shared/` (the reference data beside the repository): the first ancestor of
+/// this crate that holds it
+///
+/// # Panics
+/// When no ancestor holds `shared/`.
+#[allow(dead_code)]
+pub fn shared(rel: &str) -> String {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .map(|a| a.join("shared"))
+        .find(|d| d.is_dir())
+        .expect("shared/ beside the repository")
+        .join(rel)
+        .display()
+        .to_string()
+}

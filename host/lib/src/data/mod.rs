@@ -55,6 +55,16 @@ pub use csv::{
 pub use dsp::{decimate, decimation_taps};
 pub use prep::{detrend, Detrend, Prep};
 
+/// Relative difference of two sample intervals below which two records count as sampled
+/// at one rate. Intervals estimated from recorded time stamps differ by tens of ppm
+/// (EMPS: 999.992 Hz against 1000.02 Hz); 0.1 % moves a 100 Hz resonance by 0.1 Hz.
+pub const SAME_RATE_TOLERANCE: f64 = 1e-3;
+
+/// Whether sample intervals `a` and `b` [s] are one rate ([`SAME_RATE_TOLERANCE`]).
+pub fn same_rate(a: f64, b: f64) -> bool {
+    (a - b).abs() <= SAME_RATE_TOLERANCE * a.abs().max(b.abs())
+}
+
 /// Input/output record of one experiment, uniformly sampled.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IdData {

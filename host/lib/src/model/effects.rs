@@ -273,6 +273,12 @@ pub const EFFECT_NAMES: [&str; 6] = [
 ];
 
 impl Effect {
+    /// Whether the effect acts on the gearbox spring (backlash, cubic spring), which a
+    /// rigid plant does not have.
+    pub fn acts_on_gearbox(&self) -> bool {
+        matches!(self, Effect::Backlash(_) | Effect::NonlinearStiffness(_))
+    }
+
     /// Spec name of the effect (`backlash`, ...).
     pub fn name(&self) -> &'static str {
         match self {

@@ -545,8 +545,7 @@ fn check_effects(plant: &Plant, effects: &[Effect]) -> Result<(), SimError> {
             return Err(SimError::DuplicateEffect(e.name()));
         }
         seen.push(e.name());
-        let on_gearbox = matches!(e, Effect::Backlash(_) | Effect::NonlinearStiffness(_));
-        if on_gearbox && kind == PlantKind::Rigid {
+        if e.acts_on_gearbox() && kind == PlantKind::Rigid {
             return Err(SimError::NeedsGearbox {
                 effect: e.name(),
                 plant: kind.name(),
