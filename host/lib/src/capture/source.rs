@@ -55,7 +55,8 @@ pub enum SourceSpec {
         /// `HOST:PORT`
         addr: String,
     },
-    /// raw byte stream from a file, named pipe or pty
+    /// raw byte stream from a file, named pipe or pty; a stream that starts with the
+    /// `.jcap` magic (a capture file replayed) is read from the byte after it
     File {
         /// path of the file
         path: PathBuf,
@@ -375,6 +376,22 @@ where
     })
 }
 
+/// Adds `bytes` to the held `head` of a file; once it holds as many bytes as the `.jcap`
+/// magic (or differs from it), returns the stream bytes: everything but a leading magic.
+/// `None` while the head is still a proper prefix of the magic.
+fn strip_magic(head: &mut Vec<u8>, bytes: &[u8]) -> Option<Vec<u8>> {
+    let magic = &super::jcap::MAGIC;
+    head.extend_from_slice(bytes);
+    let n = head.len().min(magic.len());
+    if head[..n] != magic[..n] {
+        return Some(std::mem::take(head));
+    }
+    if head.len() < magic.len() {
+        return None;
+    }
+    Some(head.split_off(magic.len()))
+}
+
 /// Reader thread for `--file`: regular files, named pipes and ptys.
 ///
 /// A regular file or pty is opened here (a missing or unreadable file is a setup error);
@@ -419,15 +436,30 @@ fn spawn_file(
         };
         let mut buf = vec![0u8; CHUNK];
         let mut offset = 0u64;
+        // the first bytes, held until they can be told from a `.jcap` magic
+        let mut head = Some(Vec::with_capacity(super::jcap::MAGIC.len()));
         while !stop.load(Ordering::SeqCst) {
             match Read::read(&mut file, &mut buf) {
                 Ok(0) => {
+                    if let Some(h) = head.take().filter(|h| !h.is_empty()) {
+                        let _ = tx.send(SourceMsg::Data(h));
+                    }
                     let _ = tx.send(SourceMsg::End("end of file".into()));
                     return;
                 }
                 Ok(n) => {
                     offset += n as u64;
-                    if tx.send(SourceMsg::Data(buf[..n].to_vec())).is_err() {
+                    let data = match head.as_mut() {
+                        Some(h) => match strip_magic(h, &buf[..n]) {
+                            Some(rest) => {
+                                head = None;
+                                rest
+                            }
+                            None => continue,
+                        },
+                        None => buf[..n].to_vec(),
+                    };
+                    if !data.is_empty() && tx.send(SourceMsg::Data(data)).is_err() {
                         return;
                     }
                 }
@@ -540,5 +572,36 @@ mod can {
         Err(SourceError::CanUnsupported {
             iface: iface.to_string(),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strip_magic_drops_a_leading_jcap_magic_fed_in_any_pieces() {
+        let mut stream = super::super::jcap::MAGIC.to_vec();
+        stream.extend_from_slice(&[0, 5, 1, 2, 0]);
+        for cut in 0..stream.len() {
+            let mut head = Vec::new();
+            let mut out = Vec::new();
+            let mut done = false;
+            for piece in [&stream[..cut], &stream[cut..]] {
+                if done {
+                    out.extend_from_slice(piece);
+                } else if let Some(rest) = strip_magic(&mut head, piece) {
+                    out.extend(rest);
+                    done = true;
+                }
+            }
+            assert_eq!(out, [0, 5, 1, 2, 0], "cut at {cut}");
+        }
+        // a raw stream, even one that starts like the magic, is passed whole
+        let mut head = Vec::new();
+        assert_eq!(strip_magic(&mut head, b"JCA"), None);
+        assert_eq!(strip_magic(&mut head, b"X\0"), Some(b"JCAX\0".to_vec()));
+        let mut head = Vec::new();
+        assert_eq!(strip_magic(&mut head, &[0, 1]), Some(vec![0, 1]));
     }
 }
