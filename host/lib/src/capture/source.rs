@@ -20,7 +20,7 @@
 
 use std::fs::File;
 use std::io::{self, Read};
-use std::net::{TcpStream, ToSocketAddrs};
+use std::net::{TcpListener, TcpStream, ToSocketAddrs};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
@@ -50,8 +50,16 @@ pub enum SourceSpec {
         /// identifier of the board's frames (`None`: every data frame)
         id: Option<embedded_can::Id>,
     },
-    /// TCP endpoint `HOST:PORT` (the emulated board's UART)
+    /// TCP endpoint `HOST:PORT` to connect to (the emulated board's UART as a server,
+    /// QEMU `-serial tcp:HOST:PORT,server=on`)
     Tcp {
+        /// `HOST:PORT`
+        addr: String,
+    },
+    /// TCP address `HOST:PORT` to listen on for the board to connect (QEMU
+    /// `-serial tcp:HOST:PORT`, the firmware README's `JOINTID_SERIAL` recipe); one
+    /// connection at a time, a new one accepted after a connection is reset
+    TcpListen {
         /// `HOST:PORT`
         addr: String,
     },
@@ -77,6 +85,7 @@ impl std::fmt::Display for SourceSpec {
                 id: Some(embedded_can::Id::Extended(id)),
             } => write!(f, "can {iface} id {:#010x}", id.as_raw()),
             Self::Tcp { addr } => write!(f, "tcp {addr}"),
+            Self::TcpListen { addr } => write!(f, "tcp listening on {addr}"),
             Self::File { path } => write!(f, "file {}", path.display()),
         }
     }
@@ -263,6 +272,7 @@ impl SourceSpec {
                     open_tcp(&addr)
                 })
             }
+            Self::TcpListen { addr } => spawn_listen(addr, tx, stop.clone())?,
             Self::File { path } => spawn_file(path.clone(), tx, stop.clone(), name.clone())?,
             Self::Can { iface, id } => {
                 can::spawn(iface, *id, tx, stop.clone(), name.clone(), retry)?
@@ -313,6 +323,78 @@ fn open_tcp(addr: &str) -> Result<TcpStream, SourceError> {
         }
     }
     Err(err(last))
+}
+
+/// Binds `addr` here (an address in use or that does not resolve is a setup error) and
+/// starts the thread that accepts the board's connection and reads it. The peer closing
+/// the connection ends the stream; a connection reset is a link loss, and the thread
+/// then waits for the next connection.
+fn spawn_listen(
+    addr: &str,
+    tx: Sender<SourceMsg>,
+    stop: Arc<AtomicBool>,
+) -> Result<JoinHandle<()>, SourceError> {
+    let err = |source| SourceError::Tcp {
+        addr: addr.to_string(),
+        err: source,
+    };
+    let listener = TcpListener::bind(addr).map_err(err)?;
+    // accept polls, so that a stop is honoured while no board has connected
+    listener.set_nonblocking(true).map_err(err)?;
+    Ok(std::thread::spawn(move || {
+        let mut buf = vec![0u8; CHUNK];
+        let mut connections = 0u64;
+        'accept: while !stop.load(Ordering::SeqCst) {
+            let (mut stream, peer) = match listener.accept() {
+                Ok(c) => c,
+                Err(e) if is_timeout(&e) => {
+                    std::thread::sleep(READ_TIMEOUT);
+                    continue;
+                }
+                Err(e) => {
+                    let _ = tx.send(SourceMsg::LinkLost(format!("accept: {e}")));
+                    std::thread::sleep(READ_TIMEOUT);
+                    continue;
+                }
+            };
+            let ready = stream
+                .set_nonblocking(false)
+                .and_then(|()| stream.set_read_timeout(Some(READ_TIMEOUT)));
+            if let Err(e) = ready {
+                let _ = tx.send(SourceMsg::LinkLost(format!("connection from {peer}: {e}")));
+                continue;
+            }
+            let _ = stream.set_nodelay(true);
+            connections += 1;
+            if connections > 1
+                && tx
+                    .send(SourceMsg::LinkResumed(format!("connection from {peer}")))
+                    .is_err()
+            {
+                return;
+            }
+            while !stop.load(Ordering::SeqCst) {
+                match Read::read(&mut stream, &mut buf) {
+                    Ok(0) => {
+                        let _ = tx.send(SourceMsg::End("connection closed by peer".into()));
+                        return;
+                    }
+                    Ok(n) => {
+                        if tx.send(SourceMsg::Data(buf[..n].to_vec())).is_err() {
+                            return;
+                        }
+                    }
+                    Err(e) if is_timeout(&e) => {}
+                    Err(e) => {
+                        if tx.send(SourceMsg::LinkLost(e.to_string())).is_err() {
+                            return;
+                        }
+                        continue 'accept;
+                    }
+                }
+            }
+        }
+    }))
 }
 
 fn is_timeout(e: &io::Error) -> bool {
