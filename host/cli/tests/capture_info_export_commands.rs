@@ -595,6 +595,15 @@ fn capture_setup_errors_exit_2_with_one_line_and_leave_no_file() {
         &out,
         "missing.bin: no such file or directory",
     );
+    // --tcp-listen on an address another program holds
+    let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = held.local_addr().unwrap().to_string();
+    assert_setup_error(
+        &["capture", "--tcp-listen", &addr, "--out", o],
+        &out,
+        &format!("tcp {addr}: address already in use"),
+    );
+    drop(held);
     let unwritable = dir.join("no/such/dir/run.jcap");
     assert_setup_error(
         &[
@@ -1046,5 +1055,44 @@ fn r13_late_start_capture_scales_every_sample_after_the_cut() {
     assert_eq!(v["damaged_frames"], serde_json::json!([]), "{v}");
     assert_eq!(v["samples"], full.len() as u64, "{v}");
     assert_eq!(std::fs::read(&replay).unwrap(), bytes);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue 13 item 19: `capture --tcp-listen` waits for the board to connect (QEMU with
+/// `-serial tcp:HOST:PORT`), records what it sends and stops at its end message.
+#[test]
+fn capture_tcp_listen_records_the_board_that_connects() {
+    let dir = tmpdir("listen");
+    let s = small();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let addr = format!("127.0.0.1:{port}");
+    let out = dir.join("run.jcap");
+    let mut child = Command::new(BIN)
+        .args(["capture", "--tcp-listen", &addr, "--out"])
+        .arg(&out)
+        .arg("--json")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // listening once the port can no longer be bound (a probe connection would be taken
+    // for the board)
+    wait_until("the capture listens", Duration::from_secs(10), || {
+        std::net::TcpListener::bind(&addr).is_err()
+    });
+    let mut board = std::net::TcpStream::connect(&addr).unwrap();
+    board.write_all(&s.bytes).unwrap();
+    let o = wait_exit(&mut child, Duration::from_secs(20));
+    drop(board);
+    let v = json_of(&o);
+    assert_eq!(v["samples"], 400, "{v}");
+    assert_eq!(v["ended"], true);
+    assert_eq!(v["damaged_frames"], serde_json::json!([]));
+    let raw = std::fs::read(&out).unwrap();
+    assert_eq!(&raw[8..], &s.bytes[..]);
     let _ = std::fs::remove_dir_all(&dir);
 }
