@@ -107,3 +107,68 @@ fn emulated_board_capture_over_tcp_is_complete_in_order_and_bit_exact() {
     assert_eq!(outcome.report.samples, total as u64);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue 13 item 19: the firmware README's recipe as written. `jointid capture
+/// --tcp-listen 127.0.0.1:PORT` listens (here through the same library path), then
+/// `JOINTID_SERIAL=tcp:127.0.0.1:PORT cargo fw-qemu-run` runs the cargo runner
+/// (`firmware/app/runner.sh`), whose QEMU connects to the capture as a client; the
+/// capture stops at the board's end message with every sample, bit exact.
+#[test]
+fn r19_readme_recipe_qemu_connects_to_a_listening_capture() {
+    let elf = emulated_firmware_elf().unwrap_or_else(|e| panic!("{e}"));
+    let port = free_port();
+    let addr = format!("127.0.0.1:{port}");
+    let dir = std::env::temp_dir().join(format!("jointid-qemu-listen-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let out: PathBuf = dir.join("board.jcap");
+    let mut opts = CaptureOptions::new(&out);
+    opts.stop.duration = Some(Duration::from_secs(120));
+    let spec = SourceSpec::TcpListen { addr: addr.clone() };
+    let interrupt = AtomicBool::new(false);
+    std::thread::scope(|scope| {
+        let capture = scope.spawn(|| record_capture(&spec, &opts, &interrupt, |_, _| {}));
+        // listening once the port can no longer be bound (no probe connection, which
+        // the capture would take for the board)
+        let t0 = Instant::now();
+        while TcpListener::bind(&addr).is_ok() {
+            assert!(
+                t0.elapsed() < Duration::from_secs(10),
+                "capture never listened"
+            );
+            assert!(!capture.is_finished(), "capture ended before listening");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let runner = jointid_tests::workspace_root().join("firmware/app/runner.sh");
+        let _qemu = KillOnDrop(
+            Command::new(&runner)
+                .arg(&elf)
+                .env("JOINTID_SERIAL", format!("tcp:{addr}"))
+                .env("JOINTID_QEMU_TIMEOUT", "120")
+                .stdin(Stdio::null())
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .unwrap_or_else(|e| {
+                    panic!("cannot start {} ({SETUP_HINT}): {e}", runner.display())
+                }),
+        );
+        let outcome = capture
+            .join()
+            .expect("capture thread")
+            .expect("capture from the emulated board");
+        assert_eq!(outcome.stop, StopReason::EndMessage, "{}", outcome.report);
+        assert!(outcome.report.is_clean(), "{}", outcome.report);
+    });
+    let rec = read_jcap(&out).expect("read the capture back");
+    let cfg = rec.header.excitation;
+    let total = cfg.total_samples().expect("a finite experiment") as usize;
+    assert!(rec.report.is_clean() && rec.report.ended, "{}", rec.report);
+    assert_eq!(rec.samples.len(), total);
+    let reference = jointid_core::excitation::generate(&cfg).unwrap();
+    for (k, (s, r)) in rec.samples.iter().zip(&reference).enumerate() {
+        assert_eq!(s.seq as usize, k);
+        assert_eq!(s.theta_ref, f64::from(*r), "seq {k}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

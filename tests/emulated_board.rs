@@ -6,7 +6,9 @@
 //!
 //! Checked against known truth, with no tolerance unless stated:
 //! - the byte stream decodes with the core's `wire::Decoder` without one
-//!   damaged frame; the session header comes first and the end message last;
+//!   damaged frame; the session header comes first and the end message last,
+//!   and the header comes again, unchanged, after every second of samples
+//!   (`wire::header_interval_samples`, 2000 samples: 40 batches of 50);
 //! - sequence numbers run 0, 1, 2, … with no gap and cover the whole run;
 //! - every batch's `reference_crc` equals the CRC-32 of the excitation that
 //!   the host regenerates from the header's config (the reference does not
@@ -117,10 +119,15 @@ fn emulated_board_streams_the_whole_run_intact_and_as_the_joint_model_predicts()
     let mut samples: Vec<RawSample> = Vec::with_capacity(reference.len());
     let mut end: Option<Status> = None;
     let mut last_status_seq = 0;
+    let interval = jointid_core::wire::header_interval_samples(header.sample_rate_hz) as usize;
+    let mut repeated_at = Vec::new();
     for (i, msg) in session.messages.iter().enumerate().skip(1) {
         assert!(end.is_none(), "message {i} after the end message: {msg:?}");
         match msg {
-            Message::Header(h) => panic!("second header at message {i}: {h:?}"),
+            Message::Header(h) => {
+                assert_eq!(h, header, "repeated header at message {i}");
+                repeated_at.push(samples.len());
+            }
             Message::Batch(batch) => {
                 let first = batch.first_seq() as usize;
                 assert_eq!(first, samples.len(), "sequence gap before message {i}");
@@ -151,6 +158,13 @@ fn emulated_board_streams_the_whole_run_intact_and_as_the_joint_model_predicts()
     }
     let end = end.expect("the stream ends with an end message");
     assert_eq!(samples.len(), reference.len(), "samples received");
+    assert_eq!(
+        repeated_at,
+        (1..=reference.len() / interval)
+            .map(|j| j * interval)
+            .collect::<Vec<_>>(),
+        "the header repeats after every {interval} samples"
+    );
     assert_eq!(end.seq as usize, reference.len(), "samples the board took");
     assert_eq!(
         (end.overruns, end.queue_drops, end.tx_errors),

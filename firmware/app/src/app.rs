@@ -68,6 +68,8 @@ pub fn start<S: FrameSink>(io: board::Io, link: S) -> Streamer<S> {
         batch_len: BATCH_LEN,
         status_every: STATUS_EVERY,
         max_samples_per_poll: QUEUE_LEN,
+        // the session header again every second, for a host that starts late
+        header_every: wire::header_interval_samples(SAMPLE_RATE_HZ),
     };
     Streamer {
         pump: TxPump::new(consumer, &COUNTERS, header(), config),

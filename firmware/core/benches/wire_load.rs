@@ -9,6 +9,10 @@
 //! second (63 stream bytes per frame), against a baseline measured in the same
 //! run: one frame per sample (postcard `RawSample` + CRC-32 + COBS).
 //!
+//! Also states what protocol version 2 costs for a capture that starts late:
+//! the session header repeated every `HEADER_INTERVAL_S` and the leading 0x00
+//! delimiter of every frame, in bytes per second and as a share of the stream.
+//!
 //! Run: `cargo bench -p jointid-core --features std --bench wire_load`
 
 use heapless::spsc::Queue;
@@ -21,7 +25,7 @@ use jointid_core::transport::can::{
 use jointid_core::transport::{FrameSink, TxError};
 use jointid_core::wire::{
     cobs_encode, cobs_max_len, Crc32, DecodeEvent, Decoder, Message, SessionHeader,
-    PROTOCOL_VERSION,
+    HEADER_INTERVAL_S, PROTOCOL_VERSION,
 };
 
 /// Collects frame lengths and the byte stream.
@@ -153,8 +157,16 @@ fn main() {
     // batches per (torque order, angle order) the encoder chose
     let mut orders = [[0usize; 3]; 3];
     let mut data_bytes = 0usize;
+    // framed bytes of the repeated headers (each with its leading delimiter)
+    let (mut headers, mut repeat_bytes) = (0usize, 0usize);
     dec.feed(&meter.stream, |e| match e {
-        DecodeEvent::Frame { message, .. } => match message {
+        DecodeEvent::Frame { message, len, .. } => match message {
+            Message::Header(_) => {
+                headers += 1;
+                if headers > 1 {
+                    repeat_bytes += len + 1;
+                }
+            }
             Message::Batch(b) => {
                 let (t, a) = b.predictor_orders();
                 orders[t as usize][a as usize] += 1;
@@ -202,10 +214,27 @@ fn main() {
     );
     let ours = load(&meter.frame_lens);
     report(
-        "batched (64 samples/batch, status every 16 batches, header + end)",
+        "batched (64 samples/batch, status every 16 batches, header every 1 s + end)",
         &ours,
         total,
         seconds,
+    );
+    let stream_bps = ours.bytes as f64 / seconds;
+    let repeat_bps = repeat_bytes as f64 / seconds;
+    let delim_bps = ours.frames as f64 / seconds;
+    println!(
+        "session header repeated every {HEADER_INTERVAL_S} s ({} repeats of {} bytes): \
+         {repeat_bps:.1} bytes/s, {:.2} % of the stream",
+        headers - 1,
+        repeat_bytes / (headers - 1).max(1),
+        100.0 * repeat_bps / stream_bps
+    );
+    println!(
+        "leading 0x00 before every frame: {delim_bps:.1} bytes/s, {:.2} % of the stream; \
+         together {:.1} bytes/s, {:.2} %",
+        100.0 * delim_bps / stream_bps,
+        repeat_bps + delim_bps,
+        100.0 * (repeat_bps + delim_bps) / stream_bps
     );
     let base = load(&baseline);
     report("baseline: one frame per sample", &base, total, seconds);

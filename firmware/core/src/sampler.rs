@@ -13,7 +13,10 @@
 //! The [`TxPump`] runs in the idle loop: it sends the [`SessionHeader`], pops
 //! samples, packs them into sample batches (`SampleBatch`),
 //! frames them and hands the frames to a [`FrameSink`], with a [`Status`]
-//! every few batches and [`Message::End`](crate::wire::Message::End) once the excitation has finished.
+//! every few batches, the header again after every
+//! [`PumpConfig::header_every`] samples (so a host that starts listening late
+//! can still scale the run) and [`Message::End`](crate::wire::Message::End)
+//! once the excitation has finished.
 //! Samples of a frame the sink could not send are counted as queue drops.
 
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
@@ -23,7 +26,8 @@ use heapless::spsc::{Consumer, Producer};
 use crate::excitation::Excitation;
 use crate::transport::FrameSink;
 use crate::wire::{
-    encode_frame_ref, BatchBuilder, MessageRef, RawSample, SessionHeader, Status, MAX_FRAME_LEN,
+    encode_frame_ref, header_interval_samples, BatchBuilder, MessageRef, RawSample, SessionHeader,
+    Status, MAX_FRAME_LEN,
 };
 
 /// Reads the motor torque reference u.
@@ -224,14 +228,21 @@ pub struct PumpConfig {
     pub status_every: u32,
     /// most samples moved per [`TxPump::poll`] (bounds the time of one poll)
     pub max_samples_per_poll: usize,
+    /// the session header again after the batch that completes every this many
+    /// samples since the last header (0 = only at the start); the board uses
+    /// [`header_interval_samples`]`(sample_rate_hz)`, one second
+    pub header_every: u32,
 }
 
 impl Default for PumpConfig {
+    /// Batches of 64, a status every 16 batches, the header every 2000 samples
+    /// (one second at 2 kHz).
     fn default() -> Self {
         Self {
             batch_len: 64,
             status_every: 16,
             max_samples_per_poll: 128,
+            header_every: header_interval_samples(2000),
         }
     }
 }
@@ -246,6 +257,8 @@ pub struct TxPump<'q> {
     header_sent: bool,
     done: bool,
     batches_since_status: u32,
+    /// samples batched since the last header
+    samples_since_header: u32,
     queue_drops: u32,
     frames_sent: u32,
     frame: [u8; MAX_FRAME_LEN],
@@ -272,6 +285,7 @@ impl<'q> TxPump<'q> {
             header_sent: false,
             done: false,
             batches_since_status: 0,
+            samples_since_header: 0,
             queue_drops: 0,
             frames_sent: 0,
             frame: [0; MAX_FRAME_LEN],
@@ -338,7 +352,8 @@ impl<'q> TxPump<'q> {
         }
     }
 
-    /// Sends the builder's finished batch, then a status if one is due.
+    /// Sends the builder's finished batch, then a status and the repeated
+    /// header if they are due.
     fn send_batch<S: FrameSink + ?Sized>(&mut self, sink: &mut S) {
         let batch = self.builder.batch();
         let len = batch.len() as u32;
@@ -356,6 +371,12 @@ impl<'q> TxPump<'q> {
             self.batches_since_status = 0;
             let status = self.status(sink);
             self.send(MessageRef::Status(&status), sink);
+        }
+        self.samples_since_header = self.samples_since_header.saturating_add(len);
+        if self.config.header_every > 0 && self.samples_since_header >= self.config.header_every {
+            self.samples_since_header = 0;
+            let header = self.header;
+            self.send(MessageRef::Header(&header), sink);
         }
     }
 
@@ -475,6 +496,15 @@ mod tests {
 
     /// Runs a session; the pump is polled every `poll_every` ticks.
     fn run(poll_every: u32, fail_every: u32) -> (Vec<DecodeEvent>, Vec<f32>, VecSink) {
+        run_with(poll_every, fail_every, PumpConfig::default())
+    }
+
+    /// [`run`] with the pump's settings.
+    fn run_with(
+        poll_every: u32,
+        fail_every: u32,
+        config: PumpConfig,
+    ) -> (Vec<DecodeEvent>, Vec<f32>, VecSink) {
         let cfg = small_config();
         let mut table = [0.0f32; 1000];
         let exc = Excitation::new(&cfg, &mut table).unwrap();
@@ -482,7 +512,7 @@ mod tests {
         let (producer, consumer) = queue.split();
         let counters = Counters::new();
         let mut sampler = Sampler::new(exc, producer, &counters);
-        let mut pump = TxPump::new(consumer, &counters, header(cfg), PumpConfig::default());
+        let mut pump = TxPump::new(consumer, &counters, header(cfg), config);
         let mut joint = FakeJoint::default();
         let mut sink = VecSink {
             bytes: Vec::new(),
@@ -526,8 +556,9 @@ mod tests {
             };
             match message {
                 Message::Header(h) => {
-                    assert_eq!(i, 0);
-                    assert_eq!(h.excitation, cfg);
+                    // the first frame, then repeated unchanged
+                    assert!(i == 0 || matches!(events[0], DecodeEvent::Frame { .. }));
+                    assert_eq!(*h, header(cfg));
                 }
                 Message::Batch(b) => {
                     let k0 = b.first_seq() as usize;
@@ -570,6 +601,54 @@ mod tests {
                 tx_errors: 0
             }
         );
+    }
+
+    #[test]
+    fn header_is_repeated_after_the_batch_completing_each_interval() {
+        let config = PumpConfig {
+            header_every: 500,
+            ..PumpConfig::default()
+        };
+        let (events, refs, _) = run_with(8, 0, config);
+        let (decoded, _) = check_session(&events, &refs);
+        assert_eq!(decoded, 3400);
+        // batches of 64: 8 batches (512 samples) reach 500, so a header follows
+        // the batches ending at seq 511, 1023, ... 3071 (after a status if one is due)
+        let mut next_seq = 0u32;
+        let mut repeats = Vec::new();
+        for (i, e) in events.iter().enumerate() {
+            match e {
+                DecodeEvent::Frame {
+                    message: Message::Header(_),
+                    ..
+                } if i > 0 => repeats.push(next_seq),
+                DecodeEvent::Frame {
+                    message: Message::Batch(b),
+                    ..
+                } => next_seq = b.first_seq() + b.len() as u32,
+                _ => {}
+            }
+        }
+        assert_eq!(repeats, (1..=6).map(|j| 512 * j).collect::<Vec<u32>>());
+        // header_every = 0: the header only at the start
+        let once = PumpConfig {
+            header_every: 0,
+            ..PumpConfig::default()
+        };
+        let (events, _, _) = run_with(8, 0, once);
+        let headers = events
+            .iter()
+            .filter(|e| {
+                matches!(
+                    e,
+                    DecodeEvent::Frame {
+                        message: Message::Header(_),
+                        ..
+                    }
+                )
+            })
+            .count();
+        assert_eq!(headers, 1);
     }
 
     #[test]

@@ -29,13 +29,13 @@ pub const DEFAULT_BAUD: u32 = 921_600;
 
 /// Arguments of `jointid capture`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
-#[command(group(clap::ArgGroup::new("source").required(true).args(["serial", "can", "tcp", "file"])))]
+#[command(group(clap::ArgGroup::new("source").required(true).args(["serial", "can", "tcp", "tcp_listen", "file"])))]
 pub struct CaptureArgs {
     /// Serial port to read (`/dev/ttyACM0`, `COM3`); reopened after an unplug
     #[arg(long, value_name = "PORT")]
     pub serial: Option<String>,
     /// Baud rate of the serial port [bit/s] (default 921600)
-    #[arg(long, value_name = "N", conflicts_with_all = ["can", "tcp", "file"],
+    #[arg(long, value_name = "N", conflicts_with_all = ["can", "tcp", "tcp_listen", "file"],
           value_parser = clap::value_parser!(u32).range(1..))]
     pub baud: Option<u32>,
     /// SocketCAN interface to read (`can0`), classic and FD frames (Linux)
@@ -43,11 +43,17 @@ pub struct CaptureArgs {
     pub can: Option<String>,
     /// CAN identifier of the board's frames: `0x101` (the firmware's), any standard or
     /// extended id in hex or decimal, or `any`
-    #[arg(long, value_name = "ID", conflicts_with_all = ["serial", "tcp", "file"], value_parser = parse_can_id)]
+    #[arg(long, value_name = "ID", conflicts_with_all = ["serial", "tcp", "tcp_listen", "file"], value_parser = parse_can_id)]
     pub can_id: Option<CanId>,
-    /// TCP endpoint to read, `HOST:PORT` (the emulated board's UART)
+    /// TCP endpoint to connect to and read, `HOST:PORT` (the emulated board's UART as a
+    /// server: QEMU `-serial tcp:HOST:PORT,server=on`)
     #[arg(long, value_name = "HOST:PORT")]
     pub tcp: Option<String>,
+    /// TCP address to listen on, `HOST:PORT`, until the board connects and while it
+    /// sends (QEMU `-serial tcp:HOST:PORT`, as `JOINTID_SERIAL=tcp:HOST:PORT cargo
+    /// fw-qemu-run` does)
+    #[arg(long, value_name = "HOST:PORT")]
+    pub tcp_listen: Option<String>,
     /// Raw byte stream to read: a recorded stream, a named pipe or a pty
     #[arg(long, value_name = "PATH")]
     pub file: Option<PathBuf>,
@@ -135,6 +141,8 @@ impl CaptureArgs {
             }
         } else if let Some(addr) = &self.tcp {
             SourceSpec::Tcp { addr: addr.clone() }
+        } else if let Some(addr) = &self.tcp_listen {
+            SourceSpec::TcpListen { addr: addr.clone() }
         } else {
             // the argument group guarantees one source
             SourceSpec::File {
@@ -341,6 +349,13 @@ mod tests {
         assert_eq!(
             a.validate().1.stop.duration,
             Some(Duration::from_millis(2500))
+        );
+        let a = parse(&["--tcp-listen", "127.0.0.1:4000", "--out", "r.jcap"]).unwrap();
+        assert_eq!(
+            a.validate().0,
+            SourceSpec::TcpListen {
+                addr: "127.0.0.1:4000".into()
+            }
         );
         let a = parse(&["--file", "s.bin", "--out", "r.jcap"]).unwrap();
         assert_eq!(

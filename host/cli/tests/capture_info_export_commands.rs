@@ -595,6 +595,15 @@ fn capture_setup_errors_exit_2_with_one_line_and_leave_no_file() {
         &out,
         "missing.bin: no such file or directory",
     );
+    // --tcp-listen on an address another program holds
+    let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = held.local_addr().unwrap().to_string();
+    assert_setup_error(
+        &["capture", "--tcp-listen", &addr, "--out", o],
+        &out,
+        &format!("tcp {addr}: address already in use"),
+    );
+    drop(held);
     let unwritable = dir.join("no/such/dir/run.jcap");
     assert_setup_error(
         &[
@@ -962,6 +971,7 @@ fn export_refuses_a_capture_whose_scale_makes_samples_not_finite() {
         status_every: 4,
         overruns: 0,
         end: true,
+        header_every: 0,
     };
     let stream = encode_stream(&header, samples, 5000, &layout).unwrap();
     let jcap = dir.join("inf.jcap");
@@ -988,4 +998,101 @@ fn export_refuses_a_capture_whose_scale_makes_samples_not_finite() {
         "only the capture"
     );
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The rows of a capture CSV keyed by their time `t` [s] as bits (exact match).
+fn rows_by_t(rows: &[[f64; 4]]) -> BTreeMap<u64, [f64; 4]> {
+    rows.iter().map(|r| (r[0].to_bits(), *r)).collect()
+}
+
+/// Issue 13 item 1: a capture that starts after the board's first session header
+/// (`tail -c +9 run.jcap | tail -c +20000 > late.raw`) keeps every sample after the cut,
+/// scaled with the header the board repeats, and exports exactly the rows of the whole
+/// run for those samples; the `.jcap` replayed through `capture --file` (magic included)
+/// reads as the original.
+#[test]
+fn r13_late_start_capture_scales_every_sample_after_the_cut() {
+    let dir = tmpdir("late");
+    let run = dir.join("run.jcap");
+    let o = jointid(&["simulate", "--periods", "2", "--out", run.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (_, full) = export_csv(&run, &dir.join("run.csv"));
+    let full = rows_by_t(&full);
+    let bytes = std::fs::read(&run).unwrap();
+    // `tail -c +9 | tail -c +20000`: drop the 8-byte magic, then 19,999 stream bytes
+    let late_raw = dir.join("late.raw");
+    std::fs::write(&late_raw, &bytes[8 + 19_999..]).unwrap();
+    let late = dir.join("late.jcap");
+    let v = json_of(&jointid(&[
+        "capture",
+        "--file",
+        late_raw.to_str().unwrap(),
+        "--out",
+        late.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(v["samples_without_header"], 0, "{v}");
+    let samples = v["samples"].as_u64().unwrap();
+    let first = v["first_seq"].as_u64().unwrap();
+    assert!(first > 0 && samples > 0, "{v}");
+    // the cut loses one frame at most; everything after it is kept
+    assert_eq!(first + samples, full.len() as u64, "{v}");
+    let (_, rows) = export_csv(&late, &dir.join("late.csv"));
+    assert_eq!(rows.len() as u64, samples);
+    for r in &rows {
+        assert_eq!(full.get(&r[0].to_bits()), Some(r), "row at t = {}", r[0]);
+    }
+    // the whole .jcap, its magic included, replayed as a raw file
+    let replay = dir.join("replay.jcap");
+    let v = json_of(&jointid(&[
+        "capture",
+        "--file",
+        run.to_str().unwrap(),
+        "--out",
+        replay.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(v["damaged_frames"], serde_json::json!([]), "{v}");
+    assert_eq!(v["samples"], full.len() as u64, "{v}");
+    assert_eq!(std::fs::read(&replay).unwrap(), bytes);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue 13 item 19: `capture --tcp-listen` waits for the board to connect (QEMU with
+/// `-serial tcp:HOST:PORT`), records what it sends and stops at its end message.
+#[test]
+fn capture_tcp_listen_records_the_board_that_connects() {
+    let dir = tmpdir("listen");
+    let s = small();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let addr = format!("127.0.0.1:{port}");
+    let out = dir.join("run.jcap");
+    let mut child = Command::new(BIN)
+        .args(["capture", "--tcp-listen", &addr, "--out"])
+        .arg(&out)
+        .arg("--json")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // listening once the port can no longer be bound (a probe connection would be taken
+    // for the board)
+    wait_until("the capture listens", Duration::from_secs(10), || {
+        std::net::TcpListener::bind(&addr).is_err()
+    });
+    let mut board = std::net::TcpStream::connect(&addr).unwrap();
+    board.write_all(&s.bytes).unwrap();
+    let o = wait_exit(&mut child, Duration::from_secs(20));
+    drop(board);
+    let v = json_of(&o);
+    assert_eq!(v["samples"], 400, "{v}");
+    assert_eq!(v["ended"], true);
+    assert_eq!(v["damaged_frames"], serde_json::json!([]));
+    let raw = std::fs::read(&out).unwrap();
+    assert_eq!(&raw[8..], &s.bytes[..]);
+    let _ = std::fs::remove_dir_all(&dir);
 }

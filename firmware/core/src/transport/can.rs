@@ -5,8 +5,12 @@
 //!
 //! ```text
 //! byte 0: bit 7 = first fragment of a wire frame, bits 6..0 = rolling counter (mod 128)
-//! bytes 1..: the next bytes of the COBS-encoded wire frame (its 0x00 delimiter ends it)
+//! bytes 1..: the next bytes of the wire frame (a 0x00 after its first byte ends it)
 //! ```
+//!
+//! A wire frame starts with its own 0x00 delimiter (protocol version 2); the
+//! reassembler keeps that leading zero and ends the frame at the next one, so
+//! the reassembled stream is byte for byte the serial stream.
 //!
 //! The counter increases by one per CAN frame across the whole stream, so the
 //! [`Reassembler`] notices a lost, repeated or reordered CAN frame, discards
@@ -279,6 +283,18 @@ impl Reassembler {
                 return;
             }
             let expected = last.wrapping_add(1) & COUNTER_MASK;
+            if counter == last.wrapping_sub(1) & COUNTER_MASK {
+                // one behind the last one taken: a CAN frame swapped with its
+                // successor, which was taken (and reported) already; accepting
+                // it now would deliver its wire frame out of order
+                self.stats.lost += 1;
+                on_event(ReassemblyEvent::Lost {
+                    expected,
+                    got: counter,
+                    discarded: 0,
+                });
+                return;
+            }
             if counter != expected {
                 self.stats.lost += 1;
                 let discarded = if self.in_frame { self.len } else { 0 };
@@ -321,7 +337,8 @@ impl Reassembler {
             }
             self.buf[self.len] = b;
             self.len += 1;
-            if b == 0 {
+            // a zero as the first byte is the frame's leading delimiter
+            if b == 0 && self.len > 1 {
                 // delimiter: the rest of this CAN frame is padding
                 let n = self.len;
                 self.in_frame = false;
@@ -493,10 +510,9 @@ mod tests {
         // nothing false, in order
         let mut next = 0;
         for m in &decoded {
-            let pos = msgs[next..]
-                .iter()
-                .position(|x| x == m)
-                .expect("decoded a message that was not sent, or out of order");
+            let pos = msgs[next..].iter().position(|x| x == m).unwrap_or_else(|| {
+                panic!("decoded a message that was not sent, or out of order: {m:?} after {next}")
+            });
             next += pos + 1;
         }
         // every untouched wire frame arrives

@@ -202,7 +202,8 @@ mod tests {
         };
         let (mut frames, mut owner) = (Vec::new(), Vec::new());
         for (w, f) in s.frames.iter().enumerate() {
-            let bytes = &s.bytes[f.offset as usize..(f.offset + f.len) as usize];
+            // the whole wire frame: its leading delimiter lies just before the span
+            let bytes = &s.bytes[f.offset as usize - 1..(f.offset + f.len) as usize];
             fr.fragment(bytes, |m: Mem| {
                 frames.push(m);
                 owner.push(w);
@@ -282,10 +283,11 @@ mod tests {
             // head and tail of it arrived, one CAN payload is missing
             let payload = if fd { 63 } else { 7 };
             assert_eq!(report.damaged_frames[0].len, s.frames[mid_w].len - payload);
-            // the other is its tail from where the stream had reached it
-            let tail_len = s.frames[head_w].len - payload;
-            let head_at =
-                report.damaged_frames[0].len + s.frames[head_w].offset - s.frames[mid_w].len;
+            // the other is its tail (its first CAN payload, leading delimiter included,
+            // is lost) from where the stream had reached its wire frame: the span's
+            // offset less its leading delimiter, less the payload lost from `mid_w`
+            let tail_len = s.frames[head_w].len + 1 - payload;
+            let head_at = s.frames[head_w].offset - 1 - payload;
             assert_eq!(report.damaged_frames[1].len, tail_len);
             assert_eq!(report.damaged_frames[1].offset, head_at);
             let lost = |w: usize| match s.frames[w].content {

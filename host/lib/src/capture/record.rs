@@ -11,6 +11,13 @@
 //! header's scale as it arrives; at [`StreamAnalyzer::finish`] it checks every batch's
 //! reference CRC against slices of that period.
 //!
+//! Samples that arrive before any session header (a capture started late, after the
+//! board's first header) are held raw and given to the session of the first header that
+//! follows (the board repeats its header every second, `jointid_core::wire::
+//! HEADER_INTERVAL_S`), scaled and checked like the others; only those of a session whose
+//! `End` arrives before any header, or of a stream that holds no header at all, stay
+//! unscaled and are counted as samples without a header.
+//!
 //! **Invariant**: nothing is interpolated or invented. Samples are kept exactly as they
 //! arrived (each sequence number once); the report says where the holes are.
 
@@ -88,6 +95,10 @@ pub struct StreamAnalyzer {
     duplicates: u64,
     out_of_order: u64,
     without_header: u64,
+    /// batches received before any session header, held raw until one arrives
+    pending: Vec<BatchRef>,
+    /// their samples, in arrival order
+    pending_samples: Vec<RawSample>,
     other_sessions: u64,
     board: BoardCounters,
     ended: bool,
@@ -129,6 +140,8 @@ impl StreamAnalyzer {
             duplicates: 0,
             out_of_order: 0,
             without_header: 0,
+            pending: Vec::new(),
+            pending_samples: Vec::new(),
             other_sessions: 0,
             board: BoardCounters::default(),
             ended: false,
@@ -360,7 +373,26 @@ impl StreamAnalyzer {
                 );
             }
         }
+        let first = self.current.is_none();
         self.current = Some(idx);
+        if first {
+            self.adopt_pending();
+        }
+    }
+
+    /// Gives the batches held since the start of the stream to the session that just
+    /// announced itself, in arrival order, as if they had followed its header.
+    fn adopt_pending(&mut self) {
+        let batches = std::mem::take(&mut self.pending);
+        let samples = std::mem::take(&mut self.pending_samples);
+        let mut at = 0usize;
+        for b in batches {
+            let n = b.len as usize;
+            self.without_header -= u64::from(b.len);
+            let raw = samples.get(at..at + n).unwrap_or(&[]);
+            at += n;
+            self.on_batch(b.first_seq, b.len, b.crc, raw.iter().copied());
+        }
     }
 
     fn on_batch(
@@ -372,7 +404,16 @@ impl StreamAnalyzer {
     ) {
         let n = u64::from(len);
         match self.current {
-            None => self.without_header += n,
+            None => {
+                // held raw until a header says how to scale them
+                self.without_header += n;
+                self.pending.push(BatchRef {
+                    first_seq,
+                    len,
+                    crc,
+                });
+                self.pending_samples.extend(samples);
+            }
             Some(i) => {
                 self.sessions[i].samples += n;
                 if self.reported != Some(i) {
@@ -390,6 +431,11 @@ impl StreamAnalyzer {
     }
 
     fn on_status(&mut self, s: &Status, end: bool) {
+        if end && self.current.is_none() {
+            // a session ended before any header: its samples stay without one
+            self.pending.clear();
+            self.pending_samples.clear();
+        }
         if self.current.is_some() && self.current == self.reported {
             self.board = counters(s);
             if end {
@@ -1070,6 +1116,67 @@ mod tests {
         assert!(report.damaged_frames.is_empty());
     }
 
+    /// Issue 13 item 1: a capture that starts anywhere in a stream whose header repeats
+    /// keeps every sample after its first whole frame, scaled and with its reference, as
+    /// the capture of the whole stream has it, whatever the reading path.
+    #[test]
+    fn r13_samples_before_the_first_header_seen_are_scaled_when_it_arrives() {
+        use crate::sim::board::{encode_stream, StreamLayout};
+        let s = synth_stream(&SynthOptions::small());
+        let layout = StreamLayout {
+            batch_len: 16,
+            status_every: 4,
+            overruns: 0,
+            end: true,
+            header_every: 100,
+        };
+        let tick_step = s.samples[1].tick.wrapping_sub(s.samples[0].tick);
+        let pairs = s.samples.iter().copied().zip(s.reference.iter().copied());
+        let stream = encode_stream(&s.header, pairs, tick_step, &layout).unwrap();
+        let headers = stream
+            .frames
+            .iter()
+            .filter(|f| f.content == FrameContent::Header)
+            .count();
+        assert_eq!(headers, 4, "at the start and after seq 111, 207, 303");
+        let (_, full) = decode(&stream.bytes, 4096);
+        assert_eq!(full.samples.len(), 400);
+        let last_header = stream
+            .frames
+            .iter()
+            .rfind(|f| f.content == FrameContent::Header)
+            .unwrap();
+        for cut in (3..last_header.offset as usize).step_by(41) {
+            let late = &stream.bytes[cut..];
+            for chunk in [7, 4096] {
+                let (report, rec) = decode(late, chunk);
+                assert_eq!(report.samples_without_header, 0, "cut {cut}");
+                // only the batch the cut fell into is lost: a frame whose body starts
+                // at or after the cut is whole
+                let first = stream
+                    .frames
+                    .iter()
+                    .find_map(|f| match f.content {
+                        FrameContent::Batch { first, .. } if f.offset as usize >= cut => {
+                            Some(first as usize)
+                        }
+                        _ => None,
+                    })
+                    .unwrap();
+                assert_eq!(rec.samples[0].seq as usize, first, "cut {cut}");
+                assert_eq!(rec.samples, full.samples[first..], "cut {cut}");
+                assert!(report.reference_mismatches.is_empty(), "cut {cut}");
+            }
+            let mut an = StreamAnalyzer::new(true);
+            an.feed_parallel(late, &[], 3, 64);
+            let (report, rec) = an.finish().unwrap();
+            assert_eq!(report.samples_without_header, 0, "parallel, cut {cut}");
+            let rec = rec.unwrap();
+            let first = rec.samples[0].seq as usize;
+            assert_eq!(rec.samples, full.samples[first..], "parallel, cut {cut}");
+        }
+    }
+
     #[test]
     fn analyzer_counts_samples_without_header_and_of_other_sessions_apart() {
         let opts = SynthOptions::small();
@@ -1089,7 +1196,8 @@ mod tests {
         assert_eq!(report.sessions.len(), 2);
         assert_eq!(
             report.sessions[1].offset,
-            (s.bytes.len() - s.frames[0].len as usize + t.bytes.len()) as u64
+            // the header of the second `s`, after its leading delimiter
+            (s.bytes.len() - s.frames[0].len as usize + t.bytes.len()) as u64 + s.frames[0].offset
         );
         assert_eq!(rec.header.session_id, 8);
     }

@@ -119,7 +119,9 @@ pub struct CaptureReport {
     pub out_of_order: u64,
     /// batches whose reference CRC disagrees with the regenerated reference
     pub reference_mismatches: Vec<ReferenceMismatch>,
-    /// samples that arrived before any session header (cannot be scaled; not kept)
+    /// samples no session header can scale (not kept): those of a stream without any
+    /// header, or of a session whose `End` came before any header; samples received
+    /// before the first header of their session are scaled with it and not counted here
     pub samples_without_header: u64,
     /// samples of sessions other than the reported one (not kept)
     pub samples_other_sessions: u64,
@@ -226,7 +228,7 @@ impl fmt::Display for CaptureReport {
         if self.samples_without_header > 0 {
             writeln!(
                 f,
-                "no header        {} samples arrived before any session header",
+                "no header        {} samples have no session header to scale them (none arrived for their session)",
                 self.samples_without_header
             )?;
         }

@@ -20,7 +20,7 @@
 
 use std::fs::File;
 use std::io::{self, Read};
-use std::net::{TcpStream, ToSocketAddrs};
+use std::net::{TcpListener, TcpStream, ToSocketAddrs};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
@@ -50,12 +50,21 @@ pub enum SourceSpec {
         /// identifier of the board's frames (`None`: every data frame)
         id: Option<embedded_can::Id>,
     },
-    /// TCP endpoint `HOST:PORT` (the emulated board's UART)
+    /// TCP endpoint `HOST:PORT` to connect to (the emulated board's UART as a server,
+    /// QEMU `-serial tcp:HOST:PORT,server=on`)
     Tcp {
         /// `HOST:PORT`
         addr: String,
     },
-    /// raw byte stream from a file, named pipe or pty
+    /// TCP address `HOST:PORT` to listen on for the board to connect (QEMU
+    /// `-serial tcp:HOST:PORT`, the firmware README's `JOINTID_SERIAL` recipe); one
+    /// connection at a time, a new one accepted after a connection is reset
+    TcpListen {
+        /// `HOST:PORT`
+        addr: String,
+    },
+    /// raw byte stream from a file, named pipe or pty; a stream that starts with the
+    /// `.jcap` magic (a capture file replayed) is read from the byte after it
     File {
         /// path of the file
         path: PathBuf,
@@ -76,6 +85,7 @@ impl std::fmt::Display for SourceSpec {
                 id: Some(embedded_can::Id::Extended(id)),
             } => write!(f, "can {iface} id {:#010x}", id.as_raw()),
             Self::Tcp { addr } => write!(f, "tcp {addr}"),
+            Self::TcpListen { addr } => write!(f, "tcp listening on {addr}"),
             Self::File { path } => write!(f, "file {}", path.display()),
         }
     }
@@ -262,6 +272,7 @@ impl SourceSpec {
                     open_tcp(&addr)
                 })
             }
+            Self::TcpListen { addr } => spawn_listen(addr, tx, stop.clone())?,
             Self::File { path } => spawn_file(path.clone(), tx, stop.clone(), name.clone())?,
             Self::Can { iface, id } => {
                 can::spawn(iface, *id, tx, stop.clone(), name.clone(), retry)?
@@ -312,6 +323,78 @@ fn open_tcp(addr: &str) -> Result<TcpStream, SourceError> {
         }
     }
     Err(err(last))
+}
+
+/// Binds `addr` here (an address in use or that does not resolve is a setup error) and
+/// starts the thread that accepts the board's connection and reads it. The peer closing
+/// the connection ends the stream; a connection reset is a link loss, and the thread
+/// then waits for the next connection.
+fn spawn_listen(
+    addr: &str,
+    tx: Sender<SourceMsg>,
+    stop: Arc<AtomicBool>,
+) -> Result<JoinHandle<()>, SourceError> {
+    let err = |source| SourceError::Tcp {
+        addr: addr.to_string(),
+        err: source,
+    };
+    let listener = TcpListener::bind(addr).map_err(err)?;
+    // accept polls, so that a stop is honoured while no board has connected
+    listener.set_nonblocking(true).map_err(err)?;
+    Ok(std::thread::spawn(move || {
+        let mut buf = vec![0u8; CHUNK];
+        let mut connections = 0u64;
+        'accept: while !stop.load(Ordering::SeqCst) {
+            let (mut stream, peer) = match listener.accept() {
+                Ok(c) => c,
+                Err(e) if is_timeout(&e) => {
+                    std::thread::sleep(READ_TIMEOUT);
+                    continue;
+                }
+                Err(e) => {
+                    let _ = tx.send(SourceMsg::LinkLost(format!("accept: {e}")));
+                    std::thread::sleep(READ_TIMEOUT);
+                    continue;
+                }
+            };
+            let ready = stream
+                .set_nonblocking(false)
+                .and_then(|()| stream.set_read_timeout(Some(READ_TIMEOUT)));
+            if let Err(e) = ready {
+                let _ = tx.send(SourceMsg::LinkLost(format!("connection from {peer}: {e}")));
+                continue;
+            }
+            let _ = stream.set_nodelay(true);
+            connections += 1;
+            if connections > 1
+                && tx
+                    .send(SourceMsg::LinkResumed(format!("connection from {peer}")))
+                    .is_err()
+            {
+                return;
+            }
+            while !stop.load(Ordering::SeqCst) {
+                match Read::read(&mut stream, &mut buf) {
+                    Ok(0) => {
+                        let _ = tx.send(SourceMsg::End("connection closed by peer".into()));
+                        return;
+                    }
+                    Ok(n) => {
+                        if tx.send(SourceMsg::Data(buf[..n].to_vec())).is_err() {
+                            return;
+                        }
+                    }
+                    Err(e) if is_timeout(&e) => {}
+                    Err(e) => {
+                        if tx.send(SourceMsg::LinkLost(e.to_string())).is_err() {
+                            return;
+                        }
+                        continue 'accept;
+                    }
+                }
+            }
+        }
+    }))
 }
 
 fn is_timeout(e: &io::Error) -> bool {
@@ -375,6 +458,22 @@ where
     })
 }
 
+/// Adds `bytes` to the held `head` of a file; once it holds as many bytes as the `.jcap`
+/// magic (or differs from it), returns the stream bytes: everything but a leading magic.
+/// `None` while the head is still a proper prefix of the magic.
+fn strip_magic(head: &mut Vec<u8>, bytes: &[u8]) -> Option<Vec<u8>> {
+    let magic = &super::jcap::MAGIC;
+    head.extend_from_slice(bytes);
+    let n = head.len().min(magic.len());
+    if head[..n] != magic[..n] {
+        return Some(std::mem::take(head));
+    }
+    if head.len() < magic.len() {
+        return None;
+    }
+    Some(head.split_off(magic.len()))
+}
+
 /// Reader thread for `--file`: regular files, named pipes and ptys.
 ///
 /// A regular file or pty is opened here (a missing or unreadable file is a setup error);
@@ -419,15 +518,30 @@ fn spawn_file(
         };
         let mut buf = vec![0u8; CHUNK];
         let mut offset = 0u64;
+        // the first bytes, held until they can be told from a `.jcap` magic
+        let mut head = Some(Vec::with_capacity(super::jcap::MAGIC.len()));
         while !stop.load(Ordering::SeqCst) {
             match Read::read(&mut file, &mut buf) {
                 Ok(0) => {
+                    if let Some(h) = head.take().filter(|h| !h.is_empty()) {
+                        let _ = tx.send(SourceMsg::Data(h));
+                    }
                     let _ = tx.send(SourceMsg::End("end of file".into()));
                     return;
                 }
                 Ok(n) => {
                     offset += n as u64;
-                    if tx.send(SourceMsg::Data(buf[..n].to_vec())).is_err() {
+                    let data = match head.as_mut() {
+                        Some(h) => match strip_magic(h, &buf[..n]) {
+                            Some(rest) => {
+                                head = None;
+                                rest
+                            }
+                            None => continue,
+                        },
+                        None => buf[..n].to_vec(),
+                    };
+                    if !data.is_empty() && tx.send(SourceMsg::Data(data)).is_err() {
                         return;
                     }
                 }
@@ -540,5 +654,36 @@ mod can {
         Err(SourceError::CanUnsupported {
             iface: iface.to_string(),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strip_magic_drops_a_leading_jcap_magic_fed_in_any_pieces() {
+        let mut stream = super::super::jcap::MAGIC.to_vec();
+        stream.extend_from_slice(&[0, 5, 1, 2, 0]);
+        for cut in 0..stream.len() {
+            let mut head = Vec::new();
+            let mut out = Vec::new();
+            let mut done = false;
+            for piece in [&stream[..cut], &stream[cut..]] {
+                if done {
+                    out.extend_from_slice(piece);
+                } else if let Some(rest) = strip_magic(&mut head, piece) {
+                    out.extend(rest);
+                    done = true;
+                }
+            }
+            assert_eq!(out, [0, 5, 1, 2, 0], "cut at {cut}");
+        }
+        // a raw stream, even one that starts like the magic, is passed whole
+        let mut head = Vec::new();
+        assert_eq!(strip_magic(&mut head, b"JCA"), None);
+        assert_eq!(strip_magic(&mut head, b"X\0"), Some(b"JCAX\0".to_vec()));
+        let mut head = Vec::new();
+        assert_eq!(strip_magic(&mut head, &[0, 1]), Some(vec![0, 1]));
     }
 }

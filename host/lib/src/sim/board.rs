@@ -1,7 +1,8 @@
-//! A simulated run as the byte stream a board sends: the session header, delta-coded
+//! A simulated run as the byte stream a board sends: the session header (repeated after
+//! every second of samples, `jointid_core::wire::header_interval_samples`), delta-coded
 //! sample batches with the reference CRC, periodic `Status`, `End`, each message one frame
-//! of `jointid_core::wire::encode_frame` (COBS, CRC-32), so the capture path reads a
-//! simulated run exactly as a board capture. [`encode_stream`] is the one encoder of such
+//! of `jointid_core::wire::encode_frame` (0x00, COBS, CRC-32, 0x00), so the capture path
+//! reads a simulated run exactly as a board capture. [`encode_stream`] is the one encoder of such
 //! streams on the host (the simulator's runs, the paper experiment's, the capture
 //! fixtures'); the board itself runs the firmware core's sampler and transport.
 //!
@@ -14,8 +15,8 @@
 
 use jointid_core::excitation::ExcitationConfig;
 use jointid_core::wire::{
-    encode_frame, BatchBuilder, EncodeError, Message, RawSample, Scale, SessionHeader, Status,
-    MAX_FRAME_LEN, PROTOCOL_VERSION,
+    encode_frame, header_interval_samples, BatchBuilder, EncodeError, Message, RawSample, Scale,
+    SessionHeader, Status, MAX_FRAME_LEN, PROTOCOL_VERSION,
 };
 
 use super::{SimConfig, SimOutput, WireRangeError};
@@ -101,7 +102,9 @@ impl WireOptions {
 
 /// Encodes a simulated run as the stream a board sends: session header, sample batches
 /// (`BatchBuilder`, with the reference CRC), a `Status` every `opts.status_every`
-/// batches, `End`; each message one frame of `jointid_core::wire::encode_frame`.
+/// batches, the header again after every second of samples as the board sends it
+/// (`header_interval_samples`), `End`; each message one frame of
+/// `jointid_core::wire::encode_frame`.
 ///
 /// `out` must be `simulate_excitation(cfg, excitation)` (or the same reference through
 /// `simulate_f32`): the reader regenerates the reference from the header and reports
@@ -124,6 +127,7 @@ pub fn encode_session(
         status_every: opts.status_every,
         overruns: 0,
         end: true,
+        header_every: header_interval_samples(excitation.fs_hz) as usize,
     };
     let samples = raw.iter().zip(&out.theta_ref).map(|(s, &r)| (*s, r as f32));
     Ok(encode_stream(&header, samples, tick_step, &layout)?.bytes)
@@ -140,6 +144,9 @@ pub struct StreamLayout {
     pub overruns: u32,
     /// end with an `End` message
     pub end: bool,
+    /// the header again after the batch (and status) that completes every this many
+    /// samples since the last header, as the board's pump does (0 = only first)
+    pub header_every: usize,
 }
 
 /// What a frame carries.
@@ -160,12 +167,13 @@ pub enum FrameContent {
     End,
 }
 
-/// Where one frame lies in the stream.
+/// Where one frame lies in the stream, as the decoder reports it: after the frame's
+/// leading `0x00` delimiter (the byte at `offset − 1`, outside the span).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FrameSpan {
-    /// stream offset of the frame's first byte [bytes]
+    /// stream offset of the frame's first byte after its leading `0x00` [bytes]
     pub offset: u64,
-    /// bytes including the `0x00` delimiter [bytes]
+    /// bytes including the closing `0x00` delimiter [bytes]
     pub len: u64,
     /// what it carries
     pub content: FrameContent,
@@ -183,9 +191,10 @@ pub struct BoardStream {
 /// The one encoder of a board's stream: `header`, then the samples with their reference
 /// `θref` [rad] in batches of `layout.batch_len` (`BatchBuilder` with tick step
 /// `tick_step` [timer ticks], reference CRC), a `Status` (seq of the next sample, the
-/// layout's overruns) after every `layout.status_every` batches, and `End` (seq = the
-/// number of samples) when `layout.end`; each message one frame of
-/// `jointid_core::wire::encode_frame`.
+/// layout's overruns) after every `layout.status_every` batches, the header again after
+/// every `layout.header_every` samples, and `End` (seq = the number of samples) when
+/// `layout.end`; each message one frame of `jointid_core::wire::encode_frame`, in the
+/// order the firmware's `TxPump` sends them.
 ///
 /// Used by [`encode_session`] (a simulated run) and by the capture fixtures
 /// (`crate::test_support::synth`).
@@ -207,9 +216,10 @@ pub fn encode_stream(
         let index = out.frames.len();
         let n =
             encode_frame(msg, &mut buf).map_err(|err| BoardStreamError::Frame { index, err })?;
+        // the span starts after the frame's leading delimiter, as the decoder sees it
         out.frames.push(FrameSpan {
-            offset: out.bytes.len() as u64,
-            len: n as u64,
+            offset: out.bytes.len() as u64 + 1,
+            len: n as u64 - 1,
             content,
         });
         out.bytes.extend_from_slice(&buf[..n]);
@@ -224,6 +234,7 @@ pub fn encode_stream(
         tx_errors: 0,
     };
     let mut batches = 0usize;
+    let mut since_header = 0usize;
     let mut count = 0u32;
     let mut samples = samples.into_iter().peekable();
     while let Some((s, r)) = samples.next() {
@@ -247,10 +258,23 @@ pub fn encode_stream(
                     FrameContent::Status,
                 )?;
             }
+            since_header += content_len(content);
+            if layout.header_every > 0 && since_header >= layout.header_every {
+                since_header = 0;
+                push(&mut out, &Message::Header(*header), FrameContent::Header)?;
+            }
         }
     }
     if layout.end {
         push(&mut out, &Message::End(status(count)), FrameContent::End)?;
     }
     Ok(out)
+}
+
+/// Samples of a batch frame (0 for the others).
+fn content_len(content: FrameContent) -> usize {
+    match content {
+        FrameContent::Batch { len, .. } => len as usize,
+        _ => 0,
+    }
 }

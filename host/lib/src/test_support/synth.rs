@@ -153,6 +153,8 @@ pub fn synth_stream(opts: &SynthOptions) -> SynthStream {
         status_every: opts.status_every,
         overruns: opts.overruns,
         end: opts.end,
+        // one header, as a protocol-1 board sent it: the fixtures place every frame
+        header_every: 0,
     };
     let pairs = samples.iter().copied().zip(reference.iter().copied());
     let stream = encode_stream(&header, pairs, tick_step, &layout).expect("frame fits");
@@ -170,11 +172,15 @@ mod tests {
     use super::*;
 
     #[test]
-    fn synth_stream_frames_tile_the_bytes_and_carry_every_sample_once() {
+    fn synth_stream_frames_and_their_leading_delimiters_tile_the_bytes_and_carry_every_sample_once()
+    {
         let s = synth_stream(&SynthOptions::small());
         let mut at = 0;
         let mut next_seq = 0;
         for f in &s.frames {
+            // each frame's leading delimiter, then its span
+            assert_eq!(s.bytes[at as usize], 0, "delimiter starts each frame");
+            at += 1;
             assert_eq!(f.offset, at);
             assert_eq!(
                 s.bytes[(f.offset + f.len - 1) as usize],
