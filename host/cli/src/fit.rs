@@ -33,6 +33,7 @@ use jointid::ident::fit::{
 use jointid::ident::frf::{analyze_dataset, FrfAnalysis};
 use jointid::ident::frf_fit::{self, PERIODIC_FIT_NAME};
 use jointid::ident::grey_box::{Output, DEFAULT_GEAR_RATIO};
+use jointid::ident::ss::Resonances;
 use jointid::ident::subspace::Method;
 use jointid::ident::validate::{
     BodeCurve, CorrelationTest, FrfBand, Validation, DEFAULT_LAGS, FIT_NAME,
@@ -552,54 +553,19 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         _ => None,
     };
     let est = &est.prepared;
-    let mut files = Vec::new();
-    if let Some(path) = &args.save {
-        let saved = fitted.to_saved(prep, &ds.name, ev.fit);
-        save_model(path, &saved, args.force)?;
-        files.push(path.display().to_string());
-    }
-    if let Some(dir) = &args.plot {
-        let p = write_bode(
-            dir,
-            "bode.svg",
-            &ds,
-            args.settle_periods,
-            &[&fitted],
-            args.force,
-        )?;
-        files.push(p.display().to_string());
-    }
-    let res = fitted.resonances(default_f_min(est.len(), est.ts));
-    let report = FitReport {
-        model: fitted.spec.name(),
-        method: fitted.method.clone(),
-        file: ds.name.clone(),
-        validation_file: val_name,
+    let measured = Measured {
+        val_name,
         ts: est.ts,
         samples: est.len(),
-        parameters: {
-            let mut p = param_map(&fitted.params);
-            if args.linear_axis {
-                for v in p.values_mut() {
-                    v.unit = linear_unit(&v.unit).into();
-                }
-            }
-            p
-        },
-        fit_name: FIT_NAME.into(),
+        fit_name: FIT_NAME,
         fit_estimation: ev.fit,
         fit_validation: vv.as_ref().map(|v| v.fit),
-        resonances_hz: res.resonances.iter().map(|m| m.freq_hz).collect(),
-        antiresonances_hz: res.anti_resonances.iter().map(|m| m.freq_hz).collect(),
-        residual_tests: ResidualTests {
-            estimation: ev,
-            validation: vv,
-        },
+        res: fitted.resonances(default_f_min(est.len(), est.ts)),
+        ev,
+        vv,
         seconds,
-        files,
-        warnings: fitted.warnings.clone(),
     };
-    emit(ctx, &report, args.strict)
+    finish(args, ctx, &ds, &fitted, measured)
 }
 
 /// `--lags` against the prepared estimation and validation records.
@@ -692,10 +658,58 @@ fn run_frequency_domain(
     } else {
         (FIT_NAME, ev.fit, vv.as_ref().map(|v| v.fit))
     };
+    let measured = Measured {
+        val_name,
+        ts,
+        samples: ds.data.len(),
+        fit_name,
+        fit_estimation,
+        fit_validation,
+        res,
+        ev,
+        vv,
+        seconds,
+    };
+    finish(args, ctx, ds, &fitted, measured)
+}
+
+/// What a fit path measured, for the report.
+struct Measured {
+    /// name of the validation record
+    val_name: Option<String>,
+    /// sample interval of the compared records [s]
+    ts: f64,
+    /// samples of the estimation record
+    samples: usize,
+    /// which FIT the figures are
+    fit_name: &'static str,
+    /// FIT on the estimation data [%]
+    fit_estimation: f64,
+    /// FIT on the validation data [%]
+    fit_validation: Option<f64>,
+    /// the fitted model's resonances
+    res: Resonances,
+    /// residual tests on the estimation data
+    ev: Validation,
+    /// residual tests on the validation data
+    vv: Option<Validation>,
+    /// wall time of the fit [s]
+    seconds: f64,
+}
+
+/// The one end of both paths of `run`: saves the model (the periodic FIT named in the
+/// file when it is the one reported), writes the Bode plot, prints the report.
+fn finish(
+    args: &FitArgs,
+    ctx: &mut Context<'_>,
+    ds: &Dataset,
+    fitted: &Fitted,
+    m: Measured,
+) -> CmdResult {
     let mut files = Vec::new();
     if let Some(path) = &args.save {
-        let mut saved = fitted.to_saved(args.prep.prep(), &ds.name, fit_estimation);
-        saved.fit_name = periodic.then(|| PERIODIC_FIT_NAME.to_string());
+        let mut saved = fitted.to_saved(args.prep.prep(), &ds.name, m.fit_estimation);
+        saved.fit_name = (m.fit_name == PERIODIC_FIT_NAME).then(|| PERIODIC_FIT_NAME.to_string());
         save_model(path, &saved, args.force)?;
         files.push(path.display().to_string());
     }
@@ -705,7 +719,7 @@ fn run_frequency_domain(
             "bode.svg",
             ds,
             args.settle_periods,
-            &[&fitted],
+            &[fitted],
             args.force,
         )?;
         files.push(p.display().to_string());
@@ -714,9 +728,9 @@ fn run_frequency_domain(
         model: fitted.spec.name(),
         method: fitted.method.clone(),
         file: ds.name.clone(),
-        validation_file: val_name,
-        ts,
-        samples: ds.data.len(),
+        validation_file: m.val_name,
+        ts: m.ts,
+        samples: m.samples,
         parameters: {
             let mut p = param_map(&fitted.params);
             if args.linear_axis {
@@ -726,16 +740,16 @@ fn run_frequency_domain(
             }
             p
         },
-        fit_name: fit_name.into(),
-        fit_estimation,
-        fit_validation,
-        resonances_hz: res.resonances.iter().map(|m| m.freq_hz).collect(),
-        antiresonances_hz: res.anti_resonances.iter().map(|m| m.freq_hz).collect(),
+        fit_name: m.fit_name.into(),
+        fit_estimation: m.fit_estimation,
+        fit_validation: m.fit_validation,
+        resonances_hz: m.res.resonances.iter().map(|r| r.freq_hz).collect(),
+        antiresonances_hz: m.res.anti_resonances.iter().map(|r| r.freq_hz).collect(),
         residual_tests: ResidualTests {
-            estimation: ev,
-            validation: vv,
+            estimation: m.ev,
+            validation: m.vv,
         },
-        seconds,
+        seconds: m.seconds,
         files,
         warnings: fitted.warnings.clone(),
     };
