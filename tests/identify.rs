@@ -19,10 +19,10 @@
 use std::collections::BTreeMap;
 
 use jointid::data::{Dataset, IdData};
-use jointid::ident::fit::{fit_model, FitOptions, ModelKind};
+use jointid::ident::fit::{fit_model, FitOptions};
 use jointid::ident::grey_box::{GreyBoxModel, Output};
 use jointid::ident::pem::{self, PemOptions};
-use jointid::model::spec::Structure;
+use jointid::model::spec::{Family, ModelSpec, Structure};
 use jointid::scenario::paper::{paper_runs, table, Table};
 use jointid::sim::{self, Disturbance, PlantKind, SensorConfig, SimConfig};
 use jointid_core::excitation::{ExcitationConfig, SignalKind};
@@ -116,7 +116,7 @@ fn three_mass_estimates_lie_within_3_sigma_on_closed_loop_data() {
         let f = fit_model(
             &data,
             &FitOptions {
-                kind: ModelKind::ThreeMass,
+                spec: ModelSpec::linear(Family::Physical(Structure::ThreeMass)),
                 ..FitOptions::default()
             },
         )
@@ -202,7 +202,7 @@ fn three_mass_automatic_start_reaches_global_optimum_on_95_of_100_joints() {
         let auto = fit_model(
             &data,
             &FitOptions {
-                kind: ModelKind::ThreeMass,
+                spec: ModelSpec::linear(Family::Physical(Structure::ThreeMass)),
                 ..FitOptions::default()
             },
         );
@@ -236,7 +236,7 @@ fn three_mass_automatic_start_reaches_global_optimum_on_95_of_100_joints() {
 /// Seed 000 §6 table for one model on the simulated paper experiment (noise
 /// `seed`): estimation and validation runs as capture datasets, fitted and
 /// compared with the true model.
-fn paper_table(seed: u64, model: ModelKind) -> Table {
+fn paper_table(seed: u64, model: Family) -> Table {
     let runs = paper_runs(seed).unwrap();
     let ds = |out: &sim::SimOutput, exc: ExcitationConfig, name: &str| Dataset {
         name: name.into(),
@@ -254,7 +254,7 @@ fn paper_table(seed: u64, model: ModelKind) -> Table {
 // reaches a validation FIT within 1 point of the true model's.
 #[test]
 fn black_box_order_11_validation_fit_within_1_point_of_true_model() {
-    let t = paper_table(3, ModelKind::BlackBox(11));
+    let t = paper_table(3, Family::BlackBox(11));
     let bb = &t.rows[0];
     eprintln!(
         "black box 11: est {:.2}, val {:.2}; true model: est {:.2}, val {:.2}",
@@ -276,7 +276,7 @@ fn black_box_order_11_validation_fit_within_1_point_of_true_model() {
 // deviations (measured on seed 3: at most 0.2 % and 1.3 σ).
 #[test]
 fn four_mass_on_paper_experiment_reaches_true_fit_and_parameters() {
-    let t = paper_table(3, ModelKind::FourMass);
+    let t = paper_table(3, Family::Physical(Structure::FourMass));
     let row = &t.rows[0];
     eprintln!(
         "four-mass: est {:.2}, val {:.2}; true model: est {:.2}, val {:.2}",

@@ -27,17 +27,18 @@ use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome
 use jointid::data::output::check_output;
 use jointid::data::Dataset;
 use jointid::ident::fit::{
-    default_f_min, fit_prepared, log_grid, param_map, FitData, FitOptions, Fitted, ModelKind,
-    ParamJson,
+    below_frf, default_f_min, fit_frequency_domain, fit_prepared, log_grid, param_map, FitData,
+    FitOptions, Fitted, ParamJson,
 };
 use jointid::ident::frf::{analyze_dataset, FrfAnalysis};
-use jointid::ident::frf_fit::{self, Drive, FitWarning, FrfFit, FrfFitOptions, PERIODIC_FIT_NAME};
-use jointid::ident::frf_subspace::black_box_frf;
+use jointid::ident::frf_fit::{self, PERIODIC_FIT_NAME};
 use jointid::ident::grey_box::{Output, DEFAULT_GEAR_RATIO};
+use jointid::ident::ss::Resonances;
 use jointid::ident::subspace::Method;
 use jointid::ident::validate::{
     BodeCurve, CorrelationTest, FrfBand, Validation, DEFAULT_LAGS, FIT_NAME,
 };
+use jointid::model::spec::{Family, ModelSpec, SpecError, Structure, NONLINEAR_TWO_MASS};
 use jointid::report::plot::bode_svg;
 
 /// Friction model of the rigid body.
@@ -318,15 +319,15 @@ pub(crate) fn check_same_rate(first: &Dataset, other: &Dataset, flag: &str) -> R
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FitModel {
     /// the family (the two-mass for `nonlinear-two-mass`)
-    pub kind: ModelKind,
+    pub kind: Family,
     /// `nonlinear-two-mass` was asked for
     pub nonlinear_two_mass: bool,
 }
 
 fn parse_kind(s: &str) -> Result<FitModel, String> {
-    if s.trim().to_ascii_lowercase().replace('_', "-") == "nonlinear-two-mass" {
+    if s.trim().to_ascii_lowercase().replace('_', "-") == NONLINEAR_TWO_MASS {
         return Ok(FitModel {
-            kind: ModelKind::TwoMass,
+            kind: Family::Physical(Structure::TwoMass),
             nonlinear_two_mass: true,
         });
     }
@@ -339,6 +340,24 @@ fn parse_kind(s: &str) -> Result<FitModel, String> {
             Some(head) if head.contains("(known:") => format!("{head}, nonlinear-two-mass)"),
             _ => e,
         })
+}
+
+impl FitArgs {
+    /// The model flags (`--model`, `--effect`, `--friction`, `--current-loop-tau`,
+    /// `--delay`) resolved into the one [`ModelSpec`].
+    ///
+    /// # Errors
+    /// An `--effect` spec that does not parse.
+    pub fn spec(&self) -> Result<ModelSpec, SpecError> {
+        ModelSpec::resolve(
+            self.model.kind,
+            self.model.nonlinear_two_mass,
+            &self.effects,
+            self.friction == FrictionArg::Coulomb,
+            self.current_loop_tau,
+            self.delay,
+        )
+    }
 }
 
 /// Everything `fit --json` prints.
@@ -397,7 +416,8 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     if let Some(path) = &args.save {
         check_output(path, args.force)?;
     }
-    let nonlinear = super::fit_nl::wanted(args);
+    let spec = args.spec()?;
+    let nonlinear = spec.nonlinear();
     if let Some(dir) = &args.plot {
         let name = if nonlinear {
             super::fit_nl::PLOT_FILE
@@ -419,7 +439,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         check_same_rate(&ds, v, "--validation")?;
     }
     if nonlinear {
-        return super::fit_nl::run(args, ctx, &ds, val_ds.as_ref());
+        return super::fit_nl::run(args, &spec, ctx, &ds, val_ds.as_ref());
     }
     let prep = args.prep.prep();
     let prepare = |d: &jointid::data::IdData, name: &str| {
@@ -440,34 +460,39 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         ),
         (None, None) => (prepare(&ds.data, &ds.name)?, None, None),
     };
-    let periodic = match (
-        args.domain,
-        args.model.kind.structure(),
-        args.estimation_fraction,
-    ) {
-        (DomainArg::Time, _, _) => None,
-        (DomainArg::Frequency, _, _) if args.friction == FrictionArg::Coulomb => {
+    let opts = FitOptions {
+        spec: spec.clone(),
+        method: match args.method {
+            MethodArg::Pbsid => Method::Pbsid,
+            MethodArg::Moesp => Method::Moesp,
+        },
+        output: args.output_kind.into(),
+        r: args.gear_ratio,
+        refine: !args.no_refine,
+        feedthrough: args.feedthrough,
+    };
+    let periodic = match (args.domain, args.estimation_fraction) {
+        (DomainArg::Time, _) => None,
+        (DomainArg::Frequency, _) if spec.coulomb => {
             return Err(
                 "--friction coulomb is nonlinear: the rigid model with Coulomb friction is fitted \
                  in the time domain"
                     .into(),
             )
         }
-        (DomainArg::Frequency, _, Some(_)) => {
+        (DomainArg::Frequency, Some(_)) => {
             return Err(
                 "--domain frequency takes the whole record: give --validation \
                         instead of --estimation-fraction"
                     .into(),
             )
         }
-        (DomainArg::Frequency, _, None) => Some(
+        (DomainArg::Frequency, None) => Some(
             analyze_dataset(&ds, args.settle_periods)
                 .map_err(|e| format!("{}: --domain frequency needs periodic data: {e}", ds.name))?,
         ),
-        (DomainArg::Auto, _, None) if args.friction == FrictionArg::Viscous => {
-            analyze_dataset(&ds, args.settle_periods).ok()
-        }
-        (DomainArg::Auto, _, _) => None,
+        (DomainArg::Auto, None) if !spec.coulomb => analyze_dataset(&ds, args.settle_periods).ok(),
+        (DomainArg::Auto, _) => None,
     };
     if let Some(a) = &periodic {
         // a validation record that is not periodic (band-limited noise,
@@ -493,6 +518,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         }
         return run_frequency_domain(
             args,
+            &opts,
             ctx,
             &ds,
             a,
@@ -504,25 +530,15 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         );
     }
     check_records_lags(args, &ds.name, &est, val.as_ref(), &val_name)?;
-    let opts = FitOptions {
-        kind: args.model.kind,
-        coulomb: args.friction == FrictionArg::Coulomb,
-        method: match args.method {
-            MethodArg::Pbsid => Method::Pbsid,
-            MethodArg::Moesp => Method::Moesp,
-        },
-        output: args.output_kind.into(),
-        r: args.gear_ratio,
-        refine: !args.no_refine,
-        feedthrough: args.feedthrough,
-        current_loop_tau: args.current_loop_tau.unwrap_or(0.0),
-    };
     let t0 = Instant::now();
     let mut fitted = fit_prepared(&est, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
     let seconds = t0.elapsed().as_secs_f64();
-    if opts.coulomb {
+    if spec.coulomb {
         // nonlinear: no frequency-domain reference
-    } else if let Some(w) = below_frf(args, &ds, &fitted) {
+    } else if let Some(w) = analyze_dataset(&ds, args.settle_periods)
+        .ok()
+        .and_then(|a| below_frf(&a, ds.data.ts, &opts, &fitted))
+    {
         fitted.warnings.push(w.to_string());
     }
     let ev = fitted
@@ -537,54 +553,19 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         _ => None,
     };
     let est = &est.prepared;
-    let mut files = Vec::new();
-    if let Some(path) = &args.save {
-        let saved = fitted.to_saved(prep, &ds.name, ev.fit);
-        save_model(path, &saved, args.force)?;
-        files.push(path.display().to_string());
-    }
-    if let Some(dir) = &args.plot {
-        let p = write_bode(
-            dir,
-            "bode.svg",
-            &ds,
-            args.settle_periods,
-            &[&fitted],
-            args.force,
-        )?;
-        files.push(p.display().to_string());
-    }
-    let res = fitted.resonances(default_f_min(est.len(), est.ts));
-    let report = FitReport {
-        model: fitted.kind.name(),
-        method: fitted.method.clone(),
-        file: ds.name.clone(),
-        validation_file: val_name,
+    let measured = Measured {
+        val_name,
         ts: est.ts,
         samples: est.len(),
-        parameters: {
-            let mut p = param_map(&fitted.params);
-            if args.linear_axis {
-                for v in p.values_mut() {
-                    v.unit = linear_unit(&v.unit).into();
-                }
-            }
-            p
-        },
-        fit_name: FIT_NAME.into(),
+        fit_name: FIT_NAME,
         fit_estimation: ev.fit,
         fit_validation: vv.as_ref().map(|v| v.fit),
-        resonances_hz: res.resonances.iter().map(|m| m.freq_hz).collect(),
-        antiresonances_hz: res.anti_resonances.iter().map(|m| m.freq_hz).collect(),
-        residual_tests: ResidualTests {
-            estimation: ev,
-            validation: vv,
-        },
+        res: fitted.resonances(default_f_min(est.len(), est.ts)),
+        ev,
+        vv,
         seconds,
-        files,
-        warnings: fitted.warnings.clone(),
     };
-    emit(ctx, &report, args.strict)
+    finish(args, ctx, &ds, &fitted, measured)
 }
 
 /// `--lags` against the prepared estimation and validation records.
@@ -600,35 +581,6 @@ fn check_records_lags(
         check_lags(args.lags, vn, v.prepared.len())?;
     }
     Ok(())
-}
-
-/// A time-domain fit on periodic data checked against the frequency-domain
-/// fit of the same model family: when its periodic steady-state FIT on the
-/// estimation record is more than 10 points below, the time-domain fit has
-/// followed something else than the joint (drift, a slow disturbance).
-fn below_frf(args: &FitArgs, ds: &Dataset, fitted: &Fitted) -> Option<FitWarning> {
-    let ts = ds.data.ts;
-    if (fitted.ts - ts).abs() > 1e-9 * ts {
-        return None;
-    }
-    let a = analyze_dataset(ds, args.settle_periods).ok()?;
-    let reference = match (args.model.kind.structure(), args.model.kind) {
-        (Some(structure), _) => {
-            let mut o = FrfFitOptions::new(structure, ts);
-            o.output = args.output_kind.into();
-            o.r = args.gear_ratio;
-            let ff = frf_fit::fit_frf(&a.frf, &o).ok()?;
-            ff.freq_response(&a.frf.freq_hz)
-        }
-        (None, ModelKind::BlackBox(n)) => black_box_frf(&a.frf, n, ts, args.feedthrough, 40)
-            .ok()?
-            .model
-            .freq_response(&a.frf.freq_hz),
-        _ => return None,
-    };
-    let frf_fit = frf_fit::periodic_fit_percent(&a.frf, &reference);
-    let fit = frf_fit::periodic_fit_percent(&a.frf, &fitted.model.freq_response(&a.frf.freq_hz));
-    (fit < frf_fit - 10.0).then_some(FitWarning::FitBelowFrf { fit, frf_fit })
 }
 
 /// prints the report; with `strict`, any warning fails the run
@@ -648,6 +600,7 @@ fn emit(ctx: &mut Context<'_>, report: &FitReport, strict: bool) -> CmdResult {
 #[allow(clippy::too_many_arguments)]
 fn run_frequency_domain(
     args: &FitArgs,
+    opts: &FitOptions,
     ctx: &mut Context<'_>,
     ds: &Dataset,
     analysis: &FrfAnalysis,
@@ -659,51 +612,8 @@ fn run_frequency_domain(
 ) -> CmdResult {
     let ts = ds.data.ts;
     let t0 = Instant::now();
-    let fitted = match (args.model.kind.structure(), args.model.kind) {
-        (Some(structure), _) => {
-            let mut o = FrfFitOptions::new(structure, ts);
-            o.output = args.output_kind.into();
-            o.r = args.gear_ratio;
-            if let Some(tau) = args.current_loop_tau {
-                o.lag = Drive::Fixed(tau / ts);
-            }
-            if let Some(d) = args.delay {
-                o.delay = Drive::Fixed(d);
-            }
-            let ff =
-                frf_fit::fit_frf(&analysis.frf, &o).map_err(|e| format!("{}: {e}", ds.name))?;
-            fitted_of(args, &ff, analysis, est.decimate)
-        }
-        (None, ModelKind::BlackBox(n)) => {
-            let iters = if args.no_refine { 0 } else { 40 };
-            let bb = black_box_frf(&analysis.frf, n, ts, args.feedthrough, iters)
-                .map_err(|e| format!("{}: {e}", ds.name))?;
-            Fitted {
-                kind: args.model.kind,
-                output: args.output_kind.into(),
-                ts,
-                method: format!(
-                    "frequency domain: subspace on {} excited lines of {} periods (McKelvey et al. 1996, \
-                     bilinear map), refined by sample maximum likelihood ({} iterations); cost {:.1} = \
-                     {:.2} × its noise level",
-                    analysis.frf.g.len(),
-                    analysis.layout.count,
-                    bb.iterations,
-                    bb.cost,
-                    bb.cost_ratio()
-                ),
-                model: bb.model,
-                continuous: None,
-                params: Vec::new(),
-                friction: None,
-                warnings: bb.warnings.iter().map(|w| w.to_string()).collect(),
-                decimate: est.decimate,
-            }
-        }
-        (None, other) => {
-            return Err(format!("{} has no frequency-domain fit", other.name()).into());
-        }
-    };
+    let fitted = fit_frequency_domain(analysis, ts, opts, est.decimate)
+        .map_err(|e| format!("{}: {e}", ds.name))?;
     let seconds = t0.elapsed().as_secs_f64();
     let respond = |f: &[f64]| fitted.model.freq_response(f);
     let f_min = analysis.frf.freq_hz.first().copied().unwrap_or(0.0);
@@ -748,10 +658,58 @@ fn run_frequency_domain(
     } else {
         (FIT_NAME, ev.fit, vv.as_ref().map(|v| v.fit))
     };
+    let measured = Measured {
+        val_name,
+        ts,
+        samples: ds.data.len(),
+        fit_name,
+        fit_estimation,
+        fit_validation,
+        res,
+        ev,
+        vv,
+        seconds,
+    };
+    finish(args, ctx, ds, &fitted, measured)
+}
+
+/// What a fit path measured, for the report.
+struct Measured {
+    /// name of the validation record
+    val_name: Option<String>,
+    /// sample interval of the compared records [s]
+    ts: f64,
+    /// samples of the estimation record
+    samples: usize,
+    /// which FIT the figures are
+    fit_name: &'static str,
+    /// FIT on the estimation data [%]
+    fit_estimation: f64,
+    /// FIT on the validation data [%]
+    fit_validation: Option<f64>,
+    /// the fitted model's resonances
+    res: Resonances,
+    /// residual tests on the estimation data
+    ev: Validation,
+    /// residual tests on the validation data
+    vv: Option<Validation>,
+    /// wall time of the fit [s]
+    seconds: f64,
+}
+
+/// The one end of both paths of `run`: saves the model (the periodic FIT named in the
+/// file when it is the one reported), writes the Bode plot, prints the report.
+fn finish(
+    args: &FitArgs,
+    ctx: &mut Context<'_>,
+    ds: &Dataset,
+    fitted: &Fitted,
+    m: Measured,
+) -> CmdResult {
     let mut files = Vec::new();
     if let Some(path) = &args.save {
-        let mut saved = fitted.to_saved(args.prep.prep(), &ds.name, fit_estimation);
-        saved.fit_name = periodic.then(|| PERIODIC_FIT_NAME.to_string());
+        let mut saved = fitted.to_saved(args.prep.prep(), &ds.name, m.fit_estimation);
+        saved.fit_name = (m.fit_name == PERIODIC_FIT_NAME).then(|| PERIODIC_FIT_NAME.to_string());
         save_model(path, &saved, args.force)?;
         files.push(path.display().to_string());
     }
@@ -761,18 +719,18 @@ fn run_frequency_domain(
             "bode.svg",
             ds,
             args.settle_periods,
-            &[&fitted],
+            &[fitted],
             args.force,
         )?;
         files.push(p.display().to_string());
     }
     let report = FitReport {
-        model: fitted.kind.name(),
+        model: fitted.spec.name(),
         method: fitted.method.clone(),
         file: ds.name.clone(),
-        validation_file: val_name,
-        ts,
-        samples: ds.data.len(),
+        validation_file: m.val_name,
+        ts: m.ts,
+        samples: m.samples,
         parameters: {
             let mut p = param_map(&fitted.params);
             if args.linear_axis {
@@ -782,66 +740,20 @@ fn run_frequency_domain(
             }
             p
         },
-        fit_name: fit_name.into(),
-        fit_estimation,
-        fit_validation,
-        resonances_hz: res.resonances.iter().map(|m| m.freq_hz).collect(),
-        antiresonances_hz: res.anti_resonances.iter().map(|m| m.freq_hz).collect(),
+        fit_name: m.fit_name.into(),
+        fit_estimation: m.fit_estimation,
+        fit_validation: m.fit_validation,
+        resonances_hz: m.res.resonances.iter().map(|r| r.freq_hz).collect(),
+        antiresonances_hz: m.res.anti_resonances.iter().map(|r| r.freq_hz).collect(),
         residual_tests: ResidualTests {
-            estimation: ev,
-            validation: vv,
+            estimation: m.ev,
+            validation: m.vv,
         },
-        seconds,
+        seconds: m.seconds,
         files,
         warnings: fitted.warnings.clone(),
     };
     emit(ctx, &report, args.strict)
-}
-
-/// A frequency-domain fit as a [`Fitted`]: the sampled model with the lag
-/// and the delay, the lag as `tau_c` [s] and the delay as `delay` [s] among
-/// the parameters.
-fn fitted_of(args: &FitArgs, ff: &FrfFit, analysis: &FrfAnalysis, decimate: usize) -> Fitted {
-    let ts = ff.model.ts;
-    let mut params = ff.params.clone();
-    for (name, d) in [("tau_c", ff.lag), ("delay", ff.delay)] {
-        params.push(jointid::ident::grey_box::PhysParam {
-            name: name.into(),
-            value: d.value * ts,
-            std: d.std * ts,
-            unit: "s",
-        });
-    }
-    let drive = |d: &frf_fit::DriveEstimate| match (d.estimated, d.value > 0.0) {
-        (true, _) => "estimated",
-        (false, true) => "fixed",
-        (false, false) => "left out",
-    };
-    Fitted {
-        kind: args.model.kind,
-        output: args.output_kind.into(),
-        ts,
-        model: ff.discrete(),
-        continuous: Some(ff.continuous()),
-        params,
-        friction: None,
-        warnings: ff.warnings.iter().map(|w| w.to_string()).collect(),
-        method: format!(
-            "frequency domain: sample maximum likelihood on {} excited lines of {} periods \
-             ({:.1} to {:.1} Hz), current-loop lag {}, delay {}; cost {:.1} = {:.2} × its noise level; \
-             best of {} starts from the FRF's resonances",
-            ff.lines,
-            analysis.layout.count,
-            analysis.frf.freq_hz.first().map_or(0.0, |f| *f),
-            analysis.frf.freq_hz.last().map_or(0.0, |f| *f),
-            drive(&ff.lag),
-            drive(&ff.delay),
-            ff.cost,
-            ff.cost_ratio(),
-            ff.starts
-        ),
-        decimate,
-    }
 }
 
 /// Writes the model file `path` ([`jointid::data::output`]: an existing file only with
@@ -897,7 +809,7 @@ pub fn write_bode(
     let curves: Vec<BodeCurve> = models
         .iter()
         .map(|m| BodeCurve {
-            name: m.kind.name(),
+            name: m.spec.name(),
             freq_hz: grid.clone(),
             response: m.freq_response(&grid),
         })

@@ -20,11 +20,11 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::fit::{save_model, DomainArg, FitArgs, FrictionArg, OutputArg};
+use super::fit::{save_model, DomainArg, FitArgs, OutputArg};
 use super::{print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::check_output;
 use jointid::data::{Dataset, Detrend, IdData};
-use jointid::ident::fit::{ModelKind, ParamJson};
+use jointid::ident::fit::ParamJson;
 use jointid::ident::frf::analyze_dataset;
 use jointid::ident::frf_fit::{self, Drive, FrfFitOptions};
 use jointid::ident::model_file::SavedModel;
@@ -33,8 +33,8 @@ use jointid::ident::nonlinear::{
     simulate_args, simulate_exact, validate, NlFit, NlModel, NlOptions, NlRequest, NlValidation,
     Owner, Step,
 };
-use jointid::model::effects::{parse_effects, Effect};
-use jointid::model::spec::Structure;
+use jointid::model::effects::Effect;
+use jointid::model::spec::{Family, ModelSpec, Structure};
 use jointid::report::plot::{time_svg, TimeSeries};
 
 /// The plot `--plot DIR` writes for a nonlinear fit.
@@ -43,11 +43,6 @@ pub const PLOT_FILE: &str = "velocity.svg";
 /// Name of the FIT the nonlinear fit reports first (`fit_name`).
 pub const NL_FIT_NAME: &str =
     "velocity FIT [%] (interval-mean motor velocity through the high-pass prefilter, simulator's exact laws)";
-
-/// The fit goes to the nonlinear engine: an effect is attached or seed 001's model named.
-pub fn wanted(args: &FitArgs) -> bool {
-    args.model.nonlinear_two_mass || !args.effects.is_empty()
-}
 
 /// `--fix` and `--start` belong to the nonlinear fit; refused without an effect.
 ///
@@ -149,19 +144,19 @@ struct NlReport {
 }
 
 /// The flags of `fit` that have no meaning for the nonlinear fit.
-fn check_flags(args: &FitArgs) -> Result<Structure, String> {
+fn check_flags(args: &FitArgs, spec: &ModelSpec) -> Result<Structure, String> {
     let structure =
-        match args.model.kind {
-            ModelKind::BlackBox(_) => return Err(
+        match spec.family {
+            Family::BlackBox(_) => return Err(
                 "--effect attaches to a physical model: --model rigid, two-mass, three-mass or \
                  four-mass"
                     .into(),
             ),
-            k => k.structure().expect("a physical model"),
+            Family::Physical(s) => s,
         };
     let refuse = |cond: bool, msg: &str| if cond { Err(msg.to_string()) } else { Ok(()) };
     refuse(
-        args.friction == FrictionArg::Coulomb,
+        spec.coulomb,
         "--friction coulomb is the linear engine's rigid model; with effects use --effect \
          coulomb_friction",
     )?;
@@ -179,7 +174,7 @@ fn check_flags(args: &FitArgs) -> Result<Structure, String> {
          --detrend are not available with effects",
     )?;
     refuse(
-        args.delay.is_some(),
+        spec.delay.is_some(),
         "--delay belongs to the frequency-domain fit; with effects use --effect time_delay",
     )?;
     refuse(
@@ -288,42 +283,19 @@ fn records(
 /// Bad flags, effects or fixes (exit 2 naming them), the engine's errors, output errors.
 pub fn run(
     args: &FitArgs,
+    spec: &ModelSpec,
     ctx: &mut Context<'_>,
     ds: &Dataset,
     val_ds: Option<&Dataset>,
 ) -> CmdResult {
-    let structure = check_flags(args)?;
+    let structure = check_flags(args, spec)?;
     if let Some(p) = &args.save {
         check_output(p, args.force)?;
     }
-    // the effects: seed 001's two, then the user's
-    let mut specs: Vec<String> = Vec::new();
-    if args.model.nonlinear_two_mass {
-        for name in ["nonlinear_stiffness", "coulomb_friction"] {
-            if !args
-                .effects
-                .iter()
-                .any(|s| s.split(':').next().map(str::trim) == Some(name))
-            {
-                specs.push(name.into());
-            }
-        }
-    }
-    specs.extend(args.effects.iter().cloned());
-    let mut effects = parse_effects(&specs).map_err(|e| format!("--effect: {e}"))?;
-    // Coulomb friction is seed 001's pure law unless the spec names a breakaway level `fs`:
-    // only then are `fs` and `v_stribeck` estimated beside `fc`
-    for (e, spec) in effects.iter_mut().zip(&specs) {
-        if let Effect::CoulombFriction(c) = e {
-            let keys = spec.split_once(':').map_or("", |(_, k)| k);
-            if !keys
-                .split(',')
-                .any(|kv| kv.split('=').next().map(str::trim) == Some("fs"))
-            {
-                c.fs = c.fc;
-            }
-        }
-    }
+    // the effects as resolved (seed 001's two, then the user's) and their specs, whose
+    // given keys start there
+    let effects: Vec<Effect> = spec.effects.clone().unwrap_or_default();
+    let specs = ModelSpec::effect_specs(args.model.nonlinear_two_mass, &args.effects);
     let fixes = parse_fixes(&args.fix)?;
     check_fix_names(structure, args.gear_ratio, &effects, &fixes)?;
     let (est, val) = records(args, ds, val_ds);
@@ -334,7 +306,7 @@ pub fn run(
         .iter()
         .find(|(n, _)| n == "tau_c")
         .map(|(_, v)| *v)
-        .or(args.current_loop_tau);
+        .or(spec.current_loop_tau);
     if let Some(t) = fixed_tau {
         if !(0.0..0.1).contains(&t) {
             return Err(format!("tau_c = {t} s: a current-loop lag is within [0, 0.1) s").into());

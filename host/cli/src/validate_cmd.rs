@@ -126,7 +126,11 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
     let text = std::fs::read_to_string(mpath).map_err(|e| format!("{}: {e}", mpath.display()))?;
     let saved: SavedModel = serde_json::from_str(&text)
         .map_err(|e| format!("{}: not a jointid model file: {e}", mpath.display()))?;
-    if saved.nonlinear.is_some() {
+    // the model's description says which engine simulates it
+    let spec = saved
+        .spec()
+        .map_err(|e| format!("{}: {e}", mpath.display()))?;
+    if spec.nonlinear() {
         return run_nonlinear(args, ctx, &saved, mpath, &data_args(&args.files[1]));
     }
     let fitted = saved

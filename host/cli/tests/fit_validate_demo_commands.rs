@@ -98,7 +98,9 @@ fn fit_json_has_fields_and_validate_reproduces_saved_model_fit() {
     // same decimation (model format 2)
     let saved: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
-    assert_eq!(saved["format"], "jointid-model/3");
+    assert_eq!(saved["format"], "jointid-model/4");
+    // format 4 stores the model's description, whose family names the model
+    assert_eq!(saved["spec"]["family"], saved["model"], "{saved}");
     assert_eq!(saved["decimate_output"], 10);
     assert!(
         (saved["ts"].as_f64().unwrap() - 5e-4).abs() < 1e-12,

@@ -50,90 +50,24 @@ use crate::ident::pem::{self, FullSs, ParamModel, PemFit, PemOptions};
 use crate::ident::ss::{ContinuousSs, Resonances, StateSpace};
 use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
 use crate::ident::validate::{self, Validation};
-use crate::model::spec::Structure;
+use crate::model::spec::{Family, ModelSpec, Structure};
+
+mod frequency;
+pub use frequency::{below_frf, fit_frequency_domain};
 
 /// Largest `N · p²` (samples times squared parameter count) for which the
 /// black-box output-error refinement runs; above it the subspace model is
 /// kept. 1500 samples of an order-11 model (143 parameters) cost about 3e7.
 pub const PEM_BUDGET: f64 = 2.0e8;
 
-/// Model family asked for on the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ModelKind {
-    /// discrete black box of this order
-    BlackBox(usize),
-    /// one inertia with viscous friction (`J`, `Fv`)
-    Rigid,
-    /// motor and arm through the gearbox spring
-    TwoMass,
-    /// seed 000 eq. (5)–(6)
-    ThreeMass,
-    /// seed 000 eq. (7)–(8)
-    FourMass,
-}
-
-impl ModelKind {
-    /// name as written on the command line and in model files
-    pub fn name(&self) -> String {
-        match self.structure() {
-            None => format!("black-box:{}", self.black_box_order()),
-            Some(s) => s.label().into(),
-        }
-    }
-
-    /// order of the black box (0 for a physical model)
-    fn black_box_order(&self) -> usize {
-        match self {
-            ModelKind::BlackBox(n) => *n,
-            _ => 0,
-        }
-    }
-
-    /// grey-box structure, `None` for a black box
-    pub fn structure(&self) -> Option<Structure> {
-        match self {
-            ModelKind::BlackBox(_) => None,
-            ModelKind::Rigid => Some(Structure::Rigid),
-            ModelKind::TwoMass => Some(Structure::TwoMass),
-            ModelKind::ThreeMass => Some(Structure::ThreeMass),
-            ModelKind::FourMass => Some(Structure::FourMass),
-        }
-    }
-}
-
-impl std::str::FromStr for ModelKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let s = s.trim().to_ascii_lowercase().replace('_', "-");
-        if let Some(n) = s
-            .strip_prefix("black-box:")
-            .or_else(|| s.strip_prefix("blackbox:"))
-        {
-            return match n.parse::<usize>() {
-                Ok(n) if (1..=40).contains(&n) => Ok(ModelKind::BlackBox(n)),
-                _ => Err(format!("black-box order `{n}` must be an integer 1 … 40")),
-            };
-        }
-        match Structure::ALL.into_iter().find(|st| st.label() == s) {
-            Some(Structure::Rigid) => Ok(ModelKind::Rigid),
-            Some(Structure::TwoMass) => Ok(ModelKind::TwoMass),
-            Some(Structure::ThreeMass) => Ok(ModelKind::ThreeMass),
-            Some(Structure::FourMass) => Ok(ModelKind::FourMass),
-            None => Err(format!(
-                "unknown model `{s}` (known: black-box:ORDER, rigid, two-mass, three-mass, four-mass)"
-            )),
-        }
-    }
-}
-
 /// Options of [`fit_model`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct FitOptions {
-    /// model family
-    pub kind: ModelKind,
-    /// rigid model only: add Coulomb friction and a torque offset
-    /// (inverse-dynamics least squares)
-    pub coulomb: bool,
+    /// the model: family; `coulomb` (rigid only) adds Coulomb friction and a torque
+    /// offset (inverse-dynamics least squares); `current_loop_tau` [s] is the drive's
+    /// current-loop lag of the physical models (known, like `r`; `None` or 0 neglects it
+    /// as seed 000 §4.2 does, see [`DrivenModel`]); effects and delay are not read here
+    pub spec: ModelSpec,
     /// subspace method of the black box
     pub method: Method,
     /// which motor signal the data's output is
@@ -145,23 +79,17 @@ pub struct FitOptions {
     /// black box: estimate a direct feed-through `D` (an acceleration
     /// output responds within the sample; angle and velocity do not)
     pub feedthrough: bool,
-    /// physical models: time constant of the drive's current loop [s]
-    /// (known, like `r`; 0 neglects it as seed 000 §4.2 does), see
-    /// [`DrivenModel`]
-    pub current_loop_tau: f64,
 }
 
 impl Default for FitOptions {
     fn default() -> Self {
         FitOptions {
-            kind: ModelKind::ThreeMass,
-            coulomb: false,
+            spec: ModelSpec::linear(Family::Physical(Structure::ThreeMass)),
             method: Method::Pbsid,
             output: Output::Angle,
             r: grey_box::DEFAULT_GEAR_RATIO,
             refine: true,
             feedthrough: false,
-            current_loop_tau: 0.0,
         }
     }
 }
@@ -273,6 +201,12 @@ pub enum FitError {
     /// FIT or residual test
     #[error("validation failed: {0}")]
     Validate(#[from] validate::ValidateError),
+    /// the frequency-domain fit of a physical model (its message as it is)
+    #[error(transparent)]
+    Frf(#[from] crate::ident::frf_fit::FrfFitError),
+    /// the frequency-domain black box (its message as it is)
+    #[error(transparent)]
+    FrfBlackBox(#[from] crate::ident::frf_subspace::FrfSubspaceError),
 }
 
 /// Rigid body with viscous and Coulomb friction and a torque offset,
@@ -322,8 +256,8 @@ impl RigidFriction {
 /// A fitted model that simulates the output from the input.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Fitted {
-    /// model family
-    pub kind: ModelKind,
+    /// the model asked for (its family names the fitted model)
+    pub spec: ModelSpec,
     /// output signal
     pub output: Output,
     /// sample interval of the model [s]
@@ -352,6 +286,11 @@ fn check(data: &IdData) -> Result<(), FitError> {
     Ok(data.check(50)?)
 }
 
+/// the current-loop lag of the time-domain fit [s] (none unless held)
+fn current_loop_tau(opts: &FitOptions) -> f64 {
+    opts.spec.current_loop_tau.unwrap_or(0.0)
+}
+
 /// Fits the model family of `opts` to `data` (already decimated and
 /// detrended as wanted).
 ///
@@ -359,15 +298,16 @@ fn check(data: &IdData) -> Result<(), FitError> {
 /// [`FitError`] when the data are unusable or an estimator fails.
 pub fn fit_model(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitError> {
     check(data)?;
-    if opts.coulomb && opts.kind != ModelKind::Rigid {
+    let family = opts.spec.family;
+    if opts.spec.coulomb && family != Family::Physical(Structure::Rigid) {
         return Err(FitError::CoulombNeedsRigid {
-            model: opts.kind.name(),
+            model: family.name(),
         });
     }
-    match opts.kind.structure() {
-        None => fit_black_box(data, opts.kind.black_box_order(), opts),
-        Some(Structure::Rigid) if opts.coulomb => fit_rigid_coulomb(data, opts),
-        Some(structure) => fit_grey(data, None, structure, opts),
+    match family {
+        Family::BlackBox(order) => fit_black_box(data, order, opts),
+        Family::Physical(Structure::Rigid) if opts.spec.coulomb => fit_rigid_coulomb(data, opts),
+        Family::Physical(structure) => fit_grey(data, None, structure, opts),
     }
 }
 
@@ -422,8 +362,8 @@ impl FitData {
 /// # Errors
 /// [`FitError`] when the data are unusable or an estimator fails.
 pub fn fit_prepared(data: &FitData, opts: &FitOptions) -> Result<Fitted, FitError> {
-    let structure = match opts.kind.structure() {
-        Some(s) if data.decimate > 1 && !opts.coulomb => s,
+    let structure = match opts.spec.family.structure() {
+        Some(s) if data.decimate > 1 && !opts.spec.coulomb => s,
         _ => return fit_model(&data.prepared, opts),
     };
     check(&data.prepared)?;
@@ -531,7 +471,7 @@ fn fit_black_box(data: &IdData, n: usize, opts: &FitOptions) -> Result<Fitted, F
     };
     warnings.dedup();
     Ok(Fitted {
-        kind: opts.kind,
+        spec: opts.spec.clone(),
         output: opts.output,
         ts: data.ts,
         model,
@@ -624,11 +564,11 @@ fn fit_grey(
         (None, Some(e)) => return Err(e.into()),
         (None, None) => unreachable!("at least one start ran"),
     };
-    if raw.is_none() && opts.current_loop_tau <= 0.0 {
+    if raw.is_none() && current_loop_tau(opts) <= 0.0 {
         let mut model = f.discrete.clone();
         model.k = None;
         return Ok(Fitted {
-            kind: opts.kind,
+            spec: opts.spec.clone(),
             output: opts.output,
             ts: data.ts,
             model,
@@ -653,7 +593,7 @@ fn fit_grey(
             ts: raw.ts,
             ..f.model
         },
-        current_loop_tau: opts.current_loop_tau.max(0.0),
+        current_loop_tau: current_loop_tau(opts).max(0.0),
     };
     // the coarse model is not the model of the decimated data (see
     // [`FitData`]), so its optimum can lie in another basin at the capture
@@ -716,7 +656,7 @@ fn fit_grey(
     let mut model = pf.model.clone();
     model.k = None;
     Ok(Fitted {
-        kind: opts.kind,
+        spec: opts.spec.clone(),
         output: opts.output,
         ts: raw.ts,
         model,
@@ -758,7 +698,7 @@ fn fit_rigid_coulomb(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitErro
     };
     let model = rigid_linear(friction.j, friction.fv, data.ts, opts.output);
     Ok(Fitted {
-        kind: opts.kind,
+        spec: opts.spec.clone(),
         output: opts.output,
         ts: data.ts,
         continuous: Some(rigid_continuous(friction.j, friction.fv, opts.output)),
@@ -1003,7 +943,7 @@ mod tests {
         fit_model(
             est,
             &FitOptions {
-                kind: ModelKind::BlackBox(3),
+                spec: ModelSpec::linear(Family::BlackBox(3)),
                 output: Output::Velocity,
                 refine,
                 ..FitOptions::default()
@@ -1019,32 +959,15 @@ mod tests {
     };
 
     #[test]
-    fn model_kind_parses_names_and_rejects_unknown() {
-        assert_eq!("black-box:11".parse(), Ok(ModelKind::BlackBox(11)));
-        assert_eq!("three_mass".parse(), Ok(ModelKind::ThreeMass));
-        assert_eq!("Four-Mass".parse(), Ok(ModelKind::FourMass));
-        assert!("black-box:0".parse::<ModelKind>().is_err());
-        assert!("five-mass"
-            .parse::<ModelKind>()
-            .unwrap_err()
-            .contains("five-mass"));
-        for k in [
-            ModelKind::BlackBox(4),
-            ModelKind::Rigid,
-            ModelKind::TwoMass,
-            ModelKind::ThreeMass,
-            ModelKind::FourMass,
-        ] {
-            assert_eq!(k.name().parse(), Ok(k));
-        }
+    fn every_plant_and_physical_family_name_the_same_structure() {
         // one list of structures: every plant of the simulator and every physical model
         // family name the same structure by the same label
         for st in Structure::ALL {
-            let k: ModelKind = st.label().parse().unwrap();
+            let k: Family = st.label().parse().unwrap();
             assert_eq!(k.structure(), Some(st));
         }
         for p in crate::model::params::PlantKind::ALL {
-            let k: ModelKind = p.structure().label().parse().unwrap();
+            let k: Family = p.structure().label().parse().unwrap();
             assert_eq!(k.structure(), Some(p.structure()));
         }
     }
@@ -1125,7 +1048,7 @@ mod tests {
         let fd = FitData::new(&raw, prep).unwrap();
         assert_eq!(fd.prepared, prep.apply(&raw).unwrap());
         let mut fitted = Fitted {
-            kind: ModelKind::ThreeMass,
+            spec: ModelSpec::linear(Family::Physical(Structure::ThreeMass)),
             output: Output::Angle,
             ts,
             model: m,

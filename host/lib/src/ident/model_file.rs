@@ -3,10 +3,12 @@
 //! fitted with decimation), the preparation applied to the data (decimation,
 //! detrending), the physical parameters with their standard deviations and units, and
 //! for the Coulomb rigid model its four parameters: all that is needed to simulate the
-//! model again on new data. Format `jointid-model/3`; formats 1 and 2 are still read.
+//! model again on new data. Format `jointid-model/4`; formats 1, 2 and 3 are still read.
 //! Format 3 adds the optional `nonlinear` section ([`SavedNonlinear`]): a physical model
 //! with effects fitted by [`crate::ident::nonlinear`], which `validate` simulates with the
 //! simulator's exact laws and `simulate --model-file` runs again (its matrices are empty).
+//! Format 4 adds the [`ModelSpec`] the fit was asked for ([`SavedModel::spec`]; for the
+//! older formats it is read from the family name, the friction and the nonlinear section).
 //!
 //! This module maps a [`Fitted`] to its file contents and back; the command line reads
 //! and writes the JSON text.
@@ -20,14 +22,14 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::data::Prep;
-use crate::ident::fit::{output_name, param_map, Fitted, ModelKind, ParamJson, RigidFriction};
+use crate::ident::fit::{output_name, param_map, Fitted, ParamJson, RigidFriction};
 use crate::ident::grey_box::{Output, PhysParam};
 use crate::ident::lm::Termination;
 use crate::ident::nonlinear::{simulate_args, NlFit, NlModel, NlParam, Owner};
 use crate::ident::ss::StateSpace;
 use crate::model::effects::Effect;
 use crate::model::params::unit_of;
-use crate::model::spec::Structure;
+use crate::model::spec::{Family, ModelSpec, Structure};
 
 impl Fitted {
     /// The model file.
@@ -35,7 +37,7 @@ impl Fitted {
         let n = self.model.order();
         SavedModel {
             format: MODEL_FORMAT.into(),
-            model: self.kind.name(),
+            model: self.spec.name(),
             method: self.method.clone(),
             output: output_name(self.output).into(),
             ts: self.ts,
@@ -54,14 +56,17 @@ impl Fitted {
             fit_name: None,
             source: source.into(),
             nonlinear: None,
+            spec: Some(self.spec.clone()),
         }
     }
 }
 
 /// format tag of [`SavedModel`] (format 2: physical models at the capture
 /// rate, [`SavedModel::decimate_output`]; format 3: the optional
-/// [`SavedModel::nonlinear`] section)
-pub const MODEL_FORMAT: &str = "jointid-model/3";
+/// [`SavedModel::nonlinear`] section; format 4: [`SavedModel::spec`])
+pub const MODEL_FORMAT: &str = "jointid-model/4";
+/// format 3, still read (a file of format 4 without `spec`)
+pub const MODEL_FORMAT_3: &str = "jointid-model/3";
 /// format 2, still read (a linear model file of format 3 without `nonlinear`)
 pub const MODEL_FORMAT_2: &str = "jointid-model/2";
 /// the earlier format, still read (its `interval_mean` hold excepted)
@@ -126,6 +131,11 @@ pub struct SavedModel {
     /// with the simulator's exact laws instead of `A, B, C, D`
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub nonlinear: Option<SavedNonlinear>,
+    /// format 4: the model's description: family, effects with their fitted values,
+    /// Coulomb friction of the rigid model, lag and delay when held (absent before:
+    /// [`SavedModel::spec`] reads it from `model`, `friction` and `nonlinear`)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spec: Option<ModelSpec>,
 }
 
 /// Why a model file cannot be read back ([`SavedModel::to_fitted`]).
@@ -134,7 +144,7 @@ pub struct SavedModel {
 pub enum ModelFileError {
     /// a format this build does not read
     #[error(
-        "model format `{format}` is none of `{MODEL_FORMAT}`, `{MODEL_FORMAT_2}`, `{MODEL_FORMAT_1}`"
+        "model format `{format}` is none of `{MODEL_FORMAT}`, `{MODEL_FORMAT_3}`, `{MODEL_FORMAT_2}`, `{MODEL_FORMAT_1}`"
     )]
     Format {
         /// the file's format tag
@@ -193,13 +203,54 @@ impl SavedModel {
     /// # Errors
     /// [`ModelFileError::Format`].
     pub fn check_format(&self) -> Result<(), ModelFileError> {
-        if [MODEL_FORMAT, MODEL_FORMAT_2, MODEL_FORMAT_1].contains(&self.format.as_str()) {
+        if [MODEL_FORMAT, MODEL_FORMAT_3, MODEL_FORMAT_2, MODEL_FORMAT_1]
+            .contains(&self.format.as_str())
+        {
             Ok(())
         } else {
             Err(ModelFileError::Format {
                 format: self.format.clone(),
             })
         }
+    }
+
+    /// The model's description: format 4 stores it; for formats 1–3 it is the
+    /// family named in `model` (the structure of the `nonlinear` section and its effects
+    /// for a model with effects), Coulomb friction when `friction` is there, lag and
+    /// delay free.
+    ///
+    /// # Errors
+    /// [`ModelFileError::Model`] when the family does not parse;
+    /// [`ModelFileError::Nonlinear`] when the spec and the `nonlinear` section disagree.
+    pub fn spec(&self) -> Result<ModelSpec, ModelFileError> {
+        self.check_format()?;
+        let spec = match (&self.spec, &self.nonlinear) {
+            (Some(spec), _) => spec.clone(),
+            (None, Some(nl)) => {
+                let structure = parse_structure(&nl.structure)?;
+                ModelSpec {
+                    effects: Some(nl.effects.clone()),
+                    ..ModelSpec::linear(Family::Physical(structure))
+                }
+            }
+            (None, None) => ModelSpec {
+                coulomb: self.friction.is_some(),
+                ..ModelSpec::linear(self.model.parse().map_err(ModelFileError::Model)?)
+            },
+        };
+        if spec.nonlinear() != self.nonlinear.is_some() {
+            return Err(ModelFileError::Nonlinear(format!(
+                "the spec `{}` {} effects but the file {} a nonlinear section",
+                spec.name(),
+                if spec.nonlinear() { "has" } else { "has no" },
+                if self.nonlinear.is_some() {
+                    "has"
+                } else {
+                    "has no"
+                },
+            )));
+        }
+        Ok(spec)
     }
 
     /// The model back as a [`Fitted`] (without continuous model).
@@ -240,7 +291,7 @@ impl SavedModel {
         if self.ts.is_nan() || self.ts <= 0.0 {
             return Err(ModelFileError::Interval { ts: self.ts });
         }
-        let kind: ModelKind = self.model.parse().map_err(ModelFileError::Model)?;
+        let spec = self.spec()?;
         let output = match self.output.as_str() {
             "angle" => Output::Angle,
             "velocity" => Output::Velocity,
@@ -269,7 +320,7 @@ impl SavedModel {
             })
             .collect();
         Ok(Fitted {
-            kind,
+            spec,
             output,
             ts: self.ts,
             model,
@@ -315,6 +366,14 @@ pub struct SavedNonlinear {
     pub simulate_args: Vec<String>,
 }
 
+/// The structure named `label` in a nonlinear section.
+fn parse_structure(label: &str) -> Result<Structure, ModelFileError> {
+    Structure::ALL
+        .into_iter()
+        .find(|s| s.label() == label)
+        .ok_or_else(|| ModelFileError::Nonlinear(format!("unknown structure `{label}`")))
+}
+
 /// One estimated parameter as JSON.
 fn param_json(p: &NlParam) -> ParamJson {
     ParamJson {
@@ -353,13 +412,13 @@ impl SavedModel {
                     .collect()
             })
             .collect();
-        let name = std::iter::once(m.structure.label())
-            .chain(m.effects.iter().map(|e| e.name()))
-            .collect::<Vec<_>>()
-            .join("+");
+        let spec = ModelSpec {
+            effects: Some(m.effects.clone()),
+            ..ModelSpec::linear(Family::Physical(m.structure))
+        };
         SavedModel {
             format: MODEL_FORMAT.into(),
-            model: name,
+            model: spec.name(),
             method: method.into(),
             output: "angle".into(),
             ts,
@@ -389,6 +448,7 @@ impl SavedModel {
                 highpass_hz,
                 simulate_args: simulate_args(fit),
             }),
+            spec: Some(spec),
         }
     }
 
@@ -404,10 +464,7 @@ impl SavedModel {
             .nonlinear
             .as_ref()
             .ok_or_else(|| bad("the file holds a linear model".into()))?;
-        let structure = Structure::ALL
-            .into_iter()
-            .find(|s| s.label() == nl.structure)
-            .ok_or_else(|| bad(format!("unknown structure `{}`", nl.structure)))?;
+        let structure = parse_structure(&nl.structure)?;
         let plant = structure
             .param_names()
             .iter()
@@ -579,5 +636,27 @@ mod tests {
         saved.format = "jointid-model/9".into();
         let e = saved.to_nonlinear().unwrap_err().to_string();
         assert!(e.contains("jointid-model/9"), "{e}");
+    }
+
+    #[test]
+    fn a_format_3_nonlinear_file_reads_with_its_spec_from_the_nonlinear_section() {
+        let fit = nl_fit();
+        let saved = SavedModel::from_nonlinear(&fit, 5e-4, "", "", 0.0, "v", 5.0);
+        let mut v = serde_json::to_value(&saved).unwrap();
+        let obj = v.as_object_mut().unwrap();
+        assert!(obj.remove("spec").is_some());
+        obj.insert("format".into(), MODEL_FORMAT_3.into());
+        let old: SavedModel = serde_json::from_value(v).unwrap();
+        assert_eq!(old.spec, None);
+        assert_eq!(old.spec().unwrap(), saved.spec().unwrap());
+        assert_eq!(old.to_nonlinear().unwrap().model, fit.model);
+    }
+
+    #[test]
+    fn a_spec_that_disagrees_with_the_nonlinear_section_is_named() {
+        let mut saved = SavedModel::from_nonlinear(&nl_fit(), 5e-4, "", "", 0.0, "v", 5.0);
+        saved.spec = Some(ModelSpec::linear(Family::Physical(Structure::TwoMass)));
+        let e = saved.spec().unwrap_err().to_string();
+        assert!(e.contains("nonlinear section"), "{e}");
     }
 }

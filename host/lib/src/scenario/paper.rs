@@ -56,10 +56,11 @@ use serde::Serialize;
 use thiserror::Error;
 
 use crate::data::{Dataset, Detrend, IdData, Prep};
-use crate::ident::fit::{default_f_min, fit_prepared, FitData, FitOptions, Fitted, ModelKind};
+use crate::ident::fit::{default_f_min, fit_prepared, FitData, FitOptions, Fitted};
 use crate::ident::grey_box::Output;
 use crate::ident::ss::StateSpace;
 use crate::ident::validate::fit_percent;
+use crate::model::spec::{Family, ModelSpec, Structure};
 use crate::sim::board::{encode_session, BoardStreamError, WireOptions};
 use crate::sim::{self, Mechanism, PlantKind, SimConfig, SimOutput};
 
@@ -372,7 +373,7 @@ pub fn table(
     est_ds: &Dataset,
     val_ds: &Dataset,
     truth: &SimConfig,
-    models: &[ModelKind],
+    models: &[Family],
 ) -> Result<(Table, TableModels), ExperimentError> {
     let est_fd = prepared_both(est_ds, SETTLE_PERIODS, DECIMATE)?;
     let val_fd = prepared_both(val_ds, SETTLE_PERIODS, DECIMATE)?;
@@ -385,9 +386,9 @@ pub fn table(
     );
     let modal = Mechanism::new(&truth.plant, &truth.effects).modal_frequencies();
     let truth_struct = match truth.plant.kind {
-        PlantKind::ThreeMass => Some(ModelKind::ThreeMass),
-        PlantKind::FourMass => Some(ModelKind::FourMass),
-        PlantKind::TwoMass => Some(ModelKind::TwoMass),
+        PlantKind::ThreeMass => Some(Family::Physical(Structure::ThreeMass)),
+        PlantKind::FourMass => Some(Family::Physical(Structure::FourMass)),
+        PlantKind::TwoMass => Some(Family::Physical(Structure::TwoMass)),
         _ => None,
     };
     let tp = truth.plant.params.table();
@@ -402,10 +403,12 @@ pub fn table(
         let f = fit_prepared(
             &est_fd,
             &FitOptions {
-                kind,
+                spec: ModelSpec {
+                    current_loop_tau: Some(truth.controller.current_loop_tau),
+                    ..ModelSpec::linear(kind)
+                },
                 output: Output::Angle,
                 r: truth.plant.params.r,
-                current_loop_tau: truth.controller.current_loop_tau,
                 ..FitOptions::default()
             },
         )
@@ -457,10 +460,10 @@ pub fn table(
 }
 
 /// The three models of seed 000 Table 2.
-pub const PAPER_MODELS: [ModelKind; 3] = [
-    ModelKind::BlackBox(11),
-    ModelKind::ThreeMass,
-    ModelKind::FourMass,
+pub const PAPER_MODELS: [Family; 3] = [
+    Family::BlackBox(11),
+    Family::Physical(Structure::ThreeMass),
+    Family::Physical(Structure::FourMass),
 ];
 
 /// One experiment of seed 000 Table 2 for `seed`: the runs of [`paper_runs`] streamed by

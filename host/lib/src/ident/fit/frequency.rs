@@ -1,0 +1,159 @@
+//! The frequency-domain path of [`super`]: the model of a [`FitOptions`] fitted to the FRF
+//! of periodic data at its excited lines, as a [`Fitted`]. A physical model goes to
+//! [`frf_fit`] (sample maximum likelihood, exact ZOH with the current-loop lag and a
+//! fractional delay); the black box to [`black_box_frf`] (frequency-domain subspace,
+//! McKelvey et al. 1996, refined by the same cost). [`below_frf`] checks a time-domain fit
+//! against the frequency-domain fit of the same family.
+
+use crate::ident::frf::FrfAnalysis;
+use crate::ident::frf_fit::{self, Drive, DriveEstimate, FitWarning, FrfFit, FrfFitOptions};
+use crate::ident::frf_subspace::black_box_frf;
+use crate::ident::grey_box::PhysParam;
+use crate::model::spec::{Family, Structure};
+
+use super::{FitError, FitOptions, Fitted};
+
+/// Iterations of the black box's refinement by sample maximum likelihood.
+const BLACK_BOX_ITERATIONS: usize = 40;
+
+/// The options of [`frf_fit::fit_frf`] for `structure` at sample interval `ts` [s]: the
+/// output and gear ratio of `opts`; with `held`, the lag [s] and delay [samples] the spec
+/// holds (the others estimated).
+fn frf_options(structure: Structure, opts: &FitOptions, ts: f64, held: bool) -> FrfFitOptions {
+    let mut o = FrfFitOptions::new(structure, ts);
+    o.output = opts.output;
+    o.r = opts.r;
+    if held {
+        if let Some(tau) = opts.spec.current_loop_tau {
+            o.lag = Drive::Fixed(tau / ts);
+        }
+        if let Some(d) = opts.spec.delay {
+            o.delay = Drive::Fixed(d);
+        }
+    }
+    o
+}
+
+/// Fits the model of `opts` to the FRF of `analysis`, sampled every `ts` [s]; `decimate`
+/// is the decimation between the model and the prepared data it is compared with
+/// ([`Fitted::decimate`]). A physical model carries its lag as `tau_c` [s] and its delay
+/// as `delay` [s] among the parameters; the black box is refined unless `opts.refine` is
+/// off.
+///
+/// # Errors
+/// [`FitError::Frf`] or [`FitError::FrfBlackBox`] when the fit cannot be made.
+pub fn fit_frequency_domain(
+    analysis: &FrfAnalysis,
+    ts: f64,
+    opts: &FitOptions,
+    decimate: usize,
+) -> Result<Fitted, FitError> {
+    match opts.spec.family {
+        Family::Physical(structure) => {
+            let ff = frf_fit::fit_frf(&analysis.frf, &frf_options(structure, opts, ts, true))?;
+            Ok(fitted_of(opts, &ff, analysis, decimate))
+        }
+        Family::BlackBox(n) => {
+            let iters = if opts.refine { BLACK_BOX_ITERATIONS } else { 0 };
+            let bb = black_box_frf(&analysis.frf, n, ts, opts.feedthrough, iters)?;
+            Ok(Fitted {
+                spec: opts.spec.clone(),
+                output: opts.output,
+                ts,
+                method: format!(
+                    "frequency domain: subspace on {} excited lines of {} periods (McKelvey et al. 1996, \
+                     bilinear map), refined by sample maximum likelihood ({} iterations); cost {:.1} = \
+                     {:.2} × its noise level",
+                    analysis.frf.g.len(),
+                    analysis.layout.count,
+                    bb.iterations,
+                    bb.cost,
+                    bb.cost_ratio()
+                ),
+                model: bb.model,
+                continuous: None,
+                params: Vec::new(),
+                friction: None,
+                warnings: bb.warnings.iter().map(|w| w.to_string()).collect(),
+                decimate,
+            })
+        }
+    }
+}
+
+/// A frequency-domain fit as a [`Fitted`]: the sampled model with the lag
+/// and the delay, the lag as `tau_c` [s] and the delay as `delay` [s] among
+/// the parameters.
+fn fitted_of(opts: &FitOptions, ff: &FrfFit, analysis: &FrfAnalysis, decimate: usize) -> Fitted {
+    let ts = ff.model.ts;
+    let mut params = ff.params.clone();
+    for (name, d) in [("tau_c", ff.lag), ("delay", ff.delay)] {
+        params.push(PhysParam {
+            name: name.into(),
+            value: d.value * ts,
+            std: d.std * ts,
+            unit: "s",
+        });
+    }
+    let drive = |d: &DriveEstimate| match (d.estimated, d.value > 0.0) {
+        (true, _) => "estimated",
+        (false, true) => "fixed",
+        (false, false) => "left out",
+    };
+    Fitted {
+        spec: opts.spec.clone(),
+        output: opts.output,
+        ts,
+        model: ff.discrete(),
+        continuous: Some(ff.continuous()),
+        params,
+        friction: None,
+        warnings: ff.warnings.iter().map(|w| w.to_string()).collect(),
+        method: format!(
+            "frequency domain: sample maximum likelihood on {} excited lines of {} periods \
+             ({:.1} to {:.1} Hz), current-loop lag {}, delay {}; cost {:.1} = {:.2} × its noise level; \
+             best of {} starts from the FRF's resonances",
+            ff.lines,
+            analysis.layout.count,
+            analysis.frf.freq_hz.first().map_or(0.0, |f| *f),
+            analysis.frf.freq_hz.last().map_or(0.0, |f| *f),
+            drive(&ff.lag),
+            drive(&ff.delay),
+            ff.cost,
+            ff.cost_ratio(),
+            ff.starts
+        ),
+        decimate,
+    }
+}
+
+/// A time-domain fit on periodic data checked against the frequency-domain
+/// fit of the same model family (lag and delay estimated, the black box refined) on
+/// `analysis`, sampled every `ts` [s]: when its periodic steady-state FIT on the
+/// estimation record is more than 10 points below, the time-domain fit has followed
+/// something else than the joint (drift, a slow disturbance). `None` when the fitted model
+/// runs at another rate or the reference fit fails.
+pub fn below_frf(
+    analysis: &FrfAnalysis,
+    ts: f64,
+    opts: &FitOptions,
+    fitted: &Fitted,
+) -> Option<FitWarning> {
+    if (fitted.ts - ts).abs() > 1e-9 * ts {
+        return None;
+    }
+    let a = analysis;
+    let reference = match opts.spec.family {
+        Family::Physical(structure) => {
+            let ff = frf_fit::fit_frf(&a.frf, &frf_options(structure, opts, ts, false)).ok()?;
+            ff.freq_response(&a.frf.freq_hz)
+        }
+        Family::BlackBox(n) => black_box_frf(&a.frf, n, ts, opts.feedthrough, BLACK_BOX_ITERATIONS)
+            .ok()?
+            .model
+            .freq_response(&a.frf.freq_hz),
+    };
+    let frf_fit = frf_fit::periodic_fit_percent(&a.frf, &reference);
+    let fit = frf_fit::periodic_fit_percent(&a.frf, &fitted.model.freq_response(&a.frf.freq_hz));
+    (fit < frf_fit - 10.0).then_some(FitWarning::FitBelowFrf { fit, frf_fit })
+}

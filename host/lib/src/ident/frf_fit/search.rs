@@ -1,0 +1,239 @@
+//! Where the frequency-domain fit starts (module docs of [`super`]): the reliable lines,
+//! the FRF's peaks, the features (resonances, anti-resonances, rigid-body gain) that give
+//! the initial values of each candidate assignment of peaks to modes.
+
+use super::*;
+
+/// Lines whose FRF is reliable: `σ/|Ĝ| ≤` [`RELIABLE_REL_SIGMA`].
+pub fn reliable_lines(frf: &Frf) -> Vec<usize> {
+    (0..frf.g.len())
+        .filter(|&i| {
+            let a = frf.g[i].norm();
+            a > 0.0 && frf.sigma[i] <= RELIABLE_REL_SIGMA * a
+        })
+        .collect()
+}
+
+pub(super) fn rigid_power(output: Output) -> i32 {
+    match output {
+        Output::Angle => 2,
+        Output::Velocity => 1,
+    }
+}
+
+/// Resonances of the FRF: local maxima of `|Ĝ| ω^k` over the reliable lines
+/// (`k` 2 for the angle, 1 for the velocity), with their topographic
+/// prominence (height above the higher of the two lowest points that
+/// separate the peak from higher ground on either side), at least 0.3 dB,
+/// strongest first.
+pub fn frf_peaks(frf: &Frf, output: Output) -> Vec<FrfPeak> {
+    let idx = reliable_lines(frf);
+    let k = rigid_power(output);
+    let h: Vec<f64> = idx
+        .iter()
+        .map(|&i| {
+            let w = 2.0 * std::f64::consts::PI * frf.freq_hz[i];
+            20.0 * (frf.g[i].norm() * w.powi(k)).log10()
+        })
+        .collect();
+    let mut peaks = Vec::new();
+    for j in 1..h.len().saturating_sub(1) {
+        if !(h[j] > h[j - 1] && h[j] >= h[j + 1]) {
+            continue;
+        }
+        let mut left = h[j];
+        let mut i = j;
+        while i > 0 {
+            i -= 1;
+            if h[i] > h[j] {
+                break;
+            }
+            left = left.min(h[i]);
+        }
+        let mut right = h[j];
+        let mut i = j;
+        while i + 1 < h.len() {
+            i += 1;
+            if h[i] > h[j] {
+                break;
+            }
+            right = right.min(h[i]);
+        }
+        let prom = h[j] - left.max(right);
+        if prom >= 0.3 {
+            peaks.push(FrfPeak {
+                freq_hz: frf.freq_hz[idx[j]],
+                prominence_db: prom,
+            });
+        }
+    }
+    peaks.sort_by(|a, b| b.prominence_db.total_cmp(&a.prominence_db));
+    peaks
+}
+
+/// Start features for chosen resonances: notches below each, the rigid
+/// body from the lines below the first notch.
+pub(super) fn features(
+    frf: &Frf,
+    output: Output,
+    res_hz: &[f64],
+    zeta: f64,
+) -> Result<Features, FrfFitError> {
+    let idx = reliable_lines(frf);
+    let k = rigid_power(output);
+    let height = |i: usize| {
+        let w = 2.0 * std::f64::consts::PI * frf.freq_hz[i];
+        frf.g[i].norm() * w.powi(k)
+    };
+    let mut pairs = Vec::new();
+    let mut lo = 0.0;
+    for &p in res_hz {
+        let z = idx
+            .iter()
+            .filter(|&&i| frf.freq_hz[i] > lo && frf.freq_hz[i] < p)
+            .min_by(|&&a, &&b| height(a).total_cmp(&height(b)))
+            .map(|&i| frf.freq_hz[i])
+            .filter(|&z| z > lo)
+            .unwrap_or(0.7 * p);
+        pairs.push((z.max(0.3 * p), p));
+        lo = p;
+    }
+    let top = pairs.first().map_or(f64::INFINITY, |p| 0.5 * p.0);
+    let mut low: Vec<usize> = idx
+        .iter()
+        .copied()
+        .filter(|&i| frf.freq_hz[i] < top)
+        .collect();
+    if low.len() < 3 {
+        low = idx.iter().copied().take(3).collect();
+    }
+    let (mut js, mut fs) = (Vec::new(), Vec::new());
+    for &i in &low {
+        let w = 2.0 * std::f64::consts::PI * frf.freq_hz[i];
+        let inv = frf.g[i].inv();
+        match output {
+            Output::Angle => {
+                js.push(-inv.re / (w * w));
+                fs.push(inv.im / w);
+            }
+            Output::Velocity => {
+                js.push(inv.im / w);
+                fs.push(inv.re);
+            }
+        }
+    }
+    let med = |v: &mut Vec<f64>| {
+        if v.is_empty() {
+            return f64::NAN;
+        }
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let j_total = med(&mut js);
+    if !(j_total > 0.0 && j_total.is_finite()) {
+        return Err(FrfFitError::NoRigidBody {
+            detail: format!(
+                "median inertia {j_total:.3e} kg·m² over {} lines below {top:.2} Hz",
+                low.len()
+            ),
+        });
+    }
+    let mut f_m = med(&mut fs);
+    let w_low = 2.0 * std::f64::consts::PI * frf.freq_hz[low[0]];
+    if !(f_m > 1e-3 * j_total * w_low && f_m.is_finite()) {
+        // unresolved: a mechanical pole a decade below the lowest line
+        f_m = 0.1 * j_total * w_low;
+    }
+    Ok(Features {
+        j_total,
+        f_m,
+        pairs,
+        zeta1: zeta,
+        subspace_order: 0,
+    })
+}
+
+/// all `k`-subsets of `0..n`, in lexicographic order
+pub(super) fn subsets(n: usize, k: usize) -> Vec<Vec<usize>> {
+    if k == 0 {
+        return vec![Vec::new()];
+    }
+    if k > n {
+        return Vec::new();
+    }
+    let mut out = Vec::new();
+    let mut cur: Vec<usize> = (0..k).collect();
+    loop {
+        out.push(cur.clone());
+        let mut i = k;
+        while i > 0 && cur[i - 1] == n - k + i - 1 {
+            i -= 1;
+        }
+        if i == 0 {
+            return out;
+        }
+        cur[i - 1] += 1;
+        for j in i..k {
+            cur[j] = cur[j - 1] + 1;
+        }
+    }
+}
+
+pub(super) fn is_loss(name: &str) -> bool {
+    name.starts_with('d') || name.starts_with('f') || name == "Fv"
+}
+
+pub(super) struct Candidate {
+    pub(super) theta: Vec<f64>,
+    pub(super) start: Vec<f64>,
+    pub(super) fit: LmFit,
+    pub(super) cost: f64,
+    pub(super) opts: LmOptions,
+}
+
+/// Candidate mode frequencies for a second search: the peaks, and around the
+/// two strongest of them, frequencies where a mode hidden in their shoulder
+/// may sit; at most nine, none within 3 % of another [Hz].
+pub(super) fn augmented_candidates(peaks: &[FrfPeak], n_res: usize) -> Vec<f64> {
+    let mut c: Vec<f64> = peaks.iter().take(n_res + 2).map(|p| p.freq_hz).collect();
+    for p in peaks.iter().take(2) {
+        for m in [0.8, 1.2, 0.65, 1.45] {
+            c.push(m * p.freq_hz);
+        }
+    }
+    let mut out: Vec<f64> = Vec::new();
+    for f in c {
+        if out.len() < 9 && !out.iter().any(|g| (g - f).abs() < 0.03 * f) {
+            out.push(f);
+        }
+    }
+    out.sort_by(f64::total_cmp);
+    out
+}
+
+pub(super) fn structure_name(s: Structure) -> &'static str {
+    match s {
+        Structure::Rigid => "rigid",
+        Structure::TwoMass => "two-mass",
+        Structure::ThreeMass => "three-mass",
+        Structure::FourMass => "four-mass",
+    }
+}
+
+/// The reported order of the four-mass model's interchangeable branches
+/// ([`grey_box::FOUR_MASS_BRANCHES`]), applied to a candidate with its
+/// covariance.
+pub(super) fn canonical_four_mass(c: &mut Candidate) {
+    let nm = Structure::FourMass.param_names().len();
+    if !grey_box::four_mass_swapped(&c.theta[..nm.min(c.theta.len())]) {
+        return;
+    }
+    for (i, j) in grey_box::FOUR_MASS_BRANCHES {
+        c.theta.swap(i, j);
+        c.start.swap(i, j);
+        c.fit.theta.swap(i, j);
+        c.fit.std.swap(i, j);
+        c.fit.cov.swap_rows(i, j);
+        c.fit.cov.swap_columns(i, j);
+    }
+}
