@@ -85,6 +85,12 @@ pub enum FrfError {
         /// highest line examined
         max_line: usize,
     },
+    /// the segments of [`analyze_segments`] are not of one experiment
+    #[error("segments cannot be pooled: {what}")]
+    SegmentsDiffer {
+        /// the difference
+        what: String,
+    },
     /// data preparation failed
     #[error(transparent)]
     Data(#[from] crate::data::DataError),
@@ -564,30 +570,115 @@ pub fn detect_period(x: &[f64], signal: &str) -> Result<usize, FrfError> {
 /// # Errors
 /// As [`Dataset::period_layout`], [`detect_period`] and [`analyze`].
 pub fn analyze_dataset(ds: &Dataset, settle_periods: usize) -> Result<FrfAnalysis, FrfError> {
+    let (layout, excited) = layout_of(ds, settle_periods)?;
+    analyze(&ds.data, layout, excited)
+}
+
+/// The whole steady-state periods of `ds` and how its excited lines are found: from the
+/// excitation config; else with the period the file states
+/// ([`Dataset::stated_period`]) or the one detected from the reference (else the input).
+fn layout_of(
+    ds: &Dataset,
+    settle_periods: usize,
+) -> Result<(PeriodLayout, ExcitedLines), FrfError> {
     match ds.excitation {
-        Some(cfg) => {
-            let layout = ds.period_layout(settle_periods)?;
-            analyze(&ds.data, layout, ExcitedLines::Config(cfg))
-        }
+        Some(cfg) => Ok((ds.period_layout(settle_periods)?, ExcitedLines::Config(cfg))),
         None => {
-            let (sig, name) = match &ds.data.r {
-                Some(r) => (r.as_slice(), "theta_ref"),
-                None => (ds.data.u.as_slice(), "u"),
+            let period = match ds.stated_period() {
+                Some(p) => p,
+                None => {
+                    let (sig, name) = match &ds.data.r {
+                        Some(r) => (r.as_slice(), "theta_ref"),
+                        None => (ds.data.u.as_slice(), "u"),
+                    };
+                    detect_period(sig, name)?
+                }
             };
-            let period = detect_period(sig, name)?;
             let start = settle_periods * period;
             let count = ds.data.len().saturating_sub(start) / period;
-            analyze(
-                &ds.data,
+            Ok((
                 PeriodLayout {
                     period,
                     start,
                     count,
                 },
                 ExcitedLines::Detect,
-            )
+            ))
         }
     }
+}
+
+/// The FRF, noise and linearity of several gap-free segments of one experiment (the
+/// pieces of a capture with gaps): each segment's whole steady-state periods (its
+/// transient dropped only where it holds the ramp-in and `settle_periods`), pooled, so
+/// the FRF and its σ average over every period of every segment. Per-period spectra do
+/// not see where two segments meet, so nothing is interpolated across a gap. The
+/// returned layout counts the pooled periods from the first segment's first one.
+///
+/// # Errors
+/// As [`analyze_dataset`] for each segment; [`FrfError::SegmentsDiffer`] when the
+/// segments differ in period, sample interval or reference column.
+pub fn analyze_segments(
+    segments: &[Dataset],
+    settle_periods: usize,
+) -> Result<FrfAnalysis, FrfError> {
+    let Some(first) = segments.first() else {
+        return Err(FrfError::SegmentsDiffer {
+            what: "no segment".into(),
+        });
+    };
+    if segments.len() == 1 {
+        return analyze_dataset(first, settle_periods);
+    }
+    let (lay0, excited) = layout_of(first, settle_periods)?;
+    let mut data = IdData {
+        ts: first.data.ts,
+        u: Vec::new(),
+        y: Vec::new(),
+        r: first.data.r.as_ref().map(|_| Vec::new()),
+    };
+    let mut count = 0;
+    for (i, ds) in segments.iter().enumerate() {
+        let (lay, _) = layout_of(ds, settle_periods)?;
+        if lay.period != lay0.period
+            || (ds.data.ts - data.ts).abs() > 1e-9 * data.ts
+            || ds.data.r.is_some() != data.r.is_some()
+        {
+            return Err(FrfError::SegmentsDiffer {
+                what: format!(
+                    "segment {} has period {} samples at {} s, the first {} samples at {} s{}",
+                    i + 1,
+                    lay.period,
+                    ds.data.ts,
+                    lay0.period,
+                    data.ts,
+                    if ds.data.r.is_some() != data.r.is_some() {
+                        " (one has a reference, the other not)"
+                    } else {
+                        ""
+                    }
+                ),
+            });
+        }
+        let range = lay.range();
+        data.u.extend_from_slice(&ds.data.u[range.clone()]);
+        data.y.extend_from_slice(&ds.data.y[range.clone()]);
+        if let (Some(all), Some(r)) = (data.r.as_mut(), ds.data.r.as_ref()) {
+            all.extend_from_slice(&r[range]);
+        }
+        count += lay.count;
+    }
+    let mut a = analyze(
+        &data,
+        PeriodLayout {
+            period: lay0.period,
+            start: 0,
+            count,
+        },
+        excited,
+    )?;
+    a.layout.start = lay0.start;
+    Ok(a)
 }
 
 /// Per-period spectra, FRF with σ, noise levels and the linearity check.
@@ -1229,6 +1320,7 @@ pub(crate) mod tests {
             input: "torque".into(),
             output: "angle".into(),
             reference: None,
+            delimiter: None,
         };
         let ds = crate::data::parse_csv(&text, "mapped.csv", &map).unwrap();
         assert!(ds.excitation.is_none() && ds.data.r.is_none());
