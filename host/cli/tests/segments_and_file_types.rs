@@ -171,3 +171,94 @@ fn a_capture_named_csv_is_read_as_a_capture_and_a_mat_file_is_named() {
         stderr(&out)
     );
 }
+
+/// The capture CSV of `test_support::capture_csv` as another logger writes it: its own
+/// `# key=value` comments (some of the nine excitation keys, none of `kind`), its own
+/// column names, `;` between the cells.
+fn other_logger_csv() -> String {
+    let text = jointid::test_support::capture_csv(0.0, 4);
+    let mut out = String::from(
+        "# logger=acme-daq 2.1\n# period_samples=500\n# f0_hz=2\n# excited_harmonics=1,3,9,11\n",
+    );
+    out.push_str("time;ref;torque;angle\n");
+    for l in text.lines().filter(|l| !l.starts_with('#')).skip(1) {
+        out.push_str(&l.replace(',', ";"));
+        out.push('\n');
+    }
+    out
+}
+
+#[test]
+fn another_loggers_csv_on_standard_input_is_read_with_a_mapping_and_notes() {
+    use std::io::Write;
+    let run = |args: &[&str], input: &str| {
+        let mut child = std::process::Command::new(common::BIN)
+            .args(args)
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        child
+            .stdin
+            .take()
+            .unwrap()
+            .write_all(input.as_bytes())
+            .unwrap();
+        child.wait_with_output().unwrap()
+    };
+    let csv = other_logger_csv();
+    let map = [
+        "--time",
+        "time",
+        "--input",
+        "torque",
+        "--output",
+        "angle",
+        "--reference",
+        "ref",
+    ];
+    let mut argv = vec!["analyze", "-", "--json"];
+    argv.extend_from_slice(&map);
+    // before: "`kind`: missing: the excitation keys ... come together", exit 2
+    let out = run(&argv, &csv);
+    let v = json_of(&out);
+    assert_eq!(v["file"], "standard input");
+    assert_eq!(v["analysis"]["layout"]["period"], 500);
+    let notes = stderr(&out);
+    assert!(
+        notes.contains("comment keys period_samples without `kind`"),
+        "{notes}"
+    );
+    assert!(
+        notes.contains("comment keys not used: excited_harmonics, logger"),
+        "{notes}"
+    );
+    assert!(
+        notes.contains("no `,` in the header line 5: columns split on `;`"),
+        "{notes}"
+    );
+    // an explicit delimiter: no guess, no note about it
+    argv.extend_from_slice(&["--delimiter", ";"]);
+    let out = run(&argv, &csv);
+    json_of(&out);
+    assert!(
+        !stderr(&out).contains("columns split on"),
+        "{}",
+        stderr(&out)
+    );
+    // a capture on standard input is a capture
+    let dir = tmpdir("stdin-capture");
+    let cap = gapped_capture(&dir, "run.jcap");
+    let bytes = std::fs::read(&cap).unwrap();
+    let mut child = std::process::Command::new(common::BIN)
+        .args(["analyze", "-", "--segment", "all", "--json"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(&bytes).unwrap();
+    let v = json_of(&child.wait_with_output().unwrap());
+    assert_eq!(v["analysis"]["layout"]["count"], 14);
+}
