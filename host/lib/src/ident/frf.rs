@@ -326,14 +326,23 @@ impl Frf {
     }
 }
 
-/// Unwraps a phase sequence [deg] so that consecutive values differ by less
-/// than 180°.
+/// Lowest phase of the branch of the first value of [`unwrap_deg`] [deg]: the first
+/// value lies in (−270°, 90°].
+pub const PHASE_BRANCH_LOW_DEG: f64 = -270.0;
+
+/// Unwraps a phase sequence [deg], continuous from its first value: that value is put on
+/// the branch (−270°, 90°], then each next one within 180° of the one before.
+///
+/// The branch of the first value is fixed, not left to `atan2`'s (−180°, 180°]: the phase
+/// of a joint's torque to motor angle is near −180° at the lowest lines (−90° to −180°;
+/// to velocity 0° to −90°), where noise would put one run on +179° and the next on
+/// −179°, and the whole curve of one 360° away from the other.
 pub fn unwrap_deg(ph: impl IntoIterator<Item = f64>) -> Vec<f64> {
     let mut out: Vec<f64> = Vec::new();
     for p in ph {
         let v = match out.last() {
             Some(prev) => p - 360.0 * ((p - prev) / 360.0).round(),
-            None => p,
+            None => p - 360.0 * ((p - PHASE_BRANCH_LOW_DEG) / 360.0).ceil() + 360.0,
         };
         out.push(v);
     }
@@ -1128,6 +1137,54 @@ pub(crate) mod tests {
             "{}",
             a.linearity_y.verdict
         );
+    }
+
+    /// A joint whose torque-to-angle phase sits at −180° at the lowest lines (as a motor
+    /// angle's does): the resonance of [`plant`] with a negative gain, its lowest line
+    /// about 1° from ±180°, within the noise of the branch cut.
+    fn phase_at_the_cut(seed: u64) -> FrfAnalysis {
+        let c = cfg(512, 60, 10);
+        let r: Vec<f64> = multisine(&c, 10, 21).iter().map(|v| 0.3 * v).collect();
+        let mut sys = plant();
+        sys.b1 = -sys.b1;
+        sys.kp = -sys.kp;
+        let lay = PeriodLayout {
+            period: 512,
+            start: 1024,
+            count: 8,
+        };
+        analyze(&sys.run(&r, 0.15, 0.0, seed), lay, ExcitedLines::Config(c)).unwrap()
+    }
+
+    #[test]
+    fn phase_is_on_one_branch_from_the_lowest_line_whatever_the_noise() {
+        // σ of the phase [deg] at each line, from the FRF's own σ
+        let sd = |a: &FrfAnalysis| -> Vec<f64> {
+            a.frf
+                .g
+                .iter()
+                .zip(&a.frf.sigma)
+                .map(|(g, s)| (s / g.norm()).min(1.0).asin().to_degrees())
+                .collect()
+        };
+        let first = phase_at_the_cut(1);
+        let (a, sa) = (first.frf.phase_deg(), sd(&first));
+        // the lowest line sits near ±180°: on the branch (−270°, 90°] it is −180°
+        assert!((a[0] + 180.0).abs() < 10.0, "{}", a[0]);
+        for seed in 2..40 {
+            let other = phase_at_the_cut(seed);
+            let (b, sb) = (other.frf.phase_deg(), sd(&other));
+            for i in 0..a.len() {
+                // the same system: the same phase within the noise (4σ of each, 2° more)
+                let tol = 2.0 + 4.0 * (sa[i] + sb[i]);
+                assert!(
+                    (a[i] - b[i]).abs() < tol,
+                    "seed {seed}, line {i}: {:.1}° against {:.1}° of seed 1 (±{tol:.1}°)",
+                    b[i],
+                    a[i]
+                );
+            }
+        }
     }
 
     #[test]
