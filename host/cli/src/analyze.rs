@@ -11,8 +11,8 @@ use super::args::DataArgs;
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::{fmt_sig, Dataset, SignalKind};
 use jointid::ident::frf::{
-    amplitude_trend, analyze_dataset, AmplitudeTrend, ClassLevel, ExcitedSource, FrfAnalysis,
-    Instrument,
+    amplitude_trend, analyze_dataset, analyze_segments, AmplitudeTrend, ClassLevel, ExcitedSource,
+    FrfAnalysis, Instrument,
 };
 use jointid::ident::validate::FrfBand;
 use jointid::report::plot::{analysis_spectrum_svg, bode_svg};
@@ -67,8 +67,9 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
     if let Some(dir) = &args.plot {
         check_plot_files(dir, &["spectrum.svg", "frf.svg"], args.force)?;
     }
-    let ds = args.data.load(ctx.loaders)?;
-    let a = analyze_dataset(&ds, args.settle_periods)?;
+    let selected = args.data.select(ctx.loaders)?;
+    let ds = &selected.datasets[0];
+    let a = analyze_segments(&selected.datasets, args.settle_periods)?;
     let mut plots = Vec::new();
     if let Some(dir) = &args.plot {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
@@ -91,9 +92,12 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
     let significant = a.distortion_significant();
     let mut trend = Vec::new();
     if let Some(other) = &args.compare {
-        let other_ds = ctx.loaders.load(other, &args.data.column_map())?;
+        let other_ds = args
+            .data
+            .read
+            .select_one(ctx.loaders, other, args.data.column_map())?;
         let b = analyze_dataset(&other_ds, args.settle_periods)?;
-        same_multisine((&ds, &a), (&other_ds, &b))?;
+        same_multisine((ds, &a), (&other_ds, &b))?;
         trend.push(amplitude_trend(&a.linearity_u, &b.linearity_u));
         trend.push(amplitude_trend(&a.linearity_y, &b.linearity_y));
     }

@@ -1,12 +1,118 @@
 //! Argument groups shared by subcommands: the data file with its column
-//! mapping, and data preparation (detrend, decimation, split).
+//! mapping, how to read it and which part to use (segment, time window), and data
+//! preparation (detrend, decimation, split).
 
-use std::path::PathBuf;
+use std::io::Write;
+use std::path::{Path, PathBuf};
 
 use clap::builder::{PossibleValue, TypedValueParser};
 use clap::Args;
 
-use jointid::data::{ColumnMap, DataError, Dataset, Detrend, IdData, Loaders, Prep};
+use jointid::data::{
+    ColumnMap, DataError, Dataset, Detrend, IdData, Loaders, Prep, Record, SegmentChoice, Selected,
+    Selection, TimeBound,
+};
+
+/// How to read a data file and which part of it to use: declared once, flattened into
+/// every analysis command (analyze, fit, validate, diagnose).
+#[derive(Debug, Clone, Default, Args)]
+pub struct ReadArgs {
+    /// gap-free segment to use: longest, N (from 1, as `jointid info` lists them) or all
+    /// (analyze averages the FRF over them); default: the whole file, or its longest
+    /// segment with a note when it has gaps
+    #[arg(long, value_name = "longest|N|all")]
+    pub segment: Option<SegmentChoice>,
+    /// start of the time window: seconds of the time column (`12.5`) or whole excitation
+    /// periods after the ramp-in (`3p`)
+    #[arg(long, value_name = "T|Np")]
+    pub from: Option<TimeBound>,
+    /// end of the time window (exclusive), as --from
+    #[arg(long, value_name = "T|Np")]
+    pub to: Option<TimeBound>,
+    /// CSV column delimiter, one character (`;`, `tab`); default `,`, or `;` or a tab
+    /// when the header holds no `,` (with a note)
+    #[arg(long, value_name = "CHAR", value_parser = parse_delimiter)]
+    pub delimiter: Option<char>,
+}
+
+fn parse_delimiter(s: &str) -> Result<char, String> {
+    match s {
+        "tab" | "\\t" => return Ok('\t'),
+        "space" => return Ok(' '),
+        _ => {}
+    }
+    let mut c = s.chars();
+    match (c.next(), c.next()) {
+        (Some(d), None) if d != '"' && d != '#' && !d.is_alphanumeric() && d != '.' && d != '-' => {
+            Ok(d)
+        }
+        _ => Err(format!(
+            "`{s}`: one character that cannot be part of a number, or `tab`"
+        )),
+    }
+}
+
+impl ReadArgs {
+    /// The selection these arguments describe.
+    pub fn selection(&self) -> Selection {
+        Selection {
+            segment: self.segment,
+            from: self.from,
+            to: self.to,
+        }
+    }
+
+    /// Reads `path` (`-`: standard input) with `map` and this delimiter, and selects the
+    /// part asked for; prints the reader's and the selection's notes on standard error.
+    ///
+    /// # Errors
+    /// The loader's or the selection's [`DataError`].
+    pub fn select(
+        &self,
+        loaders: &Loaders,
+        path: &Path,
+        mut map: ColumnMap,
+    ) -> Result<Selected, DataError> {
+        map.delimiter = self.delimiter;
+        let record: Record = loaders.load_record(path, &map)?;
+        let sel = record.select(&self.selection())?;
+        for n in &sel.notes {
+            let _ = writeln!(std::io::stderr(), "note: {n}");
+        }
+        Ok(sel)
+    }
+
+    /// As [`ReadArgs::select`], for a command that takes one record.
+    ///
+    /// # Errors
+    /// As [`ReadArgs::select`]; [`DataError::Selection`] for `--segment all` when the
+    /// selection holds more than one segment.
+    pub fn select_one(
+        &self,
+        loaders: &Loaders,
+        path: &Path,
+        map: ColumnMap,
+    ) -> Result<Dataset, DataError> {
+        let mut sel = self.select(loaders, path, map)?;
+        if sel.datasets.len() > 1 {
+            let name = sel.datasets[0].name.clone();
+            return Err(DataError::Selection {
+                file: name,
+                reason: format!(
+                    "--segment all: this command takes one gap-free record, and segments {} \
+                     were selected; give --segment longest or --segment N (`analyze` averages \
+                     the FRF over all of them)",
+                    sel.segments
+                        .iter()
+                        .map(usize::to_string)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            });
+        }
+        Ok(sel.datasets.remove(0))
+    }
+}
 
 /// A data file and, for CSV files that are not capture CSVs, its columns.
 #[derive(Debug, Clone, Args)]
@@ -27,6 +133,9 @@ pub struct DataArgs {
     /// reference column (excitation); without a mapping the capture CSV's `theta_ref`
     #[arg(long, value_name = "COL")]
     pub reference: Option<String>,
+    /// how to read the file and which part to use
+    #[command(flatten)]
+    pub read: ReadArgs,
 }
 
 impl DataArgs {
@@ -38,23 +147,34 @@ impl DataArgs {
                 input: i.clone(),
                 output: o.clone(),
                 reference: self.reference.clone(),
+                delimiter: self.read.delimiter,
             },
             _ => {
                 let mut m = ColumnMap::capture();
                 if let Some(r) = &self.reference {
                     m.reference = Some(r.clone());
                 }
+                m.delimiter = self.read.delimiter;
                 m
             }
         }
     }
 
-    /// Loads the file through `loaders`.
+    /// Loads the part of the file the command line selects, as one record ([`ReadArgs::select_one`]).
     ///
     /// # Errors
-    /// The loader's [`DataError`].
+    /// The loader's or the selection's [`DataError`].
     pub fn load(&self, loaders: &Loaders) -> Result<Dataset, DataError> {
-        loaders.load(&self.path, &self.column_map())
+        self.read.select_one(loaders, &self.path, self.column_map())
+    }
+
+    /// Loads the part of the file the command line selects: one record, or every segment
+    /// with `--segment all` ([`ReadArgs::select`]).
+    ///
+    /// # Errors
+    /// The loader's or the selection's [`DataError`].
+    pub fn select(&self, loaders: &Loaders) -> Result<Selected, DataError> {
+        self.read.select(loaders, &self.path, self.column_map())
     }
 }
 

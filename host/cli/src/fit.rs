@@ -22,7 +22,7 @@ use std::time::Instant;
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
-use super::args::{DataArgs, PrepArgs};
+use super::args::{DataArgs, PrepArgs, ReadArgs};
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::check_output;
 use jointid::data::Dataset;
@@ -101,6 +101,9 @@ pub struct FitDataArgs {
     /// reference column (default: the capture CSV's `theta_ref`)
     #[arg(long, value_name = "COL")]
     pub reference: Option<String>,
+    /// how to read the files and which part to use
+    #[command(flatten)]
+    pub read: ReadArgs,
 }
 
 impl FitDataArgs {
@@ -112,6 +115,7 @@ impl FitDataArgs {
             input: self.input.clone(),
             output: self.output_col.clone(),
             reference: self.reference.clone(),
+            read: self.read.clone(),
         }
     }
 }

@@ -14,7 +14,8 @@ use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::export::kind_name;
-use jointid::capture::{read_jcap_session_reports, CaptureReport};
+use jointid::capture::{read_jcap_session_reports, segments_of, CaptureReport};
+use jointid::data::{fmt_sig, SegmentInfo};
 
 /// Arguments of `jointid info`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
@@ -38,6 +39,8 @@ pub struct SessionInfo {
     /// the session's report
     #[serde(flatten)]
     pub report: CaptureReport,
+    /// the session's gap-free segments (what `--segment N` of the analysis commands picks)
+    pub segments: Vec<SegmentInfo>,
 }
 
 /// What `info --json` prints.
@@ -50,6 +53,8 @@ pub struct InfoSummary {
     /// the report
     #[serde(flatten)]
     pub report: CaptureReport,
+    /// the reported session's gap-free segments
+    pub segments: Vec<SegmentInfo>,
     /// every session (or the one asked for), in stream order, each with its own report
     pub per_session: Vec<SessionInfo>,
 }
@@ -63,19 +68,26 @@ pub struct InfoSummary {
 pub fn run(args: &InfoArgs, ctx: &mut Context<'_>) -> CmdResult {
     let mut all = read_jcap_session_reports(&args.input, args.session)?;
     let clean = all.iter().all(|(r, _)| r.is_clean());
+    let segs = |r: &CaptureReport, h: &Option<SessionHeader>| {
+        h.as_ref().map_or_else(Vec::new, |h| segments_of(r, h))
+    };
     let (report, header) = all.remove(0);
+    let segments = segs(&report, &header);
     let mut per_session = vec![SessionInfo {
         header,
         report: report.clone(),
+        segments: segments.clone(),
     }];
-    per_session.extend(
-        all.into_iter()
-            .map(|(report, header)| SessionInfo { header, report }),
-    );
+    per_session.extend(all.into_iter().map(|(report, header)| SessionInfo {
+        segments: segs(&report, &header),
+        header,
+        report,
+    }));
     let summary = InfoSummary {
         file: args.input.display().to_string(),
         header,
         report,
+        segments,
         per_session,
     };
     if ctx.json {
@@ -105,15 +117,20 @@ pub fn describe(s: &InfoSummary) -> String {
                 i + 1,
                 s.per_session.len()
             ));
-            describe_session(&mut out, p.header.as_ref(), &p.report);
+            describe_session(&mut out, p.header.as_ref(), &p.report, &p.segments);
         }
         return out;
     }
-    describe_session(&mut out, s.header.as_ref(), &s.report);
+    describe_session(&mut out, s.header.as_ref(), &s.report, &s.segments);
     out
 }
 
-fn describe_session(out: &mut String, header: Option<&SessionHeader>, report: &CaptureReport) {
+fn describe_session(
+    out: &mut String,
+    header: Option<&SessionHeader>,
+    report: &CaptureReport,
+    segments: &[SegmentInfo],
+) {
     match header {
         None => out.push_str("no session header: counts cannot be scaled to SI\n"),
         Some(h) => {
@@ -145,5 +162,21 @@ fn describe_session(out: &mut String, header: Option<&SessionHeader>, report: &C
         }
     }
     out.push_str(&report.to_string());
+    if !segments.is_empty() {
+        out.push_str(&format!(
+            "segments         {} gap-free (--segment N of analyze, fit, validate, diagnose)\n",
+            segments.len()
+        ));
+        for g in segments {
+            out.push_str(&format!(
+                "  {:>3}  from {} s, {} s, {} samples, {} whole periods\n",
+                g.index,
+                fmt_sig(g.start_s, 6),
+                fmt_sig(g.length_s, 6),
+                g.samples,
+                g.whole_periods.unwrap_or(0)
+            ));
+        }
+    }
     out.push('\n');
 }

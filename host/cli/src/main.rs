@@ -107,12 +107,14 @@ pub struct Context<'a> {
     pub out: &'a mut dyn Write,
 }
 
-/// Loaders the binary uses: CSV (built in) and the native `.jcap` capture.
+/// Loaders the binary uses: CSV (built in) and the native capture, told by its magic
+/// bytes whatever the file is called.
 pub fn default_loaders() -> Loaders {
     let mut l = Loaders::default();
     l.register(
         "jcap",
-        Box::new(|p, _| jointid::capture::load_dataset(p).map_err(Into::into)),
+        jointid::data::JCAP_MAGIC_PREFIX,
+        Box::new(|input, _| jointid::capture::load_record(input).map_err(Into::into)),
     );
     l
 }

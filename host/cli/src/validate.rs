@@ -61,8 +61,10 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
         input: args.simulated.clone(),
         output: args.simulated.clone(),
         reference: None,
+        delimiter: map.delimiter,
     };
-    let sim = ctx.loaders.load(&sim_path, &sim_map)?;
+    // the same segment and window of the simulated file
+    let sim = args.data.read.select_one(ctx.loaders, &sim_path, sim_map)?;
     let meas = args.prep.apply(&ds.data)?;
     let yhat = args.prep.apply(&sim.data)?.y;
     let v = validate(&meas.u, &meas.y, &yhat, args.lags)?;

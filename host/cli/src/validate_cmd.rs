@@ -21,7 +21,7 @@ use std::path::PathBuf;
 use clap::Args;
 use serde::Serialize;
 
-use super::args::{DataArgs, PrepArgs};
+use super::args::{DataArgs, PrepArgs, ReadArgs};
 use super::fit::{check_columns, check_lags, print_tests};
 use super::fit_nl::{FitsJson, NL_FIT_NAME};
 use super::validate::{self as column_validate, ValidateArgs};
@@ -51,6 +51,9 @@ pub struct ValidateCmdArgs {
     /// reference column
     #[arg(long, value_name = "COL")]
     pub reference: Option<String>,
+    /// how to read DATA and which part to use
+    #[command(flatten)]
+    pub read: ReadArgs,
     /// column holding a simulated output ŷ (instead of a model file)
     #[arg(long, value_name = "COL")]
     pub simulated: Option<String>,
@@ -101,6 +104,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         input: args.input.clone(),
         output: args.output.clone(),
         reference: args.reference.clone(),
+        read: args.read.clone(),
     };
     check_columns(&data_args(&args.files[0]))?;
     if let Some(sim) = &args.simulated {

@@ -200,13 +200,22 @@ mod tests {
         assert!(text.contains(&format!("# missing_samples={len}\n")));
         // the row after the gap jumps by len + 1 sample intervals; data names its line
         let err = parse_csv(&text, "gap.csv", &ColumnMap::capture()).unwrap_err();
-        assert!(matches!(err, DataError::NonUniform { .. }), "{err}");
+        assert!(matches!(err, DataError::TimeGap { .. }), "{err}");
         let comments = text.lines().take_while(|l| l.starts_with('#')).count();
         let line = comments + 1 + first as usize + 1; // header, rows before the gap, the jump
         assert!(
             err.to_string().starts_with(&format!("gap.csv:{line}:")),
             "{err}"
         );
+        // read as a record, the CSV and the capture give the same two pieces, each
+        // placed on the excitation's time line
+        let from_csv =
+            crate::data::parse_csv_record(&text, "gap.jcap", &ColumnMap::capture()).unwrap();
+        let from_jcap = rec.to_record(std::path::Path::new("gap.jcap")).unwrap();
+        assert_eq!(from_jcap.pieces.len(), 2);
+        assert_eq!(from_csv.pieces, from_jcap.pieces);
+        assert_eq!(from_jcap.pieces[1].first_sample(), (first + len) as usize);
+        assert_eq!(from_jcap.missing_samples(), u64::from(len));
         let err = rec
             .to_dataset(std::path::Path::new("gap.jcap"))
             .unwrap_err();

@@ -187,13 +187,83 @@ impl CaptureRecord {
     }
 }
 
-/// Reads a `.jcap` as identification data: the loader `data::Loaders` uses for `.jcap`
-/// files, so every analysis command reads a capture directly.
+impl CaptureRecord {
+    /// The record as identification data split at its gaps: one [`Dataset`] per gap-free
+    /// run of sequence numbers, each with `t0 = seq / sample_rate_hz` of its first sample,
+    /// the reference, the excitation config and the capture facts as `meta` (see
+    /// [`CaptureRecord::to_dataset`]). Nothing is interpolated.
+    ///
+    /// # Errors
+    /// [`CaptureError::NotUniform`] when fewer than two samples arrived.
+    pub fn to_record(&self, path: &Path) -> Result<crate::data::Record, CaptureError> {
+        if self.samples.len() < 2 {
+            return Err(CaptureError::NotUniform {
+                path: path.to_path_buf(),
+                reason: format!("{} samples, need at least 2", self.samples.len()),
+            });
+        }
+        let meta: std::collections::BTreeMap<String, String> = export::comment_pairs(self)
+            .into_iter()
+            .filter(|(k, _)| !crate::data::EXCITATION_KEYS.contains(k))
+            .map(|(k, v)| (k.to_string(), v))
+            .collect();
+        let mut starts = vec![0];
+        starts.extend(
+            (1..self.samples.len())
+                .filter(|&i| self.samples[i].seq != self.samples[i - 1].seq.wrapping_add(1)),
+        );
+        starts.push(self.samples.len());
+        let pieces = starts
+            .windows(2)
+            .map(|w| {
+                let s = &self.samples[w[0]..w[1]];
+                Dataset {
+                    name: path.display().to_string(),
+                    data: IdData {
+                        ts: self.sample_interval_s(),
+                        u: s.iter().map(|x| x.u).collect(),
+                        y: s.iter().map(|x| x.theta_m).collect(),
+                        r: Some(s.iter().map(|x| x.theta_ref).collect()),
+                    },
+                    t0: s[0].t,
+                    excitation: Some(self.header.excitation),
+                    meta: meta.clone(),
+                }
+            })
+            .collect();
+        Ok(crate::data::Record {
+            pieces,
+            notes: Vec::new(),
+        })
+    }
+}
+
+/// Reads a `.jcap` as identification data with no gap (see [`CaptureRecord::to_dataset`]).
 ///
 /// # Errors
 /// As [`read_jcap`] and [`CaptureRecord::to_dataset`].
 pub fn load_dataset(path: &Path) -> Result<Dataset, CaptureError> {
     read_jcap(path)?.to_dataset(path)
+}
+
+/// The loader `data::Loaders` uses for content starting with the jcap magic (whatever the
+/// file is called, standard input included): the first session as a
+/// [`crate::data::Record`], one piece per gap-free run of samples. The `.events` sidecar
+/// beside a file is read when there is one.
+///
+/// # Errors
+/// As [`read_jcap`] (the header checked on `input.bytes`), and
+/// [`CaptureError::NotUniform`] when fewer than two samples arrived.
+pub fn load_record(input: &crate::data::Input<'_>) -> Result<crate::data::Record, CaptureError> {
+    let path = Path::new(input.name);
+    jcap::check_header(path, input.bytes)?;
+    let stream = &input.bytes[jcap::MAGIC.len()..];
+    let events = input
+        .path
+        .and_then(|p| jcap::read_events(p).ok().flatten())
+        .unwrap_or_default();
+    let boundaries = boundaries_of(&events);
+    decode_named(path, stream, &boundaries, events, None)?.to_record(path)
 }
 
 /// Decodes a byte stream as [`read_jcap`] does (no file, no events).
@@ -271,6 +341,43 @@ pub fn read_jcap_session_reports(
         out.push(report_of(&stream, &boundaries, events.clone(), Some(id)));
     }
     Ok(out)
+}
+
+/// The gap-free segments of a session from its report: the runs of sequence numbers
+/// between `first_seq`, the gaps and `last_seq`, with their whole excitation periods (what
+/// `--segment N` picks, numbered from 1). Empty when no sample arrived.
+pub fn segments_of(
+    report: &CaptureReport,
+    header: &SessionHeader,
+) -> Vec<crate::data::SegmentInfo> {
+    let (Some(first), Some(last)) = (report.first_seq, report.last_seq) else {
+        return Vec::new();
+    };
+    let ts = 1.0 / f64::from(header.sample_rate_hz);
+    let mut runs = Vec::new();
+    let mut start = u64::from(first);
+    for g in &report.gaps {
+        if u64::from(g.from) > start {
+            runs.push((start, u64::from(g.from) - start));
+        }
+        start = u64::from(g.to) + 1;
+    }
+    if u64::from(last) >= start {
+        runs.push((start, u64::from(last) + 1 - start));
+    }
+    runs.into_iter()
+        .enumerate()
+        .map(|(i, (k0, n))| {
+            crate::data::SegmentInfo::new(
+                i + 1,
+                k0 as usize,
+                n as usize,
+                ts,
+                Some(&header.excitation),
+                Some(last as usize),
+            )
+        })
+        .collect()
 }
 
 /// The distinct session ids of a report's sessions, in stream order.

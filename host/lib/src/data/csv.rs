@@ -32,7 +32,7 @@ use std::collections::BTreeMap;
 use std::io::{self, Write};
 use std::path::Path;
 
-use super::{ColumnMap, DataError, Dataset, ExcitationConfig, IdData, SignalKind};
+use super::{ColumnMap, DataError, Dataset, ExcitationConfig, IdData, Record, SignalKind};
 
 /// relative tolerance on each sample interval against the nominal one
 pub const SAMPLE_INTERVAL_TOLERANCE: f64 = 0.01;
@@ -51,17 +51,47 @@ pub const EXCITATION_KEYS: [&str; 9] = [
     "periods",
 ];
 
-/// Parses a CSV text (capture CSV or any CSV through `map`).
+/// Parses a CSV text (capture CSV or any CSV through `map`) as one uniformly sampled
+/// record.
 ///
-/// `name` is used in error messages. Rows are split on `,`; blank lines are
-/// skipped; cells are trimmed. The sample interval is
-/// `sample_interval_s` when given, else the median interval; every interval
-/// must be within [`SAMPLE_INTERVAL_TOLERANCE`] of it.
+/// # Errors
+/// As [`parse_csv_record`]; [`DataError::TimeGap`] naming the line of the first gap when
+/// the time column has one.
+pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, DataError> {
+    let (record, first_gap) = parse_inner(text, name, map)?;
+    match first_gap {
+        Some(e) => Err(e),
+        None => record.into_single(),
+    }
+}
+
+/// Parses a CSV text (capture CSV or any CSV through `map`) into its gap-free pieces.
+///
+/// `name` is used in error messages. Rows are split on `map.delimiter`, else on `,`
+/// (or on `;` or a tab when the header line holds no `,`: a note says so); blank lines
+/// are skipped; cells are trimmed. The sample interval is `sample_interval_s` when
+/// given, else the median interval; every interval must be within
+/// [`SAMPLE_INTERVAL_TOLERANCE`] of it or of a whole multiple of it: a multiple is a gap
+/// (samples missing), which starts a new piece. Comment keys of another logger (no
+/// `kind`, so no full excitation config) are kept in [`Dataset::meta`]; those this module
+/// does not use are named in a note.
 ///
 /// # Errors
 /// Every [`DataError`] naming `name`, the line and the column at fault.
-pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, DataError> {
+pub fn parse_csv_record(text: &str, name: &str, map: &ColumnMap) -> Result<Record, DataError> {
+    parse_inner(text, name, map).map(|(r, _)| r)
+}
+
+/// Comment keys used from a CSV without the full excitation config (another logger's).
+pub const OTHER_LOGGER_KEYS: [&str; 4] = ["sample_interval_s", "period_samples", "f0_hz", "fs_hz"];
+
+fn parse_inner(
+    text: &str,
+    name: &str,
+    map: &ColumnMap,
+) -> Result<(Record, Option<DataError>), DataError> {
     let file = || name.to_string();
+    let mut notes = Vec::new();
     let mut meta: BTreeMap<String, (usize, String)> = BTreeMap::new();
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l));
@@ -78,9 +108,60 @@ pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, Dat
             Some((ln, l)) => break (ln, l),
         }
     };
-    let excitation = parse_excitation(&meta, name)?;
+    let excitation = if meta.contains_key("kind") {
+        parse_excitation(&meta, name)?
+    } else {
+        let partial: Vec<&str> = EXCITATION_KEYS
+            .iter()
+            .copied()
+            .filter(|k| meta.contains_key(*k))
+            .collect();
+        let ours = meta
+            .get("format")
+            .is_some_and(|(_, v)| v == "jointid capture csv");
+        let unknown: Vec<&str> = meta
+            .keys()
+            .map(String::as_str)
+            .filter(|k| !OTHER_LOGGER_KEYS.contains(k))
+            .collect();
+        if !partial.is_empty() {
+            notes.push(format!(
+                "{name}: comment keys {} without `kind`: not a full excitation config (the nine \
+                 keys {} come together); read as another logger's",
+                partial.join(", "),
+                EXCITATION_KEYS.join(", ")
+            ));
+        }
+        if !unknown.is_empty() && !ours {
+            notes.push(format!(
+                "{name}: comment keys not used: {} (used: {})",
+                unknown.join(", "),
+                OTHER_LOGGER_KEYS.join(", ")
+            ));
+        }
+        None
+    };
+    let delim = match map.delimiter {
+        Some(d) => d,
+        None if header.contains(',') => ',',
+        None => match [';', '\t'].into_iter().find(|d| header.contains(*d)) {
+            Some(d) => {
+                notes.push(format!(
+                    "{name}: no `,` in the header line {header_line}: columns split on {} \
+                     (--delimiter sets it)",
+                    if d == '\t' {
+                        "tabs".to_string()
+                    } else {
+                        format!("`{d}`")
+                    }
+                ));
+                d
+            }
+            None => ',',
+        },
+    };
     let cols: Vec<&str> = header
-        .split(',')
+        .split(delim)
         .map(|c| c.trim().trim_matches('"').trim())
         .collect();
     let find = |c: &str| {
@@ -107,7 +188,7 @@ pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, Dat
         if l.trim().is_empty() || l.trim_start().starts_with('#') {
             continue;
         }
-        let cells: Vec<&str> = l.split(',').collect();
+        let cells: Vec<&str> = l.split(delim).collect();
         for (slot, (cname, idx)) in wanted.iter().enumerate() {
             let cell = cells.get(*idx).ok_or_else(|| DataError::ShortRow {
                 file: file(),
@@ -115,7 +196,7 @@ pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, Dat
                 column: cname.to_string(),
                 cells: cells.len(),
             })?;
-            let cell = cell.trim();
+            let cell = cell.trim().trim_matches('"');
             let v: f64 = cell.parse().map_err(|_| DataError::NotNumeric {
                 file: file(),
                 line: ln,
@@ -166,18 +247,34 @@ pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, Dat
         d.sort_by(f64::total_cmp);
         d[d.len() / 2]
     });
+    // piece boundaries: a jump by a whole number m ≥ 2 of intervals is a gap
+    let mut starts = vec![0usize];
+    let mut first_gap = None;
     for k in 1..rows {
         let dt = t[k] - t[k - 1];
-        if (dt - ts).abs() > SAMPLE_INTERVAL_TOLERANCE * ts {
-            return Err(DataError::NonUniform {
+        if (dt - ts).abs() <= SAMPLE_INTERVAL_TOLERANCE * ts {
+            continue;
+        }
+        let m = (dt / ts).round();
+        if m >= 2.0 && (dt - m * ts).abs() <= SAMPLE_INTERVAL_TOLERANCE * ts {
+            starts.push(k);
+            first_gap.get_or_insert(DataError::TimeGap {
                 file: file(),
                 line: line_of_row[k],
                 prev: t[k - 1],
                 next: t[k],
-                dt,
-                ts,
+                missing: m as u64 - 1,
             });
+            continue;
         }
+        return Err(DataError::NonUniform {
+            file: file(),
+            line: line_of_row[k],
+            prev: t[k - 1],
+            next: t[k],
+            dt,
+            ts,
+        });
     }
     if let Some(cfg) = &excitation {
         let fs = 1.0 / ts;
@@ -207,24 +304,32 @@ pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, Dat
             });
         }
     }
-    let t0 = t[0];
-    let r = map
-        .reference
-        .as_ref()
-        .map(|_| columns.pop().unwrap_or_default());
-    let y = columns.pop().unwrap_or_default();
-    let u = columns.pop().unwrap_or_default();
-    Ok(Dataset {
-        name: name.to_string(),
-        data: IdData { ts, u, y, r },
-        t0,
-        excitation,
-        meta: meta
-            .into_iter()
-            .filter(|(k, _)| !EXCITATION_KEYS.contains(&k.as_str()))
-            .map(|(k, (_, v))| (k, v))
-            .collect(),
-    })
+    let meta: BTreeMap<String, String> = meta
+        .into_iter()
+        .filter(|(k, _)| excitation.is_none() || !EXCITATION_KEYS.contains(&k.as_str()))
+        .map(|(k, (_, v))| (k, v))
+        .collect();
+    let r = map.reference.as_ref().map(|_| &columns[3]);
+    starts.push(rows);
+    let pieces = starts
+        .windows(2)
+        .map(|w| {
+            let range = w[0]..w[1];
+            Dataset {
+                name: name.to_string(),
+                data: IdData {
+                    ts,
+                    u: columns[1][range.clone()].to_vec(),
+                    y: columns[2][range.clone()].to_vec(),
+                    r: r.map(|r| r[range.clone()].to_vec()),
+                },
+                t0: t[w[0]],
+                excitation,
+                meta: meta.clone(),
+            }
+        })
+        .collect();
+    Ok((Record { pieces, notes }, first_gap))
 }
 
 fn parse_excitation(
@@ -416,7 +521,7 @@ pub fn write_table<W: Write + ?Sized>(
     out.flush()
 }
 
-/// Reads a CSV file (see [`parse_csv`]).
+/// Reads a CSV file as one uniformly sampled record (see [`parse_csv`]).
 ///
 /// # Errors
 /// [`DataError::Io`] when the file cannot be read, else as [`parse_csv`].
@@ -583,6 +688,7 @@ mod tests {
             input: "force".into(),
             output: "q".into(),
             reference: None,
+            delimiter: None,
         };
         let e = parse_csv("t_s,force_N,q\n0,1,2\n", "d.csv", &map).unwrap_err();
         assert_eq!(
@@ -616,11 +722,28 @@ mod tests {
             "",
             "0,0,0,0\n0.001,0,0,0\n0.002,0,0,0\n0.004,0,0,0\n0.005,0,0,0\n",
         );
+        // a jump by whole intervals is a gap: one record is refused naming its line,
+        // the record reads as two pieces
         let e = parse_csv(&gap, "g.csv", &ColumnMap::capture()).unwrap_err();
+        assert!(matches!(e, DataError::TimeGap { line: 5, .. }), "{e}");
+        assert_eq!(
+            e.to_string(),
+            "g.csv:5: gap: time jumps 0.002 s -> 0.004 s, 1 samples missing"
+        );
+        let rec = parse_csv_record(&gap, "g.csv", &ColumnMap::capture()).unwrap();
+        assert_eq!(rec.pieces.len(), 2);
+        assert_eq!((rec.pieces[0].data.len(), rec.pieces[1].data.len()), (3, 2));
+        assert_eq!(rec.pieces[1].t0, 0.004);
+        // a jump that is no whole number of intervals is non-uniform sampling
+        let odd = capture_text(
+            "",
+            "0,0,0,0\n0.001,0,0,0\n0.002,0,0,0\n0.0035,0,0,0\n0.0045,0,0,0\n0.0055,0,0,0\n",
+        );
+        let e = parse_csv(&odd, "g.csv", &ColumnMap::capture()).unwrap_err();
         assert!(matches!(e, DataError::NonUniform { line: 5, .. }), "{e}");
         assert!(
             e.to_string()
-                .starts_with("g.csv:5: non-uniform sampling: interval 0.002 s -> 0.004 s"),
+                .starts_with("g.csv:5: non-uniform sampling: interval 0.002 s -> 0.0035 s"),
             "{e}"
         );
 
@@ -671,6 +794,7 @@ mod tests {
             input: "force_N".into(),
             output: "qm_m".into(),
             reference: None,
+            delimiter: None,
         };
         let ds = load_csv(&shared("emps/emps_train_DATA_EMPS.csv"), &map).unwrap();
         assert_eq!(ds.data.len(), 24_841);
@@ -681,6 +805,7 @@ mod tests {
             input: "u_reaction_torque".into(),
             output: "y_arm_acceleration".into(),
             reference: None,
+            delimiter: None,
         };
         let ds = load_csv(&shared("daisy-robot-arm/robot_arm.csv"), &map).unwrap();
         assert_eq!(ds.data.len(), 1024);

@@ -47,13 +47,15 @@ pub fn fmt_sig(x: f64, digits: usize) -> String {
 pub mod dsp;
 pub mod output;
 pub mod prep;
+pub mod segment;
 
 pub use csv::{
-    excitation_comment_lines, load_csv, parse_csv, write_capture_csv, write_table, EXCITATION_KEYS,
-    SAMPLE_INTERVAL_TOLERANCE,
+    excitation_comment_lines, load_csv, parse_csv, parse_csv_record, write_capture_csv,
+    write_table, EXCITATION_KEYS, SAMPLE_INTERVAL_TOLERANCE,
 };
 pub use dsp::{decimate, decimation_taps};
 pub use prep::{detrend, Detrend, Prep};
+pub use segment::{Record, SegmentChoice, SegmentInfo, Selected, Selection, TimeBound};
 
 /// Relative difference of two sample intervals below which two records count as sampled
 /// at one rate. Intervals estimated from recorded time stamps differ by tens of ppm
@@ -170,6 +172,8 @@ pub struct ColumnMap {
     pub output: String,
     /// reference column, if any; `None` means no reference
     pub reference: Option<String>,
+    /// column delimiter; `None`: `,`, or `;` or a tab when the header holds no `,`
+    pub delimiter: Option<char>,
 }
 
 impl ColumnMap {
@@ -180,6 +184,7 @@ impl ColumnMap {
             input: "u".into(),
             output: "theta_m".into(),
             reference: Some("theta_ref".into()),
+            delimiter: None,
         }
     }
 }
@@ -218,6 +223,87 @@ pub struct PeriodLayout {
 }
 
 impl PeriodLayout {
+    /// The whole steady-state periods of `len` samples starting at excitation sample
+    /// `first_sample` (see [`Dataset::period_layout`]); `start` is counted from the first
+    /// of these samples.
+    ///
+    /// # Errors
+    /// Why no whole period remains.
+    pub fn of(
+        cfg: &ExcitationConfig,
+        first_sample: usize,
+        len: usize,
+        settle_periods: usize,
+    ) -> Result<PeriodLayout, String> {
+        let period = cfg.period_samples as usize;
+        let ramp = cfg.ramp_samples as usize;
+        let k0 = first_sample;
+        // in excitation samples: the first whole steady-state period boundary in the record
+        let transient_end = ramp + settle_periods * period;
+        let abs_start = if k0 <= transient_end || period == 0 {
+            transient_end
+        } else {
+            ramp + (k0 - ramp).div_ceil(period) * period
+        };
+        let abs_end = if cfg.periods > 0 {
+            (k0 + len).min(ramp + cfg.periods as usize * period)
+        } else {
+            // endless run stopped by the user: its last `ramp_samples` may be
+            // the ramp-out, so they are left out
+            (k0 + len).saturating_sub(ramp)
+        };
+        let count = abs_end.saturating_sub(abs_start) / period.max(1);
+        if period == 0 || count == 0 {
+            let (what, transient) = if k0 == 0 {
+                (
+                    format!("{len} samples"),
+                    format!("{transient_end} transient samples"),
+                )
+            } else {
+                (
+                    format!("samples {k0}..{} of the excitation", k0 + len),
+                    format!("excitation sample {abs_start}"),
+                )
+            };
+            return Err(format!(
+                "{what} leave no whole period of {period} after {transient}"
+            ));
+        }
+        Ok(PeriodLayout {
+            period,
+            start: abs_start - k0,
+            count,
+        })
+    }
+
+    /// As [`PeriodLayout::of`] for a piece of a run whose last sample is excitation sample
+    /// `run_last` (when known): an endless run's ramp-out can only lie in its last
+    /// `ramp_samples`, so a piece that ends earlier loses none of its periods to it.
+    ///
+    /// # Errors
+    /// As [`PeriodLayout::of`].
+    pub fn in_run(
+        cfg: &ExcitationConfig,
+        first_sample: usize,
+        len: usize,
+        settle_periods: usize,
+        run_last: Option<usize>,
+    ) -> Result<PeriodLayout, String> {
+        let ramp = cfg.ramp_samples as usize;
+        let end = first_sample + len;
+        match run_last {
+            Some(last) if cfg.periods == 0 && last + 1 >= end + ramp => {
+                let l = PeriodLayout::of(cfg, first_sample, len + ramp, settle_periods)?;
+                let count = l.count.min(len.saturating_sub(l.start) / l.period.max(1));
+                if count == 0 {
+                    return PeriodLayout::of(cfg, first_sample, len, settle_periods);
+                }
+                Ok(PeriodLayout { count, ..l })
+            }
+            _ => PeriodLayout::of(cfg, first_sample, len, settle_periods),
+        }
+    }
+
     /// sample range covered by the kept periods
     pub fn range(&self) -> std::ops::Range<usize> {
         self.start..self.start + self.period * self.count
@@ -225,12 +311,33 @@ impl PeriodLayout {
 }
 
 impl Dataset {
+    /// Excitation sample index of the first sample: `t0 / ts` rounded (the time column
+    /// counts from the first sample of the ramp-in, so a record that starts later, such as
+    /// a segment after a gap, starts at `t0 = k Ts`); 0 when `t0` is not positive.
+    pub fn first_sample(&self) -> usize {
+        let k = self.t0 / self.data.ts;
+        if k.is_finite() && k > 0.5 {
+            k.round() as usize
+        } else {
+            0
+        }
+    }
+
+    /// The excitation sample index of the run's last sample, when the file states it
+    /// (`# last_seq=`, as a capture and its CSV do): a piece of a run with gaps ends
+    /// before it.
+    pub fn last_sample_of_run(&self) -> Option<usize> {
+        self.meta.get("last_seq")?.parse().ok()
+    }
+
     /// Layout of the whole steady-state periods from the excitation config:
     /// skips the ramp-in and `settle_periods` more periods (transient), then
     /// takes every whole period left: at most `periods − settle_periods` when
     /// the run is finite, so the ramp-out is excluded; for an endless run
-    /// (`periods = 0`) the last `ramp_samples` samples of the record are left
-    /// out, as they may hold a ramp-out.
+    /// (`periods = 0`) the last `ramp_samples` samples of the run are left
+    /// out, as they may hold a ramp-out. A record that starts later than the
+    /// ramp-in ([`Dataset::first_sample`] > 0) starts at its first whole period
+    /// boundary after the transient.
     ///
     /// # Errors
     /// [`DataError::NoPeriods`] when there is no config or no whole period
@@ -240,31 +347,37 @@ impl Dataset {
             file: self.name.clone(),
             reason: "no excitation config in the file".into(),
         })?;
-        let period = cfg.period_samples as usize;
-        let start = cfg.ramp_samples as usize + settle_periods * period;
-        let count = if cfg.periods > 0 {
-            let avail = self.data.len().saturating_sub(start) / period.max(1);
-            avail.min((cfg.periods as usize).saturating_sub(settle_periods))
-        } else {
-            // endless run stopped by the user: its last `ramp_samples` may be
-            // the ramp-out, so they are left out
-            let end = self.data.len().saturating_sub(cfg.ramp_samples as usize);
-            end.saturating_sub(start) / period.max(1)
-        };
-        if period == 0 || count == 0 {
-            return Err(DataError::NoPeriods {
-                file: self.name.clone(),
-                reason: format!(
-                    "{} samples leave no whole period of {period} after {start} transient samples",
-                    self.data.len()
-                ),
-            });
-        }
-        Ok(PeriodLayout {
-            period,
-            start,
-            count,
+        let lay = PeriodLayout::in_run(
+            &cfg,
+            self.first_sample(),
+            self.data.len(),
+            settle_periods,
+            self.last_sample_of_run(),
+        );
+        lay.map_err(|reason| DataError::NoPeriods {
+            file: self.name.clone(),
+            reason,
         })
+    }
+
+    /// The period [samples] a file states without a full excitation config (another
+    /// logger's `# period_samples=N`, or `# f0_hz=F` with the sample interval), or of the
+    /// excitation config when there is one.
+    pub fn stated_period(&self) -> Option<usize> {
+        if let Some(c) = self.excitation {
+            return Some(c.period_samples as usize);
+        }
+        if let Some(n) = self
+            .meta
+            .get("period_samples")
+            .and_then(|v| v.parse::<usize>().ok())
+        {
+            return Some(n).filter(|n| *n >= 2);
+        }
+        let f0 = self.meta.get("f0_hz")?.parse::<f64>().ok()?;
+        let n = 1.0 / (f0 * self.data.ts);
+        (n.is_finite() && n >= 2.0 && (n - n.round()).abs() < 1e-6 * n)
+            .then_some(n.round() as usize)
     }
 }
 
@@ -436,17 +549,69 @@ pub enum DataError {
         /// why
         reason: String,
     },
+    /// the record has gaps and one uniformly sampled record was asked for
+    #[error("{file}: {gaps} gap{}, {missing} samples missing; gap-free segments {segments}; choose with --segment longest|N|all (and --from/--to)", if *gaps == 1 { "" } else { "s" })]
+    Gaps {
+        /// file name
+        file: String,
+        /// number of gaps
+        gaps: usize,
+        /// samples missing in them
+        missing: u64,
+        /// the segments, described
+        segments: String,
+    },
+    /// a time column jumps by a whole number of sample intervals: samples are missing
+    #[error("{file}:{line}: gap: time jumps {prev} s -> {next} s, {missing} samples missing")]
+    TimeGap {
+        /// file name
+        file: String,
+        /// line (1-based) of the sample after the gap
+        line: usize,
+        /// time before the gap [s]
+        prev: f64,
+        /// time after the gap [s]
+        next: f64,
+        /// samples missing
+        missing: u64,
+    },
+    /// the segment or window asked for cannot be used
+    #[error("{file}: {reason}")]
+    Selection {
+        /// file name
+        file: String,
+        /// what is wrong
+        reason: String,
+    },
+    /// a file type recognised by its content that no loader reads
+    #[error("{file}: {what}: not supported yet ({hint})")]
+    Unsupported {
+        /// file name
+        file: String,
+        /// the type recognised (`MATLAB file (v5)`)
+        what: String,
+        /// what to do instead
+        hint: String,
+    },
+    /// a file that is neither a registered binary format nor text
+    #[error("{file}: not a CSV text file: {reason}")]
+    NotText {
+        /// file name
+        file: String,
+        /// what was found
+        reason: String,
+    },
     /// decimation impossible
     #[error("decimation: {0}")]
     Decimation(String),
-    /// no loader for this file extension
-    #[error("{file}: no loader for `.{ext}` files (known: {known})")]
+    /// a binary format recognised by its content, with no loader registered
+    #[error("{file}: {format} file, and no loader for it is registered (known: {known})")]
     NoLoader {
         /// file name
         file: String,
-        /// extension
-        ext: String,
-        /// registered extensions
+        /// the format recognised
+        format: String,
+        /// registered formats
         known: String,
     },
     /// a registered loader failed (its message names the file once)
@@ -479,70 +644,159 @@ fn named_once(file: &str, source: &dyn std::error::Error) -> String {
     }
 }
 
-/// A file loader for one extension: path and column mapping in, dataset out.
+/// What a loader reads: the file's name for messages, its path when it is a file (not
+/// standard input), and its whole content.
+#[derive(Clone, Copy, Debug)]
+pub struct Input<'a> {
+    /// name used in messages (the path, or `standard input`)
+    pub name: &'a str,
+    /// the file, when the data is one (sidecar files sit beside it)
+    pub path: Option<&'a Path>,
+    /// the whole content
+    pub bytes: &'a [u8],
+}
+
+/// A loader of one binary format: content and column mapping in, record out.
 pub type LoaderFn = Box<
-    dyn Fn(&Path, &ColumnMap) -> Result<Dataset, Box<dyn std::error::Error + Send + Sync>>
+    dyn Fn(&Input<'_>, &ColumnMap) -> Result<Record, Box<dyn std::error::Error + Send + Sync>>
         + Send
         + Sync,
 >;
 
-/// Registry of loaders by file extension. CSV is built in and also serves
-/// files with no or an unknown extension that are not registered otherwise;
-/// other formats (the native `.jcap` capture file) are registered by the
-/// module that owns them with [`Loaders::register`].
+/// Registry of loaders, chosen by the file's content, never by its name: a registered
+/// format by its magic bytes (the native `.jcap` capture, registered by the module that
+/// owns it with [`Loaders::register`]), MATLAB files recognised and refused with a clear
+/// message, anything else read as CSV text. `-` reads standard input.
 #[derive(Default)]
 pub struct Loaders {
-    by_ext: Vec<(String, LoaderFn)>,
+    formats: Vec<(String, Vec<u8>, LoaderFn)>,
 }
 
 impl fmt::Debug for Loaders {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_list()
-            .entries(self.by_ext.iter().map(|(e, _)| e))
+            .entries(self.formats.iter().map(|(n, _, _)| n))
             .finish()
     }
 }
 
-/// extensions that must have a registered loader (never read as CSV)
-pub const BINARY_EXTENSIONS: [&str; 1] = ["jcap"];
+/// Magic bytes of the native capture file (`JCAP`, then the version): a file starting
+/// with them is never read as CSV.
+pub const JCAP_MAGIC_PREFIX: &[u8] = b"JCAP";
+
+/// The signature of an HDF5 file (MATLAB v7.3 files are HDF5 after a 512-byte header).
+const HDF5_SIGNATURE: &[u8] = b"\x89HDF\r\n\x1a\n";
+
+/// The MATLAB file type of `bytes`, when it is one (`MATLAB 5.0 MAT-file` text header,
+/// or the HDF5 signature at byte 0 or 512).
+pub fn matlab_kind(bytes: &[u8]) -> Option<&'static str> {
+    let head = &bytes[..bytes.len().min(116)];
+    let text = String::from_utf8_lossy(head);
+    if text.starts_with("MATLAB 7.3 MAT-file")
+        || bytes.get(512..520) == Some(HDF5_SIGNATURE)
+        || bytes.starts_with(HDF5_SIGNATURE)
+    {
+        return Some("MATLAB file (v7.3, HDF5)");
+    }
+    if text.starts_with("MATLAB ") && text.contains("MAT-file") {
+        return Some("MATLAB file (v5)");
+    }
+    None
+}
 
 impl Loaders {
-    /// registers `f` for files ending in `.ext` (without the dot), replacing
-    /// an earlier loader for the same extension
-    pub fn register(&mut self, ext: &str, f: LoaderFn) -> &mut Self {
-        let ext = ext.trim_start_matches('.').to_ascii_lowercase();
-        self.by_ext.retain(|(e, _)| *e != ext);
-        self.by_ext.push((ext, f));
+    /// Registers `f` for files starting with `magic` under the name `format`, replacing an
+    /// earlier loader of that name.
+    pub fn register(&mut self, format: &str, magic: &[u8], f: LoaderFn) -> &mut Self {
+        self.formats.retain(|(n, _, _)| n != format);
+        self.formats.push((format.to_string(), magic.to_vec(), f));
         self
     }
 
-    /// Loads `path`: a registered loader for its extension, else CSV.
+    /// Reads `path` (`-`: standard input) whole and loads it as one uniformly sampled
+    /// dataset ([`Loaders::load_record`], then [`Record::into_single`]).
     ///
     /// # Errors
-    /// [`DataError::NoLoader`] for a binary extension (`.jcap`) with no
-    /// registered loader, [`DataError::Loader`] wrapping a loader's error,
-    /// else as [`load_csv`].
+    /// As [`Loaders::load_record`]; [`DataError::Gaps`] when the data has gaps.
     pub fn load(&self, path: &Path, map: &ColumnMap) -> Result<Dataset, DataError> {
-        let ext = path
-            .extension()
-            .map(|e| e.to_string_lossy().to_ascii_lowercase())
-            .unwrap_or_default();
-        if let Some((_, f)) = self.by_ext.iter().find(|(e, _)| *e == ext) {
-            return f(path, map).map_err(|source| DataError::Loader {
-                file: path.display().to_string(),
-                source,
-            });
+        self.load_record(path, map)?.into_single()
+    }
+
+    /// Reads `path` (`-`: standard input) whole and loads it by its content: a registered
+    /// format by its magic bytes, else CSV ([`csv::parse_csv_record`]).
+    ///
+    /// # Errors
+    /// [`DataError::Io`] when it cannot be read, [`DataError::Unsupported`] for a MATLAB
+    /// file, [`DataError::NoLoader`] for a `.jcap` with no loader registered,
+    /// [`DataError::Loader`] wrapping a loader's error, [`DataError::NotText`] for other
+    /// binary content, else as [`csv::parse_csv_record`].
+    pub fn load_record(&self, path: &Path, map: &ColumnMap) -> Result<Record, DataError> {
+        let stdin = path.as_os_str() == "-";
+        let name = if stdin {
+            "standard input".to_string()
+        } else {
+            path.display().to_string()
+        };
+        let bytes = if stdin {
+            let mut b = Vec::new();
+            std::io::Read::read_to_end(&mut std::io::stdin().lock(), &mut b).map(|_| b)
+        } else {
+            std::fs::read(path)
         }
-        if BINARY_EXTENSIONS.contains(&ext.as_str()) {
-            let mut known: Vec<&str> = self.by_ext.iter().map(|(e, _)| e.as_str()).collect();
+        .map_err(|source| DataError::Io {
+            file: name.clone(),
+            source,
+        })?;
+        let input = Input {
+            name: &name,
+            path: (!stdin).then_some(path),
+            bytes: &bytes,
+        };
+        self.load_input(&input, map)
+    }
+
+    /// Loads content already read (see [`Loaders::load_record`]).
+    ///
+    /// # Errors
+    /// As [`Loaders::load_record`].
+    pub fn load_input(&self, input: &Input<'_>, map: &ColumnMap) -> Result<Record, DataError> {
+        let name = input.name.to_string();
+        if let Some((_, _, f)) = self
+            .formats
+            .iter()
+            .find(|(_, m, _)| !m.is_empty() && input.bytes.starts_with(m))
+        {
+            return f(input, map).map_err(|source| DataError::Loader { file: name, source });
+        }
+        if input.bytes.starts_with(JCAP_MAGIC_PREFIX) {
+            let mut known: Vec<&str> = self.formats.iter().map(|(n, _, _)| n.as_str()).collect();
             known.push("csv");
             return Err(DataError::NoLoader {
-                file: path.display().to_string(),
-                ext,
+                file: name,
+                format: "jcap capture".into(),
                 known: known.join(", "),
             });
         }
-        load_csv(path, map)
+        if let Some(what) = matlab_kind(input.bytes) {
+            return Err(DataError::Unsupported {
+                file: name,
+                what: what.into(),
+                hint: "save the signals as a CSV with a header line, e.g. `writetable` in \
+                       MATLAB, and map its columns with --time/--input/--output"
+                    .into(),
+            });
+        }
+        let text = std::str::from_utf8(input.bytes).map_err(|e| DataError::NotText {
+            file: name.clone(),
+            reason: format!("byte {} is not UTF-8 text", e.valid_up_to()),
+        })?;
+        if let Some(i) = text.find('\0') {
+            return Err(DataError::NotText {
+                file: name,
+                reason: format!("byte {i} is a NUL: binary content of an unknown type"),
+            });
+        }
+        csv::parse_csv_record(text, &name, map)
     }
 }
 
@@ -577,29 +831,68 @@ mod tests {
     }
 
     #[test]
-    fn loaders_dispatch_on_extension_and_refuse_unregistered_jcap() {
+    fn loaders_choose_by_content_not_by_name() {
         let dir = std::env::temp_dir().join(format!("jointid-data-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let csv = dir.join("x.csv");
+        // CSV text named .jcap is read as CSV
+        let csv = dir.join("x.jcap");
         std::fs::write(&csv, "t,theta_ref,u,theta_m\n0,0,1,2\n0.5,0,1,2\n").unwrap();
         let mut loaders = Loaders::default();
         assert_eq!(
             loaders.load(&csv, &ColumnMap::capture()).unwrap().data.ts,
             0.5
         );
-        let jcap = dir.join("x.jcap");
+        // capture bytes named .csv go to the capture loader, or are refused without one
+        let jcap = dir.join("x.csv");
+        std::fs::write(&jcap, b"JCAP\x01\r\n\x1a\x00\x01").unwrap();
         let e = loaders.load(&jcap, &ColumnMap::capture()).unwrap_err();
-        assert!(
-            e.to_string()
-                .ends_with("no loader for `.jcap` files (known: csv)"),
-            "{e}"
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}: jcap capture file, and no loader for it is registered (known: csv)",
+                jcap.display()
+            )
         );
         loaders.register(
             "jcap",
-            Box::new(|p, _| Err(format!("fake loader saw {}", p.display()).into())),
+            JCAP_MAGIC_PREFIX,
+            Box::new(|i, _| Err(format!("fake loader saw {} bytes", i.bytes.len()).into())),
         );
         let e = loaders.load(&jcap, &ColumnMap::capture()).unwrap_err();
-        assert!(e.to_string().contains("fake loader saw"), "{e}");
+        assert!(e.to_string().ends_with("fake loader saw 10 bytes"), "{e}");
+        // MATLAB files, v5 and v7.3, are named as such
+        let mat = dir.join("run.mat");
+        let mut v5 = b"MATLAB 5.0 MAT-file, Platform: GLNXA64, Created on: Mon Jan  1".to_vec();
+        v5.resize(128, b' ');
+        v5.extend_from_slice(&[0, 1, 0x49, 0x4d, 0, 0, 0, 0]);
+        std::fs::write(&mat, &v5).unwrap();
+        let e = loaders.load(&mat, &ColumnMap::capture()).unwrap_err();
+        assert!(
+            e.to_string().starts_with(&format!(
+                "{}: MATLAB file (v5): not supported yet",
+                mat.display()
+            )),
+            "{e}"
+        );
+        let mut v73 = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, HDF5 schema 1.00 .".to_vec();
+        v73.resize(512, 0);
+        v73.extend_from_slice(b"\x89HDF\r\n\x1a\n");
+        std::fs::write(&mat, &v73).unwrap();
+        let e = loaders.load(&mat, &ColumnMap::capture()).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("MATLAB file (v7.3, HDF5): not supported yet"),
+            "{e}"
+        );
+        // other binary content is not parsed as CSV
+        std::fs::write(&mat, [0x7f, b'E', b'L', b'F', 0, 0]).unwrap();
+        let e = loaders.load(&mat, &ColumnMap::capture()).unwrap_err();
+        assert!(
+            e.to_string().ends_with(
+                "not a CSV text file: byte 4 is a NUL: binary content of an unknown type"
+            ),
+            "{e}"
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

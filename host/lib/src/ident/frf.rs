@@ -85,6 +85,12 @@ pub enum FrfError {
         /// highest line examined
         max_line: usize,
     },
+    /// the segments of [`analyze_segments`] are not of one experiment
+    #[error("segments cannot be pooled: {what}")]
+    SegmentsDiffer {
+        /// the difference
+        what: String,
+    },
     /// data preparation failed
     #[error(transparent)]
     Data(#[from] crate::data::DataError),
@@ -320,14 +326,23 @@ impl Frf {
     }
 }
 
-/// Unwraps a phase sequence [deg] so that consecutive values differ by less
-/// than 180°.
+/// Lowest phase of the branch of the first value of [`unwrap_deg`] [deg]: the first
+/// value lies in (−270°, 90°].
+pub const PHASE_BRANCH_LOW_DEG: f64 = -270.0;
+
+/// Unwraps a phase sequence [deg], continuous from its first value: that value is put on
+/// the branch (−270°, 90°], then each next one within 180° of the one before.
+///
+/// The branch of the first value is fixed, not left to `atan2`'s (−180°, 180°]: the phase
+/// of a joint's torque to motor angle is near −180° at the lowest lines (−90° to −180°;
+/// to velocity 0° to −90°), where noise would put one run on +179° and the next on
+/// −179°, and the whole curve of one 360° away from the other.
 pub fn unwrap_deg(ph: impl IntoIterator<Item = f64>) -> Vec<f64> {
     let mut out: Vec<f64> = Vec::new();
     for p in ph {
         let v = match out.last() {
             Some(prev) => p - 360.0 * ((p - prev) / 360.0).round(),
-            None => p,
+            None => p - 360.0 * ((p - PHASE_BRANCH_LOW_DEG) / 360.0).ceil() + 360.0,
         };
         out.push(v);
     }
@@ -564,30 +579,115 @@ pub fn detect_period(x: &[f64], signal: &str) -> Result<usize, FrfError> {
 /// # Errors
 /// As [`Dataset::period_layout`], [`detect_period`] and [`analyze`].
 pub fn analyze_dataset(ds: &Dataset, settle_periods: usize) -> Result<FrfAnalysis, FrfError> {
+    let (layout, excited) = layout_of(ds, settle_periods)?;
+    analyze(&ds.data, layout, excited)
+}
+
+/// The whole steady-state periods of `ds` and how its excited lines are found: from the
+/// excitation config; else with the period the file states
+/// ([`Dataset::stated_period`]) or the one detected from the reference (else the input).
+fn layout_of(
+    ds: &Dataset,
+    settle_periods: usize,
+) -> Result<(PeriodLayout, ExcitedLines), FrfError> {
     match ds.excitation {
-        Some(cfg) => {
-            let layout = ds.period_layout(settle_periods)?;
-            analyze(&ds.data, layout, ExcitedLines::Config(cfg))
-        }
+        Some(cfg) => Ok((ds.period_layout(settle_periods)?, ExcitedLines::Config(cfg))),
         None => {
-            let (sig, name) = match &ds.data.r {
-                Some(r) => (r.as_slice(), "theta_ref"),
-                None => (ds.data.u.as_slice(), "u"),
+            let period = match ds.stated_period() {
+                Some(p) => p,
+                None => {
+                    let (sig, name) = match &ds.data.r {
+                        Some(r) => (r.as_slice(), "theta_ref"),
+                        None => (ds.data.u.as_slice(), "u"),
+                    };
+                    detect_period(sig, name)?
+                }
             };
-            let period = detect_period(sig, name)?;
             let start = settle_periods * period;
             let count = ds.data.len().saturating_sub(start) / period;
-            analyze(
-                &ds.data,
+            Ok((
                 PeriodLayout {
                     period,
                     start,
                     count,
                 },
                 ExcitedLines::Detect,
-            )
+            ))
         }
     }
+}
+
+/// The FRF, noise and linearity of several gap-free segments of one experiment (the
+/// pieces of a capture with gaps): each segment's whole steady-state periods (its
+/// transient dropped only where it holds the ramp-in and `settle_periods`), pooled, so
+/// the FRF and its σ average over every period of every segment. Per-period spectra do
+/// not see where two segments meet, so nothing is interpolated across a gap. The
+/// returned layout counts the pooled periods from the first segment's first one.
+///
+/// # Errors
+/// As [`analyze_dataset`] for each segment; [`FrfError::SegmentsDiffer`] when the
+/// segments differ in period, sample interval or reference column.
+pub fn analyze_segments(
+    segments: &[Dataset],
+    settle_periods: usize,
+) -> Result<FrfAnalysis, FrfError> {
+    let Some(first) = segments.first() else {
+        return Err(FrfError::SegmentsDiffer {
+            what: "no segment".into(),
+        });
+    };
+    if segments.len() == 1 {
+        return analyze_dataset(first, settle_periods);
+    }
+    let (lay0, excited) = layout_of(first, settle_periods)?;
+    let mut data = IdData {
+        ts: first.data.ts,
+        u: Vec::new(),
+        y: Vec::new(),
+        r: first.data.r.as_ref().map(|_| Vec::new()),
+    };
+    let mut count = 0;
+    for (i, ds) in segments.iter().enumerate() {
+        let (lay, _) = layout_of(ds, settle_periods)?;
+        if lay.period != lay0.period
+            || (ds.data.ts - data.ts).abs() > 1e-9 * data.ts
+            || ds.data.r.is_some() != data.r.is_some()
+        {
+            return Err(FrfError::SegmentsDiffer {
+                what: format!(
+                    "segment {} has period {} samples at {} s, the first {} samples at {} s{}",
+                    i + 1,
+                    lay.period,
+                    ds.data.ts,
+                    lay0.period,
+                    data.ts,
+                    if ds.data.r.is_some() != data.r.is_some() {
+                        " (one has a reference, the other not)"
+                    } else {
+                        ""
+                    }
+                ),
+            });
+        }
+        let range = lay.range();
+        data.u.extend_from_slice(&ds.data.u[range.clone()]);
+        data.y.extend_from_slice(&ds.data.y[range.clone()]);
+        if let (Some(all), Some(r)) = (data.r.as_mut(), ds.data.r.as_ref()) {
+            all.extend_from_slice(&r[range]);
+        }
+        count += lay.count;
+    }
+    let mut a = analyze(
+        &data,
+        PeriodLayout {
+            period: lay0.period,
+            start: 0,
+            count,
+        },
+        excited,
+    )?;
+    a.layout.start = lay0.start;
+    Ok(a)
 }
 
 /// Per-period spectra, FRF with σ, noise levels and the linearity check.
@@ -1039,6 +1139,54 @@ pub(crate) mod tests {
         );
     }
 
+    /// A joint whose torque-to-angle phase sits at −180° at the lowest lines (as a motor
+    /// angle's does): the resonance of [`plant`] with a negative gain, its lowest line
+    /// about 1° from ±180°, within the noise of the branch cut.
+    fn phase_at_the_cut(seed: u64) -> FrfAnalysis {
+        let c = cfg(512, 60, 10);
+        let r: Vec<f64> = multisine(&c, 10, 21).iter().map(|v| 0.3 * v).collect();
+        let mut sys = plant();
+        sys.b1 = -sys.b1;
+        sys.kp = -sys.kp;
+        let lay = PeriodLayout {
+            period: 512,
+            start: 1024,
+            count: 8,
+        };
+        analyze(&sys.run(&r, 0.15, 0.0, seed), lay, ExcitedLines::Config(c)).unwrap()
+    }
+
+    #[test]
+    fn phase_is_on_one_branch_from_the_lowest_line_whatever_the_noise() {
+        // σ of the phase [deg] at each line, from the FRF's own σ
+        let sd = |a: &FrfAnalysis| -> Vec<f64> {
+            a.frf
+                .g
+                .iter()
+                .zip(&a.frf.sigma)
+                .map(|(g, s)| (s / g.norm()).min(1.0).asin().to_degrees())
+                .collect()
+        };
+        let first = phase_at_the_cut(1);
+        let (a, sa) = (first.frf.phase_deg(), sd(&first));
+        // the lowest line sits near ±180°: on the branch (−270°, 90°] it is −180°
+        assert!((a[0] + 180.0).abs() < 10.0, "{}", a[0]);
+        for seed in 2..40 {
+            let other = phase_at_the_cut(seed);
+            let (b, sb) = (other.frf.phase_deg(), sd(&other));
+            for i in 0..a.len() {
+                // the same system: the same phase within the noise (4σ of each, 2° more)
+                let tol = 2.0 + 4.0 * (sa[i] + sb[i]);
+                assert!(
+                    (a[i] - b[i]).abs() < tol,
+                    "seed {seed}, line {i}: {:.1}° against {:.1}° of seed 1 (±{tol:.1}°)",
+                    b[i],
+                    a[i]
+                );
+            }
+        }
+    }
+
     #[test]
     fn linearity_check_detects_cubic_and_passes_linear() {
         let c = cfg(512, 60, 10);
@@ -1229,6 +1377,7 @@ pub(crate) mod tests {
             input: "torque".into(),
             output: "angle".into(),
             reference: None,
+            delimiter: None,
         };
         let ds = crate::data::parse_csv(&text, "mapped.csv", &map).unwrap();
         assert!(ds.excitation.is_none() && ds.data.r.is_none());

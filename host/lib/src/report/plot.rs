@@ -215,6 +215,50 @@ const PALETTE: [RGBColor; 5] = [
     RGBColor(150, 60, 170),
 ];
 
+/// The phases [deg] a Bode plot draws: the FRF's unwrapped continuously from its lowest
+/// line ([`unwrap_deg`], the phase `analyze` prints), and each model's unwrapped along
+/// its own grid, then moved by whole turns onto the FRF's branch (the median of its
+/// differences from the FRF at the FRF's lines within ±180°), so that a model that
+/// follows the FRF is drawn over it, never 360° away.
+pub fn bode_phases(
+    frf: Option<&FrfBand>,
+    models: &[BodeCurve],
+) -> (Option<Vec<f64>>, Vec<Vec<f64>>) {
+    let frf_phase = frf.map(|f| unwrap_deg(f.g.iter().map(|g| g.arg().to_degrees())));
+    let model_phase = models
+        .iter()
+        .map(|m| {
+            let mut mp = unwrap_deg(m.response.iter().map(|g| g.arg().to_degrees()));
+            if let (Some(f), Some(fp)) = (frf, &frf_phase) {
+                let mut d: Vec<f64> = f
+                    .freq_hz
+                    .iter()
+                    .zip(fp)
+                    .filter_map(|(fr, p)| {
+                        let i = m.freq_hz.partition_point(|x| x < fr);
+                        let j = if i == 0 {
+                            0
+                        } else if i >= m.freq_hz.len() || fr - m.freq_hz[i - 1] < m.freq_hz[i] - fr
+                        {
+                            i - 1
+                        } else {
+                            i
+                        };
+                        mp.get(j).map(|q| p - q).filter(|x| x.is_finite())
+                    })
+                    .collect();
+                if !d.is_empty() {
+                    d.sort_by(f64::total_cmp);
+                    let turns = (d[d.len() / 2] / 360.0).round();
+                    mp.iter_mut().for_each(|q| *q += 360.0 * turns);
+                }
+            }
+            mp
+        })
+        .collect();
+    (frf_phase, model_phase)
+}
+
 /// Bode plot (magnitude [dB] and phase [deg] against log frequency [Hz]) of
 /// `models` over a measured FRF drawn as points with ±2σ bars (magnitude:
 /// |Ĝ| ± 2σ; phase: ± asin(2σ/|Ĝ|), a full ±180° when 2σ ≥ |Ĝ|).
@@ -245,29 +289,8 @@ pub fn bode_svg(
         .flat_map(|m| m.response.iter().map(mag))
         .collect();
     let mut phs: Vec<f64> = Vec::new();
-    let model_phase: Vec<Vec<f64>> = models
-        .iter()
-        .map(|m| unwrap_deg(m.response.iter().map(|g| g.arg().to_degrees())))
-        .collect();
+    let (frf_phase, model_phase) = bode_phases(frf, models);
     model_phase.iter().for_each(|p| phs.extend(p));
-    // the FRF's phase on the branch of the first model's (within 180° of it
-    // at each line), else unwrapped along its lines: points that are sparse
-    // or noisy at low frequency otherwise land 360° away from the curve
-    let frf_phase = frf.map(|f| {
-        let mut ph = unwrap_deg(f.g.iter().map(|g| g.arg().to_degrees()));
-        if let (Some(m), Some(mp)) = (models.first(), model_phase.first()) {
-            for (p, fr) in ph.iter_mut().zip(&f.freq_hz) {
-                let i = m
-                    .freq_hz
-                    .partition_point(|x| x < fr)
-                    .min(mp.len().saturating_sub(1));
-                if let Some(target) = mp.get(i) {
-                    *p += 360.0 * ((target - *p) / 360.0).round();
-                }
-            }
-        }
-        ph
-    });
     if let (Some(f), Some(ph)) = (frf, &frf_phase) {
         for (g, s) in f.g.iter().zip(&f.sigma) {
             mags.push(mag(g));
@@ -456,6 +479,40 @@ mod tests {
         assert_eq!(svg.matches("<circle").count(), 61);
         assert!(svg.contains("first order") && svg.contains("phase [deg]"));
         assert!(matches!(bode_svg("x", None, &[]), Err(PlotError::Empty(_))));
+    }
+
+    #[test]
+    fn the_model_is_drawn_on_the_frfs_branch_and_both_are_continuous() {
+        // an integrator behind a 58.3 ms delay: −90° at 0 Hz, −300° at 10 Hz, where the
+        // FRF's lowest line is put on the branch (−270°, 90°] at +60°; the model,
+        // unwrapped from 0.1 Hz, would be drawn 360° below it
+        let tau = 210.0 / 360.0 / 10.0;
+        let resp = |f: f64| {
+            let w = 2.0 * std::f64::consts::PI * f;
+            Complex64::from_polar(1.0 / w, -w * tau - std::f64::consts::FRAC_PI_2)
+        };
+        let lines: Vec<f64> = (10..=40).map(f64::from).collect();
+        let grid: Vec<f64> = (0..560).map(|k| 0.1 * 1.0116f64.powi(k)).collect();
+        let band = FrfBand {
+            freq_hz: lines.clone(),
+            g: lines.iter().map(|f| resp(*f)).collect(),
+            sigma: vec![1e-4; lines.len()],
+        };
+        let model = BodeCurve {
+            name: "delay".into(),
+            freq_hz: grid.clone(),
+            response: grid.iter().map(|f| resp(*f)).collect(),
+        };
+        let (fp, mp) = bode_phases(Some(&band), &[model]);
+        let (fp, mp) = (fp.unwrap(), &mp[0]);
+        assert!((fp[0] - 60.0).abs() < 1e-6, "{}", fp[0]);
+        for (f, p) in lines.iter().zip(&fp) {
+            let i = grid.partition_point(|x| x < f);
+            // the grid point just above the line, up to 1.2 % higher: at most 10° lower
+            assert!((mp[i] - p).abs() < 15.0, "{f} Hz: model {} FRF {p}", mp[i]);
+        }
+        assert!(mp.windows(2).all(|w| (w[1] - w[0]).abs() < 180.0));
+        assert!(fp.windows(2).all(|w| (w[1] - w[0]).abs() < 180.0));
     }
 }
 
