@@ -10,14 +10,16 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::fit::{check_same_rate, FitDataArgs};
-use super::{print_json, CmdResult, Context, Outcome};
+use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
+use jointid::data::output::{check_output, write_file};
 use jointid::data::Dataset;
-use jointid::diagnose::{diagnose, DiagnoseRequest, Diagnosis, UserSim};
+use jointid::diagnose::{diagnose_with_series, DiagnoseRequest, Diagnosis, UserSim};
 use jointid::ident::grey_box::DEFAULT_GEAR_RATIO;
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::sim_plant;
 use jointid::model::effects::{Effect, EFFECT_NAMES};
 use jointid::model::spec::Structure;
+use jointid::report::html::{diagnosis_figures, diagnosis_html, FIGURE_IDS, MAX_PANELS};
 use jointid::sim::SimConfig;
 
 /// Arguments of `jointid diagnose`.
@@ -44,6 +46,15 @@ pub struct DiagnoseArgs {
     /// gear ratio r = arm angle / motor angle
     #[arg(long, value_name = "R", default_value_t = DEFAULT_GEAR_RATIO)]
     pub gear_ratio: f64,
+    /// write the report as one self-contained HTML file (verdict, figures, candidates)
+    #[arg(long, value_name = "REPORT.html")]
+    pub report: Option<PathBuf>,
+    /// write the report's figures as SVG files into DIR (created when missing)
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
+    /// replace the report and the SVG files when they exist
+    #[arg(long)]
+    pub force: bool,
 }
 
 fn structure_of(label: &str) -> Result<Structure, String> {
@@ -119,6 +130,24 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         return Err(format!("--gear-ratio {}: must be finite and > 0", args.gear_ratio).into());
     }
     let cands = candidates(&args.effects)?;
+    if let Some(path) = &args.report {
+        check_output(path, args.force)?;
+    }
+    if let Some(dir) = &args.plot {
+        // before the work: every name a figure's panels may take
+        let names: Vec<String> = FIGURE_IDS
+            .iter()
+            .flat_map(|id| {
+                std::iter::once(format!("{id}.svg"))
+                    .chain((1..=MAX_PANELS).map(move |i| format!("{id}-{i}.svg")))
+            })
+            .collect();
+        check_plot_files(
+            dir,
+            &names.iter().map(String::as_str).collect::<Vec<_>>(),
+            args.force,
+        )?;
+    }
     let user = args.sim.as_deref().map(user_sim).transpose()?;
     let structure = match (&args.model, &user) {
         (Some(m), _) => structure_of(m)?,
@@ -152,7 +181,28 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         user,
         ..DiagnoseRequest::default()
     };
-    let d = diagnose(&est, &val, &req)?;
+    let (d, series) = diagnose_with_series(&est, &val, &req)?;
+    if let Some(path) = &args.report {
+        let title = format!(
+            "jointid diagnose: {} against {}",
+            est.iter()
+                .map(|e| e.name.as_str())
+                .collect::<Vec<_>>()
+                .join(" and "),
+            val.name
+        );
+        let html = diagnosis_html(&title, &d, &series)?;
+        write_file(path, args.force, |w| w.write_all(html.as_bytes()))?;
+    }
+    if let Some(dir) = &args.plot {
+        let figs = diagnosis_figures(&d, &series)?;
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        for f in &figs {
+            for (svg, name) in f.svgs.iter().zip(f.file_names()) {
+                write_svg(&dir.join(name), svg, args.force)?;
+            }
+        }
+    }
     if ctx.json {
         print_json(ctx.out, &d)?;
     } else {

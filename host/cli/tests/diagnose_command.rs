@@ -1,6 +1,7 @@
 //! Command-line tests of `jointid diagnose`: the simulator's joint with a hidden cubic
-//! spring, diagnosed from its capture against a second run; the measured EMPS drive, whose
-//! friction a rigid model lacks; and the refusals.
+//! spring, diagnosed from its capture against a second run (and its HTML report opened in
+//! headless Chromium); the measured EMPS drive, whose friction a rigid model lacks; and the
+//! refusals.
 
 mod common;
 use common::{jointid, json_of, shared, tmpdir};
@@ -135,4 +136,187 @@ fn diagnose_refuses_an_unknown_effect_and_a_missing_file_naming_them() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("nope.csv"), "{err}");
+}
+
+/// The ids of the report's figures (`jointid::report::html::FIGURE_IDS`).
+const FIGURES: [&str; 5] = [
+    "fig-frf",
+    "fig-residual-spectrum",
+    "fig-distortion",
+    "fig-residual-maps",
+    "fig-time",
+];
+
+/// Chromium on the PATH; fails the test, saying how to install it, when there is none.
+fn chromium() -> std::path::PathBuf {
+    std::env::var_os("PATH")
+        .iter()
+        .flat_map(std::env::split_paths)
+        .map(|d| d.join("chromium"))
+        .find(|p| p.is_file())
+        .expect("chromium is not installed: run .ci/setup (it installs Debian's `chromium`)")
+}
+
+/// Runs headless Chromium on the page `html` with `extra` arguments (`--dump-dom`,
+/// `--screenshot=...`), a profile in `dir`; (stdout, stderr), both through files in `dir`
+/// (a pipe would fill with the DOM and stall it). Fails the test after 120 s.
+fn headless(dir: &std::path::Path, html: &std::path::Path, extra: &str) -> (String, String) {
+    use std::process::Command;
+    let tag = if extra.starts_with("--dump-dom") {
+        "dom"
+    } else {
+        "shot"
+    };
+    let name = html.file_stem().unwrap().to_string_lossy();
+    let profile = dir.join(format!("chromium-profile-{name}-{tag}"));
+    let out_path = dir.join(format!("chromium-{name}-{tag}.out"));
+    let err_path = dir.join(format!("chromium-{name}-{tag}.log"));
+    let mut child = Command::new(chromium())
+        .args([
+            "--headless=new",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--enable-logging=stderr",
+            "--v=0",
+            "--window-size=1200,3000",
+            &format!("--user-data-dir={}", profile.display()),
+            extra,
+            &format!("file://{}", html.display()),
+        ])
+        .stdout(std::fs::File::create(&out_path).unwrap())
+        .stderr(std::fs::File::create(&err_path).unwrap())
+        .spawn()
+        .expect("start chromium");
+    let t0 = std::time::Instant::now();
+    while child.try_wait().expect("wait for chromium").is_none() {
+        if t0.elapsed() > std::time::Duration::from_secs(120) {
+            let _ = child.kill();
+            panic!("chromium did not finish within 120 s on {}", html.display());
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let status = child.wait().expect("chromium status");
+    let read =
+        |p: &std::path::Path| String::from_utf8_lossy(&std::fs::read(p).unwrap()).into_owned();
+    assert!(
+        status.success(),
+        "chromium: {status:?}: {}",
+        read(&err_path)
+    );
+    (read(&out_path), read(&err_path))
+}
+
+/// What the page did wrong as Chromium saw it: console messages (a script error is logged
+/// as `INFO:CONSOLE`) and loads from anywhere (a self-contained page references no file,
+/// so any `src`, `href`, `<link>`, `url(` or `@import` in its DOM is a load that can fail).
+fn page_problems(dom: &str, log: &str) -> Vec<String> {
+    let mut found: Vec<String> = log
+        .lines()
+        .filter(|l| l.contains(":CONSOLE") || l.contains("Failed to load resource"))
+        .map(str::to_string)
+        .collect();
+    let lower = dom.to_lowercase();
+    for what in [" src=", " href=", "<link", "url(", "@import"] {
+        if lower.contains(what) {
+            found.push(format!("the DOM loads something: `{what}`"));
+        }
+    }
+    found
+}
+
+/// The cubic-spring case with `--report` and `--plot`: the report opens in headless
+/// Chromium without console errors and loads nothing; its DOM holds the verdict (the one of
+/// `--json`) at the top and every figure with an inline SVG and a caption; a screenshot is
+/// saved; `--plot` writes the same figures as SVG files; the JSON has no report data. The
+/// log scan is shown to catch a page with a script error and a missing image.
+#[test]
+fn diagnose_report_renders_in_headless_chromium_with_the_verdict_and_every_figure() {
+    let dir = tmpdir("report");
+    // the check first: a page that must fail it
+    let bad = dir.join("bad.html");
+    std::fs::write(
+        &bad,
+        "<!DOCTYPE html><html><body><p>x</p><script>undefined_fn()</script>\
+         <img src=\"missing.png\"></body></html>",
+    )
+    .unwrap();
+    let (dom, log) = headless(&dir, &bad, "--dump-dom");
+    let problems = page_problems(&dom, &log);
+    assert!(
+        problems.iter().any(|p| p.contains("undefined_fn"))
+            && problems.iter().any(|p| p.contains("src=")),
+        "the scan misses a script error or a load: {problems:?}"
+    );
+
+    let est = simulate(&dir, "est.jcap", "5", "7");
+    let val = simulate(&dir, "val.jcap", "6", "8");
+    let report = dir.join("report.html");
+    let plots = dir.join("svg");
+    let j = json_of(&jointid(&[
+        "diagnose",
+        &est,
+        "--validation",
+        &val,
+        "--effects",
+        "nonlinear_stiffness,time_delay,extra_mode",
+        "--report",
+        report.to_str().unwrap(),
+        "--plot",
+        plots.to_str().unwrap(),
+        "--json",
+    ]));
+    let keys: Vec<&str> = j.as_object().unwrap().keys().map(String::as_str).collect();
+    assert!(
+        !keys
+            .iter()
+            .any(|k| k.contains("series") || k.contains("svg")),
+        "{keys:?}"
+    );
+    let verdict = j["verdict"].as_str().unwrap();
+    assert!(verdict.starts_with("nonlinear_stiffness"), "{verdict}");
+
+    let (dom, log) = headless(&dir, &report, "--dump-dom");
+    let problems = page_problems(&dom, &log);
+    assert!(problems.is_empty(), "{problems:#?}");
+    let at = |what: &str| {
+        dom.find(what)
+            .unwrap_or_else(|| panic!("no `{what}` in the DOM"))
+    };
+    let v = at("id=\"verdict\"");
+    assert!(
+        dom[v..].find(verdict).is_some(),
+        "the verdict `{verdict}` is not in the DOM"
+    );
+    for id in FIGURES {
+        let f = at(&format!("<figure id=\"{id}\""));
+        assert!(f > v, "{id} above the verdict");
+        let end = f + dom[f..].find("</figure>").expect("figure closed");
+        let fig = &dom[f..end];
+        assert!(
+            fig.contains("<svg") && fig.contains("<figcaption>"),
+            "{id}: {fig:.300}"
+        );
+    }
+    assert!(at("id=\"candidates\"") > v);
+    assert!(dom.contains("nonlinear_stiffness") && dom.contains("k3 ="));
+
+    let png = dir.join("report.png");
+    let (_, log) = headless(&dir, &report, &format!("--screenshot={}", png.display()));
+    assert!(page_problems("", &log).is_empty(), "{log}");
+    let bytes = std::fs::read(&png).expect("the screenshot is written");
+    assert!(
+        bytes.len() > 20_000 && bytes.starts_with(b"\x89PNG"),
+        "screenshot {} bytes",
+        bytes.len()
+    );
+    eprintln!("screenshot of the report: {}", png.display());
+
+    for id in FIGURES {
+        let n = std::fs::read_dir(&plots)
+            .unwrap()
+            .filter_map(Result::ok)
+            .filter(|e| e.file_name().to_string_lossy().starts_with(id))
+            .count();
+        assert!(n >= 1, "--plot wrote no {id}*.svg");
+    }
 }

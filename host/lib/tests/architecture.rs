@@ -19,7 +19,8 @@ const ALLOWED: [(&str, &[&str]); 9] = [
     // the nonlinear models are validated with the simulator's exact laws (ident::nonlinear)
     ("ident", &["data", "model", "sim"]),
     ("diagnose", &["data", "model", "sim", "ident"]),
-    ("report", &["data", "model", "ident"]),
+    // the diagnosis report draws a `Diagnosis` (report/html.rs)
+    ("report", &["data", "model", "ident", "diagnose"]),
     (
         "scenario",
         &["data", "capture", "model", "sim", "ident", "report"],

@@ -33,6 +33,7 @@
 
 pub mod locate;
 pub mod metric;
+pub mod series;
 
 #[cfg(test)]
 mod tests;
@@ -46,7 +47,7 @@ use serde::Serialize;
 use thiserror::Error;
 
 use crate::data::{Dataset, IdData};
-use crate::ident::frf::{amplitude_trend, analyze_dataset, AmplitudeTrend, Linearity};
+use crate::ident::frf::{amplitude_trend, analyze_dataset, AmplitudeTrend, FrfAnalysis, Linearity};
 use crate::ident::grey_box::DEFAULT_GEAR_RATIO;
 use crate::ident::nonlinear::{identify, linear_start, NlFit, NlOptions, NlRequest, Owner};
 use crate::model::effects::Effect;
@@ -54,6 +55,7 @@ use crate::model::params::{model_params, Plant};
 use crate::model::spec::Structure;
 use locate::{Band, Regions};
 use metric::{segment_gain, DrivenModel, Measured, Scored};
+use series::DiagnosisSeries;
 
 /// The user's simulation, for the parameter-against-structure split of the gap.
 #[derive(Clone, Debug, PartialEq)]
@@ -454,6 +456,106 @@ fn evidence(effect: &str, w: &Where) -> String {
     }
 }
 
+/// The report's series of one diagnosis ([`DiagnosisSeries`]); `residual` is the nominal's
+/// over the scored range, `angle_order` the order of its pattern against the motor angle.
+fn series_of(
+    measured: &Measured,
+    nominal: &Fitted,
+    best: Option<(String, Vec<f64>)>,
+    val: &Dataset,
+    analyses: &[(String, FrfAnalysis)],
+    residual: &[f64],
+    angle_order: u32,
+) -> DiagnosisSeries {
+    use series::*;
+    let s = measured.skip;
+    let ts = val.data.ts;
+    let meas = measured.velocity[s..].to_vec();
+    let best = best.map(|(n, v)| (n, v[s..].to_vec()));
+    let best_res: Option<Vec<f64>> = best
+        .as_ref()
+        .map(|(_, v)| meas.iter().zip(v).map(|(a, b)| a - b).collect());
+    // 2 s segments: 0.5 Hz lines, below the metric's 1 Hz edge
+    let seg = ((2.0 / ts) as usize).min(meas.len() / 2).max(16);
+    let (freq_hz, measured_asd) = asd(&meas, ts, seg);
+    let spectra = Spectra {
+        freq_hz,
+        measured: measured_asd,
+        nominal: asd(residual, ts, seg).1,
+        best: best_res.as_ref().map(|r| asd(r, ts, seg).1),
+    };
+    let model = DrivenModel::of_fit(&nominal.fit);
+    let frf = analyses
+        .iter()
+        .rev()
+        .find(|(n, _)| *n == val.name)
+        .or(analyses.first())
+        .and_then(|(name, a)| {
+            let frf = crate::ident::validate::FrfBand::from(&a.frf);
+            let pos = frf.freq_hz.iter().copied().filter(|f| *f > 0.0);
+            let lo = pos.clone().fold(f64::INFINITY, f64::min);
+            let hi = pos.fold(0.0, f64::max);
+            if !(lo.is_finite() && hi > lo) {
+                return None;
+            }
+            let grid = log_grid(lo / 1.1, (hi * 1.1).min(0.49 / ts), 400);
+            let response = nominal_response(&model, ts, &grid);
+            Some(FrfFigure {
+                capture: name.clone(),
+                frf,
+                nominal: crate::ident::validate::BodeCurve {
+                    name: format!("nominal {}", model.plant.kind.structure().label()),
+                    freq_hz: grid,
+                    response,
+                },
+            })
+        });
+    let driven = &nominal.scored.driven;
+    let mut maps = vec![residual_map(
+        "motor velocity ω_m of the nominal [rad/s]",
+        &driven.omega_m[s..],
+        residual,
+    )];
+    if driven.gearbox_deflection[s..].iter().any(|d| *d != 0.0) {
+        maps.push(residual_map(
+            "gearbox deflection δ of the nominal [rad]",
+            &driven.gearbox_deflection[s..],
+            residual,
+        ));
+    }
+    let (angle, label) = if angle_order > 0 {
+        let p = 2.0 * std::f64::consts::PI / angle_order as f64;
+        (
+            val.data.y[s..].iter().map(|t| t.rem_euclid(p)).collect::<Vec<_>>(),
+            format!("measured motor angle θ_m modulo 2π/{angle_order} (the residual's order-{angle_order} pattern) [rad]"),
+        )
+    } else {
+        (
+            val.data.y[s..].to_vec(),
+            "measured motor angle θ_m [rad]".to_string(),
+        )
+    };
+    maps.push(residual_map(&label, &angle, residual));
+    let win = ((MOVING_RMS_S / ts).round() as usize).max(1);
+    let step = (win / 2).max(1);
+    DiagnosisSeries {
+        ts,
+        t0: s as f64 * ts,
+        validation: val.name.clone(),
+        nominal: nominal.scored.velocity[s..].to_vec(),
+        best,
+        frf,
+        lines: analyses.to_vec(),
+        spectra,
+        maps,
+        rms_step_s: step as f64 * ts,
+        nominal_rms: moving_rms(residual, win, step),
+        best_rms: best_res.as_ref().map(|r| moving_rms(r, win, step)),
+        window: loudest_window(residual, (WINDOW_S / ts).round() as usize),
+        measured: meas,
+    }
+}
+
 fn linear_of(
     ds: &Dataset,
     req: &DiagnoseRequest,
@@ -507,6 +609,19 @@ pub fn diagnose(
     val: &Dataset,
     req: &DiagnoseRequest,
 ) -> Result<Diagnosis, DiagnoseError> {
+    diagnose_with_series(est, val, req).map(|(d, _)| d)
+}
+
+/// [`diagnose`], with the series a report draws ([`DiagnosisSeries`]: FRF, spectra,
+/// residual maps, time records), which the [`Diagnosis`] (and its JSON) leaves out.
+///
+/// # Errors
+/// As [`diagnose`].
+pub fn diagnose_with_series(
+    est: &[Dataset],
+    val: &Dataset,
+    req: &DiagnoseRequest,
+) -> Result<(Diagnosis, DiagnosisSeries), DiagnoseError> {
     let t0 = Instant::now();
     let o = &req.options;
     if est.is_empty() || est.len() > 2 {
@@ -596,19 +711,22 @@ pub fn diagnose(
     let bands = locate::bands(&residual, &measured.velocity[s..], ts);
     let mut distortion = Vec::new();
     let mut lin_of: Vec<Option<Linearity>> = Vec::new();
+    let mut analyses: Vec<(String, FrfAnalysis)> = Vec::new();
     for ds in est.iter().chain(std::iter::once(val)) {
-        let lin = if ds.excitation.is_some() {
-            analyze_dataset(ds, o.settle_periods)
-                .ok()
-                .map(|a| a.linearity_y)
+        let a = if ds.excitation.is_some() {
+            analyze_dataset(ds, o.settle_periods).ok()
         } else {
             None
         };
+        let lin = a.as_ref().map(|a| a.linearity_y.clone());
         if let Some(l) = &lin {
             distortion.push(Distortion {
                 capture: ds.name.clone(),
                 linearity: l.clone(),
             });
+        }
+        if let Some(a) = a {
+            analyses.push((ds.name.clone(), a));
         }
         lin_of.push(lin);
     }
@@ -730,6 +848,7 @@ pub fn diagnose(
 
     // the pair
     let mut pair: Option<Candidate> = None;
+    let mut pair_velocity: Option<Vec<f64>> = None;
     let mut best_fit = nom_fit;
     let mut best = "none".to_string();
     if let Some((top, Some(top_fit))) = singles.first().filter(|c| c.0.significant) {
@@ -777,6 +896,7 @@ pub fn diagnose(
                         let better = pair.as_ref().is_none_or(|p| cand.score > p.score);
                         if significant && better {
                             pair = Some(cand);
+                            pair_velocity = Some(f.scored.velocity);
                         }
                     }
                     Err(e) => warnings.push(format!("pair {name}: {e}")),
@@ -857,7 +977,23 @@ pub fn diagnose(
         )
     };
     let nominal_parameters = linear_parameters(&nominal.fit);
-    Ok(Diagnosis {
+    let best_velocity = match (&pair, pair_velocity) {
+        (Some(p), Some(v)) => Some((p.name.clone(), v)),
+        _ => singles.first().filter(|c| c.0.significant).and_then(|c| {
+            c.1.as_ref()
+                .map(|f| (c.0.name.clone(), f.scored.velocity.clone()))
+        }),
+    };
+    let series = series_of(
+        &measured,
+        &nominal,
+        best_velocity,
+        val,
+        &analyses,
+        &residual,
+        location.regions.angle_pattern.order,
+    );
+    let diagnosis = Diagnosis {
         verdict,
         metric: metric::METRIC_NAME.into(),
         structure: req.structure.label().into(),
@@ -879,5 +1015,6 @@ pub fn diagnose(
         ),
         seconds: t0.elapsed().as_secs_f64(),
         warnings,
-    })
+    };
+    Ok((diagnosis, series))
 }

@@ -1,4 +1,6 @@
-//! What a person reads: SVG plots of spectra and Bode diagrams ([`plot`]).
+//! What a person reads: SVG plots of spectra, Bode diagrams and time records ([`plot`]),
+//! and the diagnosis report as one self-contained HTML page ([`html`]).
 //! Reports only draw what the estimators computed.
 
+pub mod html;
 pub mod plot;

@@ -550,7 +550,8 @@ pub fn time_svg(
         return Err(PlotError::Empty(W.into()));
     }
     let pad = 0.05 * (hi - lo).max(1e-12);
-    let (lo, hi) = (lo - pad, hi + pad);
+    // headroom above the data for the legend
+    let (lo, hi) = (lo - pad, hi + 5.0 * pad);
     let t1 = t0 + (n - 1) as f64 * ts;
     let mut svg = String::new();
     {
@@ -597,6 +598,137 @@ pub fn time_svg(
             .position(SeriesLabelPosition::UpperRight)
             .draw()
             .map_err(draw_err(W))?;
+        root.present().map_err(draw_err(W))?;
+    }
+    Ok(svg)
+}
+
+/// One curve of an [`xy_svg`] plot.
+#[derive(Clone, Copy, Debug)]
+pub struct XySeries<'a> {
+    /// legend
+    pub name: &'a str,
+    /// abscissae [x unit]
+    pub x: &'a [f64],
+    /// ordinates [y unit]; non-finite values are left out
+    pub y: &'a [f64],
+    /// draw markers at the points as well as the line
+    pub markers: bool,
+}
+
+/// Curves `y(x)` in one panel, `x_desc` and `y_desc` the axis labels with their units, the
+/// x axis logarithmic when `log_x` (points at x ≤ 0 are then left out).
+///
+/// # Errors
+/// [`PlotError::Empty`] without a finite point, [`PlotError::Draw`].
+pub fn xy_svg(
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    log_x: bool,
+    series: &[XySeries<'_>],
+) -> Result<String, PlotError> {
+    const W: &str = "xy";
+    let keep = |x: f64, y: f64| x.is_finite() && y.is_finite() && (!log_x || x > 0.0);
+    let pts = || {
+        series.iter().flat_map(|s| {
+            s.x.iter()
+                .zip(s.y)
+                .map(|(x, y)| (*x, *y))
+                .filter(|&(x, y)| keep(x, y))
+        })
+    };
+    let (x0, x1, y0, y1) = pts().fold(
+        (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ),
+        |(a, b, c, d), (x, y)| (a.min(x), b.max(x), c.min(y), d.max(y)),
+    );
+    if !x0.is_finite() || !y0.is_finite() {
+        return Err(PlotError::Empty(W.into()));
+    }
+    let (x1, y1) = (
+        if x1 > x0 { x1 } else { x0 + 1.0 },
+        if y1 > y0 { y1 } else { y0 + 1.0 },
+    );
+    let pad = 0.05 * (y1 - y0);
+    // headroom above the data for the legend
+    let (y0, y1) = (y0 - pad, y1 + 6.0 * pad);
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (900, 420)).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_err(W))?;
+        let root = root
+            .titled(title, ("sans-serif", 18))
+            .map_err(draw_err(W))?;
+        let mut builder = ChartBuilder::on(&root);
+        builder
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(70);
+        // one drawing routine over either x axis
+        macro_rules! draw {
+            ($chart:expr) => {{
+                let mut chart = $chart;
+                chart
+                    .configure_mesh()
+                    .x_desc(x_desc)
+                    .y_desc(y_desc)
+                    .light_line_style(WHITE.mix(0.0))
+                    .draw()
+                    .map_err(draw_err(W))?;
+                for (i, s) in series.iter().enumerate() {
+                    let color = PALETTE[i % PALETTE.len()];
+                    // a non-finite value breaks the line
+                    let mut runs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+                    for (x, y) in s.x.iter().zip(s.y) {
+                        if keep(*x, *y) {
+                            runs.last_mut().expect("one run").push((*x, *y));
+                        } else if !runs.last().expect("one run").is_empty() {
+                            runs.push(Vec::new());
+                        }
+                    }
+                    let line: Vec<(f64, f64)> = runs.iter().flatten().copied().collect();
+                    for (k, run) in runs.iter().enumerate() {
+                        let drawn = chart
+                            .draw_series(LineSeries::new(
+                                run.iter().copied(),
+                                color.stroke_width(2),
+                            ))
+                            .map_err(draw_err(W))?;
+                        if k == 0 {
+                            drawn.label(s.name).legend(move |(x, y)| {
+                                PathElement::new(vec![(x, y), (x + 15, y)], color.stroke_width(2))
+                            });
+                        }
+                    }
+                    if s.markers {
+                        chart
+                            .draw_series(line.iter().map(|&p| Circle::new(p, 2, color.filled())))
+                            .map_err(draw_err(W))?;
+                    }
+                }
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.8))
+                    .border_style(BLACK)
+                    .position(SeriesLabelPosition::UpperRight)
+                    .draw()
+                    .map_err(draw_err(W))?;
+            }};
+        }
+        if log_x {
+            draw!(builder
+                .build_cartesian_2d((x0..x1).log_scale(), y0..y1)
+                .map_err(draw_err(W))?);
+        } else {
+            draw!(builder
+                .build_cartesian_2d(x0..x1, y0..y1)
+                .map_err(draw_err(W))?);
+        }
         root.present().map_err(draw_err(W))?;
     }
     Ok(svg)
