@@ -100,13 +100,23 @@ pub fn solve_spd(m: &DMatrix<f64>, r: &DMatrix<f64>, ridge: f64) -> Option<DMatr
 }
 
 /// Inverse of a symmetric positive semi-definite matrix through its SVD,
-/// dropping singular values below `rel_tol · σ_max` (pseudo-inverse).
+/// dropping singular values below `rel_tol · σ_max` (pseudo-inverse). A matrix with a
+/// non-finite entry gives NaN everywhere (nalgebra's unbounded SVD never ends on one), and
+/// an SVD that has not converged in [`SVD_MAX_ITER`] sweeps gives zeros.
 pub fn pinv_sym(m: &DMatrix<f64>, rel_tol: f64) -> DMatrix<f64> {
-    let svd = m.clone().svd(true, true);
+    if m.iter().any(|v| !v.is_finite()) {
+        return DMatrix::from_element(m.ncols(), m.nrows(), f64::NAN);
+    }
+    let Some(svd) = m.clone().try_svd(true, true, f64::EPSILON, SVD_MAX_ITER) else {
+        return DMatrix::zeros(m.ncols(), m.nrows());
+    };
     let smax = svd.singular_values.max();
     svd.pseudo_inverse(rel_tol * smax.max(1e-300))
         .unwrap_or_else(|_| DMatrix::zeros(m.ncols(), m.nrows()))
 }
+
+/// Most iterations [`pinv_sym`]'s SVD takes.
+pub const SVD_MAX_ITER: usize = 10_000;
 
 /// Second-order sections of a digital Butterworth low-pass of even `order`
 /// with cut-off `fc_hz` at sample interval `ts` (bilinear transform with
@@ -316,6 +326,16 @@ pub fn dvec(x: &[f64]) -> DVector<f64> {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn pinv_of_a_matrix_with_nan_ends_and_says_nan() {
+        let mut m = DMatrix::<f64>::identity(3, 3);
+        m[(1, 2)] = f64::NAN;
+        m[(2, 1)] = f64::NAN;
+        assert!(pinv_sym(&m, 1e-14).iter().all(|v| v.is_nan()));
+        let inv = pinv_sym(&(DMatrix::<f64>::identity(3, 3) * 2.0), 1e-14);
+        assert!((inv[(0, 0)] - 0.5).abs() < 1e-15);
+    }
 
     #[test]
     fn highpass_bank_removes_a_constant_and_passes_a_fast_sine() {

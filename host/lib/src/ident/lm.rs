@@ -246,6 +246,11 @@ pub fn minimize<P: LeastSquares + ?Sized>(
     'outer: while iterations < opts.max_iter {
         iterations += 1;
         let ne = problem.normal_equations(&theta, &free);
+        if ne.jtj.iter().chain(ne.jte.iter()).any(|v| !v.is_finite()) {
+            // a derivative is not finite here: no step can be computed from it
+            termination = Termination::NoDescent;
+            break;
+        }
         let p = ne.jtj.nrows();
         let diag: Vec<f64> = (0..p).map(|i| ne.jtj[(i, i)].max(1e-300)).collect();
         loop {
