@@ -242,17 +242,23 @@ fn battery() {
         let secs = t.elapsed().as_secs_f64();
         times.push(secs);
         let ranked: Vec<&str> = d.effects.iter().map(|c| c.name.as_str()).collect();
+        let top: Vec<String> = d
+            .effects
+            .iter()
+            .take(3)
+            .map(|c| format!("{} {:+.1}±{:.1}", c.name, c.score, c.score_se))
+            .collect();
         let errs = param_errors(&d, &case.hidden);
         let closure_err = d.fit_augmented_val - truth;
         println!(
-            "case {i:>2} {label:<34} rms {:.3} rad: best {:<34} nominal {:6.2} → {:6.2} % (true model {:6.2} %, closure error {:+.2} points) ranked {:?} params {:?} {:.0} s",
+            "case {i:>2} {label:<34} rms {:.3} rad: best {:<34} nominal {:6.2} → {:6.2} % (true model {:6.2} %, closure error {:+.2} points) top {:?} params {:?} {:.0} s",
             case.rms,
             d.best,
             d.fit_nominal_val,
             d.fit_augmented_val,
             truth,
             closure_err,
-            &ranked[..ranked.len().min(3)],
+            top,
             errs.iter()
                 .map(|(k, e)| format!("{k} {e:+.1} %"))
                 .collect::<Vec<_>>(),
