@@ -123,10 +123,9 @@ fn three_mass_run_under(
     )
 }
 
-/// Fits the three-mass with `effect` from the truth moved by +20 % / −15 %, and checks the
-/// identifiable parameters within 3 % and 3 σ of the truth.
-fn check_three_mass(effect: Effect, identifiable: &[&str], substeps: usize) {
-    let (data, cfg) = three_mass_run(effect, 3);
+/// The three-mass model of `cfg`'s joint with `effect` (coarse smoothing, `substeps` RK4
+/// steps per sample) and its true values in layout order.
+fn truth_of(cfg: &SimConfig, effect: Effect, substeps: usize) -> (NlModel, Vec<f64>) {
     let p = cfg.plant.params;
     let model = NlModel {
         structure: Structure::ThreeMass,
@@ -139,6 +138,14 @@ fn check_three_mass(effect: Effect, identifiable: &[&str], substeps: usize) {
     };
     let plant = [p.j_m, p.j_a1, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m];
     let truth = model.values(&plant, 0.0, 0.0);
+    (model, truth)
+}
+
+/// Fits the three-mass with `effect` from the truth moved by +20 % / −15 %, and checks the
+/// identifiable parameters within 3 % and 3 σ of the truth.
+fn check_three_mass(effect: Effect, identifiable: &[&str], substeps: usize) {
+    let (data, cfg) = three_mass_run(effect, 3);
+    let (model, truth) = truth_of(&cfg, effect, substeps);
     let start: Vec<f64> = truth
         .iter()
         .enumerate()
@@ -200,18 +207,7 @@ fn coulomb_friction_at_the_default_size_is_found_with_the_refined_smoothing() {
     // limit with d_g −22 % and F_c +14 %; the refined one must not
     let effect = crate::model::effects::parse_effects(&["coulomb_friction:fs=0.03"]).unwrap()[0];
     let (data, cfg) = three_mass_run(effect, 3);
-    let p = cfg.plant.params;
-    let coarse = NlModel {
-        structure: Structure::ThreeMass,
-        r: p.r,
-        effects: vec![effect],
-        tau_c: cfg.controller.current_loop_tau,
-        v_eps: 0.05,
-        dz_eps: 1e-7,
-        substeps: 1,
-    };
-    let plant = [p.j_m, p.j_a1, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m];
-    let truth = coarse.values(&plant, 0.0, 0.0);
+    let (coarse, truth) = truth_of(&cfg, effect, 1);
     let start: Vec<f64> = truth
         .iter()
         .enumerate()
@@ -249,18 +245,7 @@ fn a_delay_under_a_soft_controller_is_within_its_sigma_and_its_trade_with_the_la
     };
     let effect = Effect::default_by_name("time_delay").unwrap();
     let (data, cfg) = three_mass_run_under(effect, 7, soft);
-    let p = cfg.plant.params;
-    let model = NlModel {
-        structure: Structure::ThreeMass,
-        r: p.r,
-        effects: vec![effect],
-        tau_c: cfg.controller.current_loop_tau,
-        v_eps: 0.05,
-        dz_eps: 1e-7,
-        substeps: 2,
-    };
-    let plant = [p.j_m, p.j_a1, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m];
-    let truth = model.values(&plant, 0.0, 0.0);
+    let (model, truth) = truth_of(&cfg, effect, 2);
     let start: Vec<f64> = truth.iter().map(|t| t * 1.2).collect();
     let fit = fit_output_error(&data, &model, &start, &NlOptions::default()).unwrap();
     for (name, t) in [("tau_c", 5e-4), ("samples", 1.5)] {
