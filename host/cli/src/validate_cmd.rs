@@ -148,16 +148,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
     } else {
         saved.ts / saved.prep.decimate.max(1) as f64
     };
-    if !jointid::data::same_rate(ds.data.ts, capture_ts) {
-        return Err(format!(
-            "{}: sampled at {} Hz, the model {} was fitted on data at {} Hz",
-            ds.name,
-            jointid::data::fmt_sig(1.0 / ds.data.ts, 6),
-            mpath.display(),
-            jointid::data::fmt_sig(1.0 / capture_ts, 6)
-        )
-        .into());
-    }
+    check_model_rate(&ds, capture_ts, mpath)?;
     let both = FitData::new(&ds.data, saved.prep).map_err(|e| format!("{}: {e}", ds.name))?;
     check_lags(args.lags, &ds.name, both.prepared.len())?;
     let v = fitted
@@ -249,6 +240,24 @@ struct NlReport<'a> {
     validation: FitsJson,
 }
 
+/// `ds` is sampled at the rate `model_ts` [s] the model in `mpath` was fitted at.
+fn check_model_rate(
+    ds: &jointid::data::Dataset,
+    model_ts: f64,
+    mpath: &std::path::Path,
+) -> Result<(), String> {
+    if jointid::data::same_rate(ds.data.ts, model_ts) {
+        return Ok(());
+    }
+    Err(format!(
+        "{}: sampled at {} Hz, the model {} was fitted on data at {} Hz",
+        ds.name,
+        jointid::data::fmt_sig(1.0 / ds.data.ts, 6),
+        mpath.display(),
+        jointid::data::fmt_sig(1.0 / model_ts, 6)
+    ))
+}
+
 /// `validate MODEL.json DATA` for a model with effects (format 3's `nonlinear` section):
 /// simulated from the measured torque with the simulator's exact laws
 /// ([`jointid::ident::nonlinear::validate`]); the same FITs `fit` reports, the same exit
@@ -265,16 +274,7 @@ fn run_nonlinear(
         .map_err(|e| format!("{}: {e}", mpath.display()))?;
     let nl = saved.nonlinear.as_ref().expect("a nonlinear section");
     let ds = data.load(ctx.loaders)?;
-    if !jointid::data::same_rate(ds.data.ts, saved.ts) {
-        return Err(format!(
-            "{}: sampled at {} Hz, the model {} was fitted on data at {} Hz",
-            ds.name,
-            jointid::data::fmt_sig(1.0 / ds.data.ts, 6),
-            mpath.display(),
-            jointid::data::fmt_sig(1.0 / saved.ts, 6)
-        )
-        .into());
-    }
+    check_model_rate(&ds, saved.ts, mpath)?;
     let opts = NlOptions {
         highpass_hz: nl.highpass_hz,
         ..NlOptions::default()
