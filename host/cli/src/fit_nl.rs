@@ -364,7 +364,7 @@ pub fn run(
         }
     }
 
-    let mut options = NlOptions::default();
+    let mut options = NlOptions::default().for_structure(structure);
     let req = NlRequest {
         structure,
         r: args.gear_ratio,
@@ -489,17 +489,22 @@ pub fn run(
             .collect::<Vec<_>>()
             .join(" ")
     );
-    let method = format!(
+    let method =
+        format!(
         "nonlinear grey box: output error on the interval-mean motor velocity from the measured \
-         torque ({} high-pass prefilter at {} Hz, RK4 with {} step(s) per sample, smooth \
-         Coulomb law v_eps = {:.3} rad/s), Levenberg-Marquardt with exact derivatives by dual \
-         numbers, σ by the sandwich covariance for coloured residuals; current-loop lag {}",
-        if options.highpass_order == 2 {
-            "second-order Butterworth"
+         torque ({}, RK4 with {} step(s) per sample, smooth Coulomb law v_eps = {:.3} rad/s), \
+         Levenberg-Marquardt with exact derivatives by dual numbers, σ by the sandwich \
+         covariance for coloured residuals; current-loop lag {}",
+        if options.highpass_hz <= 0.0 {
+            "no prefilter: a rigid body's information lies at the low frequencies".to_string()
+        } else if options.highpass_order == 2 {
+            format!(
+                "second-order Butterworth high-pass prefilter at {} Hz",
+                options.highpass_hz
+            )
         } else {
-            "Butterworth"
+            format!("Butterworth high-pass prefilter at {} Hz", options.highpass_hz)
         },
-        options.highpass_hz,
         fit_model.substeps,
         fit_model.v_eps,
         match (fixed_tau, fit.model.tau_c > 0.0) {

@@ -118,6 +118,18 @@ impl Default for NlOptions {
     }
 }
 
+impl NlOptions {
+    /// The options fitted for `structure`: a rigid body is fitted without the high-pass
+    /// prefilter, since its inertia and friction show at the low frequencies the prefilter
+    /// would remove (EMPS moves below 5 Hz); its torque offset is estimated instead.
+    pub fn for_structure(mut self, structure: crate::model::spec::Structure) -> Self {
+        if structure == crate::model::spec::Structure::Rigid {
+            self.highpass_hz = 0.0;
+        }
+        self
+    }
+}
+
 /// One estimated parameter.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NlParam {

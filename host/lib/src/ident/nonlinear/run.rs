@@ -100,12 +100,7 @@ pub fn identify(data: &IdData, req: &NlRequest) -> Result<NlResult, NlError> {
             (st.steps, st.model, st.values)
         }
     };
-    let mut options = req.options.clone();
-    if req.structure == Structure::Rigid {
-        // a rigid body's inertia and friction show at the low frequencies the prefilter
-        // would remove (EMPS moves below 5 Hz); its torque offset is estimated instead
-        options.highpass_hz = 0.0;
-    }
+    let options = req.options.clone().for_structure(req.structure);
     let start_model = start_model.refined_for(&start, velocity_rms(data), data.ts);
     let fit = fit_output_error(data, &start_model, &start, &options)?;
     let warnings = checks(&fit);
