@@ -73,8 +73,8 @@ use crate::model::spec::Structure;
 
 use checks::check;
 pub use checks::{
-    output_kind_check, periodic_fit_percent, periodic_steady_state, top_slope_db_per_decade,
-    SteadyState, PERIODIC_FIT_NAME,
+    distortion_check, output_kind_check, periodic_fit_percent, periodic_steady_state,
+    top_slope_db_per_decade, SteadyState, PERIODIC_FIT_NAME,
 };
 use sampled::{drive_model, Sampled};
 pub(crate) use sampled::{solve_hessenberg, unit_circle};
@@ -87,6 +87,9 @@ pub use search::{frf_peaks, reliable_lines};
 /// relative standard deviation above which a line of the FRF is not used to
 /// find resonances or the starting rigid body
 pub const RELIABLE_REL_SIGMA: f64 = 0.1;
+/// `σ/|Ĝ|` with the odd nonlinear distortion above which a line is swamped by it and left
+/// out of the start ([`reliable_lines`])
+pub const SWAMPED_REL_SIGMA: f64 = 0.5;
 /// largest lag or delay considered [samples]
 pub const MAX_DRIVE_SAMPLES: f64 = 20.0;
 /// cost above this multiple of its expected value is reported
@@ -160,6 +163,23 @@ pub enum FrfFitError {
         needed: usize,
         /// structure name
         structure: &'static str,
+    },
+    /// too few lines are reliable for a linear fit: the response is not a linear system's
+    #[error(
+        "{reliable} of {lines} excited lines have σ/|Ĝ| ≤ 10 % (median {median_percent:.0} %, the odd \
+         nonlinear distortion {distortion_percent:.0} % of it): at this amplitude the joint does not respond \
+         as a linear system (one that sticks on its friction, for instance); raise the excitation amplitude \
+         or fit a nonlinear model (--effect)"
+    )]
+    Unreliable {
+        /// reliable lines
+        reliable: usize,
+        /// lines in the FRF
+        lines: usize,
+        /// median `σ/|Ĝ|` with the distortion [%]
+        median_percent: f64,
+        /// median `σ/|Ĝ|` of the distortion alone [%]
+        distortion_percent: f64,
     },
     /// no positive rigid-body inertia could be read off the FRF
     #[error("no positive rigid-body inertia in the lowest FRF lines ({detail})")]
@@ -239,6 +259,16 @@ pub enum FitWarning {
         /// the slope the model's output kind has there [dB/decade]
         expected_db_per_decade: f64,
     },
+    /// odd nonlinear distortion stands above the noise on many excited lines: the model is
+    /// the best linear approximation at this excitation level
+    Distortion {
+        /// lines whose distortion variance exceeds three times the noise variance
+        lines: usize,
+        /// lines fitted
+        of: usize,
+        /// median over those lines of the distortion over the noise [dB]
+        above_noise_db: f64,
+    },
     /// the FIT reached is far below what a model following the FRF reaches
     FitBelowFrf {
         /// the model's FIT [%]
@@ -287,6 +317,17 @@ impl std::fmt::Display for FitWarning {
                  is the output an acceleration? Then fit a black box with --feedthrough (or give the right \
                  --output-kind)",
                 -measured_db_per_decade, -expected_db_per_decade
+            ),
+            FitWarning::Distortion {
+                lines,
+                of,
+                above_noise_db,
+            } => write!(
+                f,
+                "odd nonlinear distortion stands {above_noise_db:.0} dB above the noise on {lines} of {of} excited \
+                 lines: the model is the joint's best linear approximation at this excitation level (friction, for \
+                 one, shows as added viscous damping), weighted by the distortion; fit a nonlinear model \
+                 (--effect) or run `jointid diagnose` to name the effect"
             ),
             FitWarning::FitBelowFrf { fit, frf_fit } => write!(
                 f,
@@ -408,8 +449,11 @@ impl Lines {
         let usable = sp.periods >= 2
             && sp.u.len() == frf.g.len()
             && exc_in_noise.len() == frf.g.len()
-            && sp.pool.iter().all(|p| p.end <= sp.var_u.len());
+            && sp.pool.iter().all(|p| p.end <= sp.var_u.len())
+            && sp.distortion.len() == frf.g.len();
         let spectra = usable.then(|| sp.clone());
+        // σ of Ĝ with the odd distortion on each line
+        let sigma = frf.sigma_total();
         Lines {
             z: unit_circle(&frf.freq_hz, ts),
             z_noise: unit_circle(&sp.noise_freq_hz, ts),
@@ -418,10 +462,10 @@ impl Lines {
             w_log: frf
                 .g
                 .iter()
-                .zip(&frf.sigma)
+                .zip(&sigma)
                 .map(|(g, s)| 1.0 / (s / g.norm().max(1e-300)).max(0.02))
                 .collect(),
-            sigma: frf.sigma.clone(),
+            sigma,
             spectra,
         }
     }
@@ -536,6 +580,10 @@ impl<M: FrfModel> Problem<'_, M> {
                         })
                         .sum::<f64>()
                         / n;
+                    // the odd distortion on this line, with the model at the line
+                    let d = &s.distortion[k];
+                    let var =
+                        var + d.var_y + gm.norm_sqr() * d.var_u - 2.0 * (gm.conj() * d.cov_yu).re;
                     let floor = (1e-4 * s.y[k].norm()).powi(2);
                     let sd = (var.max(floor) / 2.0).sqrt();
                     r.push(e.re / sd);
@@ -623,6 +671,26 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
             lines: frf.g.len(),
             needed,
             structure: structure_name(structure),
+        });
+    }
+    let reliable = reliable_lines(frf).len();
+    if reliable < 3 {
+        let median = |v: Vec<f64>| {
+            let mut v: Vec<f64> = v.iter().zip(&frf.g).map(|(s, g)| s / g.norm()).collect();
+            v.sort_by(f64::total_cmp);
+            100.0 * v[v.len() / 2]
+        };
+        let total = frf.sigma_total();
+        let dist: Vec<f64> = total
+            .iter()
+            .zip(&frf.sigma)
+            .map(|(t, s)| (t * t - s * s).max(0.0).sqrt())
+            .collect();
+        return Err(FrfFitError::Unreliable {
+            reliable,
+            lines: frf.g.len(),
+            median_percent: median(total),
+            distortion_percent: median(dist),
         });
     }
     let model = GreyBoxModel {

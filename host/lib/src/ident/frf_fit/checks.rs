@@ -52,10 +52,10 @@ pub(super) fn check(fit: &FrfFit, opts: &LmOptions, frf: &Frf) -> Vec<FitWarning
             });
         }
     }
-    // peaks the model would show at the measured lines but the FRF does not
+    // peaks the model would show at the measured lines but the FRF does not (the lines the
+    // FRF's own peaks were read from: its noise and distortion kept)
     let seen = Frf {
         g: fit.freq_response(&frf.freq_hz),
-        spectra: FrfSpectra::default(),
         ..frf.clone()
     };
     for m in frf_peaks(&seen, fit.model.output) {
@@ -68,6 +68,7 @@ pub(super) fn check(fit: &FrfFit, opts: &LmOptions, frf: &Frf) -> Vec<FitWarning
             w.push(FitWarning::ExtraResonance { freq_hz: m.freq_hz });
         }
     }
+    w.extend(distortion_check(frf));
     let expected = -20.0 * rigid_power(fit.model.output) as f64;
     w.extend(output_kind_check(frf, expected));
     for p in &fit.params {
@@ -80,6 +81,39 @@ pub(super) fn check(fit: &FrfFit, opts: &LmOptions, frf: &Frf) -> Vec<FitWarning
         }
     }
     w
+}
+
+/// Share of excited lines on which the distortion dominates from which
+/// [`FitWarning::Distortion`] is raised.
+const DISTORTION_WARN_SHARE: f64 = 0.25;
+
+/// [`FitWarning::Distortion`] when the odd distortion's variance exceeds three times the
+/// noise's, and its σ [`NEGLIGIBLE_MISFIT`] of the response, on at least
+/// [`DISTORTION_WARN_SHARE`] of the excited lines (a noise-free simulation's rounding stands
+/// far above its noise and changes nothing).
+pub fn distortion_check(frf: &Frf) -> Option<FitWarning> {
+    let total = frf.sigma_total();
+    let mut db: Vec<f64> = frf
+        .sigma
+        .iter()
+        .zip(&total)
+        .zip(&frf.g)
+        .filter(|((s, t), g)| {
+            let d2 = **t * **t - **s * **s;
+            d2 > 3.0 * **s * **s && d2 > (NEGLIGIBLE_MISFIT * g.norm()).powi(2)
+        })
+        .map(|((s, t), _)| 10.0 * ((t * t - s * s) / (s * s).max(1e-300)).log10())
+        .collect();
+    let of = frf.g.len();
+    if of == 0 || (db.len() as f64) < DISTORTION_WARN_SHARE * of as f64 {
+        return None;
+    }
+    db.sort_by(f64::total_cmp);
+    Some(FitWarning::Distortion {
+        lines: db.len(),
+        of,
+        above_noise_db: db[db.len() / 2],
+    })
 }
 
 /// Slope of `20 log10 |Ĝ|` against `log10 f` over the reliable lines of the

@@ -4,14 +4,31 @@
 
 use super::*;
 
-/// Lines whose FRF is reliable: `σ/|Ĝ| ≤` [`RELIABLE_REL_SIGMA`].
+/// Lines whose FRF is reliable: the noise's `σ/|Ĝ| ≤` [`RELIABLE_REL_SIGMA`], and the odd
+/// nonlinear distortion on the line ([`Frf::sigma_total`]) below half the response. A line
+/// the distortion swamps (the lowest line of a joint that sticks on its friction) carries
+/// no linear information and would fake a resonance; lines at the resonances of a
+/// stiffening spring carry much distortion and still place the modes. When the distortion
+/// leaves fewer than a quarter of the lines, the noise alone decides; the fit then carries
+/// [`FitWarning::Distortion`].
 pub fn reliable_lines(frf: &Frf) -> Vec<usize> {
-    (0..frf.g.len())
+    let total = frf.sigma_total();
+    let by_noise: Vec<usize> = (0..frf.g.len())
         .filter(|&i| {
             let a = frf.g[i].norm();
             a > 0.0 && frf.sigma[i] <= RELIABLE_REL_SIGMA * a
         })
-        .collect()
+        .collect();
+    let both: Vec<usize> = by_noise
+        .iter()
+        .copied()
+        .filter(|&i| total[i] <= SWAMPED_REL_SIGMA * frf.g[i].norm())
+        .collect();
+    if 4 * both.len() >= frf.g.len() {
+        both
+    } else {
+        by_noise
+    }
 }
 
 pub(super) fn rigid_power(output: Output) -> i32 {
