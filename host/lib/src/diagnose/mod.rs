@@ -49,8 +49,10 @@ use thiserror::Error;
 use crate::data::{Dataset, IdData};
 use crate::ident::frf::{amplitude_trend, analyze_dataset, AmplitudeTrend, FrfAnalysis, Linearity};
 use crate::ident::grey_box::DEFAULT_GEAR_RATIO;
-use crate::ident::nonlinear::{identify, linear_start, NlFit, NlOptions, NlRequest, Owner};
-use crate::model::effects::Effect;
+use crate::ident::nonlinear::{
+    identify, linear_start, model_of, NlFit, NlOptions, NlRequest, Owner,
+};
+use crate::model::effects::{Attach, Effect, ExtraMode};
 use crate::model::params::{model_params, Plant};
 use crate::model::spec::Structure;
 use locate::{Band, Regions};
@@ -310,9 +312,10 @@ fn fit_and_score(
     measured: &Measured,
     req: &DiagnoseRequest,
     effects: Vec<Effect>,
-    linear: &Option<(Vec<f64>, f64)>,
+    starts: &LinearStarts,
 ) -> Result<Fitted, String> {
-    let nl = NlRequest {
+    let linear = &starts.structure;
+    let mut nl = NlRequest {
         structure: req.structure,
         r: req.r,
         effects,
@@ -321,6 +324,17 @@ fn fit_and_score(
         linear: linear.as_ref().map(|l| l.0.clone()),
         options: req.options.nl.clone(),
     };
+    // an extra mode starts where the linear fit with one more mass put it
+    let extra_at = nl
+        .effects
+        .iter()
+        .position(|e| matches!(e, Effect::ExtraMode(_)));
+    if let (Some(i), Some((plant, mode, tau_c))) = (extra_at, &starts.extra_mode) {
+        nl.effects[i] = Effect::ExtraMode(*mode);
+        nl.tau_c = *tau_c;
+        nl.linear = Some(plant.clone());
+        nl.start = Some(model_of(&nl, est).values(plant, 0.0, 0.0));
+    }
     let res = identify(est, &nl).map_err(|e| e.to_string())?;
     let model = DrivenModel::of_fit(&res.fit);
     let scored = measured.score(&model, val, req.options.segments)?;
@@ -556,6 +570,43 @@ fn series_of(
     }
 }
 
+/// The linear starts the candidate fits take from the frequency-domain fits.
+struct LinearStarts {
+    /// the structure's values and current-loop lag [s]
+    structure: Option<(Vec<f64>, f64)>,
+    /// the structure's values, the extra mode and the lag [s], from the structure with one
+    /// more mass ([`extra_mode_start`])
+    extra_mode: Option<(Vec<f64>, ExtraMode, f64)>,
+}
+
+/// The start of `structure` with an extra mode attached as `attach` says, from the
+/// frequency-domain fit of the structure with one more mass where that is the same
+/// mechanism: a two-mass joint with a mode on its arm is a three-mass chain, a three-mass
+/// joint with a mode in parallel on its first arm mass is seed 000's four-mass model
+/// (eq. (7), `J_p` on `k_p`). The automatic start's grid over the mode's frequency misses
+/// it when the structure's own fit took the extra resonance for one of its modes.
+fn extra_mode_start(
+    ds: &Dataset,
+    structure: Structure,
+    r: f64,
+    attach: Attach,
+) -> Option<(Vec<f64>, ExtraMode, f64)> {
+    // the bigger structure, and where its extra body's inertia, spring and damper sit
+    let (bigger, keep, extra): (Structure, &[usize], [usize; 3]) = match (structure, attach) {
+        // [J_m, J_a1, J_a2, k_g, k_a, d_g, d_a, f_m]
+        (Structure::TwoMass, _) => (Structure::ThreeMass, &[0, 1, 3, 5, 7], [2, 4, 6]),
+        // [J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m]
+        (Structure::ThreeMass, Attach::Parallel) => {
+            (Structure::FourMass, &[0, 1, 2, 4, 5, 7, 8, 10], [3, 6, 9])
+        }
+        _ => return None,
+    };
+    let (values, tau_c) = linear_start(ds, bigger, r).ok()?;
+    let plant = keep.iter().map(|&i| values[i]).collect();
+    let [j, k, d] = extra.map(|i| values[i]);
+    Some((plant, ExtraMode { j, k, d, attach }, tau_c))
+}
+
 fn linear_of(
     ds: &Dataset,
     req: &DiagnoseRequest,
@@ -669,7 +720,13 @@ pub fn diagnose_with_series(
                 .join(", ")
         ));
     }
-    let linear = linear_of(&est[0], req, &mut warnings);
+    let starts = LinearStarts {
+        structure: linear_of(&est[0], req, &mut warnings),
+        extra_mode: candidates.iter().find_map(|e| match e {
+            Effect::ExtraMode(x) => extra_mode_start(&est[0], req.structure, req.r, x.attach),
+            _ => None,
+        }),
+    };
 
     // nominal and singles, in parallel
     let mut jobs: Vec<Vec<Effect>> = vec![Vec::new()];
@@ -682,7 +739,7 @@ pub fn diagnose_with_series(
             &measured,
             req,
             effects.clone(),
-            &linear,
+            &starts,
         )
     };
     let results = parallel(&jobs, o.threads, score);
