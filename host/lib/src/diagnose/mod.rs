@@ -313,13 +313,10 @@ fn fit_and_score(
     linear: &Option<(Vec<f64>, f64)>,
 ) -> Result<Fitted, String> {
     let nl = NlRequest {
-        structure: req.structure,
-        r: req.r,
-        effects,
         tau_c: linear.as_ref().map_or(0.0, |l| l.1),
-        start: None,
         linear: linear.as_ref().map(|l| l.0.clone()),
         options: req.options.nl.clone(),
+        ..NlRequest::new(req.structure, req.r, effects)
     };
     let res = identify(est, &nl).map_err(|e| e.to_string())?;
     let model = DrivenModel::of_fit(&res.fit);
@@ -561,8 +558,8 @@ fn linear_of(
     req: &DiagnoseRequest,
     warnings: &mut Vec<String>,
 ) -> Option<(Vec<f64>, f64)> {
-    match linear_start(ds, req.structure, req.r) {
-        Ok(l) => Some(l),
+    match linear_start(ds, 1, &NlRequest::new(req.structure, req.r, Vec::new())) {
+        Ok(l) => Some((l.values, l.tau_c)),
         Err(e) => {
             if ds.excitation.is_some() {
                 warnings.push(format!(
