@@ -92,16 +92,7 @@ fn model(ts: f64) -> GreyBoxModel {
 /// output-error fit started from the true parameters (log scale)
 fn fit_from_truth(data: &IdData, truth: &[f64]) -> pem::PemFit {
     let th0: Vec<f64> = truth.iter().map(|v| v.ln()).collect();
-    pem::fit(
-        &model(data.ts),
-        &th0,
-        data,
-        &PemOptions {
-            max_iter: 40,
-            ..PemOptions::default()
-        },
-    )
-    .unwrap()
+    pem::fit(&model(data.ts), &th0, data, &PemOptions::with_max_iter(40)).unwrap()
 }
 
 // Five noise seeds, automatic initial values: every parameter within 3

@@ -1,12 +1,10 @@
 //! `jointid fit DATA --model STRUCTURE --effect SPEC...` (or `--model nonlinear-two-mass`):
 //! a physical model with the simulator's effects attached, fitted by the nonlinear
-//! grey-box engine ([`jointid::ident::nonlinear`]): seed 001's automatic start (or
-//! `--start MODEL.json`), then output error on the interval-mean motor velocity from the
-//! measured torque, then the validation with the simulator's exact laws.
-//!
-//! Current-loop lag: `--current-loop-tau S` (or `--fix tau_c=S`) holds it; otherwise, on
-//! periodic data, the frequency-domain fit of the same structure ([`frf_fit`]) gives the
-//! linear start of step 3 and the lag's start; on other data the model has no lag.
+//! grey-box engine in one call of [`jointid::ident::nonlinear::run`] (the
+//! frequency-domain linear start on periodic data, seed 001's automatic start or
+//! `--start MODEL.json`, `--fix` and the keys given in `--effect`, output error, the
+//! validation with the simulator's exact laws). Here: the flags, reading the `--start`
+//! file, the request, the report.
 //!
 //! Every `fit --json` field that has a meaning here keeps its name (`model`, `parameters`
 //! with the structure, `tau_c` and `offset`, `fit_name`, `fit_estimation`,
@@ -25,15 +23,11 @@ use super::{print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::check_output;
 use jointid::data::{Dataset, Detrend, IdData};
 use jointid::ident::fit::ParamJson;
-use jointid::ident::frf::analyze_dataset;
-use jointid::ident::frf_fit::{self, Drive, FrfFitOptions};
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::{
-    automatic_start, fit_output_error, interval_velocity, model_of, run::checks, run::velocity_rms,
-    simulate_args, simulate_exact, validate, NlFit, NlModel, NlOptions, NlRequest, NlValidation,
-    Owner, Step,
+    interval_velocity, run as run_nl, simulate_args, simulate_exact, NlData, NlFit, NlOptions,
+    NlRequest, NlRunError, NlStart, NlValidation, Owner,
 };
-use jointid::model::effects::Effect;
 use jointid::model::spec::{Family, ModelSpec, Structure};
 use jointid::report::plot::{time_svg, TimeSeries};
 
@@ -221,43 +215,15 @@ fn parse_fixes(fix: &[String]) -> Result<Vec<(String, f64)>, String> {
         .collect()
 }
 
-/// Every `--fix` names a parameter of the model (checked before the work).
-fn check_fix_names(
-    structure: Structure,
-    r: f64,
-    effects: &[Effect],
-    fixes: &[(String, f64)],
-) -> Result<(), String> {
-    // a model with a current loop: its layout names every parameter that can be held
-    let probe = NlModel {
-        structure,
-        r,
-        effects: effects.to_vec(),
-        tau_c: 1e-3,
-        v_eps: 0.01,
-        dz_eps: 1e-7,
-        substeps: 1,
-    };
-    let layout = probe.layout();
-    let mut known: Vec<&str> = Vec::new();
-    for d in layout.iter().filter(|d| d.owner != Owner::InitialVelocity) {
-        if !known.contains(&d.name) {
-            known.push(d.name);
-        }
-    }
-    for (name, _) in fixes {
-        if !known.contains(&name.as_str()) {
-            return Err(format!(
-                "--fix `{name}`: no such parameter in {} (known: {})",
-                std::iter::once(structure.label())
-                    .chain(effects.iter().map(|e| e.name()))
-                    .collect::<Vec<_>>()
-                    .join("+"),
-                known.join(", ")
-            ));
-        }
-    }
-    Ok(())
+/// The previous fit in the model file `--start PATH`.
+fn read_start(path: &Path) -> Result<NlFit, String> {
+    let text =
+        std::fs::read_to_string(path).map_err(|e| format!("--start {}: {e}", path.display()))?;
+    let saved: SavedModel = serde_json::from_str(&text)
+        .map_err(|e| format!("--start {}: not a jointid model file: {e}", path.display()))?;
+    saved
+        .to_nonlinear()
+        .map_err(|e| format!("--start {}: {e}", path.display()))
 }
 
 /// The estimation and validation records (`--estimation-fraction` splits DATA).
@@ -293,194 +259,58 @@ pub fn run(
         check_output(p, args.force)?;
     }
     // the effects as resolved (seed 001's two, then the user's) and their specs, whose
-    // given keys start there
-    let effects: Vec<Effect> = spec.effects.clone().unwrap_or_default();
+    // given keys start there (one effect per spec; `none` gives none)
+    let effects = spec.effects.clone().unwrap_or_default();
     let specs = ModelSpec::effect_specs(args.model.nonlinear_two_mass, &args.effects);
-    let fixes = parse_fixes(&args.fix)?;
-    check_fix_names(structure, args.gear_ratio, &effects, &fixes)?;
-    let (est, val) = records(args, ds, val_ds);
-    let ts = est.ts;
-
-    // the current-loop lag: fixed, from the frequency-domain fit, or none
-    let fixed_tau = fixes
-        .iter()
-        .find(|(n, _)| n == "tau_c")
-        .map(|(_, v)| *v)
-        .or(spec.current_loop_tau);
-    if let Some(t) = fixed_tau {
-        if !(0.0..0.1).contains(&t) {
-            return Err(format!("tau_c = {t} s: a current-loop lag is within [0, 0.1) s").into());
-        }
-    }
-    let mut pre_steps: Vec<Step> = Vec::new();
-    let mut warnings: Vec<String> = Vec::new();
-    let mut linear = None;
-    let mut tau_c = fixed_tau.unwrap_or(0.0);
-    let periodic = args.estimation_fraction.is_none() && args.start.is_none();
-    if periodic {
-        if let Ok(a) = analyze_dataset(ds, args.settle_periods) {
-            let mut o = FrfFitOptions::new(structure, ts);
-            o.r = args.gear_ratio;
-            if let Some(t) = fixed_tau {
-                o.lag = Drive::Fixed(t / ts);
-            }
-            if effects.iter().any(|e| matches!(e, Effect::TimeDelay(_))) {
-                o.delay = Drive::Fixed(0.0);
-            }
-            match frf_fit::fit_frf(&a.frf, &o) {
-                Ok(ff) => {
-                    let lag = ff.lag.value * ts;
-                    if fixed_tau.is_none() {
-                        tau_c = if lag >= 2e-6 { lag } else { 0.0 };
-                    }
-                    let mut values: Vec<(String, f64, &'static str)> = ff
-                        .params
-                        .iter()
-                        .map(|p| (p.name.clone(), p.value, p.unit))
-                        .collect();
-                    values.push(("tau_c".into(), lag, "s"));
-                    pre_steps.push(Step {
-                        name: "frequency-domain linear fit".into(),
-                        values,
-                        detail: format!(
-                            "sample maximum likelihood on {} excited lines; the linear {} {} \
-                             the steps below start from",
-                            ff.lines,
-                            structure.label(),
-                            if fixed_tau.is_some() {
-                                "(current-loop lag held)"
-                            } else {
-                                "and the current-loop lag"
-                            }
-                        ),
-                    });
-                    linear = Some(ff.values());
-                }
-                Err(e) => warnings.push(format!(
-                    "the frequency-domain linear fit failed ({e}): the start is found in the \
-                     time domain and the model starts without current-loop lag"
-                )),
-            }
-        }
-    }
-
-    let mut options = NlOptions::default().for_structure(structure);
     let req = NlRequest {
-        structure,
-        r: args.gear_ratio,
-        effects: effects.clone(),
-        tau_c,
-        start: None,
-        linear,
-        options: options.clone(),
+        held_tau_c: spec.current_loop_tau,
+        fixed: parse_fixes(&args.fix)?,
+        given: specs
+            .iter()
+            .take(effects.len())
+            .map(|s| given_keys(s))
+            .collect(),
+        options: NlOptions::default(),
+        ..NlRequest::new(structure, args.gear_ratio, effects)
     };
+    let (est, val) = records(args, ds, val_ds);
+    let val_name = val.as_ref().map_or("validation", |(_, n)| n.as_str());
+    let why = |e: NlRunError| -> String {
+        match &e {
+            NlRunError::UnknownParameter { .. } => format!("--fix {e}"),
+            NlRunError::StartMismatch { .. } => match &args.start {
+                Some(p) => format!("--start {}: {e}", p.display()),
+                None => e.to_string(),
+            },
+            NlRunError::LagRange(_) => e.to_string(),
+            NlRunError::Estimation(_) => format!("{}: {e}", ds.name),
+            NlRunError::Validation(_) => format!("{val_name}: {e}"),
+        }
+    };
+    req.check().map_err(why)?;
+    let mut req = req;
+    if let Some(path) = &args.start {
+        req.start = NlStart::Previous(Box::new(read_start(path)?));
+    }
+    let ts = est.ts;
     let t0 = Instant::now();
-    let mut model = model_of(&req, &est);
-    // the start: a model file, or the automatic start
-    let (steps, start_model, mut start) = match &args.start {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .map_err(|e| format!("--start {}: {e}", path.display()))?;
-            let saved: SavedModel = serde_json::from_str(&text).map_err(|e| {
-                format!("--start {}: not a jointid model file: {e}", path.display())
-            })?;
-            let prev = saved
-                .to_nonlinear()
-                .map_err(|e| format!("--start {}: {e}", path.display()))?;
-            let same = prev.model.structure == structure
-                && prev.model.effects.len() == effects.len()
-                && prev
-                    .model
-                    .effects
-                    .iter()
-                    .zip(&effects)
-                    .all(|(a, b)| a.name() == b.name());
-            if !same {
-                return Err(format!(
-                    "--start {}: the file holds {}, the fit asks for {}",
-                    path.display(),
-                    saved.model,
-                    std::iter::once(structure.label())
-                        .chain(effects.iter().map(|e| e.name()))
-                        .collect::<Vec<_>>()
-                        .join("+")
-                )
-                .into());
-            }
-            model.effects = prev.model.effects.clone();
-            if fixed_tau.is_none() {
-                model.tau_c = prev.model.tau_c;
-            }
-            let offset = prev.get("offset").unwrap_or(0.0);
-            let values = model.values(&prev.plant, offset, 0.0);
-            (Vec::new(), model.clone(), values)
-        }
-        None => {
-            let st = automatic_start(&est, &model, req.linear.as_deref())
-                .map_err(|e| format!("{}: {e}", ds.name))?;
-            (st.steps, st.model, st.values)
-        }
-    };
-    // the user's values: --fix (held) and the keys given in --effect (start there)
-    let layout = start_model.layout();
-    for (name, value) in &fixes {
-        if name == "tau_c" {
-            // held below with --current-loop-tau
-            continue;
-        }
-        let hits: Vec<usize> = (0..layout.len())
-            .filter(|&i| layout[i].name == name && layout[i].owner != Owner::InitialVelocity)
-            .collect();
-        for i in hits {
-            start[i] = *value;
-        }
-        options.fixed.push(name.clone());
-    }
-    // --current-loop-tau S or --fix tau_c=S: the lag held (S = 0: the model has none)
-    if let Some(t) = fixed_tau {
-        if let Some(i) = layout.iter().position(|d| d.name == "tau_c") {
-            start[i] = t;
-            options.fixed.push("tau_c".into());
-        }
-    }
-    // one effect per spec (`none` gives none)
-    for (i, spec) in specs.iter().enumerate().take(effects.len()) {
-        for (key, value) in given_keys(spec) {
-            if fixes.iter().any(|(n, _)| *n == key) {
-                continue;
-            }
-            if let Some(j) = layout
-                .iter()
-                .position(|d| d.owner == Owner::Effect(i) && d.name == key)
-            {
-                start[j] = value;
-            }
-        }
-    }
-    let (fit_model, _) = start_model.with_values(&start);
-    let fit_model = fit_model.refined_for(&start, velocity_rms(&est), est.ts);
-    let fit = fit_output_error(&est, &fit_model, &start, &options)
-        .map_err(|e| format!("{}: {e}", ds.name))?;
+    let done = run_nl(
+        NlData {
+            estimation: &est,
+            // whole periods of DATA: the frequency-domain fit gives the linear start
+            periodic: args
+                .estimation_fraction
+                .is_none()
+                .then_some((ds, args.settle_periods)),
+            validation: val.as_ref().map(|(v, _)| v),
+        },
+        &req,
+    )
+    .map_err(why)?;
     let seconds = t0.elapsed().as_secs_f64();
-    warnings.extend(checks(&fit));
-
-    // the FITs with the simulator's exact laws
-    let est_v = validate(&fit, &est, &options).map_err(|e| format!("{}: {e}", ds.name))?;
-    let val_v = match &val {
-        Some((v, name)) => Some(validate(&fit, v, &options).map_err(|e| format!("{name}: {e}"))?),
-        None => None,
-    };
-    for (what, v) in std::iter::once(("estimation", Some(&est_v)))
-        .chain(std::iter::once(("validation", val_v.as_ref())))
-    {
-        if let Some(v) = v {
-            if !v.velocity_fit_percent.is_finite() {
-                warnings.push(format!(
-                    "the model simulated with the exact laws is not finite on the {what} record"
-                ));
-            }
-        }
-    }
+    let (est_v, val_v) = (done.estimation, done.validation);
+    let res = done.result;
+    let (fit, method, options, warnings) = (res.fit, res.method, res.options, res.warnings);
     let simulate_command = format!(
         "jointid simulate {} --out RUN.jcap",
         simulate_args(&fit)
@@ -488,30 +318,6 @@ pub fn run(
             .map(|a| a.to_string())
             .collect::<Vec<_>>()
             .join(" ")
-    );
-    let method =
-        format!(
-        "nonlinear grey box: output error on the interval-mean motor velocity from the measured \
-         torque ({}, RK4 with {} step(s) per sample, smooth Coulomb law v_eps = {:.3} rad/s), \
-         Levenberg-Marquardt with exact derivatives by dual numbers, σ by the sandwich \
-         covariance for coloured residuals; current-loop lag {}",
-        if options.highpass_hz <= 0.0 {
-            "no prefilter: a rigid body's information lies at the low frequencies".to_string()
-        } else if options.highpass_order == 2 {
-            format!(
-                "second-order Butterworth high-pass prefilter at {} Hz",
-                options.highpass_hz
-            )
-        } else {
-            format!("Butterworth high-pass prefilter at {} Hz", options.highpass_hz)
-        },
-        fit_model.substeps,
-        fit_model.v_eps,
-        match (fixed_tau, fit.model.tau_c > 0.0) {
-            (Some(_), true) => "fixed",
-            (Some(_), false) | (None, false) => "left out",
-            (None, true) => "estimated",
-        }
     );
     let mut files = Vec::new();
     if let Some(path) = &args.save {
@@ -535,12 +341,8 @@ pub fn run(
         let p = write_velocity_plot(dir, data, name, &fit, args.force)?;
         files.push(p.display().to_string());
     }
-    let all_steps: Vec<&Step> = pre_steps.iter().chain(&steps).collect();
     let report = NlReport {
-        model: std::iter::once(structure.label())
-            .chain(fit.model.effects.iter().map(|e| e.name()))
-            .collect::<Vec<_>>()
-            .join("+"),
+        model: jointid::ident::nonlinear::model_name(structure, &fit.model.effects),
         method,
         file: ds.name.clone(),
         validation_file: val.as_ref().map(|(_, n)| n.clone()),
@@ -572,7 +374,8 @@ pub fn run(
             Some(p) => format!("from {}", p.display()),
             None => "automatic (seed 001's three steps)".into(),
         },
-        steps: all_steps
+        steps: res
+            .steps
             .iter()
             .map(|s| StepJson {
                 name: s.name.clone(),

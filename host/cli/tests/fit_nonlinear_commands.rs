@@ -143,6 +143,49 @@ fn seed001_nonlinear_two_mass_reaches_the_truth_and_its_validation_fit() {
     assert!((num(&v["fit"]) - fitted).abs() < 1e-9, "{v}");
     assert_eq!(v["fit_ok"], true);
     assert_eq!(v["fit_name"], j["fit_name"]);
+
+    // refit from the saved model (`--start`): no steps, the same minimum; `--fix` holds
+    let again = json_of(&jointid(&[
+        "fit",
+        &est,
+        "--model",
+        "nonlinear-two-mass",
+        "--gear-ratio",
+        "0.00847457627",
+        "--start",
+        model.to_str().unwrap(),
+        "--fix",
+        "d_g=80",
+        "--json",
+    ]));
+    assert!(again["start"].as_str().unwrap().starts_with("from "));
+    assert_eq!(again["steps"].as_array().map(Vec::len), Some(0));
+    assert_eq!(again["fixed"], serde_json::json!(["d_g"]));
+    assert!((num(&param(&again, "d_g")["value"]) / 80.0 - 1.0).abs() < 1e-12);
+    for name in ["J_m", "J_a1", "k_g", "k3", "fc"] {
+        let (a, b) = (
+            num(&param(&j, name)["value"]),
+            num(&param(&again, name)["value"]),
+        );
+        assert!((a / b - 1.0).abs() < 0.01, "{name}: {a} then {b}");
+    }
+    // a start of another model is refused before the work
+    let o = jointid(&[
+        "fit",
+        &est,
+        "--model",
+        "two-mass",
+        "--effect",
+        "backlash",
+        "--start",
+        model.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("the start holds two-mass+nonlinear_stiffness+coulomb_friction, the fit asks for two-mass+backlash"),
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

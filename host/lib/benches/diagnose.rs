@@ -20,7 +20,7 @@ use jointid::data::{Dataset, ExcitationConfig};
 use jointid::diagnose::metric::{DrivenModel, Measured};
 use jointid::diagnose::{all_candidates, diagnose, DiagnoseOptions, DiagnoseRequest, Diagnosis};
 use jointid::ident::linalg::GaussRng;
-use jointid::ident::nonlinear::{identify, NlOptions, NlRequest};
+use jointid::ident::nonlinear::{identify, NlRequest};
 use jointid::model::effects::Effect;
 use jointid::model::spec::Structure;
 use jointid::sim::{
@@ -362,15 +362,7 @@ fn speed() {
     let t = Instant::now();
     let nominal = identify(
         &small.data,
-        &NlRequest {
-            structure: Structure::ThreeMass,
-            r,
-            effects: Vec::new(),
-            tau_c: 0.0,
-            start: None,
-            linear: None,
-            options: NlOptions::default(),
-        },
+        &NlRequest::new(Structure::ThreeMass, r, Vec::new()),
     );
     let t_nominal = t.elapsed().as_secs_f64();
     let t = Instant::now();

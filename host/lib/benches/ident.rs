@@ -98,15 +98,7 @@ fn pem_line(m: &StateSpace, est: &IdData, val: &IdData) {
     m0.k = None;
     let (fs, th) = FullSs::from_ss(&m0, false, false);
     let t = Instant::now();
-    match pem::fit(
-        &fs,
-        &th,
-        est,
-        &PemOptions {
-            max_iter: 20,
-            ..Default::default()
-        },
-    ) {
+    match pem::fit(&fs, &th, est, &PemOptions::with_max_iter(20)) {
         Ok(pf) => {
             let dt = t.elapsed().as_secs_f64();
             let (r, a) = freqs(&pf.model);

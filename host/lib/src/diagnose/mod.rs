@@ -50,7 +50,7 @@ use crate::data::{Dataset, IdData};
 use crate::ident::frf::{amplitude_trend, analyze_dataset, AmplitudeTrend, FrfAnalysis, Linearity};
 use crate::ident::grey_box::DEFAULT_GEAR_RATIO;
 use crate::ident::nonlinear::{
-    identify, linear_start, model_of, NlFit, NlOptions, NlRequest, Owner,
+    identify, linear_start, model_of, NlFit, NlOptions, NlRequest, NlStart, Owner,
 };
 use crate::model::effects::{Attach, Effect, ExtraMode};
 use crate::model::params::{model_params, Plant};
@@ -316,13 +316,10 @@ fn fit_and_score(
 ) -> Result<Fitted, String> {
     let linear = &starts.structure;
     let mut nl = NlRequest {
-        structure: req.structure,
-        r: req.r,
-        effects,
         tau_c: linear.as_ref().map_or(0.0, |l| l.1),
-        start: None,
         linear: linear.as_ref().map(|l| l.0.clone()),
         options: req.options.nl.clone(),
+        ..NlRequest::new(req.structure, req.r, effects)
     };
     // an extra mode starts where the linear fit with one more mass put it
     let extra_at = nl
@@ -333,7 +330,7 @@ fn fit_and_score(
         nl.effects[i] = Effect::ExtraMode(*mode);
         nl.tau_c = *tau_c;
         nl.linear = Some(plant.clone());
-        nl.start = Some(model_of(&nl, est).values(plant, 0.0, 0.0));
+        nl.start = NlStart::Values(model_of(&nl, est).values(plant, 0.0, 0.0));
     }
     let res = identify(est, &nl).map_err(|e| e.to_string())?;
     let model = DrivenModel::of_fit(&res.fit);
@@ -601,10 +598,10 @@ fn extra_mode_start(
         }
         _ => return None,
     };
-    let (values, tau_c) = linear_start(ds, bigger, r).ok()?;
-    let plant = keep.iter().map(|&i| values[i]).collect();
-    let [j, k, d] = extra.map(|i| values[i]);
-    Some((plant, ExtraMode { j, k, d, attach }, tau_c))
+    let l = linear_start(ds, 1, &NlRequest::new(bigger, r, Vec::new())).ok()?;
+    let plant = keep.iter().map(|&i| l.values[i]).collect();
+    let [j, k, d] = extra.map(|i| l.values[i]);
+    Some((plant, ExtraMode { j, k, d, attach }, l.tau_c))
 }
 
 fn linear_of(
@@ -612,8 +609,8 @@ fn linear_of(
     req: &DiagnoseRequest,
     warnings: &mut Vec<String>,
 ) -> Option<(Vec<f64>, f64)> {
-    match linear_start(ds, req.structure, req.r) {
-        Ok(l) => Some(l),
+    match linear_start(ds, 1, &NlRequest::new(req.structure, req.r, Vec::new())) {
+        Ok(l) => Some((l.values, l.tau_c)),
         Err(e) => {
             if ds.excitation.is_some() {
                 warnings.push(format!(

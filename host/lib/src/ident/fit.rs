@@ -46,6 +46,7 @@ use thiserror::Error;
 
 use crate::data::{IdData, Prep};
 use crate::ident::grey_box::{self, GreyBoxOptions, IdimOptions, Output, PhysParam};
+use crate::ident::lm::LmOptions;
 use crate::ident::pem::{self, FullSs, ParamModel, PemFit, PemOptions};
 use crate::ident::ss::{ContinuousSs, Resonances, StateSpace};
 use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
@@ -399,15 +400,7 @@ fn black_box_start(
     let (fam, th0) = FullSs::from_ss(&model, opts.feedthrough, false);
     let np = pem::ParamModel::n_params(&fam) as f64;
     if opts.refine && (data.len() as f64) * np * np <= PEM_BUDGET {
-        let refined = pem::fit(
-            &fam,
-            &th0,
-            data,
-            &PemOptions {
-                max_iter: 40,
-                ..PemOptions::default()
-            },
-        );
+        let refined = pem::fit(&fam, &th0, data, &PemOptions::with_max_iter(40));
         match refined {
             Ok(pf) => {
                 let start_cost = pf.cost_history.first().copied().unwrap_or(f64::INFINITY);
@@ -615,11 +608,15 @@ fn fit_grey(
     let span = (1e4f64).ln();
     let mut pf: Option<pem::PemFit> = None;
     for (_, th0) in ranked.iter().take(2) {
+        let base = GreyBoxOptions::default().pem;
         let popts = PemOptions {
-            max_iter: 40,
-            lower: th0.iter().map(|t| t - span).collect(),
-            upper: th0.iter().map(|t| t + span).collect(),
-            ..GreyBoxOptions::default().pem
+            lm: LmOptions {
+                max_iter: 40,
+                lower: th0.iter().map(|t| t - span).collect(),
+                upper: th0.iter().map(|t| t + span).collect(),
+                ..base.lm
+            },
+            ..base
         };
         let r = pem::fit(&gm, th0, raw, &popts).map_err(grey_box::GreyBoxError::from)?;
         if pf
@@ -633,11 +630,15 @@ fn fit_grey(
     if pf.termination == pem::Termination::MaxIterations {
         // the winner continues (the valley along the parallel mass is long
         // and flat: measured up to ~100 iterations on the four-mass joint)
+        let base = GreyBoxOptions::default().pem;
         let popts = PemOptions {
-            max_iter: 160,
-            lower: pf.theta.iter().map(|t| t - span).collect(),
-            upper: pf.theta.iter().map(|t| t + span).collect(),
-            ..GreyBoxOptions::default().pem
+            lm: LmOptions {
+                max_iter: 160,
+                lower: pf.theta.iter().map(|t| t - span).collect(),
+                upper: pf.theta.iter().map(|t| t + span).collect(),
+                ..base.lm
+            },
+            ..base
         };
         let more = pem::fit(&gm, &pf.theta, raw, &popts).map_err(grey_box::GreyBoxError::from)?;
         let it = pf.iterations;

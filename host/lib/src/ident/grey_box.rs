@@ -55,6 +55,7 @@ use thiserror::Error;
 
 use crate::data::IdData;
 use crate::ident::linalg::{central_diff, filtfilt_lowpass, solve_spd};
+use crate::ident::lm::LmOptions;
 use crate::ident::pem::{self, ParamModel, PemFit, PemOptions};
 use crate::ident::ss::{ContinuousSs, StateSpace};
 use crate::ident::subspace::{self, Method, Order, SubspaceOptions};

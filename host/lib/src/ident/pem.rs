@@ -82,35 +82,32 @@ pub trait ParamModel {
 /// Options of [`fit`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct PemOptions {
-    /// largest number of Jacobian evaluations
-    pub max_iter: usize,
-    /// stop when an accepted step lowers the cost by less than this share
-    pub rel_cost_tol: f64,
-    /// stop when the step is below this share of the parameter norm
-    pub step_tol: f64,
-    /// lower bounds (per parameter; −∞ for none); empty: none
-    pub lower: Vec<f64>,
-    /// upper bounds (per parameter; +∞ for none); empty: none
-    pub upper: Vec<f64>,
-    /// fixed[i] keeps θ_i at its initial value; empty: all free
-    pub fixed: Vec<bool>,
+    /// the Levenberg–Marquardt options; `lower`, `upper` and `fixed` are per model
+    /// parameter (the initial state is appended free and unbounded), `nuisance` is set
+    /// by [`fit`] to the initial state's length
+    pub lm: LmOptions,
     /// estimate the initial state jointly (otherwise zero)
     pub estimate_x0: bool,
-    /// initial Marquardt damping
-    pub lambda0: f64,
 }
 
 impl Default for PemOptions {
     fn default() -> Self {
         Self {
-            max_iter: 50,
-            rel_cost_tol: 1e-9,
-            step_tol: 1e-10,
-            lower: Vec::new(),
-            upper: Vec::new(),
-            fixed: Vec::new(),
+            lm: LmOptions::default(),
             estimate_x0: true,
-            lambda0: 1e-3,
+        }
+    }
+}
+
+impl PemOptions {
+    /// The defaults with at most `max_iter` Jacobian evaluations.
+    pub fn with_max_iter(max_iter: usize) -> Self {
+        Self {
+            lm: LmOptions {
+                max_iter,
+                ..LmOptions::default()
+            },
+            ..Self::default()
         }
     }
 }
@@ -417,22 +414,25 @@ pub fn fit<M: ParamModel + ?Sized>(
         }
     };
     count("theta", theta0.len())?;
-    for (what, v) in [("lower bounds", &opts.lower), ("upper bounds", &opts.upper)] {
+    for (what, v) in [
+        ("lower bounds", &opts.lm.lower),
+        ("upper bounds", &opts.lm.upper),
+    ] {
         if !v.is_empty() {
             count(what, v.len())?;
         }
     }
-    if !opts.fixed.is_empty() {
-        count("fixed", opts.fixed.len())?;
+    if !opts.lm.fixed.is_empty() {
+        count("fixed", opts.lm.fixed.len())?;
     }
     data.check(1)?;
     // the start, clamped as the loop will clamp it, and its initial state
     let mut theta = theta0.to_vec();
     for (i, t) in theta.iter_mut().enumerate() {
-        if let Some(&l) = opts.lower.get(i) {
+        if let Some(&l) = opts.lm.lower.get(i) {
             *t = t.max(l);
         }
-        if let Some(&u) = opts.upper.get(i) {
+        if let Some(&u) = opts.lm.upper.get(i) {
             *t = t.min(u);
         }
     }
@@ -464,23 +464,21 @@ pub fn fit<M: ParamModel + ?Sized>(
                 .collect()
         }
     };
+    let o = &opts.lm;
     let lm_opts = LmOptions {
-        max_iter: opts.max_iter,
-        rel_cost_tol: opts.rel_cost_tol,
-        step_tol: opts.step_tol,
-        lower: pad(&opts.lower, f64::NEG_INFINITY),
-        upper: pad(&opts.upper, f64::INFINITY),
-        fixed: if opts.fixed.is_empty() {
+        lower: pad(&o.lower, f64::NEG_INFINITY),
+        upper: pad(&o.upper, f64::INFINITY),
+        fixed: if o.fixed.is_empty() {
             Vec::new()
         } else {
-            opts.fixed
+            o.fixed
                 .iter()
                 .copied()
                 .chain(std::iter::repeat_n(false, n_x0))
                 .collect()
         },
         nuisance: n_x0,
-        lambda0: opts.lambda0,
+        ..o.clone()
     };
     let f = lm::minimize(&problem, &theta, &lm_opts).map_err(|e| match e {
         lm::LmError::NonFiniteStart => PemError::NonFiniteStart,
@@ -742,8 +740,11 @@ mod tests {
             (0.03f64).ln(),
         ];
         let opts = PemOptions {
-            upper,
-            fixed: vec![false, false, true, false, false],
+            lm: LmOptions {
+                upper,
+                fixed: vec![false, false, true, false, false],
+                ..LmOptions::default()
+            },
             ..Default::default()
         };
         let f = fit(&model, &th0, &data, &opts).unwrap();
@@ -869,16 +870,7 @@ mod tests {
             m0.k = None;
             let f_sid = val_fit(&m0);
             let (fs, th) = FullSs::from_ss(&m0, true, false);
-            let pf = fit(
-                &fs,
-                &th,
-                &est,
-                &PemOptions {
-                    max_iter: 40,
-                    ..Default::default()
-                },
-            )
-            .unwrap();
+            let pf = fit(&fs, &th, &est, &PemOptions::with_max_iter(40)).unwrap();
             let f_pem = val_fit(&pf.model);
             report.push(format!(
                 "{method:?} {bd:?}: subspace FIT {f_sid:.1} %, +PEM {f_pem:.1} %"

@@ -29,10 +29,7 @@ impl Default for GreyBoxOptions {
             r: DEFAULT_GEAR_RATIO,
             subspace_order: 0,
             f_min_hz: 0.0,
-            pem: PemOptions {
-                max_iter: 60,
-                ..Default::default()
-            },
+            pem: PemOptions::with_max_iter(60),
         }
     }
 }
@@ -83,11 +80,11 @@ pub fn fit(data: &IdData, opts: &GreyBoxOptions) -> Result<GreyBoxFit, GreyBoxEr
     };
     let th0: Vec<f64> = p0.iter().map(|v| v.ln()).collect();
     let mut popts = opts.pem.clone();
-    if popts.lower.is_empty() {
-        popts.lower = th0.iter().map(|t| t - (1e4f64).ln()).collect();
+    if popts.lm.lower.is_empty() {
+        popts.lm.lower = th0.iter().map(|t| t - (1e4f64).ln()).collect();
     }
-    if popts.upper.is_empty() {
-        popts.upper = th0.iter().map(|t| t + (1e4f64).ln()).collect();
+    if popts.lm.upper.is_empty() {
+        popts.lm.upper = th0.iter().map(|t| t + (1e4f64).ln()).collect();
     }
     // Two automatic staged starts, the lower final cost wins:
     // (a) dampings and friction first (the frequencies from the data are
@@ -116,14 +113,17 @@ pub fn fit(data: &IdData, opts: &GreyBoxOptions) -> Result<GreyBoxFit, GreyBoxEr
             }
         };
         let mut start = start;
-        clamp_vec(&mut start, &popts.lower, &popts.upper);
+        clamp_vec(&mut start, &popts.lm.lower, &popts.lm.upper);
         let s1 = pem::fit(
             &model,
             &start,
             data,
             &PemOptions {
-                fixed,
-                max_iter: 15,
+                lm: LmOptions {
+                    fixed,
+                    max_iter: 15,
+                    ..popts.lm.clone()
+                },
                 ..popts.clone()
             },
         )?;

@@ -19,7 +19,8 @@ pub use fit::{
 pub use init::{automatic_start, Start, Step};
 pub use model::{NlModel, Owner, ParamDef, Scale};
 pub use run::{
-    identify, linear_start, model_of, sim_plant, validate, NlRequest, NlResult, NlValidation,
+    identify, linear_start, model_name, model_of, run, sim_plant, validate, LinearStart,
+    LinearStartError, NlData, NlRequest, NlResult, NlRun, NlRunError, NlStart, NlValidation,
 };
 
 #[cfg(test)]

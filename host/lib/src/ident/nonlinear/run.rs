@@ -1,18 +1,42 @@
-//! The whole nonlinear identification as a user runs it: the automatic start (or a given
-//! one), the output-error fit, the checks that turn a doubtful result into warnings, and
-//! the validation with the simulator's exact laws ([`crate::sim::simulate_driven`]).
+//! The whole nonlinear identification as a user runs it, one path for `jointid fit` and
+//! `diagnose`: on periodic data the frequency-domain linear start ([`linear_start`]), the
+//! automatic start (or a given one), the values the user holds or gives, the output-error
+//! fit, the checks that turn a doubtful result into warnings, and the validation with the
+//! simulator's exact laws ([`crate::sim::simulate_driven`]).
+
+use thiserror::Error;
 
 use super::fit::{fit_output_error, interval_velocity, simulate_velocity, velocity_fit};
 use super::init::{automatic_start, Step};
 use super::model::{NlModel, Owner};
 use super::{NlError, NlFit, NlOptions};
-use crate::data::IdData;
+use crate::data::{Dataset, IdData};
+use crate::ident::frf::FrfError;
+use crate::ident::frf_fit::{Drive, FrfFitError, FrfFitOptions};
 use crate::ident::lm::Termination;
 use crate::ident::validate::fit_percent;
 use crate::model::effects::Effect;
 use crate::model::params::{model_params, JointParams, Plant, PlantKind};
 use crate::model::spec::Structure;
 use crate::sim::{simulate_driven, DrivenStart};
+
+/// Largest current-loop lag a request may hold [s] (the layout's upper bound).
+pub const MAX_TAU_C: f64 = 0.1;
+
+/// A frequency-domain lag below this is read as none [s].
+const MIN_LAG: f64 = 2e-6;
+
+/// Where the fit starts.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum NlStart {
+    /// seed 001's three steps, from [`NlRequest::linear`] when given
+    #[default]
+    Automatic,
+    /// the whole start in layout order ([`NlModel::layout`])
+    Values(Vec<f64>),
+    /// a previous fit of the same structure and effects (a saved model): its values
+    Previous(Box<NlFit>),
+}
 
 /// What to identify and how.
 #[derive(Clone, Debug, PartialEq)]
@@ -21,28 +45,163 @@ pub struct NlRequest {
     pub structure: Structure,
     /// gear ratio `r` [-]
     pub r: f64,
-    /// effects to attach (their parameter values are ignored unless `start` is given;
+    /// effects to attach (their parameter values are ignored unless the start is given;
     /// the ripple's order and an extra mode's attachment are taken as they are)
     pub effects: Vec<Effect>,
-    /// current-loop lag `tau_c` [s] to start from (estimated unless fixed); 0: none
+    /// current-loop lag `tau_c` [s] to start from when not held (estimated); 0: none
     pub tau_c: f64,
-    /// the whole start in layout order ([`NlModel::layout`]); `None`: the automatic start
-    pub start: Option<Vec<f64>>,
+    /// the current-loop lag held [s] (0: the model has none); `None`: not held
+    pub held_tau_c: Option<f64>,
+    /// where the fit starts
+    pub start: NlStart,
     /// the structure's values from a linear fit the caller trusts (step 3 of the start)
     pub linear: Option<Vec<f64>>,
+    /// values held by name: a structure's parameter, `tau_c`, `offset` or an effect's key
+    /// [SI]
+    pub fixed: Vec<(String, f64)>,
+    /// per effect (in `effects` order), keys given a start value [SI]; a held name wins
+    pub given: Vec<Vec<(String, f64)>>,
     /// options of the fit (fixed parameters by name among them)
     pub options: NlOptions,
+}
+
+impl NlRequest {
+    /// The request for `structure` and `effects` with the defaults: automatic start, no
+    /// lag, nothing held or given.
+    pub fn new(structure: Structure, r: f64, effects: Vec<Effect>) -> Self {
+        NlRequest {
+            structure,
+            r,
+            effects,
+            tau_c: 0.0,
+            held_tau_c: None,
+            start: NlStart::Automatic,
+            linear: None,
+            fixed: Vec::new(),
+            given: Vec::new(),
+            options: NlOptions::default(),
+        }
+    }
+
+    /// The model's name: the structure's label and the effects' names joined by `+`.
+    pub fn model_name(&self) -> String {
+        model_name(self.structure, &self.effects)
+    }
+
+    /// The lag held: `tau_c` among [`NlRequest::fixed`], else [`NlRequest::held_tau_c`].
+    fn held(&self) -> Option<f64> {
+        self.fixed
+            .iter()
+            .find(|(n, _)| n == "tau_c")
+            .map(|(_, v)| *v)
+            .or(self.held_tau_c)
+    }
+
+    /// Checks what can be checked before the work: the held lag's range and that every
+    /// held name is a parameter of the model.
+    ///
+    /// # Errors
+    /// [`NlRunError::LagRange`], [`NlRunError::UnknownParameter`].
+    pub fn check(&self) -> Result<(), NlRunError> {
+        if let Some(t) = self.held() {
+            if !(0.0..MAX_TAU_C).contains(&t) {
+                return Err(NlRunError::LagRange(t));
+            }
+        }
+        // a model with a current loop: its layout names every parameter that can be held
+        let probe = NlModel {
+            structure: self.structure,
+            r: self.r,
+            effects: self.effects.clone(),
+            tau_c: 1e-3,
+            v_eps: 0.01,
+            dz_eps: 1e-7,
+            substeps: 1,
+        };
+        let mut known: Vec<&str> = Vec::new();
+        for d in probe
+            .layout()
+            .iter()
+            .filter(|d| d.owner != Owner::InitialVelocity)
+        {
+            if !known.contains(&d.name) {
+                known.push(d.name);
+            }
+        }
+        match self
+            .fixed
+            .iter()
+            .find(|(n, _)| !known.contains(&n.as_str()))
+        {
+            Some((name, _)) => Err(NlRunError::UnknownParameter {
+                name: name.clone(),
+                model: self.model_name(),
+                known: known.join(", "),
+            }),
+            None => Ok(()),
+        }
+    }
+}
+
+/// `structure` and `effects` as one name (`two-mass+nonlinear_stiffness`).
+pub fn model_name(structure: Structure, effects: &[Effect]) -> String {
+    std::iter::once(structure.label())
+        .chain(effects.iter().map(|e| e.name()))
+        .collect::<Vec<_>>()
+        .join("+")
+}
+
+/// Why a nonlinear identification could not be run.
+#[derive(Debug, Error)]
+pub enum NlRunError {
+    /// a held name is no parameter of the model
+    #[error("`{name}`: no such parameter in {model} (known: {known})")]
+    UnknownParameter {
+        /// the name held
+        name: String,
+        /// the model ([`model_name`])
+        model: String,
+        /// the names that can be held
+        known: String,
+    },
+    /// the held current-loop lag [s] is out of range
+    #[error("tau_c = {0} s: a current-loop lag is within [0, 0.1) s")]
+    LagRange(f64),
+    /// the previous fit given as start is of another model
+    #[error("the start holds {holds}, the fit asks for {asks}")]
+    StartMismatch {
+        /// the start's model
+        holds: String,
+        /// the model asked for
+        asks: String,
+    },
+    /// the start, the fit or the validation on the estimation record
+    #[error(transparent)]
+    Estimation(NlError),
+    /// the validation on the validation record
+    #[error(transparent)]
+    Validation(NlError),
+}
+
+impl From<NlError> for NlRunError {
+    fn from(e: NlError) -> Self {
+        NlRunError::Estimation(e)
+    }
 }
 
 /// Result of [`identify`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct NlResult {
-    /// the steps of the automatic start (empty with a given start)
+    /// the steps of the start (empty with a given start)
     pub steps: Vec<Step>,
     /// the fit
     pub fit: NlFit,
     /// what makes the fit doubtful, in words (empty when nothing does)
     pub warnings: Vec<String>,
+    /// the options the fit ran with (the held names among `fixed`)
+    pub options: NlOptions,
+    /// the method, in words
+    pub method: String,
 }
 
 /// Validation of a fitted model on data that played no part in the fit.
@@ -85,69 +244,291 @@ pub fn velocity_rms(data: &IdData) -> f64 {
     (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
 }
 
-/// Identifies `req` on `data`: the automatic start (seed 001's three steps) unless a start
-/// is given, then the output-error fit, then its checks. The rigid structure is fitted
-/// without the high-pass prefilter (its information lies below it).
+/// Identifies `req` on `data`: the start (automatic, seed 001's three steps, unless
+/// given), the held values and the given keys put into it, then the output-error fit and
+/// its checks. The rigid structure is fitted without the high-pass prefilter (its
+/// information lies below it, [`NlOptions::for_structure`]).
 ///
 /// # Errors
-/// [`NlError`] when the data or the start cannot be used.
-pub fn identify(data: &IdData, req: &NlRequest) -> Result<NlResult, NlError> {
-    let model = model_of(req, data);
-    let (steps, start_model, start) = match &req.start {
-        Some(s) => (Vec::new(), model.clone(), s.clone()),
-        None => {
+/// [`NlRunError`]: a request that does not fit the model, or the data or the start
+/// cannot be used.
+pub fn identify(data: &IdData, req: &NlRequest) -> Result<NlResult, NlRunError> {
+    req.check()?;
+    let held = req.held();
+    let mut model = model_of(req, data);
+    if let Some(t) = held {
+        model.tau_c = t;
+    }
+    let (steps, start_model, mut start) = match &req.start {
+        NlStart::Automatic => {
             let st = automatic_start(data, &model, req.linear.as_deref())?;
             (st.steps, st.model, st.values)
         }
+        NlStart::Values(v) => (Vec::new(), model.clone(), v.clone()),
+        NlStart::Previous(prev) => {
+            let same = prev.model.structure == req.structure
+                && prev.model.effects.len() == req.effects.len()
+                && prev
+                    .model
+                    .effects
+                    .iter()
+                    .zip(&req.effects)
+                    .all(|(a, b)| a.name() == b.name());
+            if !same {
+                return Err(NlRunError::StartMismatch {
+                    holds: model_name(prev.model.structure, &prev.model.effects),
+                    asks: req.model_name(),
+                });
+            }
+            model.effects = prev.model.effects.clone();
+            if held.is_none() {
+                model.tau_c = prev.model.tau_c;
+            }
+            let offset = prev.get("offset").unwrap_or(0.0);
+            let values = model.values(&prev.plant, offset, 0.0);
+            (Vec::new(), model.clone(), values)
+        }
     };
-    let options = req.options.clone().for_structure(req.structure);
-    let start_model = start_model.refined_for(&start, velocity_rms(data), data.ts);
-    let fit = fit_output_error(data, &start_model, &start, &options)?;
+    let mut options = req.options.clone().for_structure(req.structure);
+    let layout = start_model.layout();
+    // held values (the lag below, with the lag held)
+    for (name, value) in req.fixed.iter().filter(|(n, _)| n != "tau_c") {
+        for (i, d) in layout.iter().enumerate() {
+            if d.name == name && d.owner != Owner::InitialVelocity {
+                start[i] = *value;
+            }
+        }
+        options.fixed.push(name.clone());
+    }
+    // the lag held (0: the model has none, and no `tau_c` in the layout)
+    if let Some(t) = held {
+        if let Some(i) = layout.iter().position(|d| d.name == "tau_c") {
+            start[i] = t;
+            options.fixed.push("tau_c".into());
+        }
+    }
+    // the keys given per effect, unless held
+    for (i, keys) in req.given.iter().enumerate().take(req.effects.len()) {
+        for (key, value) in keys {
+            if req.fixed.iter().any(|(n, _)| n == key) {
+                continue;
+            }
+            if let Some(j) = layout
+                .iter()
+                .position(|d| d.owner == Owner::Effect(i) && d.name == key)
+            {
+                start[j] = *value;
+            }
+        }
+    }
+    let (fit_model, _) = start_model.with_values(&start);
+    let fit_model = fit_model.refined_for(&start, velocity_rms(data), data.ts);
+    let fit = fit_output_error(data, &fit_model, &start, &options)?;
     let warnings = checks(&fit);
+    let method = method(&options, &fit_model, held.is_some(), fit.model.tau_c > 0.0);
     Ok(NlResult {
         steps,
         fit,
         warnings,
+        options,
+        method,
     })
 }
 
-/// The linear start of step 3 from periodic data: the frequency-domain fit of `structure`
-/// to the FRF at the excited lines ([`crate::ident::frf_fit`]), which transients, drift
-/// and the nonlinear distortion at the non-excited lines leave alone. Returns the
-/// structure's values and the current-loop lag `tau_c` [s] it estimated (0 when none).
+/// The method of a fit with `options` of `model` (the model the fit integrates), in words.
+fn method(options: &NlOptions, model: &NlModel, lag_held: bool, lag: bool) -> String {
+    format!(
+        "nonlinear grey box: output error on the interval-mean motor velocity from the measured \
+         torque ({}, RK4 with {} step(s) per sample, smooth Coulomb law v_eps = {:.3} rad/s), \
+         Levenberg-Marquardt with exact derivatives by dual numbers, σ by the sandwich \
+         covariance for coloured residuals; current-loop lag {}",
+        if options.highpass_hz <= 0.0 {
+            "no prefilter: a rigid body's information lies at the low frequencies".to_string()
+        } else if options.highpass_order == 2 {
+            format!(
+                "second-order Butterworth high-pass prefilter at {} Hz",
+                options.highpass_hz
+            )
+        } else {
+            format!(
+                "Butterworth high-pass prefilter at {} Hz",
+                options.highpass_hz
+            )
+        },
+        model.substeps,
+        model.v_eps,
+        match (lag_held, lag) {
+            (true, true) => "fixed",
+            (_, false) => "left out",
+            (false, true) => "estimated",
+        }
+    )
+}
+
+/// The records of [`run`].
+#[derive(Clone, Copy, Debug)]
+pub struct NlData<'a> {
+    /// the estimation record
+    pub estimation: &'a IdData,
+    /// the periodic capture the estimation record is, and the periods it skips as
+    /// settling; with it (and the automatic start, no [`NlRequest::linear`]) the
+    /// frequency-domain linear start is tried
+    pub periodic: Option<(&'a Dataset, usize)>,
+    /// the validation record
+    pub validation: Option<&'a IdData>,
+}
+
+/// Result of [`run`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct NlRun {
+    /// the fit, its start's steps (the frequency-domain linear fit first when there was
+    /// one), warnings, options and method
+    pub result: NlResult,
+    /// the FITs on the estimation record, exact laws
+    pub estimation: NlValidation,
+    /// the FITs on the validation record, exact laws
+    pub validation: Option<NlValidation>,
+}
+
+/// The whole nonlinear identification: [`linear_start`] on periodic data (its failure a
+/// warning; data that are not periodic skip it), [`identify`], then [`validate`] on the
+/// estimation and the validation record.
 ///
 /// # Errors
-/// In words, when the data are not periodic or the fit fails.
+/// [`NlRunError`] as [`identify`]; [`NlRunError::Validation`] when the validation record
+/// cannot be used.
+pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
+    req.check()?;
+    let mut req = req.clone();
+    let mut steps = Vec::new();
+    let mut warnings = Vec::new();
+    if let (Some((ds, settle)), NlStart::Automatic, None) = (data.periodic, &req.start, &req.linear)
+    {
+        match linear_start(ds, settle, &req) {
+            Ok(ls) => {
+                if req.held().is_none() {
+                    req.tau_c = ls.tau_c;
+                }
+                req.linear = Some(ls.values);
+                steps.push(ls.step);
+            }
+            Err(LinearStartError::NotPeriodic(_)) => {}
+            Err(e @ LinearStartError::Fit(_)) => warnings.push(format!(
+                "the frequency-domain linear fit failed ({e}): the start is found in the \
+                 time domain and the model starts without current-loop lag"
+            )),
+        }
+    }
+    let mut result = identify(data.estimation, &req)?;
+    let estimation = validate(&result.fit, data.estimation, &result.options)?;
+    let validation = match data.validation {
+        Some(v) => Some(validate(&result.fit, v, &result.options).map_err(NlRunError::Validation)?),
+        None => None,
+    };
+    steps.append(&mut result.steps);
+    result.steps = steps;
+    warnings.append(&mut result.warnings);
+    for (what, v) in [
+        ("estimation", Some(&estimation)),
+        ("validation", validation.as_ref()),
+    ] {
+        if v.is_some_and(|v| !v.velocity_fit_percent.is_finite()) {
+            warnings.push(format!(
+                "the model simulated with the exact laws is not finite on the {what} record"
+            ));
+        }
+    }
+    result.warnings = warnings;
+    Ok(NlRun {
+        result,
+        estimation,
+        validation,
+    })
+}
+
+/// The linear start of step 3 from periodic data ([`linear_start`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinearStart {
+    /// the structure's values ([`Structure::param_names`] order) [SI]
+    pub values: Vec<f64>,
+    /// the current-loop lag it estimated [s] (0 when none or below 2 µs; the held one
+    /// when held)
+    pub tau_c: f64,
+    /// the step as the start's steps report it (`frequency-domain linear fit`)
+    pub step: Step,
+}
+
+/// Why [`linear_start`] gave none.
+#[derive(Debug, Error)]
+pub enum LinearStartError {
+    /// the data are not whole periods of a known excitation
+    #[error(transparent)]
+    NotPeriodic(#[from] FrfError),
+    /// the frequency-domain fit failed
+    #[error(transparent)]
+    Fit(#[from] FrfFitError),
+}
+
+/// The linear start of step 3 from periodic data: the frequency-domain fit of the
+/// request's structure to the FRF of `ds` (`settle` periods skipped) at the excited lines
+/// ([`crate::ident::frf_fit`]), which transients, drift and the nonlinear distortion at
+/// the non-excited lines leave alone; the current-loop lag held when the request holds
+/// it, the delay held at 0 when an effect is a `time_delay`.
+///
+/// # Errors
+/// [`LinearStartError`].
 pub fn linear_start(
-    ds: &crate::data::Dataset,
-    structure: Structure,
-    r: f64,
-) -> Result<(Vec<f64>, f64), String> {
-    use crate::ident::frf_fit::{fit_frf, FrfFitOptions};
-    let analysis = crate::ident::frf::analyze_dataset(ds, 1).map_err(|e| e.to_string())?;
+    ds: &Dataset,
+    settle: usize,
+    req: &NlRequest,
+) -> Result<LinearStart, LinearStartError> {
+    let analysis = crate::ident::frf::analyze_dataset(ds, settle)?;
     let ts = ds.data.ts;
-    let opts = FrfFitOptions {
-        r,
-        ..FrfFitOptions::new(structure, ts)
-    };
-    let fit = fit_frf(&analysis.frf, &opts).map_err(|e| e.to_string())?;
-    let values = structure
-        .param_names()
+    let held = req.held();
+    let mut o = FrfFitOptions::new(req.structure, ts);
+    o.r = req.r;
+    if let Some(t) = held {
+        o.lag = Drive::Fixed(t / ts);
+    }
+    if req
+        .effects
         .iter()
-        .map(|n| {
-            fit.params
-                .iter()
-                .find(|p| p.name == *n)
-                .map(|p| p.value)
-                .ok_or_else(|| format!("the frequency-domain fit has no `{n}`"))
-        })
-        .collect::<Result<Vec<f64>, String>>()?;
-    let tau_c = if fit.lag.value > 0.0 {
-        fit.lag.value * ts
-    } else {
-        0.0
+        .any(|e| matches!(e, Effect::TimeDelay(_)))
+    {
+        o.delay = Drive::Fixed(0.0);
+    }
+    let ff = crate::ident::frf_fit::fit_frf(&analysis.frf, &o)?;
+    let lag = ff.lag.value * ts;
+    let mut values: Vec<(String, f64, &'static str)> = ff
+        .params
+        .iter()
+        .map(|p| (p.name.clone(), p.value, p.unit))
+        .collect();
+    values.push(("tau_c".into(), lag, "s"));
+    let step = Step {
+        name: "frequency-domain linear fit".into(),
+        values,
+        detail: format!(
+            "sample maximum likelihood on {} excited lines; the linear {} {} the steps below \
+             start from",
+            ff.lines,
+            req.structure.label(),
+            if held.is_some() {
+                "(current-loop lag held)"
+            } else {
+                "and the current-loop lag"
+            }
+        ),
     };
-    Ok((values, tau_c))
+    Ok(LinearStart {
+        values: ff.values(),
+        tau_c: match held {
+            Some(t) => t,
+            None if lag >= MIN_LAG => lag,
+            None => 0.0,
+        },
+        step,
+    })
 }
 
 /// Warnings of a finished fit: iteration limit, parameters on a bound, parameters the data

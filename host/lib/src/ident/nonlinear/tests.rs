@@ -318,3 +318,112 @@ fn derivatives_by_dual_numbers_agree_with_central_differences() {
         );
     }
 }
+
+/// What cannot be run is refused before the work, each with its own error.
+#[test]
+fn a_request_that_does_not_fit_the_model_is_refused_before_the_work() {
+    let data = IdData {
+        ts: 1e-3,
+        u: vec![0.0; 100],
+        y: vec![0.0; 100],
+        r: None,
+    };
+    let effects = seed001_model().effects;
+    let req = NlRequest::new(Structure::TwoMass, 1.0 / 118.0, effects.clone());
+    let unknown = NlRequest {
+        fixed: vec![("nosuch".into(), 1.0)],
+        ..req.clone()
+    };
+    match identify(&data, &unknown) {
+        Err(e @ NlRunError::UnknownParameter { .. }) => {
+            let m = e.to_string();
+            for name in ["nosuch", "J_m", "k_g", "tau_c", "offset", "k3", "fc"] {
+                assert!(m.contains(name), "`{name}` not in {m}");
+            }
+        }
+        other => panic!("{other:?}"),
+    }
+    let lag = NlRequest {
+        fixed: vec![("tau_c".into(), 0.2)],
+        ..req.clone()
+    };
+    assert!(matches!(
+        identify(&data, &lag),
+        Err(NlRunError::LagRange(t)) if t == 0.2
+    ));
+    // a previous fit of another model as the start
+    let mut prev = fit_output_error(
+        &IdData {
+            ts: 1e-3,
+            u: (0..400).map(|k| (k as f64 * 0.05).sin()).collect(),
+            y: (0..400).map(|k| 1e-3 * (k as f64 * 0.05).cos()).collect(),
+            r: None,
+        },
+        &NlModel {
+            effects: Vec::new(),
+            ..seed001_model()
+        },
+        &NlModel {
+            effects: Vec::new(),
+            ..seed001_model()
+        }
+        .values(&[1e-3, 14.6, 1.3e5, 80.0, 2e-3], 0.0, 0.0),
+        &NlOptions {
+            max_iter: 1,
+            ..NlOptions::default()
+        },
+    )
+    .unwrap();
+    prev.model.structure = Structure::TwoMass;
+    let other = NlRequest {
+        start: NlStart::Previous(Box::new(prev)),
+        ..req
+    };
+    match identify(&data, &other) {
+        Err(e @ NlRunError::StartMismatch { .. }) => assert_eq!(
+            e.to_string(),
+            "the start holds two-mass, the fit asks for \
+             two-mass+nonlinear_stiffness+coulomb_friction"
+        ),
+        other => panic!("{other:?}"),
+    }
+}
+
+/// seed 001 through [`run`]: a held value stays where it is held, the validation record
+/// gets its FITs, and the steps and the method say what was done.
+#[test]
+fn run_holds_the_fixed_values_and_validates_on_the_validation_record() {
+    let map = ColumnMap::capture();
+    let est = load_csv(&shared("seed001-two-mass/est.csv"), &map)
+        .unwrap()
+        .data;
+    let val = load_csv(&shared("seed001-two-mass/val.csv"), &map)
+        .unwrap()
+        .data;
+    let req = NlRequest {
+        fixed: vec![("d_g".into(), 80.0)],
+        given: vec![vec![("k3".into(), 1.5e11)]],
+        ..NlRequest::new(Structure::TwoMass, 1.0 / 118.0, seed001_model().effects)
+    };
+    let done = run(
+        NlData {
+            estimation: &est,
+            periodic: None,
+            validation: Some(&val),
+        },
+        &req,
+    )
+    .unwrap();
+    let fit = &done.result.fit;
+    let d = fit.params.iter().find(|p| p.name == "d_g").unwrap();
+    assert!(d.fixed && (d.value / 80.0 - 1.0).abs() < 1e-12, "{d:?}");
+    assert!(!fit.params.iter().find(|p| p.name == "k_g").unwrap().fixed);
+    let k3 = fit.get("k3").unwrap();
+    assert!((k3 / 1.6e11 - 1.0).abs() < 0.05, "k3 = {k3:e}");
+    let names: Vec<&str> = done.result.steps.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names[0], "rigid body", "{names:?}");
+    assert!(done.result.method.ends_with("current-loop lag left out"));
+    let v = done.validation.unwrap();
+    assert!(v.velocity_fit_percent > 90.0, "{v:?}");
+    assert!(done.estimation.velocity_fit_percent > 90.0);
+}
