@@ -25,7 +25,14 @@
 //! `--param NAME=VALUE` overrides one physical parameter of the chosen model, named as in
 //! seed 000 Table 1 (`J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r`) plus
 //! seed 001's `k3`, `F_c` for the nonlinear two-mass (see [`jointid::model::params`]); only
-//! the names the model uses are accepted ([`jointid::model::params::model_params`]).
+//! the names the model uses are accepted ([`jointid::model::params::model_params`],
+//! [`jointid::model::params::seed_001_params`]).
+//!
+//! `--model` and `--effect` resolve into the one model description, a
+//! [`jointid::model::spec::ModelSpec`], by [`jointid::model::params::sim_spec`] over the
+//! effect list `fit` resolves ([`jointid::model::spec::ModelSpec::effect_specs`]):
+//! `nonlinear-two-mass` is the two-mass with seed 001's `nonlinear_stiffness` (`k3`) and
+//! pure `coulomb_friction` (`F_c`) attached, as `fit --model nonlinear-two-mass` fits it.
 // Units in brackets (`[s]`, `[rad]`) are not intra-doc links.
 #![allow(rustdoc::broken_intra_doc_links)]
 
@@ -43,17 +50,87 @@ use jointid::data::output::{check_output, write_file, OutputError};
 use jointid::data::{write_capture_csv, Dataset, ExcitationConfig, SignalKind};
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::sim_plant;
-use jointid::model::params::model_params;
+use jointid::model::params::{model_params, seed_001_params, sim_spec, ParamField};
+use jointid::model::spec::{Structure, NONLINEAR_TWO_MASS};
 use jointid::sim::board::{encode_session, BoardStreamError, WireOptions};
 use jointid::sim::{
-    parse_effects, simulate_excitation, Integrator, JointParams, Mechanism, Plant, PlantKind,
-    SensorConfig, SimConfig, SimOutput, MAX_SUBSTEPS,
+    parse_effects, simulate_excitation, Integrator, JointParams, Mechanism, Plant, SensorConfig,
+    SimConfig, SimOutput, MAX_SUBSTEPS,
 };
 
-/// The `--model` values: every plant by its label (`two-mass`), its JSON name
-/// (`two_mass`) as alias, with [`PlantKind::describe`] as help.
-fn plant_parser() -> impl TypedValueParser<Value = PlantKind> {
-    PossibleValuesParser::new(PlantKind::ALL.map(|k| {
+/// `--model`: a structure, or seed 001's nonlinear two-mass (the two-mass with
+/// `nonlinear_stiffness` and `coulomb_friction` attached, [`sim_spec`]), as `fit --model`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SimModel {
+    /// the mechanical structure (the two-mass for `nonlinear-two-mass`)
+    pub structure: Structure,
+    /// `nonlinear-two-mass` was asked for
+    pub nonlinear_two_mass: bool,
+}
+
+impl SimModel {
+    /// Every `--model` value, in the order of the help.
+    pub const ALL: [SimModel; 5] = [
+        SimModel::of(Structure::Rigid),
+        SimModel::of(Structure::TwoMass),
+        SimModel::of(Structure::ThreeMass),
+        SimModel::of(Structure::FourMass),
+        SimModel {
+            structure: Structure::TwoMass,
+            nonlinear_two_mass: true,
+        },
+    ];
+
+    /// The plain structure `s`.
+    pub const fn of(s: Structure) -> SimModel {
+        SimModel {
+            structure: s,
+            nonlinear_two_mass: false,
+        }
+    }
+
+    /// Name on the command line (`three-mass`, `nonlinear-two-mass`).
+    pub fn label(self) -> &'static str {
+        if self.nonlinear_two_mass {
+            NONLINEAR_TWO_MASS
+        } else {
+            self.structure.label()
+        }
+    }
+
+    /// The JSON spelling (`three_mass`), an alias on the command line.
+    fn name(self) -> &'static str {
+        if self.nonlinear_two_mass {
+            "nonlinear_two_mass"
+        } else {
+            self.structure.name()
+        }
+    }
+
+    /// The help of the value.
+    fn describe(self) -> &'static str {
+        if self.nonlinear_two_mass {
+            "seed 001: two-mass with cubic spring and Coulomb friction"
+        } else {
+            self.structure.describe()
+        }
+    }
+
+    /// The parameters `--param` may set: the structure's, and seed 001's `k3`, `F_c` for
+    /// the nonlinear two-mass.
+    pub fn params(self) -> Vec<(&'static str, ParamField)> {
+        let mut v = model_params(self.structure);
+        if self.nonlinear_two_mass {
+            v.extend(seed_001_params());
+        }
+        v
+    }
+}
+
+/// The `--model` values: every model by its label (`two-mass`), its JSON name
+/// (`two_mass`) as alias, with [`SimModel::describe`] as help.
+fn plant_parser() -> impl TypedValueParser<Value = SimModel> {
+    PossibleValuesParser::new(SimModel::ALL.map(|k| {
         let v = PossibleValue::new(k.label()).help(k.describe());
         if k.name() == k.label() {
             v
@@ -62,7 +139,7 @@ fn plant_parser() -> impl TypedValueParser<Value = PlantKind> {
         }
     }))
     .map(|s| {
-        PlantKind::ALL
+        SimModel::ALL
             .into_iter()
             .find(|k| k.label() == s || k.name() == s)
             .expect("a possible value")
@@ -98,7 +175,7 @@ pub struct SimulateArgs {
     /// plant model
     #[arg(long, visible_alias = "plant", value_parser = plant_parser(), value_name = "MODEL",
           default_value = "three-mass")]
-    pub model: PlantKind,
+    pub model: SimModel,
     /// override a physical parameter of the model, repeatable (`k_g=1.3e5`); names as in
     /// seed 000 Table 1 (J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r) and
     /// seed 001 (k3, F_c), those the model uses
@@ -238,11 +315,11 @@ pub enum SimulateError {
 /// [`SimulateError::ParamSyntax`], [`SimulateError::UnknownParam`] or
 /// [`SimulateError::BadValue`], each naming the parameter and listing the valid names.
 pub fn apply_params(
-    model: PlantKind,
+    model: SimModel,
     specs: &[String],
     params: &mut JointParams,
 ) -> Result<(), SimulateError> {
-    let fields = model_params(model);
+    let fields = model.params();
     let valid = || {
         fields
             .iter()
@@ -316,12 +393,25 @@ pub fn out_format(path: &Path) -> Result<OutFormat, SimulateError> {
 pub fn configure(
     args: &SimulateArgs,
 ) -> Result<(SimConfig, ExcitationConfig), Box<dyn std::error::Error + Send + Sync>> {
-    let (mut plant, mut effects) = match &args.model_file {
-        Some(path) => fitted_plant(path)?,
-        None => (Plant::new(args.model), Vec::new()),
+    let (plant, effects) = match &args.model_file {
+        Some(path) => {
+            let (mut plant, mut effects) = fitted_plant(path)?;
+            apply_params(SimModel::of(plant.kind), &args.params, &mut plant.params)?;
+            effects.extend(parse_effects(&args.effects)?);
+            (plant, effects)
+        }
+        None => {
+            let mut plant = Plant::new(args.model.structure);
+            apply_params(args.model, &args.params, &mut plant.params)?;
+            let spec = sim_spec(
+                plant.kind,
+                args.model.nonlinear_two_mass,
+                &args.effects,
+                &plant.params,
+            )?;
+            (plant, spec.effects.unwrap_or_default())
+        }
     };
-    apply_params(plant.kind, &args.params, &mut plant.params)?;
-    effects.extend(parse_effects(&args.effects)?);
     let mut cfg = SimConfig {
         plant,
         effects,
@@ -663,7 +753,7 @@ mod tests {
             "--params-out",
             "p.json",
         ]);
-        assert_eq!(a.model, PlantKind::ThreeMass);
+        assert_eq!(a.model, SimModel::of(Structure::ThreeMass));
         assert_eq!(a.excitation, ExcitationArg::RandomOdd);
         assert_eq!(a.params_out, Some(PathBuf::from("p.json")));
         let (cfg, exc) = configure(&a).unwrap();
@@ -682,15 +772,19 @@ mod tests {
             "--excitation-seed",
             "4",
         ]);
-        assert_eq!(b.model, PlantKind::NonlinearTwoMass);
+        assert_eq!(b.model, SimModel::ALL[4]);
         assert_eq!(b.excitation, ExcitationArg::OddMultisine);
         assert_eq!(b.params_out, Some(PathBuf::from("q.json")));
         let (cfg, exc) = configure(&b).unwrap();
         assert_eq!((cfg.seed, exc.seed), (3, 4));
-        assert_eq!(cfg.plant.kind, PlantKind::NonlinearTwoMass);
+        // the alias is the two-mass with seed 001's two effects, as `fit` resolves it
+        assert_eq!(cfg.plant.kind, Structure::TwoMass);
+        let names: Vec<&str> = cfg.effects.iter().map(|e| e.name()).collect();
+        assert_eq!(names, ["nonlinear_stiffness", "coulomb_friction"]);
         let d = parse(&["--out", "c.csv"]);
         let (cfg, exc) = configure(&d).unwrap();
-        assert_eq!(cfg.plant.kind, PlantKind::ThreeMass);
+        assert_eq!(cfg.plant.kind, Structure::ThreeMass);
+        assert!(cfg.effects.is_empty());
         assert_eq!(exc, ExcitationConfig::paper_default());
         assert_eq!(cfg.seed, SimConfig::default().seed);
         assert!(Cli::try_parse_from([
@@ -721,38 +815,65 @@ mod tests {
         assert_eq!(cfg.plant.params.j_p, 2.0);
         assert_eq!(cfg.plant.params.k_a, JointParams::default().k_a);
         let mut p = JointParams::default();
-        let err = apply_params(PlantKind::ThreeMass, &["J_p=2".into()], &mut p).unwrap_err();
+        let err = apply_params(
+            SimModel::of(Structure::ThreeMass),
+            &["J_p=2".into()],
+            &mut p,
+        )
+        .unwrap_err();
         assert_eq!(
             err.to_string(),
             "--param `J_p`: unknown parameter for three-mass (valid: J_m, J_a1, J_a2, k_g, d_g, k_a, d_a, f_m, r)"
         );
-        let err = apply_params(PlantKind::Rigid, &["k_g=1".into()], &mut p).unwrap_err();
+        let err =
+            apply_params(SimModel::of(Structure::Rigid), &["k_g=1".into()], &mut p).unwrap_err();
         assert!(
             err.to_string().contains("(valid: J_m, J_a1, J_a2, f_m, r)"),
             "{err}"
         );
-        let err =
-            apply_params(PlantKind::NonlinearTwoMass, &["k3=abc".into()], &mut p).unwrap_err();
+        let err = apply_params(SimModel::ALL[4], &["k3=abc".into()], &mut p).unwrap_err();
         assert_eq!(
             err.to_string(),
             "--param `k3`: `abc` is not a finite number (valid names for nonlinear-two-mass: J_m, J_a1, J_a2, k_g, d_g, f_m, r, k3, F_c)"
         );
-        let err = apply_params(PlantKind::TwoMass, &["k_g".into()], &mut p).unwrap_err();
+        let two = SimModel::of(Structure::TwoMass);
+        let err = apply_params(two, &["k_g".into()], &mut p).unwrap_err();
         assert!(matches!(err, SimulateError::ParamSyntax { .. }), "{err}");
-        let err = apply_params(PlantKind::TwoMass, &["k_g=inf".into()], &mut p).unwrap_err();
+        let err = apply_params(two, &["k_g=inf".into()], &mut p).unwrap_err();
         assert!(matches!(err, SimulateError::BadValue { .. }), "{err}");
         assert_eq!(p, JointParams::default(), "nothing applied on error");
         apply_params(
-            PlantKind::NonlinearTwoMass,
+            SimModel::ALL[4],
             &["F_c=0.05".into(), "k3=1e12".into()],
             &mut p,
         )
         .unwrap();
         assert_eq!((p.f_c, p.k3), (0.05, 1e12));
+        // and they reach seed 001's effects of the alias (pure Coulomb friction)
+        let a = parse(&[
+            "--model",
+            "nonlinear_two_mass",
+            "--param",
+            "k3=1e12",
+            "--param",
+            "F_c=0.05",
+            "--effect",
+            "backlash",
+            "--out",
+            "x.csv",
+        ]);
+        let (cfg, _) = configure(&a).unwrap();
+        let specs: Vec<String> = cfg.effects.iter().map(|e| e.to_string()).collect();
+        assert_eq!(specs[0], "nonlinear_stiffness:k3=1000000000000");
+        assert!(
+            specs[1].starts_with("coulomb_friction:fc=0.05,fs=0.05,"),
+            "{specs:?}"
+        );
+        assert!(specs[2].starts_with("backlash:"), "{specs:?}");
         // every name the models accept is a name of the parameter table
         let table: Vec<&str> = JointParams::default().table().iter().map(|t| t.0).collect();
-        for k in PlantKind::ALL {
-            for (n, _) in model_params(k) {
+        for k in SimModel::ALL {
+            for (n, _) in k.params() {
                 assert!(table.contains(&n), "{n}");
             }
         }

@@ -114,7 +114,7 @@ pub fn simulate_driven_with(
     start: &DrivenStart,
     integration: &IntegrationConfig,
 ) -> Result<DrivenOutput, SimError> {
-    let (mut positive, nonneg) = plant_ranges(plant)?;
+    let (mut positive, nonneg) = plant_ranges(plant);
     positive.extend([
         ("current_loop_tau", current_loop_tau),
         ("sample_interval_s", sample_interval_s),

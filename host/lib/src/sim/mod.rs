@@ -3,9 +3,10 @@
 //! What: the joint of seed 000 (Norrlöf et al., "Modeling and identification of a
 //! mechanical industrial manipulator", Fig. 2): a reference `θ_ref` goes into the robot's
 //! own controller, whose torque reference `u` drives the motor through a fast current loop;
-//! `u` and the motor angle `θ_m` are measured. The mechanics is one of the plants of
-//! [`crate::model::params::PlantKind`] (rigid, two-mass, three-mass eq. (5)–(6), four-mass eq. (7)–(8),
-//! the nonlinear two-mass of seed 001 eq. (4)–(9)), optionally with the effects of
+//! `u` and the motor angle `θ_m` are measured. The mechanics is one of the structures of
+//! [`crate::model::spec::Structure`] (rigid, two-mass, three-mass eq. (5)–(6), four-mass
+//! eq. (7)–(8); seed 001's nonlinear two-mass eq. (4)–(9) is the two-mass with two of the
+//! effects, [`crate::model::params::sim_spec`]), optionally with the effects of
 //! [`crate::model::effects::Effect`] (Coulomb/Stribeck friction, backlash, cubic spring, extra mode,
 //! transport delay, torque ripple).
 //!
@@ -55,13 +56,13 @@ use jointid_core::wire::{RawSample, Scale};
 use serde::{Deserialize, Serialize};
 
 pub use crate::model::effects::{parse_effects, Effect, EffectParseError};
-pub use crate::model::params::{JointParams, Plant, PlantKind};
+pub use crate::model::params::{JointParams, Plant};
 pub use crate::model::plant::{Mechanism, ModalFrequencies};
+pub use crate::model::spec::Structure;
 pub use controller::{Controller, ControllerConfig};
 pub use driven::{simulate_driven, simulate_driven_with, DrivenOutput, DrivenStart};
 pub use sensors::{Disturbance, SensorConfig};
 
-use crate::model::effects::CoulombFriction;
 use crate::model::plant::{MAX_BODIES, MAX_STATE};
 use integrate::{Contact, NonlinearPlant, SampleStepper, State, ZohStep};
 use sensors::Sensors;
@@ -415,7 +416,7 @@ impl SimConfig {
     /// # Errors
     /// The first problem found.
     pub fn validate(&self) -> Result<(), SimError> {
-        let (mut positive, mut nonneg) = plant_ranges(&self.plant)?;
+        let (mut positive, mut nonneg) = plant_ranges(&self.plant);
         let c = &self.controller;
         positive.extend([
             ("sample_rate_hz", self.sample_rate_hz),
@@ -461,21 +462,18 @@ type Named = (&'static str, f64);
 
 /// The plant's parameters that must be positive and those that must be non-negative, in the
 /// order they are checked.
-///
-/// # Errors
-/// [`SimError::InvalidParameter`] when `k3` of the nonlinear two-mass is not finite.
-fn plant_ranges(plant: &Plant) -> Result<(Vec<Named>, Vec<Named>), SimError> {
+fn plant_ranges(plant: &Plant) -> (Vec<Named>, Vec<Named>) {
     let p = &plant.params;
     let kind = plant.kind;
     let mut positive = vec![("J_m", p.j_m), ("r", p.r)];
     let mut nonneg = vec![("f_m", p.f_m)];
     match kind {
-        PlantKind::Rigid => nonneg.push(("J_a1 + J_a2", p.j_a1 + p.j_a2)),
-        PlantKind::TwoMass | PlantKind::NonlinearTwoMass => {
+        Structure::Rigid => nonneg.push(("J_a1 + J_a2", p.j_a1 + p.j_a2)),
+        Structure::TwoMass => {
             positive.extend([("J_a1 + J_a2", p.j_a1 + p.j_a2), ("k_g", p.k_g)]);
             nonneg.push(("d_g", p.d_g));
         }
-        PlantKind::ThreeMass | PlantKind::FourMass => {
+        Structure::ThreeMass | Structure::FourMass => {
             positive.extend([
                 ("J_a1", p.j_a1),
                 ("J_a2", p.j_a2),
@@ -485,17 +483,11 @@ fn plant_ranges(plant: &Plant) -> Result<(Vec<Named>, Vec<Named>), SimError> {
             nonneg.extend([("d_g", p.d_g), ("d_a", p.d_a)]);
         }
     }
-    if kind == PlantKind::FourMass {
+    if kind == Structure::FourMass {
         positive.extend([("J_p", p.j_p), ("k_p", p.k_p)]);
         nonneg.push(("d_p", p.d_p));
     }
-    if kind == PlantKind::NonlinearTwoMass {
-        nonneg.push(("F_c", p.f_c));
-        if !p.k3.is_finite() {
-            return Err(bad("k3", p.k3, "must be finite"));
-        }
-    }
-    Ok((positive, nonneg))
+    (positive, nonneg)
 }
 
 /// Checks that the `positive` values are finite and > 0 (`controller.ti` may be +inf: P
@@ -545,7 +537,7 @@ fn check_effects(plant: &Plant, effects: &[Effect]) -> Result<(), SimError> {
             return Err(SimError::DuplicateEffect(e.name()));
         }
         seen.push(e.name());
-        if e.acts_on_gearbox() && kind == PlantKind::Rigid {
+        if e.acts_on_gearbox() && kind == Structure::Rigid {
             return Err(SimError::NeedsGearbox {
                 effect: e.name(),
                 plant: kind.name(),
@@ -577,24 +569,12 @@ fn assemble(cfg: &SimConfig) -> Assembled {
 
 /// [`Assembled`] from the plant, its effects and the current-loop time constant `tc` [s].
 fn assemble_parts(plant: &Plant, effects: &[Effect], tc: f64) -> Assembled {
-    let p = &plant.params;
     let mech = Mechanism::new(plant, effects);
     let mut k3 = 0.0;
     let mut backlash = None;
     let mut coulomb = Vec::new();
     let mut ripple = Vec::new();
     let mut delay = 0.0;
-    if plant.kind == PlantKind::NonlinearTwoMass {
-        k3 += p.k3;
-        if p.f_c > 0.0 {
-            // seed 001 eq. (7): pure Coulomb, no Stribeck bump (set-valued at rest as usual)
-            coulomb.push(CoulombFriction {
-                fc: p.f_c,
-                fs: p.f_c,
-                ..CoulombFriction::default()
-            });
-        }
-    }
     for e in effects {
         match *e {
             Effect::CoulombFriction(c) if c.fs > 0.0 => coulomb.push(c),

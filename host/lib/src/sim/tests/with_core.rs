@@ -51,15 +51,21 @@ fn all_effects_stay_bounded_on_every_geared_plant_at_large_amplitude() {
     // 10 times the default amplitude: cubic spring ~30 times stiffer at peak, backlash and
     // friction together, full sensors; the run must stay finite and keep tracking
     let r = ramped(multisine(2000, &special_odd_lines(120), 0.2, 2, 13), 400);
-    for kind in [
-        PlantKind::TwoMass,
-        PlantKind::ThreeMass,
-        PlantKind::FourMass,
-        PlantKind::NonlinearTwoMass,
+    let seed_001_plant = seed_001();
+    for (kind, base) in [
+        (Structure::TwoMass, vec![]),
+        (Structure::ThreeMass, vec![]),
+        (Structure::FourMass, vec![]),
+        (Structure::TwoMass, seed_001_plant.1),
     ] {
+        // the defaults on top of the plant's own effects (seed 001's on the last: its
+        // stiffening spring and pure Coulomb friction, then the other effects)
+        let others = Effect::all_defaults()
+            .into_iter()
+            .filter(|e| base.iter().all(|b| b.name() != e.name()));
         let cfg = SimConfig {
             plant: Plant::new(kind),
-            effects: Effect::all_defaults(),
+            effects: base.iter().copied().chain(others).collect(),
             ..SimConfig::default()
         };
         let out = simulate(&cfg, &r).unwrap();
@@ -115,9 +121,18 @@ fn raw_samples_refuse_what_the_wire_cannot_carry_instead_of_clamping() {
 fn a_diverging_run_stops_with_the_first_non_finite_sample_and_the_effects() {
     let mut exc = jointid_core::excitation::ExcitationConfig::paper_default();
     exc.periods = 1;
+    // `--model nonlinear-two-mass --effect nonlinear_stiffness:k3=-1e16`
+    let plant = Plant::new(Structure::TwoMass);
+    let spec = crate::model::params::sim_spec(
+        plant.kind,
+        true,
+        &["nonlinear_stiffness:k3=-1e16".to_string()],
+        &plant.params,
+    )
+    .unwrap();
     let cfg = SimConfig {
-        plant: Plant::new(PlantKind::NonlinearTwoMass),
-        effects: parse_effects(&["nonlinear_stiffness:k3=-1e16".to_string()]).unwrap(),
+        plant,
+        effects: spec.effects.unwrap(),
         ..SimConfig::default()
     };
     let err = simulate_excitation(&cfg, &exc).unwrap_err();
@@ -131,7 +146,7 @@ fn a_diverging_run_stops_with_the_first_non_finite_sample_and_the_effects() {
     );
     assert!(
         err.to_string()
-            .contains("(plant nonlinear-two-mass, effects: nonlinear_stiffness:k3="),
+            .contains("(plant two-mass, effects: coulomb_friction:fc=0.03,fs=0.03,"),
         "{err}"
     );
 }
