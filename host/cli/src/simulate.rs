@@ -12,7 +12,7 @@
 //!   (`jointid_core::wire`: session header with the excitation config and the scale,
 //!   delta-coded sample batches from `BatchBuilder` with the reference CRC, a `Status`
 //!   every [`WireOptions::status_every`] batches, `End`; [`jointid::sim::board`]) into a
-//!   `.jcap` written by [`jointid::capture::jcap::write_stream`], so `jointid info`,
+//!   `.jcap` written by [`jointid::capture::jcap::write_stream_with`], so `jointid info`,
 //!   `export`, `analyze` and `fit` read it exactly like a board capture. The wire carries integer counts: `u` and `θm` are rounded to the
 //!   scale of [`WireOptions::for_sim`] (at most half a count from the simulator's value),
 //!   the reference is regenerated from the header bit-exactly.
@@ -21,6 +21,10 @@
 //! - Both outputs follow the one rule of every output file ([`jointid::data::output`]): an
 //!   existing file is replaced only with `--force`, checked before the simulation; each
 //!   appears whole or not at all.
+//! - The run is streamed: each sample is simulated ([`jointid::sim::Simulation`]), encoded
+//!   ([`jointid::sim::board::stream_session`]) or formatted ([`TableWriter`]) and written
+//!   as it comes, so memory does not grow with `--periods`; a simulation that stops (its
+//!   first non-finite sample, named with the effects) leaves no file.
 //!
 //! `--param NAME=VALUE` overrides one physical parameter of the chosen model, named as in
 //! seed 000 Table 1 (`J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r`) plus
@@ -45,17 +49,17 @@ use jointid_core::wire::Scale;
 use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
-use jointid::capture::jcap::{write_stream, JcapError};
+use jointid::capture::jcap::{write_stream_with, JcapError};
 use jointid::data::output::{check_output, write_file, OutputError};
-use jointid::data::{write_capture_csv, Dataset, ExcitationConfig, SignalKind};
+use jointid::data::{capture_csv_comments, ExcitationConfig, SignalKind, TableWriter};
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::sim_plant;
 use jointid::model::params::{model_params, seed_001_params, sim_spec, ParamField};
 use jointid::model::spec::{Structure, NONLINEAR_TWO_MASS};
-use jointid::sim::board::{encode_session, BoardStreamError, WireOptions};
+use jointid::sim::board::{stream_session, BoardStreamError, StreamError, WireOptions};
 use jointid::sim::{
-    parse_effects, simulate_excitation, Integrator, JointParams, Mechanism, Plant, SensorConfig,
-    SimConfig, SimOutput, MAX_SUBSTEPS,
+    parse_effects, stream_excitation, Integrator, JointParams, Mechanism, Plant, RunSummary,
+    Sample, SensorConfig, SimConfig, MAX_SUBSTEPS,
 };
 
 /// `--model`: a structure, or seed 001's nonlinear two-mass (the two-mass with
@@ -475,24 +479,16 @@ fn fitted_plant(
     Ok((sim_plant(&fit.model, &fit.plant), fit.model.effects.clone()))
 }
 
-/// The run as a capture CSV dataset: the simulator's values (unquantised), the excitation,
-/// and `sim_plant`, `sim_effects`, `sim_seed` as meta.
-pub fn to_dataset(out: &SimOutput, cfg: &SimConfig, excitation: &ExcitationConfig) -> Dataset {
-    let meta = [
+/// The `sim_plant`, `sim_effects`, `sim_seed` meta of the run's capture CSV.
+fn csv_meta(cfg: &SimConfig) -> std::collections::BTreeMap<String, String> {
+    [
         ("sim_plant", cfg.plant.kind.name().to_string()),
         ("sim_effects", effects_text(cfg, ";")),
         ("sim_seed", cfg.seed.to_string()),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
-    .collect();
-    Dataset {
-        name: "simulate".to_string(),
-        data: out.to_id_data(),
-        t0: 0.0,
-        excitation: Some(*excitation),
-        meta,
-    }
+    .collect()
 }
 
 fn effects_text(cfg: &SimConfig, sep: &str) -> String {
@@ -528,10 +524,91 @@ struct Report<'a> {
     config: &'a SimConfig,
 }
 
-fn rms(x: &[f64]) -> f64 {
-    let n = x.len().max(1) as f64;
-    let m = x.iter().sum::<f64>() / n;
-    (x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n).sqrt()
+/// Running mean and spread of a signal (Welford), for its RMS about the mean without
+/// keeping it.
+#[derive(Clone, Copy, Debug, Default)]
+struct Moments {
+    n: f64,
+    mean: f64,
+    m2: f64,
+}
+
+impl Moments {
+    fn push(&mut self, v: f64) {
+        self.n += 1.0;
+        let d = v - self.mean;
+        self.mean += d / self.n;
+        self.m2 += d * (v - self.mean);
+    }
+
+    /// RMS about the mean (0 without samples) [the signal's unit]
+    fn rms(&self) -> f64 {
+        (self.m2 / self.n.max(1.0)).sqrt()
+    }
+}
+
+/// Streams the run of `cfg` on `exc` into `path` as `.jcap` or capture CSV, each sample
+/// written as it is simulated (constant memory), `each` seeing every sample. A stop of the
+/// simulation or of the wire is returned as its own error, and leaves no file.
+///
+/// # Errors
+/// The simulation's ([`StreamError`]), the output's.
+fn write_run(
+    args: &SimulateArgs,
+    format: OutFormat,
+    cfg: &SimConfig,
+    exc: &ExcitationConfig,
+    mut each: impl FnMut(&Sample<'_>),
+) -> Result<(RunSummary, Option<u64>), Box<dyn std::error::Error + Send + Sync>> {
+    // why the writer stopped when it was the simulation, not the file
+    let mut stopped: Option<StreamError> = None;
+    let mut summary = None;
+    let mut keep = |r: Result<RunSummary, StreamError>, stopped: &mut Option<StreamError>| match r {
+        Ok(s) => {
+            summary = Some(s);
+            Ok(())
+        }
+        Err(StreamError::Io(e)) => Err(e),
+        Err(e) => {
+            *stopped = Some(e);
+            Err(std::io::Error::other("the simulation stopped"))
+        }
+    };
+    let written = match format {
+        OutFormat::Jcap => {
+            let opts = WireOptions::for_sim(cfg);
+            let written = write_stream_with(&args.out, args.force, |w| {
+                let r = stream_session(cfg, exc, &opts, w, &mut each);
+                let bytes = r.as_ref().map_or(0, |(_, n)| *n);
+                keep(r.map(|(s, _)| s), &mut stopped).map(|()| bytes)
+            });
+            match (stopped, written) {
+                (Some(e), _) => return Err(e.into()),
+                (None, w) => Some(w.map_err(SimulateError::from)?),
+            }
+        }
+        OutFormat::Csv => {
+            let ts = 1.0 / cfg.sample_rate_hz;
+            let comments = capture_csv_comments(Some(exc), ts, &csv_meta(cfg));
+            let written = write_file(&args.out, args.force, |w| {
+                let mut table = TableWriter::new(w, &comments)?;
+                let r = stream_excitation(cfg, exc, |s: &Sample<'_>| {
+                    each(s);
+                    table
+                        .row([s.t_s, s.theta_ref, s.u, s.theta_m])
+                        .map_err(StreamError::Io)
+                });
+                keep(r, &mut stopped)?;
+                table.finish()
+            });
+            match (stopped, written) {
+                (Some(e), _) => return Err(e.into()),
+                (None, w) => w.map_err(SimulateError::from)?,
+            }
+            None
+        }
+    };
+    Ok((summary.expect("a run that was written"), written))
 }
 
 /// Runs `jointid simulate`.
@@ -550,26 +627,13 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         check_output(p, args.force)?;
     }
     let (cfg, exc) = configure(args)?;
-    let out = simulate_excitation(&cfg, &exc)?;
     let params = cfg.params_json()? + "\n";
-    let (scale, stream_bytes) = match format {
-        OutFormat::Jcap => {
-            let opts = WireOptions::for_sim(&cfg);
-            let stream = encode_session(&out, &exc, &opts)?;
-            (
-                Some(opts.scale),
-                Some(write_stream(&args.out, &stream, args.force)?),
-            )
-        }
-        OutFormat::Csv => {
-            let ds = to_dataset(&out, &cfg, &exc);
-            write_file(&args.out, args.force, |mut w| {
-                write_capture_csv(&mut w, &ds)
-            })
-            .map_err(SimulateError::from)?;
-            (None, None)
-        }
-    };
+    let (mut u, mut theta_m) = (Moments::default(), Moments::default());
+    let (summary, stream_bytes) = write_run(args, format, &cfg, &exc, |s| {
+        u.push(s.u);
+        theta_m.push(s.theta_m);
+    })?;
+    let scale = (format == OutFormat::Jcap).then(|| WireOptions::for_sim(&cfg).scale);
     if let Some(p) = &args.params_out {
         write_file(p, args.force, |w| w.write_all(params.as_bytes()))
             .map_err(SimulateError::from)?;
@@ -580,15 +644,15 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         format,
         model: cfg.plant.kind.label(),
         effects: cfg.effects.iter().map(|e| e.to_string()).collect(),
-        samples: out.len(),
-        duration_s: out.len() as f64 * out.sample_interval_s,
+        samples: summary.samples,
+        duration_s: summary.samples as f64 * summary.sample_interval_s,
         params_out: args.params_out.as_ref().map(|p| p.display().to_string()),
         scale,
         stream_bytes,
-        integrator: out.integrator,
-        saturated_samples: out.saturated_samples,
-        u_rms: rms(&out.u),
-        theta_m_rms: rms(&out.theta_m),
+        integrator: summary.integrator,
+        saturated_samples: summary.saturated_samples,
+        u_rms: u.rms(),
+        theta_m_rms: theta_m.rms(),
         resonances_hz: modes.resonances_hz,
         anti_resonances_hz: modes.anti_resonances_hz,
         config: &cfg,
@@ -645,6 +709,7 @@ mod tests {
     use crate::{default_loaders, Cli, Command};
     use clap::Parser;
     use jointid::data::{load_csv, ColumnMap};
+    use jointid::sim::simulate_excitation;
 
     fn temp(name: &str) -> PathBuf {
         std::env::temp_dir().join(format!("jointid-sim-{}-{name}", std::process::id()))

@@ -150,3 +150,74 @@ fn a_diverging_run_stops_with_the_first_non_finite_sample_and_the_effects() {
         "{err}"
     );
 }
+
+#[test]
+fn the_streamed_session_is_the_bytes_of_the_collected_run_in_constant_memory() {
+    use crate::sim::board::{encode_session, stream_session, StreamError, WireOptions};
+    let mut exc = jointid_core::excitation::ExcitationConfig::paper_default();
+    exc.periods = 1;
+    // a fractional delay longer than the ring of two samples, a nonlinear plant, the
+    // seed 001 two-mass; 1 period + ramps is not a multiple of the batch of 32
+    let delayed = SimConfig {
+        effects: parse_effects(&["time_delay:samples=3.7", "backlash:width=2e-5"]).unwrap(),
+        ..SimConfig::default()
+    };
+    let (plant, effects) = seed_001();
+    let seed_001 = SimConfig {
+        plant,
+        effects,
+        seed: 9,
+        ..SimConfig::default()
+    };
+    let n = exc.total_samples().unwrap() as usize;
+    assert_ne!(n % 32, 0);
+    for cfg in [SimConfig::default(), delayed, seed_001] {
+        let out = simulate_excitation(&cfg, &exc).unwrap();
+        let opts = WireOptions::for_sim(&cfg);
+        let collected = encode_session(&out, &exc, &opts).unwrap();
+        let mut streamed = Vec::new();
+        let mut seen = Vec::new();
+        let (summary, bytes) =
+            stream_session(&cfg, &exc, &opts, &mut streamed, |s| seen.push(s.u)).unwrap();
+        assert!(streamed == collected, "{:?}", cfg.effects);
+        assert_eq!(bytes, collected.len() as u64);
+        assert_eq!(seen, out.u);
+        assert_eq!(summary.samples, n);
+        assert_eq!(summary.saturated_samples, out.saturated_samples);
+        assert_eq!(summary.integrator, out.integrator);
+        // the collector over the same loop, from a slice, agrees with the generator's run
+        assert_eq!(simulate(&cfg, &out.theta_ref).unwrap(), out);
+    }
+    // a diverging run stops the stream with the simulator's own error
+    let plant = Plant::new(Structure::TwoMass);
+    let cfg = SimConfig {
+        plant,
+        effects: parse_effects(&["nonlinear_stiffness:k3=-1e16"]).unwrap(),
+        ..SimConfig::default()
+    };
+    let opts = WireOptions::for_sim(&cfg);
+    // (its angle leaves the wire's range hundreds of samples before it is not finite)
+    let err = stream_session(&cfg, &exc, &opts, &mut Vec::new(), |_| {}).unwrap_err();
+    assert!(
+        matches!(err, StreamError::Sim(SimError::NonFinite { .. })),
+        "{err}"
+    );
+    // a finite run the wire cannot carry: the first such sample
+    let loose = WireOptions {
+        scale: jointid_core::wire::Scale {
+            torque_nm_per_count: 1e-12,
+            angle_rad_per_count: 1e-3,
+        },
+        ..WireOptions::for_sim(&SimConfig::default())
+    };
+    let out = simulate_excitation(&SimConfig::default(), &exc).unwrap();
+    let want = out
+        .to_raw_samples(&loose.scale, loose.timer_hz)
+        .unwrap_err();
+    let err =
+        stream_session(&SimConfig::default(), &exc, &loose, &mut Vec::new(), |_| {}).unwrap_err();
+    let StreamError::Wire(crate::sim::board::BoardStreamError::Range(got)) = err else {
+        panic!("{err}")
+    };
+    assert_eq!(got, want);
+}
