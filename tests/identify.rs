@@ -24,7 +24,7 @@ use jointid::ident::grey_box::{GreyBoxModel, Output};
 use jointid::ident::pem::{self, PemOptions};
 use jointid::model::spec::{Family, ModelSpec, Structure};
 use jointid::scenario::paper::{paper_runs, table, Table};
-use jointid::sim::{self, Disturbance, PlantKind, SensorConfig, SimConfig};
+use jointid::sim::{self, Disturbance, SensorConfig, SimConfig};
 use jointid_core::excitation::{ExcitationConfig, SignalKind};
 
 const FS: u32 = 500;
@@ -47,7 +47,7 @@ fn excitation(seed: u64, periods: u32) -> ExcitationConfig {
 fn sim_config(params: sim::JointParams, seed: u64) -> SimConfig {
     let mut cfg = SimConfig {
         plant: sim::Plant {
-            kind: PlantKind::ThreeMass,
+            kind: Structure::ThreeMass,
             params,
         },
         sensors: SensorConfig {

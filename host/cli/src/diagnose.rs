@@ -151,7 +151,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
     let user = args.sim.as_deref().map(user_sim).transpose()?;
     let structure = match (&args.model, &user) {
         (Some(m), _) => structure_of(m)?,
-        (None, Some(u)) => u.plant.kind.structure(),
+        (None, Some(u)) => u.plant.kind,
         (None, None) => Structure::ThreeMass,
     };
     let mut est: Vec<Dataset> = vec![args

@@ -12,7 +12,7 @@
 //!   (`jointid_core::wire`: session header with the excitation config and the scale,
 //!   delta-coded sample batches from `BatchBuilder` with the reference CRC, a `Status`
 //!   every [`WireOptions::status_every`] batches, `End`; [`jointid::sim::board`]) into a
-//!   `.jcap` written by [`jointid::capture::jcap::write_stream`], so `jointid info`,
+//!   `.jcap` written by [`jointid::capture::jcap::write_stream_with`], so `jointid info`,
 //!   `export`, `analyze` and `fit` read it exactly like a board capture. The wire carries integer counts: `u` and `θm` are rounded to the
 //!   scale of [`WireOptions::for_sim`] (at most half a count from the simulator's value),
 //!   the reference is regenerated from the header bit-exactly.
@@ -21,11 +21,22 @@
 //! - Both outputs follow the one rule of every output file ([`jointid::data::output`]): an
 //!   existing file is replaced only with `--force`, checked before the simulation; each
 //!   appears whole or not at all.
+//! - The run is streamed: each sample is simulated ([`jointid::sim::Simulation`]), encoded
+//!   ([`jointid::sim::board::stream_session`]) or formatted ([`TableWriter`]) and written
+//!   as it comes, so memory does not grow with `--periods`; a simulation that stops (its
+//!   first non-finite sample, named with the effects) leaves no file.
 //!
 //! `--param NAME=VALUE` overrides one physical parameter of the chosen model, named as in
 //! seed 000 Table 1 (`J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r`) plus
 //! seed 001's `k3`, `F_c` for the nonlinear two-mass (see [`jointid::model::params`]); only
-//! the names the model uses are accepted ([`jointid::model::params::model_params`]).
+//! the names the model uses are accepted ([`jointid::model::params::model_params`],
+//! [`jointid::model::params::seed_001_params`]).
+//!
+//! `--model` and `--effect` resolve into the one model description, a
+//! [`jointid::model::spec::ModelSpec`], by [`jointid::model::params::sim_spec`] over the
+//! effect list `fit` resolves ([`jointid::model::spec::ModelSpec::effect_specs`]):
+//! `nonlinear-two-mass` is the two-mass with seed 001's `nonlinear_stiffness` (`k3`) and
+//! pure `coulomb_friction` (`F_c`) attached, as `fit --model nonlinear-two-mass` fits it.
 // Units in brackets (`[s]`, `[rad]`) are not intra-doc links.
 #![allow(rustdoc::broken_intra_doc_links)]
 
@@ -38,22 +49,92 @@ use jointid_core::wire::Scale;
 use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
-use jointid::capture::jcap::{write_stream, JcapError};
+use jointid::capture::jcap::{write_stream_with, JcapError};
 use jointid::data::output::{check_output, write_file, OutputError};
-use jointid::data::{write_capture_csv, Dataset, ExcitationConfig, SignalKind};
+use jointid::data::{capture_csv_comments, ExcitationConfig, SignalKind, TableWriter};
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::sim_plant;
-use jointid::model::params::model_params;
-use jointid::sim::board::{encode_session, BoardStreamError, WireOptions};
+use jointid::model::params::{model_params, seed_001_params, sim_spec, ParamField};
+use jointid::model::spec::{Structure, NONLINEAR_TWO_MASS};
+use jointid::sim::board::{stream_session, BoardStreamError, StreamError, WireOptions};
 use jointid::sim::{
-    parse_effects, simulate_excitation, Integrator, JointParams, Mechanism, Plant, PlantKind,
-    SensorConfig, SimConfig, SimOutput, MAX_SUBSTEPS,
+    parse_effects, stream_excitation, Integrator, JointParams, Mechanism, Plant, RunSummary,
+    Sample, SensorConfig, SimConfig, MAX_SUBSTEPS,
 };
 
-/// The `--model` values: every plant by its label (`two-mass`), its JSON name
-/// (`two_mass`) as alias, with [`PlantKind::describe`] as help.
-fn plant_parser() -> impl TypedValueParser<Value = PlantKind> {
-    PossibleValuesParser::new(PlantKind::ALL.map(|k| {
+/// `--model`: a structure, or seed 001's nonlinear two-mass (the two-mass with
+/// `nonlinear_stiffness` and `coulomb_friction` attached, [`sim_spec`]), as `fit --model`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SimModel {
+    /// the mechanical structure (the two-mass for `nonlinear-two-mass`)
+    pub structure: Structure,
+    /// `nonlinear-two-mass` was asked for
+    pub nonlinear_two_mass: bool,
+}
+
+impl SimModel {
+    /// Every `--model` value, in the order of the help.
+    pub const ALL: [SimModel; 5] = [
+        SimModel::of(Structure::Rigid),
+        SimModel::of(Structure::TwoMass),
+        SimModel::of(Structure::ThreeMass),
+        SimModel::of(Structure::FourMass),
+        SimModel {
+            structure: Structure::TwoMass,
+            nonlinear_two_mass: true,
+        },
+    ];
+
+    /// The plain structure `s`.
+    pub const fn of(s: Structure) -> SimModel {
+        SimModel {
+            structure: s,
+            nonlinear_two_mass: false,
+        }
+    }
+
+    /// Name on the command line (`three-mass`, `nonlinear-two-mass`).
+    pub fn label(self) -> &'static str {
+        if self.nonlinear_two_mass {
+            NONLINEAR_TWO_MASS
+        } else {
+            self.structure.label()
+        }
+    }
+
+    /// The JSON spelling (`three_mass`), an alias on the command line.
+    fn name(self) -> &'static str {
+        if self.nonlinear_two_mass {
+            "nonlinear_two_mass"
+        } else {
+            self.structure.name()
+        }
+    }
+
+    /// The help of the value.
+    fn describe(self) -> &'static str {
+        if self.nonlinear_two_mass {
+            "seed 001: two-mass with cubic spring and Coulomb friction"
+        } else {
+            self.structure.describe()
+        }
+    }
+
+    /// The parameters `--param` may set: the structure's, and seed 001's `k3`, `F_c` for
+    /// the nonlinear two-mass.
+    pub fn params(self) -> Vec<(&'static str, ParamField)> {
+        let mut v = model_params(self.structure);
+        if self.nonlinear_two_mass {
+            v.extend(seed_001_params());
+        }
+        v
+    }
+}
+
+/// The `--model` values: every model by its label (`two-mass`), its JSON name
+/// (`two_mass`) as alias, with [`SimModel::describe`] as help.
+fn plant_parser() -> impl TypedValueParser<Value = SimModel> {
+    PossibleValuesParser::new(SimModel::ALL.map(|k| {
         let v = PossibleValue::new(k.label()).help(k.describe());
         if k.name() == k.label() {
             v
@@ -62,7 +143,7 @@ fn plant_parser() -> impl TypedValueParser<Value = PlantKind> {
         }
     }))
     .map(|s| {
-        PlantKind::ALL
+        SimModel::ALL
             .into_iter()
             .find(|k| k.label() == s || k.name() == s)
             .expect("a possible value")
@@ -98,7 +179,7 @@ pub struct SimulateArgs {
     /// plant model
     #[arg(long, visible_alias = "plant", value_parser = plant_parser(), value_name = "MODEL",
           default_value = "three-mass")]
-    pub model: PlantKind,
+    pub model: SimModel,
     /// override a physical parameter of the model, repeatable (`k_g=1.3e5`); names as in
     /// seed 000 Table 1 (J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r) and
     /// seed 001 (k3, F_c), those the model uses
@@ -238,11 +319,11 @@ pub enum SimulateError {
 /// [`SimulateError::ParamSyntax`], [`SimulateError::UnknownParam`] or
 /// [`SimulateError::BadValue`], each naming the parameter and listing the valid names.
 pub fn apply_params(
-    model: PlantKind,
+    model: SimModel,
     specs: &[String],
     params: &mut JointParams,
 ) -> Result<(), SimulateError> {
-    let fields = model_params(model);
+    let fields = model.params();
     let valid = || {
         fields
             .iter()
@@ -316,12 +397,25 @@ pub fn out_format(path: &Path) -> Result<OutFormat, SimulateError> {
 pub fn configure(
     args: &SimulateArgs,
 ) -> Result<(SimConfig, ExcitationConfig), Box<dyn std::error::Error + Send + Sync>> {
-    let (mut plant, mut effects) = match &args.model_file {
-        Some(path) => fitted_plant(path)?,
-        None => (Plant::new(args.model), Vec::new()),
+    let (plant, effects) = match &args.model_file {
+        Some(path) => {
+            let (mut plant, mut effects) = fitted_plant(path)?;
+            apply_params(SimModel::of(plant.kind), &args.params, &mut plant.params)?;
+            effects.extend(parse_effects(&args.effects)?);
+            (plant, effects)
+        }
+        None => {
+            let mut plant = Plant::new(args.model.structure);
+            apply_params(args.model, &args.params, &mut plant.params)?;
+            let spec = sim_spec(
+                plant.kind,
+                args.model.nonlinear_two_mass,
+                &args.effects,
+                &plant.params,
+            )?;
+            (plant, spec.effects.unwrap_or_default())
+        }
     };
-    apply_params(plant.kind, &args.params, &mut plant.params)?;
-    effects.extend(parse_effects(&args.effects)?);
     let mut cfg = SimConfig {
         plant,
         effects,
@@ -385,24 +479,16 @@ fn fitted_plant(
     Ok((sim_plant(&fit.model, &fit.plant), fit.model.effects.clone()))
 }
 
-/// The run as a capture CSV dataset: the simulator's values (unquantised), the excitation,
-/// and `sim_plant`, `sim_effects`, `sim_seed` as meta.
-pub fn to_dataset(out: &SimOutput, cfg: &SimConfig, excitation: &ExcitationConfig) -> Dataset {
-    let meta = [
+/// The `sim_plant`, `sim_effects`, `sim_seed` meta of the run's capture CSV.
+fn csv_meta(cfg: &SimConfig) -> std::collections::BTreeMap<String, String> {
+    [
         ("sim_plant", cfg.plant.kind.name().to_string()),
         ("sim_effects", effects_text(cfg, ";")),
         ("sim_seed", cfg.seed.to_string()),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
-    .collect();
-    Dataset {
-        name: "simulate".to_string(),
-        data: out.to_id_data(),
-        t0: 0.0,
-        excitation: Some(*excitation),
-        meta,
-    }
+    .collect()
 }
 
 fn effects_text(cfg: &SimConfig, sep: &str) -> String {
@@ -438,10 +524,91 @@ struct Report<'a> {
     config: &'a SimConfig,
 }
 
-fn rms(x: &[f64]) -> f64 {
-    let n = x.len().max(1) as f64;
-    let m = x.iter().sum::<f64>() / n;
-    (x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n).sqrt()
+/// Running mean and spread of a signal (Welford), for its RMS about the mean without
+/// keeping it.
+#[derive(Clone, Copy, Debug, Default)]
+struct Moments {
+    n: f64,
+    mean: f64,
+    m2: f64,
+}
+
+impl Moments {
+    fn push(&mut self, v: f64) {
+        self.n += 1.0;
+        let d = v - self.mean;
+        self.mean += d / self.n;
+        self.m2 += d * (v - self.mean);
+    }
+
+    /// RMS about the mean (0 without samples) [the signal's unit]
+    fn rms(&self) -> f64 {
+        (self.m2 / self.n.max(1.0)).sqrt()
+    }
+}
+
+/// Streams the run of `cfg` on `exc` into `path` as `.jcap` or capture CSV, each sample
+/// written as it is simulated (constant memory), `each` seeing every sample. A stop of the
+/// simulation or of the wire is returned as its own error, and leaves no file.
+///
+/// # Errors
+/// The simulation's ([`StreamError`]), the output's.
+fn write_run(
+    args: &SimulateArgs,
+    format: OutFormat,
+    cfg: &SimConfig,
+    exc: &ExcitationConfig,
+    mut each: impl FnMut(&Sample<'_>),
+) -> Result<(RunSummary, Option<u64>), Box<dyn std::error::Error + Send + Sync>> {
+    // why the writer stopped when it was the simulation, not the file
+    let mut stopped: Option<StreamError> = None;
+    let mut summary = None;
+    let mut keep = |r: Result<RunSummary, StreamError>, stopped: &mut Option<StreamError>| match r {
+        Ok(s) => {
+            summary = Some(s);
+            Ok(())
+        }
+        Err(StreamError::Io(e)) => Err(e),
+        Err(e) => {
+            *stopped = Some(e);
+            Err(std::io::Error::other("the simulation stopped"))
+        }
+    };
+    let written = match format {
+        OutFormat::Jcap => {
+            let opts = WireOptions::for_sim(cfg);
+            let written = write_stream_with(&args.out, args.force, |w| {
+                let r = stream_session(cfg, exc, &opts, w, &mut each);
+                let bytes = r.as_ref().map_or(0, |(_, n)| *n);
+                keep(r.map(|(s, _)| s), &mut stopped).map(|()| bytes)
+            });
+            match (stopped, written) {
+                (Some(e), _) => return Err(e.into()),
+                (None, w) => Some(w.map_err(SimulateError::from)?),
+            }
+        }
+        OutFormat::Csv => {
+            let ts = 1.0 / cfg.sample_rate_hz;
+            let comments = capture_csv_comments(Some(exc), ts, &csv_meta(cfg));
+            let written = write_file(&args.out, args.force, |w| {
+                let mut table = TableWriter::new(w, &comments)?;
+                let r = stream_excitation(cfg, exc, |s: &Sample<'_>| {
+                    each(s);
+                    table
+                        .row([s.t_s, s.theta_ref, s.u, s.theta_m])
+                        .map_err(StreamError::Io)
+                });
+                keep(r, &mut stopped)?;
+                table.finish()
+            });
+            match (stopped, written) {
+                (Some(e), _) => return Err(e.into()),
+                (None, w) => w.map_err(SimulateError::from)?,
+            }
+            None
+        }
+    };
+    Ok((summary.expect("a run that was written"), written))
 }
 
 /// Runs `jointid simulate`.
@@ -460,26 +627,13 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         check_output(p, args.force)?;
     }
     let (cfg, exc) = configure(args)?;
-    let out = simulate_excitation(&cfg, &exc)?;
     let params = cfg.params_json()? + "\n";
-    let (scale, stream_bytes) = match format {
-        OutFormat::Jcap => {
-            let opts = WireOptions::for_sim(&cfg);
-            let stream = encode_session(&out, &exc, &opts)?;
-            (
-                Some(opts.scale),
-                Some(write_stream(&args.out, &stream, args.force)?),
-            )
-        }
-        OutFormat::Csv => {
-            let ds = to_dataset(&out, &cfg, &exc);
-            write_file(&args.out, args.force, |mut w| {
-                write_capture_csv(&mut w, &ds)
-            })
-            .map_err(SimulateError::from)?;
-            (None, None)
-        }
-    };
+    let (mut u, mut theta_m) = (Moments::default(), Moments::default());
+    let (summary, stream_bytes) = write_run(args, format, &cfg, &exc, |s| {
+        u.push(s.u);
+        theta_m.push(s.theta_m);
+    })?;
+    let scale = (format == OutFormat::Jcap).then(|| WireOptions::for_sim(&cfg).scale);
     if let Some(p) = &args.params_out {
         write_file(p, args.force, |w| w.write_all(params.as_bytes()))
             .map_err(SimulateError::from)?;
@@ -490,15 +644,15 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         format,
         model: cfg.plant.kind.label(),
         effects: cfg.effects.iter().map(|e| e.to_string()).collect(),
-        samples: out.len(),
-        duration_s: out.len() as f64 * out.sample_interval_s,
+        samples: summary.samples,
+        duration_s: summary.samples as f64 * summary.sample_interval_s,
         params_out: args.params_out.as_ref().map(|p| p.display().to_string()),
         scale,
         stream_bytes,
-        integrator: out.integrator,
-        saturated_samples: out.saturated_samples,
-        u_rms: rms(&out.u),
-        theta_m_rms: rms(&out.theta_m),
+        integrator: summary.integrator,
+        saturated_samples: summary.saturated_samples,
+        u_rms: u.rms(),
+        theta_m_rms: theta_m.rms(),
         resonances_hz: modes.resonances_hz,
         anti_resonances_hz: modes.anti_resonances_hz,
         config: &cfg,
@@ -555,6 +709,7 @@ mod tests {
     use crate::{default_loaders, Cli, Command};
     use clap::Parser;
     use jointid::data::{load_csv, ColumnMap};
+    use jointid::sim::simulate_excitation;
 
     fn temp(name: &str) -> PathBuf {
         std::env::temp_dir().join(format!("jointid-sim-{}-{name}", std::process::id()))
@@ -663,7 +818,7 @@ mod tests {
             "--params-out",
             "p.json",
         ]);
-        assert_eq!(a.model, PlantKind::ThreeMass);
+        assert_eq!(a.model, SimModel::of(Structure::ThreeMass));
         assert_eq!(a.excitation, ExcitationArg::RandomOdd);
         assert_eq!(a.params_out, Some(PathBuf::from("p.json")));
         let (cfg, exc) = configure(&a).unwrap();
@@ -682,15 +837,19 @@ mod tests {
             "--excitation-seed",
             "4",
         ]);
-        assert_eq!(b.model, PlantKind::NonlinearTwoMass);
+        assert_eq!(b.model, SimModel::ALL[4]);
         assert_eq!(b.excitation, ExcitationArg::OddMultisine);
         assert_eq!(b.params_out, Some(PathBuf::from("q.json")));
         let (cfg, exc) = configure(&b).unwrap();
         assert_eq!((cfg.seed, exc.seed), (3, 4));
-        assert_eq!(cfg.plant.kind, PlantKind::NonlinearTwoMass);
+        // the alias is the two-mass with seed 001's two effects, as `fit` resolves it
+        assert_eq!(cfg.plant.kind, Structure::TwoMass);
+        let names: Vec<&str> = cfg.effects.iter().map(|e| e.name()).collect();
+        assert_eq!(names, ["nonlinear_stiffness", "coulomb_friction"]);
         let d = parse(&["--out", "c.csv"]);
         let (cfg, exc) = configure(&d).unwrap();
-        assert_eq!(cfg.plant.kind, PlantKind::ThreeMass);
+        assert_eq!(cfg.plant.kind, Structure::ThreeMass);
+        assert!(cfg.effects.is_empty());
         assert_eq!(exc, ExcitationConfig::paper_default());
         assert_eq!(cfg.seed, SimConfig::default().seed);
         assert!(Cli::try_parse_from([
@@ -721,38 +880,65 @@ mod tests {
         assert_eq!(cfg.plant.params.j_p, 2.0);
         assert_eq!(cfg.plant.params.k_a, JointParams::default().k_a);
         let mut p = JointParams::default();
-        let err = apply_params(PlantKind::ThreeMass, &["J_p=2".into()], &mut p).unwrap_err();
+        let err = apply_params(
+            SimModel::of(Structure::ThreeMass),
+            &["J_p=2".into()],
+            &mut p,
+        )
+        .unwrap_err();
         assert_eq!(
             err.to_string(),
             "--param `J_p`: unknown parameter for three-mass (valid: J_m, J_a1, J_a2, k_g, d_g, k_a, d_a, f_m, r)"
         );
-        let err = apply_params(PlantKind::Rigid, &["k_g=1".into()], &mut p).unwrap_err();
+        let err =
+            apply_params(SimModel::of(Structure::Rigid), &["k_g=1".into()], &mut p).unwrap_err();
         assert!(
             err.to_string().contains("(valid: J_m, J_a1, J_a2, f_m, r)"),
             "{err}"
         );
-        let err =
-            apply_params(PlantKind::NonlinearTwoMass, &["k3=abc".into()], &mut p).unwrap_err();
+        let err = apply_params(SimModel::ALL[4], &["k3=abc".into()], &mut p).unwrap_err();
         assert_eq!(
             err.to_string(),
             "--param `k3`: `abc` is not a finite number (valid names for nonlinear-two-mass: J_m, J_a1, J_a2, k_g, d_g, f_m, r, k3, F_c)"
         );
-        let err = apply_params(PlantKind::TwoMass, &["k_g".into()], &mut p).unwrap_err();
+        let two = SimModel::of(Structure::TwoMass);
+        let err = apply_params(two, &["k_g".into()], &mut p).unwrap_err();
         assert!(matches!(err, SimulateError::ParamSyntax { .. }), "{err}");
-        let err = apply_params(PlantKind::TwoMass, &["k_g=inf".into()], &mut p).unwrap_err();
+        let err = apply_params(two, &["k_g=inf".into()], &mut p).unwrap_err();
         assert!(matches!(err, SimulateError::BadValue { .. }), "{err}");
         assert_eq!(p, JointParams::default(), "nothing applied on error");
         apply_params(
-            PlantKind::NonlinearTwoMass,
+            SimModel::ALL[4],
             &["F_c=0.05".into(), "k3=1e12".into()],
             &mut p,
         )
         .unwrap();
         assert_eq!((p.f_c, p.k3), (0.05, 1e12));
+        // and they reach seed 001's effects of the alias (pure Coulomb friction)
+        let a = parse(&[
+            "--model",
+            "nonlinear_two_mass",
+            "--param",
+            "k3=1e12",
+            "--param",
+            "F_c=0.05",
+            "--effect",
+            "backlash",
+            "--out",
+            "x.csv",
+        ]);
+        let (cfg, _) = configure(&a).unwrap();
+        let specs: Vec<String> = cfg.effects.iter().map(|e| e.to_string()).collect();
+        assert_eq!(specs[0], "nonlinear_stiffness:k3=1000000000000");
+        assert!(
+            specs[1].starts_with("coulomb_friction:fc=0.05,fs=0.05,"),
+            "{specs:?}"
+        );
+        assert!(specs[2].starts_with("backlash:"), "{specs:?}");
         // every name the models accept is a name of the parameter table
         let table: Vec<&str> = JointParams::default().table().iter().map(|t| t.0).collect();
-        for k in PlantKind::ALL {
-            for (n, _) in model_params(k) {
+        for k in SimModel::ALL {
+            for (n, _) in k.params() {
                 assert!(table.contains(&n), "{n}");
             }
         }

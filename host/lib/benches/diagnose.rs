@@ -23,9 +23,7 @@ use jointid::ident::linalg::GaussRng;
 use jointid::ident::nonlinear::{identify, NlRequest};
 use jointid::model::effects::Effect;
 use jointid::model::spec::Structure;
-use jointid::sim::{
-    simulate_excitation, ControllerConfig, JointParams, Plant, PlantKind, SimConfig,
-};
+use jointid::sim::{simulate_excitation, ControllerConfig, JointParams, Plant, SimConfig};
 use jointid::test_support::random_joint;
 
 /// One case of the battery.
@@ -112,7 +110,7 @@ fn captures(case: &Case, periods: u32, rms: f64) -> (Dataset, Dataset) {
     let run = |seed: u64, exc_seed: u64, name: &str| {
         let cfg = SimConfig {
             plant: Plant {
-                kind: PlantKind::ThreeMass,
+                kind: Structure::ThreeMass,
                 params: case.params,
             },
             effects: case.hidden.clone(),
@@ -149,7 +147,7 @@ fn true_fit(case: &Case, val: &Dataset) -> f64 {
     let measured = Measured::new(&val.data, opts.band_hz, skip);
     let model = DrivenModel {
         plant: Plant {
-            kind: PlantKind::ThreeMass,
+            kind: Structure::ThreeMass,
             params: case.params,
         },
         effects: case.hidden.clone(),

@@ -18,7 +18,7 @@ use jointid::ident::frf_fit::{fit_frf, FrfFitOptions};
 use jointid::ident::grey_box::{GreyBoxModel, Output};
 use jointid::ident::linalg::GaussRng;
 use jointid::model::spec::Structure;
-use jointid::sim::{simulate_excitation, Plant, PlantKind, SimConfig};
+use jointid::sim::{simulate_excitation, Plant, SimConfig};
 use jointid::test_support::random_joint;
 
 fn main() {
@@ -34,7 +34,7 @@ fn main() {
         let (p, controller, rms) = random_joint(&mut rng, d);
         let cfg = SimConfig {
             plant: Plant {
-                kind: PlantKind::ThreeMass,
+                kind: Structure::ThreeMass,
                 params: p,
             },
             controller,

@@ -277,7 +277,8 @@ fn three_mass_effects() {
 /// at the truth (the global optimum as far as it can be known); also counted, the joints
 /// whose J_m, J_a, k1, k3, d, F_c all lie within 5 % of the truth.
 fn robustness(n: usize) {
-    use jointid::model::params::{JointParams, Plant, PlantKind};
+    use jointid::model::params::{sim_spec, JointParams, Plant};
+    use jointid::model::spec::Structure;
     println!("== seed 001's model on {n} simulated joints (±30 %, k3 and F_c over a decade)");
     let mut rng = GaussRng::new(11);
     let (mut optimum, mut truth_5, mut times) = (0, 0, Vec::new());
@@ -300,11 +301,14 @@ fn robustness(n: usize) {
             r: 1.0 / 118.0,
             ..JointParams::default()
         };
+        // seed 001's nonlinear two-mass: the two-mass with its two effects from `params`
+        let spec = sim_spec(Structure::TwoMass, true, &[], &params).expect("seed 001's effects");
         let cfg = SimConfig {
             plant: Plant {
-                kind: PlantKind::NonlinearTwoMass,
+                kind: Structure::TwoMass,
                 params,
             },
+            effects: spec.effects.unwrap_or_default(),
             seed: 100 + i as u64,
             ..SimConfig::default()
         };

@@ -191,16 +191,37 @@ pub fn events_path(capture: &Path) -> PathBuf {
 /// [`JcapError::Output`] naming the file, [`JcapError::Io`] naming a sidecar that cannot
 /// be removed.
 pub fn write_stream(path: &Path, stream: &[u8], overwrite: bool) -> Result<u64, JcapError> {
+    write_stream_with(path, overwrite, |w| {
+        w.write_all(stream)?;
+        Ok(stream.len() as u64)
+    })
+}
+
+/// [`write_stream`] with the stream written by `fill` as it is produced (e.g.
+/// `sim::board::stream_session`), which returns the stream bytes it wrote: constant
+/// memory for a stream of any length, the same rule (whole or not at all: an error of
+/// `fill` leaves no file).
+///
+/// # Errors
+/// As [`write_stream`]; an error of `fill` as [`JcapError::Output`].
+pub fn write_stream_with(
+    path: &Path,
+    overwrite: bool,
+    fill: impl FnOnce(&mut dyn Write) -> io::Result<u64>,
+) -> Result<u64, JcapError> {
+    let mut written = 0;
     crate::data::output::write_file(path, overwrite, |w| {
         w.write_all(&MAGIC)?;
-        w.write_all(stream)
+        written = fill(w)?;
+        Ok(())
     })?;
+    let stream_len = written;
     let events = events_path(path);
     match std::fs::remove_file(&events) {
         Err(err) if err.kind() != io::ErrorKind::NotFound => {
             Err(JcapError::Io { path: events, err })
         }
-        _ => Ok(stream.len() as u64),
+        _ => Ok(stream_len),
     }
 }
 

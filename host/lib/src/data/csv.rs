@@ -435,6 +435,24 @@ pub fn excitation_comment_lines(cfg: &ExcitationConfig) -> String {
     )
 }
 
+/// The `# key=value` comment lines of a capture CSV ([`write_capture_csv`]): the
+/// excitation's, the sample interval `ts` \[s\], then `meta` (keys with `=` and values with
+/// a newline left out).
+pub fn capture_csv_comments(
+    excitation: Option<&ExcitationConfig>,
+    ts: f64,
+    meta: &std::collections::BTreeMap<String, String>,
+) -> String {
+    let mut comments = excitation.map(excitation_comment_lines).unwrap_or_default();
+    comments.push_str(&format!("# sample_interval_s={ts}\n"));
+    for (k, v) in meta {
+        if k != "sample_interval_s" && !k.contains('=') && !v.contains('\n') {
+            comments.push_str(&format!("# {k}={v}\n"));
+        }
+    }
+    comments
+}
+
 /// Writes `ds` as a capture CSV: the excitation keys (when known),
 /// `sample_interval_s`, every other meta key, the header
 /// `t,theta_ref,u,theta_m` and one row per sample, numbers in shortest
@@ -451,17 +469,7 @@ pub fn write_capture_csv(out: &mut dyn std::io::Write, ds: &Dataset) -> std::io:
             format!("{}: no reference signal for the theta_ref column", ds.name),
         )
     })?;
-    let mut comments = ds
-        .excitation
-        .as_ref()
-        .map(excitation_comment_lines)
-        .unwrap_or_default();
-    comments.push_str(&format!("# sample_interval_s={}\n", ds.data.ts));
-    for (k, v) in &ds.meta {
-        if k != "sample_interval_s" && !k.contains('=') && !v.contains('\n') {
-            comments.push_str(&format!("# {k}={v}\n"));
-        }
-    }
+    let comments = capture_csv_comments(ds.excitation.as_ref(), ds.data.ts, &ds.meta);
     let rows = r
         .iter()
         .zip(&ds.data.u)
@@ -486,15 +494,50 @@ pub fn write_table<W: Write + ?Sized>(
     comments: &str,
     rows: impl IntoIterator<Item = [f64; 4]>,
 ) -> io::Result<()> {
-    out.write_all(comments.as_bytes())?;
-    if !comments.is_empty() && !comments.ends_with('\n') {
-        out.write_all(b"\n")?;
+    let mut table = TableWriter::new(out, comments)?;
+    for row in rows {
+        table.row(row)?;
     }
-    out.write_all(b"t,theta_ref,u,theta_m\n")?;
-    let mut fmt = zmij::Buffer::new();
-    let mut block = Vec::with_capacity(1 << 16);
-    const COLUMNS: [&str; 4] = ["t", "theta_ref", "u", "theta_m"];
-    for (k, row) in rows.into_iter().enumerate() {
+    table.finish()
+}
+
+/// The row writer of [`write_table`], one row at a time (for rows produced as they are
+/// written, e.g. a streamed simulation): the same bytes, the same refusal of a value that
+/// is not finite.
+pub struct TableWriter<'w, W: Write + ?Sized> {
+    out: &'w mut W,
+    fmt: zmij::Buffer,
+    block: Vec<u8>,
+    rows: usize,
+}
+
+impl<'w, W: Write + ?Sized> TableWriter<'w, W> {
+    /// Writes `comments` and the header line.
+    ///
+    /// # Errors
+    /// Whatever `out` returns.
+    pub fn new(out: &'w mut W, comments: &str) -> io::Result<Self> {
+        out.write_all(comments.as_bytes())?;
+        if !comments.is_empty() && !comments.ends_with('\n') {
+            out.write_all(b"\n")?;
+        }
+        out.write_all(b"t,theta_ref,u,theta_m\n")?;
+        Ok(TableWriter {
+            out,
+            fmt: zmij::Buffer::new(),
+            block: Vec::with_capacity(1 << 16),
+            rows: 0,
+        })
+    }
+
+    /// One row `[t [s], θref [rad], u [N·m], θm [rad]]`.
+    ///
+    /// # Errors
+    /// [`io::ErrorKind::InvalidData`] naming the row and the column of a value that is not
+    /// finite; whatever `out` returns.
+    pub fn row(&mut self, row: [f64; 4]) -> io::Result<()> {
+        const COLUMNS: [&str; 4] = ["t", "theta_ref", "u", "theta_m"];
+        let k = self.rows;
         for (i, v) in row.into_iter().enumerate() {
             if !v.is_finite() {
                 return Err(io::Error::new(
@@ -507,18 +550,27 @@ pub fn write_table<W: Write + ?Sized>(
                 ));
             }
             if i > 0 {
-                block.push(b',');
+                self.block.push(b',');
             }
-            block.extend_from_slice(fmt.format(v).as_bytes());
+            self.block.extend_from_slice(self.fmt.format(v).as_bytes());
         }
-        block.push(b'\n');
-        if block.len() >= (1 << 16) - 128 {
-            out.write_all(&block)?;
-            block.clear();
+        self.block.push(b'\n');
+        self.rows += 1;
+        if self.block.len() >= (1 << 16) - 128 {
+            self.out.write_all(&self.block)?;
+            self.block.clear();
         }
+        Ok(())
     }
-    out.write_all(&block)?;
-    out.flush()
+
+    /// Writes what is buffered and flushes `out`.
+    ///
+    /// # Errors
+    /// Whatever `out` returns.
+    pub fn finish(self) -> io::Result<()> {
+        self.out.write_all(&self.block)?;
+        self.out.flush()
+    }
 }
 
 /// Reads a CSV file as one uniformly sampled record (see [`parse_csv`]).

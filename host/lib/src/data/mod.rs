@@ -50,8 +50,8 @@ pub mod prep;
 pub mod segment;
 
 pub use csv::{
-    excitation_comment_lines, load_csv, parse_csv, parse_csv_record, write_capture_csv,
-    write_table, EXCITATION_KEYS, SAMPLE_INTERVAL_TOLERANCE,
+    capture_csv_comments, excitation_comment_lines, load_csv, parse_csv, parse_csv_record,
+    write_capture_csv, write_table, TableWriter, EXCITATION_KEYS, SAMPLE_INTERVAL_TOLERANCE,
 };
 pub use dsp::{decimate, decimation_taps};
 pub use prep::{detrend, Detrend, Prep};

@@ -515,7 +515,7 @@ fn series_of(
                 capture: name.clone(),
                 frf,
                 nominal: crate::ident::validate::BodeCurve {
-                    name: format!("nominal {}", model.plant.kind.structure().label()),
+                    name: format!("nominal {}", model.plant.kind.label()),
                     freq_hz: grid,
                     response,
                 },

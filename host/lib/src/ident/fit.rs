@@ -967,10 +967,6 @@ mod tests {
             let k: Family = st.label().parse().unwrap();
             assert_eq!(k.structure(), Some(st));
         }
-        for p in crate::model::params::PlantKind::ALL {
-            let k: Family = p.structure().label().parse().unwrap();
-            assert_eq!(k.structure(), Some(p.structure()));
-        }
     }
 
     #[test]

@@ -61,97 +61,15 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::spec::Structure;
-
-/// Which mechanical structure the plant has.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum PlantKind {
-    /// one rigid mass `J = J_m + r²(J_a1 + J_a2)` with viscous friction `f_m`
-    Rigid,
-    /// motor + one arm mass `J_a1 + J_a2` through the gearbox spring `k_g`, `d_g`
-    TwoMass,
-    /// seed 000 eq. (5)–(6): motor, `J_a1`, `J_a2`, springs `k_g`, `k_a`
-    ThreeMass,
-    /// seed 000 eq. (7)–(8): the three-mass plus `J_p` on `J_a1` through `k_p`, `d_p`
-    FourMass,
-    /// seed 001 eq. (4)–(9): two-mass with the cubic spring `k_g x + k3 x³` and Coulomb
-    /// friction `F_c sgn(φ̇_m)` on the motor (sgn regularised, see [`super::effects`])
-    NonlinearTwoMass,
-}
-
-impl PlantKind {
-    /// Every kind, in the order of increasing complexity.
-    pub const ALL: [PlantKind; 5] = [
-        PlantKind::Rigid,
-        PlantKind::TwoMass,
-        PlantKind::ThreeMass,
-        PlantKind::FourMass,
-        PlantKind::NonlinearTwoMass,
-    ];
-
-    /// The mechanical structure (the nonlinear two-mass is a two-mass).
-    pub fn structure(self) -> Structure {
-        match self {
-            PlantKind::Rigid => Structure::Rigid,
-            PlantKind::TwoMass | PlantKind::NonlinearTwoMass => Structure::TwoMass,
-            PlantKind::ThreeMass => Structure::ThreeMass,
-            PlantKind::FourMass => Structure::FourMass,
-        }
-    }
-
-    /// Name on the command line (`three-mass`, `nonlinear-two-mass`); [`PlantKind::name`]
-    /// is the JSON spelling.
-    pub fn label(self) -> &'static str {
-        match self {
-            PlantKind::NonlinearTwoMass => "nonlinear-two-mass",
-            k => k.structure().label(),
-        }
-    }
-
-    /// What the plant is, in a few words (the command line's help).
-    pub fn describe(self) -> &'static str {
-        match self {
-            PlantKind::Rigid => "one rigid mass",
-            PlantKind::TwoMass => "motor and one arm mass through the gearbox spring",
-            PlantKind::ThreeMass => "seed 000 eq. (5)-(6): motor and two arm masses",
-            PlantKind::FourMass => "seed 000 eq. (7)-(8): three-mass plus a parallel mass",
-            PlantKind::NonlinearTwoMass => {
-                "seed 001: two-mass with cubic spring and Coulomb friction"
-            }
-        }
-    }
-
-    /// Name as used in specs and JSON (`three_mass`, ...).
-    pub fn name(self) -> &'static str {
-        match self {
-            PlantKind::Rigid => "rigid",
-            PlantKind::TwoMass => "two_mass",
-            PlantKind::ThreeMass => "three_mass",
-            PlantKind::FourMass => "four_mass",
-            PlantKind::NonlinearTwoMass => "nonlinear_two_mass",
-        }
-    }
-}
-
-impl std::str::FromStr for PlantKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        PlantKind::ALL
-            .iter()
-            .copied()
-            .find(|k| k.name() == s)
-            .ok_or_else(|| {
-                let known: Vec<&str> = PlantKind::ALL.iter().map(|k| k.name()).collect();
-                format!("unknown plant `{s}` (known: {})", known.join(", "))
-            })
-    }
-}
+use super::effects::{parse_effects, CoulombFriction, Effect, NonlinearStiffness};
+use super::spec::{Family, ModelSpec, SpecError, Structure};
 
 /// Named physical parameters, seed 000 Table 1 plus seed 001's `k3`, `F_c`.
 ///
-/// Each plant kind uses the subset it needs; unused ones are carried along so one set
-/// describes all kinds (and is printed whole by [`crate::sim::SimConfig::params_json`]).
+/// Each structure uses the subset it needs; unused ones are carried along so one set
+/// describes all structures (and is printed whole by [`crate::sim::SimConfig::params_json`]).
+/// `k3` and `F_c` are the values of seed 001's two effects of the `nonlinear-two-mass`
+/// alias ([`sim_spec`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct JointParams {
     /// motor inertia `J_m` [kg·m²], motor side
@@ -182,9 +100,11 @@ pub struct JointParams {
     pub f_m: f64,
     /// gear ratio `r` [-] (arm angle per motor angle, 1/118 on the IRB1400 axis 1)
     pub r: f64,
-    /// cubic spring coefficient `k3` of the nonlinear two-mass model [N·m/rad³]
+    /// cubic spring coefficient `k3` of the nonlinear two-mass model [N·m/rad³] (its
+    /// `nonlinear_stiffness` effect)
     pub k3: f64,
-    /// Coulomb friction level `F_c` of the nonlinear two-mass model [N·m], motor side
+    /// Coulomb friction level `F_c` of the nonlinear two-mass model [N·m], motor side (its
+    /// `coulomb_friction` effect, pure: `F_s = F_c`)
     #[serde(rename = "F_c")]
     pub f_c: f64,
 }
@@ -248,9 +168,9 @@ impl JointParams {
 /// Access to one field of [`JointParams`] (its unit is the field's, [`unit_of`] its name).
 pub type ParamField = fn(&mut JointParams) -> &mut f64;
 
-/// The physical parameters plant `kind` uses, as (name, field) pairs, names as in
-/// [`JointParams::table`] (seed 000 Table 1, seed 001 `k3`, `F_c`).
-pub fn model_params(kind: PlantKind) -> Vec<(&'static str, ParamField)> {
+/// The physical parameters a plant of `structure` uses, as (name, field) pairs, names as in
+/// [`JointParams::table`] (seed 000 Table 1).
+pub fn model_params(structure: Structure) -> Vec<(&'static str, ParamField)> {
     type Field = ParamField;
     let mut v: Vec<(&'static str, Field)> = vec![
         ("J_m", |p| &mut p.j_m),
@@ -259,11 +179,11 @@ pub fn model_params(kind: PlantKind) -> Vec<(&'static str, ParamField)> {
     ];
     let gearbox: [(&'static str, Field); 2] = [("k_g", |p| &mut p.k_g), ("d_g", |p| &mut p.d_g)];
     let arm: [(&'static str, Field); 2] = [("k_a", |p| &mut p.k_a), ("d_a", |p| &mut p.d_a)];
-    match kind {
-        PlantKind::Rigid => {}
-        PlantKind::TwoMass | PlantKind::NonlinearTwoMass => v.extend(gearbox),
-        PlantKind::ThreeMass => v.extend(gearbox.into_iter().chain(arm)),
-        PlantKind::FourMass => {
+    match structure {
+        Structure::Rigid => {}
+        Structure::TwoMass => v.extend(gearbox),
+        Structure::ThreeMass => v.extend(gearbox.into_iter().chain(arm)),
+        Structure::FourMass => {
             v.push(("J_p", |p| &mut p.j_p));
             v.extend(gearbox.into_iter().chain(arm));
             v.extend::<[(&'static str, Field); 2]>([
@@ -273,10 +193,52 @@ pub fn model_params(kind: PlantKind) -> Vec<(&'static str, ParamField)> {
         }
     }
     v.extend::<[(&'static str, Field); 2]>([("f_m", |p| &mut p.f_m), ("r", |p| &mut p.r)]);
-    if kind == PlantKind::NonlinearTwoMass {
-        v.extend::<[(&'static str, Field); 2]>([("k3", |p| &mut p.k3), ("F_c", |p| &mut p.f_c)]);
-    }
     v
+}
+
+/// The parameters of seed 001's two effects that the `nonlinear-two-mass` alias adds
+/// ([`sim_spec`]): `k3` [N·m/rad³] and `F_c` [N·m], after [`model_params`] of the two-mass.
+pub fn seed_001_params() -> [(&'static str, ParamField); 2] {
+    [("k3", |p| &mut p.k3), ("F_c", |p| &mut p.f_c)]
+}
+
+/// The simulator's model description: the [`ModelSpec`] of `structure` with the effects
+/// `effects` (specs as `simulate --effect`), through the one list of effect specs the fit
+/// resolves ([`ModelSpec::effect_specs`]): with `nonlinear_two_mass`, seed 001's
+/// `nonlinear_stiffness` and `coulomb_friction` first (those `effects` does not name),
+/// valued from `params` (`k3`, and pure Coulomb friction `F_s = F_c` of `F_c`). Unlike the
+/// fit, a `coulomb_friction` spec of `effects` keeps its own breakaway level: the
+/// simulator simulates what it is given. `effects` is `None` when there are none.
+///
+/// # Errors
+/// [`SpecError::Effect`] for the first spec that does not parse.
+pub fn sim_spec(
+    structure: Structure,
+    nonlinear_two_mass: bool,
+    effects: &[String],
+    params: &JointParams,
+) -> Result<ModelSpec, SpecError> {
+    let specs = ModelSpec::effect_specs(nonlinear_two_mass, effects);
+    let mut parsed = parse_effects(&specs).map_err(|e| SpecError::Effect(e.to_string()))?;
+    // the specs the alias added come first (seed 001 eq. (6)-(7), from `params`)
+    let added = specs.len() - effects.len();
+    for e in &mut parsed[..added] {
+        match e {
+            Effect::NonlinearStiffness(s) => *s = NonlinearStiffness { k3: params.k3 },
+            Effect::CoulombFriction(c) => {
+                *c = CoulombFriction {
+                    fc: params.f_c,
+                    fs: params.f_c,
+                    ..CoulombFriction::default()
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(ModelSpec {
+        effects: (!parsed.is_empty()).then_some(parsed),
+        ..ModelSpec::linear(Family::Physical(structure))
+    })
 }
 
 /// The one unit table of the joint's physical parameters (rotary joint, SI): every name
@@ -316,9 +278,9 @@ pub fn unit_of(name: &str) -> &'static str {
 /// A plant: its structure and its physical parameters.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Plant {
-    /// structure
-    pub kind: PlantKind,
-    /// physical parameters (each kind uses the subset it needs)
+    /// mechanical structure (JSON: [`Structure::name`])
+    pub kind: Structure,
+    /// physical parameters (each structure uses the subset it needs)
     pub params: JointParams,
 }
 
@@ -326,15 +288,15 @@ impl Default for Plant {
     /// The three-mass default joint.
     fn default() -> Self {
         Plant {
-            kind: PlantKind::ThreeMass,
+            kind: Structure::ThreeMass,
             params: JointParams::default(),
         }
     }
 }
 
 impl Plant {
-    /// Plant of the given kind with the default parameters.
-    pub fn new(kind: PlantKind) -> Self {
+    /// Plant of structure `kind` with the default parameters.
+    pub fn new(kind: Structure) -> Self {
         Plant {
             kind,
             params: JointParams::default(),
@@ -380,9 +342,48 @@ mod tests {
     }
 
     #[test]
+    fn the_nonlinear_two_mass_is_the_two_mass_with_seed_001_effects_valued_from_the_params() {
+        let p = JointParams {
+            k3: 1e12,
+            f_c: 0.05,
+            ..JointParams::default()
+        };
+        let spec = sim_spec(Structure::TwoMass, true, &["backlash".into()], &p).unwrap();
+        assert_eq!(spec.family, Family::Physical(Structure::TwoMass));
+        // the same list of specs, in the same order, as the fit resolves
+        let fit =
+            ModelSpec::resolve(spec.family, true, &["backlash".into()], false, None, None).unwrap();
+        let names =
+            |s: &ModelSpec| -> Vec<&str> { s.effects.iter().flatten().map(|e| e.name()).collect() };
+        assert_eq!(names(&spec), names(&fit));
+        let e = spec.effects.unwrap();
+        assert_eq!(
+            e[0],
+            Effect::NonlinearStiffness(NonlinearStiffness { k3: 1e12 })
+        );
+        let Effect::CoulombFriction(c) = e[1] else {
+            panic!("{:?}", e[1])
+        };
+        assert_eq!((c.fc, c.fs), (0.05, 0.05));
+        // an effect the user names replaces the alias's and keeps its own values
+        // (the Stribeck level of `coulomb_friction` included)
+        let own = sim_spec(Structure::TwoMass, true, &["coulomb_friction".into()], &p).unwrap();
+        let own = own.effects.unwrap();
+        assert_eq!(own.len(), 2);
+        assert_eq!(own[1], Effect::CoulombFriction(CoulombFriction::default()));
+        // a structure without effects is a linear spec
+        let lin = sim_spec(Structure::FourMass, false, &[], &p).unwrap();
+        assert_eq!(
+            lin,
+            ModelSpec::linear(Family::Physical(Structure::FourMass))
+        );
+        assert!(sim_spec(Structure::Rigid, false, &["nope".into()], &p).is_err());
+    }
+
+    #[test]
     fn every_parameter_of_every_plant_has_a_unit_and_the_nonlinear_ones_theirs() {
-        for kind in PlantKind::ALL {
-            for (name, _) in model_params(kind) {
+        for kind in Structure::ALL {
+            for (name, _) in model_params(kind).into_iter().chain(seed_001_params()) {
                 assert_ne!(unit_of(name), "", "{name}");
             }
         }

@@ -17,7 +17,8 @@
 use nalgebra::{DMatrix, SymmetricEigen};
 
 use super::effects::{Attach, Effect};
-use super::params::{Plant, PlantKind};
+use super::params::Plant;
+use super::spec::Structure;
 
 /// Largest number of bodies the simulator accepts (four-mass plus four extra modes).
 pub const MAX_BODIES: usize = 8;
@@ -86,16 +87,16 @@ impl Mechanism {
         };
         let spring = |a, b, k, d| Spring { a, b, k, d };
         let (bodies, springs) = match plant.kind {
-            PlantKind::Rigid => (vec![motor(p.rigid_inertia())], vec![]),
-            PlantKind::TwoMass | PlantKind::NonlinearTwoMass => (
+            Structure::Rigid => (vec![motor(p.rigid_inertia())], vec![]),
+            Structure::TwoMass => (
                 vec![motor(p.j_m), arm("a", p.j_a1 + p.j_a2)],
                 vec![spring(0, 1, p.k_g, p.d_g)],
             ),
-            PlantKind::ThreeMass => (
+            Structure::ThreeMass => (
                 vec![motor(p.j_m), arm("a1", p.j_a1), arm("a2", p.j_a2)],
                 vec![spring(0, 1, p.k_g, p.d_g), spring(1, 2, p.k_a, p.d_a)],
             ),
-            PlantKind::FourMass => (
+            Structure::FourMass => (
                 vec![
                     motor(p.j_m),
                     arm("a1", p.j_a1),
@@ -262,10 +263,10 @@ mod tests {
 
     #[test]
     fn default_plants_modal_frequencies_match_the_documented_values() {
-        let two = Mechanism::new(&Plant::new(PlantKind::TwoMass), &[]).modal_frequencies();
+        let two = Mechanism::new(&Plant::new(Structure::TwoMass), &[]).modal_frequencies();
         assert!(close(&two.anti_resonances_hz, &[16.21], 0.01), "{two:?}");
         assert!(close(&two.resonances_hz, &[22.24], 0.01), "{two:?}");
-        let four = Mechanism::new(&Plant::new(PlantKind::FourMass), &[]).modal_frequencies();
+        let four = Mechanism::new(&Plant::new(Structure::FourMass), &[]).modal_frequencies();
         assert!(
             close(&four.anti_resonances_hz, &[14.02, 18.12, 35.92], 0.01),
             "{four:?}"
@@ -274,16 +275,16 @@ mod tests {
             close(&four.resonances_hz, &[17.00, 21.26, 36.14], 0.01),
             "{four:?}"
         );
-        let rigid = Mechanism::new(&Plant::new(PlantKind::Rigid), &[]).modal_frequencies();
+        let rigid = Mechanism::new(&Plant::new(Structure::Rigid), &[]).modal_frequencies();
         assert!(rigid.resonances_hz.is_empty() && rigid.anti_resonances_hz.is_empty());
     }
 
     #[test]
     fn default_modes_are_lightly_damped() {
         for kind in [
-            PlantKind::TwoMass,
-            PlantKind::ThreeMass,
-            PlantKind::FourMass,
+            Structure::TwoMass,
+            Structure::ThreeMass,
+            Structure::FourMass,
         ] {
             let modes = Mechanism::new(&Plant::new(kind), &[]).damped_modes();
             assert!(!modes.is_empty());
@@ -302,14 +303,14 @@ mod tests {
             d: p.d_p,
             attach: Attach::Parallel,
         });
-        let a = Mechanism::new(&Plant::new(PlantKind::ThreeMass), &[x]);
-        let b = Mechanism::new(&Plant::new(PlantKind::FourMass), &[]);
+        let a = Mechanism::new(&Plant::new(Structure::ThreeMass), &[x]);
+        let b = Mechanism::new(&Plant::new(Structure::FourMass), &[]);
         assert_eq!(a.linear_model(5e-4).0, b.linear_model(5e-4).0);
     }
 
     #[test]
     fn rigid_linear_model_is_one_inertia_with_viscous_friction() {
-        let plant = Plant::new(PlantKind::Rigid);
+        let plant = Plant::new(Structure::Rigid);
         let m = Mechanism::new(&plant, &[]);
         let (f, g) = m.linear_model(5e-4);
         let j = plant.params.rigid_inertia();

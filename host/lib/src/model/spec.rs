@@ -3,7 +3,7 @@
 //! and the whole description a fit is asked for ([`ModelSpec`]: family, effects, rigid
 //! Coulomb friction, current-loop lag, delay). The command line resolves its model flags
 //! into one [`ModelSpec`] once; the fit, the model file and `validate` take it from there.
-//! The simulator's plants ([`crate::model::params::PlantKind`]) are built on [`Structure`].
+//! The simulator's plant ([`crate::model::params::Plant`]) carries a [`Structure`].
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -11,8 +11,10 @@ use thiserror::Error;
 use super::effects::{parse_effects, Effect};
 
 /// Mechanical structure of a joint model: the one list of structures the estimators fit
-/// and the simulator's plants are built on ([`crate::model::params::PlantKind::structure`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// and the simulator simulates ([`crate::model::params::Plant::kind`]); serialised by its
+/// [`Structure::name`] (`three_mass`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Structure {
     /// one inertia with viscous friction
     Rigid,
@@ -40,6 +42,27 @@ impl Structure {
             Structure::TwoMass => "two-mass",
             Structure::ThreeMass => "three-mass",
             Structure::FourMass => "four-mass",
+        }
+    }
+
+    /// Name in JSON and in the capture CSV's `sim_plant` (`three_mass`); the command line
+    /// takes it as an alias of [`Structure::label`].
+    pub fn name(self) -> &'static str {
+        match self {
+            Structure::Rigid => "rigid",
+            Structure::TwoMass => "two_mass",
+            Structure::ThreeMass => "three_mass",
+            Structure::FourMass => "four_mass",
+        }
+    }
+
+    /// What the structure is, in a few words (the command line's help).
+    pub fn describe(self) -> &'static str {
+        match self {
+            Structure::Rigid => "one rigid mass",
+            Structure::TwoMass => "motor and one arm mass through the gearbox spring",
+            Structure::ThreeMass => "seed 000 eq. (5)-(6): motor and two arm masses",
+            Structure::FourMass => "seed 000 eq. (7)-(8): three-mass plus a parallel mass",
         }
     }
 

@@ -62,7 +62,7 @@ use crate::ident::ss::StateSpace;
 use crate::ident::validate::fit_percent;
 use crate::model::spec::{Family, ModelSpec, Structure};
 use crate::sim::board::{encode_session, BoardStreamError, WireOptions};
-use crate::sim::{self, Mechanism, PlantKind, SimConfig, SimOutput};
+use crate::sim::{self, Mechanism, SimConfig, SimOutput};
 
 /// timer rate of the simulated board [Hz]
 pub const TIMER_HZ: u32 = 1_000_000;
@@ -155,7 +155,7 @@ pub fn decode_session(stream: &[u8], name: &str) -> Result<Dataset, ExperimentEr
 /// The simulated joint of the experiment (see the module docs).
 pub fn paper_sim(seed: u64) -> SimConfig {
     let mut cfg = SimConfig {
-        plant: sim::Plant::new(PlantKind::FourMass),
+        plant: sim::Plant::new(Structure::FourMass),
         seed,
         ..SimConfig::default()
     };
@@ -386,10 +386,8 @@ pub fn table(
     );
     let modal = Mechanism::new(&truth.plant, &truth.effects).modal_frequencies();
     let truth_struct = match truth.plant.kind {
-        PlantKind::ThreeMass => Some(Family::Physical(Structure::ThreeMass)),
-        PlantKind::FourMass => Some(Family::Physical(Structure::FourMass)),
-        PlantKind::TwoMass => Some(Family::Physical(Structure::TwoMass)),
-        _ => None,
+        Structure::Rigid => None,
+        s => Some(Family::Physical(s)),
     };
     let tp = truth.plant.params.table();
     let mut rows = Vec::new();

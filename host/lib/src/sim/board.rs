@@ -19,7 +19,10 @@ use jointid_core::wire::{
     SessionHeader, Status, MAX_FRAME_LEN, PROTOCOL_VERSION,
 };
 
-use super::{SimConfig, SimOutput, WireRangeError};
+use super::{
+    raw_sample, stream_excitation, tick_step, RunSummary, Sample, SimConfig, SimError, SimOutput,
+    WireRangeError,
+};
 
 /// A message of a board stream did not fit a wire frame (a bug of the encoder's limits).
 #[derive(Debug, thiserror::Error)]
@@ -211,64 +214,232 @@ pub fn encode_stream(
         bytes: Vec::new(),
         frames: Vec::new(),
     };
-    let mut buf = vec![0u8; MAX_FRAME_LEN];
-    let mut push = |out: &mut BoardStream, msg: &Message, content: FrameContent| {
-        let index = out.frames.len();
-        let n =
-            encode_frame(msg, &mut buf).map_err(|err| BoardStreamError::Frame { index, err })?;
-        // the span starts after the frame's leading delimiter, as the decoder sees it
-        out.frames.push(FrameSpan {
-            offset: out.bytes.len() as u64 + 1,
-            len: n as u64 - 1,
-            content,
-        });
-        out.bytes.extend_from_slice(&buf[..n]);
+    let mut sink = |bytes: &[u8], span: FrameSpan| {
+        out.bytes.extend_from_slice(bytes);
+        out.frames.push(span);
         Ok::<(), BoardStreamError>(())
     };
-    push(&mut out, &Message::Header(*header), FrameContent::Header)?;
-    let mut builder = BatchBuilder::new(tick_step, layout.batch_len);
-    let status = |seq: u32| Status {
-        seq,
-        overruns: layout.overruns,
-        queue_drops: 0,
-        tx_errors: 0,
-    };
-    let mut batches = 0usize;
-    let mut since_header = 0usize;
-    let mut count = 0u32;
-    let mut samples = samples.into_iter().peekable();
-    while let Some((s, r)) = samples.next() {
-        count += 1;
-        let last = samples.peek().is_none();
-        let full = builder.push(s, r);
-        for b in full
-            .into_iter()
-            .chain(if last { builder.flush() } else { None })
-        {
-            let content = FrameContent::Batch {
-                first: b.first_seq(),
-                len: b.len() as u32,
-            };
-            push(&mut out, &Message::Batch(b), content)?;
-            batches += 1;
-            if layout.status_every > 0 && batches.is_multiple_of(layout.status_every) {
-                push(
-                    &mut out,
-                    &Message::Status(status(s.seq.wrapping_add(1))),
-                    FrameContent::Status,
-                )?;
-            }
-            since_header += content_len(content);
-            if layout.header_every > 0 && since_header >= layout.header_every {
-                since_header = 0;
-                push(&mut out, &Message::Header(*header), FrameContent::Header)?;
-            }
+    let mut enc = StreamEncoder::new(header, tick_step, layout, &mut sink)?;
+    for (s, r) in samples {
+        enc.push(s, r, &mut sink)?;
+    }
+    enc.finish(&mut sink)?;
+    Ok(out)
+}
+
+/// The incremental form of [`encode_stream`] (the one encoder: `encode_stream` collects
+/// it): every frame handed to a sink `(bytes, span)` as soon as it is complete, so a
+/// stream of any length is encoded in constant memory.
+pub struct StreamEncoder {
+    header: SessionHeader,
+    layout: StreamLayout,
+    builder: BatchBuilder,
+    buf: Vec<u8>,
+    /// frames emitted [-]
+    frames: usize,
+    /// bytes emitted [bytes]
+    offset: u64,
+    batches: usize,
+    since_header: usize,
+    /// samples pushed
+    count: u32,
+    /// seq of the last sample pushed
+    last_seq: u32,
+}
+
+impl StreamEncoder {
+    /// Starts the stream: the header frame goes to `sink`.
+    ///
+    /// # Errors
+    /// [`BoardStreamError::Frame`] (as `E`), or what `sink` returns.
+    pub fn new<E: From<BoardStreamError>>(
+        header: &SessionHeader,
+        tick_step: u32,
+        layout: &StreamLayout,
+        sink: &mut impl FnMut(&[u8], FrameSpan) -> Result<(), E>,
+    ) -> Result<StreamEncoder, E> {
+        let mut enc = StreamEncoder {
+            header: *header,
+            layout: *layout,
+            builder: BatchBuilder::new(tick_step, layout.batch_len),
+            buf: vec![0u8; MAX_FRAME_LEN],
+            frames: 0,
+            offset: 0,
+            batches: 0,
+            since_header: 0,
+            count: 0,
+            last_seq: 0,
+        };
+        enc.frame(&Message::Header(*header), FrameContent::Header, sink)?;
+        Ok(enc)
+    }
+
+    /// Bytes handed to the sink so far [bytes].
+    pub fn bytes(&self) -> u64 {
+        self.offset
+    }
+
+    /// One frame of `msg` to `sink`.
+    fn frame<E: From<BoardStreamError>>(
+        &mut self,
+        msg: &Message,
+        content: FrameContent,
+        sink: &mut impl FnMut(&[u8], FrameSpan) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let index = self.frames;
+        let n = encode_frame(msg, &mut self.buf)
+            .map_err(|err| BoardStreamError::Frame { index, err })?;
+        // the span starts after the frame's leading delimiter, as the decoder sees it
+        let span = FrameSpan {
+            offset: self.offset + 1,
+            len: n as u64 - 1,
+            content,
+        };
+        self.frames += 1;
+        self.offset += n as u64;
+        sink(&self.buf[..n], span)
+    }
+
+    fn status(&self, seq: u32) -> Status {
+        Status {
+            seq,
+            overruns: self.layout.overruns,
+            queue_drops: 0,
+            tx_errors: 0,
         }
     }
-    if layout.end {
-        push(&mut out, &Message::End(status(count)), FrameContent::End)?;
+
+    /// A full (or the last) batch, then the status and the header when due.
+    fn batch<E: From<BoardStreamError>>(
+        &mut self,
+        b: jointid_core::wire::SampleBatch,
+        sink: &mut impl FnMut(&[u8], FrameSpan) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let content = FrameContent::Batch {
+            first: b.first_seq(),
+            len: b.len() as u32,
+        };
+        self.frame(&Message::Batch(b), content, sink)?;
+        self.batches += 1;
+        let every = self.layout.status_every;
+        if every > 0 && self.batches.is_multiple_of(every) {
+            let st = self.status(self.last_seq.wrapping_add(1));
+            self.frame(&Message::Status(st), FrameContent::Status, sink)?;
+        }
+        self.since_header += content_len(content);
+        if self.layout.header_every > 0 && self.since_header >= self.layout.header_every {
+            self.since_header = 0;
+            let h = self.header;
+            self.frame(&Message::Header(h), FrameContent::Header, sink)?;
+        }
+        Ok(())
     }
-    Ok(out)
+
+    /// Sample `s` with its reference `r` [rad]; a batch frame when it completes one.
+    ///
+    /// # Errors
+    /// [`BoardStreamError::Frame`] (as `E`), or what `sink` returns.
+    pub fn push<E: From<BoardStreamError>>(
+        &mut self,
+        s: RawSample,
+        r: f32,
+        sink: &mut impl FnMut(&[u8], FrameSpan) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.count += 1;
+        self.last_seq = s.seq;
+        match self.builder.push(s, r) {
+            Some(b) => self.batch(b, sink),
+            None => Ok(()),
+        }
+    }
+
+    /// Ends the stream: the last partial batch, then `End` when the layout asks for it;
+    /// returns the bytes handed to the sink [bytes].
+    ///
+    /// # Errors
+    /// [`BoardStreamError::Frame`] (as `E`), or what `sink` returns.
+    pub fn finish<E: From<BoardStreamError>>(
+        mut self,
+        sink: &mut impl FnMut(&[u8], FrameSpan) -> Result<(), E>,
+    ) -> Result<u64, E> {
+        if let Some(b) = self.builder.flush() {
+            self.batch(b, sink)?;
+        }
+        if self.layout.end {
+            let st = self.status(self.count);
+            self.frame(&Message::End(st), FrameContent::End, sink)?;
+        }
+        Ok(self.offset)
+    }
+}
+
+/// Why a streamed session stopped ([`stream_session`]).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum StreamError {
+    /// the simulation (its first non-finite sample and the effects, or its configuration)
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    /// the wire (a sample it cannot carry, or a frame)
+    #[error(transparent)]
+    Wire(#[from] BoardStreamError),
+    /// the writer
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+}
+
+/// Simulates `cfg` on `excitation` and writes the board's stream to `w` as it goes
+/// ([`super::stream_excitation`], [`StreamEncoder`]): the bytes [`encode_session`] gives
+/// for `simulate_excitation(cfg, excitation)`, in memory independent of the length.
+/// Each simulated sample also goes to `each` (e.g. for statistics). Returns the run's
+/// summary and the stream bytes written [bytes]. As with the whole run, a simulation that
+/// is not finite is reported before a sample the wire cannot carry (the run goes on,
+/// unwritten, after such a sample).
+///
+/// # Errors
+/// [`StreamError`]: the simulation's, the wire's (nothing clamped), the writer's.
+pub fn stream_session(
+    cfg: &SimConfig,
+    excitation: &ExcitationConfig,
+    opts: &WireOptions,
+    w: &mut dyn std::io::Write,
+    mut each: impl FnMut(&Sample<'_>),
+) -> Result<(RunSummary, u64), StreamError> {
+    let header = opts.header(excitation);
+    let step = tick_step(opts.timer_hz, 1.0 / cfg.sample_rate_hz);
+    // as encode_session: the step between the first two samples' ticks
+    let two = excitation.total_samples().is_some_and(|n| n >= 2);
+    let tick = if two { step as u32 } else { 0 };
+    let layout = StreamLayout {
+        batch_len: opts.batch_len,
+        status_every: opts.status_every,
+        overruns: 0,
+        end: true,
+        header_every: header_interval_samples(excitation.fs_hz) as usize,
+    };
+    let mut sink = |bytes: &[u8], _: FrameSpan| w.write_all(bytes).map_err(StreamError::Io);
+    let mut enc = StreamEncoder::new(&header, tick, &layout, &mut sink)?;
+    // a sample the wire cannot carry ends the stream, but the run goes on unwritten: a
+    // run that then diverges reports its first non-finite sample, as the whole run did
+    let mut range: Option<WireRangeError> = None;
+    let summary = stream_excitation(cfg, excitation, |s: &Sample<'_>| {
+        each(s);
+        if range.is_some() {
+            return Ok(());
+        }
+        match raw_sample(s.k, s.u, s.theta_m, &opts.scale, step) {
+            Ok(raw) => enc.push(raw, s.theta_ref as f32, &mut sink),
+            Err(e) => {
+                range = Some(e);
+                Ok(())
+            }
+        }
+    })?;
+    if let Some(e) = range {
+        return Err(BoardStreamError::Range(e).into());
+    }
+    let bytes = enc.finish(&mut sink)?;
+    Ok((summary, bytes))
 }
 
 /// Samples of a batch frame (0 for the others).

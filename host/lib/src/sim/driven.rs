@@ -114,7 +114,7 @@ pub fn simulate_driven_with(
     start: &DrivenStart,
     integration: &IntegrationConfig,
 ) -> Result<DrivenOutput, SimError> {
-    let (mut positive, nonneg) = plant_ranges(plant)?;
+    let (mut positive, nonneg) = plant_ranges(plant);
     positive.extend([
         ("current_loop_tau", current_loop_tau),
         ("sample_interval_s", sample_interval_s),
@@ -153,7 +153,10 @@ pub fn simulate_driven_with(
         out.gearbox_deflection
             .push(a.nonlinear.gearbox_deflection(&x));
         out.omega_m.push(x[nb]);
-        stepper.sample(&a, &mut x, &mut mode, &u[..=k], 0.0);
+        // the delayed torques: u[k − n − 1] until the switch, u[k − n] after it
+        let past = |lag: usize| k.checked_sub(lag).map_or(0.0, |j| u[j]);
+        let (u_old, u_new) = (past(a.delay_whole + 1), past(a.delay_whole));
+        stepper.sample(&a, &mut x, &mut mode, u_old, u_new, 0.0);
     }
     Ok(out)
 }

@@ -1316,7 +1316,8 @@ mod tests {
         // monotone: the smallest sample is at an end, no interior minimum
         assert!(!dips_below_zero(&[0.5, 0.4, 0.3, 0.2, 0.01]));
     }
-    use crate::model::params::{Plant, PlantKind};
+    use crate::model::params::Plant;
+    use crate::model::spec::Structure;
 
     #[test]
     fn zoh_of_double_integrator_matches_closed_form() {
@@ -1330,7 +1331,7 @@ mod tests {
 
     #[test]
     fn rk4_on_linear_plant_matches_exact_zoh() {
-        let mech = Mechanism::new(&Plant::new(PlantKind::ThreeMass), &[]);
+        let mech = Mechanism::new(&Plant::new(Structure::ThreeMass), &[]);
         let (f, g) = mech.linear_model(5e-4);
         let t = 5e-4;
         let step = ZohStep::new(&f, &g, t);
@@ -1354,7 +1355,7 @@ mod tests {
     #[test]
     fn backlash_event_lands_on_the_edge() {
         // two-mass, motor pushed from rest inside the gap: the first contact must be located
-        let mech = Mechanism::new(&Plant::new(PlantKind::TwoMass), &[]);
+        let mech = Mechanism::new(&Plant::new(Structure::TwoMass), &[]);
         let width = 1e-3;
         let nl = NonlinearPlant::new(&mech, 5e-4, 0.0, Some(width), vec![], vec![]);
         let mut x = [0.0; MAX_STATE];
@@ -1383,7 +1384,7 @@ mod tests {
         // rigid joint at rest, current loop T_c = 0.5 ms: u_d = 0.03 N·m (below F_s = 0.04)
         // holds it exactly; then u_d = 0.05 from τ_a ≈ 0.03 reaches F_s at
         // T_c ln((0.05 − τ_a) / 0.01) ≈ T_c ln 2
-        let mech = Mechanism::new(&Plant::new(PlantKind::Rigid), &[]);
+        let mech = Mechanism::new(&Plant::new(Structure::Rigid), &[]);
         let fric = CoulombFriction::default();
         let tc = 5e-4;
         let nl = NonlinearPlant::new(&mech, tc, 0.0, None, vec![fric], vec![]);

@@ -3,9 +3,10 @@
 //! What: the joint of seed 000 (Norrlöf et al., "Modeling and identification of a
 //! mechanical industrial manipulator", Fig. 2): a reference `θ_ref` goes into the robot's
 //! own controller, whose torque reference `u` drives the motor through a fast current loop;
-//! `u` and the motor angle `θ_m` are measured. The mechanics is one of the plants of
-//! [`crate::model::params::PlantKind`] (rigid, two-mass, three-mass eq. (5)–(6), four-mass eq. (7)–(8),
-//! the nonlinear two-mass of seed 001 eq. (4)–(9)), optionally with the effects of
+//! `u` and the motor angle `θ_m` are measured. The mechanics is one of the structures of
+//! [`crate::model::spec::Structure`] (rigid, two-mass, three-mass eq. (5)–(6), four-mass
+//! eq. (7)–(8); seed 001's nonlinear two-mass eq. (4)–(9) is the two-mass with two of the
+//! effects, [`crate::model::params::sim_spec`]), optionally with the effects of
 //! [`crate::model::effects::Effect`] (Coulomb/Stribeck friction, backlash, cubic spring, extra mode,
 //! transport delay, torque ripple).
 //!
@@ -55,13 +56,13 @@ use jointid_core::wire::{RawSample, Scale};
 use serde::{Deserialize, Serialize};
 
 pub use crate::model::effects::{parse_effects, Effect, EffectParseError};
-pub use crate::model::params::{JointParams, Plant, PlantKind};
+pub use crate::model::params::{JointParams, Plant};
 pub use crate::model::plant::{Mechanism, ModalFrequencies};
+pub use crate::model::spec::Structure;
 pub use controller::{Controller, ControllerConfig};
 pub use driven::{simulate_driven, simulate_driven_with, DrivenOutput, DrivenStart};
 pub use sensors::{Disturbance, SensorConfig};
 
-use crate::model::effects::CoulombFriction;
 use crate::model::plant::{MAX_BODIES, MAX_STATE};
 use integrate::{Contact, NonlinearPlant, SampleStepper, State, ZohStep};
 use sensors::Sensors;
@@ -204,6 +205,39 @@ pub struct SimOutput {
 }
 
 impl SimOutput {
+    /// No samples yet, room for `n` of `nx` states each (interval 0, no state names,
+    /// [`Integrator::ExactZoh`] until set).
+    pub fn with_capacity(n: usize, nx: usize) -> SimOutput {
+        SimOutput {
+            sample_interval_s: 0.0,
+            t: Vec::with_capacity(n),
+            theta_ref: Vec::with_capacity(n),
+            u: Vec::with_capacity(n),
+            theta_m: Vec::with_capacity(n),
+            u_true: Vec::with_capacity(n),
+            theta_m_true: Vec::with_capacity(n),
+            tau_motor: Vec::with_capacity(n),
+            disturbance: Vec::with_capacity(n),
+            state_names: Vec::new(),
+            states: Vec::with_capacity(n * nx),
+            saturated_samples: 0,
+            integrator: Integrator::ExactZoh,
+        }
+    }
+
+    /// Appends one sample of a [`Simulation`].
+    pub fn push(&mut self, s: &Sample<'_>) {
+        self.t.push(s.t_s);
+        self.theta_ref.push(s.theta_ref);
+        self.u.push(s.u);
+        self.theta_m.push(s.theta_m);
+        self.u_true.push(s.u_true);
+        self.theta_m_true.push(s.states[0]);
+        self.tau_motor.push(s.tau_motor);
+        self.disturbance.push(s.disturbance);
+        self.states.extend_from_slice(s.states);
+    }
+
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.t.len()
@@ -240,37 +274,9 @@ impl SimOutput {
         scale: &Scale,
         timer_hz: u32,
     ) -> Result<Vec<RawSample>, WireRangeError> {
-        let step = (f64::from(timer_hz) * self.sample_interval_s).round() as u64;
-        let counts = |index: usize, signal: &'static str, unit: &'static str, v: f64, per: f32| {
-            let per = f64::from(per);
-            let c = (v / per).round();
-            if c.is_finite() && c >= f64::from(i32::MIN) && c <= f64::from(i32::MAX) {
-                Ok(c as i32)
-            } else {
-                Err(WireRangeError {
-                    index,
-                    signal,
-                    value: v,
-                    unit,
-                    per_count: per,
-                })
-            }
-        };
+        let step = tick_step(timer_hz, self.sample_interval_s);
         (0..self.len())
-            .map(|k| {
-                Ok(RawSample {
-                    seq: k as u32,
-                    tick: (k as u64).wrapping_mul(step) as u32,
-                    torque: counts(k, "u", "N·m", self.u[k], scale.torque_nm_per_count)?,
-                    angle: counts(
-                        k,
-                        "theta_m",
-                        "rad",
-                        self.theta_m[k],
-                        scale.angle_rad_per_count,
-                    )?,
-                })
-            })
+            .map(|k| raw_sample(k, self.u[k], self.theta_m[k], scale, step))
             .collect()
     }
 
@@ -283,6 +289,48 @@ impl SimOutput {
             r: Some(self.theta_ref.clone()),
         }
     }
+}
+
+/// Timer ticks per sample [ticks]: `timer_hz · T`, rounded.
+pub fn tick_step(timer_hz: u32, sample_interval_s: f64) -> u64 {
+    (f64::from(timer_hz) * sample_interval_s).round() as u64
+}
+
+/// Sample `k` as the board streams it ([`SimOutput::to_raw_samples`]): `seq = k`,
+/// `tick = k · step` (wrapping), `torque = round(u / torque_nm_per_count)` of `u` [N·m],
+/// `angle = round(θ_m / angle_rad_per_count)` of `theta_m` [rad].
+///
+/// # Errors
+/// [`WireRangeError`] for a value that is not finite or whose count does not fit an
+/// `i32`: nothing is clamped.
+pub fn raw_sample(
+    k: usize,
+    u: f64,
+    theta_m: f64,
+    scale: &Scale,
+    step: u64,
+) -> Result<RawSample, WireRangeError> {
+    let counts = |signal: &'static str, unit: &'static str, v: f64, per: f32| {
+        let per = f64::from(per);
+        let c = (v / per).round();
+        if c.is_finite() && c >= f64::from(i32::MIN) && c <= f64::from(i32::MAX) {
+            Ok(c as i32)
+        } else {
+            Err(WireRangeError {
+                index: k,
+                signal,
+                value: v,
+                unit,
+                per_count: per,
+            })
+        }
+    };
+    Ok(RawSample {
+        seq: k as u32,
+        tick: (k as u64).wrapping_mul(step) as u32,
+        torque: counts("u", "N·m", u, scale.torque_nm_per_count)?,
+        angle: counts("theta_m", "rad", theta_m, scale.angle_rad_per_count)?,
+    })
 }
 
 /// A measured value the wire cannot carry: not finite, or beyond the `i32` counts of its
@@ -415,7 +463,7 @@ impl SimConfig {
     /// # Errors
     /// The first problem found.
     pub fn validate(&self) -> Result<(), SimError> {
-        let (mut positive, mut nonneg) = plant_ranges(&self.plant)?;
+        let (mut positive, mut nonneg) = plant_ranges(&self.plant);
         let c = &self.controller;
         positive.extend([
             ("sample_rate_hz", self.sample_rate_hz),
@@ -461,21 +509,18 @@ type Named = (&'static str, f64);
 
 /// The plant's parameters that must be positive and those that must be non-negative, in the
 /// order they are checked.
-///
-/// # Errors
-/// [`SimError::InvalidParameter`] when `k3` of the nonlinear two-mass is not finite.
-fn plant_ranges(plant: &Plant) -> Result<(Vec<Named>, Vec<Named>), SimError> {
+fn plant_ranges(plant: &Plant) -> (Vec<Named>, Vec<Named>) {
     let p = &plant.params;
     let kind = plant.kind;
     let mut positive = vec![("J_m", p.j_m), ("r", p.r)];
     let mut nonneg = vec![("f_m", p.f_m)];
     match kind {
-        PlantKind::Rigid => nonneg.push(("J_a1 + J_a2", p.j_a1 + p.j_a2)),
-        PlantKind::TwoMass | PlantKind::NonlinearTwoMass => {
+        Structure::Rigid => nonneg.push(("J_a1 + J_a2", p.j_a1 + p.j_a2)),
+        Structure::TwoMass => {
             positive.extend([("J_a1 + J_a2", p.j_a1 + p.j_a2), ("k_g", p.k_g)]);
             nonneg.push(("d_g", p.d_g));
         }
-        PlantKind::ThreeMass | PlantKind::FourMass => {
+        Structure::ThreeMass | Structure::FourMass => {
             positive.extend([
                 ("J_a1", p.j_a1),
                 ("J_a2", p.j_a2),
@@ -485,17 +530,11 @@ fn plant_ranges(plant: &Plant) -> Result<(Vec<Named>, Vec<Named>), SimError> {
             nonneg.extend([("d_g", p.d_g), ("d_a", p.d_a)]);
         }
     }
-    if kind == PlantKind::FourMass {
+    if kind == Structure::FourMass {
         positive.extend([("J_p", p.j_p), ("k_p", p.k_p)]);
         nonneg.push(("d_p", p.d_p));
     }
-    if kind == PlantKind::NonlinearTwoMass {
-        nonneg.push(("F_c", p.f_c));
-        if !p.k3.is_finite() {
-            return Err(bad("k3", p.k3, "must be finite"));
-        }
-    }
-    Ok((positive, nonneg))
+    (positive, nonneg)
 }
 
 /// Checks that the `positive` values are finite and > 0 (`controller.ti` may be +inf: P
@@ -545,7 +584,7 @@ fn check_effects(plant: &Plant, effects: &[Effect]) -> Result<(), SimError> {
             return Err(SimError::DuplicateEffect(e.name()));
         }
         seen.push(e.name());
-        if e.acts_on_gearbox() && kind == PlantKind::Rigid {
+        if e.acts_on_gearbox() && kind == Structure::Rigid {
             return Err(SimError::NeedsGearbox {
                 effect: e.name(),
                 plant: kind.name(),
@@ -577,24 +616,12 @@ fn assemble(cfg: &SimConfig) -> Assembled {
 
 /// [`Assembled`] from the plant, its effects and the current-loop time constant `tc` [s].
 fn assemble_parts(plant: &Plant, effects: &[Effect], tc: f64) -> Assembled {
-    let p = &plant.params;
     let mech = Mechanism::new(plant, effects);
     let mut k3 = 0.0;
     let mut backlash = None;
     let mut coulomb = Vec::new();
     let mut ripple = Vec::new();
     let mut delay = 0.0;
-    if plant.kind == PlantKind::NonlinearTwoMass {
-        k3 += p.k3;
-        if p.f_c > 0.0 {
-            // seed 001 eq. (7): pure Coulomb, no Stribeck bump (set-valued at rest as usual)
-            coulomb.push(CoulombFriction {
-                fc: p.f_c,
-                fs: p.f_c,
-                ..CoulombFriction::default()
-            });
-        }
-    }
     for e in effects {
         match *e {
             Effect::CoulombFriction(c) if c.fs > 0.0 => coulomb.push(c),
@@ -628,7 +655,8 @@ fn assemble_parts(plant: &Plant, effects: &[Effect], tc: f64) -> Assembled {
 ///
 /// The joint starts at rest with zero spring deflections and the motor at `reference[0]`.
 /// Sample `k` is taken at `t = k T`: the measured angle is read, `u[k]` computed and held
-/// (after the optional delay and through the current loop) until `t = (k + 1) T`.
+/// (after the optional delay and through the current loop) until `t = (k + 1) T`. A
+/// collector over [`Simulation`], the one simulator loop.
 ///
 /// # Errors
 /// [`SimError`] when the configuration is invalid ([`SimConfig::validate`]) or the
@@ -638,43 +666,152 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
     if let Some((index, &value)) = reference.iter().enumerate().find(|(_, v)| !v.is_finite()) {
         return Err(SimError::BadReference { index, value });
     }
-    let ts = 1.0 / cfg.sample_rate_hz;
-    let a = assemble(cfg);
-    let nb = a.mech.n_bodies();
-    let nx = a.mech.n_state();
-    let n = reference.len();
-
-    let stepper = Stepper::new(&a, cfg.controller.current_loop_tau, ts, &cfg.integration);
-
     let theta0 = reference.first().copied().unwrap_or(0.0);
-    let mut x = at_rest(&a.mech, theta0);
-    let mut mode = a.nonlinear.region(a.nonlinear.gearbox_deflection(&x));
-    let mut controller = Controller::new(cfg.controller, ts);
-    let mut sensors = Sensors::new(cfg.sensors, ts, cfg.seed);
+    let mut sim = Simulation::new(cfg, theta0)?;
+    let mut out = sim.output(reference.len());
+    for &r in reference {
+        out.push(&sim.step(r)?);
+    }
+    out.saturated_samples = sim.saturated_samples();
+    Ok(out)
+}
 
-    let mut out = SimOutput {
-        sample_interval_s: ts,
-        t: Vec::with_capacity(n),
-        theta_ref: reference.to_vec(),
-        u: Vec::with_capacity(n),
-        theta_m: Vec::with_capacity(n),
-        u_true: Vec::with_capacity(n),
-        theta_m_true: Vec::with_capacity(n),
-        tau_motor: Vec::with_capacity(n),
-        disturbance: Vec::with_capacity(n),
-        state_names: a.mech.state_names(),
-        states: Vec::with_capacity(n * nx),
-        saturated_samples: 0,
-        integrator: stepper.integrator(),
-    };
-    for (k, &r) in reference.iter().enumerate() {
-        let meas = sensors.measure_theta(x[0]);
-        let u = controller.step(r, meas);
-        let u_rec = sensors.measure_u(u);
+/// One sample of a run at `t = k T`: what the sensors and the controller gave, the
+/// reference, and the true state before the sample's propagation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample<'a> {
+    /// sample index `k`
+    pub k: usize,
+    /// time `k T` [s]
+    pub t_s: f64,
+    /// motor-angle reference `θ_ref` [rad]
+    pub theta_ref: f64,
+    /// recorded torque reference (with measurement noise) [N·m]
+    pub u: f64,
+    /// measured motor angle (quantised, with noise) [rad]
+    pub theta_m: f64,
+    /// torque reference as the controller computed it [N·m]
+    pub u_true: f64,
+    /// torque out of the current loop [N·m]
+    pub tau_motor: f64,
+    /// disturbance torque held over the sample [N·m]
+    pub disturbance: f64,
+    /// true state, [`SimOutput::state_names`] order (`states[0]` the motor angle [rad])
+    pub states: &'a [f64],
+}
+
+/// The closed loop advanced one reference sample at a time, in constant memory: the one
+/// simulator loop behind [`simulate`], [`simulate_excitation`] and the streaming
+/// [`stream_excitation`]. The transport delay's past torques are kept in a ring of
+/// `⌊delay⌋ + 2` samples.
+pub struct Simulation {
+    a: Assembled,
+    stepper: Stepper,
+    x: State,
+    before: State,
+    mode: Contact,
+    controller: Controller,
+    sensors: Sensors,
+    ts: f64,
+    nx: usize,
+    nb: usize,
+    k: usize,
+    /// the last `⌊delay⌋ + 2` torque references `u_true` [N·m], newest at `(head − 1)`
+    past_u: Vec<f64>,
+    head: usize,
+    state_names: Vec<String>,
+    plant: &'static str,
+    effects: String,
+}
+
+impl Simulation {
+    /// The run of `cfg` (checked by [`SimConfig::validate`]) from rest with zero spring
+    /// deflections and the motor at `theta0` [rad] (the first reference sample).
+    ///
+    /// # Errors
+    /// [`SimError`] when the configuration is invalid.
+    pub fn new(cfg: &SimConfig, theta0: f64) -> Result<Simulation, SimError> {
+        cfg.validate()?;
+        let ts = 1.0 / cfg.sample_rate_hz;
+        let a = assemble(cfg);
+        let stepper = Stepper::new(&a, cfg.controller.current_loop_tau, ts, &cfg.integration);
+        let x = at_rest(&a.mech, theta0);
+        let mode = a.nonlinear.region(a.nonlinear.gearbox_deflection(&x));
+        Ok(Simulation {
+            stepper,
+            x,
+            before: x,
+            mode,
+            controller: Controller::new(cfg.controller, ts),
+            sensors: Sensors::new(cfg.sensors, ts, cfg.seed),
+            ts,
+            nx: a.mech.n_state(),
+            nb: a.mech.n_bodies(),
+            k: 0,
+            past_u: vec![0.0; a.delay_whole + 2],
+            head: 0,
+            state_names: a.mech.state_names(),
+            plant: cfg.plant.kind.label(),
+            effects: effects_text(&cfg.effects),
+            a,
+        })
+    }
+
+    /// Sample interval `T` [s].
+    pub fn sample_interval_s(&self) -> f64 {
+        self.ts
+    }
+
+    /// Integrator of the run.
+    pub fn integrator(&self) -> Integrator {
+        self.stepper.integrator()
+    }
+
+    /// Samples where the controller output was limited, so far.
+    pub fn saturated_samples(&self) -> u64 {
+        self.controller.saturated_samples()
+    }
+
+    /// An empty [`SimOutput`] of this run with room for `n` samples.
+    pub fn output(&self, n: usize) -> SimOutput {
+        SimOutput {
+            sample_interval_s: self.ts,
+            state_names: self.state_names.clone(),
+            integrator: self.integrator(),
+            ..SimOutput::with_capacity(n, self.nx)
+        }
+    }
+
+    /// Torque reference `lag` samples before the newest (0 before the first sample).
+    #[inline]
+    fn past(&self, lag: usize) -> f64 {
+        if lag > self.k {
+            return 0.0;
+        }
+        let n = self.past_u.len();
+        self.past_u[(self.head + n - 1 - lag) % n]
+    }
+
+    /// Sample `k` with reference `r` [rad]: sensors, controller, then the plant propagated
+    /// to `(k + 1) T`.
+    ///
+    /// # Errors
+    /// [`SimError::BadReference`] for a reference that is not finite,
+    /// [`SimError::NonFinite`] naming the first state or signal that is not finite.
+    pub fn step(&mut self, r: f64) -> Result<Sample<'_>, SimError> {
+        let k = self.k;
+        if !r.is_finite() {
+            return Err(SimError::BadReference { index: k, value: r });
+        }
+        let nx = self.nx;
+        let x = &mut self.x;
+        let meas = self.sensors.measure_theta(x[0]);
+        let u = self.controller.step(r, meas);
+        let u_rec = self.sensors.measure_u(u);
         let bad_state = x[..nx]
             .iter()
             .position(|v| !v.is_finite())
-            .map(|i| (out.state_names[i].clone(), x[i]));
+            .map(|i| (self.state_names[i].clone(), x[i]));
         let bad = bad_state.or_else(|| {
             [("theta_m", meas), ("u", u_rec), ("u_true", u)]
                 .into_iter()
@@ -684,26 +821,88 @@ pub fn simulate(cfg: &SimConfig, reference: &[f64]) -> Result<SimOutput, SimErro
         if let Some((signal, value)) = bad {
             return Err(SimError::NonFinite {
                 index: k,
-                t_s: k as f64 * ts,
+                t_s: k as f64 * self.ts,
                 signal,
                 value,
-                plant: cfg.plant.kind.label(),
-                effects: effects_text(&cfg.effects),
+                plant: self.plant,
+                effects: self.effects.clone(),
             });
         }
-        let w = sensors.next_disturbance();
-        out.t.push(k as f64 * ts);
-        out.u.push(u_rec);
-        out.theta_m.push(meas);
-        out.u_true.push(u);
-        out.theta_m_true.push(x[0]);
-        out.tau_motor.push(x[2 * nb]);
-        out.disturbance.push(w);
-        out.states.extend_from_slice(&x[..nx]);
-        stepper.sample(&a, &mut x, &mut mode, &out.u_true, w);
+        let w = self.sensors.next_disturbance();
+        self.before = *x;
+        self.past_u[self.head] = u;
+        self.head = (self.head + 1) % self.past_u.len();
+        let u_new = self.past(self.a.delay_whole);
+        let u_old = self.past(self.a.delay_whole + 1);
+        self.stepper
+            .sample(&self.a, &mut self.x, &mut self.mode, u_old, u_new, w);
+        self.k += 1;
+        Ok(Sample {
+            k,
+            t_s: k as f64 * self.ts,
+            theta_ref: r,
+            u: u_rec,
+            theta_m: meas,
+            u_true: u,
+            tau_motor: self.before[2 * self.nb],
+            disturbance: w,
+            states: &self.before[..nx],
+        })
     }
-    out.saturated_samples = controller.saturated_samples();
-    Ok(out)
+}
+
+/// What a streamed run leaves besides its samples.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RunSummary {
+    /// samples simulated
+    pub samples: usize,
+    /// sample interval `T` [s]
+    pub sample_interval_s: f64,
+    /// samples where the controller output was limited
+    pub saturated_samples: u64,
+    /// integrator used
+    pub integrator: Integrator,
+}
+
+/// Simulates `cfg` on the reference the firmware's generator produces for `excitation`,
+/// sample by sample (`jointid_core::excitation::Excitation`, bit-exact with the board),
+/// handing each sample to `each` and keeping nothing: memory independent of the length.
+///
+/// # Errors
+/// As [`simulate_excitation`], and whatever `each` returns (the run stops there).
+pub fn stream_excitation<E: From<SimError>>(
+    cfg: &SimConfig,
+    excitation: &ExcitationConfig,
+    mut each: impl FnMut(&Sample<'_>) -> Result<(), E>,
+) -> Result<RunSummary, E> {
+    if f64::from(excitation.fs_hz) != cfg.sample_rate_hz {
+        return Err(SimError::RateMismatch {
+            excitation_hz: excitation.fs_hz,
+            sim_hz: cfg.sample_rate_hz,
+        }
+        .into());
+    }
+    excitation
+        .total_samples()
+        .ok_or(SimError::Excitation(ExcitationError::Endless))?;
+    let mut table = vec![0.0f32; excitation.period_samples as usize];
+    let mut gen = jointid_core::excitation::Excitation::new(excitation, &mut table)
+        .map_err(SimError::Excitation)?;
+    let first = gen.next();
+    let mut sim = Simulation::new(cfg, first.map_or(0.0, f64::from))?;
+    let mut samples = 0;
+    let mut r = first;
+    while let Some(v) = r {
+        each(&sim.step(f64::from(v))?)?;
+        samples += 1;
+        r = gen.next();
+    }
+    Ok(RunSummary {
+        samples,
+        sample_interval_s: sim.sample_interval_s(),
+        saturated_samples: sim.saturated_samples(),
+        integrator: sim.integrator(),
+    })
 }
 
 /// The effects as their spec strings, space separated (`none` without effects).
@@ -797,16 +996,20 @@ impl Stepper {
         }
     }
 
-    /// Propagates `x` over the sample `k = u.len() − 1`, from `k T` to `(k + 1) T`: the
-    /// torque reference `u[k − n − 1]` until the delay's switch and `u[k − n]` after it
-    /// (0 before the first sample; delay `n + φ` samples), through the current loop, with
-    /// the disturbance `w` [N·m] held.
+    /// Propagates `x` over one sample, from `k T` to `(k + 1) T`: the torque reference
+    /// `u_old = u[k − n − 1]` [N·m] until the delay's switch and `u_new = u[k − n]` after
+    /// it (0 before the first sample; delay `n + φ` samples), through the current loop,
+    /// with the disturbance `w` [N·m] held.
     #[inline]
-    fn sample(&self, a: &Assembled, x: &mut State, mode: &mut Contact, u: &[f64], w: f64) {
-        let k = u.len() - 1;
-        let past = |lag: usize| k.checked_sub(lag).map_or(0.0, |j| u[j]);
-        let u_new = past(a.delay_whole);
-        let u_old = past(a.delay_whole + 1);
+    fn sample(
+        &self,
+        a: &Assembled,
+        x: &mut State,
+        mode: &mut Contact,
+        u_old: f64,
+        u_new: f64,
+        w: f64,
+    ) {
         match self {
             Stepper::Exact { full, split: None } => full.apply(x, &[u_new, w]),
             Stepper::Exact {
@@ -840,14 +1043,20 @@ pub fn simulate_excitation(
     cfg: &SimConfig,
     excitation: &ExcitationConfig,
 ) -> Result<SimOutput, SimError> {
-    if f64::from(excitation.fs_hz) != cfg.sample_rate_hz {
-        return Err(SimError::RateMismatch {
-            excitation_hz: excitation.fs_hz,
-            sim_hz: cfg.sample_rate_hz,
-        });
-    }
-    let r = jointid_core::excitation::generate(excitation)?;
-    simulate_f32(cfg, &r)
+    let n = excitation.total_samples().unwrap_or(0) as usize;
+    let mut out = SimOutput::with_capacity(0, 0);
+    let summary = stream_excitation(cfg, excitation, |s: &Sample<'_>| {
+        if s.k == 0 {
+            out = SimOutput::with_capacity(n, s.states.len());
+        }
+        out.push(s);
+        Ok::<(), SimError>(())
+    })?;
+    out.state_names = Mechanism::new(&cfg.plant, &cfg.effects).state_names();
+    out.sample_interval_s = summary.sample_interval_s;
+    out.saturated_samples = summary.saturated_samples;
+    out.integrator = summary.integrator;
+    Ok(out)
 }
 
 /// [`simulate`] with an `f32` reference (as the firmware's excitation generator produces it).

@@ -4,9 +4,7 @@ use super::*;
 use crate::data::{Dataset, ExcitationConfig};
 use crate::ident::frf::analyze_dataset;
 use crate::ident::linalg::GaussRng;
-use crate::sim::{
-    parse_effects, simulate_excitation, JointParams, Plant, PlantKind, SensorConfig, SimConfig,
-};
+use crate::sim::{parse_effects, simulate_excitation, JointParams, Plant, SensorConfig, SimConfig};
 
 /// excitation of `jointid simulate` with `periods` full periods
 fn excitation(periods: u32, rms: f32) -> ExcitationConfig {
@@ -187,7 +185,7 @@ fn three_mass_over_random_joints_controllers_and_amplitudes() {
         let (p, controller, rms) = crate::test_support::random_joint(&mut rng, d);
         let cfg = SimConfig {
             plant: Plant {
-                kind: PlantKind::ThreeMass,
+                kind: Structure::ThreeMass,
                 params: p,
             },
             controller,
@@ -213,11 +211,11 @@ fn three_mass_over_random_joints_controllers_and_amplitudes() {
     assert!(failed.len() <= 1, "{failed:#?}");
 }
 
-/// a joint of `kind` with the default sensors, fitted with `structure`:
+/// a joint of `structure` with the default sensors, fitted with `structure`:
 /// every parameter within 3 % and 3 σ, no warning
-fn own_joint_is_recovered(kind: PlantKind, structure: Structure) -> Frf {
+fn own_joint_is_recovered(structure: Structure) -> Frf {
     let cfg = SimConfig {
-        plant: Plant::new(kind),
+        plant: Plant::new(structure),
         ..SimConfig::default()
     };
     let frf = frf_of(&cfg, &excitation(4, 0.02));
@@ -230,7 +228,7 @@ fn own_joint_is_recovered(kind: PlantKind, structure: Structure) -> Frf {
 
 #[test]
 fn two_mass_on_its_own_joint() {
-    own_joint_is_recovered(PlantKind::TwoMass, Structure::TwoMass);
+    own_joint_is_recovered(Structure::TwoMass);
 }
 
 #[test]
@@ -253,7 +251,7 @@ fn wrong_structures_are_flagged() {
 fn four_mass_on_its_own_joint_despite_a_hidden_mode() {
     // the default four-mass joint hides one mode (its FRF shows two peaks);
     // its two branches on J_a1 are interchangeable and reported softer first
-    let frf = own_joint_is_recovered(PlantKind::FourMass, Structure::FourMass);
+    let frf = own_joint_is_recovered(Structure::FourMass);
     assert!(frf_peaks(&frf, Output::Angle).len() < 3);
 }
 

@@ -16,7 +16,7 @@ use crate::ident::frf_fit::{Drive, FrfFitError, FrfFitOptions};
 use crate::ident::lm::Termination;
 use crate::ident::validate::fit_percent;
 use crate::model::effects::Effect;
-use crate::model::params::{model_params, JointParams, Plant, PlantKind};
+use crate::model::params::{model_params, JointParams, Plant};
 use crate::model::spec::Structure;
 use crate::sim::{simulate_driven, DrivenStart};
 
@@ -609,12 +609,7 @@ pub fn sim_plant(model: &NlModel, plant: &[f64]) -> Plant {
         j_a2: 0.0,
         ..JointParams::default()
     };
-    let kind = match model.structure {
-        Structure::Rigid => PlantKind::Rigid,
-        Structure::TwoMass => PlantKind::TwoMass,
-        Structure::ThreeMass => PlantKind::ThreeMass,
-        Structure::FourMass => PlantKind::FourMass,
-    };
+    let kind = model.structure;
     if model.structure == Structure::Rigid {
         p.j_m = plant[0];
         p.f_m = plant[1];

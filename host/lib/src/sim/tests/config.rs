@@ -71,7 +71,7 @@ fn validate_rejects_bad_parameters_and_combinations() {
     let err = simulate(&cfg, &[0.0]).unwrap_err();
     assert!(err.to_string().starts_with("parameter `J_a2` = 0"), "{err}");
     let cfg = SimConfig {
-        plant: Plant::new(PlantKind::Rigid),
+        plant: Plant::new(Structure::Rigid),
         effects: vec![Effect::Backlash(Backlash::default())],
         ..SimConfig::default()
     };
@@ -110,9 +110,14 @@ fn every_plant_kind_runs_and_tracks_a_slow_reference() {
     let r: Vec<f64> = (0..n)
         .map(|i| 0.05 * (1.0 - (2.0 * PI * 0.5 * i as f64 * TS).cos()))
         .collect();
-    for kind in PlantKind::ALL {
-        let out = simulate(&ideal(Plant::new(kind), vec![]), &r).unwrap();
-        let expected = if kind == PlantKind::NonlinearTwoMass {
+    let plants = Structure::ALL
+        .map(|kind| (Plant::new(kind), vec![]))
+        .into_iter()
+        .chain([seed_001()]);
+    for (plant, effects) in plants {
+        let kind = (plant.kind, effects.len());
+        let out = simulate(&ideal(plant, effects), &r).unwrap();
+        let expected = if kind.1 > 0 {
             Integrator::ExponentialRk4 { substeps: 5 }
         } else {
             Integrator::ExactZoh

@@ -73,7 +73,8 @@ fn driven_by_the_closed_loop_torque_reproduces_the_true_motor_angle() {
         let cfg = ideal(Plant::default(), vec![e]);
         driven_reproduces_closed_loop(&cfg, &format!("three-mass with {e}"));
     }
-    let cfg = ideal(Plant::new(PlantKind::NonlinearTwoMass), vec![]);
+    let (plant, effects) = seed_001();
+    let cfg = ideal(plant, effects);
     driven_reproduces_closed_loop(&cfg, "nonlinear two-mass");
 }
 
@@ -122,7 +123,7 @@ fn driven_with_no_torque_gives_an_empty_run_after_checking_the_configuration() {
         matches!(err, SimError::InvalidParameter { ref name, .. } if name == "current_loop_tau"),
         "{err:?}"
     );
-    let rigid = Plant::new(PlantKind::Rigid);
+    let rigid = Plant::new(Structure::Rigid);
     let backlash = [Effect::Backlash(Backlash::default())];
     let err = simulate_driven(&rigid, &backlash, 5e-4, TS, &[], &DrivenStart::default());
     assert!(matches!(err, Err(SimError::NeedsGearbox { .. })));

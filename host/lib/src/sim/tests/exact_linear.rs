@@ -19,7 +19,7 @@ fn simulate_matches_exact_zoh_closed_loop_of_eq6_three_mass() {
 #[test]
 fn simulate_matches_exact_zoh_closed_loop_of_eq7_four_mass_with_fractional_delay() {
     let cfg = ideal(
-        Plant::new(PlantKind::FourMass),
+        Plant::new(Structure::FourMass),
         vec![Effect::TimeDelay(TimeDelay { samples: 2.3 })],
     );
     let r = ramped(multisine(2000, &special_odd_lines(120), 0.05, 1, 6), 400);

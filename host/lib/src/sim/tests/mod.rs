@@ -97,6 +97,14 @@ fn rel_err(a: &[f64], b: &[f64]) -> f64 {
     (num / den).sqrt()
 }
 
+/// Seed 001's nonlinear two-mass with default `k3`, `F_c`: the two-mass and the two effects
+/// of the `nonlinear-two-mass` alias ([`crate::model::params::sim_spec`]).
+fn seed_001() -> (Plant, Vec<Effect>) {
+    let plant = Plant::new(Structure::TwoMass);
+    let spec = crate::model::params::sim_spec(plant.kind, true, &[], &plant.params).unwrap();
+    (plant, spec.effects.unwrap())
+}
+
 fn ideal(plant: Plant, effects: Vec<Effect>) -> SimConfig {
     SimConfig {
         plant,

@@ -4,8 +4,8 @@ use super::*;
 
 #[test]
 fn generic_plant_rhs_equals_seed001_eq9_for_nonlinear_two_mass() {
-    let plant = Plant::new(PlantKind::NonlinearTwoMass);
-    let cfg = ideal(plant, vec![]);
+    let (plant, effects) = seed_001();
+    let cfg = ideal(plant, effects);
     let a = assemble(&cfg);
     let p = plant.params;
     let (r, d, k1, k3, fv, fc, jm, ja) = (
