@@ -54,6 +54,8 @@ struct Report<'a> {
     distortion_detected: bool,
     /// detected and within 40 dB of the excited lines
     distortion_significant: bool,
+    /// files written (the plots), as every command's `files`
+    #[serde(rename = "files")]
     plots: Vec<String>,
     #[serde(skip_serializing_if = "Vec::is_empty")]
     amplitude_trend: Vec<AmplitudeTrend>,
@@ -104,6 +106,7 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
     if ctx.json {
         print_json(
             ctx.out,
+            "analyze",
             &Report {
                 file: &ds.name,
                 analysis: &a,

@@ -42,6 +42,8 @@ pub struct ValidateArgs {
 struct Report<'a> {
     file: &'a str,
     simulated: &'a str,
+    /// as `validate MODEL DATA --json`'s `residual_tests`
+    #[serde(rename = "residual_tests")]
     validation: &'a Validation,
 }
 
@@ -71,6 +73,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
     if ctx.json {
         print_json(
             ctx.out,
+            "validate-simulated",
             &Report {
                 file: &ds.name,
                 simulated: &args.simulated,

@@ -77,7 +77,7 @@ fn fit_json_has_fields_and_validate_reproduces_saved_model_fit() {
         "parameters",
         "fit_estimation",
         "fit_validation",
-        "seconds",
+        "elapsed_s",
         "resonances_hz",
         "antiresonances_hz",
         "residual_tests",
