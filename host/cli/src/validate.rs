@@ -193,8 +193,8 @@ mod tests {
         let (r, out) = go("bad", true);
         assert_eq!(r, Outcome::CheckFailed, "{out}");
         let v: serde_json::Value = serde_json::from_str(&out).unwrap();
-        assert_eq!(v["validation"]["independence"]["pass"], false);
-        assert!(v["validation"]["fit"].as_f64().unwrap() < 60.0);
+        assert_eq!(v["residual_tests"]["independence"]["pass"], false);
+        assert!(v["residual_tests"]["fit"].as_f64().unwrap() < 60.0);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
