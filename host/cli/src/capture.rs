@@ -219,7 +219,7 @@ pub fn run(args: &CaptureArgs, ctx: &mut Context<'_>) -> CmdResult {
         report: outcome.report,
     };
     if ctx.json {
-        print_json(ctx.out, &summary)?;
+        print_json(ctx.out, "capture", &summary)?;
     } else {
         writeln!(
             ctx.out,

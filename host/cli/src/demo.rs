@@ -56,17 +56,35 @@ const FILES: [&str; 6] = [
 struct DemoReport<'a> {
     seed: u64,
     files: Vec<String>,
-    stream_bytes: (usize, usize),
-    samples: (usize, usize),
+    /// bytes of the two board streams
+    stream_bytes: PerRun<usize>,
+    /// samples of the two captures
+    samples: PerRun<usize>,
     linearity_u: &'a str,
     linearity_y: &'a str,
     distortion_detected: bool,
     /// level of the non-excited odd lines against the excited ones [dB], u and θm
-    odd_vs_excited_db: (f64, f64),
+    odd_vs_excited_db: PerSignal,
     /// level of the even lines against the excited ones [dB], u and θm
-    even_vs_excited_db: (f64, f64),
+    even_vs_excited_db: PerSignal,
     table: &'a Table,
+    /// wall time [s]
+    #[serde(rename = "elapsed_s")]
     seconds: f64,
+}
+
+/// One value for each of the two runs.
+#[derive(Serialize)]
+struct PerRun<T> {
+    estimation: T,
+    validation: T,
+}
+
+/// One value for each measured signal: the torque `u` and the motor angle `theta_m`.
+#[derive(Serialize)]
+struct PerSignal {
+    u: f64,
+    theta_m: f64,
 }
 
 /// Runs `jointid demo`.
@@ -121,22 +139,29 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
     if ctx.json {
         print_json(
             ctx.out,
+            "demo",
             &DemoReport {
                 seed: args.seed,
                 files,
-                stream_bytes: (est_stream.len(), val_stream.len()),
-                samples: (est_ds.data.len(), val_ds.data.len()),
+                stream_bytes: PerRun {
+                    estimation: est_stream.len(),
+                    validation: val_stream.len(),
+                },
+                samples: PerRun {
+                    estimation: est_ds.data.len(),
+                    validation: val_ds.data.len(),
+                },
                 linearity_u: &a.linearity_u.verdict,
                 linearity_y: &a.linearity_y.verdict,
                 distortion_detected: a.distortion_detected(),
-                odd_vs_excited_db: (
-                    a.linearity_u.odd.vs_excited_db,
-                    a.linearity_y.odd.vs_excited_db,
-                ),
-                even_vs_excited_db: (
-                    a.linearity_u.even.vs_excited_db,
-                    a.linearity_y.even.vs_excited_db,
-                ),
+                odd_vs_excited_db: PerSignal {
+                    u: a.linearity_u.odd.vs_excited_db,
+                    theta_m: a.linearity_y.odd.vs_excited_db,
+                },
+                even_vs_excited_db: PerSignal {
+                    u: a.linearity_u.even.vs_excited_db,
+                    theta_m: a.linearity_y.even.vs_excited_db,
+                },
                 table: &t,
                 seconds,
             },

@@ -204,7 +204,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         }
     }
     if ctx.json {
-        print_json(ctx.out, &d)?;
+        print_json(ctx.out, "diagnose", &d)?;
     } else {
         print_summary(ctx.out, &d, &val.name)?;
     }

@@ -23,8 +23,16 @@ pub struct ExperimentArgs {
 struct ExperimentReport {
     seeds: Vec<u64>,
     tables: Vec<Table>,
-    mean_fit_estimation: Vec<(String, f64)>,
-    mean_fit_validation: Vec<(String, f64)>,
+    /// one row per model, FIT averaged over the seeds
+    mean_fit: Vec<MeanFit>,
+}
+
+/// A model's FIT averaged over the experiments [%].
+#[derive(Serialize)]
+struct MeanFit {
+    model: String,
+    fit_estimation: f64,
+    fit_validation: f64,
 }
 
 /// Runs `jointid experiment`.
@@ -55,11 +63,19 @@ pub fn run(args: &ExperimentArgs, ctx: &mut Context<'_>) -> CmdResult {
     if ctx.json {
         print_json(
             ctx.out,
+            "experiment",
             &ExperimentReport {
                 seeds,
                 tables,
-                mean_fit_estimation: me,
-                mean_fit_validation: mv,
+                mean_fit: me
+                    .into_iter()
+                    .zip(mv)
+                    .map(|((model, e), (_, v))| MeanFit {
+                        model,
+                        fit_estimation: e,
+                        fit_validation: v,
+                    })
+                    .collect(),
             },
         )?;
     } else if tables.len() > 1 {

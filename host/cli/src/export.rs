@@ -3,14 +3,17 @@
 //! Writes only the samples that arrived; the `# gaps=` comment lists what did not (see
 //! [`jointid::capture::export`]). An existing CSV is replaced only with `--force`; the CSV
 //! is written to a temporary file beside it and renamed, so a half-written export never
-//! looks complete ([`jointid::data::output`]); `--csv -` writes to stdout.
+//! looks complete ([`jointid::data::output`]); `--csv -` writes to stdout (and `--json`'s
+//! document then goes to stderr).
 //! Exit status: 0 exported, 1 `--strict` and something is missing or damaged, 2 error.
 
 use std::io::Write;
 use std::path::PathBuf;
 
+use serde::Serialize;
+
 use super::{CmdResult, Context, Outcome};
-use jointid::capture::{export, read_jcap_session, session_ids};
+use jointid::capture::{export, read_jcap_session, session_ids, DamagedFrame, SeqGap};
 
 /// Arguments of `jointid export`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
@@ -32,9 +35,31 @@ pub struct ExportArgs {
     pub force: bool,
 }
 
+/// What `export --json` prints: on standard output, or on standard error with `--csv -`
+/// (standard output then carries the CSV).
+#[derive(Serialize)]
+struct ExportSummary<'a> {
+    /// the capture read
+    file: String,
+    /// the CSV written (`-`: standard output)
+    csv: String,
+    /// the exported session
+    session_id: u32,
+    /// CSV rows written (samples that arrived)
+    rows: usize,
+    samples: u64,
+    gaps: &'a [SeqGap],
+    missing_samples: u64,
+    damaged_frames: &'a [DamagedFrame],
+    overruns: u32,
+    /// what the text output prints as notes (other sessions in the capture)
+    notes: Vec<String>,
+}
+
 /// Runs `jointid export`: [`Outcome::CheckFailed`] with `--strict` when anything is
-/// missing or damaged. With `--json`, a summary object goes to the output (not with
-/// `--csv -`, where the output is the CSV).
+/// missing or damaged. With `--json`, a summary document goes to the output; with
+/// `--csv -`, where the output is the CSV, it goes to standard error instead, as the only
+/// thing written there.
 ///
 /// # Errors
 /// Reading the capture ([`jointid::capture::CaptureError::Jcap`], [`jointid::capture::CaptureError::NoHeader`],
@@ -55,41 +80,50 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     let r = &record.report;
     let ids = session_ids(r);
+    let mut notes = Vec::new();
     if args.session.is_none() && ids.len() > 1 {
         let list: Vec<String> = ids.iter().map(u32::to_string).collect();
-        let _ = writeln!(
-            std::io::stderr(),
-            "note: {} holds {} sessions ({}); exported session {} (choose another with --session K)",
+        notes.push(format!(
+            "{} holds {} sessions ({}); exported session {} (choose another with --session K)",
             args.input.display(),
             ids.len(),
             list.join(", "),
             record.header.session_id
+        ));
+    }
+    // with `--csv - --json` standard error carries the JSON document alone
+    if !(ctx.json && to_stdout) {
+        for n in &notes {
+            let _ = writeln!(std::io::stderr(), "note: {n}");
+        }
+        let _ = writeln!(
+            std::io::stderr(),
+            "exported {} samples to {} ({} gaps, {} samples missing, {} damaged frames)",
+            record.samples.len(),
+            args.csv.display(),
+            r.gaps.len(),
+            r.missing_samples,
+            r.damaged_frames.len()
         );
     }
-    let _ = writeln!(
-        std::io::stderr(),
-        "exported {} samples to {} ({} gaps, {} samples missing, {} damaged frames)",
-        record.samples.len(),
-        args.csv.display(),
-        r.gaps.len(),
-        r.missing_samples,
-        r.damaged_frames.len()
-    );
-    if ctx.json && !to_stdout {
-        super::print_json(
-            ctx.out,
-            &serde_json::json!({
-                "file": args.input.display().to_string(),
-                "csv": args.csv.display().to_string(),
-                "session_id": record.header.session_id,
-                "rows": record.samples.len(),
-                "samples": r.samples,
-                "gaps": r.gaps,
-                "missing_samples": r.missing_samples,
-                "damaged_frames": r.damaged_frames,
-                "overruns": r.overruns,
-            }),
-        )?;
+    if ctx.json {
+        let summary = ExportSummary {
+            file: args.input.display().to_string(),
+            csv: args.csv.display().to_string(),
+            session_id: record.header.session_id,
+            rows: record.samples.len(),
+            samples: r.samples,
+            gaps: &r.gaps,
+            missing_samples: r.missing_samples,
+            damaged_frames: &r.damaged_frames,
+            overruns: r.overruns,
+            notes,
+        };
+        if to_stdout {
+            super::print_json(&mut std::io::stderr().lock(), "export", &summary)?;
+        } else {
+            super::print_json(ctx.out, "export", &summary)?;
+        }
     }
     Ok(if args.strict && !r.is_clean() {
         Outcome::CheckFailed

@@ -394,6 +394,7 @@ pub struct FitReport {
     /// residual tests on estimation (and validation) data
     pub residual_tests: ResidualTests,
     /// wall time of the fit [s]
+    #[serde(rename = "elapsed_s")]
     pub seconds: f64,
     /// files written
     pub files: Vec<String>,
@@ -590,7 +591,7 @@ fn check_records_lags(
 /// prints the report; with `strict`, any warning fails the run
 fn emit(ctx: &mut Context<'_>, report: &FitReport, strict: bool) -> CmdResult {
     if ctx.json {
-        print_json(ctx.out, report)?;
+        print_json(ctx.out, "fit", report)?;
     } else {
         print_report(ctx.out, report)?;
     }

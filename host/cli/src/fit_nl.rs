@@ -132,6 +132,8 @@ struct NlReport {
     simulate_command: String,
     /// the model file written (--save), which `simulate --model-file` reads
     saved_model: Option<String>,
+    /// wall time of the fit [s]
+    #[serde(rename = "elapsed_s")]
     seconds: f64,
     files: Vec<String>,
     warnings: Vec<String>,
@@ -416,7 +418,7 @@ pub fn run(
         warnings,
     };
     if ctx.json {
-        print_json(ctx.out, &report)?;
+        print_json(ctx.out, "fit-nonlinear", &report)?;
     } else {
         print_report(ctx.out, &report, &fit)?;
     }

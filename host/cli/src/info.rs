@@ -91,7 +91,7 @@ pub fn run(args: &InfoArgs, ctx: &mut Context<'_>) -> CmdResult {
         per_session,
     };
     if ctx.json {
-        print_json(ctx.out, &summary)?;
+        print_json(ctx.out, "info", &summary)?;
     } else {
         write!(ctx.out, "{}", describe(&summary))?;
     }

@@ -168,7 +168,29 @@ pub fn check_plot_files(
         .try_for_each(|n| check_output(&dir.join(n), force))
 }
 
-/// Prints `value` as pretty JSON on `out`.
+/// Version of every `--json` document's shape: `"schema": "jointid-<kind>/1"`. A field
+/// renamed or removed, or a type changed, raises it; the schema files in
+/// `host/cli/schema/<kind>.schema.json` change with it.
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// The name of a `--json` document's schema, `jointid-<kind>/<SCHEMA_VERSION>`; `kind` is
+/// the command, or the command and the document's variant (`fit-nonlinear`).
+pub fn schema_name(kind: &str) -> String {
+    format!("jointid-{kind}/{SCHEMA_VERSION}")
+}
+
+/// A `--json` document: its `schema` first, then the command's own fields.
+#[derive(serde::Serialize)]
+struct Document<'a, T> {
+    schema: String,
+    #[serde(flatten)]
+    body: &'a T,
+}
+
+/// Prints `value`, a command's `--json` document of kind `kind` (the command's name, or
+/// its name and the document's variant: `fit-nonlinear`), as pretty JSON on `out`, with
+/// `"schema": "jointid-<kind>/1"` as its first field. The one place that prints a JSON
+/// document; its shape is pinned by `host/cli/schema/<kind>.schema.json`.
 ///
 /// The document is serialised first and then written, so a write error reaches the
 /// caller as the [`std::io::Error`] itself (a closed pipe stays recognisable) rather than
@@ -178,12 +200,31 @@ pub fn check_plot_files(
 /// Serialisation or write errors.
 pub fn print_json<T: serde::Serialize>(
     out: &mut dyn Write,
+    kind: &str,
     value: &T,
 ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
-    let mut text = serde_json::to_vec_pretty(value)?;
+    let doc = Document {
+        schema: schema_name(kind),
+        body: value,
+    };
+    let mut text = serde_json::to_vec_pretty(&doc)?;
     text.push(b'\n');
     out.write_all(&text)?;
     Ok(())
+}
+
+/// The one-line JSON document of an error: `{"schema": "jointid-error/1", "error": msg}`.
+fn error_json(msg: &str) -> String {
+    #[derive(serde::Serialize)]
+    struct Error<'a> {
+        error: &'a str,
+    }
+    let doc = Document {
+        schema: schema_name("error"),
+        body: &Error { error: msg },
+    };
+    // a struct of two strings always serialises
+    serde_json::to_string(&doc).unwrap_or_default()
 }
 
 /// `msg` without the ` (os error N)` that the standard library appends to I/O errors.
@@ -264,9 +305,7 @@ fn main() -> ExitCode {
                 .filter(|l| !l.is_empty())
                 .collect();
             let msg = lines.join(" ");
-            print_line_stdout(
-                &serde_json::json!({ "error": msg.trim_start_matches("error: ") }).to_string(),
-            );
+            print_line_stdout(&error_json(msg.trim_start_matches("error: ")));
             return ExitCode::from(2);
         }
         Err(e) => e.exit(),
@@ -309,7 +348,7 @@ fn main() -> ExitCode {
             }
             let msg = without_os_error_codes(&msg.replace('\n', " "));
             if cli.json {
-                print_line_stdout(&serde_json::json!({ "error": msg }).to_string());
+                print_line_stdout(&error_json(&msg));
             } else {
                 let _ = writeln!(std::io::stderr(), "jointid: error: {msg}");
             }
@@ -326,6 +365,24 @@ mod tests {
     #[test]
     fn cli_definition_is_consistent() {
         Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn json_documents_name_their_schema_first() {
+        #[derive(serde::Serialize)]
+        struct X {
+            a: u8,
+        }
+        let mut out = Vec::new();
+        print_json(&mut out, "info", &X { a: 1 }).unwrap();
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            "{\n  \"schema\": \"jointid-info/1\",\n  \"a\": 1\n}\n"
+        );
+        assert_eq!(
+            error_json("no \"x\""),
+            r#"{"schema":"jointid-error/1","error":"no \"x\""}"#
+        );
     }
 
     #[test]

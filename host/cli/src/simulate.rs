@@ -505,6 +505,8 @@ fn effects_text(cfg: &SimConfig, sep: &str) -> String {
 
 #[derive(Serialize)]
 struct Report<'a> {
+    /// the file written (`--out`), as `capture --json`'s `out`
+    #[serde(rename = "out")]
     file: String,
     format: OutFormat,
     model: &'static str,
@@ -520,6 +522,7 @@ struct Report<'a> {
     u_rms: f64,
     theta_m_rms: f64,
     resonances_hz: Vec<f64>,
+    #[serde(rename = "antiresonances_hz")]
     anti_resonances_hz: Vec<f64>,
     config: &'a SimConfig,
 }
@@ -658,7 +661,7 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         config: &cfg,
     };
     if ctx.json {
-        print_json(ctx.out, &report)?;
+        print_json(ctx.out, "simulate", &report)?;
         return Ok(Outcome::Ok);
     }
     let o = &mut *ctx.out;

@@ -42,6 +42,8 @@ pub struct ValidateArgs {
 struct Report<'a> {
     file: &'a str,
     simulated: &'a str,
+    /// as `validate MODEL DATA --json`'s `residual_tests`
+    #[serde(rename = "residual_tests")]
     validation: &'a Validation,
 }
 
@@ -71,6 +73,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
     if ctx.json {
         print_json(
             ctx.out,
+            "validate-simulated",
             &Report {
                 file: &ds.name,
                 simulated: &args.simulated,
@@ -190,8 +193,8 @@ mod tests {
         let (r, out) = go("bad", true);
         assert_eq!(r, Outcome::CheckFailed, "{out}");
         let v: serde_json::Value = serde_json::from_str(&out).unwrap();
-        assert_eq!(v["validation"]["independence"]["pass"], false);
-        assert!(v["validation"]["fit"].as_f64().unwrap() < 60.0);
+        assert_eq!(v["residual_tests"]["independence"]["pass"], false);
+        assert!(v["residual_tests"]["fit"].as_f64().unwrap() < 60.0);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

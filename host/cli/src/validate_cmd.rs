@@ -174,6 +174,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
     if ctx.json {
         print_json(
             ctx.out,
+            "validate",
             &Report {
                 model_file: mpath.display().to_string(),
                 model: &saved.model,
@@ -287,6 +288,7 @@ fn run_nonlinear(
     if ctx.json {
         print_json(
             ctx.out,
+            "validate-nonlinear",
             &NlReport {
                 model_file: mpath.display().to_string(),
                 model: &saved.model,

@@ -66,7 +66,7 @@ fn simulate_jcap_is_the_wire_stream_and_reads_like_a_board_capture() {
     assert_eq!(summary["model"], "two-mass");
     assert_eq!(summary["format"], "jcap");
     assert_eq!(summary["effects"][0], "backlash:width=0.00002");
-    assert_eq!(summary["file"], jcap.to_str().unwrap());
+    assert_eq!(summary["out"], jcap.to_str().unwrap());
     let p: Value = serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
     assert_eq!(p["plant"]["kind"], "two_mass");
     assert_eq!(p["plant"]["params"]["k_g"], 1.3e5);

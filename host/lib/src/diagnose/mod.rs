@@ -171,9 +171,12 @@ pub struct Candidate {
     pub score: f64,
     /// standard error of that mean [FIT points]
     pub score_se: f64,
-    /// gap metric on the whole validation range [%]
+    /// gap metric on the whole validation range [%] (JSON `fit_validation`, the name
+    /// every command gives a FIT on validation data)
+    #[serde(rename = "fit_validation")]
     pub fit_val: f64,
     /// toolbox FIT of `θ_m` on the validation capture [%]
+    #[serde(rename = "fit_angle_validation")]
     pub fit_angle_val: f64,
     /// passes the significance test (module documentation)
     pub significant: bool,
@@ -251,6 +254,7 @@ pub struct ParameterMismatch {
     /// where the simulation came from
     pub sim: String,
     /// gap metric of the user's simulation on the validation capture [%]
+    #[serde(rename = "fit_sim_validation")]
     pub fit_sim_val: f64,
     /// FIT points the parameters alone account for (nominal − simulation)
     pub parameter_part: f64,
@@ -269,13 +273,18 @@ pub struct Diagnosis {
     pub metric: String,
     /// structure of the nominal model
     pub structure: String,
-    /// the nominal's gap metric on the validation capture [%]
+    /// the nominal's gap metric on the validation capture [%] (JSON
+    /// `fit_nominal_validation`)
+    #[serde(rename = "fit_nominal_validation")]
     pub fit_nominal_val: f64,
     /// the nominal's toolbox FIT of `θ_m` on the validation capture [%]
+    #[serde(rename = "fit_nominal_angle_validation")]
     pub fit_nominal_angle_val: f64,
     /// the nominal's structure values, lag and offset
     pub nominal_parameters: BTreeMap<String, ParamValue>,
-    /// the best model's gap metric (the nominal's when `best` is `none`) [%]
+    /// the best model's gap metric (the nominal's when `best` is `none`) [%] (JSON
+    /// `fit_augmented_validation`)
+    #[serde(rename = "fit_augmented_validation")]
     pub fit_augmented_val: f64,
     /// share of the gap `100 − fit_nominal_val` the best closes [-]
     pub gap_closed_share: f64,
@@ -292,7 +301,8 @@ pub struct Diagnosis {
     pub parameter_mismatch: Option<ParameterMismatch>,
     /// the significance test in words
     pub test: String,
-    /// wall time [s]
+    /// wall time [s] (JSON `elapsed_s`, as every command's wall time)
+    #[serde(rename = "elapsed_s")]
     pub seconds: f64,
     /// notes
     pub warnings: Vec<String>,

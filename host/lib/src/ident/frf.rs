@@ -250,7 +250,7 @@ pub struct Frf {
     pub lines: Vec<u32>,
     /// frequency of each point [Hz]
     pub freq_hz: Vec<f64>,
-    /// Ĝ(k) = Ȳ/Ū [output unit / input unit], serialised as `[re, im]`
+    /// Ĝ(k) = Ȳ/Ū [output unit / input unit], serialised as `{"re", "im"}`
     #[serde(serialize_with = "ser_complex")]
     pub g: Vec<Complex64>,
     /// standard deviation of Ĝ(k) (complex, E|Ĝ − G|²)^½ [output unit / input unit]
@@ -332,9 +332,15 @@ pub const FIT_POOL_HALF_WIDTH: usize = 1;
 
 fn ser_complex<S: serde::Serializer>(v: &[Complex64], s: S) -> Result<S::Ok, S::Error> {
     use serde::ser::SerializeSeq;
+    /// a complex number as a labelled object
+    #[derive(Serialize)]
+    struct ReIm {
+        re: f64,
+        im: f64,
+    }
     let mut seq = s.serialize_seq(Some(v.len()))?;
     for c in v {
-        seq.serialize_element(&[c.re, c.im])?;
+        seq.serialize_element(&ReIm { re: c.re, im: c.im })?;
     }
     seq.end()
 }

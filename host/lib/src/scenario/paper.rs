@@ -332,7 +332,8 @@ pub struct ModelRow {
     pub antiresonances_hz: Vec<f64>,
     /// parameter errors where the structure is the simulator's
     pub parameter_errors: Vec<ParamError>,
-    /// fit time [s]
+    /// fit time [s] (JSON `elapsed_s`, as every command's wall time)
+    #[serde(rename = "elapsed_s")]
     pub seconds: f64,
 }
 
@@ -341,7 +342,9 @@ pub struct ModelRow {
 pub struct Table {
     /// one row per model
     pub rows: Vec<ModelRow>,
-    /// the true linear model's FIT on estimation and validation data [%]
+    /// the true linear model's FIT on estimation and validation data [%] (in JSON
+    /// `{"estimation", "validation"}`)
+    #[serde(serialize_with = "estimation_validation")]
     pub true_fit: (f64, f64),
     /// undamped resonances of the simulated joint [Hz]
     pub truth_resonances_hz: Vec<f64>,
@@ -349,8 +352,23 @@ pub struct Table {
     pub truth_antiresonances_hz: Vec<f64>,
     /// sample interval after decimation [s]
     pub ts: f64,
-    /// estimation and validation samples after decimation
+    /// estimation and validation samples after decimation (in JSON
+    /// `{"estimation", "validation"}`)
+    #[serde(serialize_with = "estimation_validation")]
     pub samples: (usize, usize),
+}
+
+/// An (estimation, validation) pair as the labelled object
+/// `{"estimation": .., "validation": ..}`.
+fn estimation_validation<S: serde::Serializer, T: Serialize>(
+    v: &(T, T),
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    use serde::ser::SerializeStruct;
+    let mut st = s.serialize_struct("EstimationValidation", 2)?;
+    st.serialize_field("estimation", &v.0)?;
+    st.serialize_field("validation", &v.1)?;
+    st.end()
 }
 
 /// The fitted models of [`table`], for plots.

@@ -407,7 +407,7 @@ fn a_joint_with_coulomb_friction_is_fitted_as_its_best_linear_approximation() {
         }
         let cfg = SimConfig {
             plant: Plant {
-                kind: PlantKind::ThreeMass,
+                kind: Structure::ThreeMass,
                 params: p,
             },
             effects,
