@@ -485,19 +485,17 @@ fn analyze_fit_and_validate_documents_match_their_schemas() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// `fit --effect` (the nonlinear engine) with validation data, and `validate` of its
-/// model file.
-#[test]
-fn nonlinear_fit_and_validate_documents_match_their_schemas() {
-    let dir = tmpdir("nonlinear");
+/// Estimation and validation captures (two periods each, other seeds) of the three-mass
+/// joint with a stiffening gearbox spring.
+fn stiffening_pair(dir: &std::path::Path) -> (String, String) {
     let three = ["--model", "three-mass", "--effect", "nonlinear_stiffness"];
     let est = simulate(
-        &dir,
+        dir,
         "est.jcap",
         &[&three[..], &["--periods", "2"][..]].concat(),
     );
     let val = simulate(
-        &dir,
+        dir,
         "val.jcap",
         &[
             &three[..],
@@ -505,6 +503,15 @@ fn nonlinear_fit_and_validate_documents_match_their_schemas() {
         ]
         .concat(),
     );
+    (est, val)
+}
+
+/// `fit --effect` (the nonlinear engine) with validation data, and `validate` of its
+/// model file.
+#[test]
+fn nonlinear_fit_and_validate_documents_match_their_schemas() {
+    let dir = tmpdir("nonlinear");
+    let (est, val) = stiffening_pair(&dir);
     let model = dir.join("m.json").display().to_string();
     let f = run_valid(
         &[
@@ -531,21 +538,7 @@ fn nonlinear_fit_and_validate_documents_match_their_schemas() {
 #[test]
 fn diagnose_demo_and_experiment_documents_match_their_schemas() {
     let dir = tmpdir("whole");
-    let three = ["--model", "three-mass", "--effect", "nonlinear_stiffness"];
-    let est = simulate(
-        &dir,
-        "est.jcap",
-        &[&three[..], &["--periods", "2"][..]].concat(),
-    );
-    let val = simulate(
-        &dir,
-        "val.jcap",
-        &[
-            &three[..],
-            &["--periods", "2", "--seed", "6", "--excitation-seed", "8"][..],
-        ]
-        .concat(),
-    );
+    let (est, val) = stiffening_pair(&dir);
     run_valid(
         &[
             "diagnose",

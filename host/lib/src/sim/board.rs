@@ -89,6 +89,18 @@ impl WireOptions {
         }
     }
 
+    /// The layout of a whole simulated session: batches and status as these options say,
+    /// the header every second, no overruns, `End` at the end.
+    pub fn layout(&self, excitation: &ExcitationConfig) -> StreamLayout {
+        StreamLayout {
+            batch_len: self.batch_len,
+            status_every: self.status_every,
+            overruns: 0,
+            end: true,
+            header_every: header_interval_samples(excitation.fs_hz) as usize,
+        }
+    }
+
     /// The session header for `excitation` at its sample rate.
     pub fn header(&self, excitation: &ExcitationConfig) -> SessionHeader {
         SessionHeader {
@@ -125,13 +137,7 @@ pub fn encode_session(
     let header = opts.header(excitation);
     let raw = out.to_raw_samples(&opts.scale, opts.timer_hz)?;
     let tick_step = raw.get(1).map_or(0, |s| s.tick.wrapping_sub(raw[0].tick));
-    let layout = StreamLayout {
-        batch_len: opts.batch_len,
-        status_every: opts.status_every,
-        overruns: 0,
-        end: true,
-        header_every: header_interval_samples(excitation.fs_hz) as usize,
-    };
+    let layout = opts.layout(excitation);
     let samples = raw.iter().zip(&out.theta_ref).map(|(s, &r)| (*s, r as f32));
     Ok(encode_stream(&header, samples, tick_step, &layout)?.bytes)
 }
@@ -410,13 +416,7 @@ pub fn stream_session(
     // as encode_session: the step between the first two samples' ticks
     let two = excitation.total_samples().is_some_and(|n| n >= 2);
     let tick = if two { step as u32 } else { 0 };
-    let layout = StreamLayout {
-        batch_len: opts.batch_len,
-        status_every: opts.status_every,
-        overruns: 0,
-        end: true,
-        header_every: header_interval_samples(excitation.fs_hz) as usize,
-    };
+    let layout = opts.layout(excitation);
     let mut sink = |bytes: &[u8], _: FrameSpan| w.write_all(bytes).map_err(StreamError::Io);
     let mut enc = StreamEncoder::new(&header, tick, &layout, &mut sink)?;
     // a sample the wire cannot carry ends the stream, but the run goes on unwritten: a

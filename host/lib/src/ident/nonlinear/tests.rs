@@ -12,6 +12,17 @@ use jointid_core::excitation::ExcitationConfig;
 
 use crate::test_support::shared_data as shared;
 
+/// seed 001's estimation and validation records (`shared/data/seed001-two-mass`).
+fn seed001_records() -> (IdData, IdData) {
+    let map = ColumnMap::capture();
+    let load = |f: &str| {
+        load_csv(&shared(&format!("seed001-two-mass/{f}")), &map)
+            .unwrap()
+            .data
+    };
+    (load("est.csv"), load("val.csv"))
+}
+
 fn seed001_model() -> NlModel {
     NlModel {
         structure: Structure::TwoMass,
@@ -33,13 +44,7 @@ fn seed001_model() -> NlModel {
 
 #[test]
 fn seed001_from_the_automatic_start_reaches_the_truth_and_its_validation_fit() {
-    let map = ColumnMap::capture();
-    let est = load_csv(&shared("seed001-two-mass/est.csv"), &map)
-        .unwrap()
-        .data;
-    let val = load_csv(&shared("seed001-two-mass/val.csv"), &map)
-        .unwrap()
-        .data;
+    let (est, val) = seed001_records();
     let model = seed001_model();
     let start = automatic_start(&est, &model, None).unwrap();
     let names: Vec<&str> = start.steps.iter().map(|s| s.name.as_str()).collect();
@@ -393,13 +398,7 @@ fn a_request_that_does_not_fit_the_model_is_refused_before_the_work() {
 /// gets its FITs, and the steps and the method say what was done.
 #[test]
 fn run_holds_the_fixed_values_and_validates_on_the_validation_record() {
-    let map = ColumnMap::capture();
-    let est = load_csv(&shared("seed001-two-mass/est.csv"), &map)
-        .unwrap()
-        .data;
-    let val = load_csv(&shared("seed001-two-mass/val.csv"), &map)
-        .unwrap()
-        .data;
+    let (est, val) = seed001_records();
     let req = NlRequest {
         fixed: vec![("d_g".into(), 80.0)],
         given: vec![vec![("k3".into(), 1.5e11)]],
