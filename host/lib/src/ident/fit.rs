@@ -20,7 +20,7 @@
 //!   [`fit_prepared`]);
 //! - the rigid body with Coulomb friction: inverse-dynamics least squares
 //!   ([`crate::ident::grey_box::rigid_idim`], seed 001 steps 1–2), then the
-//!   output-error FIT of the resulting nonlinear model (explicit simulation,
+//!   output-error FIT of the resulting nonlinear model (the simulator's own Coulomb law,
 //!   see [`RigidFriction`]).
 //!
 //! FIT is the System Identification Toolbox's `compare` figure
@@ -230,27 +230,41 @@ pub struct RigidFriction {
 }
 
 impl RigidFriction {
-    /// Simulated output for input `u` [N·m] from angle `q0` [rad] and
-    /// velocity `v0` [rad/s]; `output` selects angle or velocity.
+    /// Simulated output for input `u` [N·m] from angle `q0` [rad] and velocity `v0`
+    /// [rad/s]; `output` selects angle or velocity. The simulator's own laws integrate it
+    /// ([`crate::sim::simulate_driven`]: the rigid plant with the pure Coulomb law `F_s =
+    /// F_c`, set-valued at rest, and the offset taken from the torque), so this model and
+    /// `jointid simulate` share one Coulomb law. NaN throughout when the simulation fails
+    /// (a FIT of NaN fails every check).
     pub fn simulate(&self, u: &[f64], ts: f64, q0: f64, v0: f64, output: Output) -> Vec<f64> {
-        let (mut q, mut v) = (q0, v0);
-        let mut y = Vec::with_capacity(u.len());
-        for &uk in u {
-            y.push(match output {
-                Output::Angle => q,
-                Output::Velocity => v,
-            });
-            let sgn = if v > 0.0 {
-                1.0
-            } else if v < 0.0 {
-                -1.0
-            } else {
-                0.0
-            };
-            v += ts * (uk - self.fv * v - self.fc * sgn - self.offset) / self.j;
-            q += ts * v;
+        use crate::ident::nonlinear::{sim_plant, NlModel};
+        use crate::model::effects::{CoulombFriction, Effect};
+        use crate::sim::{simulate_driven, DrivenStart};
+        let effects = vec![Effect::CoulombFriction(CoulombFriction {
+            fc: self.fc,
+            fs: self.fc,
+            ..CoulombFriction::default()
+        })];
+        let model = NlModel {
+            structure: Structure::Rigid,
+            r: 1.0,
+            effects: effects.clone(),
+            tau_c: 0.0,
+            v_eps: 0.0,
+            dz_eps: 0.0,
+            substeps: 1,
+        };
+        let plant = sim_plant(&model, &[self.j, self.fv]);
+        let u: Vec<f64> = u.iter().map(|u| u - self.offset).collect();
+        // the current loop as good as absent: the torque acts within the step
+        let start = DrivenStart::State(vec![q0, v0, u.first().copied().unwrap_or(0.0)]);
+        match simulate_driven(&plant, &effects, 1e-9, ts, &u, &start) {
+            Ok(o) => match output {
+                Output::Angle => o.theta_m,
+                Output::Velocity => o.omega_m,
+            },
+            Err(_) => vec![f64::NAN; u.len()],
         }
-        y
     }
 }
 
