@@ -39,12 +39,22 @@ pub(super) fn check(fit: &FrfFit, opts: &LmOptions, frf: &Frf) -> Vec<FitWarning
         w.push(FitWarning::CostAboveNoise { ratio });
     }
     let tol = |f: f64| PEAK_MATCH_REL * f + line_gap(frf, f);
+    // peaks the model shows at the measured lines (the lines the FRF's own peaks were read
+    // from: its noise and distortion kept)
+    let seen = Frf {
+        g: fit.freq_response(&frf.freq_hz),
+        ..frf.clone()
+    };
+    let model_peaks = frf_peaks(&seen, fit.model.output);
     for p in &fit.peaks {
+        // a bump the model's response has too (the corner of a large damping, for one)
+        // is no missed mode
+        let near = |f: f64| (f - p.freq_hz).abs() <= tol(p.freq_hz);
         if p.prominence_db >= MISSED_PEAK_DB
-            && !fit
-                .resonances_hz
+            && !fit.resonances_hz.iter().any(|&m| near(m))
+            && !model_peaks
                 .iter()
-                .any(|&m| (m - p.freq_hz).abs() <= tol(p.freq_hz))
+                .any(|m| near(m.freq_hz) && m.prominence_db >= 0.5 * p.prominence_db)
         {
             w.push(FitWarning::MissedResonance {
                 freq_hz: p.freq_hz,
@@ -52,13 +62,8 @@ pub(super) fn check(fit: &FrfFit, opts: &LmOptions, frf: &Frf) -> Vec<FitWarning
             });
         }
     }
-    // peaks the model would show at the measured lines but the FRF does not (the lines the
-    // FRF's own peaks were read from: its noise and distortion kept)
-    let seen = Frf {
-        g: fit.freq_response(&frf.freq_hz),
-        ..frf.clone()
-    };
-    for m in frf_peaks(&seen, fit.model.output) {
+    // peaks the model would show at the measured lines but the FRF does not
+    for m in model_peaks {
         if m.prominence_db >= MISSED_PEAK_DB
             && !fit
                 .peaks
