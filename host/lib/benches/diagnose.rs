@@ -21,10 +21,10 @@ use jointid::diagnose::metric::{DrivenModel, Measured};
 use jointid::diagnose::{all_candidates, diagnose, DiagnoseOptions, DiagnoseRequest, Diagnosis};
 use jointid::ident::linalg::GaussRng;
 use jointid::ident::nonlinear::{identify, NlRequest};
-use jointid::model::effects::Effect;
+use jointid::model::effects::{Effect, EFFECT_NAMES};
 use jointid::model::spec::Structure;
-use jointid::sim::{simulate_excitation, ControllerConfig, JointParams, Plant, SimConfig};
-use jointid::test_support::random_joint;
+use jointid::sim::{ControllerConfig, JointParams, Plant, SimConfig};
+use jointid::test_support::{est_val_captures, random_joint};
 
 /// One case of the battery.
 struct Case {
@@ -69,17 +69,7 @@ fn size_keys(e: &Effect) -> Vec<(&'static str, f64)> {
 
 fn cases() -> Vec<Case> {
     let mut rng = GaussRng::new(1212);
-    let mut hidden: Vec<Vec<&str>> = [
-        "coulomb_friction",
-        "backlash",
-        "nonlinear_stiffness",
-        "extra_mode",
-        "time_delay",
-        "torque_ripple",
-    ]
-    .iter()
-    .map(|n| vec![*n])
-    .collect();
+    let mut hidden: Vec<Vec<&str>> = EFFECT_NAMES.iter().map(|n| vec![*n]).collect();
     hidden.push(vec!["nonlinear_stiffness", "time_delay"]);
     hidden.push(vec!["extra_mode", "coulomb_friction"]);
     hidden.push(vec![]);
@@ -107,37 +97,21 @@ fn cases() -> Vec<Case> {
 /// Estimation and validation captures of `case` with `periods` periods each (validation:
 /// other phases and noise).
 fn captures(case: &Case, periods: u32, rms: f64) -> (Dataset, Dataset) {
-    let run = |seed: u64, exc_seed: u64, name: &str| {
-        let cfg = SimConfig {
-            plant: Plant {
-                kind: Structure::ThreeMass,
-                params: case.params,
-            },
-            effects: case.hidden.clone(),
-            controller: case.controller,
-            seed,
-            ..SimConfig::default()
-        };
-        let exc = ExcitationConfig {
-            seed: exc_seed,
-            periods,
-            rms_rad: rms as f32,
-            ..ExcitationConfig::paper_default()
-        };
-        let out = simulate_excitation(&cfg, &exc).expect("simulation");
-        Dataset {
-            name: name.into(),
-            data: out.to_id_data(),
-            t0: 0.0,
-            excitation: Some(exc),
-            meta: Default::default(),
-        }
+    let cfg = SimConfig {
+        plant: Plant {
+            kind: Structure::ThreeMass,
+            params: case.params,
+        },
+        effects: case.hidden.clone(),
+        controller: case.controller,
+        ..SimConfig::default()
     };
-    let base = ExcitationConfig::paper_default().seed;
-    (
-        run(case.seed, base, "est"),
-        run(case.seed + 1000, base ^ 0x5A5A_1234, "val"),
-    )
+    let exc = ExcitationConfig {
+        periods,
+        rms_rad: rms as f32,
+        ..ExcitationConfig::paper_default()
+    };
+    est_val_captures(&cfg, &exc, case.seed)
 }
 
 /// The true model's gap metric on `val`.

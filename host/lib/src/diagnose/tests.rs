@@ -5,40 +5,18 @@
 
 use super::*;
 use crate::model::effects::{ExtraMode, NonlinearStiffness, TimeDelay};
-use crate::sim::{simulate_excitation, SimConfig};
+use crate::sim::SimConfig;
 use jointid_core::excitation::ExcitationConfig;
 
 /// Estimation and validation captures of the default joint with `effects`.
 fn captures(effects: &[Effect], seed: u64) -> (Dataset, Dataset) {
-    let run = |seed: u64, exc_seed: u64, name: &str| {
-        let cfg = SimConfig {
-            effects: effects.to_vec(),
-            seed,
-            ..SimConfig::default()
-        };
-        let exc = ExcitationConfig {
-            seed: exc_seed,
-            ..ExcitationConfig::paper_default()
-        };
-        let out = simulate_excitation(&cfg, &exc).unwrap();
-        Dataset {
-            name: name.into(),
-            data: out.to_id_data(),
-            t0: 0.0,
-            excitation: Some(exc),
-            meta: Default::default(),
-        }
+    let cfg = SimConfig {
+        effects: effects.to_vec(),
+        ..SimConfig::default()
     };
-    let base = ExcitationConfig::paper_default().seed;
-    (
-        run(seed, base, "est"),
-        run(seed + 1000, base ^ 0x5A5A_1234, "val"),
-    )
+    crate::test_support::est_val_captures(&cfg, &ExcitationConfig::paper_default(), seed)
 }
 
-/// The candidates of the battery: the three effects the battery hides. Coulomb friction
-/// (minutes per fit with its stick–slip laws), backlash and torque ripple are left out to
-/// keep the battery's time acceptable.
 fn battery_request() -> DiagnoseRequest {
     DiagnoseRequest {
         r: SimConfig::default().plant.params.r,

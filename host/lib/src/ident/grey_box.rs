@@ -72,7 +72,7 @@ pub use idim::{rigid_idim, IdimOptions, RigidFit};
 use init::clamp_vec;
 #[cfg(test)]
 use init::{chain_closed_form, chain_match, Chain};
-pub use init::{features, initial_values, Features};
+pub use init::{features, initial_values, rigid_from_response, Features};
 pub use linear::GreyBoxModel;
 
 /// Physical parameters from log-parameter estimates and their standard

@@ -189,3 +189,38 @@ pub fn shared_data(path: &str) -> std::path::PathBuf {
         .expect("shared/data beside the repository")
         .join(path)
 }
+
+/// An estimation and a validation capture of `cfg` driven by `exc` (`exc` as given, and
+/// other excitation phases), with noise seeds `seed` and `seed + 1000`: the two records
+/// `jointid diagnose` is given.
+///
+/// # Panics
+/// When the simulation fails.
+pub fn est_val_captures(
+    cfg: &crate::sim::SimConfig,
+    exc: &ExcitationConfig,
+    seed: u64,
+) -> (crate::data::Dataset, crate::data::Dataset) {
+    let run = |seed: u64, exc_seed: u64, name: &str| {
+        let cfg = crate::sim::SimConfig {
+            seed,
+            ..cfg.clone()
+        };
+        let exc = ExcitationConfig {
+            seed: exc_seed,
+            ..*exc
+        };
+        let out = crate::sim::simulate_excitation(&cfg, &exc).expect("simulation");
+        crate::data::Dataset {
+            name: name.into(),
+            data: out.to_id_data(),
+            t0: 0.0,
+            excitation: Some(exc),
+            meta: Default::default(),
+        }
+    };
+    (
+        run(seed, exc.seed, "est"),
+        run(seed + 1000, exc.seed ^ 0x5A5A_1234, "val"),
+    )
+}

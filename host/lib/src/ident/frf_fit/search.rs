@@ -124,29 +124,9 @@ pub(super) fn features(
     if low.len() < 3 {
         low = idx.iter().copied().take(3).collect();
     }
-    let (mut js, mut fs) = (Vec::new(), Vec::new());
-    for &i in &low {
-        let w = 2.0 * std::f64::consts::PI * frf.freq_hz[i];
-        let inv = frf.g[i].inv();
-        match output {
-            Output::Angle => {
-                js.push(-inv.re / (w * w));
-                fs.push(inv.im / w);
-            }
-            Output::Velocity => {
-                js.push(inv.im / w);
-                fs.push(inv.re);
-            }
-        }
-    }
-    let med = |v: &mut Vec<f64>| {
-        if v.is_empty() {
-            return f64::NAN;
-        }
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
-    let j_total = med(&mut js);
+    let freqs: Vec<f64> = low.iter().map(|&i| frf.freq_hz[i]).collect();
+    let g: Vec<Complex64> = low.iter().map(|&i| frf.g[i]).collect();
+    let (j_total, f_m) = grey_box::rigid_from_response(&freqs, &g, output);
     if !(j_total > 0.0 && j_total.is_finite()) {
         return Err(FrfFitError::NoRigidBody {
             detail: format!(
@@ -155,7 +135,7 @@ pub(super) fn features(
             ),
         });
     }
-    let mut f_m = med(&mut fs);
+    let mut f_m = f_m;
     let w_low = 2.0 * std::f64::consts::PI * frf.freq_hz[low[0]];
     if !(f_m > 1e-3 * j_total * w_low && f_m.is_finite()) {
         // unresolved: a mechanical pole a decade below the lowest line

@@ -334,28 +334,7 @@ pub fn features(
     let f_top = pairs.first().map(|p| 0.4 * p.0).unwrap_or(0.1 / data.ts);
     let freqs: Vec<f64> = (0..8).map(|i| f_top * (0.3 + 0.1 * i as f64)).collect();
     let g = sid.model.freq_response(&freqs);
-    let mut js = Vec::new();
-    let mut fs = Vec::new();
-    for (f, g) in freqs.iter().zip(&g) {
-        let w = 2.0 * std::f64::consts::PI * f;
-        let inv = g.inv();
-        match output {
-            Output::Angle => {
-                js.push(-inv.re / (w * w));
-                fs.push(inv.im / w);
-            }
-            Output::Velocity => {
-                js.push(inv.im / w);
-                fs.push(inv.re);
-            }
-        }
-    }
-    let med = |v: &mut Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
-    let mut j_total = med(&mut js);
-    let mut f_m = med(&mut fs);
+    let (mut j_total, mut f_m) = rigid_from_response(&freqs, &g, output);
     // inverse-dynamics LS below the first anti-resonance as a cross-check / fallback
     let idim = rigid_idim(
         data,
@@ -407,6 +386,39 @@ pub fn features(
         },
         warnings,
     ))
+}
+
+/// Rigid body from a low-frequency response `g` at `freqs_hz` [Hz]: `1/G ≈ −J ω² + j f ω`
+/// for the angle, `J j ω + f` for the velocity; the medians over the frequencies of the
+/// inertia `J` [kg·m²] and the viscous friction `f` [N·m·s/rad] (NaN without frequencies).
+pub fn rigid_from_response(
+    freqs_hz: &[f64],
+    g: &[nalgebra::Complex<f64>],
+    output: Output,
+) -> (f64, f64) {
+    let (mut js, mut fs) = (Vec::new(), Vec::new());
+    for (f, g) in freqs_hz.iter().zip(g) {
+        let w = 2.0 * std::f64::consts::PI * f;
+        let inv = g.inv();
+        match output {
+            Output::Angle => {
+                js.push(-inv.re / (w * w));
+                fs.push(inv.im / w);
+            }
+            Output::Velocity => {
+                js.push(inv.im / w);
+                fs.push(inv.re);
+            }
+        }
+    }
+    let med = |v: &mut Vec<f64>| {
+        if v.is_empty() {
+            return f64::NAN;
+        }
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    (med(&mut js), med(&mut fs))
 }
 
 /// Initial parameter values (arm-side, seed 000 Table 1 order) from features.
