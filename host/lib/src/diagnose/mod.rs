@@ -10,8 +10,10 @@
 //!    fit ([`crate::ident::nonlinear::linear_start`]) when the capture is periodic.
 //! 2. **Gap metric** ([`metric::METRIC_NAME`]): the toolbox FIT of the band-passed motor
 //!    velocity (1–150 Hz) on the validation capture, the model simulated with the
-//!    simulator's exact laws from the measured torque; the toolbox FIT of `θ_m` is
-//!    reported beside it for reference.
+//!    simulator's exact laws from the measured torque plus a slow torque input estimated
+//!    below [`DiagnoseOptions::tracking_hz`] (2 Hz; [`metric::simulate_tracked`]), the
+//!    disturbance the position loop rejected; the toolbox FIT of `θ_m` of the plain
+//!    open-loop simulation is reported beside it for reference.
 //! 3. **Candidates**: the nominal plus each candidate effect, linear parameters refitted
 //!    jointly, on [`DiagnoseOptions::threads`] threads. Each is scored on the validation
 //!    capture. **Significance test**: the scored range is split into K =
@@ -77,6 +79,9 @@ pub struct UserSim {
 pub struct DiagnoseOptions {
     /// band of the gap metric [Hz]
     pub band_hz: (f64, f64),
+    /// corner of the slow torque input each scored simulation estimates [Hz]
+    /// ([`metric::simulate_tracked`]; 0: a plain open-loop simulation)
+    pub tracking_hz: f64,
     /// segments K of the significance test
     pub segments: usize,
     /// smallest gain counted [FIT points]: significant when `mean − 2·SE` exceeds it
@@ -97,6 +102,7 @@ impl Default for DiagnoseOptions {
     fn default() -> Self {
         DiagnoseOptions {
             band_hz: metric::DEFAULT_BAND_HZ,
+            tracking_hz: metric::DEFAULT_TRACKING_HZ,
             segments: 4,
             min_gain: 0.3,
             threads: 2,
@@ -715,7 +721,7 @@ pub fn diagnose_with_series(
         }
     }
     let skip = ((o.skip_s / ts).round() as usize).min(val.data.len() / 4);
-    let measured = Measured::new(&val.data, o.band_hz, skip);
+    let measured = Measured::new(&val.data, o.band_hz, skip).with_tracking(o.tracking_hz);
     let mut warnings = Vec::new();
     if !inapplicable.is_empty() {
         warnings.push(format!(
@@ -798,7 +804,8 @@ pub fn diagnose_with_series(
         let nom_model = DrivenModel::of_fit(&nominal.fit);
         let mut levels = Vec::new();
         for ds in est {
-            let m = Measured::new(&ds.data, o.band_hz, skip.min(ds.data.len() / 4));
+            let m = Measured::new(&ds.data, o.band_hz, skip.min(ds.data.len() / 4))
+                .with_tracking(o.tracking_hz);
             let gap = m
                 .score(&nom_model, &ds.data, 1)
                 .map(|sc| 100.0 - sc.fit)
