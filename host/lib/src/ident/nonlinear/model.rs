@@ -644,10 +644,18 @@ impl<T: Float> Plant<T> {
                     }
                 }
             };
-            // mean of the held input over [t0, t0 + h] without a current loop
+            // mean of the held input over [t0, t0 + h] without a current loop; the share
+            // before the switch is taken as `switch − t0` also when the switch sits on t0
+            // (a whole-sample delay), so the derivative there is the one-sided one towards
+            // a longer delay, not nought (with nought a fit started on a whole sample never
+            // leaves it)
             let mean_input = |t0: T| -> T {
                 let t1 = t0 + c(h);
-                let before = (switch.min(t1) - t0).max(zero);
+                let before = if switch >= t0 {
+                    switch.min(t1) - t0
+                } else {
+                    zero
+                };
                 (a * before + b * (c::<T>(h) - before)) / c(h)
             };
             let theta_prev = q[0];

@@ -239,6 +239,48 @@ fn coulomb_friction_at_the_default_size_is_found_with_the_refined_smoothing() {
 }
 
 #[test]
+fn a_delay_fit_started_on_a_whole_sample_leaves_it() {
+    // without a current loop the delay enters through the held input's share before the
+    // switch; on a whole sample the switch sits on the sample instant, and the derivative
+    // there must not vanish (it did: the fit stayed on its start with a σ of nought)
+    // (the simulator needs a lag: 5 µs, a hundredth of a sample, left out of the model)
+    let no_lag = crate::sim::ControllerConfig {
+        current_loop_tau: 5e-6,
+        ..crate::sim::ControllerConfig::default()
+    };
+    let effect = Effect::TimeDelay(crate::model::effects::TimeDelay { samples: 1.6 });
+    let (data, cfg) = three_mass_run_under(effect, 4, no_lag);
+    let (mut model, truth) = truth_of(&cfg, effect, 2);
+    model.tau_c = 0.0;
+    let truth = model.values(&truth[..8], 0.0, 0.0);
+    let layout = model.layout();
+    let i = layout.iter().position(|d| d.name == "samples").unwrap();
+    let mut start = truth.clone();
+    start[i] = 1.0;
+    let fit = fit_output_error(&data, &model, &start, &NlOptions::default()).unwrap();
+    let q = &fit.params[i];
+    assert!(
+        q.std > 0.0 && (q.value - 1.6).abs() < 0.05 && (q.value - 1.6).abs() < 3.0 * q.std,
+        "samples = {} ± {} from a start of 1, truth 1.6",
+        q.value,
+        q.std
+    );
+    // with the current loop in the model the switch enters through the lag's response
+    let effect = Effect::TimeDelay(crate::model::effects::TimeDelay { samples: 1.6 });
+    let (data, cfg) = three_mass_run_under(effect, 4, crate::sim::ControllerConfig::default());
+    let (model, mut start) = truth_of(&cfg, effect, 2);
+    start[i + 1] = 1.0;
+    let fit = fit_output_error(&data, &model, &start, &NlOptions::default()).unwrap();
+    let q = &fit.params[i + 1];
+    assert!(
+        q.std > 0.0 && (q.value - 1.6).abs() < 0.05,
+        "with the lag: samples = {} ± {} from a start of 1, truth 1.6",
+        q.value,
+        q.std
+    );
+}
+
+#[test]
 fn a_delay_under_a_soft_controller_is_within_its_sigma_and_its_trade_with_the_lag_is_named() {
     // below a soft loop's bandwidth the current-loop lag and the delay lag the phase
     // alike: the fit must say so rather than report each as if it were known
