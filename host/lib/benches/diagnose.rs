@@ -10,8 +10,8 @@
 //! 2 × 15,000 estimation and 15,000 validation samples, all six candidates, against the
 //! nominal fit alone in the same run.
 //!
-//! Run: `cargo bench -p jointid --bench diagnose` (`ONLY=K` runs case K alone,
-//! `SPEED=0` skips the speed case, `BATTERY=0` the battery).
+//! Run: `cargo bench -p jointid --bench diagnose` (`ONLY=K` or `ONLY=K,L` runs those cases alone,
+//! `SPEED=0` skips the speed case, `DETAIL=1` prints every candidate, `BATTERY=0` the battery).
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -178,7 +178,9 @@ fn param_errors(d: &Diagnosis, hidden: &[Effect]) -> Vec<(String, f64)> {
 
 fn battery() {
     let all = cases();
-    let only: Option<usize> = std::env::var("ONLY").ok().and_then(|v| v.parse().ok());
+    let only: Option<Vec<usize>> = std::env::var("ONLY")
+        .ok()
+        .map(|v| v.split(',').filter_map(|k| k.trim().parse().ok()).collect());
     let r = JointParams::default().r;
     // hidden label -> answered label -> count
     let mut confusion: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
@@ -194,7 +196,7 @@ fn battery() {
     let mut closure_errs: Vec<f64> = Vec::new();
     let mut times: Vec<f64> = Vec::new();
     for (i, case) in all.iter().enumerate() {
-        if only.is_some_and(|k| k != i) {
+        if only.as_ref().is_some_and(|k| !k.contains(&i)) {
             continue;
         }
         let (est, val) = captures(case, 4, case.rms);
@@ -241,6 +243,23 @@ fn battery() {
                 .collect::<Vec<_>>(),
             secs
         );
+        if std::env::var("DETAIL").is_ok_and(|v| v == "1") {
+            for c in d.effects.iter().chain(d.pair.iter()) {
+                let p: Vec<String> = c
+                    .parameters
+                    .iter()
+                    .map(|(k, v)| format!("{k} {:.4e}±{:.1e}", v.value, v.std))
+                    .collect();
+                println!(
+                    "    {} {:+.1}: {} warnings {:?}",
+                    c.name,
+                    c.score,
+                    p.join(", "),
+                    c.warnings
+                );
+            }
+            println!("    hidden {:?}; warnings {:?}", case.hidden, d.warnings);
+        }
         let answered = d.best.clone();
         *confusion
             .entry(label.clone())

@@ -264,6 +264,38 @@ impl Measured {
     }
 }
 
+/// Start perturbation of [`Measured::start_sensitivity`] [rad].
+pub const START_PERTURBATION_RAD: f64 = 1e-9;
+
+/// Below this self-FIT [%] a model's simulation is called sensitive to its start.
+pub const SENSITIVE_BELOW: f64 = 99.0;
+
+impl Measured {
+    /// The gap metric of `model`'s simulation with its start angle moved by
+    /// [`START_PERTURBATION_RAD`], scored against its own `scored` simulation [%]: 100 for a
+    /// joint that forgets its start, far less for one whose open-loop response is chaotic
+    /// (a strongly stiffening spring at a large amplitude: 1 nrad grows to a full-size
+    /// difference within seconds). Such a model cannot be scored by any simulation metric.
+    ///
+    /// # Errors
+    /// The simulator's refusal, in words.
+    pub fn start_sensitivity(
+        &self,
+        model: &DrivenModel,
+        data: &IdData,
+        scored: &Scored,
+    ) -> Result<f64, String> {
+        let mut moved = data.clone();
+        if let Some(y0) = moved.y.first_mut() {
+            *y0 += START_PERTURBATION_RAD;
+        }
+        let (driven, _, _) = simulate_tracked(model, &moved, self.tracking_hz)?;
+        let velocity = velocity_band(&driven.theta_m, data.ts, self.band);
+        let s = self.skip;
+        fit_percent(&scored.velocity[s..], &velocity[s..]).map_err(|e| e.to_string())
+    }
+}
+
 /// Gain of `better` over `base` on the segments: (mean, standard error of the mean).
 pub fn segment_gain(better: &[f64], base: &[f64]) -> (f64, f64) {
     let g: Vec<f64> = better.iter().zip(base).map(|(a, b)| a - b).collect();
@@ -349,6 +381,48 @@ mod tests {
             h_rms < 0.05 * w_rms,
             "{h_rms:e} of {w_rms:e} above {} Hz",
             4.0 * DEFAULT_TRACKING_HZ
+        );
+    }
+
+    /// A strongly stiffening joint at a large amplitude is chaotic open loop (1 nrad at the
+    /// start grows to a full-size difference); the same joint without the cubic term is not.
+    #[test]
+    fn a_chaotic_simulation_is_told_from_one_that_forgets_its_start() {
+        use crate::data::ExcitationConfig;
+        use crate::model::effects::NonlinearStiffness;
+        use crate::sim::{SensorConfig, SimConfig};
+        let stiff = vec![Effect::NonlinearStiffness(NonlinearStiffness { k3: 3e13 })];
+        let sensitivity = |effects: Vec<Effect>| {
+            let cfg = SimConfig {
+                effects: effects.clone(),
+                sensors: SensorConfig::ideal(),
+                ..SimConfig::default()
+            };
+            let exc = ExcitationConfig {
+                periods: 3,
+                rms_rad: 0.14,
+                ..ExcitationConfig::paper_default()
+            };
+            let (_, val) = crate::test_support::est_val_captures(&cfg, &exc, 2);
+            let model = DrivenModel {
+                plant: cfg.plant,
+                effects,
+                tau_c: cfg.controller.current_loop_tau,
+                offset: 0.0,
+            };
+            let m = Measured::new(&val.data, DEFAULT_BAND_HZ, 1000);
+            let scored = m.score(&model, &val.data, 1).unwrap();
+            (
+                scored.fit,
+                m.start_sensitivity(&model, &val.data, &scored).unwrap(),
+            )
+        };
+        let (fit_linear, linear) = sensitivity(Vec::new());
+        let (fit_stiff, chaotic) = sensitivity(stiff);
+        assert!(linear > 99.99, "linear joint: self-FIT {linear:.3} %");
+        assert!(
+            chaotic < SENSITIVE_BELOW,
+            "stiffening joint: self-FIT {chaotic:.3} % (true-model metric {fit_stiff:.1} %, linear {fit_linear:.1} %)"
         );
     }
 

@@ -23,8 +23,14 @@
 //!    point), SE the standard error of the mean over the segments. When none is
 //!    significant the answer is `none`.
 //! 4. **Pair**: when the best single effect is significant, it is refitted with each other
-//!    significant candidate; a pair is reported when it gains significantly over the
-//!    single by the same test.
+//!    significant candidate, started from the two singles' fitted values (the structure
+//!    of the best single's fit, or of the partner's when that is an extra mode); a pair is
+//!    reported when it gains significantly over the single by the same test.
+//!
+//! Every scored model is also simulated from a start angle 1 nrad away
+//! ([`metric::Measured::start_sensitivity`]): a model whose open-loop response is chaotic
+//! (a strongly stiffening spring at a large amplitude) is flagged, since no simulation
+//! metric can score it.
 //! 5. **Where** ([`locate`]): the nominal's validation residual by operating region and
 //!    frequency band; the odd/even non-excited line levels of periodic captures
 //!    ([`crate::ident::frf`]); with two estimation captures, how distortion and gap change
@@ -314,6 +320,9 @@ pub struct Diagnosis {
     pub warnings: Vec<String>,
 }
 
+/// Opening words of the warning on a model whose simulation does not forget its start.
+const SENSITIVE: &str = "sensitive to its start";
+
 /// One fitted model with its score.
 struct Fitted {
     fit: NlFit,
@@ -321,7 +330,9 @@ struct Fitted {
     warnings: Vec<String>,
 }
 
-/// Fits `effects` on `est` and scores on `val`.
+/// Fits `effects` on `est` and scores on `val`. `from`: a fit whose structure values, lag
+/// and offset start this one, the effects starting at the values they carry (a pair,
+/// started from its singles' fits); `None`: the automatic start, or the extra mode's.
 fn fit_and_score(
     est: &IdData,
     val: &IdData,
@@ -329,6 +340,7 @@ fn fit_and_score(
     req: &DiagnoseRequest,
     effects: Vec<Effect>,
     starts: &LinearStarts,
+    from: Option<&NlFit>,
 ) -> Result<Fitted, String> {
     let linear = &starts.structure;
     let mut nl = NlRequest {
@@ -342,7 +354,12 @@ fn fit_and_score(
         .effects
         .iter()
         .position(|e| matches!(e, Effect::ExtraMode(_)));
-    if let (Some(i), Some((plant, mode, tau_c))) = (extra_at, &starts.extra_mode) {
+    if let Some(base) = from {
+        nl.tau_c = base.model.tau_c;
+        nl.linear = Some(base.plant.clone());
+        let offset = base.get("offset").unwrap_or(0.0);
+        nl.start = NlStart::Values(model_of(&nl, est).values(&base.plant, offset, 0.0));
+    } else if let (Some(i), Some((plant, mode, tau_c))) = (extra_at, &starts.extra_mode) {
         nl.effects[i] = Effect::ExtraMode(*mode);
         nl.tau_c = *tau_c;
         nl.linear = Some(plant.clone());
@@ -351,10 +368,21 @@ fn fit_and_score(
     let res = identify(est, &nl).map_err(|e| e.to_string())?;
     let model = DrivenModel::of_fit(&res.fit);
     let scored = measured.score(&model, val, req.options.segments)?;
+    let mut warnings = res.warnings;
+    let own = measured.start_sensitivity(&model, val, &scored)?;
+    if own < metric::SENSITIVE_BELOW {
+        warnings.push(format!(
+            "{SENSITIVE}: moving its start angle by {:e} rad moves its simulation to a \
+             band-passed velocity FIT of {own:.1} % against itself, so its response is chaotic \
+             at this amplitude and no simulation metric can score it; diagnose on captures at \
+             a smaller amplitude",
+            metric::START_PERTURBATION_RAD
+        ));
+    }
     Ok(Fitted {
         fit: res.fit,
         scored,
-        warnings: res.warnings,
+        warnings,
     })
 }
 
@@ -753,6 +781,7 @@ pub fn diagnose_with_series(
             req,
             effects.clone(),
             &starts,
+            None,
         )
     };
     let results = parallel(&jobs, o.threads, score);
@@ -925,16 +954,40 @@ pub fn diagnose_with_series(
     if let Some((top, Some(top_fit))) = singles.first().filter(|c| c.0.significant) {
         best = top.name.clone();
         best_fit = top.fit_val;
-        let partners: Vec<Effect> = singles[1..]
+        let partners: Vec<&NlFit> = singles[1..]
             .iter()
             .filter(|c| c.0.significant)
-            .filter_map(|c| c.1.as_ref().map(|f| f.fit.model.effects[0]))
+            .filter_map(|c| c.1.as_ref().map(|f| &f.fit))
             .collect();
         if o.pairs && !partners.is_empty() {
             let first = top_fit.fit.model.effects[0];
-            let jobs: Vec<Vec<Effect>> = partners.iter().map(|p| vec![first, *p]).collect();
-            let res = parallel(&jobs, o.threads, score);
-            for (effects, r) in jobs.iter().zip(res) {
+            // each pair starts from its singles' fitted values: the structure, lag and
+            // offset of the top single's fit, or of the partner's when that is an extra
+            // mode (it changes what the structure's masses and springs stand for)
+            let jobs: Vec<(Vec<Effect>, &NlFit)> = partners
+                .iter()
+                .map(|p| {
+                    let second = p.model.effects[0];
+                    let base = if matches!(second, Effect::ExtraMode(_)) {
+                        *p
+                    } else {
+                        &top_fit.fit
+                    };
+                    (vec![first, second], base)
+                })
+                .collect();
+            let res = parallel(&jobs, o.threads, |(effects, base)| {
+                fit_and_score(
+                    &est[0].data,
+                    &val.data,
+                    &measured,
+                    req,
+                    effects.clone(),
+                    &starts,
+                    Some(base),
+                )
+            });
+            for ((effects, _), r) in jobs.iter().zip(res) {
                 let name = format!("{}+{}", effects[0].name(), effects[1].name());
                 match r {
                     Ok(f) => {
@@ -1047,6 +1100,15 @@ pub fn diagnose_with_series(
             best_fit - nom_fit
         )
     };
+    if best != "none" {
+        let best_warnings = match &pair {
+            Some(p) => &p.warnings,
+            None => &singles[0].0.warnings,
+        };
+        if let Some(w) = best_warnings.iter().find(|w| w.starts_with(SENSITIVE)) {
+            warnings.push(format!("{best}: {w}"));
+        }
+    }
     let nominal_parameters = linear_parameters(&nominal.fit);
     let best_velocity = match (&pair, pair_velocity) {
         (Some(p), Some(v)) => Some((p.name.clone(), v)),
