@@ -192,6 +192,8 @@ fn fit_with_segment_all_averages_the_frf_over_the_segments_of_a_gapped_capture()
     let info = json_of(&jointid(&["info", c, "--json"]));
     let listed = info["segments"].as_array().unwrap();
     assert_eq!(listed.len(), 2, "{info}");
+    let model = dir.join("m.json");
+    let m = model.to_str().unwrap();
     let out = jointid(&[
         "fit",
         c,
@@ -199,6 +201,8 @@ fn fit_with_segment_all_averages_the_frf_over_the_segments_of_a_gapped_capture()
         "three-mass",
         "--segment",
         "all",
+        "--save",
+        m,
         "--json",
     ]);
     let all = json_of(&out);
@@ -238,6 +242,21 @@ fn fit_with_segment_all_averages_the_frf_over_the_segments_of_a_gapped_capture()
     assert!(
         e_all <= e_long,
         "sum of squared relative errors {e_all:.2e} over all segments, {e_long:.2e} longest"
+    );
+    // validate on every segment: each one's FIT and the pooled one, which is the fit's
+    let v = json_of(&jointid(&["validate", m, c, "--segment", "all", "--json"]));
+    let per = v["segments"].as_array().unwrap();
+    assert_eq!(per.len(), 2, "{v}");
+    // a segment alone with fewer than two steady-state periods has no periodic FIT (null)
+    assert!(
+        per.iter()
+            .all(|s| s["fit"].is_null() || num(&s["fit"]) > 90.0)
+            && per.iter().any(|s| !s["fit"].is_null()),
+        "{v}"
+    );
+    assert!(
+        (num(&v["fit"]) - num(&all["fit_estimation"])).abs() < 1e-6,
+        "{v} {all}"
     );
 }
 
