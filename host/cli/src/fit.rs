@@ -27,10 +27,10 @@ use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome
 use jointid::data::output::check_output;
 use jointid::data::Dataset;
 use jointid::ident::fit::{
-    below_frf, default_f_min, fit_frequency_domain, fit_prepared, log_grid, param_map, FitData,
-    FitOptions, Fitted, ParamJson,
+    below_frf, default_f_min, fit_frequency_domain, fit_prepared, fit_prepared_segments, log_grid,
+    param_map, FitData, FitOptions, Fitted, ParamJson,
 };
-use jointid::ident::frf::{analyze_dataset, FrfAnalysis};
+use jointid::ident::frf::{analyze_dataset, analyze_segments, FrfAnalysis};
 use jointid::ident::frf_fit::{self, PERIODIC_FIT_NAME};
 use jointid::ident::grey_box::{Output, DEFAULT_GEAR_RATIO};
 use jointid::ident::ss::Resonances;
@@ -379,6 +379,9 @@ pub struct FitReport {
     pub ts: f64,
     /// estimation samples (after preparation)
     pub samples: usize,
+    /// the gap-free segments of DATA the fit used (one entry for a record without gaps or
+    /// one segment), each with the model's FIT on it alone
+    pub segments: Vec<SegmentJson>,
     /// parameters by name (empty for a black box)
     pub parameters: std::collections::BTreeMap<String, ParamJson>,
     /// name of the FIT definition
@@ -401,6 +404,23 @@ pub struct FitReport {
     /// estimator notes
     pub warnings: Vec<String>,
 }
+
+/// One estimation segment in `fit --json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct SegmentJson {
+    /// number of the segment (from 1, as `jointid info` lists them)
+    pub segment: usize,
+    /// its samples at the capture rate
+    pub samples: usize,
+    /// the model's FIT on this segment alone, the report's FIT definition [%] (null when it
+    /// cannot be computed: a segment with fewer than two steady-state periods for the
+    /// periodic FIT)
+    pub fit: Option<f64>,
+}
+
+/// Least samples of a segment that a time-domain fit with `--segment all` takes; shorter
+/// ones are left out with a note (their initial state would cost more than they tell).
+pub const MIN_SEGMENT_SAMPLES: usize = 200;
 
 /// Residual tests per data set.
 #[derive(Debug, Serialize)]
@@ -435,7 +455,10 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         super::fit_nl::refuse_nonlinear_flags(args)?;
     }
     check_columns(&args.data.data_args(&args.data.path))?;
-    let ds = args.data.data_args(&args.data.path).load(ctx.loaders)?;
+    let sel = args.data.data_args(&args.data.path).select(ctx.loaders)?;
+    let numbers = sel.segments.clone();
+    let mut segs = sel.datasets;
+    let ds = longest_segment(&segs).clone();
     let val_ds = match &args.validation {
         Some(p) => Some(args.data.data_args(p).load(ctx.loaders)?),
         None => None,
@@ -443,8 +466,21 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     if let Some(v) = &val_ds {
         check_same_rate(&ds, v, "--validation")?;
     }
+    if segs.len() > 1 && args.estimation_fraction.is_some() {
+        return Err(format!(
+            "--estimation-fraction splits one record; {} segments ({}) were selected: give \
+             --validation, or --segment longest or N",
+            segs.len(),
+            list(&numbers)
+        )
+        .into());
+    }
     if nonlinear {
-        return super::fit_nl::run(args, &spec, ctx, &ds, val_ds.as_ref());
+        if segs.len() > 1 {
+            let (used, used_numbers) = usable_segments(&mut segs, &numbers, &ds.name);
+            return super::fit_nl::run(args, &spec, ctx, &used, &used_numbers, val_ds.as_ref());
+        }
+        return super::fit_nl::run(args, &spec, ctx, &segs, &numbers, val_ds.as_ref());
     }
     let prep = args.prep.prep();
     let prepare = |d: &jointid::data::IdData, name: &str| {
@@ -476,6 +512,18 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         refine: !args.no_refine,
         feedthrough: args.feedthrough,
     };
+    if segs.len() > 1 {
+        return run_segments(
+            args,
+            &opts,
+            ctx,
+            segs,
+            &numbers,
+            &val,
+            val_ds.as_ref(),
+            val_name,
+        );
+    }
     let periodic = match (args.domain, args.estimation_fraction) {
         (DomainArg::Time, _) => None,
         (DomainArg::Frequency, _) if spec.coulomb => {
@@ -525,7 +573,9 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
             args,
             &opts,
             ctx,
-            &ds,
+            std::slice::from_ref(&ds),
+            &numbers,
+            a,
             a,
             &est,
             val.as_ref(),
@@ -559,6 +609,11 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     };
     let est = &est.prepared;
     let measured = Measured {
+        segments: vec![SegmentJson {
+            segment: numbers[0],
+            samples: ds.data.len(),
+            fit: Some(ev.fit),
+        }],
         val_name,
         ts: est.ts,
         samples: est.len(),
@@ -571,6 +626,201 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         seconds,
     };
     finish(args, ctx, &ds, &fitted, measured)
+}
+
+/// The longest of the selected segments (the first of equal length); the record a fit
+/// over several segments names, plots and starts from.
+pub(crate) fn longest_segment(segs: &[Dataset]) -> &Dataset {
+    segs.iter()
+        .enumerate()
+        .max_by_key(|(i, d)| (d.data.len(), usize::MAX - i))
+        .map_or(&segs[0], |(_, d)| d)
+}
+
+/// segment numbers as `1, 3`
+pub(crate) fn list(numbers: &[usize]) -> String {
+    numbers
+        .iter()
+        .map(usize::to_string)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The segments a time-domain fit takes ([`MIN_SEGMENT_SAMPLES`] or more) and their
+/// numbers; a note on standard error names those left out and why.
+pub(crate) fn usable_segments(
+    segs: &mut Vec<Dataset>,
+    numbers: &[usize],
+    name: &str,
+) -> (Vec<Dataset>, Vec<usize>) {
+    let mut used = Vec::new();
+    let mut used_numbers = Vec::new();
+    let mut left = Vec::new();
+    for (d, &k) in segs.drain(..).zip(numbers) {
+        if d.data.len() >= MIN_SEGMENT_SAMPLES {
+            used.push(d);
+            used_numbers.push(k);
+        } else {
+            left.push(format!("segment {k} ({} samples)", d.data.len()));
+        }
+    }
+    if !left.is_empty() {
+        let _ = writeln!(
+            std::io::stderr(),
+            "note: {name}: the time-domain fit leaves out {}: shorter than {MIN_SEGMENT_SAMPLES} \
+             samples, each would add an initial state for little data",
+            left.join(", ")
+        );
+    }
+    let _ = writeln!(
+        std::io::stderr(),
+        "note: {name}: fitting segments {} as separate experiments (one parameter vector, each \
+         segment its own initial state)",
+        list(&used_numbers)
+    );
+    (used, used_numbers)
+}
+
+/// `jointid fit --segment all` with more than one segment, linear models: the
+/// frequency-domain fit on the FRF averaged over every segment's whole periods
+/// ([`analyze_segments`], as `analyze`), or the time-domain fit with the segments as
+/// separate experiments ([`fit_prepared_segments`]); FIT pooled and per segment.
+#[allow(clippy::too_many_arguments)]
+fn run_segments(
+    args: &FitArgs,
+    opts: &FitOptions,
+    ctx: &mut Context<'_>,
+    mut segs: Vec<Dataset>,
+    numbers: &[usize],
+    val: &Option<FitData>,
+    val_ds: Option<&Dataset>,
+    val_name: Option<String>,
+) -> CmdResult {
+    let name = longest_segment(&segs).name.clone();
+    let pooled = match args.domain {
+        DomainArg::Time => None,
+        DomainArg::Frequency if opts.spec.coulomb => {
+            return Err(
+                "--friction coulomb is nonlinear: the rigid model with Coulomb friction is fitted \
+                 in the time domain"
+                    .into(),
+            )
+        }
+        DomainArg::Frequency => Some(
+            analyze_segments(&segs, args.settle_periods)
+                .map_err(|e| format!("{name}: --domain frequency needs periodic data: {e}"))?,
+        ),
+        DomainArg::Auto if !opts.spec.coulomb => analyze_segments(&segs, args.settle_periods).ok(),
+        DomainArg::Auto => None,
+    };
+    if let Some(pooled) = &pooled {
+        // the residual tests run on one period of one segment's steady state: the segment
+        // with the most steady-state periods of its own
+        let Some((ds, own)) = segs
+            .iter()
+            .filter_map(|d| analyze_dataset(d, args.settle_periods).ok().map(|a| (d, a)))
+            .max_by_key(|(_, a)| a.layout.count)
+        else {
+            return Err(format!(
+                "{name}: the FRF averages the segments, but no segment alone holds two \
+                 steady-state periods for the residual tests; give --domain time"
+            )
+            .into());
+        };
+        let vp = val_ds.and_then(|v| analyze_dataset(v, args.settle_periods).ok());
+        check_lags(
+            args.lags,
+            &format!("one period of {}", ds.name),
+            own.layout.period,
+        )?;
+        let est =
+            FitData::new(&ds.data, args.prep.prep()).map_err(|e| format!("{}: {e}", ds.name))?;
+        if val_ds.is_some() && vp.is_none() {
+            check_records_lags(args, &ds.name, &est, val.as_ref(), &val_name)?;
+        }
+        let _ = writeln!(
+            std::io::stderr(),
+            "note: {name}: the FRF averages the whole periods of segments {}",
+            list(numbers)
+        );
+        return run_frequency_domain(
+            args,
+            opts,
+            ctx,
+            &segs,
+            numbers,
+            pooled,
+            &own,
+            &est,
+            val.as_ref(),
+            val_ds,
+            vp.as_ref(),
+            val_name,
+        );
+    }
+    let (used, used_numbers) = usable_segments(&mut segs, numbers, &name);
+    if used.is_empty() {
+        return Err(format!(
+            "{name}: no segment has {MIN_SEGMENT_SAMPLES} samples or more for a time-domain fit"
+        )
+        .into());
+    }
+    let prep = args.prep.prep();
+    let est: Vec<FitData> = used
+        .iter()
+        .map(|d| FitData::new(&d.data, prep).map_err(|e| format!("{}: {e}", d.name)))
+        .collect::<Result<_, _>>()?;
+    let total: usize = est.iter().map(|e| e.prepared.len()).sum();
+    check_lags(args.lags, &name, total)?;
+    if let (Some(v), Some(vn)) = (val, &val_name) {
+        check_lags(args.lags, vn, v.prepared.len())?;
+    }
+    let t0 = Instant::now();
+    let mut fitted = fit_prepared_segments(&est, opts).map_err(|e| format!("{name}: {e}"))?;
+    let seconds = t0.elapsed().as_secs_f64();
+    if !opts.spec.coulomb {
+        if let Some(w) = analyze_segments(&used, args.settle_periods)
+            .ok()
+            .and_then(|a| below_frf(&a, used[0].data.ts, opts, &fitted))
+        {
+            fitted.warnings.push(w.to_string());
+        }
+    }
+    let (ev, each) = fitted
+        .evaluate_segments(&est, args.lags)
+        .map_err(|e| format!("{name}: {e}"))?;
+    let vv = match (val, &val_name) {
+        (Some(v), Some(vn)) => Some(
+            fitted
+                .evaluate_on(v, args.lags)
+                .map_err(|e| format!("{vn}: {e}"))?,
+        ),
+        _ => None,
+    };
+    let ts = est[0].prepared.ts;
+    let measured = Measured {
+        segments: used
+            .iter()
+            .zip(&used_numbers)
+            .zip(&each)
+            .map(|((d, &k), &f)| SegmentJson {
+                segment: k,
+                samples: d.data.len(),
+                fit: Some(f),
+            })
+            .collect(),
+        val_name,
+        ts,
+        samples: total,
+        fit_name: FIT_NAME,
+        fit_estimation: ev.fit,
+        fit_validation: vv.as_ref().map(|v| v.fit),
+        res: fitted.resonances(default_f_min(total, ts)),
+        ev,
+        vv,
+        seconds,
+    };
+    finish(args, ctx, longest_segment(&used), &fitted, measured)
 }
 
 /// `--lags` against the prepared estimation and validation records.
@@ -607,7 +857,9 @@ fn run_frequency_domain(
     args: &FitArgs,
     opts: &FitOptions,
     ctx: &mut Context<'_>,
-    ds: &Dataset,
+    segs: &[Dataset],
+    numbers: &[usize],
+    pooled: &FrfAnalysis,
     analysis: &FrfAnalysis,
     est: &FitData,
     val: Option<&FitData>,
@@ -615,13 +867,16 @@ fn run_frequency_domain(
     val_analysis: Option<&FrfAnalysis>,
     val_name: Option<String>,
 ) -> CmdResult {
+    // `analysis` is the FRF of `ds`, the longest segment (its residual tests); `pooled`
+    // averages over every segment's whole periods (the fit and its FIT)
+    let ds = longest_segment(segs);
     let ts = ds.data.ts;
     let t0 = Instant::now();
-    let fitted = fit_frequency_domain(analysis, ts, opts, est.decimate)
+    let fitted = fit_frequency_domain(pooled, ts, opts, est.decimate)
         .map_err(|e| format!("{}: {e}", ds.name))?;
     let seconds = t0.elapsed().as_secs_f64();
     let respond = |f: &[f64]| fitted.model.freq_response(f);
-    let f_min = analysis.frf.freq_hz.first().copied().unwrap_or(0.0);
+    let f_min = pooled.frf.freq_hz.first().copied().unwrap_or(0.0);
     let res = fitted.resonances(f_min);
     // residual tests on one period of the steady state (slow disturbances
     // and drift averaged out), at the capture rate
@@ -657,16 +912,39 @@ fn run_frequency_domain(
     let (fit_name, fit_estimation, fit_validation) = if periodic {
         (
             PERIODIC_FIT_NAME,
-            periodic_fit(analysis),
+            periodic_fit(pooled),
             val_analysis.map(periodic_fit),
         )
     } else {
         (FIT_NAME, ev.fit, vv.as_ref().map(|v| v.fit))
     };
+    let segments = if segs.len() == 1 {
+        vec![SegmentJson {
+            segment: numbers[0],
+            samples: ds.data.len(),
+            fit: Some(if periodic {
+                periodic_fit(analysis)
+            } else {
+                ev.fit
+            }),
+        }]
+    } else {
+        segs.iter()
+            .zip(numbers)
+            .map(|(d, &k)| SegmentJson {
+                segment: k,
+                samples: d.data.len(),
+                fit: analyze_dataset(d, args.settle_periods)
+                    .ok()
+                    .map(|a| periodic_fit(&a)),
+            })
+            .collect()
+    };
     let measured = Measured {
+        segments,
         val_name,
         ts,
-        samples: ds.data.len(),
+        samples: segs.iter().map(|d| d.data.len()).sum(),
         fit_name,
         fit_estimation,
         fit_validation,
@@ -680,6 +958,8 @@ fn run_frequency_domain(
 
 /// What a fit path measured, for the report.
 struct Measured {
+    /// the estimation segments and the FIT on each
+    segments: Vec<SegmentJson>,
     /// name of the validation record
     val_name: Option<String>,
     /// sample interval of the compared records [s]
@@ -736,6 +1016,7 @@ fn finish(
         validation_file: m.val_name,
         ts: m.ts,
         samples: m.samples,
+        segments: m.segments,
         parameters: {
             let mut p = param_map(&fitted.params);
             if args.linear_axis {
@@ -854,7 +1135,32 @@ pub(crate) fn print_report(out: &mut dyn Write, r: &FitReport) -> std::io::Resul
         }
     }
     writeln!(out, "  {}:", r.fit_name)?;
-    writeln!(out, "    estimation: {:.2}", r.fit_estimation)?;
+    writeln!(
+        out,
+        "    estimation: {:.2}{}",
+        r.fit_estimation,
+        if r.segments.len() > 1 {
+            " (pooled over the segments)"
+        } else {
+            ""
+        }
+    )?;
+    if r.segments.len() > 1 {
+        for sg in &r.segments {
+            match sg.fit {
+                Some(f) => writeln!(
+                    out,
+                    "      segment {} ({} samples): {f:.2}",
+                    sg.segment, sg.samples
+                )?,
+                None => writeln!(
+                    out,
+                    "      segment {} ({} samples): not computed (fewer than two steady-state periods)",
+                    sg.segment, sg.samples
+                )?,
+            }
+        }
+    }
     if let Some(v) = r.fit_validation {
         writeln!(out, "    validation: {v:.2}")?;
     }

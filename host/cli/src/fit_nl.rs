@@ -18,7 +18,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::fit::{save_model, DomainArg, FitArgs, OutputArg};
+use super::fit::{save_model, DomainArg, FitArgs, OutputArg, SegmentJson};
 use super::{print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::check_output;
 use jointid::data::{Dataset, Detrend, IdData};
@@ -107,6 +107,9 @@ struct NlReport {
     validation_file: Option<String>,
     ts: f64,
     samples: usize,
+    /// the gap-free segments fitted (as separate experiments), each with the velocity FIT
+    /// on it alone
+    segments: Vec<SegmentJson>,
     /// the structure's parameters, `tau_c` (when there is a lag) and `offset`
     parameters: BTreeMap<String, ParamJson>,
     effects: Vec<EffectJson>,
@@ -253,9 +256,14 @@ pub fn run(
     args: &FitArgs,
     spec: &ModelSpec,
     ctx: &mut Context<'_>,
-    ds: &Dataset,
+    segs: &[Dataset],
+    numbers: &[usize],
     val_ds: Option<&Dataset>,
 ) -> CmdResult {
+    if segs.is_empty() {
+        return Err("no segment to fit".into());
+    }
+    let ds = super::fit::longest_segment(segs);
     let structure = check_flags(args, spec)?;
     if let Some(p) = &args.save {
         check_output(p, args.force)?;
@@ -276,6 +284,12 @@ pub fn run(
         ..NlRequest::new(structure, args.gear_ratio, effects)
     };
     let (est, val) = records(args, ds, val_ds);
+    // the segments as separate experiments (one record: `est` alone)
+    let est_all: Vec<IdData> = if segs.len() > 1 {
+        segs.iter().map(|d| d.data.clone()).collect()
+    } else {
+        vec![est.clone()]
+    };
     let val_name = val.as_ref().map_or("validation", |(_, n)| n.as_str());
     let why = |e: NlRunError| -> String {
         match &e {
@@ -298,12 +312,12 @@ pub fn run(
     let t0 = Instant::now();
     let done = run_nl(
         NlData {
-            estimation: &est,
+            estimation: &est_all,
             // whole periods of DATA: the frequency-domain fit gives the linear start
             periodic: args
                 .estimation_fraction
                 .is_none()
-                .then_some((ds, args.settle_periods)),
+                .then_some((segs, args.settle_periods)),
             validation: val.as_ref().map(|(v, _)| v),
         },
         &req,
@@ -311,6 +325,16 @@ pub fn run(
     .map_err(why)?;
     let seconds = t0.elapsed().as_secs_f64();
     let (est_v, val_v) = (done.estimation, done.validation);
+    let segments: Vec<SegmentJson> = segs
+        .iter()
+        .zip(numbers)
+        .zip(&done.estimation_segments)
+        .map(|((d, &k), v)| SegmentJson {
+            segment: k,
+            samples: d.data.len(),
+            fit: Some(v.velocity_fit_percent),
+        })
+        .collect();
     let res = done.result;
     let (fit, method, options, warnings) = (res.fit, res.method, res.options, res.warnings);
     let simulate_command = format!(
@@ -349,7 +373,8 @@ pub fn run(
         file: ds.name.clone(),
         validation_file: val.as_ref().map(|(_, n)| n.clone()),
         ts,
-        samples: est.len(),
+        samples: est_all.iter().map(IdData::len).sum(),
+        segments,
         parameters: fit
             .params
             .iter()
@@ -554,6 +579,17 @@ fn print_report(out: &mut dyn Write, r: &NlReport, fit: &NlFit) -> std::io::Resu
         "    estimation, simulator's exact laws:                   {:.2}",
         r.fit_estimation
     )?;
+    if r.segments.len() > 1 {
+        for sg in &r.segments {
+            writeln!(
+                out,
+                "      segment {} ({} samples), exact laws:             {:.2}",
+                sg.segment,
+                sg.samples,
+                sg.fit.unwrap_or(f64::NAN)
+            )?;
+        }
+    }
     if let Some(v) = &r.validation {
         writeln!(
             out,

@@ -22,12 +22,12 @@ use clap::Args;
 use serde::Serialize;
 
 use super::args::{DataArgs, PrepArgs, ReadArgs};
-use super::fit::{check_columns, check_lags, print_tests};
+use super::fit::{check_columns, check_lags, print_tests, SegmentJson};
 use super::fit_nl::{FitsJson, NL_FIT_NAME};
 use super::validate::{self as column_validate, ValidateArgs};
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::ident::fit::FitData;
-use jointid::ident::frf::analyze_dataset;
+use jointid::ident::frf::{analyze_dataset, analyze_segments};
 use jointid::ident::frf_fit::{periodic_fit_percent, PERIODIC_FIT_NAME};
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::{validate as nl_validate, NlOptions};
@@ -91,6 +91,8 @@ struct Report<'a> {
     require_fit: Option<f64>,
     fit_ok: bool,
     residual_tests: &'a Validation,
+    /// with `--segment all` on a capture with gaps: each segment's FIT (`fit` pools them)
+    segments: Vec<SegmentJson>,
 }
 
 /// Runs `jointid validate`.
@@ -140,7 +142,10 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
     let fitted = saved
         .to_fitted()
         .map_err(|e| format!("{}: {e}", mpath.display()))?;
-    let ds = data_args(&args.files[1]).load(ctx.loaders)?;
+    let sel = data_args(&args.files[1]).select(ctx.loaders)?;
+    let numbers = sel.segments.clone();
+    let segs = sel.datasets;
+    let ds = super::fit::longest_segment(&segs).clone();
     // the model runs at the rate it was fitted at: the capture rate (a physical model
     // with `decimate_output` > 1) or the capture rate decimated by the model's preparation
     let capture_ts = if saved.decimate_output > 1 {
@@ -149,12 +154,18 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         saved.ts / saved.prep.decimate.max(1) as f64
     };
     check_model_rate(&ds, capture_ts, mpath)?;
-    let both = FitData::new(&ds.data, saved.prep).map_err(|e| format!("{}: {e}", ds.name))?;
-    check_lags(args.lags, &ds.name, both.prepared.len())?;
-    let v = fitted
-        .evaluate_on(&both, args.lags)
+    // every selected segment (one unless --segment all on a capture with gaps), each
+    // simulated with its own initial state; FIT and residual tests pooled over them
+    let all: Vec<FitData> = segs
+        .iter()
+        .map(|d| FitData::new(&d.data, saved.prep).map_err(|e| format!("{}: {e}", d.name)))
+        .collect::<Result<_, _>>()?;
+    let samples: usize = all.iter().map(|d| d.prepared.len()).sum();
+    check_lags(args.lags, &ds.name, samples)?;
+    let (v, each) = fitted
+        .evaluate_segments(&all, args.lags)
         .map_err(|e| format!("{}: {e}", ds.name))?;
-    let data = &both.prepared;
+    let data = &all[0].prepared;
     // a model fitted in the frequency domain is judged by the periodic
     // steady-state FIT on periodic data, as `fit` reported it; the
     // toolbox FIT (which drift and slow disturbances enter) stays beside it
@@ -162,8 +173,27 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         .fit_name
         .as_deref()
         .filter(|n| *n == PERIODIC_FIT_NAME && (fitted.ts - ds.data.ts).abs() <= 1e-9 * ds.data.ts)
-        .and_then(|_| analyze_dataset(&ds, args.settle_periods).ok())
+        .and_then(|_| analyze_segments(&segs, args.settle_periods).ok())
         .map(|a| periodic_fit_percent(&a.frf, &fitted.model.freq_response(&a.frf.freq_hz)));
+    let periodic_of = |d: &jointid::data::Dataset| {
+        analyze_dataset(d, args.settle_periods)
+            .ok()
+            .map(|a| periodic_fit_percent(&a.frf, &fitted.model.freq_response(&a.frf.freq_hz)))
+    };
+    let segments: Vec<SegmentJson> = segs
+        .iter()
+        .zip(&numbers)
+        .zip(&each)
+        .map(|((d, &k), &f)| SegmentJson {
+            segment: k,
+            samples: d.data.len(),
+            fit: if periodic.is_some() {
+                periodic_of(d)
+            } else {
+                Some(f)
+            },
+        })
+        .collect();
     let (fit_name, fit) = match periodic {
         Some(f) => (PERIODIC_FIT_NAME, f),
         None => (FIT_NAME, v.fit),
@@ -179,7 +209,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
                 model_file: mpath.display().to_string(),
                 model: &saved.model,
                 file: &ds.name,
-                samples: data.len(),
+                samples,
                 ts: data.ts,
                 fit_name,
                 fit,
@@ -188,6 +218,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
                 require_fit: args.require_fit,
                 fit_ok,
                 residual_tests: &v,
+                segments,
             },
         )?;
     } else {
@@ -196,7 +227,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         writeln!(
             out,
             "  {} samples, Ts = {} s (decimation {})",
-            data.len(),
+            samples,
             jointid::data::fmt_sig(data.ts, 4),
             saved.prep.decimate
         )?;
@@ -207,6 +238,27 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         )?;
         if periodic.is_some() {
             writeln!(out, "  {FIT_NAME}: {:.2}", v.fit)?;
+        }
+        if segments.len() > 1 {
+            writeln!(
+                out,
+                "  {fit_name} per segment (the figures above pool them):"
+            )?;
+            for sg in &segments {
+                match sg.fit {
+                    Some(f) => writeln!(
+                        out,
+                        "    segment {} ({} samples): {f:.2}",
+                        sg.segment, sg.samples
+                    )?,
+                    None => writeln!(
+                        out,
+                        "    segment {} ({} samples): not computed (fewer than two \
+                         steady-state periods)",
+                        sg.segment, sg.samples
+                    )?,
+                }
+            }
         }
         writeln!(out, "  residual tests (99 %):")?;
         print_tests(out, "data", &v)?;

@@ -135,10 +135,10 @@ fn analyze_uses_the_longest_segment_by_default_and_every_one_with_segment_all() 
 
 #[test]
 fn commands_that_take_one_record_refuse_segment_all_naming_the_alternative() {
-    let dir = tmpdir("fit-segments");
+    let dir = tmpdir("diagnose-segments");
     let cap = gapped_capture(&dir, "run.jcap");
     let c = cap.to_str().unwrap();
-    let out = jointid(&["fit", c, "--model", "rigid", "--segment", "all"]);
+    let out = jointid(&["diagnose", c, "--validation", c, "--segment", "all"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(
         stderr(&out).contains(
@@ -147,6 +147,166 @@ fn commands_that_take_one_record_refuse_segment_all_naming_the_alternative() {
         ),
         "{}",
         stderr(&out)
+    );
+}
+
+/// `jointid simulate` with `args` written as a `.jcap`, then the frames that start between
+/// 45 % and 55 % of its stream removed (cut at frame delimiters, as a serial unplug loses
+/// them): a capture with one gap. Returns its path and the simulation's `--json` report.
+fn gapped_simulation(dir: &Path, name: &str, args: &[&str]) -> (PathBuf, Value) {
+    let whole = dir.join(format!("whole-{name}"));
+    let mut a = vec!["simulate", "--out", whole.to_str().unwrap(), "--json"];
+    a.extend_from_slice(args);
+    let report = json_of(&jointid(&a));
+    let bytes = std::fs::read(&whole).unwrap();
+    let body = &bytes[MAGIC.len()..];
+    let at = |f: f64| {
+        let from = (f * body.len() as f64) as usize;
+        from + body[from..].iter().position(|b| *b == 0).unwrap()
+    };
+    let (a, b) = (at(0.45), at(0.55));
+    let mut out = MAGIC.to_vec();
+    out.extend_from_slice(&body[..a]);
+    out.extend_from_slice(&body[b..]);
+    let path = dir.join(name);
+    std::fs::write(&path, out).unwrap();
+    (path, report)
+}
+
+fn num(v: &Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+/// The relative error of `fit`'s parameter `name` against the simulation's `truth`.
+fn rel_error(fit: &Value, truth: &Value, name: &str) -> f64 {
+    let v = num(&fit["parameters"][name]["value"]);
+    let t = num(&truth["config"]["plant"]["params"][name]);
+    v / t - 1.0
+}
+
+#[test]
+fn fit_with_segment_all_averages_the_frf_over_the_segments_of_a_gapped_capture() {
+    let dir = tmpdir("fit-all-frequency");
+    let (cap, sim) = gapped_simulation(&dir, "run.jcap", &["--periods", "6", "--seed", "3"]);
+    let c = cap.to_str().unwrap();
+    let info = json_of(&jointid(&["info", c, "--json"]));
+    let listed = info["segments"].as_array().unwrap();
+    assert_eq!(listed.len(), 2, "{info}");
+    let model = dir.join("m.json");
+    let m = model.to_str().unwrap();
+    let out = jointid(&[
+        "fit",
+        c,
+        "--model",
+        "three-mass",
+        "--segment",
+        "all",
+        "--save",
+        m,
+        "--json",
+    ]);
+    let all = json_of(&out);
+    let note = stderr(&out);
+    assert!(
+        note.contains("the FRF averages the whole periods of segments 1, 2"),
+        "{note}"
+    );
+    let segs = all["segments"].as_array().unwrap();
+    assert_eq!(segs.len(), 2, "{all}");
+    let total: u64 = listed.iter().map(|s| s["samples"].as_u64().unwrap()).sum();
+    assert_eq!(all["samples"].as_u64().unwrap(), total);
+    for (s, l) in segs.iter().zip(listed) {
+        assert_eq!(s["samples"], l["samples"]);
+    }
+    let longest = json_of(&jointid(&[
+        "fit",
+        c,
+        "--model",
+        "three-mass",
+        "--segment",
+        "longest",
+        "--json",
+    ]));
+    let names = ["J_m", "J_a1", "J_a2", "k_g", "k_a", "d_g", "d_a"];
+    let (mut e_all, mut e_long) = (0.0, 0.0);
+    for n in names {
+        let (a, l) = (rel_error(&all, &sim, n), rel_error(&longest, &sim, n));
+        assert!(
+            a.abs() < 0.03,
+            "{n}: {:+.2} % with --segment all",
+            100.0 * a
+        );
+        e_all += a * a;
+        e_long += l * l;
+    }
+    assert!(
+        e_all <= e_long,
+        "sum of squared relative errors {e_all:.2e} over all segments, {e_long:.2e} longest"
+    );
+    // validate on every segment: each one's FIT and the pooled one, which is the fit's
+    let v = json_of(&jointid(&["validate", m, c, "--segment", "all", "--json"]));
+    let per = v["segments"].as_array().unwrap();
+    assert_eq!(per.len(), 2, "{v}");
+    // a segment alone with fewer than two steady-state periods has no periodic FIT (null)
+    assert!(
+        per.iter()
+            .all(|s| s["fit"].is_null() || num(&s["fit"]) > 90.0)
+            && per.iter().any(|s| !s["fit"].is_null()),
+        "{v}"
+    );
+    assert!(
+        (num(&v["fit"]) - num(&all["fit_estimation"])).abs() < 1e-6,
+        "{v} {all}"
+    );
+}
+
+#[test]
+fn nonlinear_fit_with_segment_all_takes_the_segments_as_separate_experiments() {
+    let dir = tmpdir("fit-all-nonlinear");
+    let (cap, sim) = gapped_simulation(
+        &dir,
+        "run.jcap",
+        &[
+            "--effect",
+            "nonlinear_stiffness",
+            "--periods",
+            "6",
+            "--seed",
+            "2",
+        ],
+    );
+    let c = cap.to_str().unwrap();
+    let out = jointid(&[
+        "fit",
+        c,
+        "--model",
+        "three-mass",
+        "--effect",
+        "nonlinear_stiffness",
+        "--segment",
+        "all",
+        "--json",
+    ]);
+    let all = json_of(&out);
+    let note = stderr(&out);
+    assert!(
+        note.contains("fitting segments 1, 2 as separate experiments"),
+        "{note}"
+    );
+    let segs = all["segments"].as_array().unwrap();
+    assert_eq!(segs.len(), 2, "{all}");
+    assert!(segs.iter().all(|s| num(&s["fit"]) > 50.0), "{all}");
+    // the frequency-domain linear start averaged the FRF over both segments
+    assert_eq!(all["steps"][0]["name"], "frequency-domain linear fit");
+    for n in ["J_m", "J_a1", "k_g"] {
+        let e = rel_error(&all, &sim, n);
+        assert!(e.abs() < 0.03, "{n}: {:+.2} %", 100.0 * e);
+    }
+    let k3 = num(&all["effects"][0]["parameters"]["k3"]["value"]);
+    let truth = num(&sim["config"]["effects"][0]["k3"]);
+    assert!(
+        (k3 / truth - 1.0).abs() < 0.05,
+        "k3 = {k3:.4e}, truth {truth:.4e}"
     );
 }
 

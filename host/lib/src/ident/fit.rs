@@ -56,6 +56,9 @@ use crate::model::spec::{Family, ModelSpec, Structure};
 mod frequency;
 pub use frequency::{below_frf, fit_frequency_domain};
 
+#[cfg(test)]
+mod segments_tests;
+
 /// Largest `N · p²` (samples times squared parameter count) for which the
 /// black-box output-error refinement runs; above it the subspace model is
 /// kept. 1500 samples of an order-11 model (143 parameters) cost about 3e7.
@@ -202,6 +205,13 @@ pub enum FitError {
     /// FIT or residual test
     #[error("validation failed: {0}")]
     Validate(#[from] validate::ValidateError),
+    /// the rigid model with Coulomb friction takes one record
+    #[error(
+        "--friction coulomb fits one gap-free record (inverse-dynamics least squares); give \
+         --segment longest or N, or fit the segments together with the nonlinear engine \
+         (--model rigid --effect coulomb_friction)"
+    )]
+    SegmentsCoulomb,
     /// the frequency-domain fit of a physical model (its message as it is)
     #[error(transparent)]
     Frf(#[from] crate::ident::frf_fit::FrfFitError),
@@ -384,6 +394,159 @@ pub fn fit_prepared(data: &FitData, opts: &FitOptions) -> Result<Fitted, FitErro
     check(&data.prepared)?;
     check(&data.raw)?;
     fit_grey(&data.prepared, Some(&data.raw), structure, opts)
+}
+
+/// Fits the model family of `opts` to several prepared records taken as separate
+/// experiments of one system (the gap-free segments of a capture with gaps): the model is
+/// started on the longest record as [`fit_prepared`] fits it, then refined by output error
+/// on all records together ([`pem::fit_segments`]: one cost summed over the records, each
+/// with its own initial state, one parameter vector, the covariance from all of them). A
+/// physical model is refined at the capture rate (with its current-loop lag), the black box
+/// at the prepared rate (within [`PEM_BUDGET`] over all samples). One record is
+/// [`fit_prepared`].
+///
+/// # Errors
+/// [`FitError::BadData`] for no record, [`FitError::SegmentsCoulomb`] for the rigid model
+/// with Coulomb friction on more than one record, else as [`fit_prepared`].
+pub fn fit_prepared_segments(data: &[FitData], opts: &FitOptions) -> Result<Fitted, FitError> {
+    let Some(longest) = data
+        .iter()
+        .enumerate()
+        .max_by_key(|(i, d)| (d.raw.len(), usize::MAX - i))
+        .map(|(_, d)| d)
+    else {
+        return Err(FitError::BadData(crate::data::RecordError::TooShort {
+            samples: 0,
+            min: 1,
+        }));
+    };
+    if data.len() > 1 && opts.spec.coulomb {
+        return Err(FitError::SegmentsCoulomb);
+    }
+    let start = fit_prepared(longest, opts)?;
+    if data.len() == 1 {
+        return Ok(start);
+    }
+    for d in data {
+        check(&d.prepared)?;
+    }
+    let base = GreyBoxOptions::default().pem;
+    match opts.spec.family {
+        Family::BlackBox(_) => {
+            let records: Vec<IdData> = data.iter().map(|d| d.prepared.clone()).collect();
+            let samples: usize = records.iter().map(IdData::len).sum();
+            let (fam, th0) = FullSs::from_ss(&start.model, opts.feedthrough, false);
+            let np = pem::ParamModel::n_params(&fam) as f64;
+            let mut fitted = start;
+            let note =
+                |what: &str| format!("{what} ({} records as separate experiments)", records.len());
+            if !opts.refine {
+                fitted.warnings.push(note(
+                    "the black box is the subspace model of the longest record, not refined over all",
+                ));
+                return Ok(fitted);
+            }
+            if (samples as f64) * np * np > PEM_BUDGET {
+                fitted.warnings.push(note(&format!(
+                    "output-error refinement over all records skipped: {samples} samples × {np} \
+                     parameters exceed the budget; the model is the longest record's"
+                )));
+                return Ok(fitted);
+            }
+            match pem::fit_segments(&fam, &th0, &records, &PemOptions::with_max_iter(40)) {
+                Ok(pf) => {
+                    let start_cost = pf.cost_history.first().copied().unwrap_or(f64::INFINITY);
+                    let end_cost = pf.cost_history.last().copied().unwrap_or(f64::INFINITY);
+                    if pf.model.is_stable() && end_cost <= start_cost {
+                        fitted.model = pf.model;
+                        fitted.model.k = None;
+                        fitted.method.push_str(&format!(
+                            "; refined by output error over {} records as separate experiments",
+                            records.len()
+                        ));
+                    } else {
+                        fitted.warnings.push(note(
+                            "output-error refinement over all records rejected (unstable or no \
+                             descent); the model is the longest record's",
+                        ));
+                    }
+                }
+                Err(e) => fitted.warnings.push(note(&format!(
+                    "output-error refinement over all records failed: {e}"
+                ))),
+            }
+            Ok(fitted)
+        }
+        Family::Physical(structure) => {
+            let raw: Vec<IdData> = data.iter().map(|d| d.raw.clone()).collect();
+            for r in &raw {
+                check(r)?;
+            }
+            let ts = longest.raw.ts;
+            let gm = DrivenModel {
+                mechanics: grey_box::GreyBoxModel {
+                    structure,
+                    output: opts.output,
+                    r: opts.r,
+                    ts,
+                },
+                current_loop_tau: current_loop_tau(opts).max(0.0),
+            };
+            // the start in the structure's parameter order (log values)
+            let names = structure.param_names();
+            let th0: Vec<f64> = names
+                .iter()
+                .map(|n| {
+                    start
+                        .params
+                        .iter()
+                        .find(|p| p.name == *n)
+                        .map_or(0.0, |p| p.value.ln())
+                })
+                .collect();
+            let span = (1e4f64).ln();
+            let popts = PemOptions {
+                lm: LmOptions {
+                    max_iter: 80,
+                    lower: th0.iter().map(|t| t - span).collect(),
+                    upper: th0.iter().map(|t| t + span).collect(),
+                    ..base.lm
+                },
+                ..base
+            };
+            let pf =
+                pem::fit_segments(&gm, &th0, &raw, &popts).map_err(grey_box::GreyBoxError::from)?;
+            let mut warnings = start.warnings.clone();
+            if pf.termination == pem::Termination::MaxIterations {
+                warnings.push(
+                    "output-error search over all records stopped at the iteration limit".into(),
+                );
+            }
+            let params = grey_box::phys_params(names, &pf.theta, &pf.std);
+            let pvals: Vec<f64> = pf.theta.iter().map(|t| t.exp()).collect();
+            let mut model = pf.model.clone();
+            model.k = None;
+            let q = (longest.prepared.ts / ts).round().max(1.0) as usize;
+            Ok(Fitted {
+                spec: opts.spec.clone(),
+                output: opts.output,
+                ts,
+                model,
+                continuous: Some(gm.continuous(&pvals)),
+                params: canonical_branches(params),
+                friction: None,
+                warnings,
+                method: format!(
+                    "{}; then output error at the capture rate over {} records as separate \
+                     experiments (each its own initial state, {} iterations)",
+                    start.method,
+                    raw.len(),
+                    pf.iterations
+                ),
+                decimate: q,
+            })
+        }
+    }
 }
 
 /// One black-box start: the subspace model of `method`, refined by output
@@ -826,6 +989,36 @@ impl Fitted {
         let yh = self.simulate_on(data)?;
         let d = &data.prepared;
         Ok(validate::validate(&d.u, &d.y, &yh, lags)?)
+    }
+
+    /// FIT and residual tests pooled over several prepared records (the segments of a
+    /// capture, [`fit_prepared_segments`]): each simulated with its own initial state
+    /// ([`Fitted::simulate_on`]), then one FIT and one set of residual tests over the
+    /// records one after another (a lag that spans two records is counted as any other),
+    /// and each record's FIT [%].
+    ///
+    /// # Errors
+    /// As [`Fitted::evaluate_on`] for any record.
+    pub fn evaluate_segments(
+        &self,
+        data: &[FitData],
+        lags: usize,
+    ) -> Result<(Validation, Vec<f64>), FitError> {
+        if data.len() == 1 {
+            let v = self.evaluate_on(&data[0], lags)?;
+            let fit = v.fit;
+            return Ok((v, vec![fit]));
+        }
+        let (mut u, mut y, mut yh, mut each) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for d in data {
+            check(&d.prepared)?;
+            let s = self.simulate_on(d)?;
+            each.push(validate::fit_percent(&d.prepared.y, &s)?);
+            u.extend_from_slice(&d.prepared.u);
+            y.extend_from_slice(&d.prepared.y);
+            yh.extend(s);
+        }
+        Ok((validate::validate(&u, &y, &yh, lags)?, each))
     }
 
     /// Lightly damped resonances and anti-resonances above `f_min_hz` [Hz]

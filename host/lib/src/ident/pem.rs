@@ -339,52 +339,101 @@ fn normal_equations<M: ParamModel + ?Sized>(
     (jtj, jte, ssr)
 }
 
-/// The prediction-error criterion of `model` on `data` as a least-squares
-/// problem for [`crate::ident::lm`]: parameters `θ`, then the initial state when
-/// it is estimated (nuisance parameters).
+/// The prediction-error criterion of `model` on the records `data` (separate experiments:
+/// one cost summed over them, each with its own initial state) as a least-squares problem
+/// for [`crate::ident::lm`]: parameters `θ`, then each record's initial state when it is
+/// estimated (nuisance parameters).
 struct PemProblem<'a, M: ?Sized> {
     model: &'a M,
-    data: &'a IdData,
-    /// model parameters `θ` (the initial state follows them)
+    data: &'a [IdData],
+    /// model parameters `θ` (the initial states follow them)
     n_theta: usize,
-    /// state dimension when the initial state is estimated, else 0
+    /// state dimension when the initial states are estimated, else 0
     n_x0: usize,
     /// state dimension
     n: usize,
 }
 
 impl<M: ParamModel + ?Sized> PemProblem<'_, M> {
-    /// `θ` and the initial state (zero when it is not estimated)
-    fn split<'t>(&self, all: &'t [f64]) -> (&'t [f64], DVector<f64>) {
-        let (th, x0) = all.split_at(self.n_theta);
-        let x0 = if self.n_x0 > 0 {
-            DVector::from_column_slice(x0)
-        } else {
-            DVector::zeros(self.n)
-        };
+    /// `θ` and the initial state of each record (zero when it is not estimated)
+    fn split<'t>(&self, all: &'t [f64]) -> (&'t [f64], Vec<DVector<f64>>) {
+        let (th, rest) = all.split_at(self.n_theta);
+        let x0 = (0..self.data.len())
+            .map(|e| {
+                if self.n_x0 > 0 {
+                    DVector::from_column_slice(&rest[e * self.n_x0..(e + 1) * self.n_x0])
+                } else {
+                    DVector::zeros(self.n)
+                }
+            })
+            .collect();
         (th, x0)
+    }
+
+    /// samples over all records
+    fn samples(&self) -> usize {
+        self.data.iter().map(|d| d.y.len()).sum()
     }
 }
 
 impl<M: ParamModel + ?Sized> LeastSquares for PemProblem<'_, M> {
     fn n_params(&self) -> usize {
-        self.n_theta + self.n_x0
+        self.n_theta + self.n_x0 * self.data.len()
     }
 
     fn n_residuals(&self) -> usize {
-        self.data.y.len()
+        self.samples()
     }
 
     fn cost(&self, all: &[f64]) -> f64 {
         let (th, x0) = self.split(all);
-        cost_of(&self.model.to_ss(th), self.data, &x0)
+        let m = self.model.to_ss(th);
+        let ssr: f64 = self
+            .data
+            .iter()
+            .zip(&x0)
+            .map(|(d, x)| cost_of(&m, d, x) * d.y.len() as f64)
+            .sum();
+        ssr / self.samples() as f64
     }
 
     fn normal_equations(&self, all: &[f64], free: &[usize]) -> Normal {
         let (th, x0) = self.split(all);
         let free_theta: Vec<usize> = free.iter().copied().filter(|&i| i < self.n_theta).collect();
-        let (jtj, jte, ssr) =
-            normal_equations(self.model, th, &free_theta, &x0, self.n_x0 > 0, self.data);
+        let nf = free_theta.len();
+        let p = nf + self.n_x0 * self.data.len();
+        if self.data.len() == 1 {
+            let (jtj, jte, ssr) = normal_equations(
+                self.model,
+                th,
+                &free_theta,
+                &x0[0],
+                self.n_x0 > 0,
+                &self.data[0],
+            );
+            return Normal { jtj, jte, ssr };
+        }
+        // block structure: θ shared, each initial state seen by its own record only
+        let mut jtj = DMatrix::zeros(p, p);
+        let mut jte = DVector::zeros(p);
+        let mut ssr = 0.0;
+        for (e, (d, x)) in self.data.iter().zip(&x0).enumerate() {
+            let (a, b, s) = normal_equations(self.model, th, &free_theta, x, self.n_x0 > 0, d);
+            let at = |i: usize| {
+                if i < nf {
+                    i
+                } else {
+                    nf + e * self.n_x0 + (i - nf)
+                }
+            };
+            for i in 0..a.nrows() {
+                jte[at(i)] += b[i];
+                for j in 0..a.ncols() {
+                    jtj[(at(i), at(j))] += a[(i, j)];
+                }
+            }
+            ssr += s;
+        }
         Normal { jtj, jte, ssr }
     }
 }
@@ -399,6 +448,23 @@ pub fn fit<M: ParamModel + ?Sized>(
     model: &M,
     theta0: &[f64],
     data: &IdData,
+    opts: &PemOptions,
+) -> Result<PemFit, PemError> {
+    fit_segments(model, theta0, std::slice::from_ref(data), opts)
+}
+
+/// As [`fit`] on several records taken as separate experiments of one system (the
+/// gap-free segments of a capture): one cost `Σ_e Σ_t ε_e²(t, θ) / Σ_e N_e` over all of
+/// them, each record with its own initial state (estimated jointly when
+/// `opts.estimate_x0`), one `θ`, and the covariance from all records together. The
+/// returned `x0` is the first record's.
+///
+/// # Errors
+/// As [`fit`]; [`PemError::Data`] for an empty list or a record that cannot be used.
+pub fn fit_segments<M: ParamModel + ?Sized>(
+    model: &M,
+    theta0: &[f64],
+    data: &[IdData],
     opts: &PemOptions,
 ) -> Result<PemFit, PemError> {
     let np = model.n_params();
@@ -425,7 +491,15 @@ pub fn fit<M: ParamModel + ?Sized>(
     if !opts.lm.fixed.is_empty() {
         count("fixed", opts.lm.fixed.len())?;
     }
-    data.check(1)?;
+    if data.is_empty() {
+        return Err(PemError::Data(crate::data::RecordError::TooShort {
+            samples: 0,
+            min: 1,
+        }));
+    }
+    for d in data {
+        d.check(1)?;
+    }
     // the start, clamped as the loop will clamp it, and its initial state
     let mut theta = theta0.to_vec();
     for (i, t) in theta.iter_mut().enumerate() {
@@ -440,13 +514,16 @@ pub fn fit<M: ParamModel + ?Sized>(
     let n = m0.order();
     let n_x0 = if opts.estimate_x0 { n } else { 0 };
     if opts.estimate_x0 {
-        let e = estimate_x0(&m0, &data.u, &data.y);
-        if e.iter().all(|v| v.is_finite()) {
-            theta.extend(e.iter());
-        } else {
-            theta.extend(std::iter::repeat_n(0.0, n));
+        for d in data {
+            let e = estimate_x0(&m0, &d.u, &d.y);
+            if e.iter().all(|v| v.is_finite()) {
+                theta.extend(e.iter());
+            } else {
+                theta.extend(std::iter::repeat_n(0.0, n));
+            }
         }
     }
+    let n_nuisance = n_x0 * data.len();
     let problem = PemProblem {
         model,
         data,
@@ -460,7 +537,7 @@ pub fn fit<M: ParamModel + ?Sized>(
         } else {
             v.iter()
                 .copied()
-                .chain(std::iter::repeat_n(fill, n_x0))
+                .chain(std::iter::repeat_n(fill, n_nuisance))
                 .collect()
         }
     };
@@ -474,22 +551,22 @@ pub fn fit<M: ParamModel + ?Sized>(
             o.fixed
                 .iter()
                 .copied()
-                .chain(std::iter::repeat_n(false, n_x0))
+                .chain(std::iter::repeat_n(false, n_nuisance))
                 .collect()
         },
-        nuisance: n_x0,
+        nuisance: n_nuisance,
         ..o.clone()
     };
     let f = lm::minimize(&problem, &theta, &lm_opts).map_err(|e| match e {
         lm::LmError::NonFiniteStart => PemError::NonFiniteStart,
         other => PemError::Lm(other),
     })?;
-    let (th, x0) = problem.split(&f.theta);
+    let (th, mut x0) = problem.split(&f.theta);
     Ok(PemFit {
         theta: th.to_vec(),
         std: f.std[..np].to_vec(),
         cov: f.cov.view((0, 0), (np, np)).into_owned(),
-        x0,
+        x0: x0.swap_remove(0),
         model: model.to_ss(th),
         cost_history: f.cost_history,
         sigma2: f.sigma2,

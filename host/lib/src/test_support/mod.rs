@@ -224,3 +224,27 @@ pub fn est_val_captures(
         run(seed + 1000, exc.seed ^ 0x5A5A_1234, "val"),
     )
 }
+
+/// `ds` as the reader returns it when the samples `gap` were lost on the way (a serial
+/// unplug): a [`crate::data::Record`] of the piece before the gap and the piece after it,
+/// each placed on the excitation's time line by its `t0`. The joint kept running, so the
+/// second piece starts in the state the first one left at `gap.end`.
+///
+/// # Panics
+/// When `gap` is empty or does not lie inside the record.
+pub fn with_gap(ds: &crate::data::Dataset, gap: std::ops::Range<usize>) -> crate::data::Record {
+    let n = ds.data.len();
+    assert!(
+        0 < gap.start && gap.start < gap.end && gap.end < n,
+        "gap {gap:?} inside 0..{n}"
+    );
+    let piece = |range: std::ops::Range<usize>| crate::data::Dataset {
+        t0: ds.t0 + range.start as f64 * ds.data.ts,
+        data: ds.data.slice(range),
+        ..ds.clone()
+    };
+    crate::data::Record {
+        pieces: vec![piece(0..gap.start), piece(gap.end..n)],
+        notes: Vec::new(),
+    }
+}

@@ -519,6 +519,105 @@ impl LeastSquares for Problem<'_> {
     }
 }
 
+/// Several records (the gap-free segments of one capture) as separate experiments: one
+/// parameter vector `z` in layout order whose initial velocity is the first record's,
+/// followed by the initial velocity of every further record; each record simulated from its
+/// own first angle and initial velocity, its prefilter started afresh and its first `skip`
+/// samples left out, the costs summed.
+struct Segments<'a> {
+    parts: Vec<Problem<'a>>,
+    /// layout length
+    n: usize,
+    /// layout index of the initial velocity
+    v0: Option<usize>,
+}
+
+impl Segments<'_> {
+    /// The layout vector record `e` is simulated with.
+    fn part_z(&self, z: &[f64], e: usize) -> Vec<f64> {
+        let mut ze = z[..self.n].to_vec();
+        if let (Some(i), true) = (self.v0, e > 0) {
+            ze[i] = z[self.n + e - 1];
+        }
+        ze
+    }
+
+    /// For record `e`: its free layout indices and where each sits in `free`.
+    fn part_free(&self, free: &[usize], e: usize) -> (Vec<usize>, Vec<usize>) {
+        let mut idx = Vec::new();
+        let mut at = Vec::new();
+        for (j, &f) in free.iter().enumerate() {
+            let layout_index = if f < self.n {
+                (Some(f) != self.v0 || e == 0).then_some(f)
+            } else {
+                (e > 0 && f == self.n + e - 1).then_some(self.v0).flatten()
+            };
+            if let Some(i) = layout_index {
+                idx.push(i);
+                at.push(j);
+            }
+        }
+        (idx, at)
+    }
+
+    /// `H = Σ_e J_eᵀJ_e` and the sandwich's middle `S = Σ_e S_e` over `free` (module
+    /// documentation; no lag crosses from one record into another).
+    fn sandwich(&self, z: &[f64], free: &[usize], lags: usize) -> DMatrix<f64> {
+        let nf = free.len();
+        let mut h = DMatrix::zeros(nf, nf);
+        let mut s = DMatrix::zeros(nf, nf);
+        for (e, part) in self.parts.iter().enumerate() {
+            let (idx, at) = self.part_free(free, e);
+            let (he, se) = sandwich_parts(part, &self.part_z(z, e), &idx, lags);
+            for (a, &ia) in at.iter().enumerate() {
+                for (b, &ib) in at.iter().enumerate() {
+                    h[(ia, ib)] += he[(a, b)];
+                    s[(ia, ib)] += se[(a, b)];
+                }
+            }
+        }
+        let hinv = pinv_sym(&h, 1e-14);
+        &hinv * s * &hinv
+    }
+}
+
+impl LeastSquares for Segments<'_> {
+    fn n_params(&self) -> usize {
+        self.n + self.v0.map_or(0, |_| self.parts.len() - 1)
+    }
+
+    fn n_residuals(&self) -> usize {
+        self.parts.iter().map(LeastSquares::n_residuals).sum()
+    }
+
+    fn cost(&self, z: &[f64]) -> f64 {
+        self.parts
+            .iter()
+            .enumerate()
+            .map(|(e, p)| p.cost(&self.part_z(z, e)))
+            .sum()
+    }
+
+    fn normal_equations(&self, z: &[f64], free: &[usize]) -> Normal {
+        let nf = free.len();
+        let mut jtj = DMatrix::zeros(nf, nf);
+        let mut jte = DVector::zeros(nf);
+        let mut ssr = 0.0;
+        for (e, part) in self.parts.iter().enumerate() {
+            let (idx, at) = self.part_free(free, e);
+            let ne = part.normal_equations(&self.part_z(z, e), &idx);
+            for (a, &ia) in at.iter().enumerate() {
+                jte[ia] += ne.jte[a];
+                for (b, &ib) in at.iter().enumerate() {
+                    jtj[(ia, ib)] += ne.jtj[(a, b)];
+                }
+            }
+            ssr += ne.ssr;
+        }
+        Normal { jtj, jte, ssr }
+    }
+}
+
 /// Fits `model` to `data` (input `u` [N·m], output `θ_m` [rad]) from the physical start
 /// `start` (layout order, [`NlModel::layout`]).
 ///
@@ -531,7 +630,30 @@ pub fn fit_output_error(
     start: &[f64],
     opts: &NlOptions,
 ) -> Result<NlFit, NlError> {
-    data.check(20).map_err(|e| NlError::Data(e.to_string()))?;
+    fit_output_error_segments(std::slice::from_ref(data), model, start, opts)
+}
+
+/// As [`fit_output_error`] on several records taken as separate experiments of one joint
+/// (the gap-free segments of a capture): the costs summed, each record simulated from its
+/// own first angle with its own initial velocity (a nuisance parameter per record), its
+/// own prefilter start-up and its own `skip`; one parameter vector, the covariance from all
+/// records. The fit's values carry the first record's initial velocity; its
+/// `fit_velocity_percent` pools the records ([`pooled_velocity_fit`]).
+///
+/// # Errors
+/// As [`fit_output_error`], for any of the records; [`NlError::Data`] for no record.
+pub fn fit_output_error_segments(
+    data: &[IdData],
+    model: &NlModel,
+    start: &[f64],
+    opts: &NlOptions,
+) -> Result<NlFit, NlError> {
+    if data.is_empty() {
+        return Err(NlError::Data("no record to fit".into()));
+    }
+    for d in data {
+        d.check(20).map_err(|e| NlError::Data(e.to_string()))?;
+    }
     let layout = model.layout();
     if start.len() != layout.len() {
         return Err(NlError::Data(format!(
@@ -540,28 +662,48 @@ pub fn fit_output_error(
             layout.len()
         )));
     }
-    let v = interval_velocity(&data.y, data.ts);
-    let first = opts.skip.max(1).min(v.len() - 1);
-    let target: Vec<f64> = match opts.residual {
-        Residual::Angle => data.y.iter().map(|y| y - data.y[0]).collect(),
-        Residual::Velocity => v.clone(),
-    };
-    let problem = Problem {
-        model,
-        layout: &layout,
-        u: &data.u,
-        v: &target,
-        output: opts.residual,
-        theta0: data.y[0],
-        y: &data.y,
-        gradient: opts.gradient,
-        ts: data.ts,
-        first,
-        highpass: if opts.highpass_hz > 0.0 {
-            butter_highpass_sos(opts.highpass_order, opts.highpass_hz, data.ts)
-        } else {
-            Vec::new()
-        },
+    let velocities: Vec<Vec<f64>> = data.iter().map(|d| interval_velocity(&d.y, d.ts)).collect();
+    let firsts: Vec<usize> = velocities
+        .iter()
+        .map(|v| opts.skip.max(1).min(v.len() - 1))
+        .collect();
+    let targets: Vec<Vec<f64>> = data
+        .iter()
+        .zip(&velocities)
+        .map(|(d, v)| match opts.residual {
+            Residual::Angle => d.y.iter().map(|y| y - d.y[0]).collect(),
+            Residual::Velocity => v.clone(),
+        })
+        .collect();
+    let parts: Vec<Problem> = data
+        .iter()
+        .zip(&targets)
+        .zip(&firsts)
+        .map(|((d, target), &first)| Problem {
+            model,
+            layout: &layout,
+            u: &d.u,
+            v: target,
+            output: opts.residual,
+            theta0: d.y[0],
+            y: &d.y,
+            gradient: opts.gradient,
+            ts: d.ts,
+            first,
+            highpass: if opts.highpass_hz > 0.0 {
+                butter_highpass_sos(opts.highpass_order, opts.highpass_hz, d.ts)
+            } else {
+                Vec::new()
+            },
+        })
+        .collect();
+    let v0_index = layout
+        .iter()
+        .position(|d| d.owner == Owner::InitialVelocity);
+    let problem = Segments {
+        parts,
+        n: layout.len(),
+        v0: v0_index,
     };
     let z0: Vec<f64> = layout.iter().zip(start).map(|(d, &p)| d.to_z(p)).collect();
     let fixed: Vec<bool> = layout
@@ -574,8 +716,14 @@ pub fn fit_output_error(
     }
     // a Coulomb level or a ripple above the largest torque applied would hold the motor
     // still for good: the smooth law then mimics a stiff viscous term, a false minimum
-    let u_max = data.u.iter().fold(0.0f64, |m, u| m.max(u.abs()));
-    let v_max = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let u_max = data
+        .iter()
+        .flat_map(|d| &d.u)
+        .fold(0.0f64, |m, u| m.max(u.abs()));
+    let v_max = velocities
+        .iter()
+        .flatten()
+        .fold(0.0f64, |m, x| m.max(x.abs()));
     let (lower, upper): (Vec<f64>, Vec<f64>) = layout
         .iter()
         .zip(start)
@@ -601,6 +749,16 @@ pub fn fit_output_error(
             }
         })
         .unzip();
+    // the further records' initial velocities: the first one's start, bounds and flag
+    let (mut z0, mut lower, mut upper, mut fixed_all) = (z0, lower, upper, fixed.clone());
+    if let Some(i) = v0_index {
+        for _ in 1..data.len() {
+            z0.push(z0[i]);
+            lower.push(lower[i]);
+            upper.push(upper[i]);
+            fixed_all.push(fixed[i]);
+        }
+    }
     if !problem.cost(&z0).is_finite() {
         return Err(NlError::Unstable);
     }
@@ -608,7 +766,7 @@ pub fn fit_output_error(
         max_iter: opts.max_iter,
         lower: lower.clone(),
         upper: upper.clone(),
-        fixed: fixed.clone(),
+        fixed: fixed_all.clone(),
         // v0 is bounded (see above), so it is not one of the loop's unbounded nuisances
         nuisance: 0,
         ..LmOptions::default()
@@ -616,9 +774,9 @@ pub fn fit_output_error(
     let res =
         lm::minimize(&problem, &z0, &lm_opts).map_err(|e| NlError::Optimiser(e.to_string()))?;
     let z = res.theta.clone();
-    let values = problem.physical(&z);
-    let free: Vec<usize> = (0..layout.len()).filter(|&i| !fixed[i]).collect();
-    let cov_z = sandwich_covariance(&problem, &z, &free, opts.cov_lags);
+    let values = problem.parts[0].physical(&z[..layout.len()]);
+    let free: Vec<usize> = (0..z.len()).filter(|&i| !fixed_all[i]).collect();
+    let cov_z = problem.sandwich(&z, &free, opts.cov_lags);
     let mut params = Vec::with_capacity(layout.len());
     for (i, d) in layout.iter().enumerate() {
         let std = match free.iter().position(|&f| f == i) {
@@ -645,13 +803,14 @@ pub fn fit_output_error(
         });
     }
     let mut correlated = Vec::new();
-    for (ja, &a) in free.iter().enumerate() {
-        for (jb, &b) in free.iter().enumerate().skip(ja + 1) {
-            if layout[a].owner == Owner::InitialVelocity
-                || layout[b].owner == Owner::InitialVelocity
-            {
-                continue;
-            }
+    let in_layout: Vec<(usize, usize)> = free
+        .iter()
+        .enumerate()
+        .filter(|(_, &f)| f < layout.len() && layout[f].owner != Owner::InitialVelocity)
+        .map(|(j, &f)| (j, f))
+        .collect();
+    for (k, &(ja, a)) in in_layout.iter().enumerate() {
+        for &(jb, b) in &in_layout[k + 1..] {
             let den = (cov_z[(ja, ja)] * cov_z[(jb, jb)]).sqrt();
             let rho = cov_z[(ja, jb)] / den;
             if den > 0.0 && rho.abs() >= CORRELATED {
@@ -664,10 +823,15 @@ pub fn fit_output_error(
         }
     }
     let (fitted, plant) = model.with_values(&values);
-    let vh = simulate_velocity(model, &values, &data.u, data.ts, data.y[0], Some(&data.y))
-        .ok_or(NlError::Unstable)?;
+    let mut pairs = Vec::with_capacity(data.len());
+    for (e, (d, v)) in data.iter().zip(&velocities).enumerate() {
+        let ve = problem.parts[e].physical(&problem.part_z(&z, e));
+        let vh = simulate_velocity(model, &ve, &d.u, d.ts, d.y[0], Some(&d.y))
+            .ok_or(NlError::Unstable)?;
+        pairs.push((v[firsts[e]..].to_vec(), vh[firsts[e]..].to_vec()));
+    }
     let fit_velocity_percent =
-        velocity_fit(&v[first..], &vh[first..], data.ts, opts.highpass_hz).unwrap_or(f64::NAN);
+        pooled_velocity_fit(&pairs, data[0].ts, opts.highpass_hz).unwrap_or(f64::NAN);
     Ok(NlFit {
         model: fitted,
         plant,
@@ -680,6 +844,34 @@ pub fn fit_output_error(
         fit_velocity_percent,
         correlated,
     })
+}
+
+/// [`velocity_fit`] pooled over records: each pair `(v, v̂)` through its own prefilter
+/// (started afresh), then one toolbox FIT over all of them [%].
+///
+/// # Errors
+/// As [`fit_percent`].
+pub fn pooled_velocity_fit(
+    pairs: &[(Vec<f64>, Vec<f64>)],
+    ts: f64,
+    highpass_hz: f64,
+) -> Result<f64, crate::ident::validate::ValidateError> {
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for (v, vh) in pairs {
+        if highpass_hz <= 0.0 {
+            a.extend_from_slice(v);
+            b.extend_from_slice(vh);
+            continue;
+        }
+        let mut bank = SosBank::new(butter_highpass_sos(2, highpass_hz, ts), 2);
+        for (&x, &y) in v.iter().zip(vh) {
+            let mut s = [x, y];
+            bank.push(&mut s);
+            a.push(s[0]);
+            b.push(s[1]);
+        }
+    }
+    fit_percent(&a, &b)
 }
 
 /// `∂v̂_k/∂z` of the unfiltered velocity at sample `k` by the dual numbers, every
@@ -711,8 +903,14 @@ pub(crate) fn jacobian_probe(data: &IdData, model: &NlModel, z: &[f64], k: usize
     out
 }
 
-/// `H⁻¹ S H⁻¹` over the free parameters in optimiser coordinates (module documentation).
-fn sandwich_covariance(problem: &Problem, z: &[f64], free: &[usize], lags: usize) -> DMatrix<f64> {
+/// `H = JᵀJ` and the sandwich's middle `S` of one record over the free parameters in
+/// optimiser coordinates (module documentation); `H⁻¹ S H⁻¹` is the covariance.
+fn sandwich_parts(
+    problem: &Problem,
+    z: &[f64],
+    free: &[usize],
+    lags: usize,
+) -> (DMatrix<f64>, DMatrix<f64>) {
     let nf = free.len();
     let mut rows: Vec<f64> = Vec::new();
     let mut e: Vec<f64> = Vec::new();
@@ -722,7 +920,7 @@ fn sandwich_covariance(problem: &Problem, z: &[f64], free: &[usize], lags: usize
     });
     let n = e.len();
     if n <= nf || nf == 0 {
-        return DMatrix::zeros(nf, nf);
+        return (DMatrix::zeros(nf, nf), DMatrix::zeros(nf, nf));
     }
     let row = |t: usize| &rows[t * nf..(t + 1) * nf];
     let mut h = DMatrix::zeros(nf, nf);
@@ -761,6 +959,5 @@ fn sandwich_covariance(problem: &Problem, z: &[f64], free: &[usize], lags: usize
             }
         }
     }
-    let hinv = pinv_sym(&h, 1e-14);
-    &hinv * s * &hinv
+    (h, s)
 }

@@ -13,15 +13,18 @@ pub mod run;
 
 pub use export::{simulate_args, simulate_exact};
 pub use fit::{
-    cost_at, fit_output_error, interval_velocity, simulate_velocity, Correlation, Gradient,
-    NlError, NlFit, NlOptions, NlParam,
+    cost_at, fit_output_error, fit_output_error_segments, interval_velocity, pooled_velocity_fit,
+    simulate_velocity, Correlation, Gradient, NlError, NlFit, NlOptions, NlParam,
 };
 pub use init::{automatic_start, Start, Step};
 pub use model::{NlModel, Owner, ParamDef, Scale};
 pub use run::{
-    identify, linear_start, model_name, model_of, run, sim_plant, validate, LinearStart,
-    LinearStartError, NlData, NlRequest, NlResult, NlRun, NlRunError, NlStart, NlValidation,
+    identify, identify_segments, linear_start, linear_start_segments, model_name, model_of, run,
+    sim_plant, validate, validate_segments, LinearStart, LinearStartError, NlData, NlRequest,
+    NlResult, NlRun, NlRunError, NlStart, NlValidation,
 };
 
+#[cfg(test)]
+mod segments_tests;
 #[cfg(test)]
 mod tests;

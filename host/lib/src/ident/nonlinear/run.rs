@@ -6,7 +6,9 @@
 
 use thiserror::Error;
 
-use super::fit::{fit_output_error, interval_velocity, simulate_velocity, velocity_fit};
+use super::fit::{
+    fit_output_error_segments, interval_velocity, pooled_velocity_fit, simulate_velocity,
+};
 use super::init::{automatic_start, Step};
 use super::model::{NlModel, Owner};
 use super::{NlError, NlFit, NlOptions};
@@ -253,7 +255,26 @@ pub fn velocity_rms(data: &IdData) -> f64 {
 /// [`NlRunError`]: a request that does not fit the model, or the data or the start
 /// cannot be used.
 pub fn identify(data: &IdData, req: &NlRequest) -> Result<NlResult, NlRunError> {
+    identify_segments(std::slice::from_ref(data), req)
+}
+
+/// The longest of `data` (the first of equal length).
+fn longest(data: &[IdData]) -> Option<&IdData> {
+    data.iter()
+        .enumerate()
+        .max_by_key(|(i, d)| (d.len(), usize::MAX - i))
+        .map(|(_, d)| d)
+}
+
+/// As [`identify`] on several records taken as separate experiments (the gap-free segments
+/// of one capture, [`fit_output_error_segments`]): the start found on the longest record,
+/// the fit on all of them, each with its own initial state.
+///
+/// # Errors
+/// As [`identify`]; [`NlRunError::Estimation`] for no record.
+pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, NlRunError> {
     req.check()?;
+    let data = longest(all).ok_or_else(|| NlError::Data("no record to fit".into()))?;
     let held = req.held();
     let mut model = model_of(req, data);
     if let Some(t) = held {
@@ -323,7 +344,7 @@ pub fn identify(data: &IdData, req: &NlRequest) -> Result<NlResult, NlRunError> 
     }
     let (fit_model, _) = start_model.with_values(&start);
     let fit_model = fit_model.refined_for(&start, velocity_rms(data), data.ts);
-    let fit = fit_output_error(data, &fit_model, &start, &options)?;
+    let fit = fit_output_error_segments(all, &fit_model, &start, &options)?;
     let warnings = checks(&fit);
     let method = method(&options, &fit_model, held.is_some(), fit.model.tau_c > 0.0);
     Ok(NlResult {
@@ -368,12 +389,14 @@ fn method(options: &NlOptions, model: &NlModel, lag_held: bool, lag: bool) -> St
 /// The records of [`run`].
 #[derive(Clone, Copy, Debug)]
 pub struct NlData<'a> {
-    /// the estimation record
-    pub estimation: &'a IdData,
-    /// the periodic capture the estimation record is, and the periods it skips as
-    /// settling; with it (and the automatic start, no [`NlRequest::linear`]) the
-    /// frequency-domain linear start is tried
-    pub periodic: Option<(&'a Dataset, usize)>,
+    /// the estimation records: one, or the gap-free segments of one capture, fitted as
+    /// separate experiments ([`identify_segments`])
+    pub estimation: &'a [IdData],
+    /// the periodic capture the estimation records are (its segments), and the periods
+    /// each skips as settling; with it (and the automatic start, no
+    /// [`NlRequest::linear`]) the frequency-domain linear start is tried on the FRF
+    /// averaged over them ([`linear_start_segments`])
+    pub periodic: Option<(&'a [Dataset], usize)>,
     /// the validation record
     pub validation: Option<&'a IdData>,
 }
@@ -384,8 +407,10 @@ pub struct NlRun {
     /// the fit, its start's steps (the frequency-domain linear fit first when there was
     /// one), warnings, options and method
     pub result: NlResult,
-    /// the FITs on the estimation record, exact laws
+    /// the FITs on the estimation records (pooled over them), exact laws
     pub estimation: NlValidation,
+    /// the FITs on each estimation record, in order (one entry for one record)
+    pub estimation_segments: Vec<NlValidation>,
     /// the FITs on the validation record, exact laws
     pub validation: Option<NlValidation>,
 }
@@ -404,7 +429,7 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
     let mut warnings = Vec::new();
     if let (Some((ds, settle)), NlStart::Automatic, None) = (data.periodic, &req.start, &req.linear)
     {
-        match linear_start(ds, settle, &req) {
+        match linear_start_segments(ds, settle, &req) {
             Ok(ls) => {
                 if req.held().is_none() {
                     req.tau_c = ls.tau_c;
@@ -419,8 +444,16 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
             )),
         }
     }
-    let mut result = identify(data.estimation, &req)?;
-    let estimation = validate(&result.fit, data.estimation, &result.options)?;
+    let mut result = identify_segments(data.estimation, &req)?;
+    let estimation = validate_segments(&result.fit, data.estimation, &result.options)?;
+    let estimation_segments = if data.estimation.len() > 1 {
+        data.estimation
+            .iter()
+            .map(|d| validate(&result.fit, d, &result.options))
+            .collect::<Result<Vec<_>, _>>()?
+    } else {
+        vec![estimation]
+    };
     let validation = match data.validation {
         Some(v) => Some(validate(&result.fit, v, &result.options).map_err(NlRunError::Validation)?),
         None => None,
@@ -442,6 +475,7 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
     Ok(NlRun {
         result,
         estimation,
+        estimation_segments,
         validation,
     })
 }
@@ -482,8 +516,21 @@ pub fn linear_start(
     settle: usize,
     req: &NlRequest,
 ) -> Result<LinearStart, LinearStartError> {
-    let analysis = crate::ident::frf::analyze_dataset(ds, settle)?;
-    let ts = ds.data.ts;
+    linear_start_segments(std::slice::from_ref(ds), settle, req)
+}
+
+/// As [`linear_start`] on the FRF averaged over the whole periods of several gap-free
+/// segments of one capture ([`crate::ident::frf::analyze_segments`]).
+///
+/// # Errors
+/// [`LinearStartError`].
+pub fn linear_start_segments(
+    segments: &[Dataset],
+    settle: usize,
+    req: &NlRequest,
+) -> Result<LinearStart, LinearStartError> {
+    let analysis = crate::ident::frf::analyze_segments(segments, settle)?;
+    let ts = analysis_ts(segments);
     let held = req.held();
     let mut o = FrfFitOptions::new(req.structure, ts);
     o.r = req.r;
@@ -529,6 +576,12 @@ pub fn linear_start(
         },
         step,
     })
+}
+
+/// The sample interval of the segments [s] (of the first; [`crate::ident::frf::analyze_segments`]
+/// checks that they agree).
+fn analysis_ts(segments: &[Dataset]) -> f64 {
+    segments.first().map_or(1.0, |d| d.data.ts)
 }
 
 /// Warnings of a finished fit: iteration limit, parameters on a bound, parameters the data
@@ -631,36 +684,61 @@ pub fn sim_plant(model: &NlModel, plant: &[f64]) -> Plant {
 /// [`NlError::Data`] for a short record, [`NlError::Unstable`] when the simulation is not
 /// finite.
 pub fn validate(fit: &NlFit, val: &IdData, opts: &NlOptions) -> Result<NlValidation, NlError> {
-    val.check(20).map_err(|e| NlError::Data(e.to_string()))?;
+    validate_segments(fit, std::slice::from_ref(val), opts)
+}
+
+/// As [`validate`] on several records (the gap-free segments of one capture), each
+/// simulated from rest at its own first angle and through its own prefilter, the FITs
+/// pooled over all of them.
+///
+/// # Errors
+/// As [`validate`], for any record; [`NlError::Data`] for no record.
+pub fn validate_segments(
+    fit: &NlFit,
+    vals: &[IdData],
+    opts: &NlOptions,
+) -> Result<NlValidation, NlError> {
+    if vals.is_empty() {
+        return Err(NlError::Data("no record to validate on".into()));
+    }
     let model = &fit.model;
     let offset = fit.get("offset").unwrap_or(0.0);
-    let u: Vec<f64> = val.u.iter().map(|u| u + offset).collect();
     let plant = sim_plant(model, &fit.plant);
     // no current loop in the model: a lag far below the sample interval
     let tc = if model.tau_c > 0.0 { model.tau_c } else { 1e-9 };
-    let out = simulate_driven(
-        &plant,
-        &model.effects,
-        tc,
-        val.ts,
-        &u,
-        &DrivenStart::Rest { theta_m: val.y[0] },
-    )
-    .map_err(|e| NlError::Data(format!("validation simulation: {e}")))?;
-    let v = interval_velocity(&val.y, val.ts);
-    let vh = interval_velocity(&out.theta_m, val.ts);
-    // the estimation record's initial velocity means nothing here: from rest, as above
+    // the estimation record's initial velocity means nothing here: from rest, as below
     let mut values = fit.values.clone();
     if let Some(v0) = values.last_mut() {
         *v0 = 0.0;
     }
-    let smooth = simulate_velocity(model, &values, &val.u, val.ts, val.y[0], None)
-        .ok_or(NlError::Unstable)?;
+    let (mut exact, mut smooth_pairs) = (Vec::new(), Vec::new());
+    let (mut y_all, mut yh_all) = (Vec::new(), Vec::new());
+    for val in vals {
+        val.check(20).map_err(|e| NlError::Data(e.to_string()))?;
+        let u: Vec<f64> = val.u.iter().map(|u| u + offset).collect();
+        let out = simulate_driven(
+            &plant,
+            &model.effects,
+            tc,
+            val.ts,
+            &u,
+            &DrivenStart::Rest { theta_m: val.y[0] },
+        )
+        .map_err(|e| NlError::Data(format!("validation simulation: {e}")))?;
+        let v = interval_velocity(&val.y, val.ts);
+        let vh = interval_velocity(&out.theta_m, val.ts);
+        let smooth = simulate_velocity(model, &values, &val.u, val.ts, val.y[0], None)
+            .ok_or(NlError::Unstable)?;
+        exact.push((v[1..].to_vec(), vh[1..].to_vec()));
+        smooth_pairs.push((v[1..].to_vec(), smooth[1..].to_vec()));
+        y_all.extend_from_slice(&val.y);
+        yh_all.extend_from_slice(&out.theta_m);
+    }
+    let ts = vals[0].ts;
     Ok(NlValidation {
-        velocity_fit_percent: velocity_fit(&v[1..], &vh[1..], val.ts, opts.highpass_hz)
+        velocity_fit_percent: pooled_velocity_fit(&exact, ts, opts.highpass_hz).unwrap_or(f64::NAN),
+        velocity_fit_smooth_percent: pooled_velocity_fit(&smooth_pairs, ts, opts.highpass_hz)
             .unwrap_or(f64::NAN),
-        velocity_fit_smooth_percent: velocity_fit(&v[1..], &smooth[1..], val.ts, opts.highpass_hz)
-            .unwrap_or(f64::NAN),
-        angle_fit_percent: fit_percent(&val.y, &out.theta_m).unwrap_or(f64::NAN),
+        angle_fit_percent: fit_percent(&y_all, &yh_all).unwrap_or(f64::NAN),
     })
 }

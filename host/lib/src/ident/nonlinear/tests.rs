@@ -448,7 +448,7 @@ fn run_holds_the_fixed_values_and_validates_on_the_validation_record() {
     };
     let done = run(
         NlData {
-            estimation: &est,
+            estimation: std::slice::from_ref(&est),
             periodic: None,
             validation: Some(&val),
         },
