@@ -39,8 +39,8 @@
 //! part of the bias (the smooth law's Jacobian is a poor guide to the exact cost's valley:
 //! on that joint F_c +3.1 % → +2.2 %), so what is left is put into the σ:
 //!
-//! Smoothing term of the σ ([`NlOptions::smoothing_sigma`]): the fit is repeated with `v_ε`
-//! doubled from the estimate, and each parameter's change times
+//! Smoothing term of the σ ([`NlOptions::smoothing_sigma`]): one Gauss–Newton step of the
+//! fit with `v_ε` doubled, from the estimate, and each parameter's change times
 //! [`SMOOTHING_BIAS_FACTOR`] is the size of the smooth law's bias at `v_ε`, added in
 //! quadrature to its σ. The factor is `1/(2^p − 1)` for a bias growing as `v_ε^p`;
 //! measured on the default three-mass joint with pure Coulomb friction, F_c +14 % at
@@ -654,24 +654,29 @@ pub fn fit_output_error(
         lm::minimize(&problem, &z0, &lm_opts).map_err(|e| NlError::Optimiser(e.to_string()))?;
     let mut z = res.theta.clone();
     let free: Vec<usize> = (0..layout.len()).filter(|&i| !fixed[i]).collect();
-    // the smoothing term of the σ: the fit again with v_ε doubled, from this estimate
+    // the smoothing term of the σ: the estimate's move with v_ε doubled, by one
+    // Gauss–Newton step of that fit from this estimate (one pass of the dual numbers)
     let mut smoothing = vec![0.0; layout.len()];
-    if opts.smoothing_sigma && opts.max_iter > 0 && has_coulomb(model) {
+    if opts.smoothing_sigma && opts.max_iter > 0 && has_coulomb(model) && !free.is_empty() {
         let wide = NlModel {
             v_eps: 2.0 * model.v_eps,
             ..model.clone()
         };
-        let here = problem.physical(&z);
-        let o = NlOptions {
-            max_iter: 30,
-            cov_lags: 0,
-            exact_correction: false,
-            smoothing_sigma: false,
-            ..opts.clone()
+        let wide_problem = Problem {
+            model: &wide,
+            highpass: problem.highpass.clone(),
+            ..problem
         };
-        if let Ok(w) = fit_output_error(data, &wide, &here, &o) {
+        let ne = wide_problem.normal_equations(&z, &free);
+        if ne.ssr.is_finite() {
+            let dz = pinv_sym(&ne.jtj, 1e-14) * &ne.jte;
+            let mut zw = z.clone();
+            for (j, &i) in free.iter().enumerate() {
+                zw[i] += dz[j];
+            }
+            let (here, there) = (problem.physical(&z), problem.physical(&zw));
             for &i in &free {
-                smoothing[i] = SMOOTHING_BIAS_FACTOR * (w.values[i] - here[i]).abs();
+                smoothing[i] = SMOOTHING_BIAS_FACTOR * (there[i] - here[i]).abs();
             }
         }
     }
