@@ -48,6 +48,9 @@ pub enum FrictionArg {
     Viscous,
     /// viscous and Coulomb, plus a torque offset (inverse-dynamics LS)
     Coulomb,
+    /// viscous and Coulomb each with its own coefficient forward and backward (Fv, Fc,
+    /// Fv_neg, Fc_neg; inverse-dynamics LS, no offset: EMPS's asymmetric reference model)
+    CoulombAsymmetric,
 }
 
 /// Which motor signal the output column holds.
@@ -353,14 +356,16 @@ impl FitArgs {
     /// # Errors
     /// An `--effect` spec that does not parse.
     pub fn spec(&self) -> Result<ModelSpec, SpecError> {
-        ModelSpec::resolve(
+        let mut spec = ModelSpec::resolve(
             self.model.kind,
             self.model.nonlinear_two_mass,
             &self.effects,
-            self.friction == FrictionArg::Coulomb,
+            self.friction != FrictionArg::Viscous,
             self.current_loop_tau,
             self.delay,
-        )
+        )?;
+        spec.coulomb_asymmetric = self.friction == FrictionArg::CoulombAsymmetric;
+        Ok(spec)
     }
 }
 

@@ -335,3 +335,83 @@ fn unknown_effects_keys_and_fixed_names_are_refused() {
         assert!(err.contains(name), "`{name}` not listed: {err}");
     }
 }
+
+/// EMPS (measured ball-screw drive) with friction that differs with the direction of
+/// motion, both ways the CLI offers it, against the published asymmetric IDIM-LS model
+/// (Janot, Gautier & Brunot 2019: M = 95.1540 kg, Fv+ = 166.7061, Fc+ = 20.1440,
+/// Fv− = 240.4236 N·s/m, Fc− = 20.6277 N):
+/// - `--friction coulomb-asymmetric` (the same IDIM-LS): every value within 3 %;
+/// - `--effect coulomb_friction:fc_neg=..,fv_neg_extra=..` (output error on the velocity
+///   from the measured force, offset held at 0 as in the published model): the validation
+///   velocity FIT on the pulse record (exact laws) at least the symmetric model's, and the
+///   values within 7 % (the output-error optimum differs from the IDIM-LS one: with the
+///   published values held, its validation FIT is 94.50 % against 95.06 % fitted).
+#[test]
+fn emps_asymmetric_friction_matches_the_published_model_and_raises_the_validation_fit() {
+    let est = shared("data/emps/emps_train_DATA_EMPS.csv");
+    let val = shared("data/emps/emps_test_DATA_EMPS_PULSES.csv");
+    let cols = [
+        "--time", "t_s", "--input", "force_N", "--output", "qm_m", "--model", "rigid",
+    ];
+    let run = |extra: &[&str]| -> Value {
+        let mut a = vec!["fit", est.as_str()];
+        a.extend(cols);
+        a.extend(extra);
+        a.extend(["--validation", val.as_str(), "--json"]);
+        json_of(&jointid(&a))
+    };
+    let within = |v: f64, published: f64, tol: f64, what: &str| {
+        assert!(
+            (v / published - 1.0).abs() <= tol,
+            "{what}: {v} vs published {published}"
+        );
+    };
+    let idim = run(&["--friction", "coulomb-asymmetric", "--linear-axis"]);
+    for (name, published) in [
+        ("J", 95.1540),
+        ("Fv", 166.7061),
+        ("Fc", 20.1440),
+        ("Fv_neg", 240.4236),
+        ("Fc_neg", 20.6277),
+    ] {
+        within(
+            num(&idim["parameters"][name]["value"]),
+            published,
+            0.03,
+            name,
+        );
+    }
+    assert!(idim["parameters"].get("offset").is_none(), "{idim}");
+
+    let nl = ["--gear-ratio", "1", "--current-loop-tau", "0"];
+    let sym = run(&[&nl[..], &["--effect", "coulomb_friction"]].concat());
+    let asym = run(&[
+        &nl[..],
+        &["--effect", "coulomb_friction:fc_neg=20,fv_neg_extra=0"],
+    ]
+    .concat());
+    let (fs, fa) = (num(&sym["fit_validation"]), num(&asym["fit_validation"]));
+    eprintln!("validation velocity FIT: symmetric {fs:.2} %, asymmetric {fa:.2} %");
+    assert!(fa >= fs, "asymmetric {fa} < symmetric {fs}");
+    let fv = num(&param(&asym, "Fv")["value"]);
+    let fv_neg = fv + num(&param(&asym, "fv_neg_extra")["value"]);
+    for (what, v, published) in [
+        ("J", num(&param(&asym, "J")["value"]), 95.1540),
+        ("Fv", fv, 166.7061),
+        ("fc", num(&param(&asym, "fc")["value"]), 20.1440),
+        ("Fv + fv_neg_extra", fv_neg, 240.4236),
+        ("fc_neg", num(&param(&asym, "fc_neg")["value"]), 20.6277),
+    ] {
+        eprintln!("{what} = {v:.4} (published {published})");
+        within(v, published, 0.07, what);
+    }
+    let offset = param(&asym, "offset");
+    assert_eq!(num(&offset["value"]), 0.0);
+    assert!(
+        asym["effects"][0]["spec"]
+            .as_str()
+            .unwrap()
+            .contains(",fc_neg="),
+        "{asym}"
+    );
+}

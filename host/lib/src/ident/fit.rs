@@ -221,9 +221,9 @@ pub enum FitError {
 }
 
 /// Rigid body with viscous and Coulomb friction and a torque offset,
-/// `J q̈ + F_v q̇ + F_c sgn(q̇) + offset = u`, simulated by the explicit
-/// (symplectic) Euler step at the data's sample interval:
-/// `v⁺ = v + T (u − F_v v − F_c sgn v − offset)/J`, `q⁺ = q + T v⁺`.
+/// `J q̈ + F_v q̇ + F_c sgn(q̇) + offset = u`, or with friction that differs with the
+/// direction of motion (`F_v−`, `F_c−` for `q̇ < 0`), simulated by the simulator's laws
+/// ([`RigidFriction::simulate`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RigidFriction {
     /// inertia [kg·m²] (mass [kg] for a linear axis)
@@ -237,6 +237,12 @@ pub struct RigidFriction {
     pub fc: f64,
     /// constant torque offset [N·m] (N)
     pub offset: f64,
+    /// viscous friction for negative velocity [N·m·s/rad] (N·s/m); absent: `Fv`
+    #[serde(rename = "Fv_neg", default, skip_serializing_if = "Option::is_none")]
+    pub fv_neg: Option<f64>,
+    /// Coulomb friction for negative velocity [N·m] (N); absent: `Fc`
+    #[serde(rename = "Fc_neg", default, skip_serializing_if = "Option::is_none")]
+    pub fc_neg: Option<f64>,
 }
 
 impl RigidFriction {
@@ -250,9 +256,12 @@ impl RigidFriction {
         use crate::ident::nonlinear::{sim_plant, NlModel};
         use crate::model::effects::{CoulombFriction, Effect};
         use crate::sim::{simulate_driven, DrivenStart};
+        // the asymmetric law: `F_v` forward is the plant's, `F_v− − F_v` the effect's extra
         let effects = vec![Effect::CoulombFriction(CoulombFriction {
             fc: self.fc,
             fs: self.fc,
+            fc_neg: self.fc_neg,
+            fv_neg_extra: self.fv_neg.map(|f| f - self.fv),
             ..CoulombFriction::default()
         })];
         let model = NlModel {
@@ -864,6 +873,7 @@ fn fit_rigid_coulomb(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitErro
             output: opts.output,
             coulomb: true,
             offset: true,
+            asymmetric: opts.spec.coulomb_asymmetric,
             ..IdimOptions::default()
         },
     )?;
@@ -873,13 +883,19 @@ fn fit_rigid_coulomb(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitErro
         fv: get("Fv"),
         fc: get("Fc"),
         offset: get("offset"),
+        fv_neg: rf.get("Fv_neg"),
+        fc_neg: rf.get("Fc_neg"),
     };
-    let model = rigid_linear(friction.j, friction.fv, data.ts, opts.output);
+    // the linear part: the mean of the two viscous coefficients when they differ
+    let fv = friction
+        .fv_neg
+        .map_or(friction.fv, |n| 0.5 * (friction.fv + n));
+    let model = rigid_linear(friction.j, fv, data.ts, opts.output);
     Ok(Fitted {
         spec: opts.spec.clone(),
         output: opts.output,
         ts: data.ts,
-        continuous: Some(rigid_continuous(friction.j, friction.fv, opts.output)),
+        continuous: Some(rigid_continuous(friction.j, fv, opts.output)),
         model,
         params: rf.params.clone(),
         friction: Some(friction),
@@ -1325,6 +1341,8 @@ mod tests {
             fv: 4.0,
             fc: 1.0,
             offset: 0.5,
+            fv_neg: None,
+            fc_neg: None,
         };
         let u = vec![10.5; 20000];
         let v = m.simulate(&u, 1e-3, 0.0, 0.0, Output::Velocity);

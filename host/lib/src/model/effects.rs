@@ -28,6 +28,15 @@
 //!   exceeds it. The integrator treats sticking, stopping and breakaway as events (see
 //!   [`crate::sim::integrate`]); no regularisation is used, so `v_ε` (`v_smooth`) only enters
 //!   the smooth approximation [`CoulombFriction::torque`], kept for analysis.
+//!   Optionally asymmetric (a drive whose friction differs with the direction of motion,
+//!   EMPS: Janot, Gautier & Brunot 2019): `fc_neg` is the Coulomb level for ω < 0 (`fc`
+//!   then holds for ω > 0; absent: `fc` both ways) and `fv_neg_extra` a viscous coefficient
+//!   added to the plant's viscous friction `f_m` for ω < 0 only, so that `f_m` is the
+//!   viscous coefficient `F_v+` of forward motion and `F_v− = f_m + fv_neg_extra` that of
+//!   backward motion. The Stribeck bump `F_s − F_c` is the same both ways: backward the
+//!   level is `fc_neg + (F_s − F_c) e^{−(ω/v_s)²} − fv_neg_extra ω` and the breakaway level
+//!   `fc_neg + F_s − F_c`. While the motor moves, a constant torque offset equals half the
+//!   difference of the two Coulomb levels; only the stuck phases tell them apart.
 //! - `backlash`: dead zone of total width `w` in the gearbox spring: the spring torque is
 //!   `k_g dz(δ) + k3 dz(δ)³ + d_g δ̇` in contact and 0 in the gap, `dz(δ) = δ − w/2` for
 //!   `δ > w/2`, `δ + w/2` for `δ < −w/2`, 0 in between (δ = `r θ_m − θ_a1`, arm side). The
@@ -54,6 +63,8 @@
 //! |---|---|---|---|---|
 //! | `coulomb_friction` | `fc`, `fs` | 0 … 100 | N·m | eight times the default torque limit: a motor that cannot overcome its friction |
 //! | | `v_stribeck`, `v_smooth` | 1e-6 … 1e3 | rad/s | 1e3 rad/s ≈ 9500 rpm, the motor's top speed |
+//! | | `fc_neg` | 0 … 100 | N·m | as `fc` |
+//! | | `fv_neg_extra` | −1e6 … 1e6 | N·m·s/rad | as an extra mode's damping, either sign |
 //! | `backlash` | `width` | 0 … 0.1 | rad | 0.1 rad = 5.7° on the arm side, far beyond any gearbox |
 //! | `nonlinear_stiffness` | `k3` | −1e16 … 1e16 | N·m/rad³ | 300 times the default 3e13; negative: softening |
 //! | `extra_mode` | `j` | 1e-6 … 1e3 | kg·m² | |
@@ -84,6 +95,14 @@ pub struct CoulombFriction {
     /// regularisation velocity `v_ε` of the smooth approximation [`Self::torque`] [rad/s];
     /// default 0.01 (the simulator integrates the set-valued law and does not use it)
     pub v_smooth: f64,
+    /// Coulomb level `F_c−` for negative motor velocity [N·m]; `None` (the default): `fc`
+    /// both ways (symmetric)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fc_neg: Option<f64>,
+    /// viscous friction added to the plant's `f_m` for negative motor velocity
+    /// [N·m·s/rad], `F_v− = f_m + fv_neg_extra`; `None` (the default): none
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fv_neg_extra: Option<f64>,
 }
 
 impl Default for CoulombFriction {
@@ -93,35 +112,75 @@ impl Default for CoulombFriction {
             fs: 0.04,
             v_stribeck: 0.1,
             v_smooth: 0.01,
+            fc_neg: None,
+            fv_neg_extra: None,
         }
     }
 }
 
 impl CoulombFriction {
-    /// Friction level `F_c + (F_s − F_c) e^{−(ω/v_s)²}` while sliding at `omega` [rad/s] →
-    /// [N·m] (the magnitude of the set-valued law the simulator integrates).
-    pub fn level(&self, omega: f64) -> f64 {
+    /// Coulomb level for negative velocity `F_c−` [N·m] (`fc` when symmetric).
+    pub fn fc_backward(&self) -> f64 {
+        self.fc_neg.unwrap_or(self.fc)
+    }
+
+    /// Whether the law differs with the direction of motion (`fc_neg` or `fv_neg_extra`
+    /// given).
+    pub fn is_asymmetric(&self) -> bool {
+        self.fc_neg.is_some() || self.fv_neg_extra.is_some()
+    }
+
+    /// Breakaway levels `(F_s, F_c− + F_s − F_c)` [N·m] forward and backward: a stuck
+    /// motor stays stuck while its net torque lies between `−backward` and `forward`.
+    pub fn breakaway(&self) -> (f64, f64) {
+        let bump = (self.fs - self.fc).max(0.0);
+        (self.fs.max(self.fc), self.fc_backward() + bump)
+    }
+
+    /// Friction level while sliding forward (`backward` false) or backward at `omega`
+    /// [rad/s] → [N·m]: forward `F_c + (F_s − F_c) e^{−(ω/v_s)²}`, backward
+    /// `F_c− + (F_s − F_c) e^{−(ω/v_s)²} − fv_neg_extra ω` (the magnitude of the set-valued
+    /// law the simulator integrates; the backward viscous term continued linearly through
+    /// ω = 0, so that a step frozen in the backward mode sees a smooth law).
+    pub fn level_dir(&self, omega: f64, backward: bool) -> f64 {
         let x = omega / self.v_stribeck;
-        if x.abs() < 6.0 {
-            self.fc + (self.fs - self.fc) * (-x * x).exp()
+        let bump = if x.abs() < 6.0 {
+            (self.fs - self.fc) * (-x * x).exp()
         } else {
-            self.fc
+            0.0
+        };
+        if backward {
+            self.fc_backward() + bump - self.fv_neg_extra.unwrap_or(0.0) * omega
+        } else {
+            self.fc + bump
         }
     }
 
-    /// Regularised friction torque `level(ω) tanh(ω/v_ε)` opposing the motor velocity
-    /// `omega` [rad/s] → [N·m]; a smooth approximation of the set-valued law, for analysis
-    /// (the simulator does not use it).
+    /// [`Self::level_dir`] in the direction of `omega` [rad/s] → [N·m].
+    pub fn level(&self, omega: f64) -> f64 {
+        self.level_dir(omega, omega < 0.0)
+    }
+
+    /// Regularised friction torque opposing the motor velocity `omega` [rad/s] → [N·m]:
+    /// [`crate::model::laws::coulomb_smooth_asym`] with the levels of [`Self::level_dir`]
+    /// and `v_ε`; a smooth approximation of the set-valued law, for analysis (the simulator
+    /// does not use it). Symmetric: `level(ω) tanh(ω/v_ε)`.
     pub fn torque(&self, omega: f64) -> f64 {
         let x = omega / self.v_stribeck;
-        let level = if x.abs() < 6.0 {
-            self.fc + (self.fs - self.fc) * (-x * x).exp()
+        let bump = if x.abs() < 6.0 {
+            (self.fs - self.fc) * (-x * x).exp()
         } else {
-            self.fc
+            0.0
         };
         let s = omega / self.v_smooth;
-        let sign = if s.abs() < 20.0 { s.tanh() } else { s.signum() };
-        level * sign
+        let s = if s.abs() < 20.0 { s.tanh() } else { s.signum() };
+        crate::model::laws::coulomb_smooth_asym_tanh(
+            self.fc + bump,
+            self.fc_backward() + bump,
+            self.fv_neg_extra.unwrap_or(0.0),
+            omega,
+            s,
+        )
     }
 
     /// Derivative `dτ_f/dω` at `omega` [N·m·s/rad].
@@ -146,7 +205,10 @@ impl CoulombFriction {
 
     /// Upper bound of `|dτ_f/dω|` [N·m·s/rad], used to size refined steps.
     pub fn max_slope(&self) -> f64 {
-        self.fs.max(self.fc) / self.v_smooth + (self.fs - self.fc).abs() * 0.86 / self.v_stribeck
+        let (fwd, bwd) = self.breakaway();
+        fwd.max(bwd) / self.v_smooth
+            + (self.fs - self.fc).abs() * 0.86 / self.v_stribeck
+            + self.fv_neg_extra.unwrap_or(0.0).abs()
     }
 }
 
@@ -320,7 +382,14 @@ impl Effect {
     /// Parameter keys accepted in a spec for this effect.
     pub fn keys(&self) -> &'static [&'static str] {
         match self {
-            Effect::CoulombFriction(_) => &["fc", "fs", "v_stribeck", "v_smooth"],
+            Effect::CoulombFriction(_) => &[
+                "fc",
+                "fs",
+                "v_stribeck",
+                "v_smooth",
+                "fc_neg",
+                "fv_neg_extra",
+            ],
             Effect::Backlash(_) => &["width"],
             Effect::NonlinearStiffness(_) => &["k3"],
             Effect::ExtraMode(_) => &["j", "k", "d", "attach"],
@@ -361,6 +430,8 @@ impl Effect {
             (Effect::CoulombFriction(c), "fs") => c.fs = v,
             (Effect::CoulombFriction(c), "v_stribeck") => c.v_stribeck = v,
             (Effect::CoulombFriction(c), "v_smooth") => c.v_smooth = v,
+            (Effect::CoulombFriction(c), "fc_neg") => c.fc_neg = Some(v),
+            (Effect::CoulombFriction(c), "fv_neg_extra") => c.fv_neg_extra = Some(v),
             (Effect::Backlash(b), "width") => b.width = v,
             (Effect::NonlinearStiffness(s), "k3") => s.k3 = v,
             (Effect::ExtraMode(m), "j") => m.j = v,
@@ -385,6 +456,8 @@ impl Effect {
                 ("fs", 0.0, TORQUE, "N·m"),
                 ("v_stribeck", 1e-6, 1e3, "rad/s"),
                 ("v_smooth", 1e-6, 1e3, "rad/s"),
+                ("fc_neg", 0.0, TORQUE, "N·m"),
+                ("fv_neg_extra", -1e6, 1e6, "N·m·s/rad"),
             ],
             Effect::Backlash(_) => &[("width", 0.0, 0.1, "rad")],
             Effect::NonlinearStiffness(_) => &[("k3", -1e16, 1e16, "N·m/rad³")],
@@ -414,6 +487,8 @@ impl Effect {
             (Effect::CoulombFriction(c), "fs") => c.fs,
             (Effect::CoulombFriction(c), "v_stribeck") => c.v_stribeck,
             (Effect::CoulombFriction(c), "v_smooth") => c.v_smooth,
+            (Effect::CoulombFriction(c), "fc_neg") => c.fc_backward(),
+            (Effect::CoulombFriction(c), "fv_neg_extra") => c.fv_neg_extra.unwrap_or(0.0),
             (Effect::Backlash(b), "width") => b.width,
             (Effect::NonlinearStiffness(s), "k3") => s.k3,
             (Effect::ExtraMode(m), "j") => m.j,
@@ -466,11 +541,20 @@ impl fmt::Display for Effect {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}:", self.name())?;
         match self {
-            Effect::CoulombFriction(c) => write!(
-                f,
-                "fc={},fs={},v_stribeck={},v_smooth={}",
-                c.fc, c.fs, c.v_stribeck, c.v_smooth
-            ),
+            Effect::CoulombFriction(c) => {
+                write!(
+                    f,
+                    "fc={},fs={},v_stribeck={},v_smooth={}",
+                    c.fc, c.fs, c.v_stribeck, c.v_smooth
+                )?;
+                if let Some(v) = c.fc_neg {
+                    write!(f, ",fc_neg={v}")?;
+                }
+                if let Some(v) = c.fv_neg_extra {
+                    write!(f, ",fv_neg_extra={v}")?;
+                }
+                Ok(())
+            }
             Effect::Backlash(b) => write!(f, "width={}", b.width),
             Effect::NonlinearStiffness(s) => write!(f, "k3={}", s.k3),
             Effect::ExtraMode(m) => write!(
@@ -783,6 +867,52 @@ mod tests {
     }
 
     #[test]
+    fn asymmetric_friction_keys_parse_print_and_check_like_the_others() {
+        let e: Effect = "coulomb_friction:fc=0.2,fs=0.2,fc_neg=0.25,fv_neg_extra=-0.01"
+            .parse()
+            .unwrap();
+        let Effect::CoulombFriction(c) = e else {
+            panic!("{e:?}")
+        };
+        assert_eq!((c.fc_neg, c.fv_neg_extra), (Some(0.25), Some(-0.01)));
+        assert!(c.is_asymmetric());
+        assert_eq!(e.to_string().parse::<Effect>().unwrap(), e);
+        let json = serde_json::to_string(&e).unwrap();
+        assert_eq!(serde_json::from_str::<Effect>(&json).unwrap(), e);
+        // symmetric by default: the keys are absent in print and JSON, and old files read
+        let d = Effect::default_by_name("coulomb_friction").unwrap();
+        assert!(
+            !d.to_string().contains("neg") && !serde_json::to_string(&d).unwrap().contains("neg")
+        );
+        let old =
+            r#"{"effect":"coulomb_friction","fc":0.1,"fs":0.1,"v_stribeck":0.1,"v_smooth":0.01}"#;
+        let Effect::CoulombFriction(o) = serde_json::from_str::<Effect>(old).unwrap() else {
+            panic!()
+        };
+        assert!(!o.is_asymmetric() && o.fc_backward() == 0.1);
+        for (spec, msg) in [
+            (
+                "coulomb_friction:fc_neg=-1",
+                "`fc_neg` at column 25: must be within [0, 100] N·m",
+            ),
+            (
+                "coulomb_friction:fv_neg_extra=2e6",
+                "must be within [-1e6, 1e6] N·m·s/rad",
+            ),
+        ] {
+            let err = spec.parse::<Effect>().unwrap_err().to_string();
+            assert!(err.contains(msg), "{spec}: {err}");
+        }
+        // the laws: backward level and breakaway, the smooth law far from rest
+        // backward: 0.25 − (−0.01)(−2) = 0.23; the friction torque at −5 rad/s is −0.20
+        assert!((c.level(-2.0) - 0.23).abs() < 1e-12, "{}", c.level(-2.0));
+        assert!((c.level(2.0) - 0.2).abs() < 1e-12);
+        assert_eq!(c.breakaway(), (0.2, 0.25));
+        assert!((c.torque(-5.0) + 0.2).abs() < 1e-12, "{}", c.torque(-5.0));
+        assert!((c.torque(5.0) - 0.2).abs() < 1e-12);
+    }
+
+    #[test]
     fn parse_effects_handles_none_and_lists() {
         assert!(parse_effects(&["none"]).unwrap().is_empty());
         assert_eq!(
@@ -802,6 +932,7 @@ mod tests {
             fs: 0.2,
             v_stribeck: 2.0,
             v_smooth: 0.02,
+            ..CoulombFriction::default()
         };
         assert_eq!(c.torque(0.0), 0.0);
         for w in [0.001, 0.01, 0.3, 1.0, 5.0, 100.0] {

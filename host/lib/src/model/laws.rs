@@ -102,6 +102,46 @@ pub fn coulomb_smooth<T: Float>(fc: T, omega: T, v_eps: T) -> T {
     fc * (omega / v_eps).tanh()
 }
 
+/// Smooth Coulomb friction with direction-dependent levels for the estimator [N·m],
+/// opposing the motor velocity `omega` [rad/s]: with `s = tanh(ω/v_ε)` and the weights
+/// `w± = (1 ± s)/2` of forward and backward motion,
+/// `s (w+ L+ + w− L−) + w− f_v− ω`, where `level_pos` `L+` and `level_neg` `L−` are the
+/// sliding levels forward and backward [N·m] and `extra_neg` `f_v−` the viscous friction
+/// acting backward only [N·m·s/rad]. Far from rest it is the exact sliding law (`L+`
+/// forward, `−L− + f_v− ω` backward, [`crate::model::effects::CoulombFriction::level_dir`]);
+/// with `L+ = L−` and `f_v− = 0` it is [`coulomb_smooth`].
+#[inline(always)]
+pub fn coulomb_smooth_asym<T: Float>(
+    level_pos: T,
+    level_neg: T,
+    extra_neg: T,
+    omega: T,
+    v_eps: T,
+) -> T {
+    coulomb_smooth_asym_tanh(
+        level_pos,
+        level_neg,
+        extra_neg,
+        omega,
+        (omega / v_eps).tanh(),
+    )
+}
+
+/// [`coulomb_smooth_asym`] with `s = tanh(ω/v_ε)` given.
+#[inline(always)]
+pub fn coulomb_smooth_asym_tanh<T: Float>(
+    level_pos: T,
+    level_neg: T,
+    extra_neg: T,
+    omega: T,
+    s: T,
+) -> T {
+    let half: T = c(0.5);
+    let wp = half * (T::one() + s);
+    let wn = half * (T::one() - s);
+    s * (wp * level_pos + wn * level_neg) + wn * extra_neg * omega
+}
+
 /// Friction level with a Stribeck bump, `F_c + (F_s − F_c) e^{−(ω/v_s)²}` [N·m] at motor
 /// velocity `omega` [rad/s] (the magnitude of the sliding friction; seed 000's joint,
 /// [`crate::model::effects::CoulombFriction::level`] evaluates the same law).
@@ -180,6 +220,18 @@ mod tests {
         assert!((coulomb_smooth(0.1, 1.0, 1e-3) - 0.1).abs() < 1e-12);
         assert!((coulomb_smooth(0.1, -1.0, 1e-3) + 0.1).abs() < 1e-12);
         assert_eq!(coulomb_smooth(0.1, 0.0, 1e-3), 0.0);
+    }
+
+    #[test]
+    fn asymmetric_smooth_coulomb_tends_to_each_side_and_reduces_to_the_symmetric_law() {
+        let (lp, ln, fv) = (0.2, 0.3, 0.05);
+        assert!((coulomb_smooth_asym(lp, ln, fv, 2.0, 1e-3) - lp).abs() < 1e-12);
+        assert!((coulomb_smooth_asym(lp, ln, fv, -2.0, 1e-3) - (-ln - fv * 2.0)).abs() < 1e-12);
+        assert_eq!(coulomb_smooth_asym(lp, ln, fv, 0.0, 1e-3), 0.0);
+        for w in [-0.01, -1e-3, 2e-4, 0.05] {
+            let a = coulomb_smooth_asym(lp, lp, 0.0, w, 1e-3);
+            assert!((a - coulomb_smooth(lp, w, 1e-3)).abs() < 1e-15, "{w}");
+        }
     }
 
     #[test]

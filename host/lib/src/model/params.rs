@@ -246,7 +246,7 @@ pub fn sim_spec(
 /// `k_*` [N·m/rad], `d_*` and `f_m` [N·m·s/rad]), the gear ratio `r` [-], seed 001's cubic
 /// spring `k3` [N·m/rad³] and Coulomb level `F_c` [N·m], and the rigid model of the
 /// estimators: `J` [kg·m²], viscous `Fv` [N·m·s/rad], Coulomb `Fc` and `offset` [N·m].
-pub const UNITS: [(&str, &str); 18] = [
+pub const UNITS: [(&str, &str); 20] = [
     ("J_m", "kg·m²"),
     ("J_a1", "kg·m²"),
     ("J_a2", "kg·m²"),
@@ -264,6 +264,8 @@ pub const UNITS: [(&str, &str); 18] = [
     ("J", "kg·m²"),
     ("Fv", "N·m·s/rad"),
     ("Fc", "N·m"),
+    ("Fv_neg", "N·m·s/rad"),
+    ("Fc_neg", "N·m"),
     ("offset", "N·m"),
 ];
 

@@ -166,6 +166,10 @@ pub struct ModelSpec {
     /// rigid model only: Coulomb friction and a torque offset beside the viscous friction
     #[serde(default)]
     pub coulomb: bool,
+    /// with `coulomb`: friction that differs with the direction of motion (`F_v`, `F_c`
+    /// forward, `F_v−`, `F_c−` backward, no offset; [`crate::ident::grey_box::IdimOptions`])
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub coulomb_asymmetric: bool,
     /// current-loop lag `tau_c` [s] held at this value; `None`: estimated in the frequency
     /// domain, neglected (0) in the time domain
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -196,6 +200,7 @@ impl ModelSpec {
             family,
             effects: None,
             coulomb: false,
+            coulomb_asymmetric: false,
             current_loop_tau: None,
             delay: None,
         }
@@ -241,6 +246,7 @@ impl ModelSpec {
             family,
             effects,
             coulomb,
+            coulomb_asymmetric: false,
             current_loop_tau,
             delay,
         })

@@ -209,8 +209,9 @@ pub struct NonlinearPlant {
     half_gap: Option<f64>,
     coulomb: Vec<CoulombFriction>,
     ripple: Vec<TorqueRipple>,
-    /// total static (breakaway) friction `Σ F_s` [N·m]
-    f_static: f64,
+    /// total static (breakaway) friction `(Σ F_s, Σ F_s−)` [N·m] forward and backward
+    /// ([`CoulombFriction::breakaway`])
+    f_static: (f64, f64),
     /// variation of the Stribeck bump's level over a whole-sample step above which the
     /// sample is cut into substeps [N·m] (infinite without a bump)
     stribeck_tol: f64,
@@ -260,7 +261,10 @@ impl NonlinearPlant {
                 d: s.d,
             };
         }
-        let f_static: f64 = coulomb.iter().map(|c| c.fs.max(c.fc)).sum();
+        let f_static = coulomb.iter().fold((0.0, 0.0), |(a, b), c| {
+            let (p, n) = c.breakaway();
+            (a + p, b + n)
+        });
         let bump: f64 = coulomb.iter().map(|c| (c.fs - c.fc).abs()).sum();
         let stribeck_near = 3.0 * coulomb.iter().fold(0.0, |m: f64, c| m.max(c.v_stribeck));
         NonlinearPlant {
@@ -349,7 +353,7 @@ impl NonlinearPlant {
             Motion::SlipNeg
         } else {
             let t = self.motor_net_n::<NB>(x, mode, w);
-            if t.abs() < self.f_static {
+            if self.stick_margin(t) < 0.0 {
                 Motion::Stick
             } else if t > 0.0 {
                 Motion::SlipPos
@@ -357,6 +361,13 @@ impl NonlinearPlant {
                 Motion::SlipNeg
             }
         }
+    }
+
+    /// How far the net motor torque `t` [N·m] of a stuck motor lies beyond its breakaway
+    /// levels, `max(t − F_s, −t − F_s−)`: negative while it stays stuck.
+    #[inline(always)]
+    fn stick_margin(&self, t: f64) -> f64 {
+        (t - self.f_static.0).max(-t - self.f_static.1)
     }
 
     /// Torques on every body except Coulomb friction [N·m]: viscous friction, current-loop
@@ -429,16 +440,8 @@ impl NonlinearPlant {
         match motion {
             Motion::Free => {}
             Motion::Stick => acc[0] = 0.0,
-            Motion::SlipPos => {
-                for c in &self.coulomb {
-                    acc[0] -= c.level(x[n]);
-                }
-            }
-            Motion::SlipNeg => {
-                for c in &self.coulomb {
-                    acc[0] += c.level(x[n]);
-                }
-            }
+            Motion::SlipPos => acc[0] -= self.sliding_level(x[n], false),
+            Motion::SlipNeg => acc[0] += self.sliding_level(x[n], true),
         }
         for i in 0..n {
             dx[i] = x[n + i];
@@ -508,7 +511,7 @@ impl NonlinearPlant {
     ) -> Option<f64> {
         match motion {
             Motion::Free => None,
-            Motion::Stick => Some(self.motor_net_n::<NB>(x, mode, w).abs() - self.f_static),
+            Motion::Stick => Some(self.stick_margin(self.motor_net_n::<NB>(x, mode, w))),
             Motion::SlipPos => Some(-x[NB]),
             Motion::SlipNeg => Some(x[NB]),
         }
@@ -943,8 +946,8 @@ impl NonlinearPlant {
             motor += base.torque(i, r, x[0]);
         }
         match motion {
-            Motion::SlipPos => motor -= self.sliding_level(x[n]),
-            Motion::SlipNeg => motor += self.sliding_level(x[n]),
+            Motion::SlipPos => motor -= self.sliding_level(x[n], false),
+            Motion::SlipNeg => motor += self.sliding_level(x[n], true),
             Motion::Free | Motion::Stick => {}
         }
         let (ga, gb) = if NB > 1 {
@@ -981,10 +984,14 @@ impl NonlinearPlant {
             .sum()
     }
 
-    /// Total sliding-friction level at motor speed `omega` [rad/s] → [N·m].
+    /// Total sliding-friction level at motor speed `omega` [rad/s], sliding `backward` or
+    /// forward → [N·m] ([`CoulombFriction::level_dir`]).
     #[inline(always)]
-    fn sliding_level(&self, omega: f64) -> f64 {
-        self.coulomb.iter().map(|c| c.level(omega)).sum()
+    fn sliding_level(&self, omega: f64, backward: bool) -> f64 {
+        self.coulomb
+            .iter()
+            .map(|c| c.level_dir(omega, backward))
+            .sum()
     }
 
     /// One Lawson RK4 step of `step.h()` with the modes frozen, inputs `v = [u_old, u_new,
@@ -1078,7 +1085,7 @@ impl NonlinearPlant {
         // net torque of a stuck motor peaking above breakaway, a contact opening and closing);
         // `past`: the stuck motor's net torque at breakaway (ripple from the step's base)
         let past =
-            |y: &State| self.torques_n::<NB>(y, mode, w, Some(&base))[0].abs() >= self.f_static;
+            |y: &State| self.stick_margin(self.torques_n::<NB>(y, mode, w, Some(&base))[0]) >= 0.0;
         match motion {
             Motion::Stick => {
                 out[n] = 0.0;

@@ -624,7 +624,7 @@ fn assemble_parts(plant: &Plant, effects: &[Effect], tc: f64) -> Assembled {
     let mut delay = 0.0;
     for e in effects {
         match *e {
-            Effect::CoulombFriction(c) if c.fs > 0.0 => coulomb.push(c),
+            Effect::CoulombFriction(c) if c.fs > 0.0 || c.fc_backward() > 0.0 => coulomb.push(c),
             Effect::Backlash(b) if b.width > 0.0 => backlash = Some(b.width),
             Effect::NonlinearStiffness(s) => k3 += s.k3,
             Effect::TimeDelay(d) => delay += d.samples,

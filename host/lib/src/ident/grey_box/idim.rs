@@ -15,8 +15,14 @@ pub struct IdimOptions {
     pub filter_order: usize,
     /// include Coulomb friction `F_c sgn(q̇)`
     pub coulomb: bool,
-    /// include a constant torque offset
+    /// include a constant torque offset (not with `asymmetric`)
     pub offset: bool,
+    /// with `coulomb`: friction that differs with the direction of motion (Janot, Gautier
+    /// & Brunot 2019, EMPS reference model): `F_v q̇` and `F_c` for `q̇ > 0`, `F_v− q̇` and
+    /// `−F_c−` for `q̇ < 0`, names `Fv`, `Fc`, `Fv_neg`, `Fc_neg`. The offset is left out:
+    /// while the axis moves it equals half the difference of the Coulomb levels, and the
+    /// regressors would be collinear.
+    pub asymmetric: bool,
     /// keep one sample in `decimate` after filtering (1: all)
     pub decimate: usize,
 }
@@ -29,6 +35,7 @@ impl Default for IdimOptions {
             filter_order: 4,
             coulomb: true,
             offset: true,
+            asymmetric: false,
             decimate: 1,
         }
     }
@@ -53,7 +60,8 @@ impl RigidFit {
 }
 
 /// Inverse-dynamics least squares of the rigid body (seed 001 steps 1–2):
-/// `u = J q̈ + F_v q̇ + F_c sgn(q̇) + offset`, with `q̇`, `q̈` from central
+/// `u = J q̈ + F_v q̇ + F_c sgn(q̇) + offset` (or the asymmetric friction of
+/// [`IdimOptions::asymmetric`]), with `q̇`, `q̈` from central
 /// differences of the zero-phase low-passed output and `u` low-passed by the
 /// same filter ("parallel filtering", which keeps the equation exact for
 /// the filtered signals). Standard deviations from `σ̂² (ΦᵀΦ)^{−1}`
@@ -86,11 +94,16 @@ pub fn rigid_idim(data: &IdData, opts: &IdimOptions) -> Result<RigidFit, GreyBox
         }
     };
     let edge = ((2.0 / (fc * ts)).ceil() as usize).min(n / 4);
+    let asym = opts.coulomb && opts.asymmetric;
     let mut names = vec!["J", "Fv"];
     if opts.coulomb {
         names.push("Fc");
     }
-    if opts.offset {
+    if asym {
+        names.extend(["Fv_neg", "Fc_neg"]);
+    }
+    let offset = opts.offset && !asym;
+    if offset {
         names.push("offset");
     }
     let p = names.len();
@@ -105,11 +118,18 @@ pub fn rigid_idim(data: &IdData, opts: &IdimOptions) -> Result<RigidFit, GreyBox
         phi[0] = qdd[t];
         phi[1] = qd[t];
         let mut k = 2;
-        if opts.coulomb {
+        if asym {
+            let (pos, neg) = (qd[t] > 0.0, qd[t] < 0.0);
+            phi[1] = if pos { qd[t] } else { 0.0 };
+            phi[2] = f64::from(u8::from(pos));
+            phi[3] = if neg { qd[t] } else { 0.0 };
+            phi[4] = -f64::from(u8::from(neg));
+            k = 5;
+        } else if opts.coulomb {
             phi[k] = qd[t].signum() * f64::from(u8::from(qd[t] != 0.0));
             k += 1;
         }
-        if opts.offset {
+        if offset {
             phi[k] = 1.0;
         }
         for i in 0..p {

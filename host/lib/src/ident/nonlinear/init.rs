@@ -2,8 +2,9 @@
 //! 1. **rigid body**: total inertia `J` and viscous friction `F_v` by inverse-dynamics least
 //!    squares on low-passed data ([`grey_box::rigid_idim`]);
 //! 2. **friction**: `F_v`, `F_c` and a torque offset from the same torque–velocity relation
-//!    with the Coulomb regressor `sgn(ω)` (and the ripple's `sin`/`cos` of `n θ_m` when
-//!    `torque_ripple` is attached, which gives its amplitude and phase);
+//!    with the Coulomb regressor `sgn(ω)`; for an asymmetric Coulomb friction (`fc_neg`,
+//!    `fv_neg_extra` given) also each direction's levels, by the asymmetric regression
+//!    ([`IdimOptions::asymmetric`]);
 //! 3. **flexibility**: the linear structure (the caller's linear fit, e.g. the
 //!    frequency-domain one, or modal features of a subspace model,
 //!    [`grey_box::features`]), refined by the output-error fit with friction only; then each
@@ -104,9 +105,11 @@ pub fn automatic_start(
         },
     )
     .map_err(err)?;
-    let fv = friction.get("Fv").unwrap_or(0.0);
-    let fc = friction.get("Fc").unwrap_or(0.0);
-    let offset = friction.get("offset").unwrap_or(0.0);
+    let mut fv = friction.get("Fv").unwrap_or(0.0);
+    let mut fc = friction.get("Fc").unwrap_or(0.0);
+    // the regression's offset is on the torque side (`u = … + offset`); the model's adds
+    // to the motor torque
+    let mut offset = -friction.get("offset").unwrap_or(0.0);
     steps.push(Step {
         name: "friction".into(),
         values: friction
@@ -119,6 +122,58 @@ pub fn automatic_start(
             friction.rel_error_percent
         ),
     });
+    // each direction's levels: `fc_neg` as a share of `fc` (the Coulomb grid below scales
+    // both alike) and the backward viscous extra
+    let asym_spec = model.effects.iter().find_map(|e| match e {
+        Effect::CoulombFriction(c) if c.is_asymmetric() => Some(*c),
+        _ => None,
+    });
+    let mut asym: Option<Asym> = None;
+    if let Some(spec) = asym_spec {
+        let a = grey_box::rigid_idim(
+            data,
+            &IdimOptions {
+                cutoff_hz: RIGID_CUTOFF_HZ,
+                coulomb: true,
+                asymmetric: true,
+                ..IdimOptions::default()
+            },
+        )
+        .map_err(err)?;
+        let (fcp, fcn) = (a.get("Fc").unwrap_or(0.0), a.get("Fc_neg").unwrap_or(0.0));
+        let (fvp, fvn) = (a.get("Fv").unwrap_or(0.0), a.get("Fv_neg").unwrap_or(0.0));
+        if fcp > 0.0 && fcn > 0.0 {
+            if spec.fc_neg.is_some() {
+                // the levels replace the offset (held at 0, `run::identify`)
+                fc = fcp;
+                offset = 0.0;
+            } else {
+                // their mean is the level, half their difference the offset
+                fc = 0.5 * (fcp + fcn);
+                offset = -0.5 * (fcp - fcn);
+            }
+            if spec.fv_neg_extra.is_some() {
+                fv = fvp;
+            }
+            asym = Some(Asym {
+                neg_ratio: fcn / fc,
+                fv_extra: fvn - fvp,
+            });
+        }
+        steps.push(Step {
+            name: "friction, each direction".into(),
+            values: a
+                .params
+                .iter()
+                .map(|p| (p.name.clone(), p.value, p.unit))
+                .collect(),
+            detail: format!(
+                "torque-velocity least squares with each direction's levels, torque error \
+                 {:.1} %",
+                a.rel_error_percent
+            ),
+        });
+    }
     let j_used = if has_coulomb {
         friction.get("J").unwrap_or(j_total)
     } else {
@@ -143,7 +198,9 @@ pub fn automatic_start(
     match model.structure {
         Structure::Rigid => plants.push(vec![j_used, fv_used]),
         Structure::TwoMass => {
-            plants.push(two_mass_grid(data, model, j_used, fv_used, fc_used, offset));
+            plants.push(two_mass_grid(
+                data, model, j_used, fv_used, fc_used, offset, asym,
+            ));
         }
         s => {
             if let Ok((mut feat, _)) = grey_box::features(data, Output::Angle, s.masses(), 0, 0.0) {
@@ -163,7 +220,9 @@ pub fn automatic_start(
             .effects
             .iter()
             .filter_map(|e| match e {
-                Effect::CoulombFriction(c) => Some(Effect::CoulombFriction(friction_at(c, fc))),
+                Effect::CoulombFriction(c) => {
+                    Some(Effect::CoulombFriction(friction_at(c, fc, asym)))
+                }
                 _ => None,
             })
             .collect()
@@ -226,6 +285,13 @@ pub fn automatic_start(
             &NlOptions {
                 max_iter: 30,
                 cov_lags: 0,
+                exact_correction: false,
+                smoothing_sigma: false,
+                fixed: if holds_offset(model) {
+                    vec!["offset".into()]
+                } else {
+                    Vec::new()
+                },
                 ..NlOptions::default()
             },
         ) else {
@@ -264,7 +330,7 @@ pub fn automatic_start(
                 .iter()
                 .find(|e| matches!(e, Effect::CoulombFriction(_)))
                 .copied()
-                .unwrap_or(Effect::CoulombFriction(friction_at(&c, lin_fc))),
+                .unwrap_or(Effect::CoulombFriction(friction_at(&c, lin_fc, asym))),
             Effect::TorqueRipple(r) => lin
                 .model
                 .effects
@@ -357,13 +423,14 @@ fn two_mass_grid(
     fv: f64,
     fc: f64,
     offset: f64,
+    asym: Option<Asym>,
 ) -> Vec<f64> {
     let r2 = model.r * model.r;
     let friction: Vec<Effect> = model
         .effects
         .iter()
         .filter_map(|e| match e {
-            Effect::CoulombFriction(c) => Some(Effect::CoulombFriction(friction_at(c, fc))),
+            Effect::CoulombFriction(c) => Some(Effect::CoulombFriction(friction_at(c, fc, asym))),
             _ => None,
         })
         .collect();
@@ -396,17 +463,43 @@ fn two_mass_grid(
     best.map_or_else(|| vec![0.5 * j, 0.5 * j / r2, 1.0, 1.0, fv], |(_, p)| p)
 }
 
-/// Coulomb friction `c` at level `fc` [N·m], its Stribeck bump (if any) scaled alike.
+/// Each direction's friction from step 2's asymmetric regression.
+#[derive(Clone, Copy, Debug)]
+struct Asym {
+    /// `F_c− / F_c` [-]
+    neg_ratio: f64,
+    /// `F_v− − F_v` [N·m·s/rad]
+    fv_extra: f64,
+}
+
+/// Whether the model's offset is held at 0: an asymmetric Coulomb level `fc_neg` takes its
+/// place (while the motor moves, an offset is half the difference of the two levels; only
+/// the stuck phases would tell them apart, and the smooth law hardly sees those).
+pub(crate) fn holds_offset(model: &NlModel) -> bool {
+    model
+        .effects
+        .iter()
+        .any(|e| matches!(e, Effect::CoulombFriction(c) if c.fc_neg.is_some()))
+}
+
+/// Coulomb friction `c` at level `fc` [N·m], its Stribeck bump (if any) scaled alike, and
+/// its asymmetric keys (those `c` has) from step 2 when it found them.
 fn friction_at(
     c: &crate::model::effects::CoulombFriction,
     fc: f64,
+    asym: Option<Asym>,
 ) -> crate::model::effects::CoulombFriction {
     let fs = if super::model::has_bump(c) && c.fc > 0.0 {
         fc * c.fs / c.fc
     } else {
         fc
     };
-    crate::model::effects::CoulombFriction { fc, fs, ..*c }
+    let mut out = crate::model::effects::CoulombFriction { fc, fs, ..*c };
+    if let Some(a) = asym {
+        out.fc_neg = c.fc_neg.map(|_| fc * a.neg_ratio);
+        out.fv_neg_extra = c.fv_neg_extra.map(|_| a.fv_extra);
+    }
+    out
 }
 
 /// An effect at a size that leaves the linear model unchanged (or nearly: a log-parameter

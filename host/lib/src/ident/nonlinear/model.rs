@@ -7,7 +7,9 @@
 //! seed 001 eq. (4)–(9) without its nonlinear terms) with the effects' extra masses, in the
 //! coordinates of [`crate::model::plant`]. Laws from [`crate::model::laws`]: the gearbox
 //! spring `k e + k3 e³ + d ė` on the contact deflection `e` (the smooth dead zone when
-//! backlash is attached), smooth Coulomb friction `F_c tanh(ω/v_ε)` on the motor, ripple
+//! backlash is attached), smooth Coulomb friction `F_c tanh(ω/v_ε)` on the motor (its
+//! asymmetric form [`laws::coulomb_smooth_asym`] when `fc_neg` or `fv_neg_extra` is
+//! given), ripple
 //! `A sin(n θ_m + φ)`, the current-loop lag in closed form, a torque offset.
 //!
 //! Input: the measured torque reference `u[k]`, held over sample `k` (zero-order hold,
@@ -135,7 +137,10 @@ impl NlModel {
             .effects
             .iter()
             .filter_map(|e| match e {
-                Effect::CoulombFriction(f) => Some(f.fc.max(f.fs)),
+                Effect::CoulombFriction(f) => {
+                    let (fwd, bwd) = f.breakaway();
+                    Some(fwd.max(bwd))
+                }
                 _ => None,
             })
             .fold(0.0f64, f64::max);
@@ -222,6 +227,15 @@ impl NlModel {
                         v.push(d("fs", "N·m", Scale::Log, 1e-9, 1e3));
                         v.push(d("v_stribeck", "rad/s", Scale::Log, 1e-4, 1e2));
                     }
+                    if f.fc_neg.is_some() {
+                        v.push(d("fc_neg", "N·m", Scale::Log, 1e-9, 1e3));
+                    }
+                    if let Some(x) = f.fv_neg_extra {
+                        // typical size: the value, or the viscous torque of the Coulomb
+                        // level at 1 rad/s
+                        let s = x.abs().max(0.1 * f.fc).max(1e-6);
+                        v.push(d("fv_neg_extra", "N·m·s/rad", Scale::Linear(s), -1e6, 1e6));
+                    }
                 }
                 Effect::Backlash(_) => v.push(d("width", "rad", Scale::Log, 1e-9, 0.1)),
                 Effect::NonlinearStiffness(s) => v.push(d(
@@ -278,6 +292,8 @@ impl NlModel {
                     if has_bump(f) {
                         v.extend([f.fs, f.v_stribeck]);
                     }
+                    v.extend(f.fc_neg);
+                    v.extend(f.fv_neg_extra);
                 }
                 Effect::Backlash(b) => v.push(b.width),
                 Effect::NonlinearStiffness(s) => v.push(s.k3),
@@ -309,6 +325,14 @@ impl NlModel {
                         i += 3;
                     } else {
                         (f.fc, f.fs) = (p[i], p[i]);
+                        i += 1;
+                    }
+                    if f.fc_neg.is_some() {
+                        f.fc_neg = Some(p[i]);
+                        i += 1;
+                    }
+                    if f.fv_neg_extra.is_some() {
+                        f.fv_neg_extra = Some(p[i]);
                         i += 1;
                     }
                 }
@@ -362,6 +386,10 @@ pub(crate) struct Plant<T> {
     fc: Option<T>,
     /// Stribeck bump `(F_s, v_s)` of the Coulomb friction, when the model has one
     bump: Option<(T, T)>,
+    /// Coulomb level for negative velocity `F_c−` [N·m], when asymmetric
+    fc_neg: Option<T>,
+    /// viscous friction for negative velocity only [N·m·s/rad], when given
+    fv_neg: Option<T>,
     v_eps: T,
     /// (amplitude, order, phase)
     ripple: Vec<(T, T, T)>,
@@ -421,7 +449,7 @@ impl<T: Float> Plant<T> {
         i += 1;
         let (mut k3, mut half_gap, mut fc, mut ripple, mut delay) =
             (zero, None, None, vec![], None);
-        let mut bump = None;
+        let (mut bump, mut fc_neg, mut fv_neg) = (None, None, None);
         for e in &model.effects {
             match e {
                 Effect::CoulombFriction(f) => {
@@ -430,6 +458,14 @@ impl<T: Float> Plant<T> {
                         bump = Some((p[i + 1], p[i + 2]));
                         i += 3;
                     } else {
+                        i += 1;
+                    }
+                    if f.fc_neg.is_some() {
+                        fc_neg = Some(p[i]);
+                        i += 1;
+                    }
+                    if f.fv_neg_extra.is_some() {
+                        fv_neg = Some(p[i]);
                         i += 1;
                     }
                 }
@@ -491,6 +527,8 @@ impl<T: Float> Plant<T> {
             dz_eps: c(model.dz_eps),
             fc,
             bump,
+            fc_neg,
+            fv_neg,
             v_eps: c(model.v_eps),
             ripple,
             offset,
@@ -525,7 +563,15 @@ impl<T: Float> Plant<T> {
                 Some((fs, vs)) => laws::stribeck_level(fc, fs, vs, w[0]),
                 None => fc,
             };
-            motor = motor - laws::coulomb_smooth(level, w[0], self.v_eps);
+            motor = motor
+                - if self.fc_neg.is_none() && self.fv_neg.is_none() {
+                    laws::coulomb_smooth(level, w[0], self.v_eps)
+                } else {
+                    // the same bump both ways (`CoulombFriction::level_dir`)
+                    let neg = self.fc_neg.map_or(level, |f| level - fc + f);
+                    let extra = self.fv_neg.unwrap_or(T::zero());
+                    laws::coulomb_smooth_asym(level, neg, extra, w[0], self.v_eps)
+                };
         }
         acc[0] = acc[0] + motor;
         for (si, s) in self.springs[..n.saturating_sub(1)].iter().enumerate() {

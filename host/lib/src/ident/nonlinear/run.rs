@@ -312,6 +312,14 @@ pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, Nl
     };
     let mut options = req.options.clone().for_structure(req.structure);
     let layout = start_model.layout();
+    // an asymmetric Coulomb level takes the offset's place (`init::holds_offset`), unless
+    // the offset is held at a value of the user's
+    if super::init::holds_offset(&start_model) && !req.fixed.iter().any(|(n, _)| n == "offset") {
+        if let Some(i) = layout.iter().position(|d| d.owner == Owner::Offset) {
+            start[i] = 0.0;
+            options.fixed.push("offset".into());
+        }
+    }
     // held values (the lag below, with the lag held)
     for (name, value) in req.fixed.iter().filter(|(n, _)| n != "tau_c") {
         for (i, d) in layout.iter().enumerate() {
@@ -362,7 +370,7 @@ fn method(options: &NlOptions, model: &NlModel, lag_held: bool, lag: bool) -> St
         "nonlinear grey box: output error on the interval-mean motor velocity from the measured \
          torque ({}, RK4 with {} step(s) per sample, smooth Coulomb law v_eps = {:.3} rad/s), \
          Levenberg-Marquardt with exact derivatives by dual numbers, σ by the sandwich \
-         covariance for coloured residuals; current-loop lag {}",
+         covariance for coloured residuals{}; current-loop lag {}",
         if options.highpass_hz <= 0.0 {
             "no prefilter: a rigid body's information lies at the low frequencies".to_string()
         } else if options.highpass_order == 2 {
@@ -378,6 +386,17 @@ fn method(options: &NlOptions, model: &NlModel, lag_held: bool, lag: bool) -> St
         },
         model.substeps,
         model.v_eps,
+        if model
+            .effects
+            .iter()
+            .any(|e| matches!(e, Effect::CoulombFriction(_)))
+        {
+            "; with Coulomb friction, Gauss-Newton steps on the exact stick-slip law's cost \
+             after the smooth fit, and the smooth law's remaining bias (the change of the \
+             estimate when v_eps is doubled, x1.66) added to the σ"
+        } else {
+            ""
+        },
         match (lag_held, lag) {
             (true, true) => "fixed",
             (_, false) => "left out",

@@ -181,3 +181,30 @@ fn rk4_on_linear_plant_agrees_with_exact_path() {
     let e = rel_err(&rk.theta_m_true, &exact.theta_m_true);
     assert!(e < 1e-8, "{e:e}");
 }
+
+#[test]
+fn asymmetric_friction_sets_each_directions_speed_and_breakaway() {
+    // a rigid motor (J 0.01 kg·m², f_m 0.05 N·m·s/rad) driven open loop by a constant
+    // torque: forward it settles at (u − F_c)/f_m, backward at (u + F_c−)/(f_m + f_v−);
+    // between −F_c− and F_c it stays stuck
+    let mut plant = Plant::new(Structure::Rigid);
+    plant.params.j_m = 0.01;
+    plant.params.j_a1 = 0.0;
+    plant.params.j_a2 = 0.0;
+    plant.params.f_m = 0.05;
+    let effects: Vec<Effect> = vec![
+        "coulomb_friction:fc=0.1,fs=0.1,fc_neg=0.3,fv_neg_extra=0.15"
+            .parse()
+            .unwrap(),
+    ];
+    let run = |u: f64| {
+        let u = vec![u; 4000];
+        let out =
+            simulate_driven(&plant, &effects, 1e-9, 1e-3, &u, &DrivenStart::default()).unwrap();
+        *out.omega_m.last().unwrap()
+    };
+    assert!((run(0.2) - 0.1 / 0.05).abs() < 1e-6, "{}", run(0.2));
+    assert!((run(-0.5) + 0.2 / 0.2).abs() < 1e-6, "{}", run(-0.5));
+    assert_eq!(run(-0.25), 0.0);
+    assert_eq!(run(0.09), 0.0);
+}
