@@ -34,15 +34,29 @@ fn runs_are_bit_reproducible_and_the_seed_changes_the_noise() {
 
 #[test]
 fn params_json_lists_every_parameter() {
+    // the asymmetric friction keys are written when given (absent, the law is symmetric)
+    let effects: Vec<Effect> = Effect::all_defaults()
+        .into_iter()
+        .map(|e| match e {
+            Effect::CoulombFriction(c) => {
+                Effect::CoulombFriction(crate::model::effects::CoulombFriction {
+                    fc_neg: Some(c.fc),
+                    fv_neg_extra: Some(0.0),
+                    ..c
+                })
+            }
+            other => other,
+        })
+        .collect();
     let cfg = SimConfig {
-        effects: Effect::all_defaults(),
+        effects: effects.clone(),
         ..SimConfig::default()
     };
     let json = cfg.params_json().unwrap();
     for (name, _, _) in cfg.plant.params.table() {
         assert!(json.contains(&format!("\"{name}\"")), "{name} missing");
     }
-    for e in Effect::all_defaults() {
+    for e in effects {
         assert!(json.contains(&format!("\"effect\": \"{}\"", e.name())));
         for key in e.keys() {
             assert!(json.contains(&format!("\"{key}\"")), "{key} missing");
