@@ -8,9 +8,9 @@
 //! `DIR/validation.jcap`, read and decode them back, analyze (FRF with the
 //! reference as instrument, linearity verdict; `spectrum.svg` as seed 000
 //! Fig. 3, `frf.svg`), fit the 11th-order black box on the decimated
-//! estimation data and the three-mass and four-mass models at the capture
-//! rate (started on the decimated data, compared after the same
-//! decimation, see [`jointid::ident::fit::FitData`]) and print the
+//! estimation data and the three-mass and four-mass models on the FRF at the
+//! capture rate (the frequency-domain path of `jointid fit`, compared after
+//! the same decimation, see [`jointid::ident::fit::FitData`]) and print the
 //! Table-2-like comparison with resonances against the simulator's truth
 //! (`bode_3mass.svg`, `bode_4mass.svg` as Figs. 5–6).
 

@@ -106,7 +106,8 @@ pub struct PeriodSpectra {
 }
 
 /// DFT of every whole period of `x` in `layout`, lines 0 … N/2, amplitude
-/// scaled (2/N for 0 < k < N/2, 1/N at DC and Nyquist).
+/// scaled (2/N for 0 < k < N/2, 1/N at DC and Nyquist), each period's
+/// leakage of the non-periodic part removed ([`period_jumps`]).
 ///
 /// # Errors
 /// [`FrfError::OutOfRange`] when the layout does not fit `x`.
@@ -121,15 +122,67 @@ pub fn period_spectra(x: &[f64], layout: &PeriodLayout) -> Result<PeriodSpectra,
         });
     }
     let fft = FftPlanner::<f64>::new().plan_fft_forward(n);
+    let jumps = period_jumps(&x[range], n);
     Ok(PeriodSpectra {
         period: n,
         lines: (0..layout.count)
             .map(|p| {
                 let s = layout.start + p * n;
-                dft_half(&fft, &x[s..s + n])
+                let ramp = jumps[p] / n as f64;
+                let v: Vec<f64> = x[s..s + n]
+                    .iter()
+                    .enumerate()
+                    .map(|(i, v)| v - ramp * i as f64)
+                    .collect();
+                dft_half(&fft, &v)
             })
             .collect(),
     })
+}
+
+/// Half width of the window that reads a period's end jump [samples] (at
+/// most a quarter period): short, so that the jump is read where the leakage
+/// takes it, at the boundary.
+const JUMP_HALF_WINDOW: usize = 20;
+
+/// The jump `J = x(t + N) − x(t)` at the start of each period of `x` (whole
+/// periods of `n` samples), averaged over `±20` samples around the period's
+/// boundary as far as they stay in `x`, and shrunk towards zero by its own
+/// noise.
+///
+/// The periodic part cancels in the jump; what remains is the drift of the
+/// non-periodic part (a slow disturbance) over one period. Its DFT over one
+/// period carries the leakage term `−(2/N) J / (1 − e^{−j2πk/N})`: noise
+/// fully correlated from line to line, which a per-line variance cannot
+/// weight (Pintelon & Schoukens 2012, §2.6, the leakage of a non-periodic
+/// signal's DFT as a transient term). Removing the ramp `J n/N` from the
+/// period removes it and leaves the periodic part untouched. The mean jump
+/// `Ĵ` over `w` samples carries white noise of variance `v = s²_J/w`, which
+/// the ramp would spread over the lowest lines as leakage of its own; the
+/// ramp uses `Ĵ max(0, 1 − v/Ĵ²)` (Wiener shrinkage), so data without drift
+/// are left nearly as they are.
+fn period_jumps(x: &[f64], n: usize) -> Vec<f64> {
+    let count = x.len() / n;
+    let m = JUMP_HALF_WINDOW.min(n / 4).max(1) as isize;
+    (0..count)
+        .map(|p| {
+            let (a, b) = ((p * n) as isize, ((p + 1) * n) as isize);
+            let lo = (-m).max(-a);
+            let hi = m.min(x.len() as isize - b);
+            if hi - lo < 2 {
+                return 0.0;
+            }
+            let w = (hi - lo) as f64;
+            let jumps = (lo..hi).map(|i| x[(b + i) as usize] - x[(a + i) as usize]);
+            let mean = jumps.clone().sum::<f64>() / w;
+            let var = jumps.map(|j| (j - mean).powi(2)).sum::<f64>() / (w - 1.0) / w;
+            if mean == 0.0 {
+                0.0
+            } else {
+                mean * (1.0 - var / (mean * mean)).max(0.0)
+            }
+        })
+        .collect()
 }
 
 fn dft_half(fft: &Arc<dyn Fft<f64>>, x: &[f64]) -> Vec<Complex64> {

@@ -508,3 +508,161 @@ fn a_linear_joint_raises_no_distortion_warning() {
         frf.g.len()
     );
 }
+
+/// noise conditions of the σ calibration
+#[derive(Clone, Copy, Debug)]
+enum Noise {
+    /// the simulator's default sensors
+    Default,
+    /// default, plus coloured noise in the band: the disturbance's low-pass
+    /// at 30 Hz, and AR(1) noise (pole 0.95) added to the measured angle
+    Coloured,
+    /// default with the slow disturbance ten times stronger
+    Disturbance10,
+}
+
+/// FRF of one run of `structure`'s default joint under `noise`
+fn noisy_frf(structure: Structure, noise: Noise, seed: u64, periods: u32) -> (Frf, JointParams) {
+    let mut cfg = SimConfig {
+        plant: Plant::new(structure),
+        seed,
+        ..SimConfig::default()
+    };
+    match noise {
+        Noise::Default => {}
+        Noise::Coloured => cfg.sensors.disturbance.noise_cutoff_hz = 30.0,
+        Noise::Disturbance10 => cfg.sensors.disturbance.noise_std *= 10.0,
+    }
+    let exc = excitation(periods, 0.02);
+    let out = simulate_excitation(&cfg, &exc).expect("simulation");
+    let mut data = out.to_id_data();
+    if let Noise::Coloured = noise {
+        let mut rng = GaussRng::new(seed ^ 0xC0102ED);
+        let (a, sd) = (0.95, 1e-5);
+        let b = sd * (1.0f64 - a * a).sqrt();
+        let mut e = 0.0;
+        for y in &mut data.y {
+            e = a * e + b * rng.normal();
+            *y += e;
+        }
+    }
+    let ds = Dataset {
+        name: "sim".into(),
+        data,
+        t0: 0.0,
+        excitation: Some(exc),
+        meta: Default::default(),
+    };
+    (analyze_dataset(&ds, 1).expect("frf").frf, cfg.plant.params)
+}
+
+/// Per parameter (and the lag): name, spread of ln p over the runs / median
+/// reported σ(ln p), share of runs within 3 σ of the truth.
+fn sigma_calibration(
+    structure: Structure,
+    noise: Noise,
+    runs: u64,
+    periods: u32,
+) -> Vec<(String, f64, f64)> {
+    let mut vals: Vec<Vec<f64>> = Vec::new();
+    let mut stds: Vec<Vec<f64>> = Vec::new();
+    let mut within: Vec<usize> = Vec::new();
+    let mut names: Vec<String> = Vec::new();
+    for seed in 0..runs {
+        let (frf, p) = noisy_frf(structure, noise, 900 + seed, periods);
+        let fit = fit_frf(&frf, &FrfFitOptions::new(structure, 5e-4)).unwrap();
+        let mut t = truth(&p, structure);
+        t.push(1.0); // the simulator's lag: 0.5 ms = 1 sample
+        let mut v: Vec<f64> = fit.params.iter().map(|q| q.value.ln()).collect();
+        let mut s: Vec<f64> = fit.params.iter().map(|q| q.std / q.value).collect();
+        let lag = fit.lag;
+        v.push(lag.value.max(1e-9).ln());
+        s.push(lag.std / lag.value.max(1e-9));
+        if names.is_empty() {
+            names = fit.params.iter().map(|q| q.name.clone()).collect();
+            names.push("lag".into());
+            within = vec![0; names.len()];
+        }
+        for (i, w) in within.iter_mut().enumerate() {
+            if (v[i] - t[i].ln()).abs() <= 3.0 * s[i] {
+                *w += 1;
+            }
+        }
+        vals.push(v);
+        stds.push(s);
+    }
+    let n = runs as f64;
+    (0..names.len())
+        .map(|i| {
+            let m = vals.iter().map(|v| v[i]).sum::<f64>() / n;
+            let spread = (vals.iter().map(|v| (v[i] - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+            let mut s: Vec<f64> = stds.iter().map(|s| s[i]).collect();
+            s.sort_by(f64::total_cmp);
+            let med = s[s.len() / 2];
+            (names[i].clone(), spread / med, within[i] as f64 / n)
+        })
+        .collect()
+}
+
+#[test]
+fn standard_deviations_hold_with_realistic_sensors() {
+    // three-mass joint, 30 noise realisations in each of: the default
+    // sensors, coloured noise in the band, the slow disturbance ×10. With 30
+    // runs the sample spread of a Gaussian estimate is itself uncertain by
+    // 1/√(2·29) = 13 %, so the band [1/1.5, 1.5] on spread / median σ is
+    // −2.5 … +3.8 of its standard deviations wide; and 30 runs with honest σ
+    // leave on average 0.1 errors beyond 3 σ, so at most 2 are allowed.
+    // `f_m` (a pole near 0.2 Hz, below the lowest line) and the lag (Akaike's
+    // choice between lag, delay and both changes its σ from run to run) are
+    // reported, not held. The table: cargo test -p jointid --lib --
+    // standard_deviations_hold --nocapture (about 35 s).
+    let runs = 30;
+    let mut failed = Vec::new();
+    for noise in [Noise::Default, Noise::Coloured, Noise::Disturbance10] {
+        let t = sigma_calibration(Structure::ThreeMass, noise, runs, 4);
+        let row: Vec<String> = t
+            .iter()
+            .map(|(n, r, w)| format!("{n} {r:.2}/{:.0}%", 100.0 * w))
+            .collect();
+        println!("{noise:?}: {}", row.join("  "));
+        for (name, ratio, within) in &t {
+            if name == "f_m" || name == "lag" {
+                continue;
+            }
+            if !(1.0 / 1.5..=1.5).contains(ratio) || *within < 28.0 / runs as f64 {
+                failed.push(format!(
+                    "{noise:?} {name}: ratio {ratio:.2}, within 3σ {within:.2}"
+                ));
+            }
+        }
+    }
+    assert!(failed.is_empty(), "{failed:#?}");
+}
+
+#[test]
+#[ignore = "σ calibration of every structure, minutes in release: cargo test --release -p jointid \
+            --lib -- --ignored sigma_table --nocapture (SIGMA_RUNS=N, SIGMA_ONLY=\"TwoMass\")"]
+fn sigma_table() {
+    let runs: u64 = std::env::var("SIGMA_RUNS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(30);
+    let only = std::env::var("SIGMA_ONLY").unwrap_or_default();
+    for structure in [
+        Structure::ThreeMass,
+        Structure::TwoMass,
+        Structure::FourMass,
+    ] {
+        for noise in [Noise::Default, Noise::Coloured, Noise::Disturbance10] {
+            if !only.is_empty() && !format!("{structure:?} {noise:?}").contains(&only) {
+                continue;
+            }
+            let t = sigma_calibration(structure, noise, runs, 4);
+            let row: Vec<String> = t
+                .iter()
+                .map(|(n, r, w)| format!("{n} {r:.2}/{:.0}%", 100.0 * w))
+                .collect();
+            println!("{structure:?} {noise:?}: {}", row.join("  "));
+        }
+    }
+}
