@@ -5,7 +5,7 @@
 //!
 //! Scanned: every `.rs` file under `src/`, without comment lines and without the test
 //! code at the end of a file (from the `#[cfg(test)]` that opens `mod tests`; files named
-//! `tests.rs` and the files of a `tests/` folder are test code as a whole).
+//! `tests.rs` or `*_tests.rs` and the files of a `tests/` folder are test code as a whole).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -61,7 +61,7 @@ fn code() -> BTreeMap<String, Vec<(usize, String)>> {
             .unwrap()
             .to_string_lossy()
             .replace('\\', "/");
-        if rel.ends_with("/tests.rs") || rel.contains("/tests/") {
+        if rel.ends_with("/tests.rs") || rel.ends_with("_tests.rs") || rel.contains("/tests/") {
             continue;
         }
         let text = std::fs::read_to_string(&f).unwrap();
