@@ -423,6 +423,25 @@ pub struct SegmentJson {
     pub fit: Option<f64>,
 }
 
+impl SegmentJson {
+    /// One line of the per-segment FIT list, indented by `indent`.
+    pub fn write_line(&self, out: &mut dyn Write, indent: &str) -> std::io::Result<()> {
+        match self.fit {
+            Some(f) => writeln!(
+                out,
+                "{indent}segment {} ({} samples): {f:.2}",
+                self.segment, self.samples
+            ),
+            None => writeln!(
+                out,
+                "{indent}segment {} ({} samples): not computed (fewer than two steady-state \
+                 periods)",
+                self.segment, self.samples
+            ),
+        }
+    }
+}
+
 /// Least samples of a segment that a time-domain fit with `--segment all` takes; shorter
 /// ones are left out with a note (their initial state would cost more than they tell).
 pub const MIN_SEGMENT_SAMPLES: usize = 200;
@@ -1152,18 +1171,7 @@ pub(crate) fn print_report(out: &mut dyn Write, r: &FitReport) -> std::io::Resul
     )?;
     if r.segments.len() > 1 {
         for sg in &r.segments {
-            match sg.fit {
-                Some(f) => writeln!(
-                    out,
-                    "      segment {} ({} samples): {f:.2}",
-                    sg.segment, sg.samples
-                )?,
-                None => writeln!(
-                    out,
-                    "      segment {} ({} samples): not computed (fewer than two steady-state periods)",
-                    sg.segment, sg.samples
-                )?,
-            }
+            sg.write_line(out, "      ")?;
         }
     }
     if let Some(v) = r.fit_validation {

@@ -245,19 +245,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
                 "  {fit_name} per segment (the figures above pool them):"
             )?;
             for sg in &segments {
-                match sg.fit {
-                    Some(f) => writeln!(
-                        out,
-                        "    segment {} ({} samples): {f:.2}",
-                        sg.segment, sg.samples
-                    )?,
-                    None => writeln!(
-                        out,
-                        "    segment {} ({} samples): not computed (fewer than two \
-                         steady-state periods)",
-                        sg.segment, sg.samples
-                    )?,
-                }
+                sg.write_line(out, "    ")?;
             }
         }
         writeln!(out, "  residual tests (99 %):")?;

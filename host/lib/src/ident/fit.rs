@@ -320,6 +320,22 @@ fn check(data: &IdData) -> Result<(), FitError> {
     Ok(data.check(50)?)
 }
 
+/// The grey box's output-error options from the log-parameter start `th0`: bounded to
+/// `th0 ± ln 10⁴` (four decades either way), at most `max_iter` iterations.
+fn pem_within_decades(th0: &[f64], max_iter: usize) -> PemOptions {
+    let span = (1e4f64).ln();
+    let base = GreyBoxOptions::default().pem;
+    PemOptions {
+        lm: LmOptions {
+            max_iter,
+            lower: th0.iter().map(|t| t - span).collect(),
+            upper: th0.iter().map(|t| t + span).collect(),
+            ..base.lm
+        },
+        ..base
+    }
+}
+
 /// the current-loop lag of the time-domain fit [s] (none unless held)
 fn current_loop_tau(opts: &FitOptions) -> f64 {
     opts.spec.current_loop_tau.unwrap_or(0.0)
@@ -439,7 +455,6 @@ pub fn fit_prepared_segments(data: &[FitData], opts: &FitOptions) -> Result<Fitt
     for d in data {
         check(&d.prepared)?;
     }
-    let base = GreyBoxOptions::default().pem;
     match opts.spec.family {
         Family::BlackBox(_) => {
             let records: Vec<IdData> = data.iter().map(|d| d.prepared.clone()).collect();
@@ -513,16 +528,7 @@ pub fn fit_prepared_segments(data: &[FitData], opts: &FitOptions) -> Result<Fitt
                         .map_or(0.0, |p| p.value.ln())
                 })
                 .collect();
-            let span = (1e4f64).ln();
-            let popts = PemOptions {
-                lm: LmOptions {
-                    max_iter: 80,
-                    lower: th0.iter().map(|t| t - span).collect(),
-                    upper: th0.iter().map(|t| t + span).collect(),
-                    ..base.lm
-                },
-                ..base
-            };
+            let popts = pem_within_decades(&th0, 80);
             let pf =
                 pem::fit_segments(&gm, &th0, &raw, &popts).map_err(grey_box::GreyBoxError::from)?;
             let mut warnings = start.warnings.clone();
@@ -791,19 +797,9 @@ fn fit_grey(
     };
     let mut ranked: Vec<(f64, &Vec<f64>)> = candidates.iter().map(|t| (raw_cost(t), t)).collect();
     ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let span = (1e4f64).ln();
     let mut pf: Option<pem::PemFit> = None;
     for (_, th0) in ranked.iter().take(2) {
-        let base = GreyBoxOptions::default().pem;
-        let popts = PemOptions {
-            lm: LmOptions {
-                max_iter: 40,
-                lower: th0.iter().map(|t| t - span).collect(),
-                upper: th0.iter().map(|t| t + span).collect(),
-                ..base.lm
-            },
-            ..base
-        };
+        let popts = pem_within_decades(th0, 40);
         let r = pem::fit(&gm, th0, raw, &popts).map_err(grey_box::GreyBoxError::from)?;
         if pf
             .as_ref()
@@ -816,16 +812,7 @@ fn fit_grey(
     if pf.termination == pem::Termination::MaxIterations {
         // the winner continues (the valley along the parallel mass is long
         // and flat: measured up to ~100 iterations on the four-mass joint)
-        let base = GreyBoxOptions::default().pem;
-        let popts = PemOptions {
-            lm: LmOptions {
-                max_iter: 160,
-                lower: pf.theta.iter().map(|t| t - span).collect(),
-                upper: pf.theta.iter().map(|t| t + span).collect(),
-                ..base.lm
-            },
-            ..base
-        };
+        let popts = pem_within_decades(&pf.theta, 160);
         let more = pem::fit(&gm, &pf.theta, raw, &popts).map_err(grey_box::GreyBoxError::from)?;
         let it = pf.iterations;
         pf = PemFit {
