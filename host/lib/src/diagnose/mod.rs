@@ -770,10 +770,11 @@ pub fn diagnose_with_series(
     };
 
     // nominal and singles, in parallel
-    let mut jobs: Vec<Vec<Effect>> = vec![Vec::new()];
-    jobs.extend(candidates.iter().map(|e| vec![*e]));
-    // one candidate model (nominal + `effects`) fitted on the estimation data and scored
-    let score = |effects: &Vec<Effect>| {
+    let mut jobs: Vec<(Vec<Effect>, Option<&NlFit>)> = vec![(Vec::new(), None)];
+    jobs.extend(candidates.iter().map(|e| (vec![*e], None)));
+    // one candidate model (nominal + `effects`) fitted on the estimation data (started from
+    // `from` when given) and scored
+    let score = |(effects, from): &(Vec<Effect>, Option<&NlFit>)| {
         fit_and_score(
             &est[0].data,
             &val.data,
@@ -781,7 +782,7 @@ pub fn diagnose_with_series(
             req,
             effects.clone(),
             &starts,
-            None,
+            *from,
         )
     };
     let results = parallel(&jobs, o.threads, score);
@@ -964,7 +965,7 @@ pub fn diagnose_with_series(
             // each pair starts from its singles' fitted values: the structure, lag and
             // offset of the top single's fit, or of the partner's when that is an extra
             // mode (it changes what the structure's masses and springs stand for)
-            let jobs: Vec<(Vec<Effect>, &NlFit)> = partners
+            let jobs: Vec<(Vec<Effect>, Option<&NlFit>)> = partners
                 .iter()
                 .map(|p| {
                     let second = p.model.effects[0];
@@ -973,20 +974,10 @@ pub fn diagnose_with_series(
                     } else {
                         &top_fit.fit
                     };
-                    (vec![first, second], base)
+                    (vec![first, second], Some(base))
                 })
                 .collect();
-            let res = parallel(&jobs, o.threads, |(effects, base)| {
-                fit_and_score(
-                    &est[0].data,
-                    &val.data,
-                    &measured,
-                    req,
-                    effects.clone(),
-                    &starts,
-                    Some(base),
-                )
-            });
+            let res = parallel(&jobs, o.threads, score);
             for ((effects, _), r) in jobs.iter().zip(res) {
                 let name = format!("{}+{}", effects[0].name(), effects[1].name());
                 match r {

@@ -278,18 +278,33 @@ pub fn velocity_fit(
     ts: f64,
     highpass_hz: f64,
 ) -> Result<f64, crate::ident::validate::ValidateError> {
+    let (mut a, mut b) = (Vec::with_capacity(v.len()), Vec::with_capacity(v.len()));
+    highpass_pair(v, vh, ts, highpass_hz, &mut a, &mut b);
+    fit_percent(&a, &b)
+}
+
+/// `v` and `v̂` through the fit's prefilter (a second-order Butterworth high-pass at
+/// `highpass_hz` started afresh; 0: unfiltered), appended to `a` and `b`.
+fn highpass_pair(
+    v: &[f64],
+    vh: &[f64],
+    ts: f64,
+    highpass_hz: f64,
+    a: &mut Vec<f64>,
+    b: &mut Vec<f64>,
+) {
     if highpass_hz <= 0.0 {
-        return fit_percent(v, vh);
+        a.extend_from_slice(v);
+        b.extend_from_slice(vh);
+        return;
     }
     let mut bank = SosBank::new(butter_highpass_sos(2, highpass_hz, ts), 2);
-    let (mut a, mut b) = (Vec::with_capacity(v.len()), Vec::with_capacity(v.len()));
     for (&x, &y) in v.iter().zip(vh) {
         let mut s = [x, y];
         bank.push(&mut s);
         a.push(s[0]);
         b.push(s[1]);
     }
-    fit_percent(&a, &b)
 }
 
 /// `Σ e²` of the velocity residual of `model` at physical values `values` on `data`, through
@@ -948,18 +963,7 @@ pub fn pooled_velocity_fit(
 ) -> Result<f64, crate::ident::validate::ValidateError> {
     let (mut a, mut b) = (Vec::new(), Vec::new());
     for (v, vh) in pairs {
-        if highpass_hz <= 0.0 {
-            a.extend_from_slice(v);
-            b.extend_from_slice(vh);
-            continue;
-        }
-        let mut bank = SosBank::new(butter_highpass_sos(2, highpass_hz, ts), 2);
-        for (&x, &y) in v.iter().zip(vh) {
-            let mut s = [x, y];
-            bank.push(&mut s);
-            a.push(s[0]);
-            b.push(s[1]);
-        }
+        highpass_pair(v, vh, ts, highpass_hz, &mut a, &mut b);
     }
     fit_percent(&a, &b)
 }
