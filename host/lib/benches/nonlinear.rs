@@ -43,6 +43,7 @@ fn cpu_s(wall: &Instant) -> f64 {
 }
 
 use jointid::test_support::shared_data as shared;
+use jointid::test_support::{perturbed_start, three_mass_truth};
 
 /// J_m, J_a, k1, d, F_v (structure order), then k3, F_c.
 const TRUTH: [f64; 7] = [1e-3, 14.6, 1.3e5, 80.0, 2e-3, 1.6e11, 0.1];
@@ -225,26 +226,8 @@ fn three_mass_effects() {
             y: out.theta_m,
             r: None,
         };
-        let p = cfg.plant.params;
-        let model = NlModel {
-            structure: Structure::ThreeMass,
-            r: p.r,
-            effects: vec![effect],
-            tau_c: cfg.controller.current_loop_tau,
-            v_eps: 0.05,
-            dz_eps: 1e-7,
-            substeps,
-        };
-        let truth = model.values(
-            &[p.j_m, p.j_a1, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m],
-            0.0,
-            0.0,
-        );
-        let start: Vec<f64> = truth
-            .iter()
-            .enumerate()
-            .map(|(i, &t)| if i % 2 == 0 { t * 1.2 } else { t * 0.85 })
-            .collect();
+        let (model, truth) = three_mass_truth(&cfg, effect, substeps);
+        let start = perturbed_start(&truth);
         let wall = Instant::now();
         let c0 = cpu_s(&wall);
         let fit = fit_output_error(&data, &model, &start, &NlOptions::default()).expect("fit");

@@ -248,3 +248,35 @@ pub fn with_gap(ds: &crate::data::Dataset, gap: std::ops::Range<usize>) -> crate
         notes: Vec::new(),
     }
 }
+
+/// The three-mass nonlinear model of `cfg`'s joint with `effect` (coarse smoothing,
+/// `substeps` RK4 steps per sample, `cfg`'s current-loop lag) and its true values in
+/// layout order (offset and initial velocity 0).
+pub fn three_mass_truth(
+    cfg: &crate::sim::SimConfig,
+    effect: crate::model::effects::Effect,
+    substeps: usize,
+) -> (crate::ident::nonlinear::NlModel, Vec<f64>) {
+    let p = cfg.plant.params;
+    let model = crate::ident::nonlinear::NlModel {
+        structure: crate::model::spec::Structure::ThreeMass,
+        r: p.r,
+        effects: vec![effect],
+        tau_c: cfg.controller.current_loop_tau,
+        v_eps: 0.05,
+        dz_eps: 1e-7,
+        substeps,
+    };
+    let plant = [p.j_m, p.j_a1, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m];
+    let truth = model.values(&plant, 0.0, 0.0);
+    (model, truth)
+}
+
+/// A start moved off `truth`: +20 % and −15 % in turn.
+pub fn perturbed_start(truth: &[f64]) -> Vec<f64> {
+    truth
+        .iter()
+        .enumerate()
+        .map(|(i, &t)| if i % 2 == 0 { t * 1.2 } else { t * 0.85 })
+        .collect()
+}

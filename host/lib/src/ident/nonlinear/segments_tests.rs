@@ -6,7 +6,6 @@
 use super::*;
 use crate::data::{Dataset, IdData};
 use crate::model::effects::Effect;
-use crate::model::spec::Structure;
 use crate::sim::{simulate_excitation, SimConfig};
 use crate::test_support::with_gap;
 use jointid_core::excitation::ExcitationConfig;
@@ -36,26 +35,8 @@ fn segments_of_a_gapped_capture_fit_the_cubic_spring_as_separate_experiments() {
     // 3,000 samples lost: pieces of 9,000 and about 12,000 samples
     let record = with_gap(&ds, 9_000..12_000);
     let pieces: Vec<IdData> = record.pieces.iter().map(|d| d.data.clone()).collect();
-    let p = cfg.plant.params;
-    let model = NlModel {
-        structure: Structure::ThreeMass,
-        r: p.r,
-        effects: vec![effect],
-        tau_c: cfg.controller.current_loop_tau,
-        v_eps: 0.05,
-        dz_eps: 1e-7,
-        substeps: 1,
-    };
-    let truth = model.values(
-        &[p.j_m, p.j_a1, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m],
-        0.0,
-        0.0,
-    );
-    let start: Vec<f64> = truth
-        .iter()
-        .enumerate()
-        .map(|(i, &t)| if i % 2 == 0 { t * 1.2 } else { t * 0.85 })
-        .collect();
+    let (model, truth) = crate::test_support::three_mass_truth(&cfg, effect, 1);
+    let start = crate::test_support::perturbed_start(&truth);
     let all = fit_output_error_segments(&pieces, &model, &start, &NlOptions::default()).unwrap();
     let longest = fit_output_error(&pieces[1], &model, &start, &NlOptions::default()).unwrap();
     assert_eq!(

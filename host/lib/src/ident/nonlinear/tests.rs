@@ -128,22 +128,10 @@ fn three_mass_run_under(
     )
 }
 
-/// The three-mass model of `cfg`'s joint with `effect` (coarse smoothing, `substeps` RK4
-/// steps per sample) and its true values in layout order.
+/// The three-mass model of `cfg`'s joint with `effect` and its true values
+/// ([`crate::test_support::three_mass_truth`]).
 fn truth_of(cfg: &SimConfig, effect: Effect, substeps: usize) -> (NlModel, Vec<f64>) {
-    let p = cfg.plant.params;
-    let model = NlModel {
-        structure: Structure::ThreeMass,
-        r: p.r,
-        effects: vec![effect],
-        tau_c: cfg.controller.current_loop_tau,
-        v_eps: 0.05,
-        dz_eps: 1e-7,
-        substeps,
-    };
-    let plant = [p.j_m, p.j_a1, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m];
-    let truth = model.values(&plant, 0.0, 0.0);
-    (model, truth)
+    crate::test_support::three_mass_truth(cfg, effect, substeps)
 }
 
 /// Fits the three-mass with `effect` from the truth moved by +20 % / −15 %, and checks the
@@ -151,11 +139,7 @@ fn truth_of(cfg: &SimConfig, effect: Effect, substeps: usize) -> (NlModel, Vec<f
 fn check_three_mass(effect: Effect, identifiable: &[&str], substeps: usize) {
     let (data, cfg) = three_mass_run(effect, 3);
     let (model, truth) = truth_of(&cfg, effect, substeps);
-    let start: Vec<f64> = truth
-        .iter()
-        .enumerate()
-        .map(|(i, &t)| if i % 2 == 0 { t * 1.2 } else { t * 0.85 })
-        .collect();
+    let start = crate::test_support::perturbed_start(&truth);
     let fit = fit_output_error(&data, &model, &start, &NlOptions::default()).unwrap();
     assert_ne!(
         fit.termination,
@@ -213,11 +197,7 @@ fn coulomb_friction_at_the_default_size_is_found_with_the_refined_smoothing() {
     let effect = crate::model::effects::parse_effects(&["coulomb_friction:fs=0.03"]).unwrap()[0];
     let (data, cfg) = three_mass_run(effect, 3);
     let (coarse, truth) = truth_of(&cfg, effect, 1);
-    let start: Vec<f64> = truth
-        .iter()
-        .enumerate()
-        .map(|(i, &t)| if i % 2 == 0 { t * 1.2 } else { t * 0.85 })
-        .collect();
+    let start = crate::test_support::perturbed_start(&truth);
     let model = coarse.refined_for(&start, run::velocity_rms(&data), data.ts);
     assert!(model.v_eps < 0.005 && model.substeps > 1, "{model:?}");
     let fit = fit_output_error(&data, &model, &start, &NlOptions::default()).unwrap();
