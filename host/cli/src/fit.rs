@@ -623,14 +623,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     let ev = fitted
         .evaluate_on(&est, args.lags)
         .map_err(|e| format!("{}: {e}", ds.name))?;
-    let vv = match (&val, &val_name) {
-        (Some(v), Some(vn)) => Some(
-            fitted
-                .evaluate_on(v, args.lags)
-                .map_err(|e| format!("{vn}: {e}"))?,
-        ),
-        _ => None,
-    };
+    let vv = on_validation(&fitted, val.as_ref(), val_name.as_deref(), args.lags)?;
     let est = &est.prepared;
     let measured = Measured {
         segments: vec![SegmentJson {
@@ -813,14 +806,7 @@ fn run_segments(
     let (ev, each) = fitted
         .evaluate_segments(&est, args.lags)
         .map_err(|e| format!("{name}: {e}"))?;
-    let vv = match (val, &val_name) {
-        (Some(v), Some(vn)) => Some(
-            fitted
-                .evaluate_on(v, args.lags)
-                .map_err(|e| format!("{vn}: {e}"))?,
-        ),
-        _ => None,
-    };
+    let vv = on_validation(&fitted, val.as_ref(), val_name.as_deref(), args.lags)?;
     let ts = est[0].prepared.ts;
     let measured = Measured {
         segments: used
@@ -921,14 +907,7 @@ fn run_frequency_domain(
         let ev = fitted
             .evaluate_on(est, args.lags)
             .map_err(|e| format!("{}: {e}", ds.name))?;
-        let vv = match (val, &val_name) {
-            (Some(v), Some(vn)) => Some(
-                fitted
-                    .evaluate_on(v, args.lags)
-                    .map_err(|e| format!("{vn}: {e}"))?,
-            ),
-            _ => None,
-        };
+        let vv = on_validation(&fitted, val, val_name.as_deref(), args.lags)?;
         (ev, vv)
     };
     let periodic_fit =
@@ -1064,6 +1043,22 @@ fn finish(
         warnings: fitted.warnings.clone(),
     };
     emit(ctx, &report, args.strict)
+}
+
+/// `fitted` evaluated on the validation record, when there is one (errors name it).
+fn on_validation(
+    fitted: &Fitted,
+    val: Option<&FitData>,
+    name: Option<&str>,
+    lags: usize,
+) -> Result<Option<Validation>, String> {
+    match (val, name) {
+        (Some(v), Some(n)) => fitted
+            .evaluate_on(v, lags)
+            .map(Some)
+            .map_err(|e| format!("{n}: {e}")),
+        _ => Ok(None),
+    }
 }
 
 /// Writes the model file `path` ([`jointid::data::output`]: an existing file only with
