@@ -18,7 +18,7 @@
 //! 4. Seed 001's model from the automatic start on 100 simulated joints (see `robustness`;
 //!    `JOINTID_BENCH_JOINTS=N` for another count).
 //!
-//! Run: `cargo bench -p jointid --bench nonlinear`. Figures of the README's peers on the
+//! Run: `cargo bench -p jointid --bench nonlinear` (`JOINTID_BENCH_PARTS=seed001` for part 1 only). Figures of the README's peers on the
 //! same files (scipy TRF with finite differences 30.5 s, JAX + scipy 1.0 s, jax-sysid 6.1 s
 //! median per fit; validation FIT 96.87 %) are printed beside ours.
 
@@ -365,11 +365,20 @@ fn main() {
     let val = load_csv(&shared("seed001-two-mass/val.csv"), &map)
         .expect("val.csv")
         .data;
-    seed001(&est, &val);
-    three_mass_effects();
-    let n = std::env::var("JOINTID_BENCH_JOINTS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(100);
-    robustness(n);
+    // `JOINTID_BENCH_PARTS=seed001,effects,robustness` (any subset) runs only those parts
+    let parts = std::env::var("JOINTID_BENCH_PARTS").unwrap_or_default();
+    let part = |name: &str| parts.is_empty() || parts.split(',').any(|p| p.trim() == name);
+    if part("seed001") {
+        seed001(&est, &val);
+    }
+    if part("effects") {
+        three_mass_effects();
+    }
+    if part("robustness") {
+        let n = std::env::var("JOINTID_BENCH_JOINTS")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(100);
+        robustness(n);
+    }
 }

@@ -78,6 +78,10 @@ pub struct LmOptions {
     pub nuisance: usize,
     /// initial Marquardt damping `λ`
     pub lambda0: f64,
+    /// evaluate the normal equations once more at the end for `std` and `cov` (one
+    /// Jacobian); off for callers that form their own covariance: `std` and `cov` are then
+    /// zero and `ssr` is the final cost (the problem's cost must be `Σ e²`)
+    pub covariance: bool,
 }
 
 impl Default for LmOptions {
@@ -91,6 +95,7 @@ impl Default for LmOptions {
             fixed: Vec::new(),
             nuisance: 0,
             lambda0: 1e-3,
+            covariance: true,
         }
     }
 }
@@ -302,25 +307,30 @@ pub fn minimize<P: LeastSquares + ?Sized>(
         }
     }
     // covariance at the final point
-    let ne = problem.normal_equations(&theta, &free);
-    let p = ne.jtj.nrows();
+    let p = free.len();
     let n_res = problem.n_residuals();
-    let sigma2 = ne.ssr / (n_res as f64 - p as f64).max(1.0);
-    let cinv = pinv_sym(&ne.jtj, 1e-13) * sigma2;
     let mut cov = DMatrix::zeros(np, np);
     let mut std = vec![0.0; np];
-    for (a, &i) in free.iter().enumerate() {
-        for (b, &j) in free.iter().enumerate() {
-            cov[(i, j)] = cinv[(a, b)];
+    let mut ssr = cost;
+    if opts.covariance {
+        let ne = problem.normal_equations(&theta, &free);
+        ssr = ne.ssr;
+        let sigma2 = ssr / (n_res as f64 - p as f64).max(1.0);
+        let cinv = pinv_sym(&ne.jtj, 1e-13) * sigma2;
+        for (a, &i) in free.iter().enumerate() {
+            for (b, &j) in free.iter().enumerate() {
+                cov[(i, j)] = cinv[(a, b)];
+            }
+            std[i] = cinv[(a, a)].max(0.0).sqrt();
         }
-        std[i] = cinv[(a, a)].max(0.0).sqrt();
     }
+    let sigma2 = ssr / (n_res as f64 - p as f64).max(1.0);
     Ok(LmFit {
         theta,
         std,
         cov,
         cost_history: history,
-        ssr: ne.ssr,
+        ssr,
         sigma2,
         n_free: p,
         n_residuals: n_res,

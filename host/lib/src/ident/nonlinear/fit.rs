@@ -614,19 +614,25 @@ impl Segments<'_> {
     /// documentation; no lag crosses from one record into another).
     /// `residual`: one record's residual to use instead of the smooth law's (ignored with
     /// several records).
+    /// `single`: the exact law's residual and the Jacobian already evaluated, used when
+    /// there is one record.
     fn sandwich(
         &self,
         z: &[f64],
         free: &[usize],
         lags: usize,
-        residual: Option<&[f64]>,
+        single: (Option<&[f64]>, Option<&JacobianTable>),
     ) -> DMatrix<f64> {
         let nf = free.len();
         let mut h = DMatrix::zeros(nf, nf);
         let mut s = DMatrix::zeros(nf, nf);
         for (e, part) in self.parts.iter().enumerate() {
             let (idx, at) = self.part_free(free, e);
-            let own = residual.filter(|_| self.parts.len() == 1);
+            let own = if self.parts.len() == 1 {
+                single
+            } else {
+                (None, None)
+            };
             let (he, se) = sandwich_parts(part, &self.part_z(z, e), &idx, lags, own);
             for (a, &ia) in at.iter().enumerate() {
                 for (b, &ib) in at.iter().enumerate() {
@@ -830,6 +836,8 @@ pub fn fit_output_error_segments(
         fixed: fixed_all.clone(),
         // v0 is bounded (see above), so it is not one of the loop's unbounded nuisances
         nuisance: 0,
+        // the covariance is the sandwich below
+        covariance: false,
         ..LmOptions::default()
     };
     let res =
@@ -841,6 +849,7 @@ pub fn fit_output_error_segments(
     let single = (problem.parts.len() == 1).then(|| (&problem.parts[0], &data[0]));
     let mut smoothing = vec![0.0; layout.len()];
     let mut exact_residual = None;
+    let mut table = None;
     if let Some((part, record)) = single {
         // the estimate's move with v_ε doubled, by one Gauss–Newton step of that fit from
         // this estimate (one pass of the dual numbers)
@@ -873,14 +882,22 @@ pub fn fit_output_error_segments(
             && opts.residual == Residual::Velocity
             && corrects(model)
         {
-            if let Some((zc, e)) = exact_law_steps(part, record, &z, &free, (&lower, &upper)) {
+            let t = JacobianTable::at(part, &z, &free);
+            if let Some((zc, e)) = exact_law_steps(part, record, &z, (&free, &t), (&lower, &upper))
+            {
                 z = zc;
                 exact_residual = Some(e);
             }
+            table = Some(t);
         }
     }
     let values = problem.parts[0].physical(&z[..layout.len()]);
-    let cov_z = problem.sandwich(&z, &free, opts.cov_lags, exact_residual.as_deref());
+    let cov_z = problem.sandwich(
+        &z,
+        &free,
+        opts.cov_lags,
+        (exact_residual.as_deref(), table.as_ref()),
+    );
     let mut params = Vec::with_capacity(layout.len());
     for (i, d) in layout.iter().enumerate() {
         let std = match free.iter().position(|&f| f == i) {
@@ -1075,6 +1092,27 @@ fn exact_residual(problem: &Problem, data: &IdData, z: &[f64]) -> Option<(Vec<f6
     ssr.is_finite().then_some((e, ssr))
 }
 
+/// The Jacobian rows (free parameters, optimiser coordinates) and residuals of one record
+/// at a point, kept for the steps after the optimiser.
+struct JacobianTable {
+    /// `∂ê_t/∂z` row after row, `free.len()` values a row
+    rows: Vec<f64>,
+    /// the residual of each row
+    e: Vec<f64>,
+}
+
+impl JacobianTable {
+    /// One pass of the problem's Jacobian at `z` over `free`.
+    fn at(problem: &Problem, z: &[f64], free: &[usize]) -> Self {
+        let (mut rows, mut e) = (Vec::new(), Vec::new());
+        problem.jacobian_rows(z, free, |_, ek, row| {
+            e.push(ek);
+            rows.extend_from_slice(row);
+        });
+        Self { rows, e }
+    }
+}
+
 /// Gauss–Newton steps on the exact law's cost from the smooth fit's `z` with the smooth
 /// law's Jacobian there (module documentation), inside the bounds `(lower, upper)`; the
 /// last accepted point and its exact-law residual, `None` when no step lowered the cost.
@@ -1082,12 +1120,11 @@ fn exact_law_steps(
     problem: &Problem,
     data: &IdData,
     z: &[f64],
-    free: &[usize],
+    (free, table): (&[usize], &JacobianTable),
     (lower, upper): (&[f64], &[f64]),
 ) -> Option<(Vec<f64>, Vec<f64>)> {
     let nf = free.len();
-    let mut rows: Vec<f64> = Vec::new();
-    problem.jacobian_rows(z, free, |_, _, row| rows.extend_from_slice(row));
+    let rows = &table.rows;
     let n = rows.len() / nf.max(1);
     if nf == 0 || n <= nf {
         return None;
@@ -1151,20 +1188,26 @@ fn exact_law_steps(
 /// optimiser coordinates (module documentation); `H⁻¹ S H⁻¹` is the covariance.
 /// `residual`: the residual to use instead of the smooth law's (the exact law's after the
 /// correction), one per row.
+/// `table`: the Jacobian already evaluated over these `free` parameters (by the exact-law
+/// correction, a step away from `z`: the covariance does not tell the two apart), else one
+/// pass of the dual numbers here.
 fn sandwich_parts(
     problem: &Problem,
     z: &[f64],
     free: &[usize],
     lags: usize,
-    residual: Option<&[f64]>,
+    (residual, table): (Option<&[f64]>, Option<&JacobianTable>),
 ) -> (DMatrix<f64>, DMatrix<f64>) {
     let nf = free.len();
-    let mut rows: Vec<f64> = Vec::new();
-    let mut e: Vec<f64> = Vec::new();
-    problem.jacobian_rows(z, free, |_, ek, row| {
-        e.push(ek);
-        rows.extend_from_slice(row);
-    });
+    let own;
+    let JacobianTable { rows, e } = match table {
+        Some(t) => t,
+        None => {
+            own = JacobianTable::at(problem, z, free);
+            &own
+        }
+    };
+    let mut e = e.clone();
     if let Some(r) = residual.filter(|r| r.len() == e.len()) {
         e.copy_from_slice(r);
     }
