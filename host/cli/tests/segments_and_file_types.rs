@@ -276,6 +276,8 @@ fn nonlinear_fit_with_segment_all_takes_the_segments_as_separate_experiments() {
         ],
     );
     let c = cap.to_str().unwrap();
+    let model = dir.join("m.json");
+    let m = model.to_str().unwrap();
     let out = jointid(&[
         "fit",
         c,
@@ -285,6 +287,8 @@ fn nonlinear_fit_with_segment_all_takes_the_segments_as_separate_experiments() {
         "nonlinear_stiffness",
         "--segment",
         "all",
+        "--save",
+        m,
         "--json",
     ]);
     let all = json_of(&out);
@@ -308,6 +312,34 @@ fn nonlinear_fit_with_segment_all_takes_the_segments_as_separate_experiments() {
         (k3 / truth - 1.0).abs() < 0.05,
         "k3 = {k3:.4e}, truth {truth:.4e}"
     );
+    // the saved model validated on every segment, each from its own first angle: the
+    // pooled FIT is the fit's, and each segment's FIT is the fit's for that segment
+    let out = jointid(&["validate", m, c, "--segment", "all", "--json"]);
+    let v = json_of(&out);
+    assert!(
+        stderr(&out).contains("validating on segments 1, 2"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(
+        (num(&v["fit"]) - num(&all["fit_estimation"])).abs() < 0.01,
+        "{v} {all}"
+    );
+    assert_eq!(v["samples"], all["samples"], "{v}");
+    let per = v["segments"].as_array().unwrap();
+    assert_eq!(per.len(), 2, "{v}");
+    for (s, f) in per.iter().zip(segs) {
+        assert_eq!(s["segment"], f["segment"]);
+        assert_eq!(s["samples"], f["samples"]);
+        assert!((num(&s["fit"]) - num(&f["fit"])).abs() < 0.01, "{v} {all}");
+    }
+    let text = jointid(&["validate", m, c, "--segment", "all"]);
+    let text = String::from_utf8_lossy(&text.stdout);
+    assert!(
+        text.contains("per segment (the figures above pool them)"),
+        "{text}"
+    );
+    assert!(text.contains("    segment 2 ("), "{text}");
 }
 
 #[test]
