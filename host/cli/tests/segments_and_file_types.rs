@@ -71,7 +71,10 @@ fn info_lists_the_gap_free_segments_with_their_whole_periods() {
     assert_eq!(got, vec![(0.0, 4.0, 800, 7), (5.52, 4.48, 896, 8)]);
     let out = jointid(&["info", cap.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("segments         2 gap-free"), "{text}");
+    assert!(
+        text.contains("end message      received\nsegments         2 gap-free"),
+        "{text}"
+    );
     assert!(
         text.contains("2  from 5.52 s, 4.48 s, 896 samples, 8 whole periods"),
         "{text}"
