@@ -19,8 +19,9 @@ use jointid::data::{
 pub struct ReadArgs {
     /// gap-free segment to use: longest, N (from 1, as `jointid info` lists them) or all
     /// (analyze and the frequency-domain fit average the FRF over them, time-domain and
-    /// nonlinear fits take them as separate experiments); default: the whole file, or its
-    /// longest segment with a note when it has gaps
+    /// nonlinear fits take them as separate experiments, validate and diagnose simulate
+    /// each from its own start and pool the FIT); default: the whole file, or its longest
+    /// segment with a note when it has gaps
     #[arg(long, value_name = "longest|N|all")]
     pub segment: Option<SegmentChoice>,
     /// start of the time window: seconds of the time column (`12.5`) or whole excitation
@@ -101,8 +102,8 @@ impl ReadArgs {
                 file: name,
                 reason: format!(
                     "--segment all: this command takes one gap-free record, and segments {} \
-                     were selected; give --segment longest or --segment N (`analyze` and `fit` \
-                     use all of them)",
+                     were selected; give --segment longest or --segment N (`analyze`, `fit`, \
+                     `validate MODEL.json` and `diagnose` use all of them)",
                     sel.segments
                         .iter()
                         .map(usize::to_string)

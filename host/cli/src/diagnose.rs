@@ -2,18 +2,21 @@
 //! simulated joint depart from the measured one ([`jointid::diagnose`]): the nominal
 //! physical model fitted on EST, each candidate effect added and refitted, ranked by the
 //! gain of the band-passed motor-velocity FIT on VAL with a significance test over
-//! segments, and where the nominal's residual lies.
+//! segments, and where the nominal's residual lies. With `--segment all` every capture
+//! comes as its gap-free segments ([`jointid::diagnose::diagnose_segments`]).
 
 use std::io::Write;
 use std::path::PathBuf;
 
 use clap::Args;
 
-use super::fit::{check_same_rate, FitDataArgs};
+use super::fit::{
+    check_same_rate, usable_segments, FitDataArgs, SegmentNotes, MIN_SEGMENT_SAMPLES,
+};
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::{check_output, write_file};
 use jointid::data::Dataset;
-use jointid::diagnose::{diagnose_with_series, DiagnoseRequest, Diagnosis, UserSim};
+use jointid::diagnose::{diagnose_segments, DiagnoseRequest, Diagnosis, UserSim};
 use jointid::ident::grey_box::DEFAULT_GEAR_RATIO;
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::sim_plant;
@@ -154,26 +157,35 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         (None, Some(u)) => u.plant.kind,
         (None, None) => Structure::ThreeMass,
     };
-    let mut est: Vec<Dataset> = vec![args
-        .data
-        .data_args(&args.data.path)
-        .load(ctx.loaders)
-        .map_err(|e| format!("{}: {e}", args.data.path.display()))?];
-    if let Some(p) = &args.second {
-        let ds = args
+    // every capture as its gap-free segments: one, or all of them with --segment all
+    // (those shorter than a time-domain fit takes left out, with a note)
+    let capture = |p: &PathBuf, what: &str| -> Result<(Vec<Dataset>, Vec<usize>), String> {
+        let sel = args
             .data
             .data_args(p)
-            .load(ctx.loaders)
-            .map_err(|e| format!("{}: {e}", p.display()))?;
-        check_same_rate(&est[0], &ds, "EST2")?;
-        est.push(ds);
+            .select(ctx.loaders)
+            .map_err(|e| format!("{what}{}: {e}", p.display()))?;
+        if sel.datasets.len() == 1 {
+            return Ok((sel.datasets, sel.segments));
+        }
+        let name = sel.datasets[0].name.clone();
+        let mut all = sel.datasets;
+        let (segs, numbers) = usable_segments(&mut all, &sel.segments, &name, DIAGNOSING_NOTES);
+        if segs.is_empty() {
+            return Err(format!(
+                "{what}{name}: no segment has {MIN_SEGMENT_SAMPLES} samples or more"
+            ));
+        }
+        Ok((segs, numbers))
+    };
+    let mut est: Vec<Vec<Dataset>> = vec![capture(&args.data.path, "")?.0];
+    if let Some(p) = &args.second {
+        let (segs, _) = capture(p, "")?;
+        check_same_rate(&est[0][0], &segs[0], "EST2")?;
+        est.push(segs);
     }
-    let val = args
-        .data
-        .data_args(&args.validation)
-        .load(ctx.loaders)
-        .map_err(|e| format!("--validation {}: {e}", args.validation.display()))?;
-    check_same_rate(&est[0], &val, "--validation")?;
+    let (val, val_numbers) = capture(&args.validation, "--validation ")?;
+    check_same_rate(&est[0][0], &val[0], "--validation")?;
     let req = DiagnoseRequest {
         structure,
         r: args.gear_ratio,
@@ -181,15 +193,21 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         user,
         ..DiagnoseRequest::default()
     };
-    let (d, series) = diagnose_with_series(&est, &val, &req)?;
+    let est_refs: Vec<&[Dataset]> = est.iter().map(Vec::as_slice).collect();
+    let (mut d, series) = diagnose_segments(&est_refs, &val, &req)?;
+    // the capture's own numbering of the validation segments
+    for (s, &k) in d.validation_segments.iter_mut().zip(&val_numbers) {
+        s.segment = k;
+    }
+    let val_name = val[0].name.clone();
     if let Some(path) = &args.report {
         let title = format!(
             "jointid diagnose: {} against {}",
             est.iter()
-                .map(|e| e.name.as_str())
+                .map(|e| e[0].name.as_str())
                 .collect::<Vec<_>>()
                 .join(" and "),
-            val.name
+            val_name
         );
         let html = diagnosis_html(&title, &d, &series)?;
         write_file(path, args.force, |w| w.write_all(html.as_bytes()))?;
@@ -206,7 +224,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
     if ctx.json {
         print_json(ctx.out, "diagnose", &d)?;
     } else {
-        print_summary(ctx.out, &d, &val.name)?;
+        print_summary(ctx.out, &d, &val_name)?;
     }
     Ok(Outcome::Ok)
 }
@@ -225,6 +243,19 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
         d.fit_augmented_val,
         100.0 * d.gap_closed_share
     )?;
+    if !d.validation_segments.is_empty() {
+        writeln!(
+            out,
+            "  per validation segment (the figures above pool them): nominal → best, %"
+        )?;
+        for s in &d.validation_segments {
+            writeln!(
+                out,
+                "    segment {} ({} samples): {:.2} → {:.2}",
+                s.segment, s.samples, s.fit_nominal, s.fit_augmented
+            )?;
+        }
+    }
     writeln!(out, "  test: {}", d.test)?;
     writeln!(out, "  candidates (gain over the nominal, FIT points):")?;
     for c in &d.effects {
@@ -309,3 +340,21 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
     }
     Ok(())
 }
+
+/// The notes of a diagnosis over several segments of a capture
+/// ([`super::fit::usable_segments`]).
+const DIAGNOSING_NOTES: SegmentNotes = SegmentNotes {
+    leaving: |left| {
+        format!(
+            "the diagnosis leaves out {left}: shorter than {MIN_SEGMENT_SAMPLES} samples, as \
+             the time-domain fits do"
+        )
+    },
+    using: |list| {
+        format!(
+            "diagnosing on segments {list} (an estimation capture's fitted as separate \
+             experiments; the validation capture's each simulated from its own start, the \
+             metric pooled over them)"
+        )
+    },
+};

@@ -501,7 +501,8 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     if nonlinear {
         if segs.len() > 1 {
-            let (used, used_numbers) = usable_segments(&mut segs, &numbers, &ds.name);
+            let (used, used_numbers) =
+                usable_segments(&mut segs, &numbers, &ds.name, FITTING_NOTES);
             return super::fit_nl::run(args, &spec, ctx, &used, &used_numbers, val_ds.as_ref());
         }
         return super::fit_nl::run(args, &spec, ctx, &segs, &numbers, val_ds.as_ref());
@@ -664,11 +665,13 @@ pub(crate) fn list(numbers: &[usize]) -> String {
 }
 
 /// The segments a time-domain fit takes ([`MIN_SEGMENT_SAMPLES`] or more) and their
-/// numbers; a note on standard error names those left out and why.
+/// numbers; notes on standard error name those left out and why and say how the others
+/// are used ([`SegmentNotes`]).
 pub(crate) fn usable_segments(
     segs: &mut Vec<Dataset>,
     numbers: &[usize],
     name: &str,
+    notes: SegmentNotes,
 ) -> (Vec<Dataset>, Vec<usize>) {
     let mut used = Vec::new();
     let mut used_numbers = Vec::new();
@@ -684,19 +687,43 @@ pub(crate) fn usable_segments(
     if !left.is_empty() {
         let _ = writeln!(
             std::io::stderr(),
-            "note: {name}: the time-domain fit leaves out {}: shorter than {MIN_SEGMENT_SAMPLES} \
-             samples, each would add an initial state for little data",
-            left.join(", ")
+            "note: {name}: {}",
+            (notes.leaving)(&left.join(", "))
         );
     }
     let _ = writeln!(
         std::io::stderr(),
-        "note: {name}: fitting segments {} as separate experiments (one parameter vector, each \
-         segment its own initial state)",
-        list(&used_numbers)
+        "note: {name}: {}",
+        (notes.using)(&list(&used_numbers))
     );
     (used, used_numbers)
 }
+
+/// The two notes of a command on several segments ([`usable_segments`]).
+#[derive(Clone, Copy)]
+pub(crate) struct SegmentNotes {
+    /// from the segments left out, listed
+    pub leaving: fn(&str) -> String,
+    /// from the numbers of the segments used, listed
+    pub using: fn(&str) -> String,
+}
+
+/// The notes of a fit over several segments ([`usable_segments`]): the segments it leaves
+/// out, the segments it fits.
+pub(crate) const FITTING_NOTES: SegmentNotes = SegmentNotes {
+    leaving: |left| {
+        format!(
+            "the time-domain fit leaves out {left}: shorter than {MIN_SEGMENT_SAMPLES} samples, \
+             each would add an initial state for little data"
+        )
+    },
+    using: |list| {
+        format!(
+            "fitting segments {list} as separate experiments (one parameter vector, each \
+             segment its own initial state)"
+        )
+    },
+};
 
 /// `jointid fit --segment all` with more than one segment, linear models: the
 /// frequency-domain fit on the FRF averaged over every segment's whole periods
@@ -775,7 +802,7 @@ fn run_segments(
             val_name,
         );
     }
-    let (used, used_numbers) = usable_segments(&mut segs, numbers, &name);
+    let (used, used_numbers) = usable_segments(&mut segs, numbers, &name, FITTING_NOTES);
     if used.is_empty() {
         return Err(format!(
             "{name}: no segment has {MIN_SEGMENT_SAMPLES} samples or more for a time-domain fit"

@@ -164,7 +164,7 @@ fn describe_session(
     out.push_str(&report.to_string());
     if !segments.is_empty() {
         out.push_str(&format!(
-            "segments         {} gap-free (--segment N of analyze, fit, validate, diagnose)\n",
+            "\nsegments         {} gap-free (--segment N of analyze, fit, validate, diagnose)\n",
             segments.len()
         ));
         for g in segments {

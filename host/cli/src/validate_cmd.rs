@@ -22,15 +22,19 @@ use clap::Args;
 use serde::Serialize;
 
 use super::args::{DataArgs, PrepArgs, ReadArgs};
-use super::fit::{check_columns, check_lags, print_tests, SegmentJson};
+use super::fit::{
+    check_columns, check_lags, print_tests, usable_segments, SegmentJson, SegmentNotes,
+    MIN_SEGMENT_SAMPLES,
+};
 use super::fit_nl::{FitsJson, NL_FIT_NAME};
 use super::validate::{self as column_validate, ValidateArgs};
 use super::{print_json, CmdResult, Context, Outcome};
+use jointid::data::IdData;
 use jointid::ident::fit::FitData;
 use jointid::ident::frf::{analyze_dataset, analyze_segments};
 use jointid::ident::frf_fit::{periodic_fit_percent, PERIODIC_FIT_NAME};
 use jointid::ident::model_file::SavedModel;
-use jointid::ident::nonlinear::{validate as nl_validate, NlOptions};
+use jointid::ident::nonlinear::{validate as nl_validate, validate_segments, NlOptions};
 use jointid::ident::validate::{Validation, DEFAULT_LAGS, FIT_NAME};
 
 /// Arguments of `jointid validate`.
@@ -277,8 +281,11 @@ struct NlReport<'a> {
     fit_estimation: f64,
     require_fit: Option<f64>,
     fit_ok: bool,
-    /// the three FITs of the model on DATA
+    /// the three FITs of the model on DATA (pooled over the segments)
     validation: FitsJson,
+    /// with `--segment all` on a capture with gaps: each segment's velocity FIT (`fit`
+    /// pools them)
+    segments: Vec<SegmentJson>,
 }
 
 /// `ds` is sampled at the rate `model_ts` [s] the model in `mpath` was fitted at.
@@ -302,7 +309,9 @@ fn check_model_rate(
 /// `validate MODEL.json DATA` for a model with effects (format 3's `nonlinear` section):
 /// simulated from the measured torque with the simulator's exact laws
 /// ([`jointid::ident::nonlinear::validate`]); the same FITs `fit` reports, the same exit
-/// codes as for a linear model.
+/// codes as for a linear model. With `--segment all` on a capture with gaps every segment
+/// of [`MIN_SEGMENT_SAMPLES`] or more (those `fit` takes) is simulated from its own first
+/// angle, the FITs pooled over them ([`validate_segments`]) and given per segment.
 fn run_nonlinear(
     args: &ValidateCmdArgs,
     ctx: &mut Context<'_>,
@@ -314,13 +323,50 @@ fn run_nonlinear(
         .to_nonlinear()
         .map_err(|e| format!("{}: {e}", mpath.display()))?;
     let nl = saved.nonlinear.as_ref().expect("a nonlinear section");
-    let ds = data.load(ctx.loaders)?;
-    check_model_rate(&ds, saved.ts, mpath)?;
+    let sel = data.select(ctx.loaders)?;
+    let (segs, numbers) = if sel.datasets.len() > 1 {
+        let name = sel.datasets[0].name.clone();
+        let mut all = sel.datasets;
+        let (segs, numbers) = usable_segments(&mut all, &sel.segments, &name, VALIDATING_NOTES);
+        if segs.is_empty() {
+            return Err(format!(
+                "{name}: no segment has {MIN_SEGMENT_SAMPLES} samples or more to validate on"
+            )
+            .into());
+        }
+        (segs, numbers)
+    } else {
+        (sel.datasets, sel.segments)
+    };
+    let ds = super::fit::longest_segment(&segs);
+    check_model_rate(ds, saved.ts, mpath)?;
     let opts = NlOptions {
         highpass_hz: nl.highpass_hz,
         ..NlOptions::default()
     };
-    let v = nl_validate(&fit, &ds.data, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
+    let records: Vec<IdData> = segs.iter().map(|d| d.data.clone()).collect();
+    let v = validate_segments(&fit, &records, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
+    let segments: Vec<SegmentJson> = if segs.len() > 1 {
+        segs.iter()
+            .zip(&numbers)
+            .map(|(d, &k)| {
+                nl_validate(&fit, &d.data, &opts)
+                    .map(|each| SegmentJson {
+                        segment: k,
+                        samples: d.data.len(),
+                        fit: Some(each.velocity_fit_percent),
+                    })
+                    .map_err(|e| format!("{} segment {k}: {e}", d.name))
+            })
+            .collect::<Result<_, _>>()?
+    } else {
+        vec![SegmentJson {
+            segment: numbers[0],
+            samples: ds.data.len(),
+            fit: Some(v.velocity_fit_percent),
+        }]
+    };
+    let samples: usize = records.iter().map(IdData::len).sum();
     let fit_pct = v.velocity_fit_percent;
     let fit_name = saved.fit_name.as_deref().unwrap_or(NL_FIT_NAME);
     let finite = fit_pct.is_finite();
@@ -333,7 +379,7 @@ fn run_nonlinear(
                 model_file: mpath.display().to_string(),
                 model: &saved.model,
                 file: &ds.name,
-                samples: ds.data.len(),
+                samples,
                 ts: ds.data.ts,
                 fit_name,
                 fit: fit_pct,
@@ -341,6 +387,7 @@ fn run_nonlinear(
                 require_fit: args.require_fit,
                 fit_ok,
                 validation: v.into(),
+                segments,
             },
         )?;
     } else {
@@ -349,7 +396,7 @@ fn run_nonlinear(
         writeln!(
             out,
             "  {} samples, Ts = {} s; simulated from the measured torque with the simulator's exact laws",
-            ds.data.len(),
+            samples,
             jointid::data::fmt_sig(ds.data.ts, 4)
         )?;
         writeln!(
@@ -367,6 +414,15 @@ fn run_nonlinear(
             "  motor-angle FIT [%] (toolbox compare, exact laws, unfiltered): {:.2}",
             v.angle_fit_percent
         )?;
+        if segments.len() > 1 {
+            writeln!(
+                out,
+                "  {fit_name} per segment (the figures above pool them):"
+            )?;
+            for sg in &segments {
+                sg.write_line(out, "    ")?;
+            }
+        }
         if !finite {
             writeln!(
                 out,
@@ -378,6 +434,22 @@ fn run_nonlinear(
     }
     Ok(outcome(fit_ok))
 }
+
+/// The notes of a nonlinear validation over several segments ([`usable_segments`]).
+const VALIDATING_NOTES: SegmentNotes = SegmentNotes {
+    leaving: |left| {
+        format!(
+            "the validation leaves out {left}: shorter than {MIN_SEGMENT_SAMPLES} samples, as \
+             the nonlinear fit does"
+        )
+    },
+    using: |list| {
+        format!(
+            "validating on segments {list}, each simulated from its own first angle, the FITs \
+             pooled over them"
+        )
+    },
+};
 
 /// The `--require-fit` line of the text report, when one was asked for.
 fn required_fit_line(

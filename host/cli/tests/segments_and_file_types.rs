@@ -71,7 +71,10 @@ fn info_lists_the_gap_free_segments_with_their_whole_periods() {
     assert_eq!(got, vec![(0.0, 4.0, 800, 7), (5.52, 4.48, 896, 8)]);
     let out = jointid(&["info", cap.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("segments         2 gap-free"), "{text}");
+    assert!(
+        text.contains("end message      received\nsegments         2 gap-free"),
+        "{text}"
+    );
     assert!(
         text.contains("2  from 5.52 s, 4.48 s, 896 samples, 8 whole periods"),
         "{text}"
@@ -133,20 +136,111 @@ fn analyze_uses_the_longest_segment_by_default_and_every_one_with_segment_all() 
     );
 }
 
+/// `validate DATA --simulated COL` compares one record with its simulated column: it
+/// refuses several segments and names the commands that take them all.
 #[test]
 fn commands_that_take_one_record_refuse_segment_all_naming_the_alternative() {
-    let dir = tmpdir("diagnose-segments");
+    let dir = tmpdir("simulated-segments");
     let cap = gapped_capture(&dir, "run.jcap");
     let c = cap.to_str().unwrap();
-    let out = jointid(&["diagnose", c, "--validation", c, "--segment", "all"]);
+    let out = jointid(&["validate", c, "--simulated", "theta_m", "--segment", "all"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(
         stderr(&out).contains(
             "--segment all: this command takes one gap-free record, and segments 1, 2 were \
-             selected; give --segment longest or --segment N"
+             selected; give --segment longest or --segment N (`analyze`, `fit`, `validate \
+             MODEL.json` and `diagnose` use all of them)"
         ),
         "{}",
         stderr(&out)
+    );
+}
+
+/// A rigid joint with hidden Coulomb friction (the pure law, `F_s = F_c`), estimation and
+/// validation captures each with a gap: `diagnose --segment all` fits the nominal and the
+/// candidates on both estimation segments as separate experiments, scores them on both
+/// validation segments pooled, names Coulomb friction with its level, and gives each
+/// validation segment's figures. Before: refused ("this command takes one gap-free
+/// record").
+#[test]
+fn diagnose_with_segment_all_names_the_hidden_friction_of_gapped_captures() {
+    let dir = tmpdir("diagnose-segments");
+    let sim = |name: &str, seed: &str| {
+        gapped_simulation(
+            &dir,
+            name,
+            &[
+                "--model",
+                "rigid",
+                "--effect",
+                "coulomb_friction:fc=0.03,fs=0.03",
+                "--seed",
+                seed,
+                "--excitation-seed",
+                seed,
+            ],
+        )
+    };
+    let (est, truth) = sim("est.jcap", "3");
+    let (val, _) = sim("val.jcap", "4");
+    let (e, v) = (est.to_str().unwrap(), val.to_str().unwrap());
+    let out = jointid(&[
+        "diagnose",
+        e,
+        "--validation",
+        v,
+        "--segment",
+        "all",
+        "--model",
+        "rigid",
+        "--effects",
+        "coulomb_friction,time_delay",
+        "--json",
+    ]);
+    let j = json_of(&out);
+    assert!(
+        stderr(&out).contains("diagnosing on segments 1, 2"),
+        "{}",
+        stderr(&out)
+    );
+    // the best single; a time delay may pair with it (the simulated current loop lags, and
+    // with one whole period per segment no frequency-domain start gives the model a lag)
+    assert!(
+        j["best"].as_str().unwrap().starts_with("coulomb_friction"),
+        "{j}"
+    );
+    assert_eq!(j["effects"][0]["name"], "coulomb_friction");
+    assert_eq!(j["effects"][0]["significant"], true);
+    let fc = num(&j["effects"][0]["parameters"]["fc"]["value"]);
+    let true_fc = num(&truth["config"]["effects"][0]["fc"]);
+    assert!(
+        (fc / true_fc - 1.0).abs() < 0.05,
+        "F_c = {fc}, truth {true_fc}"
+    );
+    // both validation segments, numbered and sized as `info` lists them; the pooled
+    // figures (one sum of squares over both) lie between theirs
+    let listed = json_of(&jointid(&["info", v, "--json"]));
+    let listed = listed["segments"].as_array().unwrap();
+    let per = j["validation_segments"].as_array().unwrap();
+    assert_eq!(per.len(), 2, "{j}");
+    for (k, (s, l)) in per.iter().zip(listed).enumerate() {
+        assert_eq!(s["segment"], k + 1);
+        assert_eq!(s["samples"], l["samples"]);
+    }
+    for (pooled, each) in [
+        ("fit_nominal_validation", "fit_nominal"),
+        ("fit_augmented_validation", "fit_augmented"),
+    ] {
+        let p = num(&j[pooled]);
+        let (a, b) = (num(&per[0][each]), num(&per[1][each]));
+        assert!(
+            p >= a.min(b) - 1e-9 && p <= a.max(b) + 1e-9,
+            "{pooled} {p} of {a}, {b}"
+        );
+    }
+    assert!(
+        num(&j["fit_augmented_validation"]) > num(&j["fit_nominal_validation"]) + 10.0,
+        "{j}"
     );
 }
 
@@ -276,6 +370,8 @@ fn nonlinear_fit_with_segment_all_takes_the_segments_as_separate_experiments() {
         ],
     );
     let c = cap.to_str().unwrap();
+    let model = dir.join("m.json");
+    let m = model.to_str().unwrap();
     let out = jointid(&[
         "fit",
         c,
@@ -285,6 +381,8 @@ fn nonlinear_fit_with_segment_all_takes_the_segments_as_separate_experiments() {
         "nonlinear_stiffness",
         "--segment",
         "all",
+        "--save",
+        m,
         "--json",
     ]);
     let all = json_of(&out);
@@ -308,6 +406,34 @@ fn nonlinear_fit_with_segment_all_takes_the_segments_as_separate_experiments() {
         (k3 / truth - 1.0).abs() < 0.05,
         "k3 = {k3:.4e}, truth {truth:.4e}"
     );
+    // the saved model validated on every segment, each from its own first angle: the
+    // pooled FIT is the fit's, and each segment's FIT is the fit's for that segment
+    let out = jointid(&["validate", m, c, "--segment", "all", "--json"]);
+    let v = json_of(&out);
+    assert!(
+        stderr(&out).contains("validating on segments 1, 2"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(
+        (num(&v["fit"]) - num(&all["fit_estimation"])).abs() < 0.01,
+        "{v} {all}"
+    );
+    assert_eq!(v["samples"], all["samples"], "{v}");
+    let per = v["segments"].as_array().unwrap();
+    assert_eq!(per.len(), 2, "{v}");
+    for (s, f) in per.iter().zip(segs) {
+        assert_eq!(s["segment"], f["segment"]);
+        assert_eq!(s["samples"], f["samples"]);
+        assert!((num(&s["fit"]) - num(&f["fit"])).abs() < 0.01, "{v} {all}");
+    }
+    let text = jointid(&["validate", m, c, "--segment", "all"]);
+    let text = String::from_utf8_lossy(&text.stdout);
+    assert!(
+        text.contains("per segment (the figures above pool them)"),
+        "{text}"
+    );
+    assert!(text.contains("    segment 2 ("), "{text}");
 }
 
 #[test]

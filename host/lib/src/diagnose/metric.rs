@@ -196,6 +196,9 @@ pub struct Scored {
     pub angle_fit: f64,
     /// the driven simulation (deflection, velocity)
     pub driven: DrivenOutput,
+    /// gap metric over each record's scored range [%] (one entry for one record; several
+    /// for the gap-free segments of one capture, [`score_segments`])
+    pub per_record: Vec<f64>,
 }
 
 /// The measured side of the gap metric on one record.
@@ -248,11 +251,7 @@ impl Measured {
         let velocity = velocity_band(&driven.theta_m, data.ts, self.band);
         let s = self.skip;
         let fit = fit_percent(&self.velocity[s..], &velocity[s..]).map_err(|e| e.to_string())?;
-        let segments = self
-            .segment_ranges(k)
-            .into_iter()
-            .map(|r| fit_percent(&self.velocity[r.clone()], &velocity[r]).unwrap_or(f64::NAN))
-            .collect();
+        let segments = self.equal_segments(&velocity, k);
         let angle_fit = fit_percent(&data.y, &open_loop.theta_m).unwrap_or(f64::NAN);
         Ok(Scored {
             velocity,
@@ -260,8 +259,137 @@ impl Measured {
             segments,
             angle_fit,
             driven,
+            per_record: vec![fit],
         })
     }
+
+    /// The gap metric of `velocity` on each of the `k` equal segments of the scored range.
+    fn equal_segments(&self, velocity: &[f64], k: usize) -> Vec<f64> {
+        self.segment_ranges(k)
+            .into_iter()
+            .map(|r| fit_percent(&self.velocity[r.clone()], &velocity[r]).unwrap_or(f64::NAN))
+            .collect()
+    }
+
+    /// The measured side pooled over `parts` (one per gap-free segment of a capture): their
+    /// scored ranges joined in order, scored from the first sample on. One part is itself.
+    pub fn joined(parts: &[Measured]) -> Measured {
+        if let [one] = parts {
+            return one.clone();
+        }
+        Measured {
+            velocity: join(parts.iter().map(|m| &m.velocity[m.skip..])),
+            skip: 0,
+            band: parts.first().map_or(DEFAULT_BAND_HZ, |m| m.band),
+            tracking_hz: parts.first().map_or(DEFAULT_TRACKING_HZ, |m| m.tracking_hz),
+        }
+    }
+}
+
+/// The pieces joined in order.
+fn join<'a>(pieces: impl Iterator<Item = &'a [f64]>) -> Vec<f64> {
+    let mut out = Vec::new();
+    for p in pieces {
+        out.extend_from_slice(p);
+    }
+    out
+}
+
+/// Scores `model` on several records taken apart (the gap-free segments of one capture,
+/// `parts[i]` made from `data[i]`): each simulated from rest at its own first angle with
+/// its own slow input, then the gap metric pooled over the scored ranges, one sum of
+/// squares (`100·(1 − ‖y − ŷ‖/‖y − ȳ‖)` over their samples joined, not a mean of
+/// percentages). The `k` equal segments of the test split the joined scored ranges; the
+/// velocity and the driven simulation returned are the scored ranges joined (so they line
+/// up with [`Measured::joined`], whose `skip` is 0); the angle FIT pools the whole records.
+/// One record is [`Measured::score`].
+///
+/// # Errors
+/// As [`Measured::score`], for any record; no record.
+pub fn score_segments(
+    parts: &[Measured],
+    model: &DrivenModel,
+    data: &[IdData],
+    k: usize,
+) -> Result<Scored, String> {
+    match (parts, data) {
+        ([m], [d]) => return m.score(model, d, k),
+        ([], _) => return Err("no record to score".into()),
+        _ if parts.len() != data.len() => {
+            return Err(format!(
+                "{} measured parts for {} records",
+                parts.len(),
+                data.len()
+            ))
+        }
+        _ => {}
+    }
+    let mut velocity = Vec::new();
+    let (mut y_all, mut y_sim) = (Vec::new(), Vec::new());
+    let mut per_record = Vec::new();
+    let mut driven: Option<DrivenOutput> = None;
+    for (m, d) in parts.iter().zip(data) {
+        let (out, open_loop, _) = simulate_tracked(model, d, m.tracking_hz)?;
+        let v = velocity_band(&out.theta_m, d.ts, m.band);
+        let s = m.skip;
+        per_record.push(fit_percent(&m.velocity[s..], &v[s..]).unwrap_or(f64::NAN));
+        velocity.extend_from_slice(&v[s..]);
+        y_all.extend_from_slice(&d.y);
+        y_sim.extend_from_slice(&open_loop.theta_m);
+        match &mut driven {
+            None => {
+                driven = Some(DrivenOutput {
+                    theta_m: out.theta_m[s..].to_vec(),
+                    gearbox_deflection: out.gearbox_deflection[s..].to_vec(),
+                    omega_m: out.omega_m[s..].to_vec(),
+                    ..out
+                })
+            }
+            Some(j) => {
+                j.theta_m.extend_from_slice(&out.theta_m[s..]);
+                j.gearbox_deflection
+                    .extend_from_slice(&out.gearbox_deflection[s..]);
+                j.omega_m.extend_from_slice(&out.omega_m[s..]);
+            }
+        }
+    }
+    let pooled = Measured::joined(parts);
+    let fit = fit_percent(&pooled.velocity, &velocity).map_err(|e| e.to_string())?;
+    Ok(Scored {
+        segments: pooled.equal_segments(&velocity, k),
+        fit,
+        angle_fit: fit_percent(&y_all, &y_sim).unwrap_or(f64::NAN),
+        velocity,
+        driven: driven.expect("at least two records"),
+        per_record,
+    })
+}
+
+/// [`Measured::start_sensitivity`] over several records ([`score_segments`]): each one's
+/// start angle moved, the self-FIT pooled over the joined scored ranges [%].
+///
+/// # Errors
+/// As [`Measured::start_sensitivity`].
+pub fn start_sensitivity_segments(
+    parts: &[Measured],
+    model: &DrivenModel,
+    data: &[IdData],
+    scored: &Scored,
+) -> Result<f64, String> {
+    if let ([m], [d]) = (parts, data) {
+        return m.start_sensitivity(model, d, scored);
+    }
+    let mut velocity = Vec::new();
+    for (m, d) in parts.iter().zip(data) {
+        let mut moved = d.clone();
+        if let Some(y0) = moved.y.first_mut() {
+            *y0 += START_PERTURBATION_RAD;
+        }
+        let (driven, _, _) = simulate_tracked(model, &moved, m.tracking_hz)?;
+        let v = velocity_band(&driven.theta_m, d.ts, m.band);
+        velocity.extend_from_slice(&v[m.skip..]);
+    }
+    fit_percent(&scored.velocity, &velocity).map_err(|e| e.to_string())
 }
 
 /// Start perturbation of [`Measured::start_sensitivity`] [rad].
@@ -424,6 +552,82 @@ mod tests {
             chaotic < SENSITIVE_BELOW,
             "stiffening joint: self-FIT {chaotic:.3} % (true-model metric {fit_stiff:.1} %, linear {fit_linear:.1} %)"
         );
+    }
+
+    /// One record cut in two at a sample, as a gap leaves it: each piece simulated from its
+    /// own start, the metric pooled as one sum of squares over both scored ranges (not the
+    /// mean of their percentages); one piece alone is the one-record score, number for
+    /// number; the true model still beats a wrong one on the pooled figure.
+    #[test]
+    fn the_metric_pools_the_segments_as_one_sum_of_squares() {
+        use crate::data::ExcitationConfig;
+        use crate::sim::SimConfig;
+        let cfg = SimConfig::default();
+        let exc = ExcitationConfig {
+            periods: 2,
+            ..ExcitationConfig::paper_default()
+        };
+        let (_, val) = crate::test_support::est_val_captures(&cfg, &exc, 5);
+        let cut = val.data.len() / 2;
+        let piece = |r: std::ops::Range<usize>| IdData {
+            ts: val.data.ts,
+            u: val.data.u[r.clone()].to_vec(),
+            y: val.data.y[r].to_vec(),
+            r: None,
+        };
+        let data = [piece(0..cut), piece(cut..val.data.len())];
+        let parts: Vec<Measured> = data
+            .iter()
+            .map(|d| Measured::new(d, DEFAULT_BAND_HZ, 1000))
+            .collect();
+        let truth = DrivenModel {
+            plant: cfg.plant,
+            effects: Vec::new(),
+            tau_c: cfg.controller.current_loop_tau,
+            offset: 0.0,
+        };
+        let pooled = score_segments(&parts, &truth, &data, 4).unwrap();
+        let each: Vec<Scored> = parts
+            .iter()
+            .zip(&data)
+            .map(|(m, d)| m.score(&truth, d, 1).unwrap())
+            .collect();
+        // each piece's own figure, and the pooled one from the sums of squares
+        let (mut num, mut den) = (0.0, 0.0);
+        for ((m, sc), &f) in parts.iter().zip(&each).zip(&pooled.per_record) {
+            assert_eq!(f, sc.fit);
+            let y = &m.velocity[m.skip..];
+            let yh = &sc.velocity[m.skip..];
+            num += y.iter().zip(yh).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
+            den += y.iter().map(|a| a * a).sum::<f64>();
+        }
+        let n = (parts[0].velocity.len() - 1000 + parts[1].velocity.len() - 1000) as f64;
+        let all = Measured::joined(&parts);
+        let mean = all.velocity.iter().sum::<f64>() / n;
+        let den = den - n * mean * mean;
+        let expected = 100.0 * (1.0 - (num / den).sqrt());
+        assert!(
+            (pooled.fit - expected).abs() < 1e-9,
+            "pooled {} against {expected} from the sums",
+            pooled.fit
+        );
+        assert_eq!(pooled.velocity.len(), n as usize);
+        assert_eq!(pooled.driven.omega_m.len(), n as usize);
+        assert_eq!(pooled.segments.len(), 4);
+        // one piece: the one-record score itself
+        let one = score_segments(&parts[..1], &truth, &data[..1], 4).unwrap();
+        assert_eq!(one, parts[0].score(&truth, &data[0], 4).unwrap());
+        let mut wrong = truth.clone();
+        wrong.plant.params.k_g *= 0.8;
+        let w = score_segments(&parts, &wrong, &data, 4).unwrap();
+        assert!(
+            pooled.fit > w.fit + 10.0,
+            "truth {:.1} %, k_g −20 % {:.1} %",
+            pooled.fit,
+            w.fit
+        );
+        let own = start_sensitivity_segments(&parts, &truth, &data, &pooled).unwrap();
+        assert!(own > 99.99, "self-FIT {own} %");
     }
 
     #[test]

@@ -38,6 +38,11 @@
 //!
 //! The second estimation capture serves the amplitude analysis only; the fits use the
 //! first.
+//!
+//! A capture with gaps is given as its gap-free segments ([`diagnose_segments`]): the fits
+//! take the first estimation capture's segments as separate experiments, the gap metric
+//! simulates every validation segment from its own start and pools one sum of squares
+//! over them ([`metric::score_segments`]).
 
 pub mod locate;
 pub mod metric;
@@ -55,16 +60,19 @@ use serde::Serialize;
 use thiserror::Error;
 
 use crate::data::{Dataset, IdData};
+use crate::ident::frf::analyze_segments;
 use crate::ident::frf::{amplitude_trend, analyze_dataset, AmplitudeTrend, FrfAnalysis, Linearity};
 use crate::ident::grey_box::DEFAULT_GEAR_RATIO;
 use crate::ident::nonlinear::{
-    identify, linear_start, model_of, NlFit, NlOptions, NlRequest, NlStart, Owner,
+    identify_segments, linear_start_segments, model_of, NlFit, NlOptions, NlRequest, NlStart, Owner,
 };
 use crate::model::effects::{Attach, Effect, ExtraMode};
 use crate::model::params::{model_params, Plant};
 use crate::model::spec::Structure;
 use locate::{Band, Regions};
-use metric::{segment_gain, DrivenModel, Measured, Scored};
+use metric::{
+    score_segments, segment_gain, start_sensitivity_segments, DrivenModel, Measured, Scored,
+};
 use series::DiagnosisSeries;
 
 /// The user's simulation, for the parameter-against-structure split of the gap.
@@ -276,6 +284,21 @@ pub struct ParameterMismatch {
     pub parameters: Vec<Mismatch>,
 }
 
+/// One gap-free segment of the validation capture, when it has several
+/// ([`diagnose_segments`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ValidationSegment {
+    /// its place among the validation segments given, from 1 (the command line puts the
+    /// capture's own numbering here, as `jointid info` lists it)
+    pub segment: usize,
+    /// its samples
+    pub samples: usize,
+    /// the nominal's gap metric on its scored range [%]
+    pub fit_nominal: f64,
+    /// the best model's gap metric on it (the nominal's when `best` is `none`) [%]
+    pub fit_augmented: f64,
+}
+
 /// Result of [`diagnose`].
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Diagnosis {
@@ -313,6 +336,10 @@ pub struct Diagnosis {
     pub parameter_mismatch: Option<ParameterMismatch>,
     /// the significance test in words
     pub test: String,
+    /// with several validation segments: the gap metric on each (`fit_nominal_validation`
+    /// and `fit_augmented_validation` pool them); empty, and left out of the JSON, for one
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub validation_segments: Vec<ValidationSegment>,
     /// wall time [s] (JSON `elapsed_s`, as every command's wall time)
     #[serde(rename = "elapsed_s")]
     pub seconds: f64,
@@ -330,13 +357,16 @@ struct Fitted {
     warnings: Vec<String>,
 }
 
-/// Fits `effects` on `est` and scores on `val`. `from`: a fit whose structure values, lag
-/// and offset start this one, the effects starting at the values they carry (a pair,
-/// started from its singles' fits); `None`: the automatic start, or the extra mode's.
+/// Fits `effects` on the records `est` (one, or the gap-free segments of one capture as
+/// separate experiments) and scores on `val` (likewise, `parts` their measured sides).
+/// `from`: a fit whose structure values, lag and offset start this one, the effects
+/// starting at the values they carry (a pair, started from its singles' fits); `None`: the
+/// automatic start, or the extra mode's.
+#[allow(clippy::too_many_arguments)]
 fn fit_and_score(
-    est: &IdData,
-    val: &IdData,
-    measured: &Measured,
+    est: &[IdData],
+    val: &[IdData],
+    parts: &[Measured],
     req: &DiagnoseRequest,
     effects: Vec<Effect>,
     starts: &LinearStarts,
@@ -350,6 +380,12 @@ fn fit_and_score(
         ..NlRequest::new(req.structure, req.r, effects)
     };
     // an extra mode starts where the linear fit with one more mass put it
+    let longest = est
+        .iter()
+        .enumerate()
+        .max_by_key(|(i, d)| (d.len(), usize::MAX - i))
+        .map(|(_, d)| d)
+        .ok_or("no estimation record")?;
     let extra_at = nl
         .effects
         .iter()
@@ -358,18 +394,18 @@ fn fit_and_score(
         nl.tau_c = base.model.tau_c;
         nl.linear = Some(base.plant.clone());
         let offset = base.get("offset").unwrap_or(0.0);
-        nl.start = NlStart::Values(model_of(&nl, est).values(&base.plant, offset, 0.0));
+        nl.start = NlStart::Values(model_of(&nl, longest).values(&base.plant, offset, 0.0));
     } else if let (Some(i), Some((plant, mode, tau_c))) = (extra_at, &starts.extra_mode) {
         nl.effects[i] = Effect::ExtraMode(*mode);
         nl.tau_c = *tau_c;
         nl.linear = Some(plant.clone());
-        nl.start = NlStart::Values(model_of(&nl, est).values(plant, 0.0, 0.0));
+        nl.start = NlStart::Values(model_of(&nl, longest).values(plant, 0.0, 0.0));
     }
-    let res = identify(est, &nl).map_err(|e| e.to_string())?;
+    let res = identify_segments(est, &nl).map_err(|e| e.to_string())?;
     let model = DrivenModel::of_fit(&res.fit);
-    let scored = measured.score(&model, val, req.options.segments)?;
+    let scored = score_segments(parts, &model, val, req.options.segments)?;
     let mut warnings = res.warnings;
-    let own = measured.start_sensitivity(&model, val, &scored)?;
+    let own = start_sensitivity_segments(parts, &model, val, &scored)?;
     if own < metric::SENSITIVE_BELOW {
         warnings.push(format!(
             "{SENSITIVE}: moving its start angle by {:e} rad moves its simulation to a \
@@ -627,7 +663,7 @@ struct LinearStarts {
 /// (eq. (7), `J_p` on `k_p`). The automatic start's grid over the mode's frequency misses
 /// it when the structure's own fit took the extra resonance for one of its modes.
 fn extra_mode_start(
-    ds: &Dataset,
+    ds: &[Dataset],
     structure: Structure,
     r: f64,
     attach: Attach,
@@ -642,25 +678,25 @@ fn extra_mode_start(
         }
         _ => return None,
     };
-    let l = linear_start(ds, 1, &NlRequest::new(bigger, r, Vec::new())).ok()?;
+    let l = linear_start_segments(ds, 1, &NlRequest::new(bigger, r, Vec::new())).ok()?;
     let plant = keep.iter().map(|&i| l.values[i]).collect();
     let [j, k, d] = extra.map(|i| l.values[i]);
     Some((plant, ExtraMode { j, k, d, attach }, l.tau_c))
 }
 
 fn linear_of(
-    ds: &Dataset,
+    ds: &[Dataset],
     req: &DiagnoseRequest,
     warnings: &mut Vec<String>,
 ) -> Option<(Vec<f64>, f64)> {
-    match linear_start(ds, 1, &NlRequest::new(req.structure, req.r, Vec::new())) {
+    match linear_start_segments(ds, 1, &NlRequest::new(req.structure, req.r, Vec::new())) {
         Ok(l) => Some((l.values, l.tau_c)),
         Err(e) => {
-            if ds.excitation.is_some() {
+            if ds.first().is_some_and(|d| d.excitation.is_some()) {
                 warnings.push(format!(
                     "{}: the frequency-domain linear start failed ({e}); the fits start \
                      automatically in the time domain",
-                    ds.name
+                    ds[0].name
                 ));
             }
             None
@@ -714,6 +750,28 @@ pub fn diagnose_with_series(
     val: &Dataset,
     req: &DiagnoseRequest,
 ) -> Result<(Diagnosis, DiagnosisSeries), DiagnoseError> {
+    let est: Vec<&[Dataset]> = est.iter().map(std::slice::from_ref).collect();
+    diagnose_segments(&est, std::slice::from_ref(val), req)
+}
+
+/// [`diagnose_with_series`] on captures with gaps: each estimation capture and the
+/// validation capture given as its gap-free segments (one or more, in order, as
+/// [`crate::data::segment`] selects them). The fits take the first capture's segments as
+/// separate experiments ([`identify_segments`], the linear start on the FRF averaged over
+/// them, [`linear_start_segments`]); the gap metric simulates every validation segment
+/// from its own start and pools it over their scored ranges, one sum of squares
+/// ([`metric::score_segments`]); the significance test splits the joined scored ranges
+/// into its equal segments, and the residual's location, the series and the time records
+/// are over the joined scored ranges. One segment each is [`diagnose_with_series`],
+/// number for number.
+///
+/// # Errors
+/// As [`diagnose`]; [`DiagnoseError::Input`] for a capture with no segment.
+pub fn diagnose_segments(
+    est: &[&[Dataset]],
+    val: &[Dataset],
+    req: &DiagnoseRequest,
+) -> Result<(Diagnosis, DiagnosisSeries), DiagnoseError> {
     let t0 = Instant::now();
     let o = &req.options;
     if est.is_empty() || est.len() > 2 {
@@ -722,6 +780,17 @@ pub fn diagnose_with_series(
             est.len()
         )));
     }
+    if est.iter().any(|c| c.is_empty()) {
+        return Err(DiagnoseError::Input(
+            "an estimation capture with no segment".into(),
+        ));
+    }
+    let val_segs = val;
+    let Some(val0) = val.first() else {
+        return Err(DiagnoseError::Input(
+            "a validation capture with no segment".into(),
+        ));
+    };
     // effects on the gearbox spring are no candidates of a rigid model
     let (candidates, inapplicable): (Vec<Effect>, Vec<Effect>) = req
         .candidates
@@ -736,8 +805,8 @@ pub fn diagnose_with_series(
             req.r
         )));
     }
-    let ts = val.data.ts;
-    for ds in est.iter().chain(std::iter::once(val)) {
+    let ts = val0.data.ts;
+    for ds in est.iter().flat_map(|c| c.iter()).chain(val) {
         ds.data
             .check(200)
             .map_err(|e| DiagnoseError::Input(format!("{}: {e}", ds.name)))?;
@@ -748,8 +817,40 @@ pub fn diagnose_with_series(
             )));
         }
     }
-    let skip = ((o.skip_s / ts).round() as usize).min(val.data.len() / 4);
-    let measured = Measured::new(&val.data, o.band_hz, skip).with_tracking(o.tracking_hz);
+    let skip_of = |d: &Dataset| ((o.skip_s / ts).round() as usize).min(d.data.len() / 4);
+    // the measured side of every validation segment, and of them joined (one segment: itself)
+    let parts: Vec<Measured> = val
+        .iter()
+        .map(|d| Measured::new(&d.data, o.band_hz, skip_of(d)).with_tracking(o.tracking_hz))
+        .collect();
+    let val_data: Vec<IdData> = val.iter().map(|d| d.data.clone()).collect();
+    let measured = Measured::joined(&parts);
+    // the validation record the location and the series read: the capture itself, or its
+    // segments' scored ranges joined (then scored from its first sample, as `measured`)
+    let joined_val;
+    let val: &Dataset = if let [one] = val {
+        one
+    } else {
+        let mut data = IdData {
+            ts,
+            u: Vec::new(),
+            y: Vec::new(),
+            r: None,
+        };
+        for (d, m) in val.iter().zip(&parts) {
+            data.u.extend_from_slice(&d.data.u[m.skip..]);
+            data.y.extend_from_slice(&d.data.y[m.skip..]);
+        }
+        joined_val = Dataset {
+            name: val0.name.clone(),
+            data,
+            t0: val0.t0,
+            excitation: None,
+            meta: val0.meta.clone(),
+        };
+        &joined_val
+    };
+    let skip = measured.skip;
     let mut warnings = Vec::new();
     if !inapplicable.is_empty() {
         warnings.push(format!(
@@ -762,12 +863,13 @@ pub fn diagnose_with_series(
         ));
     }
     let starts = LinearStarts {
-        structure: linear_of(&est[0], req, &mut warnings),
+        structure: linear_of(est[0], req, &mut warnings),
         extra_mode: candidates.iter().find_map(|e| match e {
-            Effect::ExtraMode(x) => extra_mode_start(&est[0], req.structure, req.r, x.attach),
+            Effect::ExtraMode(x) => extra_mode_start(est[0], req.structure, req.r, x.attach),
             _ => None,
         }),
     };
+    let est_data: Vec<IdData> = est[0].iter().map(|d| d.data.clone()).collect();
 
     // nominal and singles, in parallel
     let mut jobs: Vec<(Vec<Effect>, Option<&NlFit>)> = vec![(Vec::new(), None)];
@@ -776,9 +878,9 @@ pub fn diagnose_with_series(
     // `from` when given) and scored
     let score = |(effects, from): &(Vec<Effect>, Option<&NlFit>)| {
         fit_and_score(
-            &est[0].data,
-            &val.data,
-            &measured,
+            &est_data,
+            &val_data,
+            &parts,
             req,
             effects.clone(),
             &starts,
@@ -790,7 +892,7 @@ pub fn diagnose_with_series(
     let nominal = results
         .next()
         .expect("the nominal job")
-        .map_err(|e| DiagnoseError::Nominal(format!("{}: {e}", est[0].name)))?;
+        .map_err(|e| DiagnoseError::Nominal(format!("{}: {e}", est[0][0].name)))?;
     warnings.extend(nominal.warnings.iter().map(|w| format!("nominal: {w}")));
     let nom_fit = nominal.scored.fit;
 
@@ -812,37 +914,51 @@ pub fn diagnose_with_series(
     let mut distortion = Vec::new();
     let mut lin_of: Vec<Option<Linearity>> = Vec::new();
     let mut analyses: Vec<(String, FrfAnalysis)> = Vec::new();
-    for ds in est.iter().chain(std::iter::once(val)) {
-        let a = if ds.excitation.is_some() {
-            analyze_dataset(ds, o.settle_periods).ok()
-        } else {
-            None
+    let captures: Vec<&[Dataset]> = est
+        .iter()
+        .copied()
+        .chain(std::iter::once(val_segs))
+        .collect();
+    for segs in captures {
+        let a = match segs {
+            [ds] if ds.excitation.is_some() => analyze_dataset(ds, o.settle_periods).ok(),
+            [first, ..] if first.excitation.is_some() => {
+                analyze_segments(segs, o.settle_periods).ok()
+            }
+            _ => None,
         };
+        let name = segs[0].name.clone();
         let lin = a.as_ref().map(|a| a.linearity_y.clone());
         if let Some(l) = &lin {
             distortion.push(Distortion {
-                capture: ds.name.clone(),
+                capture: name.clone(),
                 linearity: l.clone(),
             });
         }
         if let Some(a) = a {
-            analyses.push((ds.name.clone(), a));
+            analyses.push((name, a));
         }
         lin_of.push(lin);
     }
     let amplitude = if est.len() == 2 {
         let nom_model = DrivenModel::of_fit(&nominal.fit);
         let mut levels = Vec::new();
-        for ds in est {
-            let m = Measured::new(&ds.data, o.band_hz, skip.min(ds.data.len() / 4))
-                .with_tracking(o.tracking_hz);
-            let gap = m
-                .score(&nom_model, &ds.data, 1)
+        for segs in est {
+            let ms: Vec<Measured> = segs
+                .iter()
+                .map(|ds| {
+                    Measured::new(&ds.data, o.band_hz, skip_of(val0).min(ds.data.len() / 4))
+                        .with_tracking(o.tracking_hz)
+                })
+                .collect();
+            let data: Vec<IdData> = segs.iter().map(|d| d.data.clone()).collect();
+            let gap = score_segments(&ms, &nom_model, &data, 1)
                 .map(|sc| 100.0 - sc.fit)
                 .unwrap_or(f64::NAN);
+            let u: Vec<f64> = segs.iter().flat_map(|d| d.data.u.iter().copied()).collect();
             levels.push(AmplitudeLevel {
-                capture: ds.name.clone(),
-                u_rms: rms(&ds.data.u),
+                capture: segs[0].name.clone(),
+                u_rms: rms(&u),
                 gap,
             });
         }
@@ -950,6 +1066,7 @@ pub fn diagnose_with_series(
     // the pair
     let mut pair: Option<Candidate> = None;
     let mut pair_velocity: Option<Vec<f64>> = None;
+    let mut pair_records: Option<Vec<f64>> = None;
     let mut best_fit = nom_fit;
     let mut best = "none".to_string();
     if let Some((top, Some(top_fit))) = singles.first().filter(|c| c.0.significant) {
@@ -1011,6 +1128,7 @@ pub fn diagnose_with_series(
                         let better = pair.as_ref().is_none_or(|p| cand.score > p.score);
                         if significant && better {
                             pair = Some(cand);
+                            pair_records = Some(f.scored.per_record);
                             pair_velocity = Some(f.scored.velocity);
                         }
                     }
@@ -1039,8 +1157,7 @@ pub fn diagnose_with_series(
                 tau_c: u.tau_c,
                 offset: 0.0,
             };
-            let fit_sim_val = measured
-                .score(&model, &val.data, 1)
+            let fit_sim_val = score_segments(&parts, &model, &val_data, 1)
                 .map(|s| s.fit)
                 .unwrap_or_else(|e| {
                     warnings.push(format!("{}: {e}", u.name));
@@ -1101,6 +1218,30 @@ pub fn diagnose_with_series(
         }
     }
     let nominal_parameters = linear_parameters(&nominal.fit);
+    let validation_segments = if parts.len() > 1 {
+        let best_records = match (&pair, &pair_records) {
+            (Some(_), Some(r)) => r.clone(),
+            _ => singles
+                .first()
+                .filter(|c| c.0.significant)
+                .and_then(|c| c.1.as_ref().map(|f| f.scored.per_record.clone()))
+                .unwrap_or_else(|| nominal.scored.per_record.clone()),
+        };
+        val_segs
+            .iter()
+            .zip(&nominal.scored.per_record)
+            .zip(&best_records)
+            .enumerate()
+            .map(|(i, ((d, &n), &b))| ValidationSegment {
+                segment: i + 1,
+                samples: d.data.len(),
+                fit_nominal: n,
+                fit_augmented: b,
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let best_velocity = match (&pair, pair_velocity) {
         (Some(p), Some(v)) => Some((p.name.clone(), v)),
         _ => singles.first().filter(|c| c.0.significant).and_then(|c| {
@@ -1131,12 +1272,26 @@ pub fn diagnose_with_series(
         effects: singles.into_iter().map(|c| c.0).collect(),
         location,
         parameter_mismatch,
-        test: format!(
-            "the validation record (after {:.2} s) is split into {} equal segments; the gain \
-             of the metric over the nominal is computed on each; score = mean gain; significant \
-             when mean − 2·(standard error over the segments) > {} FIT point",
-            o.skip_s, o.segments, o.min_gain
-        ),
+        test: if parts.len() == 1 {
+            format!(
+                "the validation record (after {:.2} s) is split into {} equal segments; the \
+                 gain of the metric over the nominal is computed on each; score = mean gain; \
+                 significant when mean − 2·(standard error over the segments) > {} FIT point",
+                o.skip_s, o.segments, o.min_gain
+            )
+        } else {
+            format!(
+                "the validation capture's {} gap-free segments, each scored after {:.2} s, are \
+                 joined and split into {} equal parts; the gain of the metric over the nominal \
+                 is computed on each; score = mean gain; significant when mean − \
+                 2·(standard error over the parts) > {} FIT point",
+                parts.len(),
+                o.skip_s,
+                o.segments,
+                o.min_gain
+            )
+        },
+        validation_segments,
         seconds: t0.elapsed().as_secs_f64(),
         warnings,
     };
