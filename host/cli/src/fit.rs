@@ -147,8 +147,9 @@ pub struct FitArgs {
     /// attach an effect to the physical model, repeatable, spelled as `simulate --effect`
     /// (`name` or `name:key=value,...`; names: coulomb_friction, backlash,
     /// nonlinear_stiffness, extra_mode, time_delay, torque_ripple); sends the fit to the
-    /// nonlinear grey-box engine. Estimated keys given a value start there; the others
-    /// (an extra mode's `attach`, the ripple's `order`) are taken as given
+    /// nonlinear grey-box engine. Estimated keys given a value start there; an extra
+    /// mode's `attach` and a given ripple `order` are taken as given (without `order=`
+    /// the ripple's order is found in the data, step `torque_ripple order`)
     #[arg(long = "effect", value_name = "SPEC")]
     pub effects: Vec<String>,
     /// nonlinear fit: hold a parameter at this value (`J_m`, `k_g`, `tau_c`, `offset`, an

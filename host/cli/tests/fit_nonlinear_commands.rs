@@ -282,6 +282,51 @@ fn simulated_cubic_spring_is_found_and_the_model_goes_back_to_simulate() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `--effect torque_ripple` without `order=`: the order comes from the data (a hidden
+/// order 120, not the default 72, at a reference of 0.08 rad RMS, about the largest the
+/// board's safety limits let `simulate` run, whose motor travel covers two periods of the
+/// orders from about 100), reported as a step of the start, and the fitted spec carries it
+#[test]
+fn the_ripple_order_is_found_in_the_data_when_the_effect_gives_none() {
+    let dir = tmpdir("three-mass-ripple-order");
+    let run = dir.join("x.jcap");
+    jointid(&[
+        "simulate",
+        "--model",
+        "three-mass",
+        "--effect",
+        "torque_ripple:amplitude=0.01,order=120,phase=0.5",
+        "--rms",
+        "0.08",
+        "--periods",
+        "3",
+        "--out",
+        run.to_str().unwrap(),
+        "--json",
+    ]);
+    let j = json_of(&jointid(&[
+        "fit",
+        run.to_str().unwrap(),
+        "--model",
+        "three-mass",
+        "--effect",
+        "torque_ripple",
+        "--json",
+    ]));
+    let step = j["steps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .rfind(|s| s["name"] == "torque_ripple order")
+        .unwrap_or_else(|| panic!("no order step in {}", j["steps"]));
+    assert_eq!(num(&step["values"]["order"]["value"]), 120.0, "{step}");
+    let spec = j["effects"][0]["spec"].as_str().unwrap();
+    assert!(spec.contains("order=120"), "{spec}");
+    let a = num(&param(&j, "amplitude")["value"]);
+    assert!((a / 0.01 - 1.0).abs() < 0.05, "amplitude {a}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// bad input ends with exit 2 and names what is wrong, before any fitting
 #[test]
 fn unknown_effects_keys_and_fixed_names_are_refused() {

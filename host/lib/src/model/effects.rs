@@ -288,9 +288,10 @@ impl Default for TimeDelay {
 /// Position-dependent motor torque `A sin(n θ_m + φ)`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TorqueRipple {
-    /// amplitude `A` [N·m]; default 0.01
+    /// amplitude `A` [N·m]; default 0.02
     pub amplitude: f64,
-    /// periods `n` per motor revolution [-]; default 36 (cogging of a 36-slot motor)
+    /// periods `n` per motor revolution [-]; default 72 (`jointid fit` finds it in the
+    /// data unless given, [`crate::ident::nonlinear::ripple`])
     pub order: f64,
     /// phase `φ` [rad]; default 0.5
     pub phase: f64,

@@ -46,6 +46,22 @@ pub struct Start {
     pub model: NlModel,
     /// the steps, in order
     pub steps: Vec<Step>,
+    /// layout names the fit must hold at the start's values (a ripple whose order the data
+    /// do not show: its amplitude at 0 and its phase)
+    pub held: Vec<String>,
+    /// what the start could not find, in words
+    pub warnings: Vec<String>,
+}
+
+/// Where the torque ripple's order comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum RippleOrder {
+    /// the order the model's ripple carries
+    #[default]
+    Given,
+    /// searched in the data ([`super::ripple::search_order`]) on the linear start, and again
+    /// on the linear fit with the ripple
+    FromData,
 }
 
 /// The automatic start of `model` on `data` (module documentation). `linear`: the
@@ -59,7 +75,22 @@ pub fn automatic_start(
     model: &NlModel,
     linear: Option<&[f64]>,
 ) -> Result<Start, NlError> {
+    automatic_start_with(data, model, linear, RippleOrder::Given)
+}
+
+/// As [`automatic_start`], the torque ripple's order taken from `order`.
+///
+/// # Errors
+/// As [`automatic_start`].
+pub fn automatic_start_with(
+    data: &IdData,
+    model: &NlModel,
+    linear: Option<&[f64]>,
+    order: RippleOrder,
+) -> Result<Start, NlError> {
     let mut steps = Vec::new();
+    let mut held: Vec<String> = Vec::new();
+    let mut warnings: Vec<String> = Vec::new();
     let err = |e: grey_box::GreyBoxError| NlError::Data(e.to_string());
     // step 1: rigid body
     let rigid = grey_box::rigid_idim(
@@ -227,6 +258,43 @@ pub fn automatic_start(
             })
             .collect()
     };
+    // the ripple's order from the data: on the linear start that explains the data best
+    let mut ripple = model.effects.iter().find_map(|e| match e {
+        Effect::TorqueRipple(r) => Some(*r),
+        _ => None,
+    });
+    let mut searched: Option<super::ripple::OrderSearch> = None;
+    if let (Some(r), RippleOrder::FromData) = (ripple.as_mut(), order) {
+        let m = NlModel {
+            effects: with_fc(fc_used),
+            ..model.clone()
+        };
+        let best_plant = plants
+            .iter()
+            .filter_map(|p| {
+                let v = m.values(p, offset, 0.0);
+                super::fit::cost_at(data, &m, &v).map(|c| (c, v))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        let found = match best_plant {
+            Some((_, v)) => super::ripple::search_order(data, &m, &v)?,
+            None => None,
+        };
+        match &found {
+            Some(f) if f.order.is_some() => {
+                r.order = f.best as f64;
+                r.amplitude = f.amplitude;
+                r.phase = f.phase;
+            }
+            _ => {
+                warnings.push(order_warning(found.as_ref()));
+                held.extend(["amplitude".to_string(), "phase".to_string()]);
+            }
+        }
+        steps.push(order_step(found.as_ref(), "on the linear start"));
+        searched = found;
+    }
+    let ripple_found = ripple.is_some() && held.is_empty();
     let mut lin: Option<super::fit::NlFit> = None;
     for plant in &plants {
         // the Coulomb level: the regression's, or the grid value that explains the data best
@@ -251,12 +319,14 @@ pub fn automatic_start(
         // phase from a grid on this linear start, so that the linear fit does not bend
         // the structure to explain it
         let mut effects = with_fc(fc);
-        if let Some(r) = model.effects.iter().find_map(|e| match e {
-            Effect::TorqueRipple(r) => Some(*r),
-            _ => None,
-        }) {
+        if let Some(r) = ripple.filter(|_| ripple_found) {
             let mut best: Option<(f64, Effect)> = None;
-            for cand in candidates(&Effect::TorqueRipple(r), plant, model, 0.0, u_rms) {
+            // the search's own amplitude and phase among the grid's
+            let own = searched.is_some().then_some(Effect::TorqueRipple(r));
+            for cand in candidates(&Effect::TorqueRipple(r), plant, model, 0.0, u_rms)
+                .into_iter()
+                .chain(own)
+            {
                 let mut with = effects.clone();
                 with.push(cand);
                 let m = NlModel {
@@ -337,9 +407,40 @@ pub fn automatic_start(
                 .iter()
                 .find(|e| matches!(e, Effect::TorqueRipple(_)))
                 .copied()
-                .unwrap_or(neutral(Effect::TorqueRipple(r))),
+                .unwrap_or(neutral(Effect::TorqueRipple(ripple.unwrap_or(r)))),
             other => neutral(other),
         });
+    }
+    // the order again on the linear fit with the ripple (a better residual than the linear
+    // start's): the travel tells neighbouring orders apart only where the model is good
+    if let (true, RippleOrder::FromData) = (ripple_found, order) {
+        let m = NlModel {
+            effects: lin
+                .model
+                .effects
+                .iter()
+                .filter(|e| !matches!(e, Effect::TorqueRipple(_)))
+                .copied()
+                .collect(),
+            ..lin.model.clone()
+        };
+        let v = m.values(&lin_plant, lin_offset, lin.get("v0").unwrap_or(0.0));
+        if let Some(f) = super::ripple::search_order(data, &m, &v)? {
+            if f.order.is_some() {
+                for e in current.iter_mut() {
+                    if let Effect::TorqueRipple(r) = e {
+                        if r.order != f.best as f64 {
+                            *r = crate::model::effects::TorqueRipple {
+                                amplitude: f.amplitude,
+                                order: f.best as f64,
+                                phase: f.phase,
+                            };
+                        }
+                    }
+                }
+            }
+            steps.push(order_step(Some(&f), "again on the linear fit"));
+        }
     }
     // the gearbox stiffness by name: its index differs between the structures
     let kg = model
@@ -408,7 +509,110 @@ pub fn automatic_start(
         values,
         model: start_model,
         steps,
+        held,
+        warnings,
     })
+}
+
+/// The step of an order search (`on`: what it searched on).
+fn order_step(found: Option<&super::ripple::OrderSearch>, on: &str) -> Step {
+    match found {
+        Some(f) => Step {
+            name: "torque_ripple order".into(),
+            values: vec![
+                ("order".into(), f.best as f64, "-"),
+                ("z".into(), f.z, "-"),
+                ("coherence".into(), f.coherence, "-"),
+                ("amplitude".into(), f.amplitude, "N·m"),
+                ("phase".into(), f.phase, "rad"),
+            ],
+            detail: format!(
+                "{}: the ripple of order {} removes {:.1} % of the velocity cost {on}, robust \
+                 z-score {:.1} against the orders of {}–{} a period or more apart from it \
+                 over the travel (significant from {})",
+                if f.order.is_some() {
+                    "found".to_string()
+                } else if let Some((n, z)) = f.below {
+                    format!(
+                        "no significant order (order {n}, below the candidates, lowers the cost \
+                         more, z-score {z:.1}, but the travel covers fewer than two of its \
+                         periods)"
+                    )
+                } else if f.z >= super::ripple::SIGNIFICANT_Z {
+                    format!(
+                        "no significant order (order {}'s ripple is not alike on the parts of \
+                         the record, coherence {:.2} below {}: a torque periodic in time, not \
+                         in the angle)",
+                        f.best,
+                        f.coherence,
+                        super::ripple::MIN_COHERENCE
+                    )
+                } else {
+                    "no significant order".to_string()
+                },
+                f.best,
+                100.0 * f.share,
+                f.z,
+                f.range.0,
+                f.range.1,
+                super::ripple::SIGNIFICANT_Z
+            ),
+        },
+        None => Step {
+            name: "torque_ripple order".into(),
+            values: Vec::new(),
+            detail: "no order searched: the motor's travel and speed leave no candidate \
+                     (the travel must cover two periods of the ripple)"
+                .into(),
+        },
+    }
+}
+
+/// The warning when the data show no ripple order.
+fn order_warning(found: Option<&super::ripple::OrderSearch>) -> String {
+    match found {
+        Some(f)
+            if f.below.is_some()
+                && (f.z < super::ripple::SIGNIFICANT_Z
+                    || f.coherence < super::ripple::MIN_COHERENCE) =>
+        {
+            format!(
+                "the data show no torque ripple of order {}–{}; the cost falls most at order {}, \
+             whose period the motor's travel covers fewer than two times, too few to tell a \
+             ripple from a smooth error against the angle; the ripple is held at amplitude 0 \
+             (move the joint further, or give `order=`)",
+                f.range.0,
+                f.range.1,
+                f.below.map_or(0, |b| b.0)
+            )
+        }
+        Some(f) if f.below.is_some() => format!(
+            "order {} lowers the cost significantly (z-score {:.1}), but order {}, whose \
+             period the motor's travel covers fewer than two times, lowers it more: a ripple \
+             below the orders the travel can tell, or a smooth error against the angle; the \
+             ripple is held at amplitude 0 (move the joint further, or give `order=`)",
+            f.best,
+            f.z,
+            f.below.map_or(0, |b| b.0)
+        ),
+        Some(f) => format!(
+            "the data show no torque ripple: no order in {}–{} lowers the cost significantly \
+             with the same ripple along the record (best {} at z-score {:.1}, significant \
+             from {}; coherence {:.2}, a ripple of the angle from {}); the ripple is held at \
+             amplitude 0 (give `order=` to fit one)",
+            f.range.0,
+            f.range.1,
+            f.best,
+            f.z,
+            super::ripple::SIGNIFICANT_Z,
+            f.coherence,
+            super::ripple::MIN_COHERENCE
+        ),
+        None => "no torque ripple order can be searched: the motor's travel covers two \
+                 periods of no order up to the speed's limit; the ripple is held at amplitude \
+                 0 (give `order=` to fit one)"
+            .into(),
+    }
 }
 
 /// The two-mass start with the lowest output-error cost (friction at its step-2 value) on a

@@ -9,6 +9,7 @@ pub mod export;
 pub mod fit;
 pub mod init;
 pub mod model;
+pub mod ripple;
 pub mod run;
 
 pub use export::{simulate_args, simulate_exact};
@@ -16,7 +17,7 @@ pub use fit::{
     cost_at, fit_output_error, fit_output_error_segments, interval_velocity, pooled_velocity_fit,
     simulate_velocity, Correlation, Gradient, NlError, NlFit, NlOptions, NlParam,
 };
-pub use init::{automatic_start, Start, Step};
+pub use init::{automatic_start, automatic_start_with, RippleOrder, Start, Step};
 pub use model::{NlModel, Owner, ParamDef, Scale};
 pub use run::{
     identify, identify_segments, linear_start, linear_start_segments, model_name, model_of, run,
@@ -24,6 +25,8 @@ pub use run::{
     NlResult, NlRun, NlRunError, NlStart, NlValidation,
 };
 
+#[cfg(test)]
+mod ripple_tests;
 #[cfg(test)]
 mod segments_tests;
 #[cfg(test)]

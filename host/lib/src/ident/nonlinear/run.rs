@@ -9,7 +9,7 @@ use thiserror::Error;
 use super::fit::{
     fit_output_error_segments, interval_velocity, pooled_velocity_fit, simulate_velocity,
 };
-use super::init::{automatic_start, Step};
+use super::init::{automatic_start_with, RippleOrder, Step};
 use super::model::{NlModel, Owner};
 use super::{NlError, NlFit, NlOptions};
 use crate::data::{Dataset, IdData};
@@ -47,8 +47,10 @@ pub struct NlRequest {
     pub structure: Structure,
     /// gear ratio `r` [-]
     pub r: f64,
-    /// effects to attach (their parameter values are ignored unless the start is given;
-    /// the ripple's order and an extra mode's attachment are taken as they are)
+    /// effects to attach (their parameter values are ignored unless the start is given; an
+    /// extra mode's attachment is taken as it is, and so is the ripple's order when
+    /// [`NlRequest::given`] holds its `order` or the start is given; else the automatic
+    /// start finds the order in the data)
     pub effects: Vec<Effect>,
     /// current-loop lag `tau_c` [s] to start from when not held (estimated); 0: none
     pub tau_c: f64,
@@ -258,6 +260,23 @@ pub fn identify(data: &IdData, req: &NlRequest) -> Result<NlResult, NlRunError> 
     identify_segments(std::slice::from_ref(data), req)
 }
 
+/// Where the automatic start takes the torque ripple's order from: the data, unless the
+/// request gives the ripple an `order` ([`NlRequest::given`]).
+fn ripple_order_of(req: &NlRequest) -> RippleOrder {
+    let given = req.effects.iter().enumerate().any(|(i, e)| {
+        matches!(e, Effect::TorqueRipple(_))
+            && req
+                .given
+                .get(i)
+                .is_some_and(|keys| keys.iter().any(|(k, _)| k == "order"))
+    });
+    if given {
+        RippleOrder::Given
+    } else {
+        RippleOrder::FromData
+    }
+}
+
 /// The longest of `data` (the first of equal length).
 fn longest(data: &[IdData]) -> Option<&IdData> {
     data.iter()
@@ -280,9 +299,14 @@ pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, Nl
     if let Some(t) = held {
         model.tau_c = t;
     }
+    let mut options = req.options.clone().for_structure(req.structure);
+    let mut start_warnings = Vec::new();
     let (steps, start_model, mut start) = match &req.start {
         NlStart::Automatic => {
-            let st = automatic_start(data, &model, req.linear.as_deref())?;
+            let st =
+                automatic_start_with(data, &model, req.linear.as_deref(), ripple_order_of(req))?;
+            options.fixed.extend(st.held);
+            start_warnings = st.warnings;
             (st.steps, st.model, st.values)
         }
         NlStart::Values(v) => (Vec::new(), model.clone(), v.clone()),
@@ -310,7 +334,6 @@ pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, Nl
             (Vec::new(), model.clone(), values)
         }
     };
-    let mut options = req.options.clone().for_structure(req.structure);
     let layout = start_model.layout();
     // an asymmetric Coulomb level takes the offset's place (`init::holds_offset`), unless
     // the offset is held at a value of the user's
@@ -353,7 +376,8 @@ pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, Nl
     let (fit_model, _) = start_model.with_values(&start);
     let fit_model = fit_model.refined_for(&start, velocity_rms(data), data.ts);
     let fit = fit_output_error_segments(all, &fit_model, &start, &options)?;
-    let warnings = checks(&fit);
+    let mut warnings = start_warnings;
+    warnings.extend(checks(&fit));
     let method = method(&options, &fit_model, held.is_some(), fit.model.tau_c > 0.0);
     Ok(NlResult {
         steps,

@@ -1,0 +1,327 @@
+//! The torque ripple's order from the data (issue 11, step 3 of the start: "ripple order
+//! and phase from the residual's spectrum against motor angle").
+//!
+//! The ripple `A sin(n θ_m + φ) = a sin(n θ_m) + b cos(n θ_m)` enters the model as a motor
+//! torque at the measured angle ([`super::model`]), so for a given order `n` the simulated
+//! velocity is `v̂_0 + a g_s + b g_c`, where `v̂_0` is the model without ripple and `g_s`,
+//! `g_c` its responses to the torques `sin(n θ_m)`, `cos(n θ_m)` (exact for a linear
+//! model, to first order with friction). The best `(a, b)` for each candidate order is then
+//! one 2 × 2 least-squares problem on the cost's prefiltered velocity residual, and its
+//! cost drop `d_n = eᵀ G (GᵀG)⁻¹ Gᵀ e` says how much of the residual the ripple of order `n`
+//! explains. A torque error that is not a ripple (a poor linear start, a slow load) also
+//! lowers the cost at every order a little; the true order stands out against that spread:
+//! its robust z-score `(d_n − median d)/(1.4826 MAD d)` over the candidates.
+//!
+//! Candidates: the orders whose angular period `2π/n` the motor's travel (the 1st to 99th
+//! percentile of `θ_m`) covers at least [`MIN_PERIODS`] times (over less, `sin(n θ)` is a
+//! smooth function of the angle and catches any position-dependent error), and whose torque
+//! frequency `n |ω|` at the 99th percentile of the speed stays below [`NYQUIST_SHARE`] of
+//! the Nyquist frequency (the sampled angle resolves the period), at most [`MAX_ORDER`].
+
+use nalgebra::{Matrix2, Vector2};
+use rustfft::num_complex::Complex64;
+use rustfft::FftPlanner;
+
+use super::fit::{interval_velocity, simulate_velocity, NlError};
+use super::model::NlModel;
+use crate::data::IdData;
+use crate::ident::linalg::{butter_highpass_sos, SosBank};
+
+/// Periods of the ripple the motor's travel must cover for its order to be a candidate.
+pub const MIN_PERIODS: f64 = 2.0;
+
+/// Share of the Nyquist frequency the ripple's torque frequency may reach at the 99th
+/// percentile of the motor speed.
+pub const NYQUIST_SHARE: f64 = 0.25;
+
+/// Highest order searched (periods per motor revolution).
+pub const MAX_ORDER: u32 = 240;
+
+/// Robust z-score from which the best order counts as found.
+pub const SIGNIFICANT_Z: f64 = 8.0;
+
+/// Parts of the record on which the ripple is fitted apart for [`OrderSearch::coherence`].
+pub const COHERENCE_PARTS: usize = 4;
+
+/// Coherence of the parts' ripples from which the order counts as a ripple of the angle.
+pub const MIN_COHERENCE: f64 = 0.6;
+
+/// Fewest candidate orders for the spread to mean anything.
+const MIN_CANDIDATES: usize = 8;
+
+/// What the order search found.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OrderSearch {
+    /// the best candidate when it is significant ([`SIGNIFICANT_Z`]) and no order below the
+    /// candidates ([`OrderSearch::below`]) beats it
+    pub order: Option<u32>,
+    /// the candidate whose ripple lowers the cost most
+    pub best: u32,
+    /// its robust z-score against the cost drops of the orders the travel tells apart from it
+    /// (their ripples differ from its by a period or more over the travel) [-]
+    pub z: f64,
+    /// how alike its ripple is on [`COHERENCE_PARTS`] parts of the record (1: the same; at
+    /// least [`MIN_COHERENCE`] for the order to be found) [-]
+    pub coherence: f64,
+    /// the share of the prefiltered velocity cost its ripple removes [-]
+    pub share: f64,
+    /// its least-squares amplitude [N·m] and phase [rad]
+    pub amplitude: f64,
+    /// phase `φ` of `A sin(n θ + φ)` [rad]
+    pub phase: f64,
+    /// lowest and highest candidate
+    pub range: (u32, u32),
+    /// an order below the candidates (the travel covers one to [`MIN_PERIODS`] of its
+    /// periods) that lowers the cost more than every candidate, with a significant z-score
+    /// of its own: a ripple or a smooth error against the angle, the travel too short to
+    /// tell; with one, no order is found
+    pub below: Option<(u32, f64)>,
+    /// each order's cost drop [(rad/s)²]
+    pub drops: Vec<(u32, f64)>,
+}
+
+/// The candidate orders for `data` ([`MIN_PERIODS`], [`NYQUIST_SHARE`], [`MAX_ORDER`]);
+/// `None` when no order qualifies.
+pub fn order_range(data: &IdData) -> Option<(u32, u32)> {
+    let span = span(data);
+    let v: Vec<f64> = interval_velocity(&data.y, data.ts)
+        .iter()
+        .map(|x| x.abs())
+        .collect();
+    let w_hi = percentile(&v, 0.99);
+    if !(span > 0.0 && w_hi > 0.0) {
+        return None;
+    }
+    let lo = (MIN_PERIODS * std::f64::consts::TAU / span).ceil().max(1.0);
+    let nyquist = std::f64::consts::PI / data.ts;
+    let hi = (NYQUIST_SHARE * nyquist / w_hi)
+        .floor()
+        .min(MAX_ORDER as f64);
+    (hi >= lo + MIN_CANDIDATES as f64 - 1.0).then_some((lo as u32, hi as u32))
+}
+
+/// The motor's travel: the 1st to the 99th percentile of the measured angle [rad].
+fn span(data: &IdData) -> f64 {
+    percentile(&data.y, 0.99) - percentile(&data.y, 0.01)
+}
+
+/// The `q` quantile of `x` (nearest rank).
+fn percentile(x: &[f64], q: f64) -> f64 {
+    let mut s: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
+    if s.is_empty() {
+        return f64::NAN;
+    }
+    s.sort_by(f64::total_cmp);
+    s[((s.len() - 1) as f64 * q).round() as usize]
+}
+
+/// Searches the ripple's order on `data` against `model` (no ripple attached) at its
+/// physical values `values` (module documentation). `None` when no order is a candidate
+/// ([`order_range`]).
+///
+/// The responses `g_s`, `g_c` are those of the linear structure without effects or current
+/// loop (the ripple acts on the motor after the current loop, and its frequencies lie far
+/// below the loop's bandwidth), one convolution each by FFT with the pulse response of the
+/// simulation, the ripple held over each sample interval at the mean of its two ends.
+///
+/// # Errors
+/// [`NlError::Unstable`] when the model does not simulate to finite values.
+pub fn search_order(
+    data: &IdData,
+    model: &NlModel,
+    values: &[f64],
+) -> Result<Option<OrderSearch>, NlError> {
+    let Some((lo, hi)) = order_range(data) else {
+        return Ok(None);
+    };
+    let ts = data.ts;
+    let len = data.len();
+    let v = interval_velocity(&data.y, ts);
+    let base = simulate_velocity(model, values, &data.u, ts, data.y[0], Some(&data.y))
+        .ok_or(NlError::Unstable)?;
+    let e = highpassed(
+        &v.iter().zip(&base).map(|(a, b)| a - b).collect::<Vec<_>>(),
+        ts,
+    );
+    let ssr: f64 = e.iter().map(|x| x * x).sum();
+    // pulse response of the linear structure: a unit torque held over the first interval
+    // moves the mean velocity of the intervals after it (`h[0]` = 0)
+    let (_, plant) = model.with_values(values);
+    let linear = NlModel {
+        effects: Vec::new(),
+        tau_c: 0.0,
+        ..model.clone()
+    };
+    let mut pulse = vec![0.0; len];
+    pulse[0] = 1.0;
+    let mut h = simulate_velocity(
+        &linear,
+        &linear.values(&plant, 0.0, 0.0),
+        &pulse,
+        ts,
+        0.0,
+        None,
+    )
+    .ok_or(NlError::Unstable)?;
+    h[0] = 0.0;
+    let size = (2 * len).next_power_of_two();
+    let mut planner = FftPlanner::<f64>::new();
+    let fwd = planner.plan_fft_forward(size);
+    let inv = planner.plan_fft_inverse(size);
+    let mut hf: Vec<Complex64> = h.iter().map(|&x| Complex64::new(x, 0.0)).collect();
+    hf.resize(size, Complex64::new(0.0, 0.0));
+    fwd.process(&mut hf);
+    // the prefiltered responses `[g_s, g_c]` to `sin(nθ)`, `cos(nθ)`, by one complex
+    // convolution of `e^{i n θ}` held over interval k at the mean of its ends
+    let mut buf = vec![Complex64::new(0.0, 0.0); size];
+    let mut responses = |n: u32| -> [Vec<f64>; 2] {
+        let nf = n as f64;
+        for (k, b) in buf.iter_mut().enumerate() {
+            *b = if k < len {
+                let a = data.y[k];
+                let c = data.y[(k + 1).min(len - 1)];
+                (Complex64::from_polar(1.0, nf * a) + Complex64::from_polar(1.0, nf * c)) * 0.5
+            } else {
+                Complex64::new(0.0, 0.0)
+            };
+        }
+        fwd.process(&mut buf);
+        for (b, hk) in buf.iter_mut().zip(&hf) {
+            *b *= hk;
+        }
+        inv.process(&mut buf);
+        let scale = 1.0 / size as f64;
+        let gc: Vec<f64> = buf[..len].iter().map(|z| z.re * scale).collect();
+        let gs: Vec<f64> = buf[..len].iter().map(|z| z.im * scale).collect();
+        [highpassed(&gs, ts), highpassed(&gc, ts)]
+    };
+    // down to the orders of one period over the travel: a ripple just below the candidates
+    // would otherwise show as the lowest candidate, a wrong order found
+    let below = lo.div_ceil(2).max(1);
+    let mut drops = Vec::with_capacity((hi - below + 1) as usize);
+    for n in below..=hi {
+        let g = responses(n);
+        let (drop, ab) = least_squares(&g, &e, 0..e.len());
+        drops.push((n, drop, ab));
+    }
+    let travel = span(data);
+    // robust z-score of order `best`'s drop against the chance level: the candidates the
+    // travel tells apart from it (their ripples differ by a period or more over it), whose
+    // drops are what a ripple-free residual gives
+    let z_of = |best: u32, drop: f64| {
+        let mut sorted: Vec<f64> = drops
+            .iter()
+            .filter(|d| d.0 >= lo && (d.0.abs_diff(best) as f64) * travel >= std::f64::consts::TAU)
+            .map(|d| d.1)
+            .collect();
+        if sorted.len() < MIN_CANDIDATES {
+            return 0.0;
+        }
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted[sorted.len() / 2];
+        let mut dev: Vec<f64> = sorted.iter().map(|d| (d - median).abs()).collect();
+        dev.sort_by(f64::total_cmp);
+        let mad = 1.4826 * dev[dev.len() / 2];
+        if mad > 0.0 {
+            (drop - median) / mad
+        } else {
+            0.0
+        }
+    };
+    let top = |from: u32| {
+        drops
+            .iter()
+            .filter(|d| d.0 >= from)
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .copied()
+    };
+    let (best, drop, ab) = top(lo).expect("at least MIN_CANDIDATES orders");
+    let z = z_of(best, drop);
+    let mut coherence_of = |n: u32| coherence(&responses(n), &e);
+    let best_coherence = coherence_of(best);
+    // an order below the candidates that beats them all and stands out itself
+    let below_best = top(below)
+        .filter(|d| d.0 < lo)
+        .map(|d| (d.0, z_of(d.0, d.1)))
+        .filter(|d| d.1 >= SIGNIFICANT_Z && coherence_of(d.0) >= MIN_COHERENCE);
+    Ok(Some(OrderSearch {
+        order: (z >= SIGNIFICANT_Z && best_coherence >= MIN_COHERENCE && below_best.is_none())
+            .then_some(best),
+        coherence: best_coherence,
+        best,
+        z,
+        share: if ssr > 0.0 { drop / ssr } else { 0.0 },
+        amplitude: ab[0].hypot(ab[1]),
+        phase: ab[1].atan2(ab[0]),
+        range: (lo, hi),
+        below: below_best,
+        drops: drops.iter().map(|d| (d.0, d.1)).collect(),
+    }))
+}
+
+/// The 2 × 2 least squares of `e` on the responses `g` over the samples `range`: the cost
+/// drop and `(a, b)`.
+fn least_squares(
+    g: &[Vec<f64>; 2],
+    e: &[f64],
+    range: std::ops::Range<usize>,
+) -> (f64, Vector2<f64>) {
+    let dot = |a: &[f64], b: &[f64]| {
+        a[range.clone()]
+            .iter()
+            .zip(&b[range.clone()])
+            .map(|(x, y)| x * y)
+            .sum::<f64>()
+    };
+    let gram = Matrix2::new(
+        dot(&g[0], &g[0]),
+        dot(&g[0], &g[1]),
+        dot(&g[1], &g[0]),
+        dot(&g[1], &g[1]),
+    );
+    let rhs = Vector2::new(dot(&g[0], e), dot(&g[1], e));
+    match gram.try_inverse() {
+        Some(inv) => {
+            let ab = inv * rhs;
+            (rhs.dot(&ab).max(0.0), ab)
+        }
+        None => (0.0, Vector2::zeros()),
+    }
+}
+
+/// How alike the ripple `(a, b)` fitted on each of [`COHERENCE_PARTS`] equal parts of the
+/// record is: `|Σ c_k|² / (K Σ |c_k|²)` with `c_k = a_k + i b_k`, 1 when every part
+/// gives the same ripple, about `1/K` when the phase wanders (a torque that is periodic in
+/// time, not in the angle, e.g. a slow load, correlates with `sin(n θ)` at the order where
+/// `n |ω|` is its frequency, with a phase that drifts along the record).
+fn coherence(g: &[Vec<f64>; 2], e: &[f64]) -> f64 {
+    let part = e.len() / COHERENCE_PARTS;
+    let (mut sum, mut power) = (Complex64::new(0.0, 0.0), 0.0);
+    for k in 0..COHERENCE_PARTS {
+        let (_, ab) = least_squares(g, e, k * part..(k + 1) * part);
+        let c = Complex64::new(ab[0], ab[1]);
+        sum += c;
+        power += c.norm_sqr();
+    }
+    if power > 0.0 {
+        sum.norm_sqr() / (COHERENCE_PARTS as f64 * power)
+    } else {
+        0.0
+    }
+}
+
+/// `x[1..]` through the cost's prefilter (the default high-pass, [`super::fit::cost_at`]).
+fn highpassed(x: &[f64], ts: f64) -> Vec<f64> {
+    let mut bank = SosBank::new(
+        butter_highpass_sos(2, super::fit::DEFAULT_HIGHPASS_HZ, ts),
+        1,
+    );
+    x.iter()
+        .skip(1)
+        .map(|&a| {
+            let mut s = [a];
+            bank.push(&mut s);
+            s[0]
+        })
+        .collect()
+}

@@ -1,0 +1,131 @@
+//! The torque ripple's order from the data ([`super::ripple`]): simulated three-mass joints
+//! with a hidden ripple of a known order, fitted as `jointid fit DATA --model three-mass
+//! --effect torque_ripple` fits them (no `order=`: the automatic start searches it).
+
+use super::*;
+use crate::data::Dataset;
+use crate::model::effects::{Effect, TorqueRipple};
+use crate::model::spec::Structure;
+use crate::sim::SimConfig;
+use jointid_core::excitation::ExcitationConfig;
+
+/// A periodic capture of the default three-mass joint with `effects` under the default
+/// sensors, the reference at `rms` [rad] (the motor's travel about 1.75 × it).
+fn capture(effects: Vec<Effect>, rms: f64, seed: u64) -> Dataset {
+    let cfg = SimConfig {
+        effects,
+        seed,
+        ..SimConfig::default()
+    };
+    let exc = ExcitationConfig {
+        rms_rad: rms as f32,
+        ..ExcitationConfig::paper_default()
+    };
+    crate::test_support::est_val_captures(&cfg, &exc, seed).0
+}
+
+/// `run` with a ripple of the default order (72) and no `order=` given, on `ds`.
+fn fit_without_order(ds: &Dataset) -> NlRun {
+    let req = NlRequest::new(
+        Structure::ThreeMass,
+        SimConfig::default().plant.params.r,
+        vec![Effect::default_by_name("torque_ripple").unwrap()],
+    );
+    let segs = std::slice::from_ref(ds);
+    run(
+        NlData {
+            estimation: std::slice::from_ref(&ds.data),
+            periodic: Some((segs, 1)),
+            validation: None,
+        },
+        &req,
+    )
+    .unwrap()
+}
+
+#[test]
+fn the_ripple_order_is_found_in_the_data_when_not_given() {
+    // a quarter of the default amplitude (0.005 of 0.02 N·m), the travel covering at
+    // least two periods of the order: 2.6 rad at 1.5 rad RMS, 0.87 rad at 0.5
+    for (order, rms, seed) in [
+        (6.0, 1.5, 11),
+        (24.0, 0.5, 12),
+        (40.0, 0.5, 13),
+        (72.0, 0.5, 14),
+    ] {
+        let truth = TorqueRipple {
+            amplitude: 0.005,
+            order,
+            phase: 0.5,
+        };
+        let ds = capture(vec![Effect::TorqueRipple(truth)], rms, seed);
+        let out = fit_without_order(&ds);
+        let step = out
+            .result
+            .steps
+            .iter()
+            .rfind(|s| s.name == "torque_ripple order")
+            .expect("the order search is a step of the start");
+        assert!(step.detail.starts_with("found"), "{}", step.detail);
+        let Effect::TorqueRipple(r) = out.result.fit.model.effects[0] else {
+            panic!("{:?}", out.result.fit.model.effects)
+        };
+        assert_eq!(r.order, order, "{}", step.detail);
+        assert!(
+            (r.amplitude / truth.amplitude - 1.0).abs() < 0.05 && (r.phase - 0.5).abs() < 0.1,
+            "order {order}: {r:?}"
+        );
+        assert!(out.result.warnings.is_empty(), "{:?}", out.result.warnings);
+    }
+}
+
+#[test]
+fn a_joint_without_ripple_shows_no_order_and_gets_no_ripple() {
+    for (rms, seed) in [(0.5, 21), (1.5, 22)] {
+        let ds = capture(Vec::new(), rms, seed);
+        let out = fit_without_order(&ds);
+        let step = out
+            .result
+            .steps
+            .iter()
+            .find(|s| s.name == "torque_ripple order")
+            .expect("the order search is a step of the start");
+        assert!(
+            step.detail.starts_with("no significant order"),
+            "{}",
+            step.detail
+        );
+        assert!(
+            out.result
+                .warnings
+                .iter()
+                .any(|w| w.starts_with("the data show no torque ripple")),
+            "{:?}",
+            out.result.warnings
+        );
+        // held at amplitude 0: the fitted model carries no ripple
+        let a = out
+            .result
+            .fit
+            .params
+            .iter()
+            .find(|p| p.name == "amplitude")
+            .unwrap();
+        assert!(a.fixed && a.value == 0.0, "{a:?}");
+    }
+}
+
+#[test]
+fn no_order_is_searched_where_the_travel_covers_no_two_periods() {
+    // the default motion (0.02 rad RMS reference, about 0.035 rad of travel at the motor):
+    // two periods of the highest order searched (240) take 0.052 rad, so none qualifies;
+    // at 0.05 rad RMS (0.087 rad) the orders from about 150 do
+    let ds = capture(Vec::new(), 0.02, 31);
+    assert_eq!(ripple::order_range(&ds.data), None);
+    let ds = capture(Vec::new(), 0.05, 31);
+    let (lo, hi) = ripple::order_range(&ds.data).unwrap();
+    assert!(
+        (130..=170).contains(&lo) && hi == ripple::MAX_ORDER,
+        "{lo}–{hi}"
+    );
+}
