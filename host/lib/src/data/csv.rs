@@ -304,6 +304,46 @@ fn parse_inner(
             });
         }
     }
+    if let Some(cfg) = &excitation {
+        // the period must be the data's: the longest piece repeats over it
+        let longest = starts
+            .iter()
+            .zip(starts.iter().skip(1).chain(std::iter::once(&rows)))
+            .map(|(&a, &b)| a..b)
+            .max_by_key(|r| r.len())
+            .unwrap_or(0..rows);
+        let piece = |c: &[f64]| c[longest.clone()].to_vec();
+        let after_ramp = t[longest.clone()]
+            .iter()
+            .position(|&tk| tk >= f64::from(cfg.ramp_samples) * ts * (1.0 - 1e-9))
+            .unwrap_or(longest.len());
+        let n = cfg.period_samples as usize;
+        // the reference repeats exactly; the measured columns to within their noise
+        let reference = map
+            .reference
+            .as_ref()
+            .and_then(|_| repeat_misfit(&piece(&columns[3]), after_ramp, n))
+            .map(|rho| (rho, REFERENCE_MISFIT_LIMIT, "the reference column"));
+        let measured = [1, 2]
+            .iter()
+            .filter_map(|&c| repeat_misfit(&piece(&columns[c]), after_ramp, n))
+            .min_by(f64::total_cmp)
+            .map(|rho| (rho, PERIOD_MISFIT_LIMIT, "both measured columns"));
+        if let Some((rho, _, which)) = reference.or(measured).filter(|(rho, limit, _)| rho > limit)
+        {
+            let (ln, _) = &meta["period_samples"];
+            return Err(DataError::BadMeta {
+                file: file(),
+                line: *ln,
+                key: "period_samples".into(),
+                reason: format!(
+                    "{n} samples is not the data's period: successive stretches of that length \
+                     differ by {:.2} % of their power in {which}",
+                    100.0 * rho
+                ),
+            });
+        }
+    }
     let meta: BTreeMap<String, String> = meta
         .into_iter()
         .filter(|(k, _)| excitation.is_none() || !EXCITATION_KEYS.contains(&k.as_str()))
@@ -330,6 +370,39 @@ fn parse_inner(
         })
         .collect();
     Ok((Record { pieces, notes }, first_gap))
+}
+
+/// Largest share of its power by which a measured column (torque, angle) may differ
+/// between successive periods for the stated period to be the data's (uncorrelated
+/// stretches differ by about 100 %; noise and disturbance by their share of the power).
+pub const PERIOD_MISFIT_LIMIT: f64 = 0.5;
+
+/// The same for the reference column, which the board repeats exactly from one table: a
+/// period one sample off the default excitation's 5000 differs by 1.3 %.
+pub const REFERENCE_MISFIT_LIMIT: f64 = 1e-5;
+
+/// Shortest period [samples] [`repeat_misfit`] judges: shorter ones are too few samples
+/// to tell a period from noise.
+const SHORTEST_CHECKED_PERIOD: usize = 32;
+
+/// How far `x` is from repeating every `n` samples from sample `from` on:
+/// `Σ (x_{k+n} − x_k)² / Σ ((x_k − x̄)² + (x_{k+n} − x̄)²)` over the whole periods (0:
+/// exactly periodic; about 1: no relation). `None` when fewer than two whole periods
+/// follow `from`, `n` is shorter than [`SHORTEST_CHECKED_PERIOD`], or `x` is constant.
+fn repeat_misfit(x: &[f64], from: usize, n: usize) -> Option<f64> {
+    let x = x.get(from..)?;
+    let whole = x.len() / n.max(1) * n;
+    if n < SHORTEST_CHECKED_PERIOD || whole < 2 * n {
+        return None;
+    }
+    let x = &x[..whole];
+    let mean = x.iter().sum::<f64>() / whole as f64;
+    let (mut num, mut den) = (0.0, 0.0);
+    for k in 0..whole - n {
+        num += (x[k + n] - x[k]).powi(2);
+        den += (x[k] - mean).powi(2) + (x[k + n] - mean).powi(2);
+    }
+    (den > 0.0).then(|| num / den)
 }
 
 fn parse_excitation(
@@ -637,6 +710,56 @@ mod tests {
         // a period that fits is accepted
         let ds = parse_csv(&with("10"), "p.csv", &ColumnMap::capture()).unwrap();
         assert_eq!(ds.excitation.unwrap().period_samples, 10);
+    }
+
+    #[test]
+    fn a_period_that_the_data_do_not_repeat_over_is_refused() {
+        // 5 periods of 40 samples after a ramp of 2: the reference repeats exactly, the
+        // measured columns to within a little noise
+        let n = 40;
+        // a deterministic scramble in [−0.5, 0.5) as the noise
+        let noise = |k: usize, m: usize| ((k * 7919 + m * 104_729) % 1009) as f64 / 1009.0 - 0.5;
+        let rows: String = (0..2 + 5 * n)
+            .map(|k| {
+                let ph = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
+                let r = ph.sin() + 0.3 * (3.0 * ph).sin();
+                let u = 2.0 * (ph + 0.4).sin() + 0.3 * noise(k, 1);
+                let y = 0.9 * r + 0.05 * noise(k, 2);
+                format!("{},{r},{u},{y}\n", k as f64 * 1e-3)
+            })
+            .collect();
+        let with = |period: usize| {
+            let c = ExcitationConfig {
+                period_samples: period as u32,
+                periods: 5,
+                ..cfg()
+            };
+            capture_text(&excitation_comment_lines(&c), &rows)
+        };
+        let ds = parse_csv(&with(n), "p.csv", &ColumnMap::capture()).unwrap();
+        assert_eq!(ds.excitation.unwrap().period_samples, 40);
+        // one sample off: the reference tells
+        let e = parse_csv(&with(n - 1), "p.csv", &ColumnMap::capture()).unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.starts_with("p.csv:3: `period_samples`: 39 samples is not the data's period")
+                && msg.ends_with("in the reference column"),
+            "{msg}"
+        );
+        // without a reference column the measured ones judge: the right period passes,
+        // a wrong one is refused
+        let map = ColumnMap {
+            reference: None,
+            ..ColumnMap::capture()
+        };
+        assert!(parse_csv(&with(n), "p.csv", &map).is_ok());
+        let e = parse_csv(&with(n * 5 / 4), "p.csv", &map).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("50 samples is not the data's period")
+                && e.to_string().ends_with("in both measured columns"),
+            "{e}"
+        );
     }
 
     #[test]
