@@ -312,21 +312,27 @@ fn parse_inner(
             .map(|(&a, &b)| a..b)
             .max_by_key(|r| r.len())
             .unwrap_or(0..rows);
-        let piece = |c: &[f64]| c[longest.clone()].to_vec();
-        let after_ramp = t[longest.clone()]
-            .iter()
-            .position(|&tk| tk >= f64::from(cfg.ramp_samples) * ts * (1.0 - 1e-9))
-            .unwrap_or(longest.len());
+        // its samples in the periods, between the ramp in and the ramp out (`periods` 0:
+        // no end) on the excitation's time line
         let n = cfg.period_samples as usize;
+        let (t_in, t_out) = (
+            f64::from(cfg.ramp_samples) * ts * (1.0 - 1e-9),
+            match cfg.periods {
+                0 => f64::INFINITY,
+                p => (f64::from(cfg.ramp_samples) + f64::from(p) * n as f64) * ts * (1.0 - 1e-9),
+            },
+        );
+        let in_periods: Vec<usize> = longest.filter(|&k| t[k] >= t_in && t[k] < t_out).collect();
+        let piece = |c: &[f64]| in_periods.iter().map(|&k| c[k]).collect::<Vec<f64>>();
         // the reference repeats exactly; the measured columns to within their noise
         let reference = map
             .reference
             .as_ref()
-            .and_then(|_| repeat_misfit(&piece(&columns[3]), after_ramp, n))
+            .and_then(|_| repeat_misfit(&piece(&columns[3]), n))
             .map(|rho| (rho, REFERENCE_MISFIT_LIMIT, "the reference column"));
         let measured = [1, 2]
             .iter()
-            .filter_map(|&c| repeat_misfit(&piece(&columns[c]), after_ramp, n))
+            .filter_map(|&c| repeat_misfit(&piece(&columns[c]), n))
             .min_by(f64::total_cmp)
             .map(|rho| (rho, PERIOD_MISFIT_LIMIT, "both measured columns"));
         if let Some((rho, _, which)) = reference.or(measured).filter(|(rho, limit, _)| rho > limit)
@@ -385,12 +391,11 @@ pub const REFERENCE_MISFIT_LIMIT: f64 = 1e-5;
 /// to tell a period from noise.
 const SHORTEST_CHECKED_PERIOD: usize = 32;
 
-/// How far `x` is from repeating every `n` samples from sample `from` on:
-/// `Σ (x_{k+n} − x_k)² / Σ ((x_k − x̄)² + (x_{k+n} − x̄)²)` over the whole periods (0:
-/// exactly periodic; about 1: no relation). `None` when fewer than two whole periods
-/// follow `from`, `n` is shorter than [`SHORTEST_CHECKED_PERIOD`], or `x` is constant.
-fn repeat_misfit(x: &[f64], from: usize, n: usize) -> Option<f64> {
-    let x = x.get(from..)?;
+/// How far `x` is from repeating every `n` samples:
+/// `Σ (x_{k+n} − x_k)² / Σ ((x_k − x̄)² + (x_{k+n} − x̄)²)` over its whole periods (0:
+/// exactly periodic; about 1: no relation). `None` when `x` holds fewer than two whole
+/// periods, `n` is shorter than [`SHORTEST_CHECKED_PERIOD`], or `x` is constant.
+fn repeat_misfit(x: &[f64], n: usize) -> Option<f64> {
     let whole = x.len() / n.max(1) * n;
     if n < SHORTEST_CHECKED_PERIOD || whole < 2 * n {
         return None;
