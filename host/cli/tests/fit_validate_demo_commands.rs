@@ -355,6 +355,59 @@ fn daisy_order_4_fit_on_first_half_reports_second_half_fit_via_cli() {
     assert!(fv > 80.0 && fv < 100.0, "validation FIT {fv}");
 }
 
+/// Issue 10, deliverable 2: `--domain time` on band-limited noise with the default sensors
+/// (slow torque disturbance on). The angle's output error used to follow the drift (seed 1:
+/// `k_g` 4,363 against 127,500); the fit checked against the record's Welch FRF now gives
+/// the seven identifiable parameters within 3 % and both modes within 0.5 %.
+#[test]
+fn three_mass_time_domain_fit_on_noise_does_not_follow_the_drift() {
+    let dir = tmpdir("td-noise");
+    let est = dir.join("n.jcap");
+    let o = jointid(&[
+        "simulate",
+        "--model",
+        "three-mass",
+        "--excitation",
+        "noise",
+        "--seed",
+        "1",
+        "--out",
+        est.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j = json_of(&jointid(&[
+        "fit",
+        est.to_str().unwrap(),
+        "--model",
+        "three-mass",
+        "--domain",
+        "time",
+        "--json",
+    ]));
+    for (name, t) in [
+        ("J_m", 1.0e-3),
+        ("J_a1", 11.66),
+        ("J_a2", 0.627),
+        ("k_g", 1.275e5),
+        ("k_a", 7.26e3),
+        ("d_g", 80.0),
+        ("d_a", 4.0),
+    ] {
+        let v = j["parameters"][name]["value"].as_f64().unwrap();
+        assert!((v - t).abs() < 0.03 * t, "{name} {v} (truth {t}): {j}");
+    }
+    let modes: Vec<f64> = j["resonances_hz"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(modes.len(), 2, "{modes:?}");
+    for (m, t) in modes.iter().zip([17.01, 23.00]) {
+        assert!((m / t - 1.0).abs() < 0.005, "mode {m} Hz (truth {t} Hz)");
+    }
+}
+
 /// The reproduction of issue 10: `jointid simulate` with its default sensors
 /// (quantised encoder, white noise, slow torque disturbance, 0.5 ms current
 /// loop), then `jointid fit --model three-mass` as the README writes it.

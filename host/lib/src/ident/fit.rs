@@ -13,7 +13,10 @@
 //! - physical models (rigid, two-, three- and four-mass, seed 000 eq. (5)–(8),
 //!   zero-order hold eq. (12)–(13)) through [`crate::ident::grey_box::fit`], with
 //!   initial values from the data (best of three starts, see `fit_grey`) and
-//!   standard deviations by the delta method; with decimation the starts
+//!   standard deviations by the delta method; a flexible model's fit checked against the
+//!   record's Welch FRF and, when it has followed the drift of the rigid-body integrator,
+//!   replaced by the FRF fit refined on the motor velocity ([`spectral`],
+//!   [`DRIFT_COST_RATIO`]); with decimation the starts
 //!   run on the decimated data and the best one is refined at the capture
 //!   rate, where the zero-order hold is exact, and compared with the
 //!   decimated data through the same anti-alias filter ([`FitData`],
@@ -55,6 +58,8 @@ use crate::model::spec::{Family, ModelSpec, Structure};
 
 mod frequency;
 pub use frequency::{below_frf, fit_frequency_domain};
+mod spectral;
+pub use spectral::DRIFT_COST_RATIO;
 
 #[cfg(test)]
 mod segments_tests;
@@ -218,6 +223,12 @@ pub enum FitError {
     /// the frequency-domain black box (its message as it is)
     #[error(transparent)]
     FrfBlackBox(#[from] crate::ident::frf_subspace::FrfSubspaceError),
+    /// the averaged FRF of a record without whole periods ([`crate::ident::frf::welch`])
+    #[error("FRF by averaged spectra: {0}")]
+    Welch(#[from] crate::ident::frf::FrfError),
+    /// the output-error refinement on the motor velocity ([`spectral`])
+    #[error("output error on the motor velocity failed: {0}")]
+    VelocityRefinement(String),
 }
 
 /// Rigid body with viscous and Coulomb friction and a torque offset,
@@ -696,7 +707,70 @@ fn canonical_branches(mut params: Vec<PhysParam>) -> Vec<PhysParam> {
     params
 }
 
+/// A flexible physical model: the output-error fit on the angle ([`fit_grey_angle`]),
+/// checked against the Welch FRF of the record at the capture rate and replaced by the FRF
+/// fit refined on the motor velocity when it has followed the drift ([`spectral`]: more
+/// than [`DRIFT_COST_RATIO`] times farther from that FRF than both the FRF fit and the
+/// refinement). The rigid body and a record whose FRF cannot be fitted keep the angle's fit.
 fn fit_grey(
+    data: &IdData,
+    raw: Option<&IdData>,
+    structure: Structure,
+    opts: &FitOptions,
+) -> Result<Fitted, FitError> {
+    let angle = fit_grey_angle(data, raw, structure, opts);
+    if structure.masses() < 2 {
+        return angle;
+    }
+    let capture = raw.unwrap_or(data);
+    let Ok(start) = spectral::welch_start(capture, structure, opts) else {
+        return angle;
+    };
+    let limit = spectral::DRIFT_COST_RATIO;
+    let d_angle = match &angle {
+        Ok(f) => match spectral::distance(&start, f) {
+            Some(d) if d <= limit * start.cost => return angle,
+            Some(d) => d,
+            None => return angle,
+        },
+        Err(_) => f64::INFINITY,
+    };
+    let q = (data.ts / capture.ts).round().max(1.0) as usize;
+    match (angle, spectral::velocity_refined(capture, &start, opts, q)) {
+        (Ok(a), Ok(mut v)) => {
+            let d_vel = spectral::distance(&start, &v).unwrap_or(f64::INFINITY);
+            if d_angle <= limit * d_vel {
+                return Ok(a);
+            }
+            v.method = format!(
+                "{}: its response lies {:.0} times the FRF fit's distance from the record's \
+                 FRF; replaced by {}",
+                a.method,
+                d_angle / start.cost,
+                v.method
+            );
+            Ok(v)
+        }
+        (Ok(mut a), Err(e)) => {
+            a.warnings.push(format!(
+                "the response lies {:.0} times the FRF fit's distance from the record's FRF \
+                 (Welch): the fit may follow a drift; the FRF fit refined on the motor \
+                 velocity failed: {e}",
+                d_angle / start.cost
+            ));
+            Ok(a)
+        }
+        (Err(e), Ok(mut v)) => {
+            v.method = format!("output error on the angle failed ({e}); {}", v.method);
+            Ok(v)
+        }
+        (Err(e), Err(_)) => Err(e),
+    }
+}
+
+/// The output-error fit of a physical model on the motor angle: starts from subspace
+/// models' modal frequencies, refined at the capture rate.
+fn fit_grey_angle(
     data: &IdData,
     raw: Option<&IdData>,
     structure: Structure,

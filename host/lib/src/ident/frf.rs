@@ -30,6 +30,8 @@
 //! one-sided 99 % quantile under "noise only" (log-normal approximation, see
 //! [`distortion_threshold_db`]).
 //!
+//! Records without whole periods: [`welch`] (Welch's averaged spectra).
+//!
 //! Two amplitudes (DESIGN.md §7): [`amplitude_trend`] compares the relative
 //! distortion of two runs; growing with amplitude points to saturation or
 //! polynomial stiffness, falling to backlash, dead zone or stiction.
@@ -43,6 +45,9 @@ use rustfft::{Fft, FftPlanner};
 use serde::Serialize;
 
 use crate::data::{Dataset, ExcitationConfig, IdData, PeriodLayout};
+
+pub mod welch;
+pub use welch::{welch_frf, WelchFrf, WelchOptions};
 
 /// Errors of the nonparametric analysis.
 #[derive(Debug, thiserror::Error)]
@@ -90,6 +95,17 @@ pub enum FrfError {
     SegmentsDiffer {
         /// the difference
         what: String,
+    },
+    /// the record is too short for Welch's averaged spectra ([`welch::welch_frf`])
+    #[error(
+        "{samples} samples hold fewer than 2 segments of {segment} samples: too short for an \
+         averaged FRF"
+    )]
+    TooFewSegments {
+        /// record length [samples]
+        samples: usize,
+        /// segment length [samples]
+        segment: usize,
     },
     /// data preparation failed
     #[error(transparent)]
