@@ -243,15 +243,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         if periodic.is_some() {
             writeln!(out, "  {FIT_NAME}: {:.2}", v.fit)?;
         }
-        if segments.len() > 1 {
-            writeln!(
-                out,
-                "  {fit_name} per segment (the figures above pool them):"
-            )?;
-            for sg in &segments {
-                sg.write_line(out, "    ")?;
-            }
-        }
+        write_segments(out, fit_name, &segments)?;
         writeln!(out, "  residual tests (99 %):")?;
         print_tests(out, "data", &v)?;
         if !finite {
@@ -414,15 +406,7 @@ fn run_nonlinear(
             "  motor-angle FIT [%] (toolbox compare, exact laws, unfiltered): {:.2}",
             v.angle_fit_percent
         )?;
-        if segments.len() > 1 {
-            writeln!(
-                out,
-                "  {fit_name} per segment (the figures above pool them):"
-            )?;
-            for sg in &segments {
-                sg.write_line(out, "    ")?;
-            }
-        }
+        write_segments(out, fit_name, &segments)?;
         if !finite {
             writeln!(
                 out,
@@ -479,4 +463,22 @@ fn outcome(fit_ok: bool) -> Outcome {
 /// The first line of the text report: `jointid validate: MODEL (FAMILY) on DATA`.
 fn title(mpath: &std::path::Path, model: &str, data: &str) -> String {
     format!("jointid validate: {} ({model}) on {data}", mpath.display())
+}
+
+/// The per-segment FITs under the pooled ones, when there are several segments.
+fn write_segments(
+    out: &mut dyn std::io::Write,
+    fit_name: &str,
+    segments: &[SegmentJson],
+) -> std::io::Result<()> {
+    if segments.len() > 1 {
+        writeln!(
+            out,
+            "  {fit_name} per segment (the figures above pool them):"
+        )?;
+        for sg in segments {
+            sg.write_line(out, "    ")?;
+        }
+    }
+    Ok(())
 }
