@@ -173,16 +173,27 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
     // a model fitted in the frequency domain is judged by the periodic
     // steady-state FIT on periodic data, as `fit` reported it; the
     // toolbox FIT (which drift and slow disturbances enter) stays beside it
+    // (an unstable model has no periodic steady state: its FIT is NaN, never a number
+    // read off a frequency response it never reaches; the rigid body's pole on z = 1 is
+    // the integrator every physical model has)
+    let steady = fitted.model.spectral_radius() <= 1.0 + 1e-9;
+    let periodic_fit = |frf: &jointid::ident::frf::Frf| {
+        if steady {
+            periodic_fit_percent(frf, &fitted.model.freq_response(&frf.freq_hz))
+        } else {
+            f64::NAN
+        }
+    };
     let periodic = saved
         .fit_name
         .as_deref()
         .filter(|n| *n == PERIODIC_FIT_NAME && (fitted.ts - ds.data.ts).abs() <= 1e-9 * ds.data.ts)
         .and_then(|_| analyze_segments(&segs, args.settle_periods).ok())
-        .map(|a| periodic_fit_percent(&a.frf, &fitted.model.freq_response(&a.frf.freq_hz)));
+        .map(|a| periodic_fit(&a.frf));
     let periodic_of = |d: &jointid::data::Dataset| {
         analyze_dataset(d, args.settle_periods)
             .ok()
-            .map(|a| periodic_fit_percent(&a.frf, &fitted.model.freq_response(&a.frf.freq_hz)))
+            .map(|a| periodic_fit(&a.frf))
     };
     let segments: Vec<SegmentJson> = segs
         .iter()

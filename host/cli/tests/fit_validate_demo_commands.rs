@@ -242,6 +242,32 @@ fn validate_of_a_diverging_model_fails_both_tests_and_exits_1() {
         text.contains("not ok: the model's simulated output is not finite"),
         "{text}"
     );
+    // the same model as if fitted in the frequency domain: an unstable model has no
+    // periodic steady state, so that FIT is NaN too (it printed 0.00)
+    let text = std::fs::read_to_string(&model).unwrap().replacen(
+        "\"source\"",
+        &format!(
+            "\"fit_name\":{},\"source\"",
+            serde_json::to_string(jointid::ident::frf_fit::PERIODIC_FIT_NAME).unwrap()
+        ),
+        1,
+    );
+    std::fs::write(&model, text).unwrap();
+    let o = jointid(&[
+        "validate",
+        model.to_str().unwrap(),
+        data.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(
+        j["fit_name"].as_str(),
+        Some(jointid::ident::frf_fit::PERIODIC_FIT_NAME),
+        "{j}"
+    );
+    assert!(j["fit"].is_null(), "NaN periodic FIT: {j}");
+    assert_eq!(j["fit_ok"], false, "{j}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -87,10 +87,22 @@ pub fn eigenvalues(m: &DMatrix<f64>) -> Vec<Complex<f64>> {
     if n == 0 {
         return Vec::new();
     }
-    let mut bal = m.clone();
+    // scaled by a power of two to entries of order one (exact; the eigenvalues scale
+    // back): the balancing squares the entries and never ends once a norm overflows
+    // (an entry of 1e308 hung `validate`)
+    let largest = m.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    if !largest.is_finite() {
+        return vec![Complex::new(f64::NAN, f64::NAN); n];
+    }
+    let scale = if largest > 0.0 {
+        2f64.powi(largest.log2().round() as i32)
+    } else {
+        1.0
+    };
+    let mut bal = m / scale;
     nalgebra::linalg::balancing::balance_parlett_reinsch(&mut bal);
     match Schur::try_new(bal, f64::EPSILON, SCHUR_MAX_ITER) {
-        Some(s) => s.complex_eigenvalues().iter().copied().collect(),
+        Some(s) => s.complex_eigenvalues().iter().map(|&l| l * scale).collect(),
         None => vec![Complex::new(f64::NAN, f64::NAN); n],
     }
 }
@@ -442,6 +454,29 @@ impl ContinuousSs {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn eigenvalues_of_huge_and_tiny_matrices_end_and_scale() {
+        // an entry of 1e308 overflowed the balancing's norms, which then never ended
+        let m = DMatrix::from_row_slice(1, 1, &[1e308]);
+        let l = eigenvalues(&m);
+        assert!(
+            (l[0].re / 1e308 - 1.0).abs() < 1e-12 && l[0].im == 0.0,
+            "{l:?}"
+        );
+        let m = DMatrix::from_row_slice(2, 2, &[0.0, -4e300, 1e300, 0.0]);
+        let l = eigenvalues(&m);
+        assert!(
+            l.iter().all(|z| (z.im.abs() / 2e300 - 1.0).abs() < 1e-12),
+            "{l:?}"
+        );
+        let m = DMatrix::from_row_slice(2, 2, &[1e-300, 0.0, 0.0, -3e-300]);
+        let mut l: Vec<f64> = eigenvalues(&m).iter().map(|z| z.re).collect();
+        l.sort_by(f64::total_cmp);
+        assert_eq!(l, vec![-3e-300, 1e-300]);
+        let m = DMatrix::from_row_slice(1, 1, &[f64::INFINITY]);
+        assert!(eigenvalues(&m)[0].re.is_nan());
+    }
 
     fn two_mass() -> ContinuousSs {
         // motor J1=0.01, load J2=0.03, k=400 N·m/rad, d=0.02, friction 0.001, velocity output
