@@ -548,29 +548,15 @@ pub fn fit_prepared_segments(data: &[FitData], opts: &FitOptions) -> Result<Fitt
                     "output-error search over all records stopped at the iteration limit".into(),
                 );
             }
-            let params = grey_box::phys_params(names, &pf.theta, &pf.std);
-            let pvals: Vec<f64> = pf.theta.iter().map(|t| t.exp()).collect();
-            let mut model = pf.model.clone();
-            model.k = None;
             let q = (longest.prepared.ts / ts).round().max(1.0) as usize;
-            Ok(Fitted {
-                spec: opts.spec.clone(),
-                output: opts.output,
-                ts,
-                model,
-                continuous: Some(gm.continuous(&pvals)),
-                params: canonical_branches(params),
-                friction: None,
-                warnings,
-                method: format!(
-                    "{}; then output error at the capture rate over {} records as separate \
-                     experiments (each its own initial state, {} iterations)",
-                    start.method,
-                    raw.len(),
-                    pf.iterations
-                ),
-                decimate: q,
-            })
+            let method = format!(
+                "{}; then output error at the capture rate over {} records as separate \
+                 experiments (each its own initial state, {} iterations)",
+                start.method,
+                raw.len(),
+                pf.iterations
+            );
+            Ok(physical_fitted(opts, &gm, &pf, (warnings, method), q))
         }
     }
 }
@@ -898,33 +884,47 @@ fn fit_grey_angle(
     if pf.termination == pem::Termination::MaxIterations {
         warnings.push("capture-rate output-error search stopped at the iteration limit".into());
     }
-    let names = structure.param_names();
+    let method = format!(
+        "grey box (initial values from the {q}-fold decimated data, best of {} starts, \
+         output error; then output error at the capture rate{}, {} iterations)",
+        orders.len(),
+        if gm.current_loop_tau > 0.0 {
+            format!(" with a {} ms current loop", 1e3 * gm.current_loop_tau)
+        } else {
+            String::new()
+        },
+        pf.iterations
+    );
+    Ok(physical_fitted(opts, &gm, &pf, (warnings, method), q))
+}
+
+/// The [`Fitted`] of a physical structure from its capture-rate output-error fit `pf`
+/// (log-parameters of `gm`'s structure): the simulation model (no noise gain), the
+/// continuous model and the parameters on their canonical branches.
+fn physical_fitted(
+    opts: &FitOptions,
+    gm: &DrivenModel,
+    pf: &pem::PemFit,
+    (warnings, method): (Vec<String>, String),
+    decimate: usize,
+) -> Fitted {
+    let names = gm.mechanics.structure.param_names();
     let params = grey_box::phys_params(names, &pf.theta, &pf.std);
     let pvals: Vec<f64> = pf.theta.iter().map(|t| t.exp()).collect();
     let mut model = pf.model.clone();
     model.k = None;
-    Ok(Fitted {
+    Fitted {
         spec: opts.spec.clone(),
         output: opts.output,
-        ts: raw.ts,
+        ts: gm.mechanics.ts,
         model,
         continuous: Some(gm.continuous(&pvals)),
         params: canonical_branches(params),
         friction: None,
         warnings,
-        method: format!(
-            "grey box (initial values from the {q}-fold decimated data, best of {} starts, \
-             output error; then output error at the capture rate{}, {} iterations)",
-            orders.len(),
-            if gm.current_loop_tau > 0.0 {
-                format!(" with a {} ms current loop", 1e3 * gm.current_loop_tau)
-            } else {
-                String::new()
-            },
-            pf.iterations
-        ),
-        decimate: q,
-    })
+        method,
+        decimate,
+    }
 }
 
 fn fit_rigid_coulomb(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitError> {
