@@ -861,25 +861,18 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
         }),
     };
     let mut best = best.ok_or(FrfFitError::NoStart)?;
-    // drive variants: lag only, delay only (each where estimated), by AIC; the variant
-    // starts with the dropped one's time added to the kept one (below the lines' top
-    // the two shift the phase alike), so a search that slid into the wrong one of the
-    // two (a delay where the data hold a lag) is not judged by a variant with no drive
+    // drive variants: lag only, delay only (each where estimated), by AIC
     if !fixed_drive[0] && !fixed_drive[1] {
         let aic = |c: &Candidate| c.cost + 2.0 * c.fit.n_free as f64;
-        // both variants start from the fit with both free
-        let full = best.clone();
         for drop in [nm, nm + 1] {
-            let mut th = full.theta.clone();
-            let keep = if drop == nm { nm + 1 } else { nm };
-            th[keep] += th[drop];
+            let mut th = best.theta.clone();
             th[drop] = 0.0;
-            let mut o = full.opts.clone();
+            let mut o = best.opts.clone();
             o.fixed[drop] = true;
             if let Ok(f) = lm::minimize(&sml_p, &th, &o) {
                 let c = Candidate {
                     theta: f.theta.clone(),
-                    start: full.start.clone(),
+                    start: best.start.clone(),
                     cost: f.ssr,
                     fit: f,
                     opts: o,
