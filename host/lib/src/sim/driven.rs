@@ -114,6 +114,38 @@ pub fn simulate_driven_with(
     start: &DrivenStart,
     integration: &IntegrationConfig,
 ) -> Result<DrivenOutput, SimError> {
+    simulate_driven_loaded(
+        plant,
+        effects,
+        current_loop_tau,
+        sample_interval_s,
+        u,
+        &[],
+        start,
+        integration,
+    )
+}
+
+/// As [`simulate_driven_with`], with a torque `load[k]` [N·m] held over `[kT, (k + 1)T)`
+/// and added to the motor torque after the delay and the current loop, where the
+/// closed-loop simulator adds its disturbance (an empty `load` is none; a shorter one is 0
+/// past its end). Why: a torque known as a function of a measured signal, e.g. the torque
+/// ripple at the measured motor angle ([`crate::diagnose::metric`]), enters the motor
+/// directly, not through the current loop.
+///
+/// # Errors
+/// As [`simulate_driven_with`]; a non-finite `load` sample is a [`SimError::BadTorque`].
+#[allow(clippy::too_many_arguments)]
+pub fn simulate_driven_loaded(
+    plant: &Plant,
+    effects: &[Effect],
+    current_loop_tau: f64,
+    sample_interval_s: f64,
+    u: &[f64],
+    load: &[f64],
+    start: &DrivenStart,
+    integration: &IntegrationConfig,
+) -> Result<DrivenOutput, SimError> {
     let (mut positive, nonneg) = plant_ranges(plant);
     positive.extend([
         ("current_loop_tau", current_loop_tau),
@@ -122,8 +154,10 @@ pub fn simulate_driven_with(
     check_ranges(&positive, &nonneg)?;
     check_integration(integration)?;
     check_effects(plant, effects)?;
-    if let Some((index, &value)) = u.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(SimError::BadTorque { index, value });
+    for x in [u, load] {
+        if let Some((index, &value)) = x.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(SimError::BadTorque { index, value });
+        }
     }
     let ts = sample_interval_s;
     let a = assemble_parts(plant, effects, current_loop_tau);
@@ -156,7 +190,14 @@ pub fn simulate_driven_with(
         // the delayed torques: u[k − n − 1] until the switch, u[k − n] after it
         let past = |lag: usize| k.checked_sub(lag).map_or(0.0, |j| u[j]);
         let (u_old, u_new) = (past(a.delay_whole + 1), past(a.delay_whole));
-        stepper.sample(&a, &mut x, &mut mode, u_old, u_new, 0.0);
+        stepper.sample(
+            &a,
+            &mut x,
+            &mut mode,
+            u_old,
+            u_new,
+            load.get(k).copied().unwrap_or(0.0),
+        );
     }
     Ok(out)
 }

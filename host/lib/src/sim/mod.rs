@@ -60,7 +60,9 @@ pub use crate::model::params::{JointParams, Plant};
 pub use crate::model::plant::{Mechanism, ModalFrequencies};
 pub use crate::model::spec::Structure;
 pub use controller::{Controller, ControllerConfig};
-pub use driven::{simulate_driven, simulate_driven_with, DrivenOutput, DrivenStart};
+pub use driven::{
+    simulate_driven, simulate_driven_loaded, simulate_driven_with, DrivenOutput, DrivenStart,
+};
 pub use sensors::{Disturbance, SensorConfig};
 
 use crate::model::plant::{MAX_BODIES, MAX_STATE};
@@ -394,8 +396,8 @@ pub enum SimError {
         /// its value
         value: f64,
     },
-    /// a torque reference given to [`simulate_driven`] is not finite
-    #[error("torque reference sample {index} is not finite ({value})")]
+    /// a torque reference (or load) given to [`simulate_driven`] is not finite
+    #[error("torque sample {index} is not finite ({value})")]
     BadTorque {
         /// sample index
         index: usize,
