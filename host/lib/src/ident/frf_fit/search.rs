@@ -180,6 +180,7 @@ pub(super) fn is_loss(name: &str) -> bool {
     name.starts_with('d') || name.starts_with('f') || name == "Fv"
 }
 
+#[derive(Clone)]
 pub(super) struct Candidate {
     pub(super) theta: Vec<f64>,
     pub(super) start: Vec<f64>,
