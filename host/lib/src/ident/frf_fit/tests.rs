@@ -588,6 +588,17 @@ fn sigma_calibration(
                 *w += 1;
             }
         }
+        if std::env::var("SIGMA_VERBOSE").is_ok() {
+            let errs: Vec<String> = (0..v.len())
+                .map(|i| format!("{:+.1}", 100.0 * (v[i] - t[i].ln())))
+                .collect();
+            println!(
+                "  seed {seed}: log errors [%] {} cost {:.3e} warnings {:?}",
+                errs.join(" "),
+                fit.cost,
+                fit.warnings
+            );
+        }
         vals.push(v);
         stds.push(s);
     }
@@ -641,7 +652,8 @@ fn standard_deviations_hold_with_realistic_sensors() {
 
 #[test]
 #[ignore = "σ calibration of every structure, minutes in release: cargo test --release -p jointid \
-            --lib -- --ignored sigma_table --nocapture (SIGMA_RUNS=N, SIGMA_ONLY=\"TwoMass\")"]
+            --lib -- --ignored sigma_table --nocapture (SIGMA_RUNS=N, SIGMA_ONLY=\"TwoMass\", \
+            SIGMA_VERBOSE=1 for each run)"]
 fn sigma_table() {
     let runs: u64 = std::env::var("SIGMA_RUNS")
         .ok()
