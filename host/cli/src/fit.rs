@@ -28,7 +28,7 @@ use jointid::data::output::check_output;
 use jointid::data::Dataset;
 use jointid::ident::fit::{
     below_frf, default_f_min, fit_frequency_domain, fit_prepared, fit_prepared_segments, log_grid,
-    param_map, FitData, FitOptions, Fitted, ParamJson,
+    param_map, FitData, FitMetric, FitOptions, Fitted, ParamJson, VELOCITY_FIT_NAME,
 };
 use jointid::ident::frf::{analyze_dataset, analyze_segments, FrfAnalysis};
 use jointid::ident::frf_fit::{self, PERIODIC_FIT_NAME};
@@ -392,10 +392,19 @@ pub struct FitReport {
     pub parameters: std::collections::BTreeMap<String, ParamJson>,
     /// name of the FIT definition
     pub fit_name: String,
+    /// which FIT `fit_estimation` and `fit_validation` are: `toolbox` (the output's),
+    /// `periodic` (the period-averaged steady state's) or `velocity` (the prefiltered motor
+    /// velocity's, for a model fitted on it: the angle's drift dominates the toolbox FIT)
+    pub fit_metric: &'static str,
     /// FIT on the estimation data [%]
     pub fit_estimation: f64,
     /// FIT on the validation data [%]
     pub fit_validation: Option<f64>,
+    /// with `fit_metric` `velocity`: the toolbox FIT of the angle on the estimation data [%]
+    /// (secondary: the drift dominates it)
+    pub fit_toolbox_estimation: Option<f64>,
+    /// as `fit_toolbox_estimation`, on the validation data [%]
+    pub fit_toolbox_validation: Option<f64>,
     /// identified resonance frequencies [Hz]
     pub resonances_hz: Vec<f64>,
     /// identified anti-resonance frequencies [Hz]
@@ -626,19 +635,28 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         .evaluate_on(&est, args.lags)
         .map_err(|e| format!("{}: {e}", ds.name))?;
     let vv = on_validation(&fitted, val.as_ref(), val_name.as_deref(), args.lags)?;
+    let fig = time_domain_figures(
+        &fitted,
+        std::slice::from_ref(&est),
+        val.as_ref(),
+        (&ev, vv.as_ref()),
+    )
+    .map_err(|e| format!("{}: {e}", ds.name))?;
     let est = &est.prepared;
     let measured = Measured {
         segments: vec![SegmentJson {
             segment: numbers[0],
             samples: ds.data.len(),
-            fit: Some(ev.fit),
+            fit: Some(fig.estimation),
         }],
         val_name,
         ts: est.ts,
         samples: est.len(),
-        fit_name: FIT_NAME,
-        fit_estimation: ev.fit,
-        fit_validation: vv.as_ref().map(|v| v.fit),
+        fit_name: fig.name,
+        fit_metric: fig.metric,
+        fit_estimation: fig.estimation,
+        fit_validation: fig.validation,
+        toolbox: fig.toolbox,
         res: fitted.resonances(default_f_min(est.len(), est.ts)),
         ev,
         vv,
@@ -836,6 +854,9 @@ fn run_segments(
         .map_err(|e| format!("{name}: {e}"))?;
     let vv = on_validation(&fitted, val.as_ref(), val_name.as_deref(), args.lags)?;
     let ts = est[0].prepared.ts;
+    let mut fig = time_domain_figures(&fitted, &est, val.as_ref(), (&ev, vv.as_ref()))
+        .map_err(|e| format!("{name}: {e}"))?;
+    let each = fig.each.take().unwrap_or(each);
     let measured = Measured {
         segments: used
             .iter()
@@ -850,9 +871,11 @@ fn run_segments(
         val_name,
         ts,
         samples: total,
-        fit_name: FIT_NAME,
-        fit_estimation: ev.fit,
-        fit_validation: vv.as_ref().map(|v| v.fit),
+        fit_name: fig.name,
+        fit_metric: fig.metric,
+        fit_estimation: fig.estimation,
+        fit_validation: fig.validation,
+        toolbox: fig.toolbox,
         res: fitted.resonances(default_f_min(total, ts)),
         ev,
         vv,
@@ -977,8 +1000,10 @@ fn run_frequency_domain(
         ts,
         samples: segs.iter().map(|d| d.data.len()).sum(),
         fit_name,
+        fit_metric: if periodic { "periodic" } else { "toolbox" },
         fit_estimation,
         fit_validation,
+        toolbox: None,
         res,
         ev,
         vv,
@@ -999,10 +1024,14 @@ struct Measured {
     samples: usize,
     /// which FIT the figures are
     fit_name: &'static str,
+    /// its short name ([`FitReport::fit_metric`])
+    fit_metric: &'static str,
     /// FIT on the estimation data [%]
     fit_estimation: f64,
     /// FIT on the validation data [%]
     fit_validation: Option<f64>,
+    /// the toolbox FIT on estimation and validation data when it is not the headline [%]
+    toolbox: Option<(f64, Option<f64>)>,
     /// the fitted model's resonances
     res: Resonances,
     /// residual tests on the estimation data
@@ -1025,7 +1054,9 @@ fn finish(
     let mut files = Vec::new();
     if let Some(path) = &args.save {
         let mut saved = fitted.to_saved(args.prep.prep(), &ds.name, m.fit_estimation);
-        saved.fit_name = (m.fit_name == PERIODIC_FIT_NAME).then(|| PERIODIC_FIT_NAME.to_string());
+        if m.fit_name == PERIODIC_FIT_NAME {
+            saved.fit_name = Some(PERIODIC_FIT_NAME.to_string());
+        }
         save_model(path, &saved, args.force)?;
         files.push(path.display().to_string());
     }
@@ -1058,8 +1089,11 @@ fn finish(
             p
         },
         fit_name: m.fit_name.into(),
+        fit_metric: m.fit_metric,
         fit_estimation: m.fit_estimation,
         fit_validation: m.fit_validation,
+        fit_toolbox_estimation: m.toolbox.map(|t| t.0),
+        fit_toolbox_validation: m.toolbox.and_then(|t| t.1),
         resonances_hz: m.res.resonances.iter().map(|r| r.freq_hz).collect(),
         antiresonances_hz: m.res.anti_resonances.iter().map(|r| r.freq_hz).collect(),
         residual_tests: ResidualTests {
@@ -1071,6 +1105,53 @@ fn finish(
         warnings: fitted.warnings.clone(),
     };
     emit(ctx, &report, args.strict)
+}
+
+/// The FIT figures of a time-domain fit ([`time_domain_figures`]).
+struct Figures {
+    name: &'static str,
+    metric: &'static str,
+    estimation: f64,
+    validation: Option<f64>,
+    /// each estimation record's, when not the toolbox FIT's
+    each: Option<Vec<f64>>,
+    /// the toolbox FIT on estimation and validation data, when it is not the headline
+    toolbox: Option<(f64, Option<f64>)>,
+}
+
+/// The FIT a time-domain fit reports on `est` and `val`: the toolbox FIT (`toolbox`: its
+/// residual tests there), or for a model fitted on the motor velocity
+/// ([`FitMetric::Velocity`]) the velocity FIT, the toolbox FIT beside it.
+fn time_domain_figures(
+    fitted: &Fitted,
+    est: &[FitData],
+    val: Option<&FitData>,
+    toolbox: (&Validation, Option<&Validation>),
+) -> Result<Figures, jointid::ident::fit::FitError> {
+    let (ev, vv) = (toolbox.0.fit, toolbox.1.map(|v| v.fit));
+    if fitted.fit_metric != FitMetric::Velocity {
+        return Ok(Figures {
+            name: FIT_NAME,
+            metric: "toolbox",
+            estimation: ev,
+            validation: vv,
+            each: None,
+            toolbox: None,
+        });
+    }
+    let (estimation, each) = fitted.velocity_fit_segments(est)?;
+    let validation = match val {
+        Some(v) => Some(fitted.velocity_fit_segments(std::slice::from_ref(v))?.0),
+        None => None,
+    };
+    Ok(Figures {
+        name: VELOCITY_FIT_NAME,
+        metric: "velocity",
+        estimation,
+        validation,
+        each: Some(each),
+        toolbox: Some((ev, vv)),
+    })
 }
 
 /// `fitted` evaluated on the validation record, when there is one (errors name it).
@@ -1199,6 +1280,17 @@ pub(crate) fn print_report(out: &mut dyn Write, r: &FitReport) -> std::io::Resul
     }
     if let Some(v) = r.fit_validation {
         writeln!(out, "    validation: {v:.2}")?;
+    }
+    if let Some(e) = r.fit_toolbox_estimation {
+        writeln!(
+            out,
+            "  {FIT_NAME} of the simulated output (the drift of the rigid-body integrator \
+             dominates it):"
+        )?;
+        writeln!(out, "    estimation: {e:.2}")?;
+        if let Some(v) = r.fit_toolbox_validation {
+            writeln!(out, "    validation: {v:.2}")?;
+        }
     }
     let hz = |v: &[f64]| {
         if v.is_empty() {

@@ -30,7 +30,7 @@ use super::fit_nl::{FitsJson, NL_FIT_NAME};
 use super::validate::{self as column_validate, ValidateArgs};
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::data::IdData;
-use jointid::ident::fit::FitData;
+use jointid::ident::fit::{FitData, FitMetric, VELOCITY_FIT_NAME};
 use jointid::ident::frf::{analyze_dataset, analyze_segments};
 use jointid::ident::frf_fit::{periodic_fit_percent, PERIODIC_FIT_NAME};
 use jointid::ident::model_file::SavedModel;
@@ -88,8 +88,10 @@ struct Report<'a> {
     samples: usize,
     ts: f64,
     fit_name: &'a str,
+    /// `toolbox`, `periodic` or `velocity` (as `fit --json`)
+    fit_metric: &'a str,
     fit: f64,
-    /// the toolbox FIT, also when `fit` is the periodic one
+    /// the toolbox FIT, also when `fit` is the periodic or the velocity one
     fit_toolbox: f64,
     fit_estimation: f64,
     require_fit: Option<f64>,
@@ -195,23 +197,36 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
             .ok()
             .map(|a| periodic_fit(&a.frf))
     };
+    // a model fitted on the motor velocity is judged by the velocity FIT, as `fit`
+    // reported it (the angle's drift dominates the toolbox FIT)
+    let velocity = if fitted.fit_metric == FitMetric::Velocity {
+        Some(
+            fitted
+                .velocity_fit_segments(&all)
+                .map_err(|e| format!("{}: {e}", ds.name))?,
+        )
+    } else {
+        None
+    };
     let segments: Vec<SegmentJson> = segs
         .iter()
         .zip(&numbers)
         .zip(&each)
-        .map(|((d, &k), &f)| SegmentJson {
+        .enumerate()
+        .map(|(i, ((d, &k), &f))| SegmentJson {
             segment: k,
             samples: d.data.len(),
-            fit: if periodic.is_some() {
-                periodic_of(d)
-            } else {
-                Some(f)
+            fit: match (&periodic, &velocity) {
+                (Some(_), _) => periodic_of(d),
+                (None, Some((_, vel))) => vel.get(i).copied(),
+                (None, None) => Some(f),
             },
         })
         .collect();
-    let (fit_name, fit) = match periodic {
-        Some(f) => (PERIODIC_FIT_NAME, f),
-        None => (FIT_NAME, v.fit),
+    let (fit_name, fit) = match (periodic, &velocity) {
+        (Some(f), _) => (PERIODIC_FIT_NAME, f),
+        (None, Some((f, _))) => (VELOCITY_FIT_NAME, *f),
+        (None, None) => (FIT_NAME, v.fit),
     };
     // a diverged simulation is never ok, with or without --require-fit
     let finite = fit.is_finite() && v.fit.is_finite() && v.whiteness.non_finite == 0;
@@ -227,6 +242,11 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
                 samples,
                 ts: data.ts,
                 fit_name,
+                fit_metric: match (periodic, &velocity) {
+                    (Some(_), _) => "periodic",
+                    (None, Some(_)) => "velocity",
+                    (None, None) => "toolbox",
+                },
                 fit,
                 fit_toolbox: v.fit,
                 fit_estimation: saved.fit_estimation,
@@ -251,7 +271,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
             "  {fit_name}: {fit:.2} (estimation: {:.2})",
             saved.fit_estimation
         )?;
-        if periodic.is_some() {
+        if periodic.is_some() || velocity.is_some() {
             writeln!(out, "  {FIT_NAME}: {:.2}", v.fit)?;
         }
         write_segments(out, fit_name, &segments)?;

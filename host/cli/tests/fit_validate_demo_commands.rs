@@ -660,3 +660,63 @@ fn fit_and_validate_check_their_arguments_before_fitting() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--domain time` on the simulator's default joint and sensors under noise excitation
+/// (issue 10): the model fitted on the motor velocity reports the velocity FIT, with the
+/// angle's toolbox FIT (which the drift dominates) beside it, and `validate` on the saved
+/// model reports the same figures.
+#[test]
+fn time_domain_fit_on_the_velocity_reports_the_velocity_fit() {
+    let dir = tmpdir("velocity_fit");
+    let (est, val, model) = (dir.join("n1.jcap"), dir.join("n2.jcap"), dir.join("m.json"));
+    for (seed, path) in [("1", &est), ("2", &val)] {
+        let o = jointid(&[
+            "simulate",
+            "--model",
+            "three-mass",
+            "--excitation",
+            "noise",
+            "--seed",
+            seed,
+            "--out",
+            path.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{o:?}");
+    }
+    let j = json_of(&jointid(&[
+        "fit",
+        est.to_str().unwrap(),
+        "--model",
+        "three-mass",
+        "--domain",
+        "time",
+        "--validation",
+        val.to_str().unwrap(),
+        "--save",
+        model.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(j["fit_metric"], "velocity", "{j}");
+    assert!(j["fit_name"].as_str().unwrap().starts_with("velocity FIT"));
+    let (e, v) = (
+        j["fit_estimation"].as_f64().unwrap(),
+        j["fit_validation"].as_f64().unwrap(),
+    );
+    assert!(e > 75.0 && v > 75.0, "velocity FIT {e} / {v}");
+    assert!(j["fit_toolbox_validation"].as_f64().unwrap() < 0.0, "{j}");
+    let k_g = j["parameters"]["k_g"]["value"].as_f64().unwrap();
+    assert!((k_g / 1.275e5 - 1.0).abs() < 0.03, "k_g {k_g}");
+    let w = json_of(&jointid(&[
+        "validate",
+        model.to_str().unwrap(),
+        val.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(w["fit_name"], j["fit_name"]);
+    assert_eq!(w["fit_metric"], "velocity");
+    let a = w["fit"].as_f64().unwrap();
+    assert!((a - v).abs() < 1e-6, "validate {a} vs fit {v}");
+    let t = w["fit_toolbox"].as_f64().unwrap();
+    let tj = j["fit_toolbox_validation"].as_f64().unwrap();
+    assert!((t - tj).abs() < 1e-6, "validate toolbox {t} vs fit {tj}");
+}

@@ -13,10 +13,12 @@
 //! - physical models (rigid, two-, three- and four-mass, seed 000 eq. (5)–(8),
 //!   zero-order hold eq. (12)–(13)) through [`crate::ident::grey_box::fit`], with
 //!   initial values from the data (best of three starts, see `fit_grey`) and
-//!   standard deviations by the delta method; a flexible model's fit checked against the
-//!   record's Welch FRF and, when it has followed the drift of the rigid-body integrator,
-//!   replaced by the FRF fit refined on the motor velocity ([`spectral`],
-//!   [`DRIFT_COST_RATIO`]); with decimation the starts
+//!   standard deviations by the delta method; a flexible model first fitted to the
+//!   record's Welch FRF and refined on the motor velocity, which is the model (reporting
+//!   the velocity FIT, [`FitMetric`]) when the angle is dominated by a drift of the
+//!   rigid-body integrator, else the angle's fit is run, checked against that FRF and
+//!   replaced when it has followed the drift ([`spectral`], [`DRIFT_COST_RATIO`]); with
+//!   decimation the starts
 //!   run on the decimated data and the best one is refined at the capture
 //!   rate, where the zero-order hold is exact, and compared with the
 //!   decimated data through the same anti-alias filter ([`FitData`],
@@ -298,6 +300,32 @@ impl RigidFriction {
     }
 }
 
+/// Name of the FIT reported for a model fitted on the motor velocity
+/// ([`FitMetric::Velocity`], [`Fitted::velocity_fit_segments`]).
+pub const VELOCITY_FIT_NAME: &str = "velocity FIT [%] (interval-mean motor velocity simulated \
+     from rest by the measured torque, both through the fit's 5 Hz second-order high-pass)";
+
+/// What the FIT reported for a [`Fitted`] measures.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FitMetric {
+    /// the toolbox FIT of the model's output ([`crate::ident::validate::FIT_NAME`])
+    #[default]
+    Output,
+    /// [`VELOCITY_FIT_NAME`]: the model was fitted on the prefiltered motor velocity
+    /// ([`spectral`]), where the drift the angle's FIT is dominated by does not enter
+    Velocity,
+}
+
+impl FitMetric {
+    /// `"output"` or `"velocity"` (the `fit_metric` of `--json`)
+    pub fn name(self) -> &'static str {
+        match self {
+            FitMetric::Output => "output",
+            FitMetric::Velocity => "velocity",
+        }
+    }
+}
+
 /// A fitted model that simulates the output from the input.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Fitted {
@@ -325,6 +353,9 @@ pub struct Fitted {
     /// decimated data (its output is decimated by the same filter, see
     /// [`FitData`])
     pub decimate: usize,
+    /// what its FIT measures: the output, or the prefiltered motor velocity it was
+    /// fitted on
+    pub fit_metric: FitMetric,
 }
 
 fn check(data: &IdData) -> Result<(), FitError> {
@@ -438,8 +469,9 @@ pub fn fit_prepared(data: &FitData, opts: &FitOptions) -> Result<Fitted, FitErro
 /// on all records together ([`pem::fit_segments`]: one cost summed over the records, each
 /// with its own initial state, one parameter vector, the covariance from all of them). A
 /// physical model is refined at the capture rate (with its current-loop lag), the black box
-/// at the prepared rate (within [`PEM_BUDGET`] over all samples). One record is
-/// [`fit_prepared`].
+/// at the prepared rate (within [`PEM_BUDGET`] over all samples); a physical model the
+/// longest record gave from the motor velocity ([`FitMetric::Velocity`]) is refined on the
+/// velocity over all records instead ([`spectral`]). One record is [`fit_prepared`].
 ///
 /// # Errors
 /// [`FitError::BadData`] for no record, [`FitError::SegmentsCoulomb`] for the rigid model
@@ -516,6 +548,11 @@ pub fn fit_prepared_segments(data: &[FitData], opts: &FitOptions) -> Result<Fitt
             let raw: Vec<IdData> = data.iter().map(|d| d.raw.clone()).collect();
             for r in &raw {
                 check(r)?;
+            }
+            if start.fit_metric == FitMetric::Velocity {
+                // the longest record's angle fit followed the drift or was not needed: the
+                // angle's output error over all records would follow it again
+                return spectral::velocity_refined_segments(&raw, &start, opts, start.decimate);
             }
             let ts = longest.raw.ts;
             let gm = DrivenModel {
@@ -663,6 +700,7 @@ fn fit_black_box(data: &IdData, n: usize, opts: &FitOptions) -> Result<Fitted, F
         warnings,
         method: desc,
         decimate: 1,
+        fit_metric: FitMetric::Output,
     })
 }
 
@@ -693,26 +731,56 @@ fn canonical_branches(mut params: Vec<PhysParam>) -> Vec<PhysParam> {
     params
 }
 
-/// A flexible physical model: the output-error fit on the angle ([`fit_grey_angle`]),
-/// checked against the Welch FRF of the record at the capture rate and replaced by the FRF
-/// fit refined on the motor velocity when it has followed the drift ([`spectral`]: more
-/// than [`DRIFT_COST_RATIO`] times farther from that FRF than both the FRF fit and the
-/// refinement). The rigid body and a record whose FRF cannot be fitted keep the angle's fit.
+/// A flexible physical model ([`spectral`]): the record's Welch FRF at the capture rate, the
+/// model fitted to it and refined by output error on the motor velocity. When that
+/// refinement converged and its response lies within [`DRIFT_COST_RATIO`] times the FRF
+/// fit's distance from the FRF, it is the model and the angle's output error is not run
+/// (it took most of the time and was thrown away on data with a slow disturbance).
+/// Otherwise the output-error fit on the angle ([`fit_grey_angle`]) runs and is kept unless
+/// it lies more than [`DRIFT_COST_RATIO`] times farther from the FRF than both the FRF fit
+/// and the refinement. The rigid body and a record whose FRF cannot be fitted take the
+/// angle's fit.
 fn fit_grey(
     data: &IdData,
     raw: Option<&IdData>,
     structure: Structure,
     opts: &FitOptions,
 ) -> Result<Fitted, FitError> {
-    let angle = fit_grey_angle(data, raw, structure, opts);
     if structure.masses() < 2 {
-        return angle;
+        return fit_grey_angle(data, raw, structure, opts);
     }
     let capture = raw.unwrap_or(data);
     let Ok(start) = spectral::welch_start(capture, structure, opts) else {
-        return angle;
+        return fit_grey_angle(data, raw, structure, opts);
     };
     let limit = spectral::DRIFT_COST_RATIO;
+    let q = (data.ts / capture.ts).round().max(1.0) as usize;
+    let vel = spectral::velocity_refined(capture, &start, opts, q).map(|r| {
+        let d = spectral::distance(&start, &r.fitted).unwrap_or(f64::INFINITY);
+        (r, d)
+    });
+    if let Ok((r, d_vel)) = &vel {
+        // the angle's toolbox FIT of the refined model: far below zero when a drift the
+        // model does not explain dominates the angle (the angle's output error would then
+        // follow it); near 100 % on data without one, where the angle's fit is run and kept
+        // as before
+        let angle_fit =
+            validate::fit_percent(&capture.y, &r.fitted.simulate(capture)).unwrap_or(f64::NAN);
+        if r.converged
+            && *d_vel <= limit * start.cost
+            && angle_fit < spectral::DRIFT_ANGLE_FIT
+            && r.velocity_fit >= spectral::MIN_VELOCITY_FIT
+        {
+            let mut v = r.fitted.clone();
+            v.method.push_str(&format!(
+                " (it converged and lies near the FRF, and its toolbox FIT of the angle is \
+                 {angle_fit:.0} %: the angle's output error, which would follow the drift, was \
+                 not run)"
+            ));
+            return Ok(v);
+        }
+    }
+    let angle = fit_grey_angle(data, raw, structure, opts);
     let d_angle = match &angle {
         Ok(f) => match spectral::distance(&start, f) {
             Some(d) if d <= limit * start.cost => return angle,
@@ -721,13 +789,12 @@ fn fit_grey(
         },
         Err(_) => f64::INFINITY,
     };
-    let q = (data.ts / capture.ts).round().max(1.0) as usize;
-    match (angle, spectral::velocity_refined(capture, &start, opts, q)) {
-        (Ok(a), Ok(mut v)) => {
-            let d_vel = spectral::distance(&start, &v).unwrap_or(f64::INFINITY);
+    match (angle, vel) {
+        (Ok(a), Ok((r, d_vel))) => {
             if d_angle <= limit * d_vel {
                 return Ok(a);
             }
+            let mut v = r.fitted;
             v.method = format!(
                 "{}: its response lies {:.0} times the FRF fit's distance from the record's \
                  FRF; replaced by {}",
@@ -746,7 +813,8 @@ fn fit_grey(
             ));
             Ok(a)
         }
-        (Err(e), Ok(mut v)) => {
+        (Err(e), Ok((r, _))) => {
+            let mut v = r.fitted;
             v.method = format!("output error on the angle failed ({e}); {}", v.method);
             Ok(v)
         }
@@ -827,6 +895,7 @@ fn fit_grey_angle(
                 f.pem.iterations
             ),
             decimate: 1,
+            fit_metric: FitMetric::Output,
         });
     }
     // refinement at the capture rate (and with the current loop), started
@@ -924,6 +993,7 @@ fn physical_fitted(
         warnings,
         method,
         decimate,
+        fit_metric: FitMetric::Output,
     }
 }
 
@@ -967,6 +1037,7 @@ fn fit_rigid_coulomb(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitErro
         )],
         method: "inverse-dynamics least squares (IDIM-LS), then output-error simulation".into(),
         decimate: 1,
+        fit_metric: FitMetric::Output,
     })
 }
 
@@ -1096,6 +1167,64 @@ impl Fitted {
             yh.extend(s);
         }
         Ok((validate::validate(&u, &y, &yh, lags)?, each))
+    }
+
+    /// [`VELOCITY_FIT_NAME`] on prepared records [%], pooled over them and each record's:
+    /// the model (at its own rate: the capture rate of a physical model, [`Fitted::decimate`])
+    /// driven by the measured torque from rest, its interval-mean motor velocity against the
+    /// measured one, both through the second-order high-pass at
+    /// [`crate::ident::nonlinear::fit::DEFAULT_HIGHPASS_HZ`] the velocity fit's cost uses
+    /// ([`crate::ident::nonlinear::pooled_velocity_fit`]). Started from rest, no initial
+    /// state is fitted to the angle (whose drift would set it); the prefilter's transient and
+    /// a torque offset's ramp decay within a fraction of a second.
+    ///
+    /// # Errors
+    /// [`FitError::DecimationMismatch`] for a record at another rate, [`FitError::BadData`]
+    /// for an unusable one, [`FitError::Validate`].
+    pub fn velocity_fit_segments(&self, data: &[FitData]) -> Result<(f64, Vec<f64>), FitError> {
+        use crate::ident::nonlinear::{fit::DEFAULT_HIGHPASS_HZ, interval_velocity};
+        let mut pairs = Vec::with_capacity(data.len());
+        for d in data {
+            let rec = if self.decimate > 1 {
+                &d.raw
+            } else {
+                &d.prepared
+            };
+            check(rec)?;
+            if (rec.ts - self.ts).abs() > 1e-3 * self.ts {
+                return Err(FitError::DecimationMismatch {
+                    model_ts: self.ts,
+                    model_q: self.decimate,
+                    data_ts: d.raw.ts,
+                    data_q: d.decimate,
+                });
+            }
+            let yh = match &self.friction {
+                Some(_) => self.simulate(rec),
+                None => self.model.simulate(&rec.u, None),
+            };
+            let (v, vh) = match self.output {
+                Output::Angle => (
+                    interval_velocity(&rec.y, rec.ts),
+                    interval_velocity(&yh, rec.ts),
+                ),
+                Output::Velocity => (rec.y.clone(), yh),
+            };
+            pairs.push((v[1..].to_vec(), vh[1..].to_vec()));
+        }
+        let ts = self.ts;
+        let each = pairs
+            .iter()
+            .map(|p| {
+                crate::ident::nonlinear::pooled_velocity_fit(
+                    std::slice::from_ref(p),
+                    ts,
+                    DEFAULT_HIGHPASS_HZ,
+                )
+            })
+            .collect::<Result<Vec<f64>, _>>()?;
+        let pooled = crate::ident::nonlinear::pooled_velocity_fit(&pairs, ts, DEFAULT_HIGHPASS_HZ)?;
+        Ok((pooled, each))
     }
 
     /// Lightly damped resonances and anti-resonances above `f_min_hz` [Hz]
@@ -1339,6 +1468,7 @@ mod tests {
             warnings: Vec::new(),
             method: String::new(),
             decimate: q,
+            fit_metric: FitMetric::Output,
         };
         let exact =
             validate::fit_percent(&fd.prepared.y, &fitted.simulate_on(&fd).unwrap()).unwrap();

@@ -22,7 +22,9 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::data::Prep;
-use crate::ident::fit::{output_name, param_map, Fitted, ParamJson, RigidFriction};
+use crate::ident::fit::{
+    output_name, param_map, FitMetric, Fitted, ParamJson, RigidFriction, VELOCITY_FIT_NAME,
+};
 use crate::ident::grey_box::{Output, PhysParam};
 use crate::ident::lm::Termination;
 use crate::ident::nonlinear::{simulate_args, NlFit, NlModel, NlParam, Owner};
@@ -53,7 +55,7 @@ impl Fitted {
             decimate_output: self.decimate,
             input_hold: None,
             fit_estimation,
-            fit_name: None,
+            fit_name: (self.fit_metric == FitMetric::Velocity).then(|| VELOCITY_FIT_NAME.into()),
             source: source.into(),
             nonlinear: None,
             spec: Some(self.spec.clone()),
@@ -121,8 +123,9 @@ pub struct SavedModel {
     pub fit_estimation: f64,
     /// which FIT `fit_estimation` is, when not the toolbox's (a model fitted
     /// in the frequency domain: the periodic steady-state FIT,
-    /// [`crate::ident::frf_fit::PERIODIC_FIT_NAME`]); `validate` reports the
-    /// same one on periodic data
+    /// [`crate::ident::frf_fit::PERIODIC_FIT_NAME`]; a model fitted on the motor
+    /// velocity: [`crate::ident::fit::VELOCITY_FIT_NAME`]); `validate` reports the
+    /// same one (the periodic one on periodic data)
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fit_name: Option<String>,
     /// estimation data file
@@ -330,6 +333,11 @@ impl SavedModel {
             warnings: Vec::new(),
             method: self.method.clone(),
             decimate: self.decimate_output,
+            fit_metric: if self.fit_name.as_deref() == Some(VELOCITY_FIT_NAME) {
+                FitMetric::Velocity
+            } else {
+                FitMetric::Output
+            },
         })
     }
 }

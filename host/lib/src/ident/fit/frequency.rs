@@ -11,7 +11,7 @@ use crate::ident::frf_subspace::black_box_frf;
 use crate::ident::grey_box::PhysParam;
 use crate::model::spec::{Family, Structure};
 
-use super::{FitError, FitOptions, Fitted};
+use super::{FitError, FitMetric, FitOptions, Fitted};
 
 /// Iterations of the black box's refinement by sample maximum likelihood.
 const BLACK_BOX_ITERATIONS: usize = 40;
@@ -76,6 +76,7 @@ pub fn fit_frequency_domain(
                 friction: None,
                 warnings: bb.warnings.iter().map(|w| w.to_string()).collect(),
                 decimate,
+                fit_metric: FitMetric::Output,
             })
         }
     }
@@ -124,6 +125,7 @@ fn fitted_of(opts: &FitOptions, ff: &FrfFit, analysis: &FrfAnalysis, decimate: u
             ff.starts
         ),
         decimate,
+        fit_metric: FitMetric::Output,
     }
 }
 
