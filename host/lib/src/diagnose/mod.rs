@@ -393,7 +393,22 @@ fn fit_and_score(
         .effects
         .iter()
         .position(|e| matches!(e, Effect::ExtraMode(_)));
-    if let Some(base) = from {
+    let with_coulomb = nl
+        .effects
+        .iter()
+        .any(|e| matches!(e, Effect::CoulombFriction(_)));
+    if let (true, Some(i), Some((plant, mode, tau_c))) =
+        (with_coulomb, extra_at, &starts.coulomb_extra_mode)
+    {
+        // Coulomb friction with an extra mode: the structure and the mode from the
+        // friction-compensated FRF of the structure with one more mass, the friction's
+        // level as given (a pair's: its single's fitted level)
+        nl.effects[i] = Effect::ExtraMode(*mode);
+        nl.tau_c = *tau_c;
+        nl.linear = Some(plant.clone());
+        let offset = from.and_then(|b| b.get("offset")).unwrap_or(0.0);
+        nl.start = NlStart::Values(model_of(&nl, longest).values(plant, offset, 0.0));
+    } else if let Some(base) = from {
         nl.tau_c = base.model.tau_c;
         nl.linear = Some(base.plant.clone());
         let offset = base.get("offset").unwrap_or(0.0);
@@ -403,6 +418,10 @@ fn fit_and_score(
         nl.tau_c = *tau_c;
         nl.linear = Some(plant.clone());
         nl.start = NlStart::Values(model_of(&nl, longest).values(plant, 0.0, 0.0));
+    } else if let (true, Some((plant, tau_c))) = (with_coulomb, &starts.coulomb) {
+        // Coulomb friction: the linear start from the friction-compensated FRF
+        nl.tau_c = *tau_c;
+        nl.linear = Some(plant.clone());
     }
     let res = identify_segments(est, &nl).map_err(|e| e.to_string())?;
     let model = DrivenModel::of_fit(&res.fit);
@@ -657,6 +676,13 @@ struct LinearStarts {
     /// the structure's values, the extra mode and the lag [s], from the structure with one
     /// more mass ([`extra_mode_start`])
     extra_mode: Option<(Vec<f64>, ExtraMode, f64)>,
+    /// as `structure`, from the friction-compensated FRF
+    /// ([`crate::ident::nonlinear::compensate`]), for candidates with Coulomb friction; `None`
+    /// when the compensation was not used
+    coulomb: Option<(Vec<f64>, f64)>,
+    /// as `extra_mode`, from the friction-compensated FRF, for pairs of Coulomb friction and
+    /// an extra mode
+    coulomb_extra_mode: Option<(Vec<f64>, ExtraMode, f64)>,
 }
 
 /// The start of `structure` with an extra mode attached as `attach` says, from the
@@ -670,6 +696,7 @@ fn extra_mode_start(
     structure: Structure,
     r: f64,
     attach: Attach,
+    coulomb: Option<Effect>,
 ) -> Option<(Vec<f64>, ExtraMode, f64)> {
     // the bigger structure, and where its extra body's inertia, spring and damper sit
     let (bigger, keep, extra): (Structure, &[usize], [usize; 3]) = match (structure, attach) {
@@ -681,10 +708,36 @@ fn extra_mode_start(
         }
         _ => return None,
     };
-    let l = linear_start_segments(ds, 1, &NlRequest::new(bigger, r, Vec::new())).ok()?;
+    let l = linear_start_segments(
+        ds,
+        1,
+        &NlRequest::new(bigger, r, coulomb.into_iter().collect()),
+    )
+    .ok()?;
+    if coulomb.is_some() && !compensation_used(&l) {
+        return None;
+    }
     let plant = keep.iter().map(|&i| l.values[i]).collect();
     let [j, k, d] = extra.map(|i| l.values[i]);
     Some((plant, ExtraMode { j, k, d, attach }, l.tau_c))
+}
+
+/// Whether a linear start is the friction-compensated FRF's.
+fn compensation_used(l: &crate::ident::nonlinear::LinearStart) -> bool {
+    l.compensation
+        .as_ref()
+        .is_some_and(|c| c.values.iter().any(|(n, v, _)| n == "used" && *v > 0.0))
+}
+
+/// The linear start from the friction-compensated FRF ([`LinearStarts::coulomb`]).
+fn coulomb_linear_of(
+    ds: &[Dataset],
+    req: &DiagnoseRequest,
+    coulomb: Effect,
+) -> Option<(Vec<f64>, f64)> {
+    let l =
+        linear_start_segments(ds, 1, &NlRequest::new(req.structure, req.r, vec![coulomb])).ok()?;
+    compensation_used(&l).then_some((l.values, l.tau_c))
 }
 
 fn linear_of(
@@ -865,12 +918,24 @@ pub fn diagnose_segments(
                 .join(", ")
         ));
     }
+    let coulomb = candidates
+        .iter()
+        .find(|e| matches!(e, Effect::CoulombFriction(_)))
+        .copied();
+    let extra = candidates.iter().find_map(|e| match e {
+        Effect::ExtraMode(x) => Some(x.attach),
+        _ => None,
+    });
     let starts = LinearStarts {
         structure: linear_of(est[0], req, &mut warnings),
-        extra_mode: candidates.iter().find_map(|e| match e {
-            Effect::ExtraMode(x) => extra_mode_start(est[0], req.structure, req.r, x.attach),
+        extra_mode: extra.and_then(|a| extra_mode_start(est[0], req.structure, req.r, a, None)),
+        coulomb: coulomb.and_then(|c| coulomb_linear_of(est[0], req, c)),
+        coulomb_extra_mode: match (coulomb, extra) {
+            (Some(c), Some(a)) if o.pairs => {
+                extra_mode_start(est[0], req.structure, req.r, a, Some(c))
+            }
             _ => None,
-        }),
+        },
     };
     let est_data: Vec<IdData> = est[0].iter().map(|d| d.data.clone()).collect();
 

@@ -5,6 +5,7 @@
 //! simulator's ([`crate::model::laws`]); the non-smooth ones (Coulomb friction, backlash)
 //! enter the fit in their documented smooth form ([`model`]).
 
+pub mod compensate;
 pub mod export;
 pub mod fit;
 pub mod init;
