@@ -33,6 +33,7 @@ use jointid_core::wire::SessionHeader;
 use crate::data::{Dataset, IdData};
 
 pub mod can;
+pub mod canlog;
 pub mod export;
 pub mod jcap;
 pub mod live;
