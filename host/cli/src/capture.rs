@@ -51,6 +51,12 @@ pub struct CaptureArgs {
     #[arg(long, value_name = "BIT/S", value_parser = parse_slcan_bitrate,
           conflicts_with_all = ["serial", "can", "candump", "tcp", "tcp_listen", "file"])]
     pub slcan_bitrate: Option<u32>,
+    /// CAN FD data-phase bit rate of the slcan adapter [bit/s]: 500000, 1000000, 2000000,
+    /// 4000000 or 5000000 (`Y0`..`Y5` of CANable 2.0-class adapters; the firmware sends
+    /// at 5000000); default: the adapter's own setting
+    #[arg(long, value_name = "BIT/S", value_parser = parse_slcan_data_bitrate,
+          conflicts_with_all = ["serial", "can", "candump", "tcp", "tcp_listen", "file"])]
+    pub slcan_data_bitrate: Option<u32>,
     /// `candump -l` log file to replay (`(1700000000.123456) can0 101#80...`)
     #[arg(long, value_name = "LOG")]
     pub candump: Option<PathBuf>,
@@ -133,6 +139,14 @@ fn parse_slcan_bitrate(s: &str) -> Result<u32, String> {
     Ok(v)
 }
 
+fn parse_slcan_data_bitrate(s: &str) -> Result<u32, String> {
+    let v: u32 = s
+        .parse()
+        .map_err(|_| format!("`{s}` is not a bit rate in bit/s"))?;
+    jointid::capture::canlog::slcan_data_bitrate_command(v)?;
+    Ok(v)
+}
+
 fn parse_seconds(s: &str) -> Result<f64, String> {
     let v: f64 = s
         .parse()
@@ -173,6 +187,7 @@ impl CaptureArgs {
                 port: port.clone(),
                 baud: self.baud.unwrap_or(DEFAULT_SLCAN_BAUD),
                 bitrate: self.slcan_bitrate,
+                data_bitrate: self.slcan_data_bitrate,
                 id: self.board_can_id(),
             }
         } else if let Some(path) = &self.candump {
@@ -422,6 +437,7 @@ mod tests {
                 port: "/dev/ttyACM1".into(),
                 baud: DEFAULT_SLCAN_BAUD,
                 bitrate: Some(500_000),
+                data_bitrate: None,
                 id: embedded_can::StandardId::new(0x321).map(Into::into),
             }
         );
@@ -475,6 +491,22 @@ mod tests {
                 "r.jcap",
             ],
             &["--candump", "l", "--baud", "9600", "--out", "r.jcap"],
+            &[
+                "--slcan",
+                "p",
+                "--slcan-data-bitrate",
+                "3000000",
+                "--out",
+                "r.jcap",
+            ],
+            &[
+                "--can",
+                "c",
+                "--slcan-data-bitrate",
+                "5000000",
+                "--out",
+                "r.jcap",
+            ],
         ] {
             assert!(parse(bad).is_err(), "{bad:?} should be rejected");
         }

@@ -394,6 +394,8 @@ fn slcan_over_a_pty_records_the_damage_and_every_intact_sample_bit_exact() {
             socat.b.to_str().unwrap(),
             "--slcan-bitrate",
             "1000000",
+            "--slcan-data-bitrate",
+            "5000000",
             "--out",
             out.to_str().unwrap(),
             "--json",
@@ -415,10 +417,10 @@ fn slcan_over_a_pty_records_the_damage_and_every_intact_sample_bit_exact() {
         .open(&socat.a)
         .unwrap();
     let commands = read_until(&mut adapter_in, b"O\r", Duration::from_secs(10));
-    assert_eq!(commands, b"C\rS8\rO\r");
-    // replies: BEL to `C` (the channel was closed already: not an error), OK, OK
-    let mut text = b"\x07\r\r".to_vec();
-    let mut line = 3u64;
+    assert_eq!(commands, b"C\rS8\rY5\rO\r");
+    // replies: BEL to `C` (the channel was closed already: not an error), OK, OK, OK
+    let mut text = b"\x07\r\r\r".to_vec();
+    let mut line = 4u64;
     let mut bad = Vec::new();
     for (i, f) in d.frames.iter().enumerate() {
         match i {

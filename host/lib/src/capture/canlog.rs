@@ -511,6 +511,31 @@ pub fn slcan_bitrate_command(bitrate: u32) -> Result<&'static str, String> {
         })
 }
 
+/// The slcan data-phase bit-rate command of CAN FD adapters (CANable 2.0, WeAct
+/// USB2CANFD) for `bitrate` [bit/s]: `Y0` (500 kbit/s), `Y1`, `Y2`, `Y4`, `Y5` (5 Mbit/s,
+/// the firmware's).
+///
+/// # Errors
+/// The bit rates there are, when `bitrate` is not one of them.
+pub fn slcan_data_bitrate_command(bitrate: u32) -> Result<&'static str, String> {
+    const RATES: [(u32, &str); 5] = [
+        (500_000, "Y0"),
+        (1_000_000, "Y1"),
+        (2_000_000, "Y2"),
+        (4_000_000, "Y4"),
+        (5_000_000, "Y5"),
+    ];
+    RATES
+        .iter()
+        .find(|(r, _)| *r == bitrate)
+        .map(|(_, c)| *c)
+        .ok_or_else(|| {
+            format!(
+                "{bitrate} bit/s is not an slcan data bit rate (500000, 1000000, 2000000, 4000000, 5000000)"
+            )
+        })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -723,6 +748,8 @@ mod tests {
     fn slcan_bitrates_map_to_their_commands() {
         assert_eq!(slcan_bitrate_command(1_000_000), Ok("S8"));
         assert_eq!(slcan_bitrate_command(125_000), Ok("S4"));
+        assert_eq!(slcan_data_bitrate_command(5_000_000), Ok("Y5"));
+        assert!(slcan_data_bitrate_command(3_000_000).is_err());
         assert!(slcan_bitrate_command(2_000_000)
             .unwrap_err()
             .contains("not an slcan bit rate"));

@@ -75,6 +75,8 @@ pub enum SourceSpec {
         baud: u32,
         /// CAN bit rate [bit/s] (`None`: the adapter's current setting)
         bitrate: Option<u32>,
+        /// CAN FD data-phase bit rate [bit/s] (`None`: the adapter's current setting)
+        data_bitrate: Option<u32>,
         /// identifier of the board's frames (`None`: every data frame)
         id: Option<embedded_can::Id>,
     },
@@ -325,8 +327,12 @@ impl SourceSpec {
                 port,
                 baud,
                 bitrate,
+                data_bitrate,
                 id,
-            } => spawn_slcan(port, *baud, *bitrate, *id, tx, stop.clone(), retry)?,
+            } => {
+                let rates = (*bitrate, *data_bitrate);
+                spawn_slcan(port, *baud, rates, *id, tx, stop.clone(), retry)?
+            }
             Self::Candump { path, id } => {
                 spawn_candump(path.clone(), *id, tx, stop.clone(), name.clone())?
             }
@@ -681,23 +687,26 @@ fn spawn_candump(
 }
 
 /// Opens the slcan adapter's port and its CAN channel: `C` (close, in case it was left
-/// open), the bit rate, `O`. Their replies are read with the frames ([`LineReader`]).
+/// open), the bit rates `(nominal, data)` when given, `O`. Their replies are read with
+/// the frames ([`LineReader`]).
 fn open_slcan(
     port: &str,
     baud: u32,
-    bitrate: Option<u32>,
+    (bitrate, data_bitrate): (Option<u32>, Option<u32>),
     reader: &mut LineReader,
 ) -> Result<Box<dyn serialport::SerialPort>, SourceError> {
-    let mut link = open_serial(port, baud)?;
+    let refused = |message| SourceError::SerialOpen {
+        port: port.to_string(),
+        message,
+    };
     let mut commands = vec!["C"];
     if let Some(b) = bitrate {
-        commands.push(super::canlog::slcan_bitrate_command(b).map_err(|message| {
-            SourceError::SerialOpen {
-                port: port.to_string(),
-                message,
-            }
-        })?);
+        commands.push(super::canlog::slcan_bitrate_command(b).map_err(refused)?);
     }
+    if let Some(b) = data_bitrate {
+        commands.push(super::canlog::slcan_data_bitrate_command(b).map_err(refused)?);
+    }
+    let mut link = open_serial(port, baud)?;
     commands.push("O");
     for c in commands {
         io::Write::write_all(&mut link, format!("{c}\r").as_bytes()).map_err(|e| {
@@ -716,14 +725,14 @@ fn open_slcan(
 fn spawn_slcan(
     port: &str,
     baud: u32,
-    bitrate: Option<u32>,
+    rates: (Option<u32>, Option<u32>),
     id: Option<embedded_can::Id>,
     tx: Sender<SourceMsg>,
     stop: Arc<AtomicBool>,
     retry: RetryPolicy,
 ) -> Result<JoinHandle<()>, SourceError> {
     let mut reader = LineReader::new(LineFormat::Slcan, id);
-    let mut link = open_slcan(port, baud, bitrate, &mut reader)?;
+    let mut link = open_slcan(port, baud, rates, &mut reader)?;
     let port = port.to_string();
     Ok(std::thread::spawn(move || {
         let mut buf = vec![0u8; CHUNK];
@@ -749,7 +758,7 @@ fn spawn_slcan(
                 if stop.load(Ordering::SeqCst) {
                     return;
                 }
-                if let Ok(l) = open_slcan(&port, baud, bitrate, &mut reader) {
+                if let Ok(l) = open_slcan(&port, baud, rates, &mut reader) {
                     break l;
                 }
                 // replies of a failed attempt will not come
