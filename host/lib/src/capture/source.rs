@@ -17,6 +17,11 @@
 //! core's `transport::can` reassembler ([`super::can::CanStream`]); the recorded bytes are that
 //! reassembled stream, so a CAN capture and a serial capture of the same run are the same
 //! file.
+//!
+//! slcan and candump: the adapter's lines (a serial port, reopened like one) and the log's
+//! lines (a file, read to its end) are parsed by [`super::canlog::LineReader`] into the
+//! same reassembler; each line it cannot read arrives as [`SourceMsg::BadLine`] at its
+//! place in the stream.
 
 use std::fs::File;
 use std::io::{self, Read};
