@@ -1,7 +1,7 @@
 //! `jointid capture`: record the board's stream into a `.jcap`.
 //!
 //! Layers (as ripgrep's `lowargs`/`hiargs`): [`CaptureArgs`] is what clap parsed (one
-//! source out of four is enforced by an argument group, numbers are range-checked by
+//! source out of seven is enforced by an argument group, numbers are range-checked by
 //! their value parsers); [`CaptureArgs::validate`] turns it into a
 //! [`jointid::capture::SourceSpec`] and [`jointid::capture::CaptureOptions`]; [`run`]
 //! installs the Ctrl-C handler, draws the progress line and prints the summary.
@@ -29,20 +29,39 @@ pub const DEFAULT_BAUD: u32 = 921_600;
 
 /// Arguments of `jointid capture`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
-#[command(group(clap::ArgGroup::new("source").required(true).args(["serial", "can", "tcp", "tcp_listen", "file"])))]
+#[command(group(clap::ArgGroup::new("source").required(true).args(["serial", "can", "slcan", "candump", "tcp", "tcp_listen", "file"])))]
 pub struct CaptureArgs {
     /// Serial port to read (`/dev/ttyACM0`, `COM3`); reopened after an unplug
     #[arg(long, value_name = "PORT")]
     pub serial: Option<String>,
-    /// Baud rate of the serial port [bit/s] (default 921600)
-    #[arg(long, value_name = "N", conflicts_with_all = ["can", "tcp", "tcp_listen", "file"],
+    /// Baud rate of the serial port [bit/s] (default 921600; with --slcan 115200, which
+    /// USB adapters ignore)
+    #[arg(long, value_name = "N", conflicts_with_all = ["can", "candump", "tcp", "tcp_listen", "file"],
           value_parser = clap::value_parser!(u32).range(1..))]
     pub baud: Option<u32>,
     /// SocketCAN interface to read (`can0`), classic and FD frames (Linux)
     #[arg(long, value_name = "IFACE")]
     pub can: Option<String>,
-    /// CAN identifier of the board's frames: `0x101` (the firmware's), any standard or
-    /// extended id in hex or decimal, or `any`
+    /// slcan CAN adapter to read (CANable, USBtin, Lawicel: `/dev/ttyACM0`); its channel
+    /// is opened (`C`, the bit rate, `O`) and closed again at the end
+    #[arg(long, value_name = "PORT")]
+    pub slcan: Option<String>,
+    /// CAN bit rate of the slcan adapter [bit/s]: 10000 to 1000000 (`S0`..`S8`; the
+    /// firmware sends at 1000000); default: the adapter's own setting
+    #[arg(long, value_name = "BIT/S", value_parser = parse_slcan_bitrate,
+          conflicts_with_all = ["serial", "can", "candump", "tcp", "tcp_listen", "file"])]
+    pub slcan_bitrate: Option<u32>,
+    /// CAN FD data-phase bit rate of the slcan adapter [bit/s]: 500000, 1000000, 2000000,
+    /// 4000000 or 5000000 (`Y0`..`Y5` of CANable 2.0-class adapters; the firmware sends
+    /// at 5000000); default: the adapter's own setting
+    #[arg(long, value_name = "BIT/S", value_parser = parse_slcan_data_bitrate,
+          conflicts_with_all = ["serial", "can", "candump", "tcp", "tcp_listen", "file"])]
+    pub slcan_data_bitrate: Option<u32>,
+    /// `candump -l` log file to replay (`(1700000000.123456) can0 101#80...`)
+    #[arg(long, value_name = "LOG")]
+    pub candump: Option<PathBuf>,
+    /// CAN identifier of the board's frames (--can, --slcan, --candump): `0x101` (the
+    /// firmware's), any standard or extended id in hex or decimal, or `any`
     #[arg(long, value_name = "ID", conflicts_with_all = ["serial", "tcp", "tcp_listen", "file"], value_parser = parse_can_id)]
     pub can_id: Option<CanId>,
     /// TCP endpoint to connect to and read, `HOST:PORT` (the emulated board's UART as a
@@ -112,6 +131,22 @@ fn parse_can_id(s: &str) -> Result<CanId, String> {
         .ok_or_else(|| format!("`{s}` is above the largest extended CAN identifier 0x1fffffff"))
 }
 
+fn parse_slcan_bitrate(s: &str) -> Result<u32, String> {
+    let v: u32 = s
+        .parse()
+        .map_err(|_| format!("`{s}` is not a bit rate in bit/s"))?;
+    jointid::capture::canlog::slcan_bitrate_command(v)?;
+    Ok(v)
+}
+
+fn parse_slcan_data_bitrate(s: &str) -> Result<u32, String> {
+    let v: u32 = s
+        .parse()
+        .map_err(|_| format!("`{s}` is not a bit rate in bit/s"))?;
+    jointid::capture::canlog::slcan_data_bitrate_command(v)?;
+    Ok(v)
+}
+
 fn parse_seconds(s: &str) -> Result<f64, String> {
     let v: f64 = s
         .parse()
@@ -122,7 +157,19 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
     Ok(v)
 }
 
+/// Default baud rate of an slcan adapter's serial link [bit/s] (USB adapters ignore it).
+pub const DEFAULT_SLCAN_BAUD: u32 = 115_200;
+
 impl CaptureArgs {
+    /// The identifier `--can-id` asks for (default the firmware's).
+    fn board_can_id(&self) -> Option<embedded_can::Id> {
+        match self.can_id {
+            Some(CanId::Any) => None,
+            Some(CanId::Id(id)) => Some(id),
+            None => embedded_can::StandardId::new(DEFAULT_CAN_ID).map(Into::into),
+        }
+    }
+
     /// The validated source and options.
     pub fn validate(&self) -> (SourceSpec, CaptureOptions) {
         let spec = if let Some(port) = &self.serial {
@@ -133,11 +180,20 @@ impl CaptureArgs {
         } else if let Some(iface) = &self.can {
             SourceSpec::Can {
                 iface: iface.clone(),
-                id: match self.can_id {
-                    Some(CanId::Any) => None,
-                    Some(CanId::Id(id)) => Some(id),
-                    None => embedded_can::StandardId::new(DEFAULT_CAN_ID).map(Into::into),
-                },
+                id: self.board_can_id(),
+            }
+        } else if let Some(port) = &self.slcan {
+            SourceSpec::Slcan {
+                port: port.clone(),
+                baud: self.baud.unwrap_or(DEFAULT_SLCAN_BAUD),
+                bitrate: self.slcan_bitrate,
+                data_bitrate: self.slcan_data_bitrate,
+                id: self.board_can_id(),
+            }
+        } else if let Some(path) = &self.candump {
+            SourceSpec::Candump {
+                path: path.clone(),
+                id: self.board_can_id(),
             }
         } else if let Some(addr) = &self.tcp {
             SourceSpec::Tcp { addr: addr.clone() }
@@ -364,6 +420,35 @@ mod tests {
                 path: "s.bin".into()
             }
         );
+        let a = parse(&[
+            "--slcan",
+            "/dev/ttyACM1",
+            "--slcan-bitrate",
+            "500000",
+            "--can-id",
+            "0x321",
+            "--out",
+            "r.jcap",
+        ])
+        .unwrap();
+        assert_eq!(
+            a.validate().0,
+            SourceSpec::Slcan {
+                port: "/dev/ttyACM1".into(),
+                baud: DEFAULT_SLCAN_BAUD,
+                bitrate: Some(500_000),
+                data_bitrate: None,
+                id: embedded_can::StandardId::new(0x321).map(Into::into),
+            }
+        );
+        let a = parse(&["--candump", "bus.log", "--out", "r.jcap"]).unwrap();
+        assert_eq!(
+            a.validate().0,
+            SourceSpec::Candump {
+                path: "bus.log".into(),
+                id: board
+            }
+        );
         let a = parse(&["--serial", "/dev/ttyUSB0", "--out", "r.jcap"]).unwrap();
         assert_eq!(
             a.validate().0,
@@ -388,6 +473,40 @@ mod tests {
             &["--can", "c", "--can-id", "0x20000000", "--out", "r.jcap"],
             &["--can", "c", "--can-id", "zz", "--out", "r.jcap"],
             &["--file", "f", "--can-id", "0x101", "--out", "r.jcap"],
+            &["--slcan", "p", "--candump", "l", "--out", "r.jcap"],
+            &[
+                "--slcan",
+                "p",
+                "--slcan-bitrate",
+                "2000000",
+                "--out",
+                "r.jcap",
+            ],
+            &[
+                "--candump",
+                "l",
+                "--slcan-bitrate",
+                "500000",
+                "--out",
+                "r.jcap",
+            ],
+            &["--candump", "l", "--baud", "9600", "--out", "r.jcap"],
+            &[
+                "--slcan",
+                "p",
+                "--slcan-data-bitrate",
+                "3000000",
+                "--out",
+                "r.jcap",
+            ],
+            &[
+                "--can",
+                "c",
+                "--slcan-data-bitrate",
+                "5000000",
+                "--out",
+                "r.jcap",
+            ],
         ] {
             assert!(parse(bad).is_err(), "{bad:?} should be rejected");
         }

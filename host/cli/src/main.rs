@@ -53,7 +53,7 @@ pub struct Cli {
 /// Subcommands, in the order of the user's path.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// record the board's stream (serial, CAN, TCP or file) into a .jcap capture
+    /// record the board's stream (serial, CAN, slcan adapter, candump log, TCP or file) into a .jcap capture
     Capture(capture::CaptureArgs),
     /// what a .jcap capture holds: board, excitation, samples, gaps, damaged frames
     Info(info::InfoArgs),

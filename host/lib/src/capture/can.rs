@@ -14,7 +14,8 @@
 //! - when such a frame's delimiter never arrives (the next wire frame's first CAN frame
 //!   comes first, or the frame grew too long), its bytes followed by one added `0x00`.
 //!
-//! Repeated CAN frames (same counter twice) are dropped, as the reassembler does; FD
+//! Repeated CAN frames (same counter twice) are dropped, as the reassembler does, and so
+//! is a CAN frame that arrives after its successor (its wire frame is damaged already); FD
 //! padding after a delimiter is dropped. The added `0x00` bytes are the only bytes of a
 //! CAN capture that did not travel on the bus; they are counted in [`CanStats`].
 
@@ -63,6 +64,8 @@ impl std::fmt::Debug for CanStream {
 
 enum Ev {
     Abandon,
+    /// one behind the last CAN frame taken (swapped with its successor): ignored
+    Behind,
     Frame(Vec<u8>),
     Duplicate,
 }
@@ -109,6 +112,11 @@ impl CanStream {
         let mut events = Vec::new();
         self.re.push(data, |e| match e {
             ReassemblyEvent::Frame(b) => events.push(Ev::Frame(b.to_vec())),
+            ReassemblyEvent::Lost {
+                expected,
+                got,
+                discarded: 0,
+            } if got == expected.wrapping_sub(2) & 0x7F => events.push(Ev::Behind),
             ReassemblyEvent::Lost { discarded, .. } | ReassemblyEvent::Malformed { discarded }
                 if discarded > 0 =>
             {
@@ -124,6 +132,8 @@ impl CanStream {
                     self.stats.duplicates += 1;
                     return;
                 }
+                // the reassembler took its successor already: its bytes cannot be placed
+                Ev::Behind => return,
                 // the rest of the abandoned frame may still come: a lost middle
                 // fragment leaves head and tail, which stay one damaged frame
                 Ev::Abandon if !first => {
@@ -295,6 +305,44 @@ mod tests {
                 _ => 0,
             };
             assert_eq!(report.missing_samples, lost(mid_w) + lost(head_w));
+        }
+    }
+
+    #[test]
+    fn can_stream_reports_a_wire_frame_with_two_swapped_can_frames_once_and_adds_nothing() {
+        for fd in [false, true] {
+            let (s, frames, owner) = fragments(fd);
+            let long: Vec<usize> = (0..s.frames.len())
+                .filter(|&w| {
+                    matches!(s.frames[w].content, FrameContent::Batch { .. })
+                        && owner.iter().filter(|&&o| o == w).count() >= 3
+                })
+                .collect();
+            // the second and third CAN frames of one batch arrive the wrong way round;
+            // the second CAN frame of the next long batch is lost
+            let (w, w2) = (long[0], long[1]);
+            let i = owner.iter().position(|&o| o == w).unwrap() + 1;
+            let j = owner.iter().position(|&o| o == w2).unwrap() + 1;
+            let mut damaged = frames.clone();
+            let lost = damaged.remove(j);
+            damaged.swap(i, i + 1);
+            let out = run(&damaged);
+            let mut an = StreamAnalyzer::new(false);
+            an.feed(&out);
+            let report = an.finish_report();
+            assert_eq!(report.damaged_frames.len(), 2, "fd {fd}: {report}");
+            assert_eq!(report.damaged_frames[0].offset, s.frames[w].offset);
+            assert_eq!(report.frames as usize, s.frames.len() - 2);
+            // the late CAN frame's bytes are dropped, none is written twice or elsewhere
+            let late = damaged[i + 1].data.len() as u64 - 1;
+            assert_eq!(report.damaged_frames[0].len, s.frames[w].len - late);
+            let missing = lost.data.len() as u64 - 1;
+            assert_eq!(report.damaged_frames[1].len, s.frames[w2].len - missing);
+            assert_eq!(
+                out.len() as u64,
+                s.bytes.len() as u64 - late - missing,
+                "fd {fd}"
+            );
         }
     }
 

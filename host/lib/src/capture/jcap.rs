@@ -423,16 +423,20 @@ pub enum EventKind {
     LinkResumed,
     /// the capture stopped (the detail says why)
     Stop,
+    /// a line of an slcan or candump source could not be read, or the adapter or the bus
+    /// reported an error (the detail quotes it and says what is wrong; `line` is its number)
+    BadLine,
 }
 
 impl std::fmt::Display for EventKind {
-    /// In words: `start`, `link lost`, `link resumed`, `stop`.
+    /// In words: `start`, `link lost`, `link resumed`, `stop`, `bad line`.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
             Self::Start => "start",
             Self::LinkLost => "link lost",
             Self::LinkResumed => "link resumed",
             Self::Stop => "stop",
+            Self::BadLine => "bad line",
         })
     }
 }
@@ -451,6 +455,9 @@ pub struct JcapEvent {
     /// human-readable detail (source, reason)
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub detail: String,
+    /// line number in an slcan or candump source (1-based; `bad_line` events)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub line: Option<u64>,
 }
 
 impl JcapEvent {
@@ -466,6 +473,7 @@ impl JcapEvent {
             utc: utc_string(unix_ms),
             event,
             detail: detail.into(),
+            line: None,
         }
     }
 }

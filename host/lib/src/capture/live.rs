@@ -21,6 +21,10 @@
 //! capture then ends with the frame that carried it, and whatever the source delivered
 //! after that frame is not written, however large the chunks it reads), the board's `End`
 //! message, or the end of the stream (end of file, peer closed).
+//!
+//! A line of an slcan or candump source that cannot be read never stops the capture: it
+//! goes to the sidecar as a `bad_line` event with its line number and the stream offset
+//! it came at, and into the report.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -199,6 +203,9 @@ pub fn record_capture(
             Some(SourceMsg::LinkResumed(what)) => {
                 let _ = log.log(&JcapEvent::now(an.bytes(), EventKind::LinkResumed, what));
             }
+            Some(SourceMsg::BadLine(b)) => {
+                let _ = log.log(&bad_line_event(an.bytes(), b));
+            }
             Some(SourceMsg::End(why)) => break Ok(StopReason::EndOfStream(why)),
             Some(SourceMsg::Failed(e)) => break Err(e.into()),
         }
@@ -222,8 +229,16 @@ pub fn record_capture(
         Ok(stop) => {
             // bytes read before the stop but not yet handled still belong to the capture
             // (after a `--periods` cut, nothing of them)
-            for bytes in late {
-                feed_and_append(&mut an, &mut writer, &bytes, Instant::now())?;
+            for msg in late {
+                match msg {
+                    SourceMsg::Data(bytes) => {
+                        feed_and_append(&mut an, &mut writer, &bytes, Instant::now())?;
+                    }
+                    SourceMsg::BadLine(b) if an.cut().is_none() => {
+                        let _ = log.log(&bad_line_event(an.bytes(), b));
+                    }
+                    _ => {}
+                }
             }
             let received = an.bytes();
             let bytes = writer.finish()?;
@@ -258,6 +273,13 @@ pub fn record_capture(
             Err(e)
         }
     }
+}
+
+/// The sidecar event of a bad slcan or candump line at stream offset `offset`.
+fn bad_line_event(offset: u64, b: super::canlog::BadLine) -> JcapEvent {
+    let mut e = JcapEvent::now(offset, EventKind::BadLine, b.detail);
+    e.line = Some(b.line);
+    e
 }
 
 /// Feeds `bytes` to the analyzer and appends them to the capture, only up to the

@@ -1,18 +1,21 @@
-//! Capture: record the board's stream from a serial port, a CAN interface, a TCP socket
-//! or a file, losing nothing, and say exactly what arrived damaged.
+//! Capture: record the board's stream from a serial port, a CAN interface, an slcan CAN
+//! adapter, a `candump -l` log, a TCP socket or a file, losing nothing, and say exactly
+//! what arrived damaged.
 //!
 //! The path of the bytes:
 //!
 //! ```text
-//! source (serial | can | tcp | file) ──► live::record ──► jcap::JcapWriter  (RUN.jcap, raw bytes)
-//!                                             │      └──► jcap::EventLog    (RUN.jcap.events)
-//!                                             └─────────► record::StreamAnalyzer ──► report (progress, summary)
+//! source (serial | can | slcan | candump | tcp | file) ──► live::record ──► jcap::JcapWriter  (RUN.jcap, raw bytes)
+//!                                                                │      └──► jcap::EventLog    (RUN.jcap.events)
+//!                                                                └─────────► record::StreamAnalyzer ──► report (progress, summary)
 //! RUN.jcap ──► read_jcap ──► record::StreamAnalyzer ──► CaptureRecord (header, samples in SI, report) ──► export (CSV)
 //! ```
 //!
 //! - [`jcap`]: the native capture file (8-byte header + the raw received bytes,
 //!   append-only), its `.events` sidecar, the flush and fsync policy.
 //! - [`source`]: the links bytes come from, with reconnection after a link loss.
+//! - [`can`]: CAN frames into the stream bytes (the core's reassembler); [`canlog`]: the
+//!   lines of slcan adapters and `candump -l` logs into CAN frames, bad lines reported.
 //! - [`record`]: the one interpreter of a stream (decoder, sessions, sequence gaps,
 //!   reference check, conversion to SI).
 //! - [`live`]: the capture loop (stop rules, progress, setup-error rule).
@@ -33,6 +36,7 @@ use jointid_core::wire::SessionHeader;
 use crate::data::{Dataset, IdData};
 
 pub mod can;
+pub mod canlog;
 pub mod export;
 pub mod jcap;
 pub mod live;

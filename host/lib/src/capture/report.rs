@@ -134,13 +134,23 @@ pub struct CaptureReport {
 }
 
 impl CaptureReport {
-    /// True when nothing is missing, damaged or inconsistent.
+    /// True when nothing is missing, damaged or inconsistent (and no line of an slcan or
+    /// candump source was bad).
     pub fn is_clean(&self) -> bool {
-        self.gaps.is_empty()
+        self.bad_lines().count() == 0
+            && self.gaps.is_empty()
             && self.damaged_frames.is_empty()
             && self.reference_mismatches.is_empty()
             && self.duplicates == 0
             && self.board == BoardCounters::default()
+    }
+
+    /// The `bad_line` events: lines of an slcan or candump source that could not be read,
+    /// error replies of the adapter, CAN error frames.
+    pub fn bad_lines(&self) -> impl Iterator<Item = &JcapEvent> {
+        self.link_events
+            .iter()
+            .filter(|e| e.event == super::jcap::EventKind::BadLine)
     }
 
     /// Frames whose CRC did not match.
@@ -249,6 +259,22 @@ impl fmt::Display for CaptureReport {
                     "  {} {} at byte {} {}",
                     e.utc, e.event, e.offset, e.detail
                 )?;
+            }
+        }
+        let bad = self.bad_lines().count();
+        if bad > 0 {
+            writeln!(f, "bad lines        {bad} (not read, capture went on)")?;
+            for e in self.bad_lines().take(20) {
+                writeln!(
+                    f,
+                    "  line {} (at byte {}): {}",
+                    e.line.map_or_else(|| "-".to_string(), |l| l.to_string()),
+                    e.offset,
+                    e.detail
+                )?;
+            }
+            if bad > 20 {
+                writeln!(f, "  ... {} more (see --json)", bad - 20)?;
             }
         }
         write!(

@@ -17,6 +17,11 @@
 //! core's `transport::can` reassembler ([`super::can::CanStream`]); the recorded bytes are that
 //! reassembled stream, so a CAN capture and a serial capture of the same run are the same
 //! file.
+//!
+//! slcan and candump: the adapter's lines (a serial port, reopened like one) and the log's
+//! lines (a file, read to its end) are parsed by [`super::canlog::LineReader`] into the
+//! same reassembler; each line it cannot read arrives as [`SourceMsg::BadLine`] at its
+//! place in the stream.
 
 use std::fs::File;
 use std::io::{self, Read};
@@ -27,6 +32,8 @@ use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
+
+use super::canlog::{LineFormat, LineReader, Piece};
 
 /// How long one blocking read may wait before the reader thread checks its stop flag.
 const READ_TIMEOUT: Duration = Duration::from_millis(50);
@@ -63,6 +70,28 @@ pub enum SourceSpec {
         /// `HOST:PORT`
         addr: String,
     },
+    /// slcan adapter (CANable, USBtin, Lawicel) on a serial port: opened with `C`, the
+    /// bit-rate command and `O`, closed with `C` at the end; its frame lines reassembled
+    /// like [`SourceSpec::Can`]'s frames (`super::canlog`)
+    Slcan {
+        /// device path
+        port: String,
+        /// baud rate of the serial link [bit/s] (USB adapters ignore it)
+        baud: u32,
+        /// CAN bit rate [bit/s] (`None`: the adapter's current setting)
+        bitrate: Option<u32>,
+        /// CAN FD data-phase bit rate [bit/s] (`None`: the adapter's current setting)
+        data_bitrate: Option<u32>,
+        /// identifier of the board's frames (`None`: every data frame)
+        id: Option<embedded_can::Id>,
+    },
+    /// `candump -l` log file, replayed at the speed it can be read
+    Candump {
+        /// the log
+        path: PathBuf,
+        /// identifier of the board's frames (`None`: every data frame)
+        id: Option<embedded_can::Id>,
+    },
     /// raw byte stream from a file, named pipe or pty; a stream that starts with the
     /// `.jcap` magic (a capture file replayed) is read from the byte after it
     File {
@@ -87,7 +116,28 @@ impl std::fmt::Display for SourceSpec {
             Self::Tcp { addr } => write!(f, "tcp {addr}"),
             Self::TcpListen { addr } => write!(f, "tcp listening on {addr}"),
             Self::File { path } => write!(f, "file {}", path.display()),
+            Self::Slcan {
+                port, bitrate, id, ..
+            } => {
+                write!(f, "slcan {port}")?;
+                if let Some(b) = bitrate {
+                    write!(f, " at {b} bit/s")?;
+                }
+                write_id(f, *id)
+            }
+            Self::Candump { path, id } => {
+                write!(f, "candump {}", path.display())?;
+                write_id(f, *id)
+            }
         }
+    }
+}
+
+fn write_id(f: &mut std::fmt::Formatter<'_>, id: Option<embedded_can::Id>) -> std::fmt::Result {
+    match id {
+        None => Ok(()),
+        Some(embedded_can::Id::Standard(id)) => write!(f, " id {:#05x}", id.as_raw()),
+        Some(embedded_can::Id::Extended(id)) => write!(f, " id {:#010x}", id.as_raw()),
     }
 }
 
@@ -172,6 +222,9 @@ pub enum SourceMsg {
     LinkLost(String),
     /// the link delivers again (detail = what was reopened)
     LinkResumed(String),
+    /// a line of an slcan or candump source that could not be read (or an error the
+    /// adapter or the bus reported), at this point of the stream
+    BadLine(super::canlog::BadLine),
     /// the stream ended (detail = why); no message follows
     End(String),
     /// unrecoverable error; no message follows
@@ -204,9 +257,10 @@ impl RunningSource {
 
     /// Asks the reader thread to stop and waits for it, unless it is blocked in a read
     /// that has no timeout (a pipe or pty given as `--file`): that thread is left to end
-    /// with the process. Returns the bytes that had already been read but not yet
-    /// received, in order, so that a stop loses nothing that arrived.
-    pub fn stop(mut self) -> Vec<Vec<u8>> {
+    /// with the process. Returns the bytes and bad lines that had already been read but
+    /// not yet received ([`SourceMsg::Data`], [`SourceMsg::BadLine`]), in order, so that a
+    /// stop loses nothing that arrived.
+    pub fn stop(mut self) -> Vec<SourceMsg> {
         self.stop.store(true, Ordering::SeqCst);
         if let Some(t) = self.thread.take() {
             if t.is_finished() || !self.name.starts_with("file ") {
@@ -215,10 +269,7 @@ impl RunningSource {
         }
         self.rx
             .try_iter()
-            .filter_map(|m| match m {
-                SourceMsg::Data(d) => Some(d),
-                _ => None,
-            })
+            .filter(|m| matches!(m, SourceMsg::Data(_) | SourceMsg::BadLine(_)))
             .collect()
     }
 }
@@ -276,6 +327,19 @@ impl SourceSpec {
             Self::File { path } => spawn_file(path.clone(), tx, stop.clone(), name.clone())?,
             Self::Can { iface, id } => {
                 can::spawn(iface, *id, tx, stop.clone(), name.clone(), retry)?
+            }
+            Self::Slcan {
+                port,
+                baud,
+                bitrate,
+                data_bitrate,
+                id,
+            } => {
+                let rates = (*bitrate, *data_bitrate);
+                spawn_slcan(port, *baud, rates, *id, tx, stop.clone(), retry)?
+            }
+            Self::Candump { path, id } => {
+                spawn_candump(path.clone(), *id, tx, stop.clone(), name.clone())?
             }
         };
         Ok(RunningSource {
@@ -561,6 +625,159 @@ fn spawn_file(
                 }
             }
         }
+    }))
+}
+
+/// Sends the pieces of a line reader in order; false when the receiver is gone.
+fn send_pieces(tx: &Sender<SourceMsg>, pieces: Vec<Piece>) -> bool {
+    pieces.into_iter().all(|p| {
+        tx.send(match p {
+            Piece::Data(d) => SourceMsg::Data(d),
+            Piece::Bad(b) => SourceMsg::BadLine(b),
+        })
+        .is_ok()
+    })
+}
+
+/// Reader thread for `--candump`: the log is opened here (a missing or unreadable file is
+/// a setup error) and read line by line; a read error later ends the capture.
+fn spawn_candump(
+    path: PathBuf,
+    id: Option<embedded_can::Id>,
+    tx: Sender<SourceMsg>,
+    stop: Arc<AtomicBool>,
+    name: String,
+) -> Result<JoinHandle<()>, SourceError> {
+    let err = |source| SourceError::File {
+        path: path.clone(),
+        err: source,
+    };
+    if std::fs::metadata(&path).map_err(err)?.is_dir() {
+        return Err(err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "is a directory",
+        )));
+    }
+    let mut file = File::open(&path).map_err(err)?;
+    Ok(std::thread::spawn(move || {
+        let mut reader = LineReader::new(LineFormat::Candump, id);
+        let mut buf = vec![0u8; CHUNK];
+        let mut offset = 0u64;
+        while !stop.load(Ordering::SeqCst) {
+            match Read::read(&mut file, &mut buf) {
+                Ok(0) => {
+                    if send_pieces(&tx, reader.finish()) {
+                        let _ = tx.send(SourceMsg::End("end of file".into()));
+                    }
+                    return;
+                }
+                Ok(n) => {
+                    offset += n as u64;
+                    if !send_pieces(&tx, reader.feed(&buf[..n])) {
+                        return;
+                    }
+                }
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(source) => {
+                    let _ = tx.send(SourceMsg::Failed(SourceError::Read {
+                        source_name: name,
+                        offset,
+                        err: source,
+                    }));
+                    return;
+                }
+            }
+        }
+    }))
+}
+
+/// Opens the slcan adapter's port and its CAN channel: `C` (close, in case it was left
+/// open), the bit rates `(nominal, data)` when given, `O`. Their replies are read with
+/// the frames ([`LineReader`]).
+fn open_slcan(
+    port: &str,
+    baud: u32,
+    (bitrate, data_bitrate): (Option<u32>, Option<u32>),
+    reader: &mut LineReader,
+) -> Result<Box<dyn serialport::SerialPort>, SourceError> {
+    let refused = |message| SourceError::SerialOpen {
+        port: port.to_string(),
+        message,
+    };
+    let mut commands = vec!["C"];
+    if let Some(b) = bitrate {
+        commands.push(super::canlog::slcan_bitrate_command(b).map_err(refused)?);
+    }
+    if let Some(b) = data_bitrate {
+        commands.push(super::canlog::slcan_data_bitrate_command(b).map_err(refused)?);
+    }
+    let mut link = open_serial(port, baud)?;
+    commands.push("O");
+    for c in commands {
+        io::Write::write_all(&mut link, format!("{c}\r").as_bytes()).map_err(|e| {
+            SourceError::SerialOpen {
+                port: port.to_string(),
+                message: format!("writing `{c}` to the adapter: {e}"),
+            }
+        })?;
+        reader.expect_reply(c);
+    }
+    Ok(link)
+}
+
+/// Reader thread for `--slcan`: the port is opened here; a lost port is reopened (and
+/// the channel with it) like a serial port's; at the stop the channel is closed (`C`).
+fn spawn_slcan(
+    port: &str,
+    baud: u32,
+    rates: (Option<u32>, Option<u32>),
+    id: Option<embedded_can::Id>,
+    tx: Sender<SourceMsg>,
+    stop: Arc<AtomicBool>,
+    retry: RetryPolicy,
+) -> Result<JoinHandle<()>, SourceError> {
+    let mut reader = LineReader::new(LineFormat::Slcan, id);
+    let mut link = open_slcan(port, baud, rates, &mut reader)?;
+    let port = port.to_string();
+    Ok(std::thread::spawn(move || {
+        let mut buf = vec![0u8; CHUNK];
+        while !stop.load(Ordering::SeqCst) {
+            let lost = match Read::read(&mut link, &mut buf) {
+                Ok(0) => "device hung up".to_string(),
+                Ok(n) => {
+                    if !send_pieces(&tx, reader.feed(&buf[..n])) {
+                        return;
+                    }
+                    continue;
+                }
+                Err(e) if is_timeout(&e) => continue,
+                Err(e) => e.to_string(),
+            };
+            if !send_pieces(&tx, reader.link_lost()) || tx.send(SourceMsg::LinkLost(lost)).is_err()
+            {
+                return;
+            }
+            drop(link);
+            link = loop {
+                std::thread::sleep(retry.interval);
+                if stop.load(Ordering::SeqCst) {
+                    return;
+                }
+                if let Ok(l) = open_slcan(&port, baud, rates, &mut reader) {
+                    break l;
+                }
+                // replies of a failed attempt will not come
+                let _ = reader.link_lost();
+            };
+            if tx
+                .send(SourceMsg::LinkResumed(format!("slcan {port}")))
+                .is_err()
+            {
+                return;
+            }
+        }
+        // close the channel; the adapter stops sending
+        let _ = io::Write::write_all(&mut link, b"C\r");
     }))
 }
 
