@@ -500,14 +500,22 @@ pub fn slcan_bitrate_command(bitrate: u32) -> Result<&'static str, String> {
         (800_000, "S7"),
         (1_000_000, "S8"),
     ];
-    RATES
+    rate_command(&RATES, bitrate, "an slcan bit rate")
+}
+
+/// The command of `bitrate` in `rates`, or an error naming `what` and the rates there are.
+fn rate_command(
+    rates: &[(u32, &'static str)],
+    bitrate: u32,
+    what: &str,
+) -> Result<&'static str, String> {
+    rates
         .iter()
         .find(|(r, _)| *r == bitrate)
         .map(|(_, c)| *c)
         .ok_or_else(|| {
-            format!(
-                "{bitrate} bit/s is not an slcan bit rate (10000, 20000, 50000, 100000, 125000, 250000, 500000, 800000, 1000000)"
-            )
+            let list: Vec<String> = rates.iter().map(|(r, _)| r.to_string()).collect();
+            format!("{bitrate} bit/s is not {what} ({})", list.join(", "))
         })
 }
 
@@ -525,15 +533,7 @@ pub fn slcan_data_bitrate_command(bitrate: u32) -> Result<&'static str, String> 
         (4_000_000, "Y4"),
         (5_000_000, "Y5"),
     ];
-    RATES
-        .iter()
-        .find(|(r, _)| *r == bitrate)
-        .map(|(_, c)| *c)
-        .ok_or_else(|| {
-            format!(
-                "{bitrate} bit/s is not an slcan data bit rate (500000, 1000000, 2000000, 4000000, 5000000)"
-            )
-        })
+    rate_command(&RATES, bitrate, "an slcan data bit rate")
 }
 
 #[cfg(test)]

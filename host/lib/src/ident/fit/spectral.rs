@@ -402,23 +402,7 @@ mod tests {
             let fd = FitData::new(&ds.data, Prep::default()).unwrap();
             let fit = fit_prepared(&fd, &FitOptions::default()).unwrap();
             let p = cfg.plant.params;
-            let truth = [
-                ("J_m", p.j_m),
-                ("J_a1", p.j_a1),
-                ("J_a2", p.j_a2),
-                ("k_g", p.k_g),
-                ("k_a", p.k_a),
-                ("d_g", p.d_g),
-                ("d_a", p.d_a),
-            ];
-            for (name, t) in truth {
-                let v = fit.params.iter().find(|q| q.name == name).unwrap().value;
-                assert!(
-                    (v / t - 1.0).abs() < 0.03,
-                    "seed {seed}: {name} {v:.5e} (truth {t:.5e}); {}",
-                    fit.method
-                );
-            }
+            assert_within_3_percent(&fit, &cfg, &format!("seed {seed}"));
             let values = [p.j_m, p.j_a1, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m];
             let true_modes = grey_box::GreyBoxModel {
                 structure: Structure::ThreeMass,
@@ -445,6 +429,28 @@ mod tests {
 
     /// The model with the true values of `cfg`'s three-mass joint and current loop, in the
     /// form of `fit` (same rate and output).
+    /// The seven identifiable three-mass parameters of `fit` within 3 % of `cfg`'s.
+    fn assert_within_3_percent(fit: &Fitted, cfg: &SimConfig, what: &str) {
+        let p = cfg.plant.params;
+        let truth = [
+            ("J_m", p.j_m),
+            ("J_a1", p.j_a1),
+            ("J_a2", p.j_a2),
+            ("k_g", p.k_g),
+            ("k_a", p.k_a),
+            ("d_g", p.d_g),
+            ("d_a", p.d_a),
+        ];
+        for (name, t) in truth {
+            let v = fit.params.iter().find(|q| q.name == name).unwrap().value;
+            assert!(
+                (v / t - 1.0).abs() < 0.03,
+                "{what}: {name} {v:.5e} (truth {t:.5e}); {}",
+                fit.method
+            );
+        }
+    }
+
     fn true_model(fit: &Fitted, cfg: &SimConfig) -> Fitted {
         let p = cfg.plant.params;
         let values = [p.j_m, p.j_a1, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m];
@@ -525,24 +531,7 @@ mod tests {
             "{}",
             fit.method
         );
-        let p = cfg.plant.params;
-        let truth = [
-            ("J_m", p.j_m),
-            ("J_a1", p.j_a1),
-            ("J_a2", p.j_a2),
-            ("k_g", p.k_g),
-            ("k_a", p.k_a),
-            ("d_g", p.d_g),
-            ("d_a", p.d_a),
-        ];
-        for (name, t) in truth {
-            let v = fit.params.iter().find(|q| q.name == name).unwrap().value;
-            assert!(
-                (v / t - 1.0).abs() < 0.03,
-                "{name} {v:.5e} (truth {t:.5e}); {}",
-                fit.method
-            );
-        }
+        assert_within_3_percent(&fit, &cfg, "two segments");
         let (pooled, each) = fit.velocity_fit_segments(&data).unwrap();
         let (truth_pooled, _) = true_model(&fit, &cfg).velocity_fit_segments(&data).unwrap();
         assert_eq!(each.len(), 2);
