@@ -538,6 +538,23 @@ fn strip_magic(head: &mut Vec<u8>, bytes: &[u8]) -> Option<Vec<u8>> {
     Some(head.split_off(magic.len()))
 }
 
+/// The metadata of `path`, which must exist and not be a directory (a setup error names
+/// the file).
+fn not_a_directory(path: &std::path::Path) -> Result<std::fs::Metadata, SourceError> {
+    let err = |source| SourceError::File {
+        path: path.to_path_buf(),
+        err: source,
+    };
+    let meta = std::fs::metadata(path).map_err(err)?;
+    if meta.is_dir() {
+        return Err(err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "is a directory",
+        )));
+    }
+    Ok(meta)
+}
+
 /// Reader thread for `--file`: regular files, named pipes and ptys.
 ///
 /// A regular file or pty is opened here (a missing or unreadable file is a setup error);
@@ -553,13 +570,7 @@ fn spawn_file(
         path: path.clone(),
         err: source,
     };
-    let meta = std::fs::metadata(&path).map_err(err)?;
-    if meta.is_dir() {
-        return Err(err(io::Error::new(
-            io::ErrorKind::InvalidInput,
-            "is a directory",
-        )));
-    }
+    let meta = not_a_directory(&path)?;
     #[cfg(unix)]
     let is_fifo = std::os::unix::fs::FileTypeExt::is_fifo(&meta.file_type());
     #[cfg(not(unix))]
@@ -652,12 +663,7 @@ fn spawn_candump(
         path: path.clone(),
         err: source,
     };
-    if std::fs::metadata(&path).map_err(err)?.is_dir() {
-        return Err(err(io::Error::new(
-            io::ErrorKind::InvalidInput,
-            "is a directory",
-        )));
-    }
+    not_a_directory(&path)?;
     let mut file = File::open(&path).map_err(err)?;
     Ok(std::thread::spawn(move || {
         let mut reader = LineReader::new(LineFormat::Candump, id);

@@ -93,24 +93,47 @@ impl DrivenModel {
 /// # Errors
 /// The simulator's refusal, in words.
 pub fn simulate_fit(model: &DrivenModel, data: &IdData) -> Result<DrivenOutput, String> {
+    let (others, load) = ripple_as_load(model, data);
+    simulate_loaded(&others, data, &load)
+}
+
+/// `model` with its torque ripples taken out, and their torque at the measured angle of
+/// `data` ([`measured_ripple`]), once for the several simulations of one record.
+fn ripple_as_load(model: &DrivenModel, data: &IdData) -> (DrivenModel, Vec<f64>) {
+    let (ripples, others): (Vec<Effect>, Vec<Effect>) = model
+        .effects
+        .iter()
+        .partition(|e| matches!(e, Effect::TorqueRipple(_)));
+    let load = measured_ripple(&ripples, &data.y);
+    (
+        DrivenModel {
+            effects: others,
+            ..model.clone()
+        },
+        load,
+    )
+}
+
+/// [`simulate_fit`] of a model without ripple, with the torque `load` after the current
+/// loop.
+fn simulate_loaded(
+    model: &DrivenModel,
+    data: &IdData,
+    load: &[f64],
+) -> Result<DrivenOutput, String> {
     let u: Vec<f64> = data.u.iter().map(|u| u + model.offset).collect();
     // no current loop in the model: a lag far below the sample interval
     let tc = if model.tau_c > 0.0 { model.tau_c } else { 1e-9 };
     let start = DrivenStart::Rest {
         theta_m: data.y.first().copied().unwrap_or(0.0),
     };
-    let (ripples, others): (Vec<Effect>, Vec<Effect>) = model
-        .effects
-        .iter()
-        .partition(|e| matches!(e, Effect::TorqueRipple(_)));
-    let load = measured_ripple(&ripples, &data.y);
     let out = simulate_driven_loaded(
         &model.plant,
-        &others,
+        &model.effects,
         tc,
         data.ts,
         &u,
-        &load,
+        load,
         &start,
         &IntegrationConfig::default(),
     )
@@ -189,7 +212,8 @@ pub fn simulate_tracked(
     data: &IdData,
     corner_hz: f64,
 ) -> Result<(DrivenOutput, DrivenOutput, Vec<f64>), String> {
-    let first = simulate_fit(model, data)?;
+    let (bare, load) = ripple_as_load(model, data);
+    let first = simulate_loaded(&bare, data, &load)?;
     let n = data.len();
     if corner_hz <= 0.0 || n < 8 {
         return Ok((first.clone(), first, vec![0.0; n]));
@@ -223,7 +247,7 @@ pub fn simulate_tracked(
         }
         let driven = DrivenModel {
             offset: 0.0,
-            ..model.clone()
+            ..bare.clone()
         };
         let shifted = IdData {
             u: data
@@ -234,7 +258,7 @@ pub fn simulate_tracked(
                 .collect(),
             ..data.clone()
         };
-        out = simulate_fit(&driven, &shifted)?;
+        out = simulate_loaded(&driven, &shifted, &load)?;
     }
     Ok((out, first, w))
 }

@@ -121,6 +121,20 @@ pub struct DrivenModel {
 }
 
 impl DrivenModel {
+    /// `structure` with the output and gear ratio of `opts`, sampled every `ts` [s],
+    /// behind a current loop of `current_loop_tau` [s] (negative: none).
+    pub fn new(structure: Structure, opts: &FitOptions, ts: f64, current_loop_tau: f64) -> Self {
+        DrivenModel {
+            mechanics: grey_box::GreyBoxModel {
+                structure,
+                output: opts.output,
+                r: opts.r,
+                ts,
+            },
+            current_loop_tau: current_loop_tau.max(0.0),
+        }
+    }
+
     /// continuous model for parameter values `p` (not logarithms); the lag
     /// state is the last one
     pub fn continuous(&self, p: &[f64]) -> ContinuousSs {
@@ -555,15 +569,7 @@ pub fn fit_prepared_segments(data: &[FitData], opts: &FitOptions) -> Result<Fitt
                 return spectral::velocity_refined_segments(&raw, &start, opts, start.decimate);
             }
             let ts = longest.raw.ts;
-            let gm = DrivenModel {
-                mechanics: grey_box::GreyBoxModel {
-                    structure,
-                    output: opts.output,
-                    r: opts.r,
-                    ts,
-                },
-                current_loop_tau: current_loop_tau(opts).max(0.0),
-            };
+            let gm = DrivenModel::new(structure, opts, ts, current_loop_tau(opts));
             // the start in the structure's parameter order (log values)
             let names = structure.param_names();
             let th0: Vec<f64> = names

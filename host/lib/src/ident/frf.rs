@@ -313,7 +313,7 @@ pub enum Instrument {
 }
 
 /// FRF estimate at the excited lines.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct Frf {
     /// harmonic index of each point
     pub lines: Vec<u32>,
@@ -876,13 +876,7 @@ pub fn analyze(
     }
     let f0 = 1.0 / (n as f64 * data.ts);
     let cyu = cov_mean(&sy, &sty.mean, &su, &stu.mean);
-    let mut frf = Frf {
-        lines: Vec::new(),
-        freq_hz: Vec::new(),
-        g: Vec::new(),
-        sigma: Vec::new(),
-        spectra: FrfSpectra::default(),
-    };
+    let mut frf = Frf::default();
     for &k in &excited_set {
         let k = k as usize;
         let (yk, uk) = (sty.mean[k], stu.mean[k]);

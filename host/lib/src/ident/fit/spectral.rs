@@ -206,15 +206,7 @@ fn refined_fitted(
     let std: Vec<f64> = names.iter().map(|n| std_of(n)).collect();
     let log: Vec<f64> = fit.plant.iter().map(|v| v.ln()).collect();
     let log_std: Vec<f64> = std.iter().zip(&fit.plant).map(|(s, v)| s / v).collect();
-    let gm = DrivenModel {
-        mechanics: grey_box::GreyBoxModel {
-            structure,
-            output: opts.output,
-            r: opts.r,
-            ts,
-        },
-        current_loop_tau: fit.model.tau_c.max(0.0),
-    };
+    let gm = DrivenModel::new(structure, opts, ts, fit.model.tau_c);
     let mut model = pem_model(&gm, &log);
     model.k = None;
     let mut params = canonical_branches(grey_box::phys_params(names, &log, &log_std));

@@ -36,7 +36,7 @@
 use rustfft::num_complex::Complex64;
 use rustfft::FftPlanner;
 
-use super::{Frf, FrfError, FrfSpectra, Instrument};
+use super::{Frf, FrfError, Instrument};
 use crate::data::IdData;
 
 /// Options of [`welch_frf`].
@@ -179,13 +179,7 @@ pub fn welch_frf(data: &IdData, opts: &WelchOptions) -> Result<WelchFrf, FrfErro
     let top = sxx.iter().skip(1).copied().fold(0.0, f64::max);
     let floor = top * 10f64.powf(-opts.band_db / 10.0);
     let fs = 1.0 / data.ts;
-    let mut frf = Frf {
-        lines: Vec::new(),
-        freq_hz: Vec::new(),
-        g: Vec::new(),
-        sigma: Vec::new(),
-        spectra: FrfSpectra::default(),
-    };
+    let mut frf = Frf::default();
     let mut coherence = Vec::new();
     for k in 2..nl - 1 {
         if !(sxx[k] > floor && sxx[k] > 0.0 && sux[k].norm_sqr() > 0.0) {
