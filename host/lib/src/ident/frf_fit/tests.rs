@@ -593,8 +593,13 @@ fn sigma_calibration(
                 .map(|i| format!("{:+.1}", 100.0 * (v[i] - t[i].ln())))
                 .collect();
             println!(
-                "  seed {seed}: log errors [%] {} cost {:.3e} warnings {:?}",
+                "  seed {seed}: log errors [%] {} σ [%] {} delay {:.2} cost {:.3e} warnings {:?}",
                 errs.join(" "),
+                s.iter()
+                    .map(|x| format!("{:.2}", 100.0 * x))
+                    .collect::<Vec<_>>()
+                    .join(" "),
+                fit.delay.value,
                 fit.cost,
                 fit.warnings
             );
