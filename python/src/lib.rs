@@ -19,7 +19,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 
 create_exception!(
-    _native,
+    jointid,
     JointidError,
     PyException,
     "An error of jointid, with the message the command line prints."

@@ -179,3 +179,18 @@ def test_the_readmes_python_lines(tmp_path, monkeypatch):
     assert isinstance(m, jointid.FitResult) and m.fit_validation > 95
     assert scope["A"].shape == (7, 7)
     assert list(scope["df"].columns)[:4] == ["t", "theta_ref", "u", "theta_m"]
+
+
+def test_read_capture_of_a_mapped_csv(tmp_path):
+    path = tmp_path / "drive.csv"
+    t = np.arange(400) * 1e-3
+    path.write_text("time_s,force,pos\n" + "".join(
+        f"{float(a)!r},{float(np.sin(a))!r},{float(np.cos(a))!r}\n" for a in t))
+    df = jointid.read_capture(path, time="time_s", input="force", output="pos")
+    assert list(df.columns) == ["t", "u", "theta_m", "segment"]
+    assert df.attrs["ts"] == pytest.approx(1e-3) and df.attrs["excitation"] is None
+    assert np.array_equal(df["u"].to_numpy(), np.sin(t))
+    with pytest.raises(jointid.JointidError, match="give all three"):
+        jointid.read_capture(path, time="time_s")
+    with pytest.raises(jointid.JointidError, match="nope"):
+        jointid.read_capture(path, time="time_s", input="nope", output="pos")
