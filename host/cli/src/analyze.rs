@@ -380,6 +380,7 @@ mod tests {
                 json: cli.json,
                 loaders: &loaders,
                 out: &mut buf,
+                fitted: None,
             };
             run_cli(&cli, &mut ctx).map_err(|e| e.to_string())
         };

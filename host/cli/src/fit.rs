@@ -1104,6 +1104,7 @@ fn finish(
         files,
         warnings: fitted.warnings.clone(),
     };
+    ctx.fitted = Some(fitted.clone());
     emit(ctx, &report, args.strict)
 }
 

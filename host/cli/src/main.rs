@@ -1,250 +1,15 @@
-//! `jointid`: the command line of the `jointid` library. Parse (clap derive),
-//! validate, dispatch; exit codes 0 ok, 1 a check failed, 2 error (printed on one
-//! line, or as `{"error": ...}` with `--json`).
-//!
-//! Layers (as ripgrep's `flags/`): each subcommand has one module here with
-//! its `clap::Args` struct and a `run(args, ctx)` that loads data, calls the
-//! estimators (which do no IO) and prints a table or JSON. Shared argument
-//! groups (data file + column mapping, preparation) live in [`args`].
-//!
-//! Adding a subcommand (`capture`, `export`, `info`, `simulate`, `fit`,
-//! `demo`, …): create `src/<name>.rs` with `pub struct <Name>Args` (derive
-//! `clap::Args`) and `pub fn run(args: &<Name>Args, ctx: &mut Context<'_>)
-//! -> CmdResult`; add `mod <name>;`, one [`Command`] variant and one arm in
-//! [`run`]. Nothing else changes.
-//!
-//! Exit codes ([`Outcome::code`]): 0 ok, 1 a check failed, 2 error ([`main`]).
-// Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
-#![allow(rustdoc::broken_intra_doc_links)]
+//! `jointid`: the command line of the `jointid` library (the commands live in the
+//! `jointid_cli` library, [`jointid_cli::run`]). Exit codes 0 ok, 1 a check failed, 2
+//! error (printed on one line, or as `{"error": ...}` with `--json`).
 
 use std::io::Write;
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
-use jointid::data::output::{check_output, OutputError};
-use jointid::data::Loaders;
-
-mod analyze;
-mod args;
-mod capture;
-mod demo;
-mod diagnose;
-mod experiment;
-mod export;
-mod fit;
-mod fit_nl;
-mod info;
-mod simulate;
-mod validate;
-mod validate_cmd;
-
-/// `jointid`: identification of one robot joint, from capture to validated models.
-#[derive(Debug, Parser)]
-#[command(name = "jointid", version, about, long_about = None)]
-pub struct Cli {
-    /// machine-readable JSON output (results and errors)
-    #[arg(long, global = true)]
-    pub json: bool,
-    /// the subcommand
-    #[command(subcommand)]
-    pub command: Command,
-}
-
-/// Subcommands, in the order of the user's path.
-#[derive(Debug, Subcommand)]
-pub enum Command {
-    /// record the board's stream (serial, CAN, slcan adapter, candump log, TCP or file) into a .jcap capture
-    Capture(capture::CaptureArgs),
-    /// what a .jcap capture holds: board, excitation, samples, gaps, damaged frames
-    Info(info::InfoArgs),
-    /// write a .jcap capture as the capture CSV (t,theta_ref,u,theta_m)
-    Export(export::ExportArgs),
-    /// nonparametric FRF, noise level and nonlinear distortion of periodic data
-    Analyze(analyze::AnalyzeArgs),
-    /// fit a black-box or physical model: parameters, FIT, resonances, residual tests
-    Fit(fit::FitArgs),
-    /// FIT and residual tests of a saved model (or a simulated column) on data
-    Validate(validate_cmd::ValidateCmdArgs),
-    /// the whole path on the simulated joint, through the wire encoder (no board needed)
-    Demo(demo::DemoArgs),
-    /// seed 000 Table 2 on simulated IRB1400-like data (FIT of black box 11, three-, four-mass)
-    Experiment(experiment::ExperimentArgs),
-    /// closed-loop joint simulator with switchable effects; writes a .jcap capture or a capture CSV
-    Simulate(simulate::SimulateArgs),
-    /// which unmodelled effect makes the simulated joint depart from the measured one
-    Diagnose(diagnose::DiagnoseArgs),
-}
-
-/// How a command ended when it did not fail with an error.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Outcome {
-    /// everything ran and every check passed (exit 0)
-    Ok,
-    /// ran, but a check the user asked for failed (exit 1)
-    CheckFailed,
-}
-
-impl Outcome {
-    /// process exit code
-    pub fn code(self) -> u8 {
-        match self {
-            Outcome::Ok => 0,
-            Outcome::CheckFailed => 1,
-        }
-    }
-}
-
-/// Result of a subcommand; any error ends the process with exit code 2.
-pub type CmdResult = Result<Outcome, Box<dyn std::error::Error + Send + Sync>>;
-
-/// What every subcommand gets besides its arguments.
-pub struct Context<'a> {
-    /// print JSON instead of tables
-    pub json: bool,
-    /// file loaders by extension (CSV built in)
-    pub loaders: &'a Loaders,
-    /// where results go (stdout in the binary, a buffer in tests)
-    pub out: &'a mut dyn Write,
-}
-
-/// Loaders the binary uses: CSV (built in) and the native capture, told by its magic
-/// bytes whatever the file is called.
-pub fn default_loaders() -> Loaders {
-    let mut l = Loaders::default();
-    l.register(
-        "jcap",
-        jointid::data::JCAP_MAGIC_PREFIX,
-        Box::new(|input, _| jointid::capture::load_record(input).map_err(Into::into)),
-    );
-    l
-}
-
-/// Runs the parsed command line.
-///
-/// # Errors
-/// Whatever the subcommand reports; main.rs prints it on one line (or as
-/// JSON with `--json`) and exits with 2.
-pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
-    match &cli.command {
-        Command::Capture(a) => capture::run(a, ctx),
-        Command::Info(a) => info::run(a, ctx),
-        Command::Export(a) => export::run(a, ctx),
-        Command::Analyze(a) => analyze::run(a, ctx),
-        Command::Fit(a) => fit::run(a, ctx),
-        Command::Validate(a) => validate_cmd::run(a, ctx),
-        Command::Demo(a) => demo::run(a, ctx),
-        Command::Experiment(a) => experiment::run(a, ctx),
-        Command::Simulate(a) => simulate::run(a, ctx),
-        Command::Diagnose(a) => diagnose::run(a, ctx),
-    }
-}
-
-/// Writes an SVG string (from [`jointid::report::plot`]) to `path` under the one rule of
-/// every output file ([`jointid::data::output`]: an existing file only with `--force`,
-/// whole or not at all).
-///
-/// # Errors
-/// [`OutputError`] naming the file.
-pub fn write_svg(path: &std::path::Path, svg: &str, force: bool) -> Result<(), OutputError> {
-    jointid::data::output::write_file(path, force, |w| w.write_all(svg.as_bytes()))
-}
-
-/// Checks, before any work, that the files `names` can be written into the plot directory
-/// `dir` ([`jointid::data::output::check_output`]); a directory that does not exist yet is
-/// created later, with its parents, and holds nothing to overwrite.
-///
-/// # Errors
-/// [`OutputError`] naming the first file that cannot be written.
-pub fn check_plot_files(
-    dir: &std::path::Path,
-    names: &[&str],
-    force: bool,
-) -> Result<(), OutputError> {
-    if !dir.exists() {
-        return Ok(());
-    }
-    names
-        .iter()
-        .try_for_each(|n| check_output(&dir.join(n), force))
-}
-
-/// Version of every `--json` document's shape: `"schema": "jointid-<kind>/1"`. A field
-/// renamed or removed, or a type changed, raises it; the schema files in
-/// `host/cli/schema/<kind>.schema.json` change with it.
-pub const SCHEMA_VERSION: u32 = 1;
-
-/// The name of a `--json` document's schema, `jointid-<kind>/<SCHEMA_VERSION>`; `kind` is
-/// the command, or the command and the document's variant (`fit-nonlinear`).
-pub fn schema_name(kind: &str) -> String {
-    format!("jointid-{kind}/{SCHEMA_VERSION}")
-}
-
-/// A `--json` document: its `schema` first, then the command's own fields.
-#[derive(serde::Serialize)]
-struct Document<'a, T> {
-    schema: String,
-    #[serde(flatten)]
-    body: &'a T,
-}
-
-/// Prints `value`, a command's `--json` document of kind `kind` (the command's name, or
-/// its name and the document's variant: `fit-nonlinear`), as pretty JSON on `out`, with
-/// `"schema": "jointid-<kind>/1"` as its first field. The one place that prints a JSON
-/// document; its shape is pinned by `host/cli/schema/<kind>.schema.json`.
-///
-/// The document is serialised first and then written, so a write error reaches the
-/// caller as the [`std::io::Error`] itself (a closed pipe stays recognisable) rather than
-/// inside a `serde_json::Error`.
-///
-/// # Errors
-/// Serialisation or write errors.
-pub fn print_json<T: serde::Serialize>(
-    out: &mut dyn Write,
-    kind: &str,
-    value: &T,
-) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
-    let doc = Document {
-        schema: schema_name(kind),
-        body: value,
-    };
-    let mut text = serde_json::to_vec_pretty(&doc)?;
-    text.push(b'\n');
-    out.write_all(&text)?;
-    Ok(())
-}
-
-/// The one-line JSON document of an error: `{"schema": "jointid-error/1", "error": msg}`.
-fn error_json(msg: &str) -> String {
-    #[derive(serde::Serialize)]
-    struct Error<'a> {
-        error: &'a str,
-    }
-    let doc = Document {
-        schema: schema_name("error"),
-        body: &Error { error: msg },
-    };
-    // a struct of two strings always serialises
-    serde_json::to_string(&doc).unwrap_or_default()
-}
-
-/// `msg` without the ` (os error N)` that the standard library appends to I/O errors.
-fn without_os_error_codes(msg: &str) -> String {
-    let mut out = String::with_capacity(msg.len());
-    let mut rest = msg;
-    while let Some(i) = rest.find(" (os error ") {
-        out.push_str(&rest[..i]);
-        let tail = &rest[i + " (os error ".len()..];
-        let digits = tail.bytes().take_while(u8::is_ascii_digit).count();
-        if digits > 0 && tail[digits..].starts_with(')') {
-            rest = &tail[digits + 1..];
-        } else {
-            out.push_str(" (os error ");
-            rest = tail;
-        }
-    }
-    out.push_str(rest);
-    out
-}
+use clap::Parser;
+use jointid_cli::{
+    default_loaders, error_json, error_message, is_broken_pipe, parse_error_message, run, Cli,
+    Context,
+};
 
 /// The binary's standard output: every write and flush error names it ("standard
 /// output: ..."), keeping the error's kind (a closed pipe is still
@@ -270,20 +35,6 @@ impl<W: Write> Write for StdOut<W> {
     }
 }
 
-/// True when `e` or one of its causes is a closed pipe.
-fn is_broken_pipe(e: &(dyn std::error::Error + 'static)) -> bool {
-    let mut cur = Some(e);
-    while let Some(c) = cur {
-        if c.downcast_ref::<std::io::Error>()
-            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
-        {
-            return true;
-        }
-        cur = c.source();
-    }
-    false
-}
-
 /// Prints one line of the program's own (an error) on standard output, or on standard
 /// error when standard output cannot take it; never panics.
 fn print_line_stdout(line: &str) {
@@ -297,15 +48,7 @@ fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) if e.use_stderr() && std::env::args().any(|a| a == "--json") => {
-            let text = e.render().to_string();
-            let lines: Vec<&str> = text
-                .lines()
-                .map(str::trim)
-                .take_while(|l| !l.starts_with("Usage:"))
-                .filter(|l| !l.is_empty())
-                .collect();
-            let msg = lines.join(" ");
-            print_line_stdout(&error_json(msg.trim_start_matches("error: ")));
+            print_line_stdout(&error_json(&parse_error_message(&e)));
             return ExitCode::from(2);
         }
         Err(e) => e.exit(),
@@ -318,6 +61,7 @@ fn main() -> ExitCode {
             json: cli.json,
             loaders: &loaders,
             out: &mut stdout,
+            fitted: None,
         },
     );
     // what is still buffered must reach the output too: a failed flush is an error
@@ -333,20 +77,10 @@ fn main() -> ExitCode {
             return ExitCode::SUCCESS;
         }
     }
-    match result.map_err(anyhow::Error::from_boxed) {
+    match result {
         Ok(outcome) => ExitCode::from(outcome.code()),
         Err(e) => {
-            // the chain, skipping causes the message already states
-            let mut msg = e.to_string();
-            for cause in e.chain().skip(1) {
-                let c = cause.to_string();
-                // an I/O error's text without its `(os error N)` suffix counts as stated
-                let plain = c.find(" (os error ").map_or(c.as_str(), |i| &c[..i]);
-                if !msg.contains(plain) {
-                    msg = format!("{msg}: {c}");
-                }
-            }
-            let msg = without_os_error_codes(&msg.replace('\n', " "));
+            let msg = error_message(e);
             if cli.json {
                 print_line_stdout(&error_json(&msg));
             } else {
@@ -354,50 +88,5 @@ fn main() -> ExitCode {
             }
             ExitCode::from(2)
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use clap::CommandFactory;
-
-    #[test]
-    fn cli_definition_is_consistent() {
-        Cli::command().debug_assert();
-    }
-
-    #[test]
-    fn json_documents_name_their_schema_first() {
-        #[derive(serde::Serialize)]
-        struct X {
-            a: u8,
-        }
-        let mut out = Vec::new();
-        print_json(&mut out, "info", &X { a: 1 }).unwrap();
-        assert_eq!(
-            String::from_utf8(out).unwrap(),
-            "{\n  \"schema\": \"jointid-info/1\",\n  \"a\": 1\n}\n"
-        );
-        assert_eq!(
-            error_json("no \"x\""),
-            r#"{"schema":"jointid-error/1","error":"no \"x\""}"#
-        );
-    }
-
-    #[test]
-    fn json_flag_is_global() {
-        let c = Cli::try_parse_from(["jointid", "analyze", "x.csv", "--json"]).unwrap();
-        assert!(c.json);
-        let c = Cli::try_parse_from([
-            "jointid",
-            "--json",
-            "validate",
-            "x.csv",
-            "--simulated",
-            "ys",
-        ])
-        .unwrap();
-        assert!(c.json && matches!(c.command, Command::Validate(_)));
     }
 }

@@ -728,6 +728,7 @@ mod tests {
                 json: cli.json,
                 loaders: &loaders,
                 out: &mut buf,
+                fitted: None,
             },
         );
         (result, buf)

@@ -182,6 +182,7 @@ mod tests {
                     json: cli.json,
                     loaders: &loaders,
                     out: &mut buf,
+                    fitted: None,
                 },
             )
             .unwrap();
