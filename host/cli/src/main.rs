@@ -57,7 +57,7 @@ pub enum Command {
     Capture(capture::CaptureArgs),
     /// what a .jcap capture holds: board, excitation, samples, gaps, damaged frames
     Info(info::InfoArgs),
-    /// write a .jcap capture as the capture CSV (t,theta_ref,u,theta_m)
+    /// write a .jcap capture as the capture CSV (t,theta_ref,u,theta_m) or a MATLAB file
     Export(export::ExportArgs),
     /// nonparametric FRF, noise level and nonlinear distortion of periodic data
     Analyze(analyze::AnalyzeArgs),
