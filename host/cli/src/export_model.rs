@@ -18,7 +18,8 @@ use serde_json::json;
 use super::{CmdResult, Context, Outcome};
 
 /// What `export-model` writes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum ModelFormat {
     /// state space, continuous and discrete, as JSON
     JsonSs,
@@ -82,21 +83,66 @@ pub fn run(args: &ExportModelArgs, ctx: &mut Context<'_>) -> CmdResult {
     match &args.out {
         Some(out) => {
             write_file(out, args.force, |w| w.write_all(&bytes))?;
-            let _ = writeln!(
-                std::io::stderr(),
-                "wrote {} ({}{})",
-                out.display(),
-                ex.signals(),
-                if ex.continuous.is_none() {
-                    ", discrete only"
-                } else {
-                    ""
-                }
-            );
+            if !ctx.json {
+                let _ = writeln!(
+                    std::io::stderr(),
+                    "wrote {} ({}{})",
+                    out.display(),
+                    ex.signals(),
+                    if ex.continuous.is_none() {
+                        ", discrete only"
+                    } else {
+                        ""
+                    }
+                );
+            }
         }
         None => ctx.out.write_all(&bytes)?,
     }
+    if ctx.json {
+        let summary = Summary {
+            file: name,
+            format: args.format,
+            out: args.out.as_ref().map(|p| p.display().to_string()),
+            input: &ex.input,
+            output: &ex.output,
+            ts: ex.ts,
+            states: ex.discrete.a.len(),
+            continuous: ex.continuous.is_some(),
+            continuous_note: ex.continuous_note.as_deref(),
+        };
+        // with the export itself on standard output, the summary goes to standard error
+        if args.out.is_some() {
+            super::print_json(ctx.out, "export-model", &summary)?;
+        } else {
+            super::print_json(&mut std::io::stderr().lock(), "export-model", &summary)?;
+        }
+    }
     Ok(Outcome::Ok)
+}
+
+/// What `export-model --json` prints: on standard output with `--out`, else on standard
+/// error (standard output then carries the export).
+#[derive(serde::Serialize)]
+struct Summary<'a> {
+    /// the model file read
+    file: String,
+    /// the form written
+    format: ModelFormat,
+    /// the file written (absent: standard output)
+    #[serde(skip_serializing_if = "Option::is_none")]
+    out: Option<String>,
+    input: &'a jointid::ident::model_export::Signal,
+    output: &'a jointid::ident::model_export::Signal,
+    /// sample interval of the discrete model [s]
+    ts: f64,
+    /// model order
+    states: usize,
+    /// whether a continuous model was written
+    continuous: bool,
+    /// why not, when not
+    #[serde(skip_serializing_if = "Option::is_none")]
+    continuous_note: Option<&'a str>,
 }
 
 fn json_text(v: &serde_json::Value) -> Result<Vec<u8>, serde_json::Error> {
