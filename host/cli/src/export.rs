@@ -1,4 +1,5 @@
-//! `jointid export RUN.jcap --csv RUN.csv`: the capture CSV of DESIGN.md §5.
+//! `jointid export RUN.jcap --csv RUN.csv`: the capture CSV of DESIGN.md §5;
+//! `--mat RUN.mat`: the same columns as MATLAB vectors ([`jointid::capture::export::export_mat`]).
 //!
 //! Writes only the samples that arrived; the `# gaps=` comment lists what did not (see
 //! [`jointid::capture::export`]). An existing CSV is replaced only with `--force`; the CSV
@@ -15,15 +16,22 @@ use serde::Serialize;
 use super::{CmdResult, Context, Outcome};
 use jointid::capture::{export, read_jcap_session, session_ids, DamagedFrame, SeqGap};
 
+use jointid::data::output::check_output;
+
 /// Arguments of `jointid export`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
+#[command(group(clap::ArgGroup::new("to").required(true).multiple(true).args(["csv", "mat"])))]
 pub struct ExportArgs {
     /// Capture file to read
     #[arg(value_name = "RUN.jcap")]
     pub input: PathBuf,
     /// CSV file to write (`-` for stdout)
     #[arg(long, value_name = "RUN.csv")]
-    pub csv: PathBuf,
+    pub csv: Option<PathBuf>,
+    /// MATLAB Level-5 file to write: column vectors t, theta_ref, u, theta_m and the CSV's
+    /// comment lines as the text `comments`
+    #[arg(long, value_name = "RUN.mat")]
+    pub mat: Option<PathBuf>,
     /// Session to export, by its id as `jointid info` lists it (default: the first)
     #[arg(long, value_name = "K")]
     pub session: Option<u32>,
@@ -42,7 +50,11 @@ struct ExportSummary<'a> {
     /// the capture read
     file: String,
     /// the CSV written (`-`: standard output)
-    csv: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    csv: Option<String>,
+    /// the MATLAB file written
+    #[serde(skip_serializing_if = "Option::is_none")]
+    mat: Option<String>,
     /// the exported session
     session_id: u32,
     /// CSV rows written (samples that arrived)
@@ -65,9 +77,12 @@ struct ExportSummary<'a> {
 /// Reading the capture ([`jointid::capture::CaptureError::Jcap`], [`jointid::capture::CaptureError::NoHeader`],
 /// [`jointid::capture::CaptureError::Excitation`]) or writing the CSV ([`jointid::capture::CaptureError::Output`]).
 pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
-    let to_stdout = args.csv.as_os_str() == "-";
-    if !to_stdout {
-        jointid::data::output::check_output(&args.csv, args.force)?;
+    let to_stdout = args.csv.as_ref().is_some_and(|c| c.as_os_str() == "-");
+    if let Some(csv) = args.csv.as_ref().filter(|_| !to_stdout) {
+        check_output(csv, args.force)?;
+    }
+    if let Some(mat) = &args.mat {
+        check_output(mat, args.force)?;
     }
     let record = read_jcap_session(&args.input, args.session)?;
     if to_stdout {
@@ -75,9 +90,17 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
         // errors name standard output (see main.rs)
         export::write_csv(&record, &mut w)?;
         w.into_inner().map_err(|e| e.into_error())?;
-    } else {
-        export::export_csv(&record, &args.csv, args.force)?;
+    } else if let Some(csv) = &args.csv {
+        export::export_csv(&record, csv, args.force)?;
     }
+    if let Some(mat) = &args.mat {
+        export::export_mat(&record, mat, args.force)?;
+    }
+    let written: Vec<String> = [&args.csv, &args.mat]
+        .into_iter()
+        .flatten()
+        .map(|p| p.display().to_string())
+        .collect();
     let r = &record.report;
     let ids = session_ids(r);
     let mut notes = Vec::new();
@@ -100,7 +123,7 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
             std::io::stderr(),
             "exported {} samples to {} ({} gaps, {} samples missing, {} damaged frames)",
             record.samples.len(),
-            args.csv.display(),
+            written.join(" and "),
             r.gaps.len(),
             r.missing_samples,
             r.damaged_frames.len()
@@ -109,7 +132,8 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
     if ctx.json {
         let summary = ExportSummary {
             file: args.input.display().to_string(),
-            csv: args.csv.display().to_string(),
+            csv: args.csv.as_ref().map(|p| p.display().to_string()),
+            mat: args.mat.as_ref().map(|p| p.display().to_string()),
             session_id: record.header.session_id,
             rows: record.samples.len(),
             samples: r.samples,

@@ -170,7 +170,8 @@ pub struct FitArgs {
     /// (after preparation) and validate on the rest
     #[arg(long, value_name = "F", conflicts_with = "validation", value_parser = parse_fraction)]
     pub estimation_fraction: Option<f64>,
-    /// store the model (everything needed to simulate it again)
+    /// store the model (everything needed to simulate it again); a name ending in `.mat`
+    /// writes a MATLAB file instead (matrices, transfer functions, parameters, FIT)
     #[arg(long, value_name = "MODEL.json")]
     pub save: Option<PathBuf>,
     /// write bode.svg (model over the FRF with ±2σ) into this directory
@@ -1172,7 +1173,9 @@ fn on_validation(
 }
 
 /// Writes the model file `path` ([`jointid::data::output`]: an existing file only with
-/// `force`, whole or not at all).
+/// `force`, whole or not at all): JSON, or a MATLAB Level-5 file when the name ends in
+/// `.mat` ([`jointid::ident::model_export::model_mat`]: the matrices, transfer functions,
+/// parameters, FIT and a description; `validate` reads only the JSON).
 ///
 /// # Errors
 /// Serialisation and [`jointid::data::output::OutputError`]s naming the file.
@@ -1181,8 +1184,16 @@ pub(crate) fn save_model(
     saved: &jointid::ident::model_file::SavedModel,
     force: bool,
 ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
-    let text = serde_json::to_string_pretty(saved)? + "\n";
-    jointid::data::output::write_file(path, force, |w| w.write_all(text.as_bytes()))?;
+    let is_mat = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mat"));
+    let bytes = if is_mat {
+        jointid::ident::model_export::model_mat(saved)
+            .map_err(|e| format!("{}: {e}", path.display()))?
+    } else {
+        (serde_json::to_string_pretty(saved)? + "\n").into_bytes()
+    };
+    jointid::data::output::write_file(path, force, |w| w.write_all(&bytes))?;
     Ok(())
 }
 

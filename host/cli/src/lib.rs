@@ -34,6 +34,7 @@ mod demo;
 mod diagnose;
 mod experiment;
 mod export;
+mod export_model;
 mod fit;
 mod fit_nl;
 mod info;
@@ -60,8 +61,10 @@ pub enum Command {
     Capture(capture::CaptureArgs),
     /// what a .jcap capture holds: board, excitation, samples, gaps, damaged frames
     Info(info::InfoArgs),
-    /// write a .jcap capture as the capture CSV (t,theta_ref,u,theta_m)
+    /// write a .jcap capture as the capture CSV (t,theta_ref,u,theta_m) or a MATLAB file
     Export(export::ExportArgs),
+    /// a model file of `fit --save` as state space or transfer functions (JSON, MATLAB, python-control)
+    ExportModel(export_model::ExportModelArgs),
     /// nonparametric FRF, noise level and nonlinear distortion of periodic data
     Analyze(analyze::AnalyzeArgs),
     /// fit a black-box or physical model: parameters, FIT, resonances, residual tests
@@ -135,6 +138,7 @@ pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
         Command::Capture(a) => capture::run(a, ctx),
         Command::Info(a) => info::run(a, ctx),
         Command::Export(a) => export::run(a, ctx),
+        Command::ExportModel(a) => export_model::run(a, ctx),
         Command::Analyze(a) => analyze::run(a, ctx),
         Command::Fit(a) => fit::run(a, ctx),
         Command::Validate(a) => validate_cmd::run(a, ctx),

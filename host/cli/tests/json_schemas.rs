@@ -482,6 +482,31 @@ fn analyze_fit_and_validate_documents_match_their_schemas() {
         &["validate", &est, "--simulated", "theta_m", "--json"],
         "validate-simulated",
     );
+    let py = dir.join("m.py").display().to_string();
+    let e = run_valid(
+        &[
+            "export-model",
+            &model,
+            "--format",
+            "python-control",
+            "--out",
+            &py,
+            "--json",
+        ],
+        "export-model",
+    );
+    assert_eq!(
+        (e["format"].as_str(), e["out"].as_str()),
+        (Some("python-control"), Some(py.as_str()))
+    );
+    // to standard output the export goes there, the summary to standard error
+    let o = jointid(&["export-model", &model, "--format", "json-tf", "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(one_document(&o.stdout, "export-model stdout")["continuous"].is_object());
+    assert_valid(
+        &one_document(&o.stderr, "export-model stderr"),
+        "export-model",
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -450,7 +450,8 @@ fn a_capture_named_csv_is_read_as_a_capture_and_a_mat_file_is_named() {
     assert_eq!(out.status.code(), Some(2));
     assert!(
         stderr(&out).contains(&format!(
-            "{}: MATLAB file (v5): not supported yet",
+            "{}: endian indicator \"  \" at byte 126 is neither `IM` nor `MI`: not a MATLAB \
+             Level-5 MAT-file",
             mat.display()
         )),
         "{}",

@@ -134,6 +134,37 @@ pub fn export_csv(
     Ok(())
 }
 
+/// The capture as a Level-5 MAT-file ([`crate::data::mat`]): the column vectors `t` [s],
+/// `theta_ref` [rad], `u` [N·m] and `theta_m` [rad] of the samples that arrived, and the
+/// capture CSV's comment block as the text `comments` (which the loader reads back, so
+/// the excitation config travels with the data). Written under the rule of every output
+/// file, as [`export_csv`].
+///
+/// # Errors
+/// [`CaptureError::Output`] naming the file that could not be written.
+pub fn export_mat(
+    record: &CaptureRecord,
+    path: &Path,
+    overwrite: bool,
+) -> Result<(), CaptureError> {
+    use crate::data::mat::{MatOut, MatWriter};
+    let column = |f: fn(&super::CaptureSample) -> f64| {
+        MatOut::column(&record.samples.iter().map(f).collect::<Vec<f64>>())
+    };
+    let mut w = MatWriter::new("jointid capture: t [s], theta_ref [rad], u [N m], theta_m [rad]");
+    w.var("t", &column(|s| s.t))
+        .var("theta_ref", &column(|s| s.theta_ref))
+        .var("u", &column(|s| s.u))
+        .var("theta_m", &column(|s| s.theta_m))
+        .var(
+            crate::data::mat::COMMENTS_VAR,
+            &MatOut::Text(comment_lines(record)),
+        );
+    let bytes = w.finish();
+    crate::data::output::write_file(path, overwrite, |w| w.write_all(&bytes))?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -215,6 +215,26 @@ fn parse_inner(
         }
         line_of_row.push(ln);
     }
+    record_from_columns(name, map, meta, excitation, notes, columns, line_of_row)
+}
+
+/// The record of columns already read (time, input, output and, when `map` has one, the
+/// reference), checked as [`parse_csv_record`] describes; `line_of_row` is each row's
+/// position for messages (a line of a CSV, a sample of a MAT-file), `meta` the comment
+/// keys with their lines. Also returns the first gap as an error, for [`parse_csv`].
+///
+/// # Errors
+/// As [`parse_csv_record`] after the cells are read.
+pub(super) fn record_from_columns(
+    name: &str,
+    map: &ColumnMap,
+    meta: BTreeMap<String, (usize, String)>,
+    excitation: Option<ExcitationConfig>,
+    notes: Vec<String>,
+    columns: Vec<Vec<f64>>,
+    line_of_row: Vec<usize>,
+) -> Result<(Record, Option<DataError>), DataError> {
+    let file = || name.to_string();
     let rows = line_of_row.len();
     if rows < 2 {
         return Err(DataError::TooShort { file: file(), rows });
@@ -410,7 +430,7 @@ fn repeat_misfit(x: &[f64], n: usize) -> Option<f64> {
     (den > 0.0).then(|| num / den)
 }
 
-fn parse_excitation(
+pub(super) fn parse_excitation(
     meta: &BTreeMap<String, (usize, String)>,
     file: &str,
 ) -> Result<Option<ExcitationConfig>, DataError> {

@@ -45,6 +45,7 @@ pub fn fmt_sig(x: f64, digits: usize) -> String {
     format!("{rounded}")
 }
 pub mod dsp;
+pub mod mat;
 pub mod output;
 pub mod prep;
 pub mod segment;
@@ -665,8 +666,8 @@ pub type LoaderFn = Box<
 
 /// Registry of loaders, chosen by the file's content, never by its name: a registered
 /// format by its magic bytes (the native `.jcap` capture, registered by the module that
-/// owns it with [`Loaders::register`]), MATLAB files recognised and refused with a clear
-/// message, anything else read as CSV text. `-` reads standard input.
+/// owns it with [`Loaders::register`]), MATLAB Level-5 files read by [`mat`] (v7.3, HDF5,
+/// refused with a clear message), anything else read as CSV text. `-` reads standard input.
 #[derive(Default)]
 pub struct Loaders {
     formats: Vec<(String, Vec<u8>, LoaderFn)>,
@@ -687,6 +688,9 @@ pub const JCAP_MAGIC_PREFIX: &[u8] = b"JCAP";
 /// The signature of an HDF5 file (MATLAB v7.3 files are HDF5 after a 512-byte header).
 const HDF5_SIGNATURE: &[u8] = b"\x89HDF\r\n\x1a\n";
 
+/// What [`matlab_kind`] calls a Level-5 MAT-file, which [`mat`] reads.
+pub const MATLAB_V5: &str = "MATLAB file (v5)";
+
 /// The MATLAB file type of `bytes`, when it is one (`MATLAB 5.0 MAT-file` text header,
 /// or the HDF5 signature at byte 0 or 512).
 pub fn matlab_kind(bytes: &[u8]) -> Option<&'static str> {
@@ -699,7 +703,7 @@ pub fn matlab_kind(bytes: &[u8]) -> Option<&'static str> {
         return Some("MATLAB file (v7.3, HDF5)");
     }
     if text.starts_with("MATLAB ") && text.contains("MAT-file") {
-        return Some("MATLAB file (v5)");
+        return Some(MATLAB_V5);
     }
     None
 }
@@ -778,11 +782,14 @@ impl Loaders {
             });
         }
         if let Some(what) = matlab_kind(input.bytes) {
+            if what == MATLAB_V5 {
+                return mat::parse_mat_record(input.bytes, &name, map);
+            }
             return Err(DataError::Unsupported {
                 file: name,
                 what: what.into(),
-                hint: "save the signals as a CSV with a header line, e.g. `writetable` in \
-                       MATLAB, and map its columns with --time/--input/--output"
+                hint: "save it as a Level-5 MAT-file with `save(file, '-v7', ...)` in \
+                       MATLAB, or the signals as a CSV with a header line"
                     .into(),
             });
         }
@@ -869,11 +876,20 @@ mod tests {
         let e = loaders.load(&mat, &ColumnMap::capture()).unwrap_err();
         assert!(
             e.to_string().starts_with(&format!(
-                "{}: MATLAB file (v5): not supported yet",
+                "{}: endian indicator \"  \" at byte 126 is neither `IM` nor `MI`",
                 mat.display()
             )),
             "{e}"
         );
+        // a Level-5 file is read by its variables, whatever its name
+        let mut w = mat::MatWriter::new("loader test");
+        for (n, x) in [("t", [0.0, 0.5]), ("theta_ref", [0.0; 2]), ("u", [1.0; 2])] {
+            w.var(n, &mat::MatOut::column(&x));
+        }
+        w.var("theta_m", &mat::MatOut::row(&[2.0, 3.0]));
+        std::fs::write(&csv, w.finish()).unwrap();
+        let ds = loaders.load(&csv, &ColumnMap::capture()).unwrap();
+        assert_eq!((ds.data.ts, ds.data.y.clone()), (0.5, vec![2.0, 3.0]));
         let mut v73 = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, HDF5 schema 1.00 .".to_vec();
         v73.resize(512, 0);
         v73.extend_from_slice(b"\x89HDF\r\n\x1a\n");

@@ -13,6 +13,7 @@ pub mod frf_subspace;
 pub mod grey_box;
 pub mod linalg;
 pub mod lm;
+pub mod model_export;
 pub mod model_file;
 pub mod nonlinear;
 pub mod pem;
