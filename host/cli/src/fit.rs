@@ -23,6 +23,7 @@ use clap::{Args, ValueEnum};
 use serde::Serialize;
 
 use super::args::{DataArgs, PrepArgs, ReadArgs};
+use super::views::{write_views, CompareRecord, Views, VIEW_FILES};
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::check_output;
 use jointid::data::Dataset;
@@ -40,6 +41,7 @@ use jointid::ident::validate::{
 };
 use jointid::model::spec::{Family, ModelSpec, SpecError, Structure, NONLINEAR_TWO_MASS};
 use jointid::report::plot::bode_svg;
+use jointid::report::views::Units;
 
 /// Friction model of the rigid body.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -173,7 +175,9 @@ pub struct FitArgs {
     /// store the model (everything needed to simulate it again)
     #[arg(long, value_name = "MODEL.json")]
     pub save: Option<PathBuf>,
-    /// write bode.svg (model over the FRF with ±2σ) into this directory
+    /// write into this directory bode.svg (model over the FRF with ±2σ) and the toolbox's
+    /// views: compare.svg (measured vs simulated output, FIT in the legend), resid.svg
+    /// (residual tests with their bands), pzmap.svg and step.svg
     #[arg(long, value_name = "DIR")]
     pub plot: Option<PathBuf>,
     /// replace the --save file and the plot when they exist (without it they are refused
@@ -478,12 +482,12 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     let spec = args.spec()?;
     let nonlinear = spec.nonlinear();
     if let Some(dir) = &args.plot {
-        let name = if nonlinear {
-            super::fit_nl::PLOT_FILE
-        } else {
-            "bode.svg"
-        };
-        check_plot_files(dir, &[name], args.force)?;
+        let mut names = vec![super::fit_nl::PLOT_FILE];
+        if !nonlinear {
+            names = vec!["bode.svg"];
+            names.extend(VIEW_FILES);
+        }
+        check_plot_files(dir, &names, args.force)?;
     }
     if !nonlinear {
         super::fit_nl::refuse_nonlinear_flags(args)?;
@@ -642,8 +646,28 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         (&ev, vv.as_ref()),
     )
     .map_err(|e| format!("{}: {e}", ds.name))?;
+    let mut compare = Vec::new();
+    if args.plot.is_some() {
+        compare.push(simulated_record(
+            &fitted,
+            &est,
+            format!("estimation: {}", ds.name),
+            ev.fit,
+        )?);
+        if let (Some(v), Some(n), Some(vv)) = (&val, &val_name, &vv) {
+            compare.push(simulated_record(
+                &fitted,
+                v,
+                format!("validation: {n}"),
+                vv.fit,
+            )?);
+        }
+    }
     let est = &est.prepared;
     let measured = Measured {
+        compare,
+        fit_label: toolbox_label(fig.metric),
+        compared: "simulated",
         segments: vec![SegmentJson {
             segment: numbers[0],
             samples: ds.data.len(),
@@ -856,8 +880,33 @@ fn run_segments(
     let ts = est[0].prepared.ts;
     let mut fig = time_domain_figures(&fitted, &est, val.as_ref(), (&ev, vv.as_ref()))
         .map_err(|e| format!("{name}: {e}"))?;
+    let mut compare = Vec::new();
+    if args.plot.is_some() {
+        // the longest segment, under the toolbox FIT printed for it
+        let i = (0..used.len())
+            .max_by_key(|&i| (used[i].data.len(), usize::MAX - i))
+            .unwrap_or(0);
+        let title = format!("estimation: {} (segment {})", used[i].name, used_numbers[i]);
+        compare.push(simulated_record(&fitted, &est[i], title, each[i])?);
+        if let (Some(v), Some(n), Some(vv)) = (val, &val_name, &vv) {
+            compare.push(simulated_record(
+                &fitted,
+                v,
+                format!("validation: {n}"),
+                vv.fit,
+            )?);
+        }
+    }
+    let fit_label = if fig.each.is_some() {
+        "toolbox FIT"
+    } else {
+        "FIT"
+    };
     let each = fig.each.take().unwrap_or(each);
     let measured = Measured {
+        compare,
+        fit_label,
+        compared: "simulated",
         segments: used
             .iter()
             .zip(&used_numbers)
@@ -947,10 +996,35 @@ fn run_frequency_domain(
         jointid::ident::validate::validate(&s.u, &s.y, &s.y_hat, args.lags)
             .map_err(|e| format!("{}: {e}", d.name))
     };
+    let periodic_fit =
+        |a: &FrfAnalysis| frf_fit::periodic_fit_percent(&a.frf, &respond(&a.frf.freq_hz));
     let periodic = val_ds.is_none() || val_analysis.is_some();
+    let mut compare = Vec::new();
     let (ev, vv) = if periodic {
+        // what the periodic FIT printed for each record compares: one averaged period
+        // at the reliable lines, measured against the model's response
+        let mut record = |title: String, a: &FrfAnalysis, period: usize| {
+            let g = respond(&a.frf.freq_hz);
+            if let Some((y, y_hat)) = frf_fit::periodic_fit_signals(&a.frf, &g, period) {
+                compare.push(CompareRecord {
+                    title,
+                    ts,
+                    y,
+                    y_hat,
+                    fit: periodic_fit(a),
+                });
+            }
+        };
+        record(
+            format!("estimation: {}", ds.name),
+            pooled,
+            analysis.layout.period,
+        );
         let vv = match (val_ds, val_analysis) {
-            (Some(v), Some(a)) => Some(tests(v, a)?),
+            (Some(v), Some(a)) => {
+                record(format!("validation: {}", v.name), a, a.layout.period);
+                Some(tests(v, a)?)
+            }
             _ => None,
         };
         (tests(ds, analysis)?, vv)
@@ -959,10 +1033,24 @@ fn run_frequency_domain(
             .evaluate_on(est, args.lags)
             .map_err(|e| format!("{}: {e}", ds.name))?;
         let vv = on_validation(&fitted, val, val_name.as_deref(), args.lags)?;
+        if args.plot.is_some() {
+            compare.push(simulated_record(
+                &fitted,
+                est,
+                format!("estimation: {}", ds.name),
+                ev.fit,
+            )?);
+            if let (Some(v), Some(n), Some(vv)) = (val, &val_name, &vv) {
+                compare.push(simulated_record(
+                    &fitted,
+                    v,
+                    format!("validation: {n}"),
+                    vv.fit,
+                )?);
+            }
+        }
         (ev, vv)
     };
-    let periodic_fit =
-        |a: &FrfAnalysis| frf_fit::periodic_fit_percent(&a.frf, &respond(&a.frf.freq_hz));
     let (fit_name, fit_estimation, fit_validation) = if periodic {
         (
             PERIODIC_FIT_NAME,
@@ -995,6 +1083,13 @@ fn run_frequency_domain(
             .collect()
     };
     let measured = Measured {
+        compare,
+        fit_label: if periodic { "periodic FIT" } else { "FIT" },
+        compared: if periodic {
+            "the model's: one period averaged over the record, reliable excited lines only"
+        } else {
+            "simulated"
+        },
         segments,
         val_name,
         ts,
@@ -1014,6 +1109,12 @@ fn run_frequency_domain(
 
 /// What a fit path measured, for the report.
 struct Measured {
+    /// the records of `compare.svg` (filled with `--plot` only)
+    compare: Vec<CompareRecord>,
+    /// name of their FIT in the legend
+    fit_label: &'static str,
+    /// what the model's output in `compare.svg` is
+    compared: &'static str,
     /// the estimation segments and the FIT on each
     segments: Vec<SegmentJson>,
     /// name of the validation record
@@ -1049,7 +1150,7 @@ fn finish(
     ctx: &mut Context<'_>,
     ds: &Dataset,
     fitted: &Fitted,
-    m: Measured,
+    mut m: Measured,
 ) -> CmdResult {
     let mut files = Vec::new();
     if let Some(path) = &args.save {
@@ -1070,6 +1171,24 @@ fn finish(
             args.force,
         )?;
         files.push(p.display().to_string());
+        let mut tests = vec![("estimation", &m.ev)];
+        if let Some(v) = &m.vv {
+            tests.push(("validation", v));
+        }
+        let views = Views {
+            fitted,
+            fit_label: m.fit_label,
+            compared: m.compared,
+            records: std::mem::take(&mut m.compare),
+            tests,
+            units: Units::joint(args.linear_axis, fitted.output == Output::Velocity),
+            linear: args.linear_axis,
+            record_s: ds.data.len() as f64 * ds.data.ts,
+            file: &ds.name,
+        };
+        for p in write_views(dir, &views, args.force)? {
+            files.push(p.display().to_string());
+        }
     }
     let report = FitReport {
         model: fitted.spec.name(),
@@ -1105,6 +1224,36 @@ fn finish(
         warnings: fitted.warnings.clone(),
     };
     emit(ctx, &report, args.strict)
+}
+
+/// The legend's name of the toolbox FIT: `FIT` when it is the headline (`metric`
+/// `toolbox`), else `toolbox FIT` (printed beside the velocity FIT).
+fn toolbox_label(metric: &str) -> &'static str {
+    if metric == "toolbox" {
+        "FIT"
+    } else {
+        "toolbox FIT"
+    }
+}
+
+/// A record of `compare.svg`: `data`'s prepared output and `fitted`'s simulation on it
+/// ([`Fitted::simulate_on`], the one the toolbox FIT `fit` is computed from).
+fn simulated_record(
+    fitted: &Fitted,
+    data: &FitData,
+    title: String,
+    fit: f64,
+) -> Result<CompareRecord, String> {
+    let y_hat = fitted
+        .simulate_on(data)
+        .map_err(|e| format!("{title}: {e}"))?;
+    Ok(CompareRecord {
+        title,
+        ts: data.prepared.ts,
+        y: data.prepared.y.clone(),
+        y_hat,
+        fit,
+    })
 }
 
 /// The FIT figures of a time-domain fit ([`time_domain_figures`]).

@@ -1,0 +1,194 @@
+//! The toolbox's views that `fit --plot` and `validate --plot` write beside the Bode
+//! plot ([`jointid::report::views`]): `compare.svg` (measured against simulated output,
+//! FIT in the legend, one panel per record), `resid.svg` (the residual tests with their
+//! 99 % bands), `pzmap.svg` (poles and zeros, s-plane in Hz) and `step.svg` (response to
+//! a unit input step). Axes carry the data's units ([`Units`]).
+
+use std::path::{Path, PathBuf};
+
+use jointid::ident::fit::Fitted;
+use jointid::ident::grey_box::Output;
+use jointid::ident::validate::Validation;
+use jointid::report::views::{
+    compare_svg, interval_rate, pzmap_svg, resid_svg, step_horizon, step_response, step_svg,
+    CompareModel, ComparePanel, PzModel, ResidRow, StepCurve, Units,
+};
+
+use super::write_svg;
+
+/// The files [`write_views`] writes.
+pub const VIEW_FILES: [&str; 4] = ["compare.svg", "resid.svg", "pzmap.svg", "step.svg"];
+
+/// One record of `compare.svg`: measured and simulated output and the FIT the command
+/// printed for them.
+pub struct CompareRecord {
+    /// `estimation: FILE`, `validation: FILE`
+    pub title: String,
+    /// sample interval [s]
+    pub ts: f64,
+    /// measured output
+    pub y: Vec<f64>,
+    /// simulated output
+    pub y_hat: Vec<f64>,
+    /// the FIT [%] printed for it
+    pub fit: f64,
+}
+
+/// What the views of one model show.
+pub struct Views<'a> {
+    /// the model
+    pub fitted: &'a Fitted,
+    /// name of the FIT in the legend (`FIT`, `periodic FIT`, `toolbox FIT`)
+    pub fit_label: &'a str,
+    /// whose output is drawn against the measured one (`simulated`, `the model's: one
+    /// period averaged ...`)
+    pub compared: &'a str,
+    /// the records compared
+    pub records: Vec<CompareRecord>,
+    /// residual tests per record (`estimation`, `validation`, `data`)
+    pub tests: Vec<(&'a str, &'a Validation)>,
+    /// the data's units
+    pub units: Units,
+    /// the axis is linear (force → position)
+    pub linear: bool,
+    /// duration of the estimation record [s] (the step response's horizon at most)
+    pub record_s: f64,
+    /// the data file named in the titles
+    pub file: &'a str,
+}
+
+/// names of the input, the output and the output's rate
+fn quantities(linear: bool, output: Output) -> (&'static str, &'static str, &'static str) {
+    match (linear, output) {
+        (false, Output::Angle) => ("torque", "motor angle", "motor velocity"),
+        (false, Output::Velocity) => ("torque", "motor velocity", "motor acceleration"),
+        (true, Output::Angle) => ("force", "position", "velocity"),
+        (true, Output::Velocity) => ("force", "velocity", "acceleration"),
+    }
+}
+
+/// Writes [`VIEW_FILES`] into `dir` (created when missing; existing files only with
+/// `force`) and returns their paths.
+///
+/// # Errors
+/// Directory, plot and write errors.
+pub fn write_views(
+    dir: &Path,
+    v: &Views<'_>,
+    force: bool,
+) -> Result<Vec<PathBuf>, Box<dyn std::error::Error + Send + Sync>> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let f = v.fitted;
+    let name = f.spec.name();
+    let (inp, out, rate) = quantities(v.linear, f.output);
+    let mut written = Vec::new();
+    let mut put =
+        |file: &str, svg: String| -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+            let p = dir.join(file);
+            write_svg(&p, &svg, force)?;
+            written.push(p);
+            Ok(())
+        };
+
+    let panels: Vec<ComparePanel<'_>> = v
+        .records
+        .iter()
+        .map(|r| ComparePanel {
+            title: r.title.clone(),
+            t0: 0.0,
+            ts: r.ts,
+            measured: &r.y,
+            models: vec![CompareModel {
+                name: &name,
+                simulated: &r.y_hat,
+                fit_percent: r.fit,
+            }],
+        })
+        .collect();
+    put(
+        "compare.svg",
+        compare_svg(
+            &format!("{out}, measured and {}: {}", v.compared, v.file),
+            &format!("{out} [{}]", v.units.output),
+            v.fit_label,
+            &panels,
+        )?,
+    )?;
+
+    let labels: Vec<String> = v
+        .tests
+        .iter()
+        .map(|(r, _)| format!("{name}, {r}"))
+        .collect();
+    let rows: Vec<ResidRow<'_>> = v
+        .tests
+        .iter()
+        .zip(&labels)
+        .map(|((_, t), l)| ResidRow {
+            label: l,
+            whiteness: &t.whiteness,
+            independence: &t.independence,
+        })
+        .collect();
+    put(
+        "resid.svg",
+        resid_svg(&format!("residual tests (99 %): {}", v.file), &rows)?,
+    )?;
+
+    let pz = PzModel::new(&name, &f.model, f.continuous.as_ref());
+    put(
+        "pzmap.svg",
+        pzmap_svg(
+            &format!(
+                "poles (x) and zeros (o), {inp} -> {out}, s-plane{}",
+                if f.continuous.is_some() {
+                    ""
+                } else {
+                    " (s = ln z / Ts)"
+                }
+            ),
+            std::slice::from_ref(&pz),
+            0.45 / f.ts,
+        )?,
+    )?;
+
+    // a pole slower than the record acts as an integrator there: the output ramps, so
+    // its rate is what settles
+    let two_pi = 2.0 * std::f64::consts::PI;
+    let integrating = pz
+        .poles_hz
+        .iter()
+        .any(|p| p.norm() * two_pi < two_pi / v.record_s);
+    let horizon = step_horizon(std::slice::from_ref(&pz), f.ts, v.record_s);
+    let n = ((horizon / f.ts).round() as usize).max(2);
+    let y = step_response(&f.model, 1.0, n);
+    let (values, shown, unit) = if integrating {
+        (interval_rate(&y, f.ts), rate, v.units.output_rate())
+    } else {
+        (y, out, v.units.output.clone())
+    };
+    let title = if integrating {
+        format!(
+            "step response: {rate} (mean over each sample) after a 1 {} {inp} step; the {out} integrates it",
+            v.units.input
+        )
+    } else {
+        format!(
+            "step response: {out} after a 1 {} {inp} step",
+            v.units.input
+        )
+    };
+    put(
+        "step.svg",
+        step_svg(
+            &title,
+            &format!("{shown} [{unit}]"),
+            &[StepCurve {
+                name: &name,
+                ts: f.ts,
+                values: &values,
+            }],
+        )?,
+    )?;
+    Ok(written)
+}
