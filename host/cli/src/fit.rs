@@ -23,7 +23,7 @@ use clap::{Args, ValueEnum};
 use serde::Serialize;
 
 use super::args::{DataArgs, PrepArgs, ReadArgs};
-use super::views::{write_views, CompareRecord, Views, VIEW_FILES};
+use super::views::{write_views, CompareRecord, Views, PERIODIC_COMPARED, VIEW_FILES};
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::check_output;
 use jointid::data::Dataset;
@@ -1086,7 +1086,7 @@ fn run_frequency_domain(
         compare,
         fit_label: if periodic { "periodic FIT" } else { "FIT" },
         compared: if periodic {
-            "the model's: one period averaged over the record, reliable excited lines only"
+            PERIODIC_COMPARED
         } else {
             "simulated"
         },

@@ -16,6 +16,10 @@ use jointid::report::views::{
 
 use super::write_svg;
 
+/// What `compare.svg` draws against the measured output on periodic data: the record's
+/// period under the periodic FIT ([`jointid::ident::frf_fit::periodic_fit_signals`]).
+pub const PERIODIC_COMPARED: &str = "the model's (one averaged period, reliable excited lines)";
+
 /// The files [`write_views`] writes.
 pub const VIEW_FILES: [&str; 4] = ["compare.svg", "resid.svg", "pzmap.svg", "step.svg"];
 

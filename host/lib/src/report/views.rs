@@ -212,7 +212,8 @@ pub fn compare_svg(
     let legend_h = 14 + 20 * (most as u32 + 1);
     let mut svg = String::new();
     {
-        let w = 660 * panels.len() as u32;
+        // one panel still leaves the title its width
+        let w = (660 * panels.len() as u32).max(1000);
         let root = SVGBackend::with_string(&mut svg, (w, 440 + legend_h)).into_drawing_area();
         root.fill(&WHITE).map_err(draw_err(W))?;
         let root = root
