@@ -23,7 +23,9 @@ use clap::{Args, ValueEnum};
 use serde::Serialize;
 
 use super::args::{DataArgs, PrepArgs, ReadArgs};
-use super::views::{write_views, CompareRecord, Views, PERIODIC_COMPARED, VIEW_FILES};
+use super::views::{
+    frf_label, write_views, CompareRecord, Signals, Views, PERIODIC_COMPARED, VIEW_FILES,
+};
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::check_output;
 use jointid::data::Dataset;
@@ -40,8 +42,7 @@ use jointid::ident::validate::{
     BodeCurve, CorrelationTest, FrfBand, Validation, DEFAULT_LAGS, FIT_NAME,
 };
 use jointid::model::spec::{Family, ModelSpec, SpecError, Structure, NONLINEAR_TWO_MASS};
-use jointid::report::plot::bode_svg;
-use jointid::report::views::Units;
+use jointid::report::plot::bode_svg_in;
 
 /// Friction model of the rigid body.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -221,6 +222,10 @@ pub struct FitArgs {
     /// the axis is linear (force [N] → position [m]): units kg, N·s/m, N, N/m
     #[arg(long)]
     pub linear_axis: bool,
+    /// the plots' units of input and output for other data, e.g. `V,m` (default: N·m and
+    /// rad, or N and m with --linear-axis; an output velocity per second)
+    #[arg(long, value_name = "IN,OUT", value_parser = super::views::parse_units)]
+    pub units: Option<(String, String)>,
     /// whole periods dropped as transient before the FRF of the plot
     #[arg(long, value_name = "P", default_value_t = 1)]
     pub settle_periods: usize,
@@ -1162,12 +1167,14 @@ fn finish(
         files.push(path.display().to_string());
     }
     if let Some(dir) = &args.plot {
+        let signals = Signals::new(args.linear_axis, fitted.output, args.units.as_ref());
         let p = write_bode(
             dir,
             "bode.svg",
             ds,
             args.settle_periods,
             &[fitted],
+            &frf_label(&signals),
             args.force,
         )?;
         files.push(p.display().to_string());
@@ -1181,8 +1188,7 @@ fn finish(
             compared: m.compared,
             records: std::mem::take(&mut m.compare),
             tests,
-            units: Units::joint(args.linear_axis, fitted.output == Output::Velocity),
-            linear: args.linear_axis,
+            signals,
             record_s: ds.data.len() as f64 * ds.data.ts,
             file: &ds.name,
         };
@@ -1334,7 +1340,8 @@ pub(crate) fn save_model(
     Ok(())
 }
 
-/// Writes `name` into `dir`: Bode plot of `models` over the FRF of `ds`
+/// Writes `name` into `dir`: Bode plot of `models` over the FRF of `ds` (its signals and
+/// units `io`, [`frf_label`])
 /// (when `ds` is periodic) with ±2σ, up to 0.45 / Ts of the coarsest model;
 /// an existing file only with `force`.
 ///
@@ -1346,6 +1353,7 @@ pub fn write_bode(
     ds: &Dataset,
     settle_periods: usize,
     models: &[&Fitted],
+    io: &(String, String),
     force: bool,
 ) -> Result<PathBuf, Box<dyn std::error::Error + Send + Sync>> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
@@ -1378,8 +1386,16 @@ pub fn write_bode(
         })
         .collect();
     let path = dir.join(name);
-    let title = format!("models over the FRF u -> theta_m: {}", ds.name);
-    write_svg(&path, &bode_svg(&title, band.as_ref(), &curves)?, force)?;
+    let title = format!(
+        "models over the FRF {}: {}",
+        io.0,
+        super::views::short_name(&ds.name)
+    );
+    write_svg(
+        &path,
+        &bode_svg_in(&title, Some(&io.1), band.as_ref(), &curves)?,
+        force,
+    )?;
     Ok(path)
 }
 

@@ -28,17 +28,15 @@ use super::fit::{
 };
 use super::fit_nl::{FitsJson, NL_FIT_NAME};
 use super::validate::{self as column_validate, ValidateArgs};
-use super::views::{write_views, CompareRecord, Views, PERIODIC_COMPARED, VIEW_FILES};
+use super::views::{write_views, CompareRecord, Signals, Views, PERIODIC_COMPARED, VIEW_FILES};
 use super::{check_plot_files, print_json, CmdResult, Context, Outcome};
 use jointid::data::IdData;
 use jointid::ident::fit::{FitData, FitMetric, VELOCITY_FIT_NAME};
 use jointid::ident::frf::{analyze_dataset, analyze_segments};
 use jointid::ident::frf_fit::{periodic_fit_percent, periodic_fit_signals, PERIODIC_FIT_NAME};
-use jointid::ident::grey_box::Output;
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::{validate as nl_validate, validate_segments, NlOptions};
 use jointid::ident::validate::{Validation, DEFAULT_LAGS, FIT_NAME};
-use jointid::report::views::Units;
 
 /// Arguments of `jointid validate`.
 #[derive(Debug, Clone, Args)]
@@ -91,6 +89,9 @@ pub struct ValidateCmdArgs {
     /// the axis is linear (force [N] → position [m]): the plots' units
     #[arg(long)]
     pub linear_axis: bool,
+    /// the plots' units of input and output for other data, e.g. `V,m` (as `fit --units`)
+    #[arg(long, value_name = "IN,OUT", value_parser = super::views::parse_units)]
+    pub units: Option<(String, String)>,
 }
 
 #[derive(Serialize)]
@@ -310,8 +311,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
             compared,
             records: vec![record],
             tests: vec![("data", &v)],
-            units: Units::joint(args.linear_axis, fitted.output == Output::Velocity),
-            linear: args.linear_axis,
+            signals: Signals::new(args.linear_axis, fitted.output, args.units.as_ref()),
             record_s: ds.data.len() as f64 * ds.data.ts,
             file: &ds.name,
         };

@@ -51,10 +51,8 @@ pub struct Views<'a> {
     pub records: Vec<CompareRecord>,
     /// residual tests per record (`estimation`, `validation`, `data`)
     pub tests: Vec<(&'a str, &'a Validation)>,
-    /// the data's units
-    pub units: Units,
-    /// the axis is linear (force → position)
-    pub linear: bool,
+    /// the data's signals and units
+    pub signals: Signals,
     /// duration of the estimation record [s] (the step response's horizon at most)
     pub record_s: f64,
     /// the data file named in the titles
@@ -71,6 +69,77 @@ fn quantities(linear: bool, output: Output) -> (&'static str, &'static str, &'st
     }
 }
 
+/// The plots' names and units of the input, the output and the output's rate.
+#[derive(Clone, Debug)]
+pub struct Signals {
+    /// units of input and output
+    pub units: Units,
+    /// name of the input (`torque`, `force`, `input`)
+    pub input: &'static str,
+    /// name of the output (`motor angle`, `position`, `output`)
+    pub output: &'static str,
+    /// name of the output's rate (`motor velocity`, `velocity`, `output rate`)
+    pub rate: &'static str,
+}
+
+impl Signals {
+    /// A rotary joint or (`linear`) a linear axis with the output `output`; `units`
+    /// (`--units IN,OUT`) names the units of other data, whose signals are then called
+    /// input and output.
+    pub fn new(linear: bool, output: Output, units: Option<&(String, String)>) -> Self {
+        match units {
+            Some((i, o)) => Signals {
+                units: Units {
+                    input: i.clone(),
+                    output: o.clone(),
+                },
+                input: "input",
+                output: "output",
+                rate: "output rate",
+            },
+            None => {
+                let (input, output_name, rate) = quantities(linear, output);
+                Signals {
+                    units: Units::joint(linear, output == Output::Velocity),
+                    input,
+                    output: output_name,
+                    rate,
+                }
+            }
+        }
+    }
+}
+
+/// `--units IN,OUT`: two non-empty units separated by a comma
+pub fn parse_units(s: &str) -> Result<(String, String), String> {
+    match s.split_once(',') {
+        Some((i, o)) if !i.trim().is_empty() && !o.trim().is_empty() && !o.contains(',') => {
+            Ok((i.trim().to_string(), o.trim().to_string()))
+        }
+        _ => Err(format!(
+            "`{s}` is not IN,OUT: the input's and the output's unit, e.g. `N,m` or `V,rad`"
+        )),
+    }
+}
+
+/// The FRF's signals with their units for a Bode plot, `("force [N] -> position [m]",
+/// "m/N")`: the title's, and the gain's unit.
+pub fn frf_label(s: &Signals) -> (String, String) {
+    let (i, o) = (&s.units.input, &s.units.output);
+    (
+        format!("{} [{i}] -> {} [{o}]", s.input, s.output),
+        format!("{o}/{i}"),
+    )
+}
+
+/// the last component of a data file's name, for titles
+pub fn short_name(name: &str) -> &str {
+    Path::new(name)
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or(name)
+}
+
 /// Writes [`VIEW_FILES`] into `dir` (created when missing; existing files only with
 /// `force`) and returns their paths.
 ///
@@ -84,7 +153,8 @@ pub fn write_views(
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let f = v.fitted;
     let name = f.spec.name();
-    let (inp, out, rate) = quantities(v.linear, f.output);
+    let (inp, out, rate) = (v.signals.input, v.signals.output, v.signals.rate);
+    let units = &v.signals.units;
     let mut written = Vec::new();
     let mut put =
         |file: &str, svg: String| -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
@@ -112,8 +182,8 @@ pub fn write_views(
     put(
         "compare.svg",
         compare_svg(
-            &format!("{out}, measured and {}: {}", v.compared, v.file),
-            &format!("{out} [{}]", v.units.output),
+            &format!("{out}, measured and {}: {}", v.compared, short_name(v.file)),
+            &format!("{out} [{}]", units.output),
             v.fit_label,
             &panels,
         )?,
@@ -136,7 +206,10 @@ pub fn write_views(
         .collect();
     put(
         "resid.svg",
-        resid_svg(&format!("residual tests (99 %): {}", v.file), &rows)?,
+        resid_svg(
+            &format!("residual tests (99 %): {}", short_name(v.file)),
+            &rows,
+        )?,
     )?;
 
     let pz = PzModel::new(&name, &f.model, f.continuous.as_ref());
@@ -167,20 +240,17 @@ pub fn write_views(
     let n = ((horizon / f.ts).round() as usize).max(2);
     let y = step_response(&f.model, 1.0, n);
     let (values, shown, unit) = if integrating {
-        (interval_rate(&y, f.ts), rate, v.units.output_rate())
+        (interval_rate(&y, f.ts), rate, units.output_rate())
     } else {
-        (y, out, v.units.output.clone())
+        (y, out, units.output.clone())
     };
     let title = if integrating {
         format!(
             "step response: {rate} (mean over each sample) after a 1 {} {inp} step; the {out} integrates it",
-            v.units.input
+            units.input
         )
     } else {
-        format!(
-            "step response: {out} after a 1 {} {inp} step",
-            v.units.input
-        )
+        format!("step response: {out} after a 1 {} {inp} step", units.input)
     };
     put(
         "step.svg",
@@ -195,4 +265,33 @@ pub fn write_views(
         )?,
     )?;
     Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn units_name_the_signals_of_a_joint_an_axis_or_other_data() {
+        let s = Signals::new(true, Output::Angle, None);
+        assert_eq!(
+            (s.input, s.output, s.rate),
+            ("force", "position", "velocity")
+        );
+        assert_eq!(
+            frf_label(&s),
+            ("force [N] -> position [m]".into(), "m/N".into())
+        );
+        let s = Signals::new(false, Output::Velocity, None);
+        assert_eq!(s.units.output, "rad/s");
+        assert_eq!(s.units.output_rate(), "rad/s²");
+        let u = parse_units(" V , m ").unwrap();
+        assert_eq!(u, ("V".to_string(), "m".to_string()));
+        let s = Signals::new(true, Output::Angle, Some(&u));
+        assert_eq!(frf_label(&s).0, "input [V] -> output [m]");
+        for bad in ["N", "N,", ",m", "N,m,s"] {
+            assert!(parse_units(bad).unwrap_err().contains("IN,OUT"), "{bad}");
+        }
+        assert_eq!(short_name("/a/b/robot_arm.csv"), "robot_arm.csv");
+    }
 }

@@ -299,7 +299,24 @@ pub fn bode_svg(
     frf: Option<&FrfBand>,
     models: &[BodeCurve],
 ) -> Result<String, PlotError> {
+    bode_svg_in(title, None, frf, models)
+}
+
+/// [`bode_svg`] with the magnitude axis in dB re 1 `gain_unit` (e.g. `m/N`) when given.
+///
+/// # Errors
+/// As [`bode_svg`].
+pub fn bode_svg_in(
+    title: &str,
+    gain_unit: Option<&str>,
+    frf: Option<&FrfBand>,
+    models: &[BodeCurve],
+) -> Result<String, PlotError> {
     const W: &str = "bode";
+    let mag_desc = match gain_unit {
+        Some(u) => format!("magnitude [dB re 1 {u}]"),
+        None => "magnitude [dB]".to_string(),
+    };
     let freqs = frf
         .map(|f| f.freq_hz.clone())
         .into_iter()
@@ -390,7 +407,7 @@ pub fn bode_svg(
                 .configure_mesh()
                 .x_desc("frequency [Hz]")
                 .y_desc(if is_mag {
-                    "magnitude [dB]"
+                    mag_desc.as_str()
                 } else {
                     "phase [deg]"
                 })

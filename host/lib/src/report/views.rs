@@ -38,9 +38,12 @@ impl Units {
         }
     }
 
-    /// the unit of the output's time derivative (`rad` → `rad/s`)
+    /// the unit of the output's time derivative (`rad` → `rad/s`, `rad/s` → `rad/s²`)
     pub fn output_rate(&self) -> String {
-        format!("{}/s", self.output)
+        match self.output.strip_suffix("/s") {
+            Some(base) => format!("{base}/s²"),
+            None => format!("{}/s", self.output),
+        }
     }
 }
 
