@@ -24,7 +24,8 @@ use serde::Serialize;
 
 use super::args::{DataArgs, PrepArgs, ReadArgs};
 use super::views::{
-    frf_label, write_views, CompareRecord, Signals, Views, PERIODIC_COMPARED, VIEW_FILES,
+    frf_label, write_views, CompareRecord, Signals, Views, PERIODIC_COMPARED, VELOCITY_COMPARED,
+    VIEW_FILES,
 };
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::check_output;
@@ -652,27 +653,35 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     )
     .map_err(|e| format!("{}: {e}", ds.name))?;
     let mut compare = Vec::new();
+    let on_velocity = fig.metric == "velocity";
     if args.plot.is_some() {
-        compare.push(simulated_record(
-            &fitted,
-            &est,
-            format!("estimation: {}", ds.name),
-            ev.fit,
-        )?);
+        // the headline FIT's signals: the velocity's, else the output's
+        let record =
+            |d: &FitData, title: String, toolbox: f64, velocity: Option<f64>| match velocity {
+                Some(fit) if on_velocity => velocity_record(&fitted, d, title, fit),
+                _ => simulated_record(&fitted, d, title, toolbox),
+            };
+        let title = format!("estimation: {}", ds.name);
+        compare.push(record(&est, title, ev.fit, Some(fig.estimation))?);
         if let (Some(v), Some(n), Some(vv)) = (&val, &val_name, &vv) {
-            compare.push(simulated_record(
-                &fitted,
+            compare.push(record(
                 v,
                 format!("validation: {n}"),
                 vv.fit,
+                fig.validation,
             )?);
         }
     }
     let est = &est.prepared;
     let measured = Measured {
         compare,
-        fit_label: toolbox_label(fig.metric),
-        compared: "simulated",
+        fit_label: if on_velocity { "velocity FIT" } else { "FIT" },
+        compared: if on_velocity {
+            VELOCITY_COMPARED
+        } else {
+            "simulated"
+        },
+        compare_rate: on_velocity && fitted.output == Output::Angle,
         segments: vec![SegmentJson {
             segment: numbers[0],
             samples: ds.data.len(),
@@ -912,6 +921,7 @@ fn run_segments(
         compare,
         fit_label,
         compared: "simulated",
+        compare_rate: false,
         segments: used
             .iter()
             .zip(&used_numbers)
@@ -1090,6 +1100,7 @@ fn run_frequency_domain(
     let measured = Measured {
         compare,
         fit_label: if periodic { "periodic FIT" } else { "FIT" },
+        compare_rate: false,
         compared: if periodic {
             PERIODIC_COMPARED
         } else {
@@ -1120,6 +1131,8 @@ struct Measured {
     fit_label: &'static str,
     /// what the model's output in `compare.svg` is
     compared: &'static str,
+    /// `compare.svg` draws the output's rate (the velocity FIT's signals)
+    compare_rate: bool,
     /// the estimation segments and the FIT on each
     segments: Vec<SegmentJson>,
     /// name of the validation record
@@ -1187,6 +1200,7 @@ fn finish(
             fit_label: m.fit_label,
             compared: m.compared,
             records: std::mem::take(&mut m.compare),
+            compare_rate: m.compare_rate,
             tests,
             signals,
             record_s: ds.data.len() as f64 * ds.data.ts,
@@ -1232,14 +1246,24 @@ fn finish(
     emit(ctx, &report, args.strict)
 }
 
-/// The legend's name of the toolbox FIT: `FIT` when it is the headline (`metric`
-/// `toolbox`), else `toolbox FIT` (printed beside the velocity FIT).
-fn toolbox_label(metric: &str) -> &'static str {
-    if metric == "toolbox" {
-        "FIT"
-    } else {
-        "toolbox FIT"
-    }
+/// A record of `compare.svg` under the velocity FIT `fit`: the signals it compares
+/// ([`Fitted::velocity_fit_signals`]).
+pub(crate) fn velocity_record(
+    fitted: &Fitted,
+    data: &FitData,
+    title: String,
+    fit: f64,
+) -> Result<CompareRecord, String> {
+    let (y, y_hat) = fitted
+        .velocity_fit_signals(data)
+        .map_err(|e| format!("{title}: {e}"))?;
+    Ok(CompareRecord {
+        title,
+        ts: fitted.ts,
+        y,
+        y_hat,
+        fit,
+    })
 }
 
 /// A record of `compare.svg`: `data`'s prepared output and `fitted`'s simulation on it

@@ -22,18 +22,22 @@ use clap::Args;
 use serde::Serialize;
 
 use super::args::{DataArgs, PrepArgs, ReadArgs};
+use super::fit::velocity_record;
 use super::fit::{
     check_columns, check_lags, print_tests, usable_segments, SegmentJson, SegmentNotes,
     MIN_SEGMENT_SAMPLES,
 };
 use super::fit_nl::{FitsJson, NL_FIT_NAME};
 use super::validate::{self as column_validate, ValidateArgs};
-use super::views::{write_views, CompareRecord, Signals, Views, PERIODIC_COMPARED, VIEW_FILES};
+use super::views::{
+    write_views, CompareRecord, Signals, Views, PERIODIC_COMPARED, VELOCITY_COMPARED, VIEW_FILES,
+};
 use super::{check_plot_files, print_json, CmdResult, Context, Outcome};
 use jointid::data::IdData;
 use jointid::ident::fit::{FitData, FitMetric, VELOCITY_FIT_NAME};
 use jointid::ident::frf::{analyze_dataset, analyze_segments};
 use jointid::ident::frf_fit::{periodic_fit_percent, periodic_fit_signals, PERIODIC_FIT_NAME};
+use jointid::ident::grey_box::Output;
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::{validate as nl_validate, validate_segments, NlOptions};
 use jointid::ident::validate::{Validation, DEFAULT_LAGS, FIT_NAME};
@@ -287,22 +291,22 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
                 } else {
                     format!("data: {}", ds.name)
                 };
-                let label = if velocity.is_some() {
-                    "toolbox FIT"
+                if let Some((_, vel)) = &velocity {
+                    let r = velocity_record(&fitted, d, title, vel[i])?;
+                    (r, "velocity FIT", VELOCITY_COMPARED)
                 } else {
-                    "FIT"
-                };
-                let y_hat = fitted
-                    .simulate_on(d)
-                    .map_err(|e| format!("{}: {e}", segs[i].name))?;
-                let r = CompareRecord {
-                    title,
-                    ts: d.prepared.ts,
-                    y: d.prepared.y.clone(),
-                    y_hat,
-                    fit: each[i],
-                };
-                (r, label, "simulated")
+                    let y_hat = fitted
+                        .simulate_on(d)
+                        .map_err(|e| format!("{}: {e}", segs[i].name))?;
+                    let r = CompareRecord {
+                        title,
+                        ts: d.prepared.ts,
+                        y: d.prepared.y.clone(),
+                        y_hat,
+                        fit: each[i],
+                    };
+                    (r, "FIT", "simulated")
+                }
             }
         };
         let views = Views {
@@ -310,6 +314,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
             fit_label,
             compared,
             records: vec![record],
+            compare_rate: compared == VELOCITY_COMPARED && fitted.output == Output::Angle,
             tests: vec![("data", &v)],
             signals: Signals::new(args.linear_axis, fitted.output, args.units.as_ref()),
             record_s: ds.data.len() as f64 * ds.data.ts,

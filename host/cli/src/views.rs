@@ -20,6 +20,10 @@ use super::write_svg;
 /// period under the periodic FIT ([`jointid::ident::frf_fit::periodic_fit_signals`]).
 pub const PERIODIC_COMPARED: &str = "the model's (one averaged period, reliable excited lines)";
 
+/// What `compare.svg` draws against the measured output's rate under the velocity FIT
+/// ([`jointid::ident::fit::Fitted::velocity_fit_signals`]).
+pub const VELOCITY_COMPARED: &str = "simulated from rest, both through the fit's 5 Hz high-pass";
+
 /// The files [`write_views`] writes.
 pub const VIEW_FILES: [&str; 4] = ["compare.svg", "resid.svg", "pzmap.svg", "step.svg"];
 
@@ -49,6 +53,8 @@ pub struct Views<'a> {
     pub compared: &'a str,
     /// the records compared
     pub records: Vec<CompareRecord>,
+    /// the records hold the output's rate (the velocity FIT's signals), not the output
+    pub compare_rate: bool,
     /// residual tests per record (`estimation`, `validation`, `data`)
     pub tests: Vec<(&'a str, &'a Validation)>,
     /// the data's signals and units
@@ -182,8 +188,17 @@ pub fn write_views(
     put(
         "compare.svg",
         compare_svg(
-            &format!("{out}, measured and {}: {}", v.compared, short_name(v.file)),
-            &format!("{out} [{}]", units.output),
+            &format!(
+                "{}, measured and {}: {}",
+                if v.compare_rate { rate } else { out },
+                v.compared,
+                short_name(v.file)
+            ),
+            &if v.compare_rate {
+                format!("{rate} [{}]", units.output_rate())
+            } else {
+                format!("{out} [{}]", units.output)
+            },
             v.fit_label,
             &panels,
         )?,

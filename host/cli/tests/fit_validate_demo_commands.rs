@@ -694,6 +694,8 @@ fn time_domain_fit_on_the_velocity_reports_the_velocity_fit() {
         val.to_str().unwrap(),
         "--save",
         model.to_str().unwrap(),
+        "--plot",
+        dir.join("plots").to_str().unwrap(),
         "--json",
     ]));
     assert_eq!(j["fit_metric"], "velocity", "{j}");
@@ -703,6 +705,13 @@ fn time_domain_fit_on_the_velocity_reports_the_velocity_fit() {
         j["fit_validation"].as_f64().unwrap(),
     );
     assert!(e > 75.0 && v > 75.0, "velocity FIT {e} / {v}");
+    // compare.svg draws the headline FIT's signals: the velocities, under that FIT
+    let compare = std::fs::read_to_string(dir.join("plots/compare.svg")).unwrap();
+    for fit in [e, v] {
+        let text = format!("three-mass: velocity FIT {fit:.2} %");
+        assert!(compare.contains(&text), "{text} not in compare.svg");
+    }
+    assert!(compare.contains("motor velocity [rad/s]"));
     assert!(j["fit_toolbox_validation"].as_f64().unwrap() < 0.0, "{j}");
     let k_g = j["parameters"]["k_g"]["value"].as_f64().unwrap();
     assert!((k_g / 1.275e5 - 1.0).abs() < 0.03, "k_g {k_g}");
