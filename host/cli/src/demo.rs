@@ -131,8 +131,13 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
 
     let (t, models) = table(&est_ds, &val_ds, &runs.sim, &PAPER_MODELS)?;
     let f = &models.fitted;
-    let p5 = write_bode(dir, FILES[4], &est_ds, 1, &[&f[0], &f[1]], args.force)?;
-    let p6 = write_bode(dir, FILES[5], &est_ds, 1, &[&f[0], &f[2]], args.force)?;
+    let io = super::views::frf_label(&super::views::Signals::new(
+        false,
+        jointid::ident::grey_box::Output::Angle,
+        None,
+    ));
+    let p5 = write_bode(dir, FILES[4], &est_ds, 1, &[&f[0], &f[1]], &io, args.force)?;
+    let p6 = write_bode(dir, FILES[5], &est_ds, 1, &[&f[0], &f[2]], &io, args.force)?;
     files.push(p5.display().to_string());
     files.push(p6.display().to_string());
     let seconds = t0.elapsed().as_secs_f64();

@@ -23,6 +23,10 @@ use clap::{Args, ValueEnum};
 use serde::Serialize;
 
 use super::args::{DataArgs, PrepArgs, ReadArgs};
+use super::views::{
+    frf_label, write_views, CompareRecord, Signals, Views, PERIODIC_COMPARED, VELOCITY_COMPARED,
+    VIEW_FILES,
+};
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::check_output;
 use jointid::data::Dataset;
@@ -39,7 +43,7 @@ use jointid::ident::validate::{
     BodeCurve, CorrelationTest, FrfBand, Validation, DEFAULT_LAGS, FIT_NAME,
 };
 use jointid::model::spec::{Family, ModelSpec, SpecError, Structure, NONLINEAR_TWO_MASS};
-use jointid::report::plot::bode_svg;
+use jointid::report::plot::bode_svg_in;
 
 /// Friction model of the rigid body.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -174,7 +178,9 @@ pub struct FitArgs {
     /// writes a MATLAB file instead (matrices, transfer functions, parameters, FIT)
     #[arg(long, value_name = "MODEL.json")]
     pub save: Option<PathBuf>,
-    /// write bode.svg (model over the FRF with ±2σ) into this directory
+    /// write into this directory bode.svg (model over the FRF with ±2σ) and the toolbox's
+    /// views: compare.svg (measured vs simulated output, FIT in the legend), resid.svg
+    /// (residual tests with their bands), pzmap.svg and step.svg
     #[arg(long, value_name = "DIR")]
     pub plot: Option<PathBuf>,
     /// replace the --save file and the plot when they exist (without it they are refused
@@ -218,6 +224,10 @@ pub struct FitArgs {
     /// the axis is linear (force [N] → position [m]): units kg, N·s/m, N, N/m
     #[arg(long)]
     pub linear_axis: bool,
+    /// the plots' units of input and output for other data, e.g. `V,m` (default: N·m and
+    /// rad, or N and m with --linear-axis; an output velocity per second)
+    #[arg(long, value_name = "IN,OUT", value_parser = super::views::parse_units)]
+    pub units: Option<(String, String)>,
     /// whole periods dropped as transient before the FRF of the plot
     #[arg(long, value_name = "P", default_value_t = 1)]
     pub settle_periods: usize,
@@ -479,12 +489,12 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     let spec = args.spec()?;
     let nonlinear = spec.nonlinear();
     if let Some(dir) = &args.plot {
-        let name = if nonlinear {
-            super::fit_nl::PLOT_FILE
-        } else {
-            "bode.svg"
-        };
-        check_plot_files(dir, &[name], args.force)?;
+        let mut names = vec![super::fit_nl::PLOT_FILE];
+        if !nonlinear {
+            names = vec!["bode.svg"];
+            names.extend(VIEW_FILES);
+        }
+        check_plot_files(dir, &names, args.force)?;
     }
     if !nonlinear {
         super::fit_nl::refuse_nonlinear_flags(args)?;
@@ -643,8 +653,36 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         (&ev, vv.as_ref()),
     )
     .map_err(|e| format!("{}: {e}", ds.name))?;
+    let mut compare = Vec::new();
+    let on_velocity = fig.metric == "velocity";
+    if args.plot.is_some() {
+        // the headline FIT's signals: the velocity's, else the output's
+        let record =
+            |d: &FitData, title: String, toolbox: f64, velocity: Option<f64>| match velocity {
+                Some(fit) if on_velocity => velocity_record(&fitted, d, title, fit),
+                _ => simulated_record(&fitted, d, title, toolbox),
+            };
+        let title = format!("estimation: {}", ds.name);
+        compare.push(record(&est, title, ev.fit, Some(fig.estimation))?);
+        if let (Some(v), Some(n), Some(vv)) = (&val, &val_name, &vv) {
+            compare.push(record(
+                v,
+                format!("validation: {n}"),
+                vv.fit,
+                fig.validation,
+            )?);
+        }
+    }
     let est = &est.prepared;
     let measured = Measured {
+        compare,
+        fit_label: if on_velocity { "velocity FIT" } else { "FIT" },
+        compared: if on_velocity {
+            VELOCITY_COMPARED
+        } else {
+            "simulated"
+        },
+        compare_rate: on_velocity && fitted.output == Output::Angle,
         segments: vec![SegmentJson {
             segment: numbers[0],
             samples: ds.data.len(),
@@ -857,8 +895,34 @@ fn run_segments(
     let ts = est[0].prepared.ts;
     let mut fig = time_domain_figures(&fitted, &est, val.as_ref(), (&ev, vv.as_ref()))
         .map_err(|e| format!("{name}: {e}"))?;
+    let mut compare = Vec::new();
+    if args.plot.is_some() {
+        // the longest segment, under the toolbox FIT printed for it
+        let i = (0..used.len())
+            .max_by_key(|&i| (used[i].data.len(), usize::MAX - i))
+            .unwrap_or(0);
+        let title = format!("estimation: {} (segment {})", used[i].name, used_numbers[i]);
+        compare.push(simulated_record(&fitted, &est[i], title, each[i])?);
+        if let (Some(v), Some(n), Some(vv)) = (val, &val_name, &vv) {
+            compare.push(simulated_record(
+                &fitted,
+                v,
+                format!("validation: {n}"),
+                vv.fit,
+            )?);
+        }
+    }
+    let fit_label = if fig.each.is_some() {
+        "toolbox FIT"
+    } else {
+        "FIT"
+    };
     let each = fig.each.take().unwrap_or(each);
     let measured = Measured {
+        compare,
+        fit_label,
+        compared: "simulated",
+        compare_rate: false,
         segments: used
             .iter()
             .zip(&used_numbers)
@@ -948,10 +1012,35 @@ fn run_frequency_domain(
         jointid::ident::validate::validate(&s.u, &s.y, &s.y_hat, args.lags)
             .map_err(|e| format!("{}: {e}", d.name))
     };
+    let periodic_fit =
+        |a: &FrfAnalysis| frf_fit::periodic_fit_percent(&a.frf, &respond(&a.frf.freq_hz));
     let periodic = val_ds.is_none() || val_analysis.is_some();
+    let mut compare = Vec::new();
     let (ev, vv) = if periodic {
+        // what the periodic FIT printed for each record compares: one averaged period
+        // at the reliable lines, measured against the model's response
+        let mut record = |title: String, a: &FrfAnalysis, period: usize| {
+            let g = respond(&a.frf.freq_hz);
+            if let Some((y, y_hat)) = frf_fit::periodic_fit_signals(&a.frf, &g, period) {
+                compare.push(CompareRecord {
+                    title,
+                    ts,
+                    y,
+                    y_hat,
+                    fit: periodic_fit(a),
+                });
+            }
+        };
+        record(
+            format!("estimation: {}", ds.name),
+            pooled,
+            analysis.layout.period,
+        );
         let vv = match (val_ds, val_analysis) {
-            (Some(v), Some(a)) => Some(tests(v, a)?),
+            (Some(v), Some(a)) => {
+                record(format!("validation: {}", v.name), a, a.layout.period);
+                Some(tests(v, a)?)
+            }
             _ => None,
         };
         (tests(ds, analysis)?, vv)
@@ -960,10 +1049,24 @@ fn run_frequency_domain(
             .evaluate_on(est, args.lags)
             .map_err(|e| format!("{}: {e}", ds.name))?;
         let vv = on_validation(&fitted, val, val_name.as_deref(), args.lags)?;
+        if args.plot.is_some() {
+            compare.push(simulated_record(
+                &fitted,
+                est,
+                format!("estimation: {}", ds.name),
+                ev.fit,
+            )?);
+            if let (Some(v), Some(n), Some(vv)) = (val, &val_name, &vv) {
+                compare.push(simulated_record(
+                    &fitted,
+                    v,
+                    format!("validation: {n}"),
+                    vv.fit,
+                )?);
+            }
+        }
         (ev, vv)
     };
-    let periodic_fit =
-        |a: &FrfAnalysis| frf_fit::periodic_fit_percent(&a.frf, &respond(&a.frf.freq_hz));
     let (fit_name, fit_estimation, fit_validation) = if periodic {
         (
             PERIODIC_FIT_NAME,
@@ -996,6 +1099,14 @@ fn run_frequency_domain(
             .collect()
     };
     let measured = Measured {
+        compare,
+        fit_label: if periodic { "periodic FIT" } else { "FIT" },
+        compare_rate: false,
+        compared: if periodic {
+            PERIODIC_COMPARED
+        } else {
+            "simulated"
+        },
         segments,
         val_name,
         ts,
@@ -1015,6 +1126,14 @@ fn run_frequency_domain(
 
 /// What a fit path measured, for the report.
 struct Measured {
+    /// the records of `compare.svg` (filled with `--plot` only)
+    compare: Vec<CompareRecord>,
+    /// name of their FIT in the legend
+    fit_label: &'static str,
+    /// what the model's output in `compare.svg` is
+    compared: &'static str,
+    /// `compare.svg` draws the output's rate (the velocity FIT's signals)
+    compare_rate: bool,
     /// the estimation segments and the FIT on each
     segments: Vec<SegmentJson>,
     /// name of the validation record
@@ -1050,7 +1169,7 @@ fn finish(
     ctx: &mut Context<'_>,
     ds: &Dataset,
     fitted: &Fitted,
-    m: Measured,
+    mut m: Measured,
 ) -> CmdResult {
     let mut files = Vec::new();
     if let Some(path) = &args.save {
@@ -1062,15 +1181,35 @@ fn finish(
         files.push(path.display().to_string());
     }
     if let Some(dir) = &args.plot {
+        let signals = Signals::new(args.linear_axis, fitted.output, args.units.as_ref());
         let p = write_bode(
             dir,
             "bode.svg",
             ds,
             args.settle_periods,
             &[fitted],
+            &frf_label(&signals),
             args.force,
         )?;
         files.push(p.display().to_string());
+        let mut tests = vec![("estimation", &m.ev)];
+        if let Some(v) = &m.vv {
+            tests.push(("validation", v));
+        }
+        let views = Views {
+            fitted,
+            fit_label: m.fit_label,
+            compared: m.compared,
+            records: std::mem::take(&mut m.compare),
+            compare_rate: m.compare_rate,
+            tests,
+            signals,
+            record_s: ds.data.len() as f64 * ds.data.ts,
+            file: &ds.name,
+        };
+        for p in write_views(dir, &views, args.force)? {
+            files.push(p.display().to_string());
+        }
     }
     let report = FitReport {
         model: fitted.spec.name(),
@@ -1107,6 +1246,46 @@ fn finish(
     };
     ctx.fitted = Some(fitted.clone());
     emit(ctx, &report, args.strict)
+}
+
+/// A record of `compare.svg` under the velocity FIT `fit`: the signals it compares
+/// ([`Fitted::velocity_fit_signals`]).
+pub(crate) fn velocity_record(
+    fitted: &Fitted,
+    data: &FitData,
+    title: String,
+    fit: f64,
+) -> Result<CompareRecord, String> {
+    let (y, y_hat) = fitted
+        .velocity_fit_signals(data)
+        .map_err(|e| format!("{title}: {e}"))?;
+    Ok(CompareRecord {
+        title,
+        ts: fitted.ts,
+        y,
+        y_hat,
+        fit,
+    })
+}
+
+/// A record of `compare.svg`: `data`'s prepared output and `fitted`'s simulation on it
+/// ([`Fitted::simulate_on`], the one the toolbox FIT `fit` is computed from).
+fn simulated_record(
+    fitted: &Fitted,
+    data: &FitData,
+    title: String,
+    fit: f64,
+) -> Result<CompareRecord, String> {
+    let y_hat = fitted
+        .simulate_on(data)
+        .map_err(|e| format!("{title}: {e}"))?;
+    Ok(CompareRecord {
+        title,
+        ts: data.prepared.ts,
+        y: data.prepared.y.clone(),
+        y_hat,
+        fit,
+    })
 }
 
 /// The FIT figures of a time-domain fit ([`time_domain_figures`]).
@@ -1197,7 +1376,8 @@ pub(crate) fn save_model(
     Ok(())
 }
 
-/// Writes `name` into `dir`: Bode plot of `models` over the FRF of `ds`
+/// Writes `name` into `dir`: Bode plot of `models` over the FRF of `ds` (its signals and
+/// units `io`, [`frf_label`])
 /// (when `ds` is periodic) with ±2σ, up to 0.45 / Ts of the coarsest model;
 /// an existing file only with `force`.
 ///
@@ -1209,6 +1389,7 @@ pub fn write_bode(
     ds: &Dataset,
     settle_periods: usize,
     models: &[&Fitted],
+    io: &(String, String),
     force: bool,
 ) -> Result<PathBuf, Box<dyn std::error::Error + Send + Sync>> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
@@ -1241,8 +1422,16 @@ pub fn write_bode(
         })
         .collect();
     let path = dir.join(name);
-    let title = format!("models over the FRF u -> theta_m: {}", ds.name);
-    write_svg(&path, &bode_svg(&title, band.as_ref(), &curves)?, force)?;
+    let title = format!(
+        "models over the FRF {}: {}",
+        io.0,
+        super::views::short_name(&ds.name)
+    );
+    write_svg(
+        &path,
+        &bode_svg_in(&title, Some(&io.1), band.as_ref(), &curves)?,
+        force,
+    )?;
     Ok(path)
 }
 

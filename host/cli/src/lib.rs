@@ -41,6 +41,7 @@ mod info;
 mod simulate;
 mod validate;
 mod validate_cmd;
+mod views;
 
 /// `jointid`: identification of one robot joint, from capture to validated models.
 #[derive(Debug, Parser)]

@@ -22,17 +22,22 @@ use clap::Args;
 use serde::Serialize;
 
 use super::args::{DataArgs, PrepArgs, ReadArgs};
+use super::fit::velocity_record;
 use super::fit::{
     check_columns, check_lags, print_tests, usable_segments, SegmentJson, SegmentNotes,
     MIN_SEGMENT_SAMPLES,
 };
 use super::fit_nl::{FitsJson, NL_FIT_NAME};
 use super::validate::{self as column_validate, ValidateArgs};
-use super::{print_json, CmdResult, Context, Outcome};
+use super::views::{
+    write_views, CompareRecord, Signals, Views, PERIODIC_COMPARED, VELOCITY_COMPARED, VIEW_FILES,
+};
+use super::{check_plot_files, print_json, CmdResult, Context, Outcome};
 use jointid::data::IdData;
 use jointid::ident::fit::{FitData, FitMetric, VELOCITY_FIT_NAME};
 use jointid::ident::frf::{analyze_dataset, analyze_segments};
-use jointid::ident::frf_fit::{periodic_fit_percent, PERIODIC_FIT_NAME};
+use jointid::ident::frf_fit::{periodic_fit_percent, periodic_fit_signals, PERIODIC_FIT_NAME};
+use jointid::ident::grey_box::Output;
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::{validate as nl_validate, validate_segments, NlOptions};
 use jointid::ident::validate::{Validation, DEFAULT_LAGS, FIT_NAME};
@@ -78,6 +83,19 @@ pub struct ValidateCmdArgs {
     /// preparation of DATA for --simulated (a model file carries its own)
     #[command(flatten)]
     pub prep: PrepArgs,
+    /// write the toolbox's views of a linear model file into this directory: compare.svg
+    /// (measured vs simulated output, FIT in the legend), resid.svg, pzmap.svg, step.svg
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
+    /// replace the plot files when they exist
+    #[arg(long)]
+    pub force: bool,
+    /// the axis is linear (force [N] → position [m]): the plots' units
+    #[arg(long)]
+    pub linear_axis: bool,
+    /// the plots' units of input and output for other data, e.g. `V,m` (as `fit --units`)
+    #[arg(long, value_name = "IN,OUT", value_parser = super::views::parse_units)]
+    pub units: Option<(String, String)>,
 }
 
 #[derive(Serialize)]
@@ -99,6 +117,8 @@ struct Report<'a> {
     residual_tests: &'a Validation,
     /// with `--segment all` on a capture with gaps: each segment's FIT (`fit` pools them)
     segments: Vec<SegmentJson>,
+    /// files written (`--plot`)
+    files: Vec<String>,
 }
 
 /// Runs `jointid validate`.
@@ -115,6 +135,11 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         read: args.read.clone(),
     };
     check_columns(&data_args(&args.files[0]))?;
+    if args.plot.is_some() && args.simulated.is_some() {
+        return Err(
+            "--plot draws a model file's views: give MODEL.json DATA, not --simulated".into(),
+        );
+    }
     if let Some(sim) = &args.simulated {
         if args.files.len() != 1 {
             return Err("validate with --simulated takes one DATA file".into());
@@ -143,7 +168,18 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         .spec()
         .map_err(|e| format!("{}: {e}", mpath.display()))?;
     if spec.nonlinear() {
+        if args.plot.is_some() {
+            return Err(format!(
+                "--plot: {} holds a model with effects; the views are drawn for linear models \
+                 (`fit --effect ... --plot` draws the nonlinear fit's velocity)",
+                mpath.display()
+            )
+            .into());
+        }
         return run_nonlinear(args, ctx, &saved, mpath, &data_args(&args.files[1]));
+    }
+    if let Some(dir) = &args.plot {
+        check_plot_files(dir, &VIEW_FILES, args.force)?;
     }
     let fitted = saved
         .to_fitted()
@@ -186,12 +222,12 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
             f64::NAN
         }
     };
-    let periodic = saved
+    let periodic_analysis = saved
         .fit_name
         .as_deref()
         .filter(|n| *n == PERIODIC_FIT_NAME && (fitted.ts - ds.data.ts).abs() <= 1e-9 * ds.data.ts)
-        .and_then(|_| analyze_segments(&segs, args.settle_periods).ok())
-        .map(|a| periodic_fit(&a.frf));
+        .and_then(|_| analyze_segments(&segs, args.settle_periods).ok());
+    let periodic = periodic_analysis.as_ref().map(|a| periodic_fit(&a.frf));
     let periodic_of = |d: &jointid::data::Dataset| {
         analyze_dataset(d, args.settle_periods)
             .ok()
@@ -228,6 +264,67 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
         (None, Some((f, _))) => (VELOCITY_FIT_NAME, *f),
         (None, None) => (FIT_NAME, v.fit),
     };
+    let mut files = Vec::new();
+    if let Some(dir) = &args.plot {
+        // the record drawn: the averaged period under the periodic FIT, else the longest
+        // segment simulated under its toolbox FIT
+        let i = (0..all.len())
+            .max_by_key(|&i| (segs[i].data.len(), usize::MAX - i))
+            .unwrap_or(0);
+        let periodic_record = periodic_analysis.as_ref().and_then(|a| {
+            let g = fitted.model.freq_response(&a.frf.freq_hz);
+            let (y, y_hat) = periodic_fit_signals(&a.frf, &g, a.layout.period)?;
+            Some(CompareRecord {
+                title: format!("data: {}", ds.name),
+                ts: data.ts,
+                y,
+                y_hat,
+                fit,
+            })
+        });
+        let (record, fit_label, compared) = match periodic_record {
+            Some(r) => (r, "periodic FIT", PERIODIC_COMPARED),
+            None => {
+                let d = &all[i];
+                let title = if segs.len() > 1 {
+                    format!("data: {} (segment {})", segs[i].name, numbers[i])
+                } else {
+                    format!("data: {}", ds.name)
+                };
+                if let Some((_, vel)) = &velocity {
+                    let r = velocity_record(&fitted, d, title, vel[i])?;
+                    (r, "velocity FIT", VELOCITY_COMPARED)
+                } else {
+                    let y_hat = fitted
+                        .simulate_on(d)
+                        .map_err(|e| format!("{}: {e}", segs[i].name))?;
+                    let r = CompareRecord {
+                        title,
+                        ts: d.prepared.ts,
+                        y: d.prepared.y.clone(),
+                        y_hat,
+                        fit: each[i],
+                    };
+                    (r, "FIT", "simulated")
+                }
+            }
+        };
+        let views = Views {
+            fitted: &fitted,
+            fit_label,
+            compared,
+            records: vec![record],
+            compare_rate: compared == VELOCITY_COMPARED && fitted.output == Output::Angle,
+            tests: vec![("data", &v)],
+            signals: Signals::new(args.linear_axis, fitted.output, args.units.as_ref()),
+            record_s: ds.data.len() as f64 * ds.data.ts,
+            file: &ds.name,
+        };
+        files = write_views(dir, &views, args.force)?
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
+    }
     // a diverged simulation is never ok, with or without --require-fit
     let finite = fit.is_finite() && v.fit.is_finite() && v.whiteness.non_finite == 0;
     let fit_ok = finite && args.require_fit.is_none_or(|x| fit >= x);
@@ -254,6 +351,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
                 fit_ok,
                 residual_tests: &v,
                 segments,
+                files,
             },
         )?;
     } else {
@@ -287,6 +385,9 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
             )?;
         }
         required_fit_line(out, args.require_fit, fit_ok)?;
+        for f in &files {
+            writeln!(out, "  wrote {f}")?;
+        }
     }
     Ok(outcome(fit_ok))
 }

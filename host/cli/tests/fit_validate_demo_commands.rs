@@ -694,6 +694,8 @@ fn time_domain_fit_on_the_velocity_reports_the_velocity_fit() {
         val.to_str().unwrap(),
         "--save",
         model.to_str().unwrap(),
+        "--plot",
+        dir.join("plots").to_str().unwrap(),
         "--json",
     ]));
     assert_eq!(j["fit_metric"], "velocity", "{j}");
@@ -703,6 +705,13 @@ fn time_domain_fit_on_the_velocity_reports_the_velocity_fit() {
         j["fit_validation"].as_f64().unwrap(),
     );
     assert!(e > 75.0 && v > 75.0, "velocity FIT {e} / {v}");
+    // compare.svg draws the headline FIT's signals: the velocities, under that FIT
+    let compare = std::fs::read_to_string(dir.join("plots/compare.svg")).unwrap();
+    for fit in [e, v] {
+        let text = format!("three-mass: velocity FIT {fit:.2} %");
+        assert!(compare.contains(&text), "{text} not in compare.svg");
+    }
+    assert!(compare.contains("motor velocity [rad/s]"));
     assert!(j["fit_toolbox_validation"].as_f64().unwrap() < 0.0, "{j}");
     let k_g = j["parameters"]["k_g"]["value"].as_f64().unwrap();
     assert!((k_g / 1.275e5 - 1.0).abs() < 0.03, "k_g {k_g}");
@@ -719,4 +728,138 @@ fn time_domain_fit_on_the_velocity_reports_the_velocity_fit() {
     let t = w["fit_toolbox"].as_f64().unwrap();
     let tj = j["fit_toolbox_validation"].as_f64().unwrap();
     assert!((t - tj).abs() < 1e-6, "validate toolbox {t} vs fit {tj}");
+}
+
+/// `svg` is a whole SVG document that rsvg-convert renders (when it is installed)
+fn assert_renders(path: &Path) {
+    let text = std::fs::read_to_string(path).unwrap();
+    assert!(
+        text.starts_with("<svg") && text.trim_end().ends_with("</svg>"),
+        "{}",
+        path.display()
+    );
+    if let Ok(o) = std::process::Command::new("rsvg-convert")
+        .arg("-o")
+        .arg(path.with_extension("png"))
+        .arg(path)
+        .output()
+    {
+        assert!(
+            o.status.success(),
+            "rsvg-convert {}: {}",
+            path.display(),
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+}
+
+// The toolbox's views on the EMPS drive (a linear axis: force [N] -> position [m]):
+// `fit --plot` writes compare, resid, pzmap and step beside bode.svg, with the FITs it
+// printed in the compare legend, the units of the data on the axes and the residual tests'
+// bands; `validate --plot` writes the same views for the model on the pulses record.
+#[test]
+fn fit_and_validate_plot_the_toolbox_views_in_the_datas_units() {
+    let train = shared("data/emps/emps_train_DATA_EMPS.csv");
+    let test = shared("data/emps/emps_test_DATA_EMPS_PULSES.csv");
+    let dir = tmpdir("views");
+    let (plots, model) = (dir.join("fit"), dir.join("m.json"));
+    let cols = [
+        "--time",
+        "t_s",
+        "--input",
+        "force_N",
+        "--output",
+        "qm_m",
+        "--linear-axis",
+    ];
+    let mut argv = vec![
+        "fit",
+        &train,
+        "--model",
+        "rigid",
+        "--estimation-fraction",
+        "0.5",
+    ];
+    argv.extend(cols);
+    let (p, m) = (plots.to_str().unwrap(), model.to_str().unwrap());
+    argv.extend(["--plot", p, "--save", m, "--json"]);
+    let j = json_of(&jointid(&argv));
+    let files: Vec<&str> = j["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f.as_str().unwrap())
+        .collect();
+    for name in [
+        "bode.svg",
+        "compare.svg",
+        "resid.svg",
+        "pzmap.svg",
+        "step.svg",
+    ] {
+        let path = plots.join(name);
+        assert!(files.contains(&path.to_str().unwrap()), "{files:?}");
+        assert_renders(&path);
+    }
+    let read = |name: &str| std::fs::read_to_string(plots.join(name)).unwrap();
+    // the legend's FIT is the one printed: the toolbox FIT, the headline or beside it
+    let (label, est, val) = if j["fit_metric"] == "toolbox" {
+        ("FIT", &j["fit_estimation"], &j["fit_validation"])
+    } else {
+        (
+            "toolbox FIT",
+            &j["fit_toolbox_estimation"],
+            &j["fit_toolbox_validation"],
+        )
+    };
+    let compare = read("compare.svg");
+    for fit in [est, val] {
+        let text = format!("rigid: {label} {:.2} %", fit.as_f64().unwrap());
+        assert!(compare.contains(&text), "{text} not in compare.svg");
+    }
+    assert!(compare.contains("estimation: ") && compare.contains("validation: "));
+    assert!(compare.contains("position [m]") && compare.contains("time [s]"));
+    let step = read("step.svg");
+    assert!(step.contains("1 N force step") && step.contains("velocity [m/s]"));
+    assert!(read("pzmap.svg").contains("Re s / 2π [Hz]"));
+    let resid = read("resid.svg");
+    for rec in ["estimation", "validation"] {
+        for test in ["whiteness", "independence"] {
+            let b = j["residual_tests"][rec][test]["bound"].as_f64().unwrap();
+            let text = format!("99 % band ±{b:.4}");
+            assert!(
+                resid.contains(&text),
+                "{rec} {test}: {text} not in resid.svg"
+            );
+        }
+    }
+
+    let vplots = dir.join("validate");
+    let mut argv = vec!["validate", m, &test];
+    argv.extend(cols);
+    argv.extend(["--plot", vplots.to_str().unwrap(), "--json"]);
+    let v = json_of(&jointid(&argv));
+    assert_eq!(v["files"].as_array().unwrap().len(), 4, "{v}");
+    for name in ["compare.svg", "resid.svg", "pzmap.svg", "step.svg"] {
+        assert_renders(&vplots.join(name));
+    }
+    let compare = std::fs::read_to_string(vplots.join("compare.svg")).unwrap();
+    let (label, fit) = if v["fit_metric"] == "toolbox" {
+        ("FIT", &v["fit"])
+    } else {
+        ("toolbox FIT", &v["fit_toolbox"])
+    };
+    let text = format!("rigid: {label} {:.2} %", fit.as_f64().unwrap());
+    assert!(
+        compare.contains(&text),
+        "{text} not in validate's compare.svg"
+    );
+    assert!(compare.contains("position [m]"));
+    let resid = std::fs::read_to_string(vplots.join("resid.svg")).unwrap();
+    let b = v["residual_tests"]["whiteness"]["bound"].as_f64().unwrap();
+    assert!(resid.contains(&format!("99 % band ±{b:.4}")));
+    // an existing view is refused before any work, unless --force
+    let o = jointid(&argv);
+    assert_eq!(o.status.code(), Some(2), "{o:?}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

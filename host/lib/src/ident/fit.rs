@@ -1188,36 +1188,11 @@ impl Fitted {
     /// [`FitError::DecimationMismatch`] for a record at another rate, [`FitError::BadData`]
     /// for an unusable one, [`FitError::Validate`].
     pub fn velocity_fit_segments(&self, data: &[FitData]) -> Result<(f64, Vec<f64>), FitError> {
-        use crate::ident::nonlinear::{fit::DEFAULT_HIGHPASS_HZ, interval_velocity};
-        let mut pairs = Vec::with_capacity(data.len());
-        for d in data {
-            let rec = if self.decimate > 1 {
-                &d.raw
-            } else {
-                &d.prepared
-            };
-            check(rec)?;
-            if (rec.ts - self.ts).abs() > 1e-3 * self.ts {
-                return Err(FitError::DecimationMismatch {
-                    model_ts: self.ts,
-                    model_q: self.decimate,
-                    data_ts: d.raw.ts,
-                    data_q: d.decimate,
-                });
-            }
-            let yh = match &self.friction {
-                Some(_) => self.simulate(rec),
-                None => self.model.simulate(&rec.u, None),
-            };
-            let (v, vh) = match self.output {
-                Output::Angle => (
-                    interval_velocity(&rec.y, rec.ts),
-                    interval_velocity(&yh, rec.ts),
-                ),
-                Output::Velocity => (rec.y.clone(), yh),
-            };
-            pairs.push((v[1..].to_vec(), vh[1..].to_vec()));
-        }
+        use crate::ident::nonlinear::fit::DEFAULT_HIGHPASS_HZ;
+        let pairs = data
+            .iter()
+            .map(|d| self.velocity_pair(d))
+            .collect::<Result<Vec<_>, _>>()?;
         let ts = self.ts;
         let each = pairs
             .iter()
@@ -1231,6 +1206,50 @@ impl Fitted {
             .collect::<Result<Vec<f64>, _>>()?;
         let pooled = crate::ident::nonlinear::pooled_velocity_fit(&pairs, ts, DEFAULT_HIGHPASS_HZ)?;
         Ok((pooled, each))
+    }
+
+    /// The measured and simulated interval-mean velocity of one record that
+    /// [`Fitted::velocity_fit_segments`] compares (sample 0 left out), before the high-pass.
+    fn velocity_pair(&self, d: &FitData) -> Result<(Vec<f64>, Vec<f64>), FitError> {
+        use crate::ident::nonlinear::interval_velocity;
+        let rec = if self.decimate > 1 {
+            &d.raw
+        } else {
+            &d.prepared
+        };
+        check(rec)?;
+        if (rec.ts - self.ts).abs() > 1e-3 * self.ts {
+            return Err(FitError::DecimationMismatch {
+                model_ts: self.ts,
+                model_q: self.decimate,
+                data_ts: d.raw.ts,
+                data_q: d.decimate,
+            });
+        }
+        let yh = match &self.friction {
+            Some(_) => self.simulate(rec),
+            None => self.model.simulate(&rec.u, None),
+        };
+        let (v, vh) = match self.output {
+            Output::Angle => (
+                interval_velocity(&rec.y, rec.ts),
+                interval_velocity(&yh, rec.ts),
+            ),
+            Output::Velocity => (rec.y.clone(), yh),
+        };
+        Ok((v[1..].to_vec(), vh[1..].to_vec()))
+    }
+
+    /// The signals behind [`VELOCITY_FIT_NAME`] on one record, `(v, v̂)` at the model's
+    /// rate from its second sample, both through the fit's high-pass: the toolbox FIT of
+    /// `v̂` against `v` is the record's velocity FIT.
+    ///
+    /// # Errors
+    /// As [`Fitted::velocity_fit_segments`].
+    pub fn velocity_fit_signals(&self, d: &FitData) -> Result<(Vec<f64>, Vec<f64>), FitError> {
+        use crate::ident::nonlinear::fit::{highpassed_pair, DEFAULT_HIGHPASS_HZ};
+        let (v, vh) = self.velocity_pair(d)?;
+        Ok(highpassed_pair(&v, &vh, self.ts, DEFAULT_HIGHPASS_HZ))
     }
 
     /// Lightly damped resonances and anti-resonances above `f_min_hz` [Hz]

@@ -73,8 +73,8 @@ use crate::model::spec::Structure;
 
 use checks::check;
 pub use checks::{
-    distortion_check, output_kind_check, periodic_fit_percent, periodic_steady_state,
-    top_slope_db_per_decade, SteadyState, PERIODIC_FIT_NAME,
+    distortion_check, output_kind_check, periodic_fit_percent, periodic_fit_signals,
+    periodic_steady_state, top_slope_db_per_decade, SteadyState, PERIODIC_FIT_NAME,
 };
 use sampled::{drive_model, Sampled};
 pub(crate) use sampled::{solve_hessenberg, unit_circle};

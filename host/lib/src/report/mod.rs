@@ -4,3 +4,4 @@
 
 pub mod html;
 pub mod plot;
+pub mod views;

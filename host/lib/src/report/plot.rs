@@ -207,6 +207,32 @@ pub fn spectrum_svg(title: &str, panels: &[SpectrumPanel<'_>]) -> Result<String,
     Ok(svg)
 }
 
+/// colour of the FRF's ±2σ band and bars
+const BAND: RGBColor = RGBColor(40, 110, 210);
+
+/// The corner of a plot (upper right, upper left, lower left, lower right, in that order
+/// of preference) whose box of 35 % × 30 % of the plot holds the fewest of `points`
+/// (coordinates scaled to 0 … 1 across the plot): where a legend hides the least data.
+pub fn least_covered_corner(points: impl Iterator<Item = (f64, f64)>) -> SeriesLabelPosition {
+    let (w, h) = (0.35, 0.3);
+    let mut count = [0usize; 4];
+    for (x, y) in points.filter(|(x, y)| x.is_finite() && y.is_finite()) {
+        let (right, left, top, low) = (x >= 1.0 - w, x <= w, y >= 1.0 - h, y <= h);
+        count[0] += usize::from(right && top);
+        count[1] += usize::from(left && top);
+        count[2] += usize::from(left && low);
+        count[3] += usize::from(right && low);
+    }
+    let best = (0..4).min_by_key(|&i| (count[i], i)).unwrap_or(0);
+    [
+        SeriesLabelPosition::UpperRight,
+        SeriesLabelPosition::UpperLeft,
+        SeriesLabelPosition::LowerLeft,
+        SeriesLabelPosition::LowerRight,
+    ][best]
+        .clone()
+}
+
 const PALETTE: [RGBColor; 5] = [
     RGBColor(0, 0, 0),
     RGBColor(200, 30, 30),
@@ -260,8 +286,10 @@ pub fn bode_phases(
 }
 
 /// Bode plot (magnitude [dB] and phase [deg] against log frequency [Hz]) of
-/// `models` over a measured FRF drawn as points with ±2σ bars (magnitude:
-/// |Ĝ| ± 2σ; phase: ± asin(2σ/|Ĝ|), a full ±180° when 2σ ≥ |Ĝ|).
+/// `models` over a measured FRF drawn as points with capped ±2σ bars and a translucent
+/// band joining them (magnitude: |Ĝ| ± 2σ; phase: ± asin(2σ/|Ĝ|), a full ±180° when
+/// 2σ ≥ |Ĝ|), on top of the model lines; the legend in the magnitude panel's corner
+/// that the data cover least ([`least_covered_corner`]).
 ///
 /// # Errors
 /// [`PlotError::Empty`] when there is nothing with a positive frequency,
@@ -271,7 +299,24 @@ pub fn bode_svg(
     frf: Option<&FrfBand>,
     models: &[BodeCurve],
 ) -> Result<String, PlotError> {
+    bode_svg_in(title, None, frf, models)
+}
+
+/// [`bode_svg`] with the magnitude axis in dB re 1 `gain_unit` (e.g. `m/N`) when given.
+///
+/// # Errors
+/// As [`bode_svg`].
+pub fn bode_svg_in(
+    title: &str,
+    gain_unit: Option<&str>,
+    frf: Option<&FrfBand>,
+    models: &[BodeCurve],
+) -> Result<String, PlotError> {
     const W: &str = "bode";
+    let mag_desc = match gain_unit {
+        Some(u) => format!("magnitude [dB re 1 {u}]"),
+        None => "magnitude [dB]".to_string(),
+    };
     let freqs = frf
         .map(|f| f.freq_hz.clone())
         .into_iter()
@@ -324,6 +369,31 @@ pub fn bode_svg(
             .titled(title, ("sans-serif", 20))
             .map_err(draw_err(W))?;
         let (top, bottom) = root.split_vertically(370);
+        // the legend goes to the corner of the magnitude panel that the data cover least
+        let legend_corner = {
+            let (l0, l1) = (fmin.ln(), fmax.ln());
+            let nx = |f: f64| (f.ln() - l0) / (l1 - l0);
+            let ny = |v: f64| (v - mlo) / (mhi - mlo);
+            let model_pts = models.iter().flat_map(|m| {
+                m.freq_hz
+                    .iter()
+                    .zip(&m.response)
+                    .filter(|(f, _)| **f > 0.0)
+                    .map(|(f, g)| (nx(*f), ny(mag(g))))
+            });
+            let frf_pts = frf.into_iter().flat_map(|f| {
+                f.freq_hz
+                    .iter()
+                    .zip(&f.g)
+                    .zip(&f.sigma)
+                    .flat_map(|((fr, g), s)| {
+                        let m = g.norm();
+                        [m, m + 2.0 * s, (m - 2.0 * s).max(m * 1e-3)]
+                            .map(|v| (nx(*fr), ny(to_db(v))))
+                    })
+            });
+            least_covered_corner(model_pts.chain(frf_pts))
+        };
         let fmt_hz = |f: &f64| format!("{}", (f * 1e6).round() / 1e6);
         for (area, is_mag) in [(top, true), (bottom, false)] {
             let (lo, hi) = if is_mag { (mlo, mhi) } else { (plo, phi) };
@@ -337,7 +407,7 @@ pub fn bode_svg(
                 .configure_mesh()
                 .x_desc("frequency [Hz]")
                 .y_desc(if is_mag {
-                    "magnitude [dB]"
+                    mag_desc.as_str()
                 } else {
                     "phase [deg]"
                 })
@@ -345,38 +415,45 @@ pub fn bode_svg(
                 .light_line_style(WHITE.mix(0.0))
                 .draw()
                 .map_err(draw_err(W))?;
-            if let (Some(f), Some(ph)) = (frf, &frf_phase) {
-                let bars =
-                    f.freq_hz
-                        .iter()
-                        .zip(&f.g)
-                        .zip(&f.sigma)
-                        .zip(ph)
-                        .map(|(((fr, g), s), p)| {
-                            let (a, b) = if is_mag {
-                                let m = g.norm();
-                                (
-                                    to_db((m - 2.0 * s).max(m * 1e-3)).max(lo),
-                                    to_db(m + 2.0 * s).min(hi),
-                                )
+            // the FRF's ±2σ interval per line: (f, centre, low, high), clipped to the panel
+            let intervals: Vec<(f64, f64, f64, f64)> = match (frf, &frf_phase) {
+                (Some(f), Some(ph)) => f
+                    .freq_hz
+                    .iter()
+                    .zip(&f.g)
+                    .zip(&f.sigma)
+                    .zip(ph)
+                    .map(|(((fr, g), s), p)| {
+                        let (c, a, b) = if is_mag {
+                            let m = g.norm();
+                            (
+                                mag(g),
+                                to_db((m - 2.0 * s).max(m * 1e-3)),
+                                to_db(m + 2.0 * s),
+                            )
+                        } else {
+                            let d = if 2.0 * s >= g.norm() {
+                                180.0
                             } else {
-                                let d = if 2.0 * s >= g.norm() {
-                                    180.0
-                                } else {
-                                    (2.0 * s / g.norm()).asin().to_degrees()
-                                };
-                                ((p - d).max(lo), (p + d).min(hi))
+                                (2.0 * s / g.norm()).asin().to_degrees()
                             };
-                            PathElement::new(vec![(*fr, a), (*fr, b)], BLACK.mix(0.3))
-                        });
-                chart.draw_series(bars).map_err(draw_err(W))?;
+                            (*p, p - d, p + d)
+                        };
+                        (*fr, c, a.clamp(lo, hi), b.clamp(lo, hi))
+                    })
+                    .collect(),
+                _ => Vec::new(),
+            };
+            if !intervals.is_empty() {
+                // the band between the lines, translucent, under everything else
+                let band: Vec<(f64, f64)> = intervals
+                    .iter()
+                    .map(|i| (i.0, i.3))
+                    .chain(intervals.iter().rev().map(|i| (i.0, i.2)))
+                    .collect();
                 chart
-                    .draw_series(f.freq_hz.iter().zip(&f.g).zip(ph).map(|((fr, g), p)| {
-                        Circle::new((*fr, if is_mag { mag(g) } else { *p }), 2, BLACK.filled())
-                    }))
-                    .map_err(draw_err(W))?
-                    .label("FRF ± 2σ")
-                    .legend(|(x, y)| Circle::new((x + 4, y), 2, BLACK.filled()));
+                    .draw_series(std::iter::once(Polygon::new(band, BAND.mix(0.25).filled())))
+                    .map_err(draw_err(W))?;
             }
             for (i, (m, mp)) in models.iter().zip(&model_phase).enumerate() {
                 let color = PALETTE[(i + 1) % PALETTE.len()];
@@ -406,12 +483,42 @@ pub fn bode_svg(
                         PathElement::new(vec![(x, y), (x + 15, y)], color.stroke_width(2))
                     });
             }
+            if !intervals.is_empty() {
+                // capped ±2σ bars and the points, over the model lines
+                chart
+                    .draw_series(intervals.iter().map(|&(fr, _, a, b)| {
+                        PathElement::new(vec![(fr, a), (fr, b)], BAND.stroke_width(2))
+                    }))
+                    .map_err(draw_err(W))?;
+                chart
+                    .draw_series(intervals.iter().flat_map(|&(fr, _, a, b)| {
+                        [a, b].map(|v| {
+                            EmptyElement::at((fr, v))
+                                + PathElement::new(vec![(-3, 0), (3, 0)], BAND.stroke_width(2))
+                        })
+                    }))
+                    .map_err(draw_err(W))?;
+                chart
+                    .draw_series(
+                        intervals
+                            .iter()
+                            .map(|&(fr, c, _, _)| Circle::new((fr, c), 2, BLACK.filled())),
+                    )
+                    .map_err(draw_err(W))?
+                    .label("FRF ± 2σ (band and bars)")
+                    .legend(|(x, y)| {
+                        EmptyElement::at((x + 4, y))
+                            + Rectangle::new([(-4, -6), (4, 6)], BAND.mix(0.25).filled())
+                            + PathElement::new(vec![(0, -6), (0, 6)], BAND.stroke_width(2))
+                            + Circle::new((0, 0), 2, BLACK.filled())
+                    });
+            }
             if is_mag {
                 chart
                     .configure_series_labels()
                     .background_style(WHITE.mix(0.8))
                     .border_style(BLACK)
-                    .position(SeriesLabelPosition::LowerLeft)
+                    .position(legend_corner.clone())
                     .draw()
                     .map_err(draw_err(W))?;
             }
@@ -455,6 +562,29 @@ mod tests {
         assert_eq!(svg.matches("<circle").count(), 3 * 6 + 1, "{svg}");
         assert!(svg.contains("odd non-excited (x)"));
         assert!(matches!(spectrum_svg("x", &[]), Err(PlotError::Empty(_))));
+    }
+
+    #[test]
+    fn the_legend_goes_to_the_emptiest_corner() {
+        // a line falling from upper left to lower right leaves the other two corners;
+        // upper right is preferred
+        let falling = (0..100).map(|k| (k as f64 / 99.0, 1.0 - k as f64 / 99.0));
+        assert!(matches!(
+            least_covered_corner(falling),
+            SeriesLabelPosition::UpperRight
+        ));
+        // a rising one fills upper right and lower left: upper left is next
+        let rising = (0..100).map(|k| (k as f64 / 99.0, k as f64 / 99.0));
+        assert!(matches!(
+            least_covered_corner(rising),
+            SeriesLabelPosition::UpperLeft
+        ));
+        // data in every corner but the lower right
+        let pts = [(0.9, 0.9), (0.1, 0.9), (0.1, 0.1)].into_iter();
+        assert!(matches!(
+            least_covered_corner(pts),
+            SeriesLabelPosition::LowerRight
+        ));
     }
 
     #[test]

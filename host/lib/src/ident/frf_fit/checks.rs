@@ -194,6 +194,39 @@ pub fn periodic_fit_percent(frf: &Frf, g: &[Complex64]) -> f64 {
     100.0 * (1.0 - (e / d).sqrt())
 }
 
+/// What [`periodic_fit_percent`] compares, as one period of `period` samples: the
+/// period-averaged output Ȳ and the model's G·Ū at the reliable lines only, synthesised
+/// from the amplitude-scaled line spectra, `(ȳ, ŷ)`. By Parseval the toolbox FIT of `ŷ`
+/// against `ȳ` is the periodic FIT (both have no mean). `None` when `frf` carries no
+/// spectra or `g` does not match its lines.
+pub fn periodic_fit_signals(
+    frf: &Frf,
+    g: &[Complex64],
+    period: usize,
+) -> Option<(Vec<f64>, Vec<f64>)> {
+    let s = &frf.spectra;
+    if s.u.len() != g.len() || g.is_empty() || frf.lines.len() != g.len() || period < 2 {
+        return None;
+    }
+    let lines: Vec<(f64, Complex64, Complex64)> = reliable_lines(frf)
+        .into_iter()
+        .filter(|&k| frf.lines[k] > 0 && 2 * (frf.lines[k] as usize) < period)
+        .map(|k| {
+            let w = 2.0 * std::f64::consts::PI * f64::from(frf.lines[k]) / period as f64;
+            (w, s.y[k], g[k] * s.u[k])
+        })
+        .collect();
+    let at = |t: usize, pick: fn(&(f64, Complex64, Complex64)) -> Complex64| {
+        lines
+            .iter()
+            .map(|l| (pick(l) * Complex64::from_polar(1.0, l.0 * t as f64)).re)
+            .sum::<f64>()
+    };
+    let y = (0..period).map(|t| at(t, |l| l.1)).collect();
+    let y_hat = (0..period).map(|t| at(t, |l| l.2)).collect();
+    Some((y, y_hat))
+}
+
 /// One period of the periodic steady state (see [`periodic_steady_state`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SteadyState {

@@ -156,6 +156,11 @@ fn three_mass_on_default_sensors_recovers_the_joint() {
     );
     let fit_val = periodic_fit_percent(&val, &fit.freq_response(&val.freq_hz));
     assert!(fit_val > 95.0, "validation FIT {fit_val}");
+    // the period drawn under that FIT gives it back (Parseval)
+    let period = 2 * (*val.lines.iter().max().unwrap() as usize + 1);
+    let (y, y_hat) = periodic_fit_signals(&val, &fit.freq_response(&val.freq_hz), period).unwrap();
+    let drawn = crate::ident::validate::fit_percent(&y, &y_hat).unwrap();
+    assert!((drawn - fit_val).abs() < 1e-9, "{drawn} vs {fit_val}");
 }
 
 #[test]

@@ -968,6 +968,14 @@ pub fn fit_output_error_segments(
     })
 }
 
+/// `v` and `vh` through the second-order high-pass at `highpass_hz` (none at 0) that
+/// [`pooled_velocity_fit`] compares them through: the signals behind its figure.
+pub fn highpassed_pair(v: &[f64], vh: &[f64], ts: f64, highpass_hz: f64) -> (Vec<f64>, Vec<f64>) {
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    highpass_pair(v, vh, ts, highpass_hz, &mut a, &mut b);
+    (a, b)
+}
+
 /// [`velocity_fit`] pooled over records: each pair `(v, v̂)` through its own prefilter
 /// (started afresh), then one toolbox FIT over all of them [%].
 ///
