@@ -555,6 +555,11 @@ mod tests {
 
     /// a nonlinear fit as the engine returns it (values by hand)
     fn nl_fit() -> NlFit {
+        nl_fit_with(vec![1e-3, 14.6, 1.3e5, 80.0, 2e-3])
+    }
+
+    /// as [`nl_fit`] with the two-mass values `plant`
+    fn nl_fit_with(plant: Vec<f64>) -> NlFit {
         let model = NlModel {
             structure: Structure::TwoMass,
             r: 1.0 / 118.0,
@@ -571,7 +576,6 @@ mod tests {
             dz_eps: 1e-7,
             substeps: 1,
         };
-        let plant = vec![1e-3, 14.6, 1.3e5, 80.0, 2e-3];
         let values = model.values(&plant, 1e-3, 0.0);
         let params = model
             .layout()
@@ -633,6 +637,27 @@ mod tests {
         assert!(args
             .iter()
             .any(|a| a.starts_with("nonlinear_stiffness:k3=")));
+    }
+
+    #[test]
+    fn a_model_file_reads_back_the_very_values_written() {
+        // values as a fit leaves them (every bit used), not round decimals
+        let mut x = 0.123_456_789_f64;
+        for _ in 0..400 {
+            let mut plant = nl_fit().plant;
+            for p in plant.iter_mut() {
+                x = (x * 3.987_654_321 + 0.314_159).fract();
+                *p *= 1.0 + x;
+            }
+            let fit = nl_fit_with(plant);
+            let saved = SavedModel::from_nonlinear(&fit, 5e-4, "", "", 0.0, "v", 5.0);
+            let text = serde_json::to_string(&saved).unwrap();
+            let back: SavedModel = serde_json::from_str(&text).unwrap();
+            let nl = back.to_nonlinear().unwrap();
+            for (a, b) in nl.plant.iter().zip(&fit.plant) {
+                assert_eq!(a.to_bits(), b.to_bits(), "{a:e} read back for {b:e}");
+            }
+        }
     }
 
     #[test]
