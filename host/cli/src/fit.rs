@@ -902,15 +902,13 @@ fn run_segments(
             .max_by_key(|&i| (used[i].data.len(), usize::MAX - i))
             .unwrap_or(0);
         let title = format!("estimation: {} (segment {})", used[i].name, used_numbers[i]);
-        compare.push(simulated_record(&fitted, &est[i], title, each[i])?);
-        if let (Some(v), Some(n), Some(vv)) = (val, &val_name, &vv) {
-            compare.push(simulated_record(
-                &fitted,
-                v,
-                format!("validation: {n}"),
-                vv.fit,
-            )?);
-        }
+        compare = compare_records(
+            &fitted,
+            (&est[i], title, each[i]),
+            val.as_ref(),
+            &val_name,
+            &vv,
+        )?;
     }
     let fit_label = if fig.each.is_some() {
         "toolbox FIT"
@@ -1050,20 +1048,8 @@ fn run_frequency_domain(
             .map_err(|e| format!("{}: {e}", ds.name))?;
         let vv = on_validation(&fitted, val, val_name.as_deref(), args.lags)?;
         if args.plot.is_some() {
-            compare.push(simulated_record(
-                &fitted,
-                est,
-                format!("estimation: {}", ds.name),
-                ev.fit,
-            )?);
-            if let (Some(v), Some(n), Some(vv)) = (val, &val_name, &vv) {
-                compare.push(simulated_record(
-                    &fitted,
-                    v,
-                    format!("validation: {n}"),
-                    vv.fit,
-                )?);
-            }
+            let title = format!("estimation: {}", ds.name);
+            compare = compare_records(&fitted, (est, title, ev.fit), val, &val_name, &vv)?;
         }
         (ev, vv)
     };
@@ -1270,6 +1256,27 @@ pub(crate) fn velocity_record(
 
 /// A record of `compare.svg`: `data`'s prepared output and `fitted`'s simulation on it
 /// ([`Fitted::simulate_on`], the one the toolbox FIT `fit` is computed from).
+/// The records of compare.svg: the estimation record `(data, title, FIT)`, then the
+/// validation record when there is one.
+fn compare_records(
+    fitted: &Fitted,
+    (data, title, fit): (&FitData, String, f64),
+    val: Option<&FitData>,
+    val_name: &Option<String>,
+    vv: &Option<Validation>,
+) -> Result<Vec<CompareRecord>, String> {
+    let mut out = vec![simulated_record(fitted, data, title, fit)?];
+    if let (Some(v), Some(n), Some(vv)) = (val, val_name, vv) {
+        out.push(simulated_record(
+            fitted,
+            v,
+            format!("validation: {n}"),
+            vv.fit,
+        )?);
+    }
+    Ok(out)
+}
+
 fn simulated_record(
     fitted: &Fitted,
     data: &FitData,
