@@ -561,17 +561,29 @@ fn noisy_frf(structure: Structure, noise: Noise, seed: u64, periods: u32) -> (Fr
     (analyze_dataset(&ds, 1).expect("frf").frf, cfg.plant.params)
 }
 
-/// Per parameter (and the lag): name, spread of ln p over the runs / median
-/// reported σ(ln p), share of runs within 3 σ of the truth.
+/// One parameter's calibration over repeated noise realisations.
+struct Calibration {
+    name: String,
+    /// spread of ln p over the runs / median reported σ(ln p)
+    ratio: f64,
+    /// share of runs within 3 σ of the truth
+    within: f64,
+    /// RMS over the runs of the standardised error (ln p − ln p₀)/σ(ln p): 1
+    /// for honest σ, also where σ changes from run to run
+    z_rms: f64,
+}
+
+/// Per parameter (and the lag), its [`Calibration`].
 fn sigma_calibration(
     structure: Structure,
     noise: Noise,
     runs: u64,
     periods: u32,
-) -> Vec<(String, f64, f64)> {
+) -> Vec<Calibration> {
     let mut vals: Vec<Vec<f64>> = Vec::new();
     let mut stds: Vec<Vec<f64>> = Vec::new();
     let mut within: Vec<usize> = Vec::new();
+    let mut z2: Vec<f64> = Vec::new();
     let mut names: Vec<String> = Vec::new();
     for seed in 0..runs {
         let (frf, p) = noisy_frf(structure, noise, 900 + seed, periods);
@@ -587,11 +599,13 @@ fn sigma_calibration(
             names = fit.params.iter().map(|q| q.name.clone()).collect();
             names.push("lag".into());
             within = vec![0; names.len()];
+            z2 = vec![0.0; names.len()];
         }
         for (i, w) in within.iter_mut().enumerate() {
             if (v[i] - t[i].ln()).abs() <= 3.0 * s[i] {
                 *w += 1;
             }
+            z2[i] += ((v[i] - t[i].ln()) / s[i]).powi(2);
         }
         if std::env::var("SIGMA_VERBOSE").is_ok() {
             let errs: Vec<String> = (0..v.len())
@@ -620,9 +634,30 @@ fn sigma_calibration(
             let mut s: Vec<f64> = stds.iter().map(|s| s[i]).collect();
             s.sort_by(f64::total_cmp);
             let med = s[s.len() / 2];
-            (names[i].clone(), spread / med, within[i] as f64 / n)
+            Calibration {
+                name: names[i].clone(),
+                ratio: spread / med,
+                within: within[i] as f64 / n,
+                z_rms: (z2[i] / n).sqrt(),
+            }
         })
         .collect()
+}
+
+/// `name ratio/z_rms/within%` for each parameter.
+fn table_row(t: &[Calibration]) -> String {
+    t.iter()
+        .map(|c| {
+            format!(
+                "{} {:.2}/{:.2}/{:.0}%",
+                c.name,
+                c.ratio,
+                c.z_rms,
+                100.0 * c.within
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("  ")
 }
 
 #[test]
@@ -633,26 +668,33 @@ fn standard_deviations_hold_with_realistic_sensors() {
     // 1/√(2·29) = 13 %, so the band [1/1.5, 1.5] on spread / median σ is
     // −2.5 … +3.8 of its standard deviations wide; and 30 runs with honest σ
     // leave on average 0.1 errors beyond 3 σ, so at most 2 are allowed.
-    // `f_m` (a pole near 0.2 Hz, below the lowest line) and the lag (Akaike's
-    // choice between lag, delay and both changes its σ from run to run) are
-    // reported, not held. The table: cargo test -p jointid --lib --
+    // The ratio spread / median σ is the wrong measure where σ itself moves
+    // from run to run; the standardised error (ln p − ln p₀)/σ of each run,
+    // whose RMS is 1 for honest σ, is the right one there. The table
+    // (`ratio/z_rms/within`): cargo test -p jointid --lib --
     // standard_deviations_hold --nocapture (about 35 s).
     let runs = 30;
     let mut failed = Vec::new();
     for noise in [Noise::Default, Noise::Coloured, Noise::Disturbance10] {
         let t = sigma_calibration(Structure::ThreeMass, noise, runs, 4);
-        let row: Vec<String> = t
-            .iter()
-            .map(|(n, r, w)| format!("{n} {r:.2}/{:.0}%", 100.0 * w))
-            .collect();
-        println!("{noise:?}: {}", row.join("  "));
-        for (name, ratio, within) in &t {
-            if name == "f_m" || name == "lag" {
-                continue;
-            }
-            if !(1.0 / 1.5..=1.5).contains(ratio) || *within < 28.0 / runs as f64 {
+        println!("{noise:?}: {}", table_row(&t));
+        for c in &t {
+            // Both measures, except: f_m, whose σ changes several-fold from
+            // run to run (a pole below the lowest line, at its bound in one
+            // run of the ×10 disturbance, warned), is held by z_rms alone;
+            // the lag, whose σ carries Akaike's choice between lag, delay
+            // and both, by the ratio alone (its z_rms, 0.5–0.6, says that σ
+            // is conservative in the runs where the choice is open).
+            let band = 1.0 / 1.5..=1.5;
+            let honest = match c.name.as_str() {
+                "f_m" => band.contains(&c.z_rms),
+                "lag" => band.contains(&c.ratio),
+                _ => band.contains(&c.ratio) && band.contains(&c.z_rms),
+            };
+            if !honest || c.within < 28.0 / runs as f64 {
                 failed.push(format!(
-                    "{noise:?} {name}: ratio {ratio:.2}, within 3σ {within:.2}"
+                    "{noise:?} {}: ratio {:.2}, z_rms {:.2}, within 3σ {:.2}",
+                    c.name, c.ratio, c.z_rms, c.within
                 ));
             }
         }
@@ -680,11 +722,7 @@ fn sigma_table() {
                 continue;
             }
             let t = sigma_calibration(structure, noise, runs, 4);
-            let row: Vec<String> = t
-                .iter()
-                .map(|(n, r, w)| format!("{n} {r:.2}/{:.0}%", 100.0 * w))
-                .collect();
-            println!("{structure:?} {noise:?}: {}", row.join("  "));
+            println!("{structure:?} {noise:?}: {}", table_row(&t));
         }
     }
 }
