@@ -208,10 +208,14 @@ fn frequency_domain_case(n: usize, td_seconds: f64) {
     let fit_true = periodic_fit_percent(&val, &true_model.freq_response(&val.freq_hz));
     println!(
         "frequency domain black box n=11 N={n:<7} FRF {t_frf:.4} s + fit {t_bb:.4} s ({:.3} x the time-domain grey-box fit), \
-         validation FIT {fit_bb:.2} % (true model {fit_true:.2} %), cost ratio {:.2}",
+         validation FIT {fit_bb:.2} % (true model {fit_true:.2} %), cost ratio {:.2}, {} warnings",
         (t_frf + t_bb) / td_seconds,
-        bb.cost_ratio()
+        bb.cost_ratio(),
+        bb.warnings.len()
     );
+    for w in &bb.warnings {
+        println!("    warning: {w}");
+    }
 }
 
 fn main() {

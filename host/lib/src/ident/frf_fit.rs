@@ -74,7 +74,8 @@ use crate::model::spec::Structure;
 use checks::check;
 pub use checks::{
     distortion_check, output_kind_check, periodic_fit_percent, periodic_fit_signals,
-    periodic_steady_state, top_slope_db_per_decade, SteadyState, PERIODIC_FIT_NAME,
+    periodic_steady_state, top_slope_db_per_decade, unsupported_modes, SteadyState,
+    PERIODIC_FIT_NAME,
 };
 use sampled::{drive_model, Sampled};
 pub(crate) use sampled::{solve_hessenberg, unit_circle};
@@ -281,6 +282,16 @@ pub enum FitWarning {
         /// the FRF's own FIT [%]
         frf_fit: f64,
     },
+    /// a black box's lightly damped mode lies outside the reliable lines: no measured
+    /// line holds it, so surplus states placed it where the noise let them
+    UnsupportedMode {
+        /// its natural frequency [Hz]
+        freq_hz: f64,
+        /// its damping ratio
+        damping: f64,
+        /// the band of the reliable lines [Hz]
+        band_hz: (f64, f64),
+    },
 }
 
 impl std::fmt::Display for FitWarning {
@@ -339,6 +350,17 @@ impl std::fmt::Display for FitWarning {
                 "its periodic steady-state FIT on the estimation data, {fit:.1} %, is far below the {frf_fit:.1} % \
                  the same model family fitted to the FRF reaches (--domain frequency): the time-domain fit \
                  followed something else than the joint (drift, a slow disturbance)"
+            ),
+            FitWarning::UnsupportedMode {
+                freq_hz,
+                damping,
+                band_hz,
+            } => write!(
+                f,
+                "the model has a mode at {freq_hz:.2} Hz (damping {damping:.2}) outside the reliable lines \
+                 ({:.2}–{:.2} Hz): no measured line holds it, so it follows the noise; lower the order \
+                 or measure more periods",
+                band_hz.0, band_hz.1
             ),
         }
     }

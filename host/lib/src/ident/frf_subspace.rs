@@ -28,8 +28,8 @@ use thiserror::Error;
 
 use crate::ident::frf::Frf;
 use crate::ident::frf_fit::{
-    output_kind_check, solve_hessenberg, unit_circle, Cost, FitWarning, FrfModel, Lines, Problem,
-    COST_RATIO_WARN,
+    output_kind_check, solve_hessenberg, unit_circle, unsupported_modes, Cost, FitWarning,
+    FrfModel, Lines, Problem, COST_RATIO_WARN,
 };
 use crate::ident::lm::{self, LeastSquares, LmOptions, Termination};
 use crate::ident::ss::StateSpace;
@@ -411,6 +411,7 @@ pub fn black_box_frf(
         // a strictly proper mechanical response falls by at least 20 dB/decade
         warnings.extend(output_kind_check(frf, -20.0));
     }
+    warnings.extend(unsupported_modes(frf, &model));
     Ok(FrfBlackBox {
         model,
         cost,
@@ -430,7 +431,11 @@ mod tests {
     use crate::sim::{simulate_excitation, SimConfig};
 
     fn frf_of(cfg: &SimConfig, seed: u64) -> Frf {
-        let exc = ExcitationConfig::paper_default();
+        frf_of_exc(cfg, seed, ExcitationConfig::paper_default())
+    }
+
+    /// FRF of `exc` on `cfg`'s joint (the first period dropped)
+    fn frf_of_exc(cfg: &SimConfig, seed: u64, exc: ExcitationConfig) -> Frf {
         let out = simulate_excitation(
             &SimConfig {
                 seed,
@@ -468,6 +473,37 @@ mod tests {
         let val = frf_of(&cfg, 2);
         let fit = periodic_fit_percent(&val, &bb.model.freq_response(&val.freq_hz));
         assert!(fit > 95.0, "validation FIT {fit}");
+    }
+
+    #[test]
+    fn a_mode_no_reliable_line_holds_is_reported() {
+        // 15,000 samples, two periods after the first (the ident bench's
+        // short record): the slow disturbance leaves the lines
+        // below 3.6 Hz unreliable, and the four states the three-mass joint
+        // does not need place a light mode there (0.80 Hz for this seed)
+        let cfg = SimConfig::default();
+        let unsupported = |bb: &FrfBlackBox| -> Vec<f64> {
+            bb.warnings
+                .iter()
+                .filter_map(|w| match w {
+                    FitWarning::UnsupportedMode { freq_hz, .. } => Some(*freq_hz),
+                    _ => None,
+                })
+                .collect()
+        };
+        let exc = ExcitationConfig {
+            periods: 3,
+            ramp_samples: 0,
+            ..ExcitationConfig::paper_default()
+        };
+        let short = black_box_frf(&frf_of_exc(&cfg, 1, exc), 11, 5e-4, false, 40).unwrap();
+        let warned = unsupported(&short);
+        assert!(!warned.is_empty(), "{:?}", short.warnings);
+        // what is reported is none of the joint's modes (17.0 and 23.0 Hz)
+        assert!(warned.iter().all(|f| *f < 3.0), "{warned:?}");
+        // with the paper's record no mode is left outside the lines
+        let long = black_box_frf(&frf_of(&cfg, 1), 11, 5e-4, false, 40).unwrap();
+        assert!(unsupported(&long).is_empty(), "{:?}", long.warnings);
     }
 
     #[test]

@@ -88,6 +88,34 @@ pub(super) fn check(fit: &FrfFit, opts: &LmOptions, frf: &Frf) -> Vec<FitWarning
     w
 }
 
+/// Damping below which a black box's mode outside the reliable lines is
+/// reported ([`unsupported_modes`]): a pair this light makes a peak, where a
+/// better damped one below the band stands for the rigid-body poles.
+const UNSUPPORTED_MODE_DAMPING: f64 = 0.2;
+
+/// [`FitWarning::UnsupportedMode`] for each lightly damped mode of `model`
+/// below 0.9 × the lowest reliable line or above 1.1 × the highest
+/// ([`reliable_lines`]): the states a black box has beyond what the joint
+/// needs go where no line holds them.
+pub fn unsupported_modes(frf: &Frf, model: &crate::ident::ss::StateSpace) -> Vec<FitWarning> {
+    let lines = reliable_lines(frf);
+    let (Some(&lo), Some(&hi)) = (lines.first(), lines.last()) else {
+        return Vec::new();
+    };
+    let band_hz = (frf.freq_hz[lo], frf.freq_hz[hi]);
+    model
+        .resonances(0.0, UNSUPPORTED_MODE_DAMPING)
+        .resonances
+        .into_iter()
+        .filter(|m| m.freq_hz < 0.9 * band_hz.0 || m.freq_hz > 1.1 * band_hz.1)
+        .map(|m| FitWarning::UnsupportedMode {
+            freq_hz: m.freq_hz,
+            damping: m.damping,
+            band_hz,
+        })
+        .collect()
+}
+
 /// Share of excited lines on which the distortion dominates from which
 /// [`FitWarning::Distortion`] is raised.
 const DISTORTION_WARN_SHARE: f64 = 0.25;
