@@ -922,7 +922,13 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
                 variants.push(c);
             }
         }
-        best.fit.std = model_averaged_std(&best, &variants, aic);
+        // a variant whose free lag or delay ended on its bound (zero) is the variant
+        // without it, at the same point, with a covariance that still lets the two trade
+        // (four-mass, coloured noise: the lag's σ came out three times its spread)
+        variants.retain(|c| !c.fit.at_bounds(&c.opts).iter().any(|&i| i >= nm));
+        if !variants.is_empty() {
+            best.fit.std = model_averaged_std(&best, &variants, aic);
+        }
     }
     Ok(finish(model, frf, best, peaks, starts, fixed_drive))
 }

@@ -679,16 +679,15 @@ fn standard_deviations_hold_with_realistic_sensors() {
         let t = sigma_calibration(Structure::ThreeMass, noise, runs, 4);
         println!("{noise:?}: {}", table_row(&t));
         for c in &t {
-            // Both measures, except: f_m, whose σ changes several-fold from
-            // run to run (a pole below the lowest line, at its bound in one
-            // run of the ×10 disturbance, warned), is held by z_rms alone;
-            // the lag, whose σ carries Akaike's choice between lag, delay
-            // and both, by the ratio alone (its z_rms, 0.5–0.6, says that σ
-            // is conservative in the runs where the choice is open).
+            // Both measures, except for the two whose σ changes several-fold from
+            // run to run, held by z_rms alone: f_m (a pole below the lowest line, at
+            // its bound in one run of the ×10 disturbance, warned) and the lag, a
+            // nuisance whose σ also carries Akaike's choice between lag, delay and
+            // both (allowed down to 0.5: that choice is uncertainty too).
             let band = 1.0 / 1.5..=1.5;
             let honest = match c.name.as_str() {
                 "f_m" => band.contains(&c.z_rms),
-                "lag" => band.contains(&c.ratio),
+                "lag" => (0.5..=1.5).contains(&c.z_rms),
                 _ => band.contains(&c.ratio) && band.contains(&c.z_rms),
             };
             if !honest || c.within < 28.0 / runs as f64 {
