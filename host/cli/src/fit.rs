@@ -1002,12 +1002,14 @@ fn run_frequency_domain(
     let respond = |f: &[f64]| fitted.model.freq_response(f);
     let f_min = pooled.frf.freq_hz.first().copied().unwrap_or(0.0);
     let res = fitted.resonances(f_min);
-    // residual tests on one period of the steady state (slow disturbances
-    // and drift averaged out), at the capture rate
+    // residual tests: input independence on one period of the steady state (slow
+    // disturbances and drift averaged out), at the capture rate; the residuals the fit
+    // weighted, line by line, against their bound
     let tests = |d: &Dataset, a: &FrfAnalysis| -> Result<Validation, String> {
         let s = frf_fit::periodic_steady_state(&d.data, &a.layout, respond)
             .map_err(|e| format!("{}: {e}", d.name))?;
-        jointid::ident::validate::validate(&s.u, &s.y, &s.y_hat, args.lags)
+        let (line_e, nu) = frf_fit::line_residuals(&a.frf, respond);
+        jointid::ident::validate::validate_periodic(&s.u, &s.y, &s.y_hat, &line_e, nu, args.lags)
             .map_err(|e| format!("{}: {e}", d.name))
     };
     let periodic_fit =
@@ -1536,13 +1538,14 @@ pub(crate) fn print_tests(out: &mut dyn Write, label: &str, v: &Validation) -> s
 fn print_test(out: &mut dyn Write, label: &str, t: &CorrelationTest) -> std::io::Result<()> {
     writeln!(
         out,
-        "    {label:<10} {:<40} {}: max |r| {:.3} vs bound {:.3} ({} of {} lags outside, {} {} allowed), χ² {:.1} {} {:.1}",
+        "    {label:<10} {:<40} {}: max |r| {:.3} vs bound {:.3} ({} of {} {} outside, {} {} allowed), χ² {:.1} {} {:.1}",
         t.name,
         verdict(t),
         t.max_abs,
         t.bound,
         t.outside,
         t.lags.len(),
+        t.unit,
         if t.outside <= t.allowed { "≤" } else { ">" },
         t.allowed,
         t.statistic,

@@ -73,9 +73,9 @@ use crate::model::spec::Structure;
 
 use checks::check;
 pub use checks::{
-    distortion_check, output_kind_check, periodic_fit_percent, periodic_fit_signals,
-    periodic_steady_state, top_slope_db_per_decade, unsupported_modes, SteadyState,
-    PERIODIC_FIT_NAME,
+    distortion_check, line_residuals, output_kind_check, periodic_fit_percent,
+    periodic_fit_signals, periodic_steady_state, top_slope_db_per_decade, unsupported_modes,
+    SteadyState, PERIODIC_FIT_NAME,
 };
 use sampled::{drive_model, Sampled};
 pub(crate) use sampled::{solve_hessenberg, unit_circle};
@@ -497,6 +497,34 @@ impl Lines {
         }
     }
 
+    /// The SML residual of each excited line, `(Ȳ − G Ū)/σ_e` with `E|·|² = 1`, from the
+    /// model's response `gn` at the noise lines of `s`: the output-error noise pooled over
+    /// the line's window, each line with its own model response (see [`FrfSpectra`]),
+    /// plus the odd distortion on the line with the model at the line.
+    fn sml_residuals(&self, s: &FrfSpectra, gn: &[Complex64]) -> Vec<Complex64> {
+        self.exc_in_noise
+            .iter()
+            .enumerate()
+            .map(|(k, &kn)| {
+                let gm = gn[kn];
+                let e = s.y[k] - gm * s.u[k];
+                let pool = s.pool[k].clone();
+                let n = pool.len().max(1) as f64;
+                let var = pool
+                    .map(|j| {
+                        s.var_y[j] + gn[j].norm_sqr() * s.var_u[j]
+                            - 2.0 * (gn[j].conj() * s.cov_yu[j]).re
+                    })
+                    .sum::<f64>()
+                    / n;
+                let d = &s.distortion[k];
+                let var = var + d.var_y + gm.norm_sqr() * d.var_u - 2.0 * (gm.conj() * d.cov_yu).re;
+                let floor = (1e-4 * s.y[k].norm()).powi(2);
+                e / var.max(floor).sqrt()
+            })
+            .collect()
+    }
+
     /// SML cost expected at the true model with `p` free parameters
     pub(crate) fn expected_cost(&self, p: usize) -> f64 {
         let nu = self.spectra.as_ref().map_or(0.0, FrfSpectra::dof);
@@ -593,28 +621,10 @@ impl<M: FrfModel> Problem<'_, M> {
             }
             (Cost::Sml, Some(s)) => {
                 let gn = self.response(theta, &l.z_noise)?;
-                for (k, &kn) in l.exc_in_noise.iter().enumerate() {
-                    let gm = gn[kn];
-                    let e = s.y[k] - gm * s.u[k];
-                    // output-error noise pooled over the window, each line
-                    // with its own model response (see `FrfSpectra`)
-                    let pool = s.pool[k].clone();
-                    let n = pool.len().max(1) as f64;
-                    let var = pool
-                        .map(|j| {
-                            s.var_y[j] + gn[j].norm_sqr() * s.var_u[j]
-                                - 2.0 * (gn[j].conj() * s.cov_yu[j]).re
-                        })
-                        .sum::<f64>()
-                        / n;
-                    // the odd distortion on this line, with the model at the line
-                    let d = &s.distortion[k];
-                    let var =
-                        var + d.var_y + gm.norm_sqr() * d.var_u - 2.0 * (gm.conj() * d.cov_yu).re;
-                    let floor = (1e-4 * s.y[k].norm()).powi(2);
-                    let sd = (var.max(floor) / 2.0).sqrt();
-                    r.push(e.re / sd);
-                    r.push(e.im / sd);
+                for e in l.sml_residuals(s, &gn) {
+                    // real and imaginary part, each of unit variance
+                    r.push(e.re * std::f64::consts::SQRT_2);
+                    r.push(e.im * std::f64::consts::SQRT_2);
                 }
             }
             (Cost::Sml, None) => {

@@ -35,6 +35,8 @@
 #![allow(rustdoc::broken_intra_doc_links)]
 
 use rustfft::num_complex::Complex64;
+
+use crate::ident::frf_fit::COST_RATIO_WARN;
 use serde::Serialize;
 
 /// how a fit figure is labelled wherever it is shown
@@ -105,6 +107,8 @@ pub struct CorrelationTest {
     pub bound: f64,
     /// largest |value|
     pub max_abs: f64,
+    /// what `lags` count: "lags" [samples], or "lines" (excited lines, [`line_residual_test`])
+    pub unit: &'static str,
     /// lags outside the bound (a NaN value counts as outside)
     pub outside: usize,
     /// most lags outside the bound that the test accepts ([`allowed_outside`])
@@ -134,9 +138,10 @@ impl CorrelationTest {
         let mut why = Vec::new();
         if self.outside > self.allowed {
             why.push(format!(
-                "{} of {} lags outside the band, at most {} allowed",
+                "{} of {} {} outside the band, at most {} allowed",
                 self.outside,
                 self.lags.len(),
+                self.unit,
                 self.allowed
             ));
         }
@@ -222,6 +227,66 @@ pub fn whiteness_test(e: &[f64], m: usize) -> Result<CorrelationTest, ValidateEr
         statistic,
         m,
     ))
+}
+
+/// Name of [`line_residual_test`].
+pub const LINE_RESIDUAL_NAME: &str = "standardised line residuals |Ĝ − G|/σ (per excited line)";
+
+/// The residual test of a fit to the FRF: the standardised residuals
+/// `e_k = (Ĝ_k − G_k)/σ_k` at the K excited lines (in `values`, the line index in `lags`)
+/// against the 99 % bound of `|e_k|` for a right model, where `|e_k|²/1` is F(2, ν)
+/// distributed, σ_k² estimated with `nu` real degrees of freedom (exponential for
+/// `nu = ∞`): `|e|² ≤ (ν/2)(0.01^{−2/ν} − 1)`. Lines outside are counted against
+/// [`allowed_outside`]; the level of all lines, `2 Σ |e_k|² (ν − 2)/ν` (mean 2K), against
+/// [`COST_RATIO_WARN`] times 2K, where the fit itself warns that its cost is above the
+/// noise: a χ² quantile would be too narrow, as the F-distributed `|e_k|²` of
+/// estimated variances spread more than a χ² (1.5 times its variance at ν = 12).
+///
+/// This is what the fit assumed: independent line errors of variance σ_k² (Pintelon &
+/// Schoukens 2012, §8.3, the residual analysis of a frequency-domain fit). A correlation
+/// over the lines cannot serve: a missed resonance puts nearly all the misfit on one or
+/// two lines, which no normalised correlation sees; nor can the time-domain
+/// autocorrelation of the same residual, near 1 at every short lag of a low-pass band
+/// whatever the model.
+///
+/// # Errors
+/// [`ValidateError::TooShort`] when there is no line.
+pub fn line_residual_test(e: &[Complex64], nu: f64) -> Result<CorrelationTest, ValidateError> {
+    let k = e.len();
+    if k == 0 {
+        return Err(ValidateError::TooShort {
+            samples: 0,
+            lags: 1,
+        });
+    }
+    let lags: Vec<i64> = (0..k as i64).collect();
+    let q = if nu.is_finite() && nu > 2.0 {
+        nu / 2.0 * (0.01f64.powf(-2.0 / nu) - 1.0)
+    } else {
+        -(0.01f64.ln())
+    };
+    let bound = q.sqrt();
+    let non_finite = e
+        .iter()
+        .filter(|v| !(v.re.is_finite() && v.im.is_finite()))
+        .count();
+    if non_finite > 0 {
+        let mut t = not_finite(LINE_RESIDUAL_NAME, lags, bound, 2 * k, non_finite);
+        t.unit = "lines";
+        return Ok(t);
+    }
+    let values: Vec<f64> = e.iter().map(|v| v.norm()).collect();
+    let shrink = if nu.is_finite() && nu > 2.0 {
+        (nu - 2.0) / nu
+    } else {
+        1.0
+    };
+    let statistic = 2.0 * shrink * e.iter().map(|v| v.norm_sqr()).sum::<f64>();
+    let mut t = finish(LINE_RESIDUAL_NAME, lags, values, bound, statistic, 2 * k);
+    t.critical = COST_RATIO_WARN * (2 * k) as f64;
+    t.unit = "lines";
+    t.pass = t.outside <= t.allowed && t.statistic <= t.critical;
+    Ok(t)
 }
 
 /// Independence of `e` from past inputs: normalised cross-correlation
@@ -312,6 +377,7 @@ fn not_finite(
         lags,
         bound,
         max_abs: f64::NAN,
+        unit: "lags",
         outside: m,
         allowed: allowed_outside(m),
         non_finite,
@@ -343,6 +409,7 @@ fn finish(
         max_abs: values.iter().fold(0.0, |a, v| a.max(v.abs())),
         values,
         bound,
+        unit: "lags",
         outside,
         allowed,
         non_finite: 0,
@@ -384,6 +451,34 @@ pub fn validate(
     let fit = fit_percent(y, yhat)?;
     let e: Vec<f64> = y.iter().zip(yhat).map(|(a, b)| a - b).collect();
     let whiteness = whiteness_test(&e, lags)?;
+    let independence = input_independence_test(&e, u, lags)?;
+    Ok(Validation {
+        fit_name: FIT_NAME.into(),
+        fit,
+        pass: fit.is_finite() && whiteness.pass && independence.pass,
+        whiteness,
+        independence,
+    })
+}
+
+/// FIT and residual tests of a frequency-domain fit on a periodic record: the FIT and the
+/// input independence on one steady-state period (`u`, `y`, `yhat`: slow disturbances and
+/// drift averaged out); in the place of whiteness, the standardised line residuals
+/// `line_e` against their bound ([`line_residual_test`], σ² with `nu` degrees of freedom).
+///
+/// # Errors
+/// As [`fit_percent`], [`line_residual_test`], [`input_independence_test`].
+pub fn validate_periodic(
+    u: &[f64],
+    y: &[f64],
+    yhat: &[f64],
+    line_e: &[Complex64],
+    nu: f64,
+    lags: usize,
+) -> Result<Validation, ValidateError> {
+    let fit = fit_percent(y, yhat)?;
+    let e: Vec<f64> = y.iter().zip(yhat).map(|(a, b)| a - b).collect();
+    let whiteness = line_residual_test(line_e, nu)?;
     let independence = input_independence_test(&e, u, lags)?;
     Ok(Validation {
         fit_name: FIT_NAME.into(),
@@ -619,6 +714,39 @@ mod tests {
         let t = finish("t", (0..26).collect(), v, 0.1, 0.0, 26);
         assert_eq!(t.outside, 3);
         assert!(!t.pass);
+    }
+
+    #[test]
+    fn line_residuals_pass_at_the_noise_and_fail_on_a_missed_mode() {
+        // K = 80 lines, each a complex error over a σ estimated from ν = 12 real
+        // degrees of freedom (P = 3 periods, three lines pooled): F(2, 12)-distributed
+        // |e|². Over 200 draws the test passes at its 99 % level.
+        let (k, nu) = (80, 12usize);
+        let mut g = Lcg(7);
+        let mut draw = |g: &mut Lcg| -> Vec<Complex64> {
+            (0..k)
+                .map(|_| {
+                    let e = Complex64::new(g.gauss(), g.gauss()) / 2f64.sqrt();
+                    let var = (0..nu).map(|_| g.gauss().powi(2)).sum::<f64>() / nu as f64;
+                    e / var.sqrt()
+                })
+                .collect()
+        };
+        let failed = (0..200)
+            .filter(|_| !line_residual_test(&draw(&mut g), nu as f64).unwrap().pass)
+            .count();
+        assert!(failed <= 6, "{failed} of 200 false alarms");
+        // a mode the model misses: five neighbouring lines ten σ off
+        let mut e = draw(&mut g);
+        for v in &mut e[30..35] {
+            *v += Complex64::new(10.0, 0.0);
+        }
+        let t = line_residual_test(&e, nu as f64).unwrap();
+        assert!(!t.pass && t.outside >= 5, "{t:?}");
+        assert!(t.failure().unwrap().contains("lines outside the band"));
+        // a NaN line fails
+        e[0] = Complex64::new(f64::NAN, 0.0);
+        assert!(!line_residual_test(&e, nu as f64).unwrap().pass);
     }
 
     #[test]

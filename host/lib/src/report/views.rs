@@ -301,16 +301,22 @@ fn verdict(t: &CorrelationTest) -> String {
         return format!("FAIL: {} residual samples not finite", t.non_finite);
     }
     format!(
-        "{}: {} of {} lags outside ({} allowed), ζ {:.1} {} χ² 99 % {:.1}",
+        "{}: {} of {} {} outside ({} allowed), ζ {:.1} {} {} {:.1}",
         if t.pass { "pass" } else { "FAIL" },
         t.outside,
         t.lags.len(),
+        t.unit,
         t.allowed,
         t.statistic,
         if t.statistic <= t.critical {
             "≤"
         } else {
             ">"
+        },
+        if t.unit == "lines" {
+            "2 × its mean"
+        } else {
+            "χ² 99 %"
         },
         t.critical
     )
@@ -344,13 +350,21 @@ pub fn resid_svg(title: &str, rows: &[ResidRow<'_>]) -> Result<String, PlotError
                     t.lags.first().copied().unwrap_or(0),
                     t.lags.last().copied().unwrap_or(1),
                 );
+                // a correlation stays within ±1; a standardised line residual does not
+                // (shown up to ten times its bound)
+                let cap = if t.unit == "lines" {
+                    10.0 * t.bound
+                } else {
+                    1.0
+                };
                 let top = t
                     .values
                     .iter()
                     .filter(|v| v.is_finite())
                     .fold(2.0 * t.bound, |a, v| a.max(v.abs()))
-                    .min(1.0)
+                    .min(cap)
                     * 1.15;
+                let bottom = if t.unit == "lines" { 0.0 } else { -top };
                 let (head, body) = area.split_vertically(40);
                 for (k, (text, size)) in [
                     (format!("{}: {}", row.label, t.name), 14),
@@ -370,16 +384,22 @@ pub fn resid_svg(title: &str, rows: &[ResidRow<'_>]) -> Result<String, PlotError
                     .margin(8)
                     .x_label_area_size(32)
                     .y_label_area_size(60)
-                    .build_cartesian_2d(lag0 as f64 - 0.8..lag1 as f64 + 0.8, -top..top)
+                    .build_cartesian_2d(lag0 as f64 - 0.8..lag1 as f64 + 0.8, bottom..top)
                     .map_err(draw_err(W))?;
                 chart
                     .configure_mesh()
-                    .x_desc(if c == 0 {
+                    .x_desc(if c == 0 && t.unit == "lines" {
+                        "excited line (index)"
+                    } else if c == 0 {
                         "lag [samples]"
                     } else {
                         "lag τ [samples] (u(t − τ), past inputs)"
                     })
-                    .y_desc("normalised correlation")
+                    .y_desc(if t.unit == "lines" {
+                        "|Ĝ − G| / σ"
+                    } else {
+                        "normalised correlation"
+                    })
                     .light_line_style(WHITE.mix(0.0))
                     .draw()
                     .map_err(draw_err(W))?;

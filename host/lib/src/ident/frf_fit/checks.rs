@@ -222,6 +222,33 @@ pub fn periodic_fit_percent(frf: &Frf, g: &[Complex64]) -> f64 {
     100.0 * (1.0 - (e / d).sqrt())
 }
 
+/// The residuals the fit weighted, one per excited line of `frf`, `E|·|² = 1` at the
+/// true model: the sample-maximum-likelihood residuals of the model whose response
+/// `respond(f_hz)` gives ([`Lines`]); `(Ĝ − G)/σ` with [`Frf::sigma_total`] when the
+/// FRF keeps no spectra. Also the number of real degrees of freedom of their variances.
+pub fn line_residuals(
+    frf: &Frf,
+    respond: impl Fn(&[f64]) -> Vec<Complex64>,
+) -> (Vec<Complex64>, f64) {
+    // z is not used: the noise lines are evaluated by `respond`
+    let lines = Lines::new(frf, 1.0);
+    match &lines.spectra {
+        Some(s) => (lines.sml_residuals(s, &respond(&s.noise_freq_hz)), s.dof()),
+        None => {
+            let g = respond(&frf.freq_hz);
+            let e = frf
+                .g
+                .iter()
+                .zip(&g)
+                .zip(frf.sigma_total())
+                .filter(|(_, s)| *s > 0.0)
+                .map(|((m, g), s)| (m - g) / s)
+                .collect();
+            (e, f64::INFINITY)
+        }
+    }
+}
+
 /// What [`periodic_fit_percent`] compares, as one period of `period` samples: the
 /// period-averaged output Ȳ and the model's G·Ū at the reliable lines only, synthesised
 /// from the amplitude-scaled line spectra, `(ȳ, ŷ)`. By Parseval the toolbox FIT of `ŷ`
