@@ -723,7 +723,7 @@ mod tests {
         // |e|². Over 200 draws the test passes at its 99 % level.
         let (k, nu) = (80, 12usize);
         let mut g = Lcg(7);
-        let mut draw = |g: &mut Lcg| -> Vec<Complex64> {
+        let draw = |g: &mut Lcg| -> Vec<Complex64> {
             (0..k)
                 .map(|_| {
                     let e = Complex64::new(g.gauss(), g.gauss()) / 2f64.sqrt();
