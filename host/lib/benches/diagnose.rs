@@ -141,20 +141,26 @@ fn request(r: f64) -> DiagnoseRequest {
     }
 }
 
-/// Relative errors [%] of the best candidate's size parameters against the hidden effect of
-/// the same name (the extra mode may sit on the arm's branch: the smaller error of the two
+/// Relative errors [%] of the answer's size parameters against the hidden effect of the
+/// same name: the pair's fit (keys `effect.key`) when the answer is a pair, else the
+/// single's (the extra mode may sit on the arm's branch: the smaller error of the two
 /// readings is taken).
 fn param_errors(d: &Diagnosis, hidden: &[Effect]) -> Vec<(String, f64)> {
     let mut out = Vec::new();
+    let pair = d.pair.as_ref().filter(|p| p.name == d.best);
     for e in hidden {
-        let Some(c) = d.effects.iter().find(|c| c.name == e.name()) else {
-            continue;
-        };
         if !d.best.split('+').any(|b| b == e.name()) {
             continue;
         }
+        let (c, prefix) = match pair {
+            Some(p) => (p, format!("{}.", e.name())),
+            None => match d.effects.iter().find(|c| c.name == e.name()) {
+                Some(c) => (c, String::new()),
+                None => continue,
+            },
+        };
         for (key, truth) in size_keys(e) {
-            let Some(p) = c.parameters.get(key) else {
+            let Some(p) = c.parameters.get(&format!("{prefix}{key}")) else {
                 continue;
             };
             let mut err = 100.0 * (p.value / truth - 1.0);

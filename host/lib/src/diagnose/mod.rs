@@ -1142,8 +1142,8 @@ pub fn diagnose_segments(
         best_fit = top.fit_val;
         // the singles that lead pairs: the best, and the second when the two tie within
         // twice the standard error of their difference (bench case 6, a stiffening spring
-        // with a delay: the extra mode alone +12.4 ± 0.2, the delay alone +11.9 ± 0.2, and
-        // only the pair led by the delay holds the truth)
+        // with a delay, while its nominal had no lag: the extra mode alone +12.4 ± 0.2, the
+        // delay alone +11.9 ± 0.2, and only the pair led by the delay holds the truth)
         let mut leaders: Vec<usize> = vec![0];
         if let Some((second, Some(_))) = singles.get(1).filter(|c| c.0.significant) {
             let tie = 2.0 * (top.score_se.powi(2) + second.score_se.powi(2)).sqrt();

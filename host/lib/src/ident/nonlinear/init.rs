@@ -10,7 +10,8 @@
 //!    [`grey_box::features`]), refined by the output-error fit with friction only; then each
 //!    remaining effect's size from a one-dimensional search of the output-error cost over a
 //!    grid scaled by the data (cubic term against the deflection level, backlash width
-//!    against it, delay in samples, the extra mode's frequency against the first resonance).
+//!    against it, delay in samples with its time taken from the lag of the linear fit, the
+//!    extra mode's frequency against the first resonance).
 //!
 //! Each step's result is kept ([`Step`]) and reported, as seed 001 reports them.
 
@@ -457,6 +458,9 @@ pub fn automatic_start_with(
     } else {
         u_rms / model.r / kg
     };
+    // the lag the linear fit refined with the structure's values; a delay takes its time
+    // from it (below)
+    let mut tau_c = lin.model.tau_c;
     for i in 0..model.effects.len() {
         if matches!(model.effects[i], Effect::TorqueRipple(_)) {
             continue; // sized with the linear fit of step 3
@@ -465,35 +469,56 @@ pub fn automatic_start_with(
         if grid.is_empty() {
             continue;
         }
-        let mut best: Option<(f64, Effect)> = None;
+        let mut best: Option<(f64, Effect, f64)> = None;
         for cand in grid {
             let mut effects = current.clone();
             effects[i] = cand;
+            // below the resonances a delay and the lag shift the phase alike, and the
+            // linear fit gave the lag all of it: each delay of the grid takes its time from
+            // the lag (down to a tenth of it, which keeps the lag in the model), so that
+            // the search weighs how the phase is shared, not a delay on top of the whole
+            // lag (bench case 4 of `diagnose`, a 1.9-sample delay behind a 0.5 ms lag, from
+            // a linear start whose lag held the whole phase: 0.15 samples with the delay
+            // added on top, 1.86 with its time taken from the lag)
+            let lag = match cand {
+                Effect::TimeDelay(d) if tau_c > 0.0 => {
+                    (tau_c - d.samples * data.ts).max(0.1 * tau_c)
+                }
+                _ => tau_c,
+            };
             let m = NlModel {
                 effects,
+                tau_c: lag,
                 ..model.clone()
             };
             let values = m.values(&lin_plant, lin_offset, 0.0);
             if let Some(cost) = super::fit::cost_at(data, &m, &values) {
-                if best.as_ref().is_none_or(|(c, _)| cost < *c) {
-                    best = Some((cost, cand));
+                if best.as_ref().is_none_or(|(c, _, _)| cost < *c) {
+                    best = Some((cost, cand, lag));
                 }
             }
         }
-        if let Some((cost, cand)) = best {
+        if let Some((cost, cand, lag)) = best {
             current[i] = cand;
+            tau_c = lag;
             let m = NlModel {
                 effects: vec![cand],
+                tau_c: lag,
                 ..model.clone()
             };
             let layout = m.layout();
             let vals = m.values(&lin_plant, lin_offset, 0.0);
+            // a delay reports the lag it left
+            let lag_too = matches!(cand, Effect::TimeDelay(_));
             steps.push(Step {
                 name: cand.name().into(),
                 values: layout
                     .iter()
                     .zip(&vals)
-                    .filter(|(d, _)| matches!(d.owner, super::model::Owner::Effect(_)))
+                    .filter(|(d, _)| {
+                        matches!(d.owner, super::model::Owner::Effect(_))
+                            || lag_too && d.owner == super::model::Owner::CurrentLoop
+                    })
                     .map(|(d, &v)| (d.name.to_string(), v, d.unit))
                     .collect(),
                 detail: format!("best of a grid on the output-error cost ({cost:.4e})"),
@@ -502,6 +527,7 @@ pub fn automatic_start_with(
     }
     let start_model = NlModel {
         effects: current,
+        tau_c,
         ..model.clone()
     };
     let values = start_model.values(&lin_plant, lin_offset, lin.get("v0").unwrap_or(0.0));
