@@ -6,11 +6,14 @@
 //! function (a viscous-like damping), not the structure's: the linear fits see a motor on a
 //! damper and no spring. Bench case 7 of `benches/diagnose.rs` (three-mass with an extra
 //! mode and Stribeck friction `F_c` 0.043, `F_s` 0.058 N·m at 0.067 rad RMS, torque RMS
-//! 0.059 N·m): the motor is at rest on 41 % of the samples; every frequency-domain fit
-//! (three- and four-mass, raw or friction-compensated, even compensated with the true law
-//! at the true motor velocity) ends with `k_g` 100–4e6 N·m/rad (truth 1.53e5) and `f_m`
-//! 0.02–0.2 N·m·s/rad (0.002), and every nonlinear fit started there stays in that basin
-//! (the basin around the truth spans about 1.5× per value: a start 3× off ends at 47 %).
+//! 0.059 N·m): the motor is at rest on 41 % of the samples. The three- and four-mass fits
+//! to the raw FRF end at `k_g` 222 and 119 N·m/rad (truth 1.53e5) with `f_m` 0.18 and 0.20
+//! N·m·s/rad (0.002); compensated as [`crate::ident::nonlinear::compensate`] does, at
+//! 75–1.4e6 N·m/rad; even compensated with the true law at the true motor velocity, the
+//! fits that find `k_g` keep `k_a` 2–25× off and `f_m` 3–10× high (a stuck motor carries
+//! a friction torque no law of its velocity gives). Every nonlinear fit started there stays
+//! in that basin: the basin around the truth spans about 1.5× per value (the pair started
+//! 3× off ends at 47 %, 1.5× off at 90.5 %, as from the truth).
 //!
 //! **What.** The two-mass with Coulomb friction is fitted by output error from its automatic
 //! start, whose step 3 grids the gearbox spring against the cost of the simulation with the
