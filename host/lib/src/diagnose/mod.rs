@@ -47,6 +47,7 @@
 //! simulates every validation segment from its own start and pools one sum of squares
 //! over them ([`metric::score_segments`]).
 
+pub mod grow;
 pub mod locate;
 pub mod metric;
 pub mod series;
@@ -397,7 +398,34 @@ fn fit_and_score(
         .effects
         .iter()
         .any(|e| matches!(e, Effect::CoulombFriction(_)));
-    if let (true, Some(i), Some((plant, mode, tau_c))) =
+    let coulomb_at = nl
+        .effects
+        .iter()
+        .position(|e| matches!(e, Effect::CoulombFriction(_)));
+    if let (Some(ci), Some(g)) = (coulomb_at, &starts.grown) {
+        // the motor sticks: the structure grown in the time domain ([`grow`]); with an
+        // extra mode, the mode from the start's grid on it and the friction as given (a
+        // pair's: its single's fitted law); else the grown friction, or a pair's start
+        let (plant, tau_c, keys) = match from {
+            Some(b) => (b.plant.clone(), b.model.tau_c, grow::friction_keys(b)),
+            None => {
+                nl.effects[ci] = g.coulomb;
+                (g.plant.clone(), g.tau_c, Vec::new())
+            }
+        };
+        nl.tau_c = tau_c;
+        nl.linear = Some(plant.clone());
+        if extra_at.is_some() {
+            let mut given = vec![Vec::new(); nl.effects.len()];
+            given[ci] = keys;
+            nl.given = given;
+        } else if let Some(b) = from {
+            let offset = b.get("offset").unwrap_or(0.0);
+            nl.start = NlStart::Values(model_of(&nl, longest).values(&plant, offset, 0.0));
+        } else {
+            nl.start = NlStart::Values(model_of(&nl, longest).values(&plant, g.offset, 0.0));
+        }
+    } else if let (true, Some(i), Some((plant, mode, tau_c))) =
         (with_coulomb, extra_at, &starts.coulomb_extra_mode)
     {
         // Coulomb friction with an extra mode: the structure and the mode from the
@@ -683,6 +711,9 @@ struct LinearStarts {
     /// as `extra_mode`, from the friction-compensated FRF, for pairs of Coulomb friction and
     /// an extra mode
     coulomb_extra_mode: Option<(Vec<f64>, ExtraMode, f64)>,
+    /// when the motor sticks, the start grown in the time domain ([`grow`]), which every
+    /// candidate with Coulomb friction takes instead of the above
+    grown: Option<grow::Grown>,
 }
 
 /// The start of `structure` with an extra mode attached as `attach` says, from the
@@ -729,15 +760,26 @@ fn compensation_used(l: &crate::ident::nonlinear::LinearStart) -> bool {
         .is_some_and(|c| c.values.iter().any(|(n, v, _)| n == "used" && *v > 0.0))
 }
 
-/// The linear start from the friction-compensated FRF ([`LinearStarts::coulomb`]).
+/// The linear start from the friction-compensated FRF ([`LinearStarts::coulomb`]), and the
+/// friction level the compensation's regression found [N·m] (before its
+/// [`crate::ident::nonlinear::compensate::SHARE`]).
+#[allow(clippy::type_complexity)]
 fn coulomb_linear_of(
     ds: &[Dataset],
     req: &DiagnoseRequest,
     coulomb: Effect,
-) -> Option<(Vec<f64>, f64)> {
-    let l =
-        linear_start_segments(ds, 1, &NlRequest::new(req.structure, req.r, vec![coulomb])).ok()?;
-    compensation_used(&l).then_some((l.values, l.tau_c))
+) -> (Option<(Vec<f64>, f64)>, Option<f64>) {
+    let Ok(l) = linear_start_segments(ds, 1, &NlRequest::new(req.structure, req.r, vec![coulomb]))
+    else {
+        return (None, None);
+    };
+    let level = l.compensation.as_ref().and_then(|c| {
+        let taken = c.values.iter().find(|v| v.0 == "fc")?.1;
+        let regressed = c.values.iter().any(|v| v.0 == "fc_std");
+        regressed.then_some(taken / crate::ident::nonlinear::compensate::SHARE)
+    });
+    let start = compensation_used(&l).then_some((l.values, l.tau_c));
+    (start, level)
 }
 
 fn linear_of(
@@ -926,18 +968,55 @@ pub fn diagnose_segments(
         Effect::ExtraMode(x) => Some(x.attach),
         _ => None,
     });
-    let starts = LinearStarts {
+    let est_data: Vec<IdData> = est[0].iter().map(|d| d.data.clone()).collect();
+    let (coulomb_start, level) = match coulomb {
+        Some(c) => coulomb_linear_of(est[0], req, c),
+        None => (None, None),
+    };
+    let mut starts = LinearStarts {
         structure: linear_of(est[0], req, &mut warnings),
         extra_mode: extra.and_then(|a| extra_mode_start(est[0], req.structure, req.r, a, None)),
-        coulomb: coulomb.and_then(|c| coulomb_linear_of(est[0], req, c)),
+        coulomb: coulomb_start,
         coulomb_extra_mode: match (coulomb, extra) {
             (Some(c), Some(a)) if o.pairs => {
                 extra_mode_start(est[0], req.structure, req.r, a, Some(c))
             }
             _ => None,
         },
+        grown: None,
     };
-    let est_data: Vec<IdData> = est[0].iter().map(|d| d.data.clone()).collect();
+    // stick-slip: the Coulomb candidates start from the structure grown in the time domain
+    if let Some(level) = level {
+        let share = grow::stick_share(&est_data, level);
+        if share > grow::STICK_SHARE
+            && matches!(req.structure, Structure::TwoMass | Structure::ThreeMass)
+        {
+            let lag = match &starts.structure {
+                Some((_, t)) if *t > 0.0 => *t,
+                _ => ts,
+            };
+            match grow::grow(&est_data, req.structure, req.r, lag, &o.nl) {
+                Ok(g) => {
+                    warnings.push(format!(
+                        "the motor sticks: the torque stays below the friction level \
+                         {level:.3e} N·m on {:.0} % of the estimation samples, so the FRF is \
+                         the friction's and not the structure's; the candidates with Coulomb \
+                         friction (Stribeck law) start from the {} grown in the time domain \
+                         from the two-mass",
+                        100.0 * share,
+                        req.structure.label()
+                    ));
+                    starts.grown = Some(g);
+                }
+                Err(e) => warnings.push(format!(
+                    "the motor sticks (the torque below the friction level on {:.0} % of the \
+                     samples) but the time-domain start failed: {e}",
+                    100.0 * share
+                )),
+            }
+        }
+    }
+    let starts = starts;
 
     // nominal and singles, in parallel
     let mut jobs: Vec<(Vec<Effect>, Option<&NlFit>)> = vec![(Vec::new(), None)];
@@ -1163,18 +1242,30 @@ pub fn diagnose_segments(
             // offset of the leading single's fit, or of the partner's when that is an
             // extra mode (it changes what the structure's masses and springs stand for);
             // a pair of the two leaders is tried once, led by the best
+            // a Coulomb friction fitted from the grown start ([`grow`]) takes the extra mode
+            // whatever the mode's single scored: that single started from the FRF the
+            // sticking motor spoils
+            let grown_lead = starts.grown.is_some() && matches!(first, Effect::CoulombFriction(_));
             for (j, c) in singles.iter().enumerate() {
-                let (Some(p), true) = (c.1.as_ref(), c.0.significant) else {
-                    continue;
-                };
                 if j == l || leaders.contains(&j) && j < l {
                     continue;
                 }
-                let second = p.fit.model.effects[0];
-                let base = if matches!(second, Effect::ExtraMode(_)) {
-                    &p.fit
-                } else {
-                    &lead.fit
+                let (second, base) = match (c.1.as_ref(), c.0.significant) {
+                    (Some(p), true) => {
+                        let second = p.fit.model.effects[0];
+                        let own = matches!(second, Effect::ExtraMode(_)) && !grown_lead;
+                        (second, if own { &p.fit } else { &lead.fit })
+                    }
+                    _ if grown_lead => {
+                        match candidates
+                            .iter()
+                            .find(|e| matches!(e, Effect::ExtraMode(_)))
+                        {
+                            Some(e) if e.name() == c.0.name => (*e, &lead.fit),
+                            _ => continue,
+                        }
+                    }
+                    _ => continue,
                 };
                 jobs.push((vec![first, second], Some(base)));
                 led_by.push(lead);
