@@ -448,9 +448,20 @@ pub fn validate(
     yhat: &[f64],
     lags: usize,
 ) -> Result<Validation, ValidateError> {
+    validation(u, y, yhat, lags, |e| whiteness_test(e, lags))
+}
+
+/// FIT, the input independence of `y − yhat`, and `whiteness` of it.
+fn validation(
+    u: &[f64],
+    y: &[f64],
+    yhat: &[f64],
+    lags: usize,
+    whiteness: impl FnOnce(&[f64]) -> Result<CorrelationTest, ValidateError>,
+) -> Result<Validation, ValidateError> {
     let fit = fit_percent(y, yhat)?;
     let e: Vec<f64> = y.iter().zip(yhat).map(|(a, b)| a - b).collect();
-    let whiteness = whiteness_test(&e, lags)?;
+    let whiteness = whiteness(&e)?;
     let independence = input_independence_test(&e, u, lags)?;
     Ok(Validation {
         fit_name: FIT_NAME.into(),
@@ -476,17 +487,7 @@ pub fn validate_periodic(
     nu: f64,
     lags: usize,
 ) -> Result<Validation, ValidateError> {
-    let fit = fit_percent(y, yhat)?;
-    let e: Vec<f64> = y.iter().zip(yhat).map(|(a, b)| a - b).collect();
-    let whiteness = line_residual_test(line_e, nu)?;
-    let independence = input_independence_test(&e, u, lags)?;
-    Ok(Validation {
-        fit_name: FIT_NAME.into(),
-        fit,
-        pass: fit.is_finite() && whiteness.pass && independence.pass,
-        whiteness,
-        independence,
-    })
+    validation(u, y, yhat, lags, |_| line_residual_test(line_e, nu))
 }
 
 /// A model's frequency response for Bode plots and comparison.
