@@ -1,5 +1,6 @@
 //! The whole nonlinear identification as a user runs it, one path for `jointid fit` and
-//! `diagnose`: on periodic data the frequency-domain linear start ([`linear_start`]), the
+//! `diagnose`: on periodic data the frequency-domain linear start ([`linear_start`]), or
+//! when the motor sticks the start grown in the time domain ([`super::grow`]), the
 //! automatic start (or a given one), the values the user holds or gives, the output-error
 //! fit, the checks that turn a doubtful result into warnings, and the validation with the
 //! simulator's exact laws ([`crate::sim::simulate_driven`]).
@@ -459,8 +460,10 @@ pub struct NlRun {
 }
 
 /// The whole nonlinear identification: [`linear_start`] on periodic data (its failure a
-/// warning; data that are not periodic skip it), [`identify`], then [`validate`] on the
-/// estimation and the validation record.
+/// warning; data that are not periodic skip it), with Coulomb friction on a flexible
+/// structure and a motor that sticks the start grown in the time domain instead
+/// ([`super::grow`], a step per stage and a warning that says so), [`identify`], then
+/// [`validate`] on the estimation and the validation record.
 ///
 /// # Errors
 /// [`NlRunError`] as [`identify`]; [`NlRunError::Validation`] when the validation record
