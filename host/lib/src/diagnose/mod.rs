@@ -47,7 +47,6 @@
 //! simulates every validation segment from its own start and pools one sum of squares
 //! over them ([`metric::score_segments`]).
 
-pub mod grow;
 pub mod locate;
 pub mod metric;
 pub mod series;
@@ -67,6 +66,7 @@ use crate::data::{Dataset, IdData};
 use crate::ident::frf::analyze_segments;
 use crate::ident::frf::{amplitude_trend, analyze_dataset, AmplitudeTrend, FrfAnalysis, Linearity};
 use crate::ident::grey_box::DEFAULT_GEAR_RATIO;
+use crate::ident::nonlinear::grow;
 use crate::ident::nonlinear::{
     identify_segments, linear_start_segments, model_of, NlFit, NlOptions, NlRequest, NlStart, Owner,
 };

@@ -1,5 +1,6 @@
 //! The whole nonlinear identification as a user runs it, one path for `jointid fit` and
-//! `diagnose`: on periodic data the frequency-domain linear start ([`linear_start`]), the
+//! `diagnose`: on periodic data the frequency-domain linear start ([`linear_start`]), or
+//! when the motor sticks the start grown in the time domain ([`super::grow`]), the
 //! automatic start (or a given one), the values the user holds or gives, the output-error
 //! fit, the checks that turn a doubtful result into warnings, and the validation with the
 //! simulator's exact laws ([`crate::sim::simulate_driven`]).
@@ -459,8 +460,10 @@ pub struct NlRun {
 }
 
 /// The whole nonlinear identification: [`linear_start`] on periodic data (its failure a
-/// warning; data that are not periodic skip it), [`identify`], then [`validate`] on the
-/// estimation and the validation record.
+/// warning; data that are not periodic skip it), with Coulomb friction on a flexible
+/// structure and a motor that sticks the start grown in the time domain instead
+/// ([`super::grow`], a step per stage and a warning that says so), [`identify`], then
+/// [`validate`] on the estimation and the validation record.
 ///
 /// # Errors
 /// [`NlRunError`] as [`identify`]; [`NlRunError::Validation`] when the validation record
@@ -470,6 +473,9 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
     let mut req = req.clone();
     let mut steps = Vec::new();
     let mut warnings = Vec::new();
+    // the start is the data's own: not given, and no linear fit of the caller's
+    let own_start = req.start == NlStart::Automatic && req.linear.is_none();
+    let mut compensation = None;
     if let (Some((ds, settle)), NlStart::Automatic, None) = (data.periodic, &req.start, &req.linear)
     {
         match linear_start_segments(ds, settle, &req) {
@@ -478,6 +484,7 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
                     req.tau_c = ls.tau_c;
                 }
                 req.linear = Some(ls.values);
+                compensation.clone_from(&ls.compensation);
                 steps.extend(ls.compensation);
                 steps.push(ls.step);
             }
@@ -486,6 +493,17 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
                 "the frequency-domain linear fit failed ({e}): the start is found in the \
                  time domain and the model starts without current-loop lag"
             )),
+        }
+    }
+    if own_start {
+        if let Some(note) = grow_if_sticking(data.estimation, compensation.as_ref(), &mut req) {
+            match note {
+                Ok((grown, note)) => {
+                    steps.extend(grown);
+                    warnings.push(note);
+                }
+                Err(note) => warnings.push(note),
+            }
         }
     }
     let mut result = identify_segments(data.estimation, &req)?;
@@ -522,6 +540,125 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
         estimation_segments,
         validation,
     })
+}
+
+/// The friction level stick-slip is judged against [N·m]: the held `fc`, else the level
+/// the compensation's regression found (its step's `fc` over
+/// [`super::compensate::SHARE`]), else on data that gave no compensation the regression
+/// itself on the longest record ([`super::compensate::level`], one sample ahead), when
+/// significant (above 3 σ).
+fn friction_level(data: &[IdData], req: &NlRequest, compensation: Option<&Step>) -> Option<f64> {
+    if let Some((_, v)) = req.fixed.iter().find(|(n, _)| n == "fc") {
+        return Some(*v);
+    }
+    if let Some(c) = compensation {
+        let taken = c.values.iter().find(|v| v.0 == "fc")?.1;
+        let regressed = c.values.iter().any(|v| v.0 == "fc_std");
+        return regressed.then_some(taken / super::compensate::SHARE);
+    }
+    let law = req.effects.iter().find_map(|e| match e {
+        Effect::CoulombFriction(c) => Some(*c),
+        _ => None,
+    })?;
+    let d = longest(data)?;
+    let law = crate::model::effects::CoulombFriction {
+        v_smooth: model_of(req, d).v_eps,
+        ..law
+    };
+    let l = super::compensate::level(d, 1, &law)?;
+    (l.fc > 3.0 * l.std).then_some(l.fc)
+}
+
+/// When `req` has Coulomb friction on a flexible structure and the motor sticks on `data`
+/// (the torque below [`friction_level`] on more than [`super::grow::STICK_SHARE`] of the
+/// samples), the start grown in the time domain ([`super::grow`]) put into `req`: with the
+/// friction alone, the whole start (plant, lag, offset and friction); with other effects,
+/// the plant, the lag and the friction's keys, the others from their own automatic start
+/// on that plant. `None` when the motor does not stick (`req` untouched); else the grown
+/// stages' steps and the note that says so, or the note of a growth that failed (`req`
+/// untouched).
+fn grow_if_sticking(
+    data: &[IdData],
+    compensation: Option<&Step>,
+    req: &mut NlRequest,
+) -> Option<Result<(Vec<Step>, String), String>> {
+    use super::grow::{grow_with, stick_share, Seed, STICK_SHARE};
+    if req.structure == Structure::Rigid {
+        return None;
+    }
+    let (ci, law) = req.effects.iter().enumerate().find_map(|(i, e)| match e {
+        Effect::CoulombFriction(c) => Some((i, *c)),
+        _ => None,
+    })?;
+    let level = friction_level(data, req, compensation)?;
+    let share = stick_share(data, level);
+    if share <= STICK_SHARE {
+        return None;
+    }
+    let longest = longest(data)?;
+    let ts = longest.ts;
+    let held = req.held();
+    let given = req.given.get(ci).cloned().unwrap_or_default();
+    let seed = Seed {
+        structure: req.structure,
+        r: req.r,
+        tau_c: held.unwrap_or(if req.tau_c > 0.0 { req.tau_c } else { ts }),
+        held_tau_c: held,
+        law,
+        given,
+        fixed: req.fixed.clone(),
+        options: req.options.clone(),
+    };
+    let sticks = format!(
+        "the motor sticks: the torque stays below the friction level {level:.3e} N·m on \
+         {:.0} % of the estimation samples, so the FRF is the friction's and not the \
+         structure's",
+        100.0 * share
+    );
+    let g = match grow_with(data, &seed) {
+        Ok(g) => g,
+        Err(e) => {
+            return Some(Err(format!(
+                "{sticks}; the start grown in the time domain failed ({e}), the fit starts from \
+                 the frequency-domain linear fit"
+            )))
+        }
+    };
+    req.tau_c = g.tau_c;
+    req.effects[ci] = g.coulomb;
+    req.linear = Some(g.plant.clone());
+    // the friction's given keys started the growth; from here on its own values
+    req.given.resize(req.effects.len(), Vec::new());
+    let others = req.effects.len() > 1;
+    if others {
+        req.given[ci] = super::grow::friction_keys_of(&g.coulomb);
+    } else {
+        req.given[ci].clear();
+        req.start = NlStart::Values(model_of(req, longest).values(&g.plant, g.offset, 0.0));
+    }
+    let stages = g.steps.len();
+    Some(Ok((
+        g.steps,
+        format!(
+            "{sticks}; the start was grown in the time domain instead: the two-mass with \
+             Coulomb friction by output error{}, {}",
+            match stages {
+                2 =>
+                    ", then the arm's second mass as an extra mode in series (the three-mass \
+                      chain)",
+                3 =>
+                    ", then the arm's second mass as an extra mode in series (the three-mass \
+                      chain), then the parallel mass as an extra mode in parallel (the \
+                      four-mass)",
+                _ => "",
+            },
+            if others {
+                "the other effects from their automatic start on it"
+            } else {
+                "the fit starts from its plant, lag, offset and friction"
+            }
+        ),
+    )))
 }
 
 /// The linear start of step 3 from periodic data ([`linear_start`]).
