@@ -235,7 +235,27 @@ fn battery() {
         let d = match diagnose(&[est], &val, &request(r)) {
             Ok(d) => d,
             Err(e) => {
+                // a diagnosis that stops is a wrong answer of every kind
                 println!("case {i:>2} {label:<34} failed: {e}");
+                *confusion
+                    .entry(label.clone())
+                    .or_default()
+                    .entry("failed".into())
+                    .or_default() += 1;
+                match case.hidden.len() {
+                    0 => {
+                        nones += 1;
+                        false_alarms += 1;
+                    }
+                    1 => {
+                        singles += 1;
+                        // no nominal to compare: visible when the true model scores
+                        if truth > 0.0 {
+                            visible += 1;
+                        }
+                    }
+                    _ => pairs += 1,
+                }
                 continue;
             }
         };
