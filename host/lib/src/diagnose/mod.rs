@@ -1458,7 +1458,7 @@ pub fn diagnose_segments(
                     effect.name(),
                     effect.name()
                 ));
-                if !(singles[i].0.score >= score) {
+                if singles[i].0.score.is_nan() || singles[i].0.score < score {
                     singles[i] = (
                         Candidate {
                             name: effect.name().into(),

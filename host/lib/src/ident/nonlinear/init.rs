@@ -718,12 +718,13 @@ pub const RESOLVABLE_STEP: f64 = 1.5;
 /// nothing was.
 pub fn resolvable(structure: Structure, r: f64, plant: &mut [f64], h: f64) -> Option<String> {
     let names = structure.param_names();
-    if plant.len() != names.len() || !(h > 0.0) {
+    if plant.len() != names.len() || h.is_nan() || h <= 0.0 {
         return None;
     }
     let at = |n: &str| names.iter().position(|m| *m == n);
     // (stiffness, damping, [(inertia, coordinate gain)] of its two bodies)
-    let springs: Vec<(&str, &str, [(&str, f64); 2])> = match structure {
+    type Spring = (&'static str, &'static str, [(&'static str, f64); 2]);
+    let springs: Vec<Spring> = match structure {
         Structure::Rigid => Vec::new(),
         Structure::TwoMass | Structure::ThreeMass | Structure::FourMass => {
             let mut v = vec![("k_g", "d_g", [("J_m", r), ("J_a1", 1.0)])];

@@ -641,10 +641,18 @@ fn a_linear_start_with_a_mode_beyond_the_step_is_brought_to_one_that_simulates()
     };
     assert!(sim(&stiff).is_none(), "the stiff start simulates");
     let mut plant = stiff.to_vec();
-    let said = super::init::resolvable(Structure::ThreeMass, cfg.plant.params.r, &mut plant, data.ts)
-        .expect("a change");
+    let said = super::init::resolvable(
+        Structure::ThreeMass,
+        cfg.plant.params.r,
+        &mut plant,
+        data.ts,
+    )
+    .expect("a change");
     assert!(said.contains("`k_a`") && said.contains("`d_a`"), "{said}");
-    assert!(plant[4] < 1e-2 * stiff[4] && plant[6] < 1e-2 * stiff[6], "{plant:?}");
+    assert!(
+        plant[4] < 1e-2 * stiff[4] && plant[6] < 1e-2 * stiff[6],
+        "{plant:?}"
+    );
     // the other values as they were
     for i in [0, 1, 2, 3, 5, 7] {
         assert_eq!(plant[i], stiff[i]);
