@@ -11,7 +11,9 @@
 //!    remaining effect's size from a one-dimensional search of the output-error cost over a
 //!    grid scaled by the data (cubic term against the deflection level, backlash width
 //!    against it, delay in samples with its time taken from the lag of the linear fit, the
-//!    extra mode's frequency against the first resonance).
+//!    extra mode's frequency against the first resonance). A linear start with a mode or
+//!    damper faster than the RK4 step integrates is brought to the fastest it holds
+//!    ([`resolvable`]) first: as it came, it would not simulate.
 //!
 //! Each step's result is kept ([`Step`]) and reported, as seed 001 reports them.
 
@@ -246,6 +248,12 @@ pub fn automatic_start_with(
         return Err(NlError::Data(
             "no linear start for the flexible structure (step 3 of the start)".into(),
         ));
+    }
+    let h = data.ts / model.substeps.max(1) as f64;
+    for plant in &mut plants {
+        if let Some(w) = resolvable(model.structure, model.r, plant, h) {
+            warnings.push(w);
+        }
     }
     let with_fc = |fc: f64| -> Vec<Effect> {
         model
@@ -691,6 +699,80 @@ fn two_mass_grid(
         }
     }
     best.map_or_else(|| vec![0.5 * j, 0.5 * j / r2, 1.0, 1.0, fv], |(_, p)| p)
+}
+
+/// Largest `|λ| h` the start gives a spring of the plant, `λ` its two bodies' natural
+/// frequency `√(k (g_a²/J_a + g_b²/J_b))` or their damper's decay rate `d (g_a²/J_a +
+/// g_b²/J_b)` [1/s], `h` the RK4 step [s]. RK4 is stable below 2.8 on the imaginary axis and
+/// 2.78 on the real one; 1.5 leaves the fit room, as [`NlModel::refined_for`] does for the
+/// Coulomb slope. At the default 2 kHz and one step, a mode up to 480 Hz.
+pub const RESOLVABLE_STEP: f64 = 1.5;
+
+/// Brings each spring of `plant` (values in [`Structure::param_names`] order, gear ratio
+/// `r`) whose mode or damper the RK4 step `h` [s] cannot integrate
+/// ([`RESOLVABLE_STEP`]) down to what it can: the stiffness to the fastest mode it
+/// holds, the damping to the fastest decay. Such a spring is a linear fit's reading of
+/// a joint that is rigid in the band (a friction-dominated FRF hides the arm's
+/// resonance: `k_a` 3·10⁹ N·m/rad and `d_a` 7.5·10⁵ N·m·s/rad from a sticking motor),
+/// and as a start it does not simulate. The words say what was changed; `None` when
+/// nothing was.
+pub fn resolvable(structure: Structure, r: f64, plant: &mut [f64], h: f64) -> Option<String> {
+    let names = structure.param_names();
+    if plant.len() != names.len() || h.is_nan() || h <= 0.0 {
+        return None;
+    }
+    let at = |n: &str| names.iter().position(|m| *m == n);
+    // (stiffness, damping, [(inertia, coordinate gain)] of its two bodies)
+    type Spring = (&'static str, &'static str, [(&'static str, f64); 2]);
+    let springs: Vec<Spring> = match structure {
+        Structure::Rigid => Vec::new(),
+        Structure::TwoMass | Structure::ThreeMass | Structure::FourMass => {
+            let mut v = vec![("k_g", "d_g", [("J_m", r), ("J_a1", 1.0)])];
+            if structure != Structure::TwoMass {
+                v.push(("k_a", "d_a", [("J_a1", 1.0), ("J_a2", 1.0)]));
+            }
+            if structure == Structure::FourMass {
+                v.push(("k_p", "d_p", [("J_a1", 1.0), ("J_p", 1.0)]));
+            }
+            v
+        }
+    };
+    let mut changed = Vec::new();
+    for (k, d, bodies) in springs {
+        let (Some(ik), Some(id)) = (at(k), at(d)) else {
+            continue;
+        };
+        let mut mobility = 0.0;
+        for (j, g) in bodies {
+            let Some(ij) = at(j) else {
+                continue;
+            };
+            if plant[ij] > 0.0 {
+                mobility += g * g / plant[ij];
+            }
+        }
+        if !(mobility > 0.0 && mobility.is_finite()) {
+            continue;
+        }
+        let k_max = (RESOLVABLE_STEP / h).powi(2) / mobility;
+        let d_max = RESOLVABLE_STEP / h / mobility;
+        if plant[ik] > k_max {
+            changed.push(format!("`{k}` {:.3e} → {k_max:.3e} N·m/rad", plant[ik]));
+            plant[ik] = k_max;
+        }
+        if plant[id] > d_max {
+            changed.push(format!("`{d}` {:.3e} → {d_max:.3e} N·m·s/rad", plant[id]));
+            plant[id] = d_max;
+        }
+    }
+    (!changed.is_empty()).then(|| {
+        format!(
+            "a linear start put a mode or a damper beyond what the simulation's step of {h:.2e} \
+             s integrates (the joint is rigid there in the data); started at the fastest it \
+             holds: {}",
+            changed.join(", ")
+        )
+    })
 }
 
 /// Each direction's friction from step 2's asymmetric regression.

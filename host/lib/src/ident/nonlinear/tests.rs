@@ -691,3 +691,53 @@ fn a_sticking_three_mass_joint_starts_from_the_structure_grown_in_the_time_domai
     let v = done.validation.unwrap().velocity_fit_percent;
     eprintln!("validation velocity FIT {v:.2} %, {:?}", fit.plant);
 }
+
+/// A linear start read off the FRF of a sticking motor (the default joint, soft tuning,
+/// 1.45× the default Coulomb friction at 0.067 rad RMS, seed 505 of the diagnose bench's
+/// captures): `k_a` 3.1·10⁹ N·m/rad and `d_a` 7.5·10⁵ N·m·s/rad put the arm's mode and
+/// damper far beyond what RK4 at 2 kHz integrates, and the start does not simulate; brought
+/// to the fastest the step holds, it does, and a start that needs nothing is left alone.
+#[test]
+fn a_linear_start_with_a_mode_beyond_the_step_is_brought_to_one_that_simulates() {
+    let effect = Effect::CoulombFriction(CoulombFriction::default());
+    let (data, cfg) = three_mass_run(effect, 4);
+    let (model, _) = truth_of(&cfg, effect, 1);
+    let stiff = [
+        1.2939e-3, 1.434, 12.965, 1.2575e5, 3.0595e9, 195.03, 7.5299e5, 0.16454,
+    ];
+    let sim = |plant: &[f64]| {
+        simulate_velocity(
+            &model,
+            &model.values(plant, 0.0, 0.0),
+            &data.u,
+            data.ts,
+            data.y[0],
+            None,
+        )
+        .filter(|v| v.iter().all(|x| x.is_finite()))
+    };
+    assert!(sim(&stiff).is_none(), "the stiff start simulates");
+    let mut plant = stiff.to_vec();
+    let said = super::init::resolvable(
+        Structure::ThreeMass,
+        cfg.plant.params.r,
+        &mut plant,
+        data.ts,
+    )
+    .expect("a change");
+    assert!(said.contains("`k_a`") && said.contains("`d_a`"), "{said}");
+    assert!(
+        plant[4] < 1e-2 * stiff[4] && plant[6] < 1e-2 * stiff[6],
+        "{plant:?}"
+    );
+    // the other values as they were
+    for i in [0, 1, 2, 3, 5, 7] {
+        assert_eq!(plant[i], stiff[i]);
+    }
+    assert!(sim(&plant).is_some(), "{plant:?} does not simulate");
+    let p = cfg.plant.params;
+    let mut default = vec![p.j_m, p.j_a1, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m];
+    let before = default.clone();
+    assert!(super::init::resolvable(Structure::ThreeMass, p.r, &mut default, data.ts).is_none());
+    assert_eq!(default, before);
+}
