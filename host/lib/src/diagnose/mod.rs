@@ -547,6 +547,31 @@ fn arm_branch_as(fit: &NlFit, structure: Structure, mode: &ExtraMode) -> Option<
     Some(f)
 }
 
+/// The candidate `name` of the fitted model `f`, judged `(score, score_se, significant)`
+/// against its base; its effect parameters named `effect.key` for a pair.
+fn scored_candidate(
+    name: &str,
+    f: &Fitted,
+    judged: (f64, f64, bool),
+    pair: bool,
+    reason: String,
+) -> Candidate {
+    let (score, score_se, significant) = judged;
+    Candidate {
+        name: name.into(),
+        specs: f.fit.model.effects.iter().map(|e| e.to_string()).collect(),
+        score,
+        score_se,
+        fit_val: f.scored.fit,
+        fit_angle_val: f.scored.angle_fit,
+        significant,
+        parameters: effect_parameters(&f.fit, pair),
+        structure_parameters: linear_parameters(&f.fit),
+        reason,
+        warnings: f.warnings.clone(),
+    }
+}
+
 /// A candidate's place in the ranking: its score, a failed fit last.
 fn by_score(c: &Candidate) -> f64 {
     if c.score.is_finite() {
@@ -1258,19 +1283,13 @@ pub fn diagnose_segments(
                     }
                 );
                 (
-                    Candidate {
-                        name: effect.name().into(),
-                        specs: f.fit.model.effects.iter().map(|e| e.to_string()).collect(),
-                        score,
-                        score_se,
-                        fit_val: f.scored.fit,
-                        fit_angle_val: f.scored.angle_fit,
-                        significant,
-                        parameters: effect_parameters(&f.fit, false),
-                        structure_parameters: linear_parameters(&f.fit),
+                    scored_candidate(
+                        effect.name(),
+                        &f,
+                        (score, score_se, significant),
+                        false,
                         reason,
-                        warnings: f.warnings.clone(),
-                    },
+                    ),
                     Some(f),
                 )
             }
@@ -1363,17 +1382,12 @@ pub fn diagnose_segments(
                     Ok(f) => {
                         let (score, score_se, significant) =
                             judge(&f.scored.segments, &lead.scored.segments);
-                        let cand = Candidate {
-                            name: name.clone(),
-                            specs: f.fit.model.effects.iter().map(|e| e.to_string()).collect(),
-                            score,
-                            score_se,
-                            fit_val: f.scored.fit,
-                            fit_angle_val: f.scored.angle_fit,
-                            significant,
-                            parameters: effect_parameters(&f.fit, true),
-                            structure_parameters: linear_parameters(&f.fit),
-                            reason: format!(
+                        let cand = scored_candidate(
+                            &name,
+                            &f,
+                            (score, score_se, significant),
+                            true,
+                            format!(
                                 "{} added to {}: validation FIT {score:+.1} ± {score_se:.1} \
                                  points over {} alone{}",
                                 effects[1].name(),
@@ -1385,8 +1399,7 @@ pub fn diagnose_segments(
                                     " (not significant)"
                                 }
                             ),
-                            warnings: f.warnings.clone(),
-                        };
+                        );
                         // pairs of different leaders compare by their validation FIT,
                         // and one led by the second single must beat the best single too
                         let better = pair.as_ref().is_none_or(|p| cand.fit_val > p.fit_val)
@@ -1460,25 +1473,19 @@ pub fn diagnose_segments(
                 ));
                 if singles[i].0.score.is_nan() || singles[i].0.score < score {
                     singles[i] = (
-                        Candidate {
-                            name: effect.name().into(),
-                            specs: f.fit.model.effects.iter().map(|e| e.to_string()).collect(),
-                            score,
-                            score_se,
-                            fit_val: f.scored.fit,
-                            fit_angle_val: f.scored.angle_fit,
-                            significant,
-                            parameters: effect_parameters(&f.fit, false),
-                            structure_parameters: linear_parameters(&f.fit),
-                            reason: format!(
+                        scored_candidate(
+                            effect.name(),
+                            &f,
+                            (score, score_se, significant),
+                            false,
+                            format!(
                                 "{}; validation FIT {score:+.1} ± {score_se:.1} points, refitted \
                                  from the values of the pair {}, to which it leaves {gain:+.1} \
                                  ± {se:.1} points",
                                 evidence(effect.name(), &location),
                                 p.name
                             ),
-                            warnings: f.warnings.clone(),
-                        },
+                        ),
                         Some(f),
                     );
                     singles.sort_by(|a, b| by_score(&b.0).total_cmp(&by_score(&a.0)));

@@ -189,12 +189,7 @@ fn held_in(fixed: &[(String, f64)], same: &[&str], mode: [&str; 3]) -> Vec<(Stri
 fn stage_step(name: &str, what: &str, fit: &NlFit) -> Step {
     Step {
         name: name.into(),
-        values: fit
-            .params
-            .iter()
-            .filter(|p| p.name != "v0")
-            .map(|p| (p.name.to_string(), p.value, p.unit))
-            .collect(),
+        values: Step::values_of(fit),
         detail: format!(
             "{what} by output error ({} iterations, velocity FIT {:.2} %)",
             fit.iterations, fit.fit_velocity_percent

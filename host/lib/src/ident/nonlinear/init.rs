@@ -17,7 +17,7 @@
 //!
 //! Each step's result is kept ([`Step`]) and reported, as seed 001 reports them.
 
-use super::fit::{fit_output_error, NlError, NlOptions};
+use super::fit::{fit_output_error, NlError, NlFit, NlOptions};
 use super::model::NlModel;
 use crate::data::IdData;
 use crate::ident::grey_box::{self, IdimOptions, Output};
@@ -38,6 +38,18 @@ pub struct Step {
     pub values: Vec<(String, f64, &'static str)>,
     /// how well: the cost measure the step used, in words
     pub detail: String,
+}
+
+impl Step {
+    /// The values a fit found, as a step reports them: every parameter but the initial
+    /// velocity (a nuisance of the record, not of the joint).
+    pub fn values_of(fit: &NlFit) -> Vec<(String, f64, &'static str)> {
+        fit.params
+            .iter()
+            .filter(|p| p.name != "v0")
+            .map(|p| (p.name.to_string(), p.value, p.unit))
+            .collect()
+    }
 }
 
 /// The automatic start and the record of its steps.
@@ -383,12 +395,7 @@ pub fn automatic_start_with(
     let lin = lin.ok_or(NlError::Unstable)?;
     steps.push(Step {
         name: "flexibility".into(),
-        values: lin
-            .params
-            .iter()
-            .filter(|p| p.name != "v0")
-            .map(|p| (p.name.to_string(), p.value, p.unit))
-            .collect(),
+        values: Step::values_of(&lin),
         detail: format!(
             "linear {} by output error on the motor velocity, FIT {:.2} %",
             model.structure.label(),
