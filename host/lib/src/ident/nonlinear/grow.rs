@@ -49,6 +49,7 @@
 use super::init::Step;
 use super::{identify_segments, NlFit, NlOptions, NlRequest};
 use crate::data::IdData;
+use crate::ident::grey_box;
 use crate::model::effects::{Attach, CoulombFriction, Effect, ExtraMode};
 use crate::model::spec::Structure;
 
@@ -337,9 +338,19 @@ pub fn grow_with(est: &[IdData], seed: &Seed) -> Result<Grown, String> {
     // [J_m, J_a1, J_a2, k_g, k_a, d_g, d_a, f_m] and the mode →
     // [J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m]
     let p = &c.plant;
-    let four = vec![
+    let mut four = vec![
         p[0], p[1], p[2], x.j, p[3], p[4], x.k, p[5], p[6], x.d, p[7],
     ];
+    // the two branches on `J_a1` are the same mechanism: the softer one is reported as
+    // `(J_a2, k_a, d_a)`, as the linear fits do, unless the caller holds a value of either
+    let branch_held = ["J_a2", "J_p", "k_a", "k_p", "d_a", "d_p"]
+        .iter()
+        .any(|n| seed.fixed.iter().any(|(m, _)| m == n));
+    if !branch_held && grey_box::four_mass_swapped(&four) {
+        for (i, j) in grey_box::FOUR_MASS_BRANCHES {
+            four.swap(i, j);
+        }
+    }
     Ok(done(&c, four, steps))
 }
 
