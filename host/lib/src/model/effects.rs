@@ -75,6 +75,10 @@
 //! | | `order` | −1e4 … 1e4 | periods per revolution | |
 //! | | `phase` | −2π … 2π | rad | |
 //!
+//! `F_s ≥ F_c` is checked on a spec that names both; a spec that names `fc` above the
+//! default `fs` and no `fs` (`coulomb_friction:fc=20`, EMPS's level in N) takes the
+//! breakaway level up to `fc`: the pure law at that level, not an error.
+//!
 //! A configuration inside these bounds can still make the run diverge (a softening cubic
 //! spring, say): the simulator then stops at the first non-finite sample and names it
 //! with the effects (`SimError::NonFinite`).
@@ -652,6 +656,7 @@ impl FromStr for Effect {
                 name: name.to_string(),
                 known: EFFECT_NAMES.join(", "),
             })?;
+        let mut fs_named = false;
         if let Some(rest) = rest {
             let mut col = rest_col;
             for item in rest.split(',') {
@@ -669,6 +674,7 @@ impl FromStr for Effect {
                 };
                 let key = trimmed[..eq].trim();
                 let value = trimmed[eq + 1..].trim();
+                fs_named |= key == "fs";
                 let value_col = item_col + eq + 1;
                 match effect.set(key, value) {
                     Ok(true) => {}
@@ -690,6 +696,13 @@ impl FromStr for Effect {
                         })
                     }
                 }
+            }
+        }
+        // a level named above the default breakaway level, and no breakaway level: the
+        // pure law at that level (module documentation)
+        if let Effect::CoulombFriction(c) = &mut effect {
+            if !fs_named && c.fs < c.fc {
+                c.fs = c.fc;
             }
         }
         effect
@@ -809,6 +822,15 @@ mod tests {
             .parse::<Effect>()
             .unwrap_err();
         assert!(matches!(err, EffectParseError::Inconsistent { .. }));
+        // a level above the default breakaway level, with no breakaway level: the pure law
+        match "coulomb_friction:fc=20".parse::<Effect>().unwrap() {
+            Effect::CoulombFriction(c) => assert_eq!((c.fc, c.fs), (20.0, 20.0)),
+            e => panic!("{e:?}"),
+        }
+        match "coulomb_friction:fc=0.02".parse::<Effect>().unwrap() {
+            Effect::CoulombFriction(c) => assert_eq!((c.fc, c.fs), (0.02, 0.04)),
+            e => panic!("{e:?}"),
+        }
         let err = "extra_mode:attach=sideways".parse::<Effect>().unwrap_err();
         assert!(err.to_string().contains("parallel"), "{err}");
         let err = "torque_ripple:amplitude=inf".parse::<Effect>().unwrap_err();
