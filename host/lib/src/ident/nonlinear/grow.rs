@@ -263,36 +263,52 @@ pub fn grow_with(est: &[IdData], seed: &Seed) -> Result<Grown, String> {
     if structure == Structure::TwoMass {
         return Ok(done(&a, a.plant.clone(), steps));
     }
+    // a stage: the mode attached as `attach` on `from` (its plant in the names of `s`),
+    // from the grid of `fit_with_mode`, the values held that mean the same (`same`, and
+    // the grown structure's `names` as the mode's keys); its fit, its mode and its step
+    let add_mode = |from: &NlFit,
+                    s: Structure,
+                    same: &[&str],
+                    attach: Attach,
+                    names: [&str; 3],
+                    (name, what): (&str, &str)|
+     -> Result<(NlFit, ExtraMode, Step), String> {
+        let mode = Effect::ExtraMode(ExtraMode {
+            attach,
+            ..ExtraMode::default()
+        });
+        let f = fit_with_mode(
+            est,
+            &NlRequest {
+                fixed: held_in(&seed.fixed, same, names),
+                given: vec![Vec::new(), friction_keys(from)],
+                ..request(s, vec![mode, coulomb_of(from)], Some(from))
+            },
+            &from.plant,
+            from.get("offset").unwrap_or(0.0),
+        )?;
+        let Some(Effect::ExtraMode(x)) = f.model.effects.first().copied() else {
+            return Err(format!("{name}: the fit lost its extra mode"));
+        };
+        let step = stage_step(name, what, &f);
+        Ok((f, x, step))
+    };
     // stage 2: the arm's second mass, an extra mode in series on the two-mass (the
     // three-mass chain)
-    let serial = Effect::ExtraMode(ExtraMode {
-        attach: Attach::Serial,
-        ..ExtraMode::default()
-    });
-    let b = fit_with_mode(
-        est,
-        &NlRequest {
-            fixed: held_in(
-                &seed.fixed,
-                &["J_m", "J_a1", "k_g", "d_g", "f_m"],
-                ["J_a2", "k_a", "d_a"],
-            ),
-            given: vec![Vec::new(), friction_keys(&a)],
-            ..request(Structure::TwoMass, vec![serial, coulomb_of(&a)], Some(&a))
-        },
-        &a.plant,
-        a.get("offset").unwrap_or(0.0),
+    let (b, x, step) = add_mode(
+        &a,
+        Structure::TwoMass,
+        &["J_m", "J_a1", "k_g", "d_g", "f_m"],
+        Attach::Serial,
+        ["J_a2", "k_a", "d_a"],
+        (
+            "stick-slip start: three-mass chain",
+            "the two-mass with an extra mode in series (the arm's second mass) and the \
+             friction, from the two-mass and the best point of a grid over the mode (the best \
+             of three short fits)",
+        ),
     )?;
-    let Some(Effect::ExtraMode(x)) = b.model.effects.first().copied() else {
-        return Err("the chain's fit lost its extra mode".into());
-    };
-    steps.push(stage_step(
-        "stick-slip start: three-mass chain",
-        "the two-mass with an extra mode in series (the arm's second mass) and the friction, \
-         from the two-mass and the best point of a grid over the mode (the best of three \
-         short fits)",
-        &b,
-    ));
+    steps.push(step);
     // [J_m, J_a1, k_g, d_g, f_m] and the mode → [J_m, J_a1, J_a2, k_g, k_a, d_g, d_a, f_m]
     let p = &b.plant;
     let three = vec![p[0], p[1], x.j, p[2], x.k, p[3], x.d, p[4]];
@@ -301,40 +317,22 @@ pub fn grow_with(est: &[IdData], seed: &Seed) -> Result<Grown, String> {
     }
     // stage 3: the parallel mass, an extra mode in parallel on the three-mass's first arm
     // mass (seed 000 eq. (7))
-    let parallel = Effect::ExtraMode(ExtraMode {
-        attach: Attach::Parallel,
-        ..ExtraMode::default()
-    });
     let mut from_b = b.clone();
     from_b.plant = three;
-    let c = fit_with_mode(
-        est,
-        &NlRequest {
-            fixed: held_in(
-                &seed.fixed,
-                Structure::ThreeMass.param_names(),
-                ["J_p", "k_p", "d_p"],
-            ),
-            given: vec![Vec::new(), friction_keys(&b)],
-            ..request(
-                Structure::ThreeMass,
-                vec![parallel, coulomb_of(&b)],
-                Some(&from_b),
-            )
-        },
-        &from_b.plant,
-        b.get("offset").unwrap_or(0.0),
+    let (c, x, step) = add_mode(
+        &from_b,
+        Structure::ThreeMass,
+        Structure::ThreeMass.param_names(),
+        Attach::Parallel,
+        ["J_p", "k_p", "d_p"],
+        (
+            "stick-slip start: four-mass",
+            "the three-mass with an extra mode in parallel on the first arm mass (J_p) and the \
+             friction, from the three-mass chain and the best point of a grid over the mode \
+             (the best of three short fits)",
+        ),
     )?;
-    let Some(Effect::ExtraMode(x)) = c.model.effects.first().copied() else {
-        return Err("the four-mass fit lost its extra mode".into());
-    };
-    steps.push(stage_step(
-        "stick-slip start: four-mass",
-        "the three-mass with an extra mode in parallel on the first arm mass (J_p) and the \
-         friction, from the three-mass chain and the best point of a grid over the mode (the \
-         best of three short fits)",
-        &c,
-    ));
+    steps.push(step);
     // [J_m, J_a1, J_a2, k_g, k_a, d_g, d_a, f_m] and the mode →
     // [J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m]
     let p = &c.plant;
