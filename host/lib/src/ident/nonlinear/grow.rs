@@ -355,7 +355,7 @@ pub fn grow_with(est: &[IdData], seed: &Seed) -> Result<Grown, String> {
 /// Iterations of each screening fit of a stage with an extra mode.
 const SCREEN_ITER: usize = 20;
 
-/// The fit of `req` (its first effect an extra mode, attached as it says, on the
+/// The fit of `req` (one of its effects an extra mode, attached as it says, on the
 /// structure's values `plant`, with `offset` [N·m]) from the best of a grid: the mode's
 /// mass split off the first arm mass `J_a1` (5, 10, 20, 40 %) or a quarter of it added
 /// (the automatic start's grid), its frequency with the arm held still from 3 to 60 Hz (9
@@ -369,8 +369,10 @@ const SCREEN_ITER: usize = 20;
 /// N·m·s/rad on the two-mass, truth 80), so at its value the grid prefers a mode that
 /// stays out of the way, while a third of it puts the best point at 19 Hz with 5 % of
 /// the arm (truth 17 Hz, 5 %), from where the fit reaches the truth. `req` as given
-/// when no point of the grid can be simulated.
-fn fit_with_mode(
+/// when no point of the grid can be simulated. The screening fits are a start: the smooth
+/// law's minimum without covariance, whatever `req` asks; the kept one is returned as it is
+/// (the caller's final fit corrects and covers it).
+pub fn fit_with_mode(
     est: &[IdData],
     req: &NlRequest,
     plant: &[f64],
@@ -381,10 +383,14 @@ fn fit_with_mode(
             .map(|r| r.fit)
             .map_err(|e| e.to_string())
     };
-    let (Some(data), Some(Effect::ExtraMode(mode))) = (
-        est.iter().max_by_key(|d| d.len()),
-        req.effects.first().copied(),
-    ) else {
+    let at = req
+        .effects
+        .iter()
+        .position(|e| matches!(e, Effect::ExtraMode(_)));
+    let (Some(data), Some(at)) = (est.iter().max_by_key(|d| d.len()), at) else {
+        return fit(req);
+    };
+    let Effect::ExtraMode(mode) = req.effects[at] else {
         return fit(req);
     };
     let base = super::model_of(req, data);
@@ -417,7 +423,7 @@ fn fit_with_mode(
                     ..mode
                 };
                 let mut model = base.clone();
-                model.effects[0] = Effect::ExtraMode(m);
+                model.effects[at] = Effect::ExtraMode(m);
                 let values = model.values(&p, offset, 0.0);
                 if let Some(c) = super::cost_at(data, &model, &values) {
                     if best.as_ref().is_none_or(|(b, _, _)| c < *b) {
@@ -428,10 +434,16 @@ fn fit_with_mode(
         }
         if let Some((_, p, m)) = best {
             let mut r = req.clone();
-            r.effects[0] = Effect::ExtraMode(m);
+            r.effects[at] = Effect::ExtraMode(m);
             let model = super::model_of(&r, data);
             r.start = super::NlStart::Values(model.values(&p, offset, 0.0));
-            r.options.max_iter = SCREEN_ITER;
+            r.options = NlOptions {
+                max_iter: SCREEN_ITER,
+                cov_lags: 0,
+                exact_correction: false,
+                smoothing_sigma: false,
+                ..req.options.clone()
+            };
             starts.push(r);
         }
     }
