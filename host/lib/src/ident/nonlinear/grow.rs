@@ -361,10 +361,11 @@ pub fn grow_with(est: &[IdData], seed: &Seed) -> Result<Grown, String> {
 const SCREEN_ITER: usize = 20;
 
 /// The fit of `req` (one of its effects an extra mode, attached as it says, on the
-/// structure's values `plant`, with `offset` [N·m]) from the best of a grid: the mode's
-/// mass split off the first arm mass `J_a1` (5, 10, 20, 40 %) or a quarter of it added
-/// (the automatic start's grid), its frequency with the arm held still from 3 to 60 Hz (9
-/// steps), 5 % damping, the gearbox damper `d_g` at its value, a third and a tenth of it;
+/// structure's values `plant`, with `offset` [N·m]) from the best of a grid
+/// ([`best_point`]): the mode's mass split off the first arm mass `J_a1` (5, 10, 20, 40 %)
+/// or a quarter of it added (the automatic start's grid), its frequency with the arm held
+/// still from 3 to 60 Hz (9 steps), 5 % damping, the gearbox damper `d_g` at its value, a
+/// third and a tenth of it;
 /// the point of lowest output-error cost for each `d_g` fitted for [`SCREEN_ITER`]
 /// iterations (smooth law), the lowest cost kept. The split keeps the arm's inertia, which
 /// the smaller structure fitted; the mass is a free axis because the mode's coupling, not
@@ -401,42 +402,11 @@ pub fn fit_with_mode(
     let base = super::model_of(req, data);
     let dg = req.structure.param_names().iter().position(|n| *n == "d_g");
     let mut starts: Vec<NlRequest> = Vec::new();
-    for dg_share in [1.0, 0.3, 0.1] {
-        let mut best: Option<(f64, Vec<f64>, ExtraMode)> = None;
-        for (share, split) in [
-            (0.05, true),
-            (0.1, true),
-            (0.2, true),
-            (0.4, true),
-            (0.25, false),
-        ] {
-            let j = share * plant[1];
-            let mut p = plant.to_vec();
-            if split {
-                p[1] -= j;
-            }
-            if let Some(i) = dg {
-                p[i] *= dg_share;
-            }
-            for i in 0..9 {
-                let w = 2.0 * std::f64::consts::PI * 3.0 * 20f64.powf(f64::from(i) / 8.0);
-                let k = j * w * w;
-                let m = ExtraMode {
-                    j,
-                    k,
-                    d: 2.0 * 0.05 * (k * j).sqrt(),
-                    ..mode
-                };
-                let mut model = base.clone();
-                model.effects[at] = Effect::ExtraMode(m);
-                let values = model.values(&p, offset, 0.0);
-                if let Some(c) = super::cost_at(data, &model, &values) {
-                    if best.as_ref().is_none_or(|(b, _, _)| c < *b) {
-                        best = Some((c, p.clone(), m));
-                    }
-                }
-            }
-        }
+    for dg_share in DAMPER_SHARES {
+        let points = MODE_SHARES
+            .iter()
+            .flat_map(|&s| mode_frequencies().map(move |f| (dg_share, s, f)));
+        let best = best_point(data, &base, at, (plant, dg, offset), mode, points);
         if let Some((_, p, m)) = best {
             let mut r = req.clone();
             r.effects[at] = Effect::ExtraMode(m);
@@ -467,24 +437,67 @@ pub fn fit_with_mode(
     kept.ok_or(last)
 }
 
-/// Frequencies of the race over the mode (the arm held still) [Hz]: 3 to 60 Hz, 9 steps,
-/// as the grid of [`fit_with_mode`].
-fn race_frequencies() -> impl Iterator<Item = f64> {
+/// Frequencies of the grid over an added mode (the arm held still) [Hz]: 3 to 60 Hz, 9
+/// steps.
+fn mode_frequencies() -> impl Iterator<Item = f64> {
     (0..9).map(|i| 3.0 * 20f64.powf(f64::from(i) / 8.0))
 }
 
-/// The mode's mass as a share of the first arm mass, split off it (`true`) or added
-/// (`false`): the grid of [`fit_with_mode`].
-const RACE_SHARES: [(f64, bool); 5] = [
+/// Masses of the grid over an added mode, as a share of the first arm mass, split off it
+/// (`true`) or added (`false`).
+const MODE_SHARES: [(f64, bool); 5] = [
     (0.05, true),
     (0.1, true),
     (0.2, true),
     (0.4, true),
     (0.25, false),
 ];
-/// The gearbox damper `d_g` as a share of the smaller structure's: the grid of
-/// [`fit_with_mode`].
-const RACE_DAMPER_SHARES: [f64; 3] = [1.0, 0.3, 0.1];
+
+/// The gearbox damper `d_g` of the grid over an added mode, as a share of the smaller
+/// structure's.
+const DAMPER_SHARES: [f64; 3] = [1.0, 0.3, 0.1];
+
+/// The point of lowest output-error cost on `data` among `points` (damper share, (mass
+/// share, split), frequency [Hz]) of the grid over the mode `mode` at index `at` of the
+/// effects of `base`, on the structure's values `plant` (`d_g` at index `dg`) with
+/// `offset` [N·m]: its cost, its structure's values and its mode (5 % damping).
+fn best_point(
+    data: &IdData,
+    base: &super::NlModel,
+    at: usize,
+    (plant, dg, offset): (&[f64], Option<usize>, f64),
+    mode: ExtraMode,
+    points: impl Iterator<Item = (f64, (f64, bool), f64)>,
+) -> Option<(f64, Vec<f64>, ExtraMode)> {
+    let mut best: Option<(f64, Vec<f64>, ExtraMode)> = None;
+    for (dg_share, (share, split), f_hz) in points {
+        let j = share * plant[1];
+        let mut p = plant.to_vec();
+        if split {
+            p[1] -= j;
+        }
+        if let Some(i) = dg {
+            p[i] *= dg_share;
+        }
+        let w = 2.0 * std::f64::consts::PI * f_hz;
+        let k = j * w * w;
+        let m = ExtraMode {
+            j,
+            k,
+            d: 2.0 * 0.05 * (k * j).sqrt(),
+            ..mode
+        };
+        let mut model = base.clone();
+        model.effects[at] = Effect::ExtraMode(m);
+        let values = model.values(&p, offset, 0.0);
+        if let Some(c) = super::cost_at(data, &model, &values) {
+            if best.as_ref().is_none_or(|(b, _, _)| c < *b) {
+                best = Some((c, p, m));
+            }
+        }
+    }
+    best
+}
 
 /// Iterations of each runner of the race ([`race_mode`]).
 const RACE_ITER: usize = 5;
@@ -493,7 +506,7 @@ const RACE_ITER: usize = 5;
 const RACE_MIN_SAMPLES: usize = 4000;
 
 /// The mode added by a race over its frequency: at each frequency the grid's point of
-/// lowest cost (mass share, damper share, as [`fit_with_mode`]'s grid), each fitted for
+/// lowest cost (mass share, damper share, the grid's), each fitted for
 /// [`RACE_ITER`] iterations on the first quarter of the longest record (at least
 /// [`RACE_MIN_SAMPLES`]), the one that ends lowest fitted for [`SCREEN_ITER`] iterations
 /// on all records; `None` when it ends no lower on the piece than `kept` (the grid's fit)
@@ -526,36 +539,11 @@ fn race_mode(
     let dg = req.structure.param_names().iter().position(|n| *n == "d_g");
     let fit = |r: &NlRequest, on: &[IdData]| identify_segments(on, r).ok().map(|r| r.fit);
     let mut lead: Option<NlFit> = None;
-    for f_hz in race_frequencies() {
-        let w = 2.0 * std::f64::consts::PI * f_hz;
-        let mut best: Option<(f64, Vec<f64>, ExtraMode)> = None;
-        for dg_share in RACE_DAMPER_SHARES {
-            for (share, split) in RACE_SHARES {
-                let j = share * plant[1];
-                let mut p = plant.to_vec();
-                if split {
-                    p[1] -= j;
-                }
-                if let Some(i) = dg {
-                    p[i] *= dg_share;
-                }
-                let k = j * w * w;
-                let m = ExtraMode {
-                    j,
-                    k,
-                    d: 2.0 * 0.05 * (k * j).sqrt(),
-                    ..mode
-                };
-                let mut model = base.clone();
-                model.effects[0] = Effect::ExtraMode(m);
-                let values = model.values(&p, offset, 0.0);
-                if let Some(c) = super::cost_at(&piece[0], &model, &values) {
-                    if best.as_ref().is_none_or(|(b, _, _)| c < *b) {
-                        best = Some((c, p, m));
-                    }
-                }
-            }
-        }
+    for f_hz in mode_frequencies() {
+        let points = DAMPER_SHARES
+            .iter()
+            .flat_map(|&d| MODE_SHARES.iter().map(move |&s| (d, s, f_hz)));
+        let best = best_point(&piece[0], &base, 0, (plant, dg, offset), mode, points);
         let Some((_, p, m)) = best else {
             continue;
         };
