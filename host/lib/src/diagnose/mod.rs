@@ -27,7 +27,12 @@
 //!    significant the answer is `none`.
 //! 4. **Pair**: when the best single effect is significant, it is refitted with each other
 //!    significant candidate, started from the two singles' fitted values (the structure
-//!    of the best single's fit, or of the partner's when that is an extra mode); a pair is
+//!    of the best single's fit, or of the partner's when that is an extra mode), and with
+//!    each candidate whose single scored significantly *below* the nominal it contains
+//!    (`mean + 2·SE < −min_gain`: a fit in a wrong basin, which says nothing of its
+//!    effect), started from its candidate's size on the best single's fit. Where the motor
+//!    sticks, a pair of the friction and an extra mode takes the mode from the grid of the
+//!    growth ([`grow::fit_with_mode`]) on the friction's fit. A pair is
 //!    reported when it gains significantly over the single by the same test. When the
 //!    second single ties with the best (within twice the standard error of their
 //!    difference), the pairs it leads are tried too, and the pair with the highest

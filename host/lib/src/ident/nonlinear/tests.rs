@@ -651,23 +651,8 @@ fn a_sticking_three_mass_joint_starts_from_the_structure_grown_in_the_time_domai
     let (est, val) = (capture(4), capture(5));
     let p = SimConfig::default().plant.params;
     let req = NlRequest::new(Structure::ThreeMass, p.r, vec![effect]);
-    let done = run(
-        NlData {
-            estimation: std::slice::from_ref(&est.data),
-            periodic: Some((std::slice::from_ref(&est), 1)),
-            validation: Some(&val.data),
-        },
-        &req,
-    )
-    .unwrap();
+    let done = run_grown(&est, &val, &req);
     let r = &done.result;
-    assert!(
-        r.warnings
-            .iter()
-            .any(|w| w.starts_with("the motor sticks") && w.contains("grown in the time domain")),
-        "{:?}",
-        r.warnings
-    );
     let names: Vec<&str> = r.steps.iter().map(|s| s.name.as_str()).collect();
     assert!(
         names.contains(&"stick-slip start: three-mass chain"),
@@ -742,6 +727,27 @@ fn a_linear_start_with_a_mode_beyond_the_step_is_brought_to_one_that_simulates()
     assert_eq!(default, before);
 }
 
+/// `req` run on the periodic capture `est`, validated on `val`, where the motor sticks:
+/// the run must say its start was grown in the time domain.
+fn run_grown(est: &crate::data::Dataset, val: &crate::data::Dataset, req: &NlRequest) -> NlRun {
+    let done = run(
+        NlData {
+            estimation: std::slice::from_ref(&est.data),
+            periodic: Some((std::slice::from_ref(est), 1)),
+            validation: Some(&val.data),
+        },
+        req,
+    )
+    .unwrap();
+    let w = &done.result.warnings;
+    assert!(
+        w.iter()
+            .any(|w| w.starts_with("the motor sticks") && w.contains("grown in the time domain")),
+        "{w:?}"
+    );
+    done
+}
+
 /// Bench case 10 of `benches/diagnose.rs` (the values as drawn): a three-mass joint whose
 /// arm hangs 4.3 % of its inertia on the second spring (22.7 Hz with the arm held still),
 /// Stribeck friction `F_c` 0.0292, `F_s` 0.0390 N·m under the soft tuning at 0.031 rad
@@ -796,23 +802,8 @@ fn a_sticking_motor_whose_arm_mode_hides_under_the_friction_reaches_the_true_lev
         params.r,
         vec![Effect::CoulombFriction(CoulombFriction::default())],
     );
-    let done = run(
-        NlData {
-            estimation: std::slice::from_ref(&est.data),
-            periodic: Some((std::slice::from_ref(&est), 1)),
-            validation: Some(&val.data),
-        },
-        &req,
-    )
-    .unwrap();
+    let done = run_grown(&est, &val, &req);
     let r = &done.result;
-    assert!(
-        r.warnings
-            .iter()
-            .any(|w| w.starts_with("the motor sticks") && w.contains("grown in the time domain")),
-        "{:?}",
-        r.warnings
-    );
     // the true model's validation FIT, as `validate` takes it (exact laws, from rest)
     let out = crate::sim::simulate_driven(
         &cfg.plant,
