@@ -303,9 +303,12 @@ pub fn automatic_start_with(
         };
         match &found {
             Some(f) if f.order.is_some() => {
-                r.order = f.best as f64;
+                r.order = f.order.map_or(0.0, f64::from);
                 r.amplitude = f.amplitude;
                 r.phase = f.phase;
+                if f.short {
+                    warnings.push(short_order_warning(f));
+                }
             }
             _ => {
                 warnings.push(order_warning(found.as_ref()));
@@ -442,13 +445,13 @@ pub fn automatic_start_with(
         };
         let v = m.values(&lin_plant, lin_offset, lin.get("v0").unwrap_or(0.0));
         if let Some(f) = super::ripple::search_order(data, &m, &v)? {
-            if f.order.is_some() {
+            if let Some(n) = f.order {
                 for e in current.iter_mut() {
                     if let Effect::TorqueRipple(r) = e {
-                        if r.order != f.best as f64 {
+                        if r.order != f64::from(n) {
                             *r = crate::model::effects::TorqueRipple {
                                 amplitude: f.amplitude,
-                                order: f.best as f64,
+                                order: f64::from(n),
                                 phase: f.phase,
                             };
                         }
@@ -558,6 +561,30 @@ pub fn automatic_start_with(
 /// The step of an order search (`on`: what it searched on).
 fn order_step(found: Option<&super::ripple::OrderSearch>, on: &str) -> Step {
     match found {
+        Some(f) if f.short => Step {
+            name: "torque_ripple order".into(),
+            values: vec![
+                ("order".into(), f.order.map_or(0.0, f64::from), "-"),
+                ("periods".into(), f.periods, "-"),
+                ("coherence".into(), f.coherence, "-"),
+                ("amplitude".into(), f.amplitude, "N·m"),
+                ("phase".into(), f.phase, "rad"),
+            ],
+            detail: format!(
+                "found below the candidates: the ripple of order {} removes {:.1} % of the \
+                 velocity cost {on}{}; the travel covers {:.2} of its periods, too few to \
+                 tell it from its neighbours, so it stands for a torque against the motor \
+                 angle over the travel",
+                f.order.unwrap_or(0),
+                100.0 * f.share,
+                match (f.range, f.below) {
+                    (Some((lo, hi)), Some((_, z))) =>
+                        format!(", more than every candidate of {lo}–{hi} (robust z-score {z:.1})"),
+                    _ => String::new(),
+                },
+                f.periods
+            ),
+        },
         Some(f) => Step {
             name: "torque_ripple order".into(),
             values: vec![
@@ -569,15 +596,16 @@ fn order_step(found: Option<&super::ripple::OrderSearch>, on: &str) -> Step {
             ],
             detail: format!(
                 "{}: the ripple of order {} removes {:.1} % of the velocity cost {on}, robust \
-                 z-score {:.1} against the orders of {}–{} a period or more apart from it \
+                 z-score {:.1} against the orders of {} a period or more apart from it \
                  over the travel (significant from {})",
                 if f.order.is_some() {
                     "found".to_string()
-                } else if let Some((n, z)) = f.below {
+                } else if f.range.is_none() {
                     format!(
-                        "no significant order (order {n}, below the candidates, lowers the cost \
-                         more, z-score {z:.1}, but the travel covers fewer than two of its \
-                         periods)"
+                        "no significant order (the travel covers two periods of too few orders \
+                         to rank them; the best's ripple removes less than {:.0} % of the cost \
+                         or is not alike along the record)",
+                        100.0 * super::ripple::MIN_SHORT_SHARE
                     )
                 } else if f.z >= super::ripple::SIGNIFICANT_Z {
                     format!(
@@ -594,8 +622,7 @@ fn order_step(found: Option<&super::ripple::OrderSearch>, on: &str) -> Step {
                 f.best,
                 100.0 * f.share,
                 f.z,
-                f.range.0,
-                f.range.1,
+                orders_text(f),
                 super::ripple::SIGNIFICANT_Z
             ),
         },
@@ -609,49 +636,52 @@ fn order_step(found: Option<&super::ripple::OrderSearch>, on: &str) -> Step {
     }
 }
 
+/// The orders an order search ranked: its candidates, else the orders it searched.
+fn orders_text(f: &super::ripple::OrderSearch) -> String {
+    match f.range {
+        Some((lo, hi)) => format!("{lo}–{hi}"),
+        None => format!(
+            "{}–{} (the travel covers two periods of too few orders)",
+            f.searched.0, f.searched.1
+        ),
+    }
+}
+
+/// The warning when the order found lies below the candidates ([`OrderSearch::short`]).
+///
+/// [`OrderSearch::short`]: super::ripple::OrderSearch::short
+fn short_order_warning(f: &super::ripple::OrderSearch) -> String {
+    format!(
+        "the torque ripple's order {} is not fixed by these data: the motor's travel covers \
+         {:.2} of its periods (two or more tell an order from its neighbours); the ripple \
+         stands for a torque against the motor angle over the travel, its order and amplitude \
+         trade against each other (move the joint further, or give `order=`)",
+        f.order.unwrap_or(f.best),
+        f.periods
+    )
+}
+
 /// The warning when the data show no ripple order.
 fn order_warning(found: Option<&super::ripple::OrderSearch>) -> String {
     match found {
-        Some(f)
-            if f.below.is_some()
-                && (f.z < super::ripple::SIGNIFICANT_Z
-                    || f.coherence < super::ripple::MIN_COHERENCE) =>
-        {
-            format!(
-                "the data show no torque ripple of order {}–{}; the cost falls most at order {}, \
-             whose period the motor's travel covers fewer than two times, too few to tell a \
-             ripple from a smooth error against the angle; the ripple is held at amplitude 0 \
-             (move the joint further, or give `order=`)",
-                f.range.0,
-                f.range.1,
-                f.below.map_or(0, |b| b.0)
-            )
-        }
-        Some(f) if f.below.is_some() => format!(
-            "order {} lowers the cost significantly (z-score {:.1}), but order {}, whose \
-             period the motor's travel covers fewer than two times, lowers it more: a ripple \
-             below the orders the travel can tell, or a smooth error against the angle; the \
-             ripple is held at amplitude 0 (move the joint further, or give `order=`)",
-            f.best,
-            f.z,
-            f.below.map_or(0, |b| b.0)
-        ),
         Some(f) => format!(
-            "the data show no torque ripple: no order in {}–{} lowers the cost significantly \
+            "the data show no torque ripple: no order in {} lowers the cost significantly \
              with the same ripple along the record (best {} at z-score {:.1}, significant \
-             from {}; coherence {:.2}, a ripple of the angle from {}); the ripple is held at \
-             amplitude 0 (give `order=` to fit one)",
-            f.range.0,
-            f.range.1,
+             from {}, removing {:.1} % of the cost; coherence {:.2}, a ripple of the angle \
+             from {}), and none down to order {} (a quarter of its period over the travel) \
+             beats them; the ripple is held at amplitude 0 (give `order=` to fit one)",
+            orders_text(f),
             f.best,
             f.z,
             super::ripple::SIGNIFICANT_Z,
+            100.0 * f.share,
             f.coherence,
-            super::ripple::MIN_COHERENCE
+            super::ripple::MIN_COHERENCE,
+            f.searched.0
         ),
-        None => "no torque ripple order can be searched: the motor's travel covers two \
-                 periods of no order up to the speed's limit; the ripple is held at amplitude \
-                 0 (give `order=` to fit one)"
+        None => "no torque ripple order can be searched: the motor's travel covers a quarter \
+                 period of too few orders up to the speed's limit; the ripple is held at \
+                 amplitude 0 (give `order=` to fit one)"
             .into(),
     }
 }

@@ -17,6 +17,15 @@
 //! smooth function of the angle and catches any position-dependent error), and whose torque
 //! frequency `n |ω|` at the 99th percentile of the speed stays below [`NYQUIST_SHARE`] of
 //! the Nyquist frequency (the sampled angle resolves the period), at most [`MAX_ORDER`].
+//!
+//! Short travel: the search also runs down to the orders whose period the travel covers
+//! [`MIN_SHORT_PERIODS`] times. A small motion of a joint with a ripple feels a torque that
+//! is a smooth function of the angle over its travel (a piece of the sine: a level, a slope,
+//! a bend); no order is told from its neighbours there, but the torque is real and a ripple
+//! of one of those orders models it. Such an order is taken when it beats every candidate
+//! significantly, or when there are no candidates, when it removes at least
+//! [`MIN_SHORT_SHARE`] of the cost with the same ripple along the record; the start then
+//! says that the order stands for a torque against the angle, not a measured order.
 
 use nalgebra::{Matrix2, Vector2};
 use rustfft::num_complex::Complex64;
@@ -37,6 +46,14 @@ pub const NYQUIST_SHARE: f64 = 0.25;
 /// Highest order searched (periods per motor revolution).
 pub const MAX_ORDER: u32 = 240;
 
+/// Periods of the ripple the motor's travel must cover for its order to be searched at all
+/// (module documentation, short travel): a quarter period still bends the torque.
+pub const MIN_SHORT_PERIODS: f64 = 0.25;
+
+/// Share of the prefiltered velocity cost an order below the candidates must remove when
+/// there are no candidates to stand out against (module documentation, short travel) [-].
+pub const MIN_SHORT_SHARE: f64 = 0.05;
+
 /// Robust z-score from which the best order counts as found.
 pub const SIGNIFICANT_Z: f64 = 8.0;
 
@@ -52,10 +69,16 @@ const MIN_CANDIDATES: usize = 8;
 /// What the order search found.
 #[derive(Clone, Debug, PartialEq)]
 pub struct OrderSearch {
-    /// the best candidate when it is significant ([`SIGNIFICANT_Z`]) and no order below the
-    /// candidates ([`OrderSearch::below`]) beats it
+    /// the order found: the best candidate when it is significant ([`SIGNIFICANT_Z`]) and
+    /// no order below the candidates ([`OrderSearch::below`]) beats it, else that order
+    /// below ([`OrderSearch::short`])
     pub order: Option<u32>,
-    /// the candidate whose ripple lowers the cost most
+    /// whether the order found lies below the candidates: the travel covers fewer than
+    /// [`MIN_PERIODS`] of its periods, so it stands for a torque against the angle over the
+    /// travel rather than a measured order (module documentation, short travel)
+    pub short: bool,
+    /// the candidate whose ripple lowers the cost most (with no candidates, the order
+    /// searched that does)
     pub best: u32,
     /// its robust z-score against the cost drops of the orders the travel tells apart from it
     /// (their ripples differ from its by a period or more over the travel) [-]
@@ -63,18 +86,24 @@ pub struct OrderSearch {
     /// how alike its ripple is on [`COHERENCE_PARTS`] parts of the record (1: the same; at
     /// least [`MIN_COHERENCE`] for the order to be found) [-]
     pub coherence: f64,
-    /// the share of the prefiltered velocity cost its ripple removes [-]
+    /// the share of the prefiltered velocity cost the ripple of the order found (else of
+    /// `best`) removes [-]
     pub share: f64,
     /// its least-squares amplitude [N·m] and phase [rad]
     pub amplitude: f64,
     /// phase `φ` of `A sin(n θ + φ)` [rad]
     pub phase: f64,
-    /// lowest and highest candidate
-    pub range: (u32, u32),
-    /// an order below the candidates (the travel covers one to [`MIN_PERIODS`] of its
-    /// periods) that lowers the cost more than every candidate, with a significant z-score
-    /// of its own: a ripple or a smooth error against the angle, the travel too short to
-    /// tell; with one, no order is found
+    /// lowest and highest candidate; `None` when the travel covers [`MIN_PERIODS`] periods
+    /// of too few orders
+    pub range: Option<(u32, u32)>,
+    /// lowest and highest order searched ([`MIN_SHORT_PERIODS`])
+    pub searched: (u32, u32),
+    /// the travel over the period of the order found (else of `best`) [-]
+    pub periods: f64,
+    /// the order below the candidates (the travel covers [`MIN_SHORT_PERIODS`] to
+    /// [`MIN_PERIODS`] of its periods) that lowers the cost most, with its z-score against
+    /// the candidates (0 without candidates) when it lowers the cost more than every
+    /// candidate and its ripple is alike along the record
     pub below: Option<(u32, f64)>,
     /// each order's cost drop [(rad/s)²]
     pub drops: Vec<(u32, f64)>,
@@ -83,6 +112,12 @@ pub struct OrderSearch {
 /// The candidate orders for `data` ([`MIN_PERIODS`], [`NYQUIST_SHARE`], [`MAX_ORDER`]);
 /// `None` when no order qualifies.
 pub fn order_range(data: &IdData) -> Option<(u32, u32)> {
+    orders_covering(data, MIN_PERIODS)
+}
+
+/// The orders from those whose period the motor's travel covers `periods` times to the
+/// speed's limit ([`NYQUIST_SHARE`], [`MAX_ORDER`]), when at least [`MIN_CANDIDATES`].
+fn orders_covering(data: &IdData, periods: f64) -> Option<(u32, u32)> {
     let span = span(data);
     let v: Vec<f64> = interval_velocity(&data.y, data.ts)
         .iter()
@@ -92,7 +127,7 @@ pub fn order_range(data: &IdData) -> Option<(u32, u32)> {
     if !(span > 0.0 && w_hi > 0.0) {
         return None;
     }
-    let lo = (MIN_PERIODS * std::f64::consts::TAU / span).ceil().max(1.0);
+    let lo = (periods * std::f64::consts::TAU / span).ceil().max(1.0);
     let nyquist = std::f64::consts::PI / data.ts;
     let hi = (NYQUIST_SHARE * nyquist / w_hi)
         .floor()
@@ -116,8 +151,8 @@ fn percentile(x: &[f64], q: f64) -> f64 {
 }
 
 /// Searches the ripple's order on `data` against `model` (no ripple attached) at its
-/// physical values `values` (module documentation). `None` when no order is a candidate
-/// ([`order_range`]).
+/// physical values `values` (module documentation). `None` when the travel covers
+/// [`MIN_SHORT_PERIODS`] periods of too few orders.
 ///
 /// The responses `g_s`, `g_c` are those of the linear structure without effects or current
 /// loop (the ripple acts on the motor after the current loop, and its frequencies lie far
@@ -131,9 +166,12 @@ pub fn search_order(
     model: &NlModel,
     values: &[f64],
 ) -> Result<Option<OrderSearch>, NlError> {
-    let Some((lo, hi)) = order_range(data) else {
+    let Some((floor, hi)) = orders_covering(data, MIN_SHORT_PERIODS) else {
         return Ok(None);
     };
+    let range = order_range(data);
+    // without candidates every order searched lies below them
+    let lo = range.map_or(hi + 1, |r| r.0);
     let ts = data.ts;
     let len = data.len();
     let v = interval_velocity(&data.y, ts);
@@ -195,11 +233,10 @@ pub fn search_order(
         let gs: Vec<f64> = buf[..len].iter().map(|z| z.im * scale).collect();
         [highpassed(&gs, ts), highpassed(&gc, ts)]
     };
-    // down to the orders of one period over the travel: a ripple just below the candidates
-    // would otherwise show as the lowest candidate, a wrong order found
-    let below = lo.div_ceil(2).max(1);
-    let mut drops = Vec::with_capacity((hi - below + 1) as usize);
-    for n in below..=hi {
+    // down to the orders of a quarter period over the travel: a ripple below the
+    // candidates would otherwise show as the lowest candidate, a wrong order found
+    let mut drops = Vec::with_capacity((hi - floor + 1) as usize);
+    for n in floor..=hi {
         let g = responses(n);
         let (drop, ab) = least_squares(&g, &e, 0..e.len());
         drops.push((n, drop, ab));
@@ -235,26 +272,48 @@ pub fn search_order(
             .max_by(|a, b| a.1.total_cmp(&b.1))
             .copied()
     };
-    let (best, drop, ab) = top(lo).expect("at least MIN_CANDIDATES orders");
-    let z = z_of(best, drop);
+    let share_of = |drop: f64| if ssr > 0.0 { drop / ssr } else { 0.0 };
+    let (best, drop, ab) =
+        top(range.map_or(floor, |r| r.0)).expect("at least MIN_CANDIDATES orders");
+    let z = if range.is_some() {
+        z_of(best, drop)
+    } else {
+        0.0
+    };
     let mut coherence_of = |n: u32| coherence(&responses(n), &e);
     let best_coherence = coherence_of(best);
-    // an order below the candidates that beats them all and stands out itself
-    let below_best = top(below)
-        .filter(|d| d.0 < lo)
-        .map(|d| (d.0, z_of(d.0, d.1)))
-        .filter(|d| d.1 >= SIGNIFICANT_Z && coherence_of(d.0) >= MIN_COHERENCE);
+    // an order below the candidates that beats them all and stands out itself; without
+    // candidates, the best order searched when its ripple is alike along the record and
+    // removes a share of the cost that no chance correlation does
+    let below_best = top(floor).filter(|d| d.0 < lo).and_then(|d| {
+        let z = if range.is_some() { z_of(d.0, d.1) } else { 0.0 };
+        let stands_out = if range.is_some() {
+            z >= SIGNIFICANT_Z
+        } else {
+            share_of(d.1) >= MIN_SHORT_SHARE
+        };
+        (stands_out && coherence_of(d.0) >= MIN_COHERENCE).then_some((d.0, z, d.1, d.2))
+    });
+    let candidate_found = range.is_some() && z >= SIGNIFICANT_Z && best_coherence >= MIN_COHERENCE;
+    let (order, drop, ab) = match below_best {
+        Some((n, _, drop, ab)) => (Some(n), drop, ab),
+        None if candidate_found => (Some(best), drop, ab),
+        None => (None, drop, ab),
+    };
+    let travel_periods = |n: u32| travel * n as f64 / std::f64::consts::TAU;
     Ok(Some(OrderSearch {
-        order: (z >= SIGNIFICANT_Z && best_coherence >= MIN_COHERENCE && below_best.is_none())
-            .then_some(best),
+        order,
+        short: below_best.is_some(),
         coherence: best_coherence,
         best,
         z,
-        share: if ssr > 0.0 { drop / ssr } else { 0.0 },
+        share: share_of(drop),
         amplitude: ab[0].hypot(ab[1]),
         phase: ab[1].atan2(ab[0]),
-        range: (lo, hi),
-        below: below_best,
+        range,
+        searched: (floor, hi),
+        periods: travel_periods(order.unwrap_or(best)),
+        below: below_best.map(|(n, z, _, _)| (n, z)),
         drops: drops.iter().map(|d| (d.0, d.1)).collect(),
     }))
 }

@@ -129,3 +129,70 @@ fn no_order_is_searched_where_the_travel_covers_no_two_periods() {
         "{lo}–{hi}"
     );
 }
+
+#[test]
+fn a_ripple_the_travel_covers_less_than_a_period_of_is_fitted_as_a_torque_against_the_angle() {
+    // order 72 (period 0.087 rad) at 0.04 rad RMS: the motor's travel covers under one
+    // period, no order can be told from its neighbours, yet the torque against the angle
+    // is large; the search takes an order below the candidates, says so, and the fit
+    // explains the motion as well as one with the true order given
+    let truth = TorqueRipple {
+        amplitude: 0.025,
+        order: 72.0,
+        phase: 0.5,
+    };
+    let ds = capture(vec![Effect::TorqueRipple(truth)], 0.04, 41);
+    let out = fit_without_order(&ds);
+    let step = out
+        .result
+        .steps
+        .iter()
+        .rfind(|s| s.name == "torque_ripple order")
+        .expect("the order search is a step of the start");
+    assert!(
+        step.detail.starts_with("found below the candidates"),
+        "{}",
+        step.detail
+    );
+    assert!(
+        out.result
+            .warnings
+            .iter()
+            .any(|w| w.contains("is not fixed by these data")),
+        "{:?}",
+        out.result.warnings
+    );
+    let req = NlRequest {
+        given: vec![vec![("order".into(), 72.0)]],
+        ..NlRequest::new(
+            Structure::ThreeMass,
+            SimConfig::default().plant.params.r,
+            vec![Effect::TorqueRipple(truth)],
+        )
+    };
+    let segs = std::slice::from_ref(&ds);
+    let given = run(
+        NlData {
+            estimation: std::slice::from_ref(&ds.data),
+            periodic: Some((segs, 1)),
+            validation: None,
+        },
+        &req,
+    )
+    .unwrap();
+    let (found, known) = (
+        out.result.fit.fit_velocity_percent,
+        given.result.fit.fit_velocity_percent,
+    );
+    assert!(
+        found > known - 1.0,
+        "order searched {found:.2} %, given {known:.2} %"
+    );
+    let Effect::TorqueRipple(r) = out.result.fit.model.effects[0] else {
+        panic!("{:?}", out.result.fit.model.effects)
+    };
+    assert!(
+        r.amplitude > 0.5 * truth.amplitude && r.amplitude < 2.0 * truth.amplitude,
+        "{r:?}"
+    );
+}
