@@ -505,12 +505,12 @@ const RACE_ITER: usize = 5;
 /// Fewest samples of the piece the race runs on (2 s at 2 kHz).
 const RACE_MIN_SAMPLES: usize = 4000;
 
-/// The mode added by a race over its frequency: at each frequency the grid's point of
-/// lowest cost (mass share, damper share, the grid's), each fitted for
-/// [`RACE_ITER`] iterations on the first quarter of the longest record (at least
-/// [`RACE_MIN_SAMPLES`]), the one that ends lowest fitted for [`SCREEN_ITER`] iterations
-/// on all records; `None` when it ends no lower on the piece than `kept` (the grid's fit)
-/// or nothing could be fitted.
+/// The mode (the extra mode among `req`'s effects) added by a race over its frequency: at
+/// each frequency the grid's point of lowest cost (mass share, damper share, the grid's),
+/// each fitted for [`RACE_ITER`] iterations on the first quarter of the longest record (at
+/// least [`RACE_MIN_SAMPLES`]), the one that ends lowest fitted for [`SCREEN_ITER`]
+/// iterations on all records; `None` when it ends no lower on the piece than `kept` (the
+/// grid's fit), nothing could be fitted, or `req` has no extra mode.
 ///
 /// **Why.** Before any fit, a mode in the band where it acts costs more than one out of
 /// the way: the smaller structure has bent its values to stand in for the mode it lacks.
@@ -530,7 +530,11 @@ fn race_mode(
     kept: &NlFit,
 ) -> Option<NlFit> {
     let data = est.iter().max_by_key(|d| d.len())?;
-    let Some(Effect::ExtraMode(mode)) = req.effects.first().copied() else {
+    let at = req
+        .effects
+        .iter()
+        .position(|e| matches!(e, Effect::ExtraMode(_)))?;
+    let Effect::ExtraMode(mode) = req.effects[at] else {
         return None;
     };
     let n = (data.len() / 4).max(RACE_MIN_SAMPLES).min(data.len());
@@ -543,12 +547,12 @@ fn race_mode(
         let points = DAMPER_SHARES
             .iter()
             .flat_map(|&d| MODE_SHARES.iter().map(move |&s| (d, s, f_hz)));
-        let best = best_point(&piece[0], &base, 0, (plant, dg, offset), mode, points);
+        let best = best_point(&piece[0], &base, at, (plant, dg, offset), mode, points);
         let Some((_, p, m)) = best else {
             continue;
         };
         let mut r = req.clone();
-        r.effects[0] = Effect::ExtraMode(m);
+        r.effects[at] = Effect::ExtraMode(m);
         r.start = super::NlStart::Values(super::model_of(&r, data).values(&p, offset, 0.0));
         r.options.max_iter = RACE_ITER;
         if let Some(f) = fit(&r, &piece) {
