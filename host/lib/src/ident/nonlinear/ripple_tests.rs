@@ -26,11 +26,19 @@ fn capture(effects: Vec<Effect>, rms: f64, seed: u64) -> Dataset {
 
 /// `run` with a ripple of the default order (72) and no `order=` given, on `ds`.
 fn fit_without_order(ds: &Dataset) -> NlRun {
-    let req = NlRequest::new(
-        Structure::ThreeMass,
-        SimConfig::default().plant.params.r,
-        vec![Effect::default_by_name("torque_ripple").unwrap()],
-    );
+    fit_ripple(ds, TorqueRipple::default(), Vec::new())
+}
+
+/// `run` with the ripple `ripple` and the values `given` for it, on `ds`.
+fn fit_ripple(ds: &Dataset, ripple: TorqueRipple, given: Vec<(String, f64)>) -> NlRun {
+    let req = NlRequest {
+        given: vec![given],
+        ..NlRequest::new(
+            Structure::ThreeMass,
+            SimConfig::default().plant.params.r,
+            vec![Effect::TorqueRipple(ripple)],
+        )
+    };
     let segs = std::slice::from_ref(ds);
     run(
         NlData {
@@ -41,6 +49,20 @@ fn fit_without_order(ds: &Dataset) -> NlRun {
         &req,
     )
     .unwrap()
+}
+
+/// The last order search of `out`'s start.
+fn order_step(out: &NlRun) -> &Step {
+    out.result
+        .steps
+        .iter()
+        .rfind(|s| s.name == "torque_ripple order")
+        .expect("the order search is a step of the start")
+}
+
+/// Whether a warning of `out` contains `text`.
+fn warns(out: &NlRun, text: &str) -> bool {
+    out.result.warnings.iter().any(|w| w.contains(text))
 }
 
 #[test]
@@ -60,12 +82,7 @@ fn the_ripple_order_is_found_in_the_data_when_not_given() {
         };
         let ds = capture(vec![Effect::TorqueRipple(truth)], rms, seed);
         let out = fit_without_order(&ds);
-        let step = out
-            .result
-            .steps
-            .iter()
-            .rfind(|s| s.name == "torque_ripple order")
-            .expect("the order search is a step of the start");
+        let step = order_step(&out);
         assert!(step.detail.starts_with("found"), "{}", step.detail);
         let Effect::TorqueRipple(r) = out.result.fit.model.effects[0] else {
             panic!("{:?}", out.result.fit.model.effects)
@@ -84,22 +101,14 @@ fn a_joint_without_ripple_shows_no_order_and_gets_no_ripple() {
     for (rms, seed) in [(0.5, 21), (1.5, 22)] {
         let ds = capture(Vec::new(), rms, seed);
         let out = fit_without_order(&ds);
-        let step = out
-            .result
-            .steps
-            .iter()
-            .find(|s| s.name == "torque_ripple order")
-            .expect("the order search is a step of the start");
+        let step = order_step(&out);
         assert!(
             step.detail.starts_with("no significant order"),
             "{}",
             step.detail
         );
         assert!(
-            out.result
-                .warnings
-                .iter()
-                .any(|w| w.starts_with("the data show no torque ripple")),
+            warns(&out, "the data show no torque ripple"),
             "{:?}",
             out.result.warnings
         );
@@ -143,43 +152,18 @@ fn a_ripple_the_travel_covers_less_than_a_period_of_is_fitted_as_a_torque_agains
     };
     let ds = capture(vec![Effect::TorqueRipple(truth)], 0.04, 41);
     let out = fit_without_order(&ds);
-    let step = out
-        .result
-        .steps
-        .iter()
-        .rfind(|s| s.name == "torque_ripple order")
-        .expect("the order search is a step of the start");
+    let step = order_step(&out);
     assert!(
         step.detail.starts_with("found below the candidates"),
         "{}",
         step.detail
     );
     assert!(
-        out.result
-            .warnings
-            .iter()
-            .any(|w| w.contains("is not fixed by these data")),
+        warns(&out, "is not fixed by these data"),
         "{:?}",
         out.result.warnings
     );
-    let req = NlRequest {
-        given: vec![vec![("order".into(), 72.0)]],
-        ..NlRequest::new(
-            Structure::ThreeMass,
-            SimConfig::default().plant.params.r,
-            vec![Effect::TorqueRipple(truth)],
-        )
-    };
-    let segs = std::slice::from_ref(&ds);
-    let given = run(
-        NlData {
-            estimation: std::slice::from_ref(&ds.data),
-            periodic: Some((segs, 1)),
-            validation: None,
-        },
-        &req,
-    )
-    .unwrap();
+    let given = fit_ripple(&ds, truth, vec![("order".into(), 72.0)]);
     let (found, known) = (
         out.result.fit.fit_velocity_percent,
         given.result.fit.fit_velocity_percent,
