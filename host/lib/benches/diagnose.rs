@@ -19,14 +19,13 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use jointid::data::{Dataset, ExcitationConfig};
-use jointid::diagnose::metric::{DrivenModel, Measured};
-use jointid::diagnose::{all_candidates, diagnose, DiagnoseOptions, DiagnoseRequest, Diagnosis};
+use jointid::diagnose::{all_candidates, diagnose, DiagnoseRequest, Diagnosis};
 use jointid::ident::linalg::GaussRng;
 use jointid::ident::nonlinear::{identify, NlRequest};
 use jointid::model::effects::{Effect, EFFECT_NAMES};
 use jointid::model::spec::Structure;
 use jointid::sim::{ControllerConfig, JointParams, Plant, SimConfig};
-use jointid::test_support::{est_val_captures, random_joint};
+use jointid::test_support::{est_val_captures, random_joint, true_fit};
 
 /// One case of the battery.
 struct Case {
@@ -105,10 +104,9 @@ fn cases(rounds: usize) -> Vec<Case> {
     out
 }
 
-/// Estimation and validation captures of `case` with `periods` periods each (validation:
-/// other phases and noise).
-fn captures(case: &Case, periods: u32, rms: f64) -> (Dataset, Dataset) {
-    let cfg = SimConfig {
+/// The simulation of `case`.
+fn config(case: &Case) -> SimConfig {
+    SimConfig {
         plant: Plant {
             kind: Structure::ThreeMass,
             params: case.params,
@@ -116,32 +114,18 @@ fn captures(case: &Case, periods: u32, rms: f64) -> (Dataset, Dataset) {
         effects: case.hidden.clone(),
         controller: case.controller,
         ..SimConfig::default()
-    };
+    }
+}
+
+/// Estimation and validation captures of `case` with `periods` periods each (validation:
+/// other phases and noise).
+fn captures(case: &Case, periods: u32, rms: f64) -> (Dataset, Dataset) {
     let exc = ExcitationConfig {
         periods,
         rms_rad: rms as f32,
         ..ExcitationConfig::paper_default()
     };
-    est_val_captures(&cfg, &exc, case.seed)
-}
-
-/// The true model's gap metric on `val`.
-fn true_fit(case: &Case, val: &Dataset) -> f64 {
-    let opts = DiagnoseOptions::default();
-    let skip = ((opts.skip_s / val.data.ts).round() as usize).min(val.data.len() / 4);
-    let measured = Measured::new(&val.data, opts.band_hz, skip);
-    let model = DrivenModel {
-        plant: Plant {
-            kind: Structure::ThreeMass,
-            params: case.params,
-        },
-        effects: case.hidden.clone(),
-        tau_c: case.controller.current_loop_tau,
-        offset: 0.0,
-    };
-    measured
-        .score(&model, &val.data, 1)
-        .map_or(f64::NAN, |s| s.fit)
+    est_val_captures(&config(case), &exc, case.seed)
 }
 
 fn request(r: f64) -> DiagnoseRequest {
@@ -230,7 +214,7 @@ fn battery() {
                 .collect::<Vec<_>>()
                 .join("+")
         };
-        let truth = true_fit(case, &val);
+        let truth = true_fit(&config(case), &val);
         let t = Instant::now();
         let d = match diagnose(&[est], &val, &request(r)) {
             Ok(d) => d,

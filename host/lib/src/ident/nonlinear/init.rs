@@ -285,6 +285,9 @@ pub fn automatic_start_with(
         _ => None,
     });
     let mut searched: Option<super::ripple::OrderSearch> = None;
+    // where the warning of an order below the candidates is (the search again on the
+    // linear fit rewrites it)
+    let mut short_warning: Option<usize> = None;
     if let (Some(r), RippleOrder::FromData) = (ripple.as_mut(), order) {
         let m = NlModel {
             effects: with_fc(fc_used),
@@ -307,7 +310,26 @@ pub fn automatic_start_with(
                 r.amplitude = f.amplitude;
                 r.phase = f.phase;
                 if f.short {
+                    short_warning = Some(warnings.len());
                     warnings.push(short_order_warning(f));
+                }
+                // one more linear start: the structure's modal features with the ripple
+                // taken off the torque (over a short travel the ripple is a stiffness to the
+                // ground, which bends every start from the raw torque); its spring is only
+                // brought to what the simulation integrates, without a word, as a start
+                // among others
+                if f.short && model.structure != Structure::Rigid {
+                    let comp = super::ripple::compensated(data, r);
+                    if let Ok((mut feat, _)) =
+                        grey_box::features(&comp, Output::Angle, model.structure.masses(), 0, 0.0)
+                    {
+                        feat.j_total = j_used;
+                        feat.f_m = fv_used;
+                        let mut p = grey_box::initial_values(model.structure, model.r, &feat);
+                        let h = data.ts / model.substeps.max(1) as f64;
+                        resolvable(model.structure, model.r, &mut p, h);
+                        plants.push(p);
+                    }
                 }
             }
             _ => {
@@ -446,6 +468,15 @@ pub fn automatic_start_with(
         let v = m.values(&lin_plant, lin_offset, lin.get("v0").unwrap_or(0.0));
         if let Some(f) = super::ripple::search_order(data, &m, &v)? {
             if let Some(n) = f.order {
+                let text = f.short.then(|| short_order_warning(&f));
+                match (short_warning, text) {
+                    (Some(i), Some(t)) => warnings[i] = t,
+                    (Some(i), None) => {
+                        warnings.remove(i);
+                    }
+                    (None, Some(t)) => warnings.push(t),
+                    (None, None) => {}
+                }
                 for e in current.iter_mut() {
                     if let Effect::TorqueRipple(r) = e {
                         if r.order != f64::from(n) {
