@@ -142,9 +142,7 @@ fn battery_extra_mode_default_and_larger() {
 /// at 0.0136 rad RMS, wider than the rms gearbox deflection the linear fit reads (8.8
 /// µrad); the linear structure bends away from the joint's (`J_a2` 21×), and from it the
 /// backlash fit ended at 0.4 µrad, no gain, and the answer was the cubic spring. Grown from
-/// the linear two-mass ([`grow::grow_backlash`]) it is found. The joint is the bench's
-/// draw to ten digits: the same joint rounded to five lands the grown two-mass in another
-/// basin of the width (6.7 µrad, +2.5 points), which this test does not cover.
+/// the linear two-mass ([`grow::grow_backlash`]) it is found.
 #[test]
 fn a_backlash_wider_than_the_linear_deflection_is_found() {
     use crate::model::effects::Backlash;
