@@ -18,7 +18,10 @@
 //!    disturbance the position loop rejected; the toolbox FIT of `θ_m` of the plain
 //!    open-loop simulation is reported beside it for reference.
 //! 3. **Candidates**: the nominal plus each candidate effect, linear parameters refitted
-//!    jointly, on [`DiagnoseOptions::threads`] threads. Each is scored on the validation
+//!    jointly, on [`DiagnoseOptions::threads`] threads; the backlash also from the start
+//!    grown from the linear two-mass ([`grow::grow_backlash`]: a gap as wide as the
+//!    gearbox's deflection bends the linear structure away from the joint's), the fit of
+//!    lower cost kept. Each is scored on the validation
 //!    capture. **Significance test**: the scored range is split into K =
 //!    [`DiagnoseOptions::segments`] (4) equal segments; the gain of the metric over the
 //!    nominal is computed on each; the score is the mean gain; the candidate is
@@ -480,7 +483,18 @@ fn fit_and_score(
         nl.tau_c = *tau_c;
         nl.linear = Some(plant.clone());
     }
-    let res = identify_segments(est, &nl).map_err(|e| e.to_string())?;
+    let mut res = identify_segments(est, &nl).map_err(|e| e.to_string());
+    if let ([Effect::Backlash(_)], None, Some(two)) = (&nl.effects[..], from, &starts.two_mass) {
+        // a gap as wide as the deflection bends the linear structure away from the joint's:
+        // the start grown from the two-mass too, the lower cost kept ([`grow::grow_backlash`])
+        let beat = res.as_ref().ok().map(|r| r.fit.ssr);
+        if let Some(g) = backlash_grown(est, req, &nl, two, (longest, beat)) {
+            if res.as_ref().map_or(true, |r| g.fit.ssr < r.fit.ssr) {
+                res = Ok(g);
+            }
+        }
+    }
+    let res = res?;
     let model = DrivenModel::of_fit(&res.fit);
     let scored = score_segments(parts, &model, val, req.options.segments)?;
     let mut warnings = res.warnings;
@@ -499,6 +513,28 @@ fn fit_and_score(
         scored,
         warnings,
     })
+}
+
+/// The backlash candidate `nl` fitted from the start grown from the linear two-mass (its
+/// values and lag [s], [`grow::grow_backlash`]); `None` when the growth or the fit fails,
+/// or the grown start's cost is not below `beat` (the usual fit's).
+fn backlash_grown(
+    est: &[IdData],
+    req: &DiagnoseRequest,
+    nl: &NlRequest,
+    (plant, lag): &(Vec<f64>, f64),
+    (longest, beat): (&IdData, Option<f64>),
+) -> Option<crate::ident::nonlinear::NlResult> {
+    let g = grow::grow_backlash(est, req.structure, req.r, (plant, *lag), &req.options.nl).ok()?;
+    if beat.is_some_and(|b| g.ssr >= b) {
+        return None;
+    }
+    let mut n = nl.clone();
+    n.effects = vec![g.backlash];
+    n.tau_c = g.tau_c;
+    n.linear = Some(g.plant.clone());
+    n.start = NlStart::Values(model_of(&n, longest).values(&g.plant, g.offset, 0.0));
+    identify_segments(est, &n).ok()
 }
 
 /// The nominal when its fit from the usual start (`failed` says why) fails: first started
@@ -520,6 +556,7 @@ fn recover_nominal(
         coulomb: None,
         coulomb_extra_mode: None,
         grown: None,
+        two_mass: None,
     };
     let mut why = vec![format!("from the frequency-domain start: {failed}")];
     match fit_and_score(est, val, parts, req, Vec::new(), &none, None) {
@@ -854,6 +891,9 @@ struct LinearStarts {
     /// when the motor sticks, the start grown in the time domain ([`grow`]), which every
     /// candidate with Coulomb friction takes instead of the above
     grown: Option<grow::Grown>,
+    /// the linear two-mass's values and lag [s] from the frequency-domain fit, from which
+    /// the backlash candidate is also grown ([`grow::grow_backlash`])
+    two_mass: Option<(Vec<f64>, f64)>,
 }
 
 /// The start of `structure` with an extra mode attached as `attach` says, from the
@@ -1124,7 +1164,19 @@ pub fn diagnose_segments(
             _ => None,
         },
         grown: None,
+        two_mass: None,
     };
+    if candidates.iter().any(|e| matches!(e, Effect::Backlash(_)))
+        && matches!(req.structure, Structure::TwoMass | Structure::ThreeMass)
+    {
+        starts.two_mass = linear_start_segments(
+            est[0],
+            1,
+            &NlRequest::new(Structure::TwoMass, req.r, Vec::new()),
+        )
+        .ok()
+        .map(|l| (l.values, l.tau_c));
+    }
     // stick-slip: the Coulomb candidates start from the structure grown in the time domain
     if let Some(level) = level {
         let share = grow::stick_share(&est_data, level);
