@@ -138,6 +138,45 @@ fn battery_extra_mode_default_and_larger() {
     check_extra_mode(1.5);
 }
 
+/// Diagnoses a bench case as drawn (`benches/diagnose.rs`): the three-mass joint `params`
+/// with the hidden `effects` under `controller` at `rms_rad` RMS (4 periods, noise seed
+/// `seed`), from the candidates `names`; the diagnosis and the true model's gap metric.
+fn bench_case(
+    params: crate::sim::JointParams,
+    effects: Vec<Effect>,
+    controller: crate::sim::ControllerConfig,
+    (rms_rad, seed): (f32, u64),
+    names: &[&str],
+) -> (Diagnosis, f64) {
+    let cfg = SimConfig {
+        plant: crate::sim::Plant {
+            kind: crate::model::spec::Structure::ThreeMass,
+            params,
+        },
+        effects,
+        controller,
+        ..SimConfig::default()
+    };
+    let exc = ExcitationConfig {
+        periods: 4,
+        rms_rad,
+        ..ExcitationConfig::paper_default()
+    };
+    let (est, val) = crate::test_support::est_val_captures(&cfg, &exc, seed);
+    let req = DiagnoseRequest {
+        r: params.r,
+        candidates: names.iter().filter_map(|n| candidate(n)).collect(),
+        ..DiagnoseRequest::default()
+    };
+    let d = diagnose(&[est], &val, &req).unwrap();
+    let true_fit = crate::test_support::true_fit(&cfg, &val);
+    eprintln!(
+        "{}; nominal {:.2} %, true model {true_fit:.2} %, {:.1} s",
+        d.verdict, d.fit_nominal_val, d.seconds
+    );
+    (d, true_fit)
+}
+
 /// Bench case 21 of `benches/diagnose.rs`: a backlash of 16.4 µrad on a three-mass joint
 /// at 0.0136 rad RMS, wider than the rms gearbox deflection the linear fit reads (8.8
 /// µrad); the linear structure bends away from the joint's (`J_a2` 21×), and from it the
@@ -146,7 +185,7 @@ fn battery_extra_mode_default_and_larger() {
 #[test]
 fn a_backlash_wider_than_the_linear_deflection_is_found() {
     use crate::model::effects::Backlash;
-    use crate::sim::{JointParams, Plant};
+    use crate::sim::{ControllerConfig, JointParams};
     let width = 1.6370324e-5;
     let params = JointParams {
         j_m: 1.071108388e-3,
@@ -159,36 +198,15 @@ fn a_backlash_wider_than_the_linear_deflection_is_found() {
         f_m: 2.036282476e-3,
         ..JointParams::default()
     };
-    let cfg = SimConfig {
-        plant: Plant {
-            kind: Structure::ThreeMass,
-            params,
-        },
-        effects: vec![Effect::Backlash(Backlash { width })],
-        controller: crate::sim::ControllerConfig {
+    let (d, _) = bench_case(
+        params,
+        vec![Effect::Backlash(Backlash { width })],
+        ControllerConfig {
             u_max: 1e3,
-            ..crate::sim::ControllerConfig::default()
+            ..ControllerConfig::default()
         },
-        ..SimConfig::default()
-    };
-    let exc = ExcitationConfig {
-        periods: 4,
-        rms_rad: 0.013617472,
-        ..ExcitationConfig::paper_default()
-    };
-    let (est, val) = crate::test_support::est_val_captures(&cfg, &exc, 521);
-    let req = DiagnoseRequest {
-        r: params.r,
-        candidates: ["backlash", "nonlinear_stiffness"]
-            .iter()
-            .filter_map(|n| Effect::default_by_name(n))
-            .collect(),
-        ..DiagnoseRequest::default()
-    };
-    let d = diagnose(&[est], &val, &req).unwrap();
-    eprintln!(
-        "best {} nominal {:.2} % -> {:.2} %, {:.1} s",
-        d.best, d.fit_nominal_val, d.fit_augmented_val, d.seconds
+        (0.013617472, 521),
+        &["backlash", "nonlinear_stiffness"],
     );
     assert_eq!(d.best, "backlash", "{}", d.verdict);
     let w = param(&d, "width");
@@ -224,11 +242,8 @@ fn one_estimation_capture_or_two_and_a_candidate_are_required() {
 /// motor sticks (the start grown in the time domain, [`crate::ident::nonlinear::grow`]) and
 /// where a single took a wrong basin.
 mod pairs {
-    use crate::diagnose::{candidate, diagnose, DiagnoseRequest};
     use crate::model::effects::{Attach, CoulombFriction, Effect, ExtraMode};
-    use crate::model::spec::Structure;
-    use crate::sim::{ControllerConfig, JointParams, Plant, SimConfig};
-    use jointid_core::excitation::ExcitationConfig;
+    use crate::sim::{ControllerConfig, JointParams};
 
     /// Diagnoses the three-mass joint `params` with the hidden `mode` and `friction` under
     /// `controller` at `rms_rad` RMS (4 periods, noise seed `seed`) from the Coulomb and
@@ -244,32 +259,13 @@ mod pairs {
         rms_rad: f32,
         seed: u64,
     ) {
-        let cfg = SimConfig {
-            plant: Plant {
-                kind: Structure::ThreeMass,
-                params,
-            },
-            effects: vec![Effect::ExtraMode(mode), Effect::CoulombFriction(friction)],
+        let (d, true_fit) = super::bench_case(
+            params,
+            vec![Effect::ExtraMode(mode), Effect::CoulombFriction(friction)],
             controller,
-            ..SimConfig::default()
-        };
-        let exc = ExcitationConfig {
-            periods: 4,
-            rms_rad,
-            ..ExcitationConfig::paper_default()
-        };
-        let (est, val) = crate::test_support::est_val_captures(&cfg, &exc, seed);
-        let req = DiagnoseRequest {
-            r: params.r,
-            candidates: ["coulomb_friction", "extra_mode"]
-                .iter()
-                .filter_map(|n| candidate(n))
-                .collect(),
-            ..DiagnoseRequest::default()
-        };
-        let d = diagnose(&[est], &val, &req).unwrap();
-        let true_fit = crate::test_support::true_fit(&cfg, &val);
-        eprintln!("{}; true model {true_fit:.2} %; {:?}", d.verdict, d.pair);
+            (rms_rad, seed),
+            &["coulomb_friction", "extra_mode"],
+        );
         assert_eq!(
             d.warnings.iter().any(|w| w.starts_with("the motor sticks")),
             sticks
@@ -436,8 +432,7 @@ mod pairs {
 /// backlash with the delay, as the stiffness was tried only with the leader.
 #[test]
 fn a_single_below_its_nominal_is_the_partner_of_the_second_single_too() {
-    use crate::model::spec::Structure;
-    use crate::sim::{ControllerConfig, JointParams, Plant};
+    use crate::sim::{ControllerConfig, JointParams};
     let params = JointParams {
         j_m: 9.628e-4,
         j_a1: 8.816,
@@ -449,40 +444,18 @@ fn a_single_below_its_nominal_is_the_partner_of_the_second_single_too() {
         f_m: 2.111e-3,
         ..JointParams::default()
     };
-    let cfg = SimConfig {
-        plant: Plant {
-            kind: Structure::ThreeMass,
-            params,
-        },
-        effects: vec![
+    let (d, _) = bench_case(
+        params,
+        vec![
             Effect::NonlinearStiffness(NonlinearStiffness { k3: 4.638e13 }),
             Effect::TimeDelay(TimeDelay { samples: 2.212 }),
         ],
-        controller: ControllerConfig {
+        ControllerConfig {
             u_max: 1e3,
             ..ControllerConfig::default()
         },
-        ..SimConfig::default()
-    };
-    let exc = ExcitationConfig {
-        periods: 4,
-        rms_rad: 0.05856,
-        ..ExcitationConfig::paper_default()
-    };
-    let (est, val) = crate::test_support::est_val_captures(&cfg, &exc, 536);
-    let req = DiagnoseRequest {
-        r: params.r,
-        candidates: ["backlash", "nonlinear_stiffness", "time_delay"]
-            .iter()
-            .filter_map(|n| candidate(n))
-            .collect(),
-        ..DiagnoseRequest::default()
-    };
-    let d = diagnose(&[est], &val, &req).unwrap();
-    eprintln!(
-        "{}; true model {:.2} %",
-        d.verdict,
-        crate::test_support::true_fit(&cfg, &val)
+        (0.05856, 536),
+        &["backlash", "nonlinear_stiffness", "time_delay"],
     );
     let mut named: Vec<&str> = d.best.split('+').collect();
     named.sort_unstable();
@@ -497,11 +470,8 @@ fn a_single_below_its_nominal_is_the_partner_of_the_second_single_too() {
 /// A torque ripple whose period the motor's travel does not cover twice: a torque against
 /// the angle, a stiffness to the ground over the travel.
 mod ripple {
-    use crate::diagnose::{candidate, diagnose, DiagnoseRequest};
     use crate::model::effects::{Effect, TorqueRipple};
-    use crate::model::spec::Structure;
-    use crate::sim::{ControllerConfig, JointParams, Plant, SimConfig};
-    use jointid_core::excitation::ExcitationConfig;
+    use crate::sim::{ControllerConfig, JointParams};
 
     /// Bench case 25 (`benches/diagnose.rs`, the values as drawn): order 72 at 0.064 rad
     /// RMS, the travel about 0.9 of its periods, under the soft tuning. Before, the answer
@@ -526,38 +496,19 @@ mod ripple {
             order: 72.0,
             phase: 0.5,
         };
-        let cfg = SimConfig {
-            plant: Plant {
-                kind: Structure::ThreeMass,
-                params,
-            },
-            effects: vec![Effect::TorqueRipple(truth)],
-            controller: ControllerConfig {
+        let (d, true_fit) = super::bench_case(
+            params,
+            vec![Effect::TorqueRipple(truth)],
+            ControllerConfig {
                 kp: 10.0,
                 kv: 0.1,
                 ti: 0.1,
                 u_max: 1e3,
                 ..ControllerConfig::default()
             },
-            ..SimConfig::default()
-        };
-        let exc = ExcitationConfig {
-            periods: 4,
-            rms_rad: 0.06426,
-            ..ExcitationConfig::paper_default()
-        };
-        let (est, val) = crate::test_support::est_val_captures(&cfg, &exc, 525);
-        let req = DiagnoseRequest {
-            r: params.r,
-            candidates: ["torque_ripple", "time_delay", "extra_mode"]
-                .iter()
-                .filter_map(|n| candidate(n))
-                .collect(),
-            ..DiagnoseRequest::default()
-        };
-        let d = diagnose(&[est], &val, &req).unwrap();
-        let true_fit = crate::test_support::true_fit(&cfg, &val);
-        eprintln!("{}; true model {true_fit:.2} %", d.verdict);
+            (0.06426, 525),
+            &["torque_ripple", "time_delay", "extra_mode"],
+        );
         assert_eq!(d.best, "torque_ripple", "{}", d.verdict);
         assert!(
             (d.fit_augmented_val - true_fit).abs() < 3.0,
