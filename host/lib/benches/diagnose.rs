@@ -19,13 +19,14 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use jointid::data::{Dataset, ExcitationConfig};
+use jointid::diagnose::metric::true_fit;
 use jointid::diagnose::{all_candidates, diagnose, DiagnoseRequest, Diagnosis};
 use jointid::ident::linalg::GaussRng;
 use jointid::ident::nonlinear::{identify, NlRequest};
 use jointid::model::effects::{Effect, EFFECT_NAMES};
 use jointid::model::spec::Structure;
 use jointid::sim::{ControllerConfig, JointParams, Plant, SimConfig};
-use jointid::test_support::{est_val_captures, random_joint, true_fit};
+use jointid::test_support::{est_val_captures, random_joint};
 
 /// One case of the battery.
 struct Case {

@@ -518,6 +518,24 @@ pub fn segment_gain(better: &[f64], base: &[f64]) -> (f64, f64) {
     (mean, (var / k).sqrt())
 }
 
+/// The gap metric of the simulated joint `cfg` itself (its plant, effects and current-loop
+/// lag) on its validation capture `val`, with the diagnosis's default band and settling
+/// skip: what a diagnosis that found the truth would score [%]; NaN when it does not
+/// simulate.
+pub fn true_fit(cfg: &crate::sim::SimConfig, val: &crate::data::Dataset) -> f64 {
+    let opts = super::DiagnoseOptions::default();
+    let skip = ((opts.skip_s / val.data.ts).round() as usize).min(val.data.len() / 4);
+    let model = DrivenModel {
+        plant: cfg.plant,
+        effects: cfg.effects.clone(),
+        tau_c: cfg.controller.current_loop_tau,
+        offset: 0.0,
+    };
+    Measured::new(&val.data, opts.band_hz, skip)
+        .score(&model, &val.data, 1)
+        .map_or(f64::NAN, |s| s.fit)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -169,7 +169,7 @@ fn bench_case(
         ..DiagnoseRequest::default()
     };
     let d = diagnose(&[est], &val, &req).unwrap();
-    let true_fit = crate::test_support::true_fit(&cfg, &val);
+    let true_fit = crate::diagnose::metric::true_fit(&cfg, &val);
     eprintln!(
         "{}; nominal {:.2} %, true model {true_fit:.2} %, {:.1} s",
         d.verdict, d.fit_nominal_val, d.seconds

@@ -176,25 +176,6 @@ pub fn random_joint(
     (p, controller, rms)
 }
 
-/// The gap metric of the simulated joint `cfg` itself (its plant, effects and current-loop
-/// lag) on its validation capture `val`, with the diagnosis's default band and settling
-/// skip: what a diagnosis that found the truth would score [%]; NaN when it does not
-/// simulate.
-pub fn true_fit(cfg: &crate::sim::SimConfig, val: &crate::data::Dataset) -> f64 {
-    use crate::diagnose::metric::{DrivenModel, Measured};
-    let opts = crate::diagnose::DiagnoseOptions::default();
-    let skip = ((opts.skip_s / val.data.ts).round() as usize).min(val.data.len() / 4);
-    let model = DrivenModel {
-        plant: cfg.plant,
-        effects: cfg.effects.clone(),
-        tau_c: cfg.controller.current_loop_tau,
-        offset: 0.0,
-    };
-    Measured::new(&val.data, opts.band_hz, skip)
-        .score(&model, &val.data, 1)
-        .map_or(f64::NAN, |s| s.fit)
-}
-
 /// `shared/data/<path>`: the first ancestor of this crate that holds `shared/data` (the
 /// repository sits beside `shared/`, the reference data the tests and benches read).
 ///
