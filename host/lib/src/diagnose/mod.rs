@@ -83,7 +83,7 @@ use crate::data::{Dataset, IdData};
 use crate::ident::frf::analyze_segments;
 use crate::ident::frf::{amplitude_trend, analyze_dataset, AmplitudeTrend, FrfAnalysis, Linearity};
 use crate::ident::grey_box::DEFAULT_GEAR_RATIO;
-use crate::ident::nonlinear::grow;
+use crate::ident::nonlinear::{grow, ripple};
 use crate::ident::nonlinear::{
     identify_segments, linear_start_segments, model_of, NlFit, NlOptions, NlRequest, NlStart, Owner,
 };
@@ -675,27 +675,47 @@ fn parallel<T: Send, J: Sync>(jobs: &[J], threads: usize, f: impl Fn(&J) -> T + 
         .collect()
 }
 
+/// The effects' fitted parameters of a fit (keys `effect.key` when `prefix`), with a torque
+/// ripple's order, found by its search and held in the fit (standard deviation 0; none
+/// when the search found no order and the ripple was held at amplitude 0).
 fn effect_parameters(fit: &NlFit, prefix: bool) -> BTreeMap<String, ParamValue> {
+    let key = |e: &Effect, name: &str| {
+        if prefix {
+            format!("{}.{name}", e.name())
+        } else {
+            name.to_string()
+        }
+    };
+    let orders = fit.model.effects.iter().filter_map(|e| match e {
+        Effect::TorqueRipple(r) if r.amplitude != 0.0 => Some((
+            key(e, "order"),
+            ParamValue {
+                value: r.order,
+                std: 0.0,
+                unit: e
+                    .bounds()
+                    .iter()
+                    .find(|b| b.0 == "order")
+                    .map_or("", |b| b.3)
+                    .into(),
+            },
+        )),
+        _ => None,
+    });
     fit.params
         .iter()
         .filter_map(|p| match p.owner {
-            Owner::Effect(i) => {
-                let key = if prefix {
-                    format!("{}.{}", fit.model.effects[i].name(), p.name)
-                } else {
-                    p.name.to_string()
-                };
-                Some((
-                    key,
-                    ParamValue {
-                        value: p.value,
-                        std: p.std,
-                        unit: p.unit.to_string(),
-                    },
-                ))
-            }
+            Owner::Effect(i) => Some((
+                key(&fit.model.effects[i], p.name),
+                ParamValue {
+                    value: p.value,
+                    std: p.std,
+                    unit: p.unit.to_string(),
+                },
+            )),
             _ => None,
         })
+        .chain(orders)
         .collect()
 }
 
@@ -721,8 +741,20 @@ fn rms(x: &[f64]) -> f64 {
     (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt()
 }
 
-/// The evidence for `effect` in the residual's location, in words.
-fn evidence(effect: &str, w: &Where) -> String {
+/// A fit's torque ripple: its order and the periods of it the motor's travel on the
+/// longest of `est` covers; `None` without one, or held at amplitude 0 (no order found).
+fn ripple_travel(fit: &NlFit, est: &[IdData]) -> Option<(f64, f64)> {
+    let order = fit.model.effects.iter().find_map(|e| match e {
+        Effect::TorqueRipple(r) if r.amplitude != 0.0 => Some(r.order),
+        _ => None,
+    })?;
+    let longest = est.iter().max_by_key(|d| d.len())?;
+    Some((order, ripple::travel_periods(longest, order)))
+}
+
+/// The evidence for `effect` in the residual's location, in words; `fitted`: the fitted
+/// ripple's order and the periods of it the travel covers ([`ripple_travel`]).
+fn evidence(effect: &str, w: &Where, fitted: Option<(f64, f64)>) -> String {
     let times = |r: &locate::Region, what: &str| {
         if r.energy_ratio.is_finite() {
             format!("residual {:.1}× the average {what}", r.energy_ratio)
@@ -766,11 +798,26 @@ fn evidence(effect: &str, w: &Where) -> String {
             }
             s
         }
-        "torque_ripple" => format!(
-            "a pattern of order {} per motor revolution explains {:.1} % of the residual",
-            r.angle_pattern.order,
-            100.0 * r.angle_pattern.share
-        ),
+        "torque_ripple" => {
+            let pattern = format!(
+                "the residual's strongest pattern against the motor angle, order {} per \
+                 revolution, explains {:.1} % of it",
+                r.angle_pattern.order,
+                100.0 * r.angle_pattern.share
+            );
+            match fitted {
+                Some((n, p)) if p < ripple::MIN_PERIODS => format!(
+                    "the fitted ripple, order {n:.0}, spans {p:.2} of its periods over the \
+                     motor's travel: a torque against the angle whose order these data do not \
+                     fix; {pattern}"
+                ),
+                Some((n, p)) => format!(
+                    "the fitted ripple has order {n:.0} per revolution ({p:.1} periods over \
+                     the motor's travel); {pattern}"
+                ),
+                None => pattern,
+            }
+        }
         "extra_mode" => band(top_band),
         "time_delay" => band(w.bands_hz.last()),
         _ => String::new(),
@@ -1370,7 +1417,7 @@ pub fn diagnose_segments(
                 }
                 let reason = format!(
                     "{}; validation FIT {:+.1} ± {:.1} points{}",
-                    evidence(effect.name(), &location),
+                    evidence(effect.name(), &location, ripple_travel(&f.fit, &est_data)),
                     score,
                     score_se,
                     if significant {
@@ -1626,7 +1673,11 @@ pub fn diagnose_segments(
                                 "{}; validation FIT {score:+.1} ± {score_se:.1} points, refitted \
                                  from the values of the pair {}, to which it leaves {gain:+.1} \
                                  ± {se:.1} points",
-                                evidence(effect.name(), &location),
+                                evidence(
+                                    effect.name(),
+                                    &location,
+                                    ripple_travel(&f.fit, &est_data)
+                                ),
                                 p.name
                             ),
                         ),

@@ -467,8 +467,7 @@ pub fn grow_backlash(
     let model = super::model_of(&req, data);
     // [J_m, J_a1, k_g, d_g, f_m]
     let kg = linear.get(2).copied().unwrap_or(0.0);
-    let u_rms = (data.u.iter().map(|u| u * u).sum::<f64>() / data.u.len().max(1) as f64).sqrt();
-    let delta = u_rms / r / kg;
+    let delta = super::init::torque_rms(data) / r / kg;
     if !(delta > 0.0 && delta.is_finite()) {
         return Err("no gearbox deflection on the linear two-mass".into());
     }

@@ -232,7 +232,7 @@ pub fn automatic_start_with(
     };
     // a positive floor keeps the log-parameters finite when friction is not seen
     let fv_used = fv_used.max(1e-6 * j_used);
-    let u_rms = (data.u.iter().map(|u| u * u).sum::<f64>() / data.u.len() as f64).sqrt();
+    let u_rms = torque_rms(data);
     let fc_used = if fc > 0.0 { fc } else { 0.01 * u_rms };
 
     // step 3: flexibility, linear; every start the data offer (the caller's linear fit, the
@@ -248,13 +248,7 @@ pub fn automatic_start_with(
                 data, model, j_used, fv_used, fc_used, offset, asym,
             ));
         }
-        s => {
-            if let Ok((mut feat, _)) = grey_box::features(data, Output::Angle, s.masses(), 0, 0.0) {
-                feat.j_total = j_used;
-                feat.f_m = fv_used;
-                plants.push(grey_box::initial_values(s, model.r, &feat));
-            }
-        }
+        s => plants.extend(modal_start(data, s, model.r, (j_used, fv_used))),
     }
     if plants.is_empty() {
         return Err(NlError::Data(
@@ -309,7 +303,7 @@ pub fn automatic_start_with(
                 r.order = f.order.map_or(0.0, f64::from);
                 r.amplitude = f.amplitude;
                 r.phase = f.phase;
-                if f.short {
+                if f.short() {
                     short_warning = Some(warnings.len());
                     warnings.push(short_order_warning(f));
                 }
@@ -318,16 +312,11 @@ pub fn automatic_start_with(
                 // ground, which bends every start from the raw torque); its spring is only
                 // brought to what the simulation integrates, without a word, as a start
                 // among others
-                if f.short && model.structure != Structure::Rigid {
+                if f.short() && model.structure != Structure::Rigid {
                     let comp = super::ripple::compensated(data, r);
-                    if let Ok((mut feat, _)) =
-                        grey_box::features(&comp, Output::Angle, model.structure.masses(), 0, 0.0)
-                    {
-                        feat.j_total = j_used;
-                        feat.f_m = fv_used;
-                        let mut p = grey_box::initial_values(model.structure, model.r, &feat);
-                        let h = data.ts / model.substeps.max(1) as f64;
-                        resolvable(model.structure, model.r, &mut p, h);
+                    let s = model.structure;
+                    if let Some(mut p) = modal_start(&comp, s, model.r, (j_used, fv_used)) {
+                        resolvable(s, model.r, &mut p, h);
                         plants.push(p);
                     }
                 }
@@ -468,7 +457,7 @@ pub fn automatic_start_with(
         let v = m.values(&lin_plant, lin_offset, lin.get("v0").unwrap_or(0.0));
         if let Some(f) = super::ripple::search_order(data, &m, &v)? {
             if let Some(n) = f.order {
-                let text = f.short.then(|| short_order_warning(&f));
+                let text = f.short().then(|| short_order_warning(&f));
                 match (short_warning, text) {
                     (Some(i), Some(t)) => warnings[i] = t,
                     (Some(i), None) => {
@@ -592,7 +581,7 @@ pub fn automatic_start_with(
 /// The step of an order search (`on`: what it searched on).
 fn order_step(found: Option<&super::ripple::OrderSearch>, on: &str) -> Step {
     match found {
-        Some(f) if f.short => Step {
+        Some(f) if f.short() => Step {
             name: "torque_ripple order".into(),
             values: vec![
                 ("order".into(), f.order.map_or(0.0, f64::from), "-"),
@@ -690,6 +679,28 @@ fn short_order_warning(f: &super::ripple::OrderSearch) -> String {
         f.order.unwrap_or(f.best),
         f.periods
     )
+}
+
+/// RMS of the measured torque of `data` [N·m]: with the gearbox stiffness, the scale of
+/// the deflection (`u_rms / r / k_g`) the effects' grids are laid on.
+pub(crate) fn torque_rms(data: &IdData) -> f64 {
+    (data.u.iter().map(|u| u * u).sum::<f64>() / data.u.len().max(1) as f64).sqrt()
+}
+
+/// The linear start of `structure` (gear ratio `r`) from the modal features of the
+/// subspace model of `data`, with the rigid body's inertia and the motor's viscous
+/// friction of steps 1–2 (`j_total` [kg·m²], `f_m` [N·m·s/rad]); `None` when the data
+/// give no features.
+fn modal_start(
+    data: &IdData,
+    structure: Structure,
+    r: f64,
+    (j_total, f_m): (f64, f64),
+) -> Option<Vec<f64>> {
+    let (mut feat, _) = grey_box::features(data, Output::Angle, structure.masses(), 0, 0.0).ok()?;
+    feat.j_total = j_total;
+    feat.f_m = f_m;
+    Some(grey_box::initial_values(structure, r, &feat))
 }
 
 /// The warning when the data show no ripple order.

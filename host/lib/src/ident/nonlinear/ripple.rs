@@ -81,10 +81,6 @@ pub struct OrderSearch {
     /// no order below the candidates ([`OrderSearch::below`]) beats it, else that order
     /// below ([`OrderSearch::short`])
     pub order: Option<u32>,
-    /// whether the order found lies below the candidates: the travel covers fewer than
-    /// [`MIN_PERIODS`] of its periods, so it stands for a torque against the angle over the
-    /// travel rather than a measured order (module documentation, short travel)
-    pub short: bool,
     /// the candidate whose ripple lowers the cost most (with no candidates, the order
     /// searched that does)
     pub best: u32,
@@ -117,6 +113,15 @@ pub struct OrderSearch {
     pub drops: Vec<(u32, f64)>,
 }
 
+impl OrderSearch {
+    /// Whether the order found lies below the candidates: the travel covers fewer than
+    /// [`MIN_PERIODS`] of its periods, so it stands for a torque against the angle over the
+    /// travel rather than a measured order (module documentation, short travel).
+    pub fn short(&self) -> bool {
+        self.below.is_some()
+    }
+}
+
 /// The candidate orders for `data` ([`MIN_PERIODS`], [`NYQUIST_SHARE`], [`MAX_ORDER`]);
 /// `None` when no order qualifies.
 pub fn order_range(data: &IdData) -> Option<(u32, u32)> {
@@ -146,6 +151,12 @@ fn orders_covering(data: &IdData, periods: f64) -> Option<(u32, u32)> {
 /// The motor's travel: the 1st to the 99th percentile of the measured angle [rad].
 fn span(data: &IdData) -> f64 {
     percentile(&data.y, 0.99) - percentile(&data.y, 0.01)
+}
+
+/// Periods of a ripple of `order` per motor revolution the motor's travel on `data`
+/// covers [-] (below [`MIN_PERIODS`] the data do not fix the order).
+pub fn travel_periods(data: &IdData, order: f64) -> f64 {
+    span(data) * order / std::f64::consts::TAU
 }
 
 /// The `q` quantile of `x` (nearest rank).
@@ -308,10 +319,8 @@ pub fn search_order(
         None if candidate_found => (Some(best), drop, ab),
         None => (None, drop, ab),
     };
-    let travel_periods = |n: u32| travel * n as f64 / std::f64::consts::TAU;
     Ok(Some(OrderSearch {
         order,
-        short: below_best.is_some(),
         coherence: best_coherence,
         best,
         z,
@@ -320,7 +329,7 @@ pub fn search_order(
         phase: ab[1].atan2(ab[0]),
         range,
         searched: (floor, hi),
-        periods: travel_periods(order.unwrap_or(best)),
+        periods: travel_periods(data, f64::from(order.unwrap_or(best))),
         below: below_best.map(|(n, z, _, _)| (n, z)),
         drops: drops.iter().map(|d| (d.0, d.1)).collect(),
     }))
