@@ -337,13 +337,7 @@ pub fn grow_with(est: &[IdData], seed: &Seed) -> Result<Grown, String> {
             ..request(s, vec![mode, coulomb_of(from)], Some(from))
         };
         let offset = from.get("offset").unwrap_or(0.0);
-        let f = fit_with_mode(est, &req, &from.plant, offset)?;
-        // the grid judged its points unfitted: a race over the mode's frequency, kept
-        // when it ends lower
-        let f = match race_mode(est, &req, &from.plant, offset, &f) {
-            Some(g) if g.ssr < f.ssr => g,
-            _ => f,
-        };
+        let f = fit_with_mode_raced(est, &req, &from.plant, offset)?;
         let Some(Effect::ExtraMode(x)) = f.model.effects.first().copied() else {
             return Err(format!("{name}: the fit lost its extra mode"));
         };
@@ -684,6 +678,24 @@ pub fn fit_with_mode(
         }
     }
     kept.ok_or(last)
+}
+
+/// [`fit_with_mode`], and a race over the mode's frequency ([`race_mode`]) kept when it
+/// ends lower: the grid judges its points unfitted.
+///
+/// # Errors
+/// As [`fit_with_mode`].
+pub fn fit_with_mode_raced(
+    est: &[IdData],
+    req: &NlRequest,
+    plant: &[f64],
+    offset: f64,
+) -> Result<NlFit, String> {
+    let f = fit_with_mode(est, req, plant, offset)?;
+    Ok(match race_mode(est, req, plant, offset, &f) {
+        Some(g) if g.ssr < f.ssr => g,
+        _ => f,
+    })
 }
 
 /// Frequencies of the grid over an added mode (the arm held still) [Hz]: 3 to 60 Hz, 9
