@@ -563,5 +563,17 @@ mod ripple {
             "{:?}",
             c.warnings
         );
+        // the order the search found is reported with the fitted values, and the reason
+        // says that the travel does not fix it
+        let order = c.parameters["order"].value;
+        assert!(
+            order >= 1.0 && c.parameters["order"].std == 0.0,
+            "order {order}"
+        );
+        assert!(
+            c.reason.contains(&format!("order {order:.0}")) && c.reason.contains("do not fix"),
+            "{}",
+            c.reason
+        );
     }
 }

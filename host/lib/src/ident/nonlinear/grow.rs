@@ -267,7 +267,7 @@ pub fn grow_with(est: &[IdData], seed: &Seed) -> Result<Grown, String> {
         .chain(&seed.given)
         .any(|(n, _)| n == "fs" || n == "v_stribeck");
     let mut level_alone = false;
-    if has_bump(&seed.law) && !shape_held {
+    if has_bump(&seed.law) && seed.law.fc > 0.0 && !shape_held {
         let pure = CoulombFriction {
             fs: seed.law.fc,
             ..seed.law
