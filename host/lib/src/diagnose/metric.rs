@@ -524,7 +524,7 @@ pub fn segment_gain(better: &[f64], base: &[f64]) -> (f64, f64) {
 /// simulate.
 pub fn true_fit(cfg: &crate::sim::SimConfig, val: &crate::data::Dataset) -> f64 {
     let opts = super::DiagnoseOptions::default();
-    let skip = ((opts.skip_s / val.data.ts).round() as usize).min(val.data.len() / 4);
+    let skip = opts.skip_of(&val.data);
     let model = DrivenModel {
         plant: cfg.plant,
         effects: cfg.effects.clone(),
