@@ -762,6 +762,15 @@ fn parallel<T: Send, J: Sync>(jobs: &[J], threads: usize, f: impl Fn(&J) -> T + 
         .collect()
 }
 
+/// The order [periods per revolution] of a torque ripple the search found: none held at
+/// amplitude 0, whose order was never fitted.
+fn found_order(e: &Effect) -> Option<f64> {
+    match e {
+        Effect::TorqueRipple(r) if r.amplitude != 0.0 => Some(r.order),
+        _ => None,
+    }
+}
+
 /// The effects' fitted parameters of a fit (keys `effect.key` when `prefix`), with a torque
 /// ripple's order, found by its search and held in the fit (standard deviation 0; none
 /// when the search found no order and the ripple was held at amplitude 0).
@@ -773,21 +782,22 @@ fn effect_parameters(fit: &NlFit, prefix: bool) -> BTreeMap<String, ParamValue> 
             name.to_string()
         }
     };
-    let orders = fit.model.effects.iter().filter_map(|e| match e {
-        Effect::TorqueRipple(r) if r.amplitude != 0.0 => Some((
-            key(e, "order"),
-            ParamValue {
-                value: r.order,
-                std: 0.0,
-                unit: e
-                    .bounds()
-                    .iter()
-                    .find(|b| b.0 == "order")
-                    .map_or("", |b| b.3)
-                    .into(),
-            },
-        )),
-        _ => None,
+    let orders = fit.model.effects.iter().filter_map(|e| {
+        found_order(e).map(|order| {
+            (
+                key(e, "order"),
+                ParamValue {
+                    value: order,
+                    std: 0.0,
+                    unit: e
+                        .bounds()
+                        .iter()
+                        .find(|b| b.0 == "order")
+                        .map_or("", |b| b.3)
+                        .into(),
+                },
+            )
+        })
     });
     fit.params
         .iter()
@@ -831,10 +841,7 @@ fn rms(x: &[f64]) -> f64 {
 /// A fit's torque ripple: its order and the periods of it the motor's travel on the
 /// longest of `est` covers; `None` without one, or held at amplitude 0 (no order found).
 fn ripple_travel(fit: &NlFit, est: &[IdData]) -> Option<(f64, f64)> {
-    let order = fit.model.effects.iter().find_map(|e| match e {
-        Effect::TorqueRipple(r) if r.amplitude != 0.0 => Some(r.order),
-        _ => None,
-    })?;
+    let order = fit.model.effects.iter().find_map(found_order)?;
     let longest = est.iter().max_by_key(|d| d.len())?;
     Some((order, ripple::travel_periods(longest, order)))
 }
