@@ -722,12 +722,17 @@ fn scored_candidate(
 /// The share of the nominal's odd-line residual a model removes, in words (empty when not
 /// read).
 fn odd_words(share: Option<f64>) -> String {
-    share.map_or(String::new(), |s| {
-        format!(
+    match share {
+        None => String::new(),
+        Some(s) if s < -0.005 => format!(
+            "; it leaves {:.0} % more than the nominal's residual at the non-excited odd lines",
+            -100.0 * s
+        ),
+        Some(s) => format!(
             "; it removes {:.0} % of the nominal's residual at the non-excited odd lines",
-            100.0 * s
-        )
-    })
+            100.0 * s.max(0.0)
+        ),
+    }
 }
 
 /// A candidate's place in the ranking: its score, a failed fit last.
@@ -1933,11 +1938,15 @@ pub fn diagnose_segments(
                  candidate's warnings)"
             )),
             Some(share) if share < locate::ODD_EXPLAINED_DOUBT => warnings.push(format!(
-                "{left}; {best} removes only {:.0} % of it, so {best} does not explain the \
-                 distortion and the answer is doubtful: the effect that makes it may be one \
-                 whose simulation from the measured torque cannot be scored (a strongly \
-                 stiffening spring, chaotic at this amplitude) or is not among the candidates",
-                100.0 * share
+                "{left}; {best} removes {} of it, so {best} does not explain the distortion \
+                 and the answer is doubtful: the effect that makes it may be one whose \
+                 simulation from the measured torque cannot be scored (a strongly stiffening \
+                 spring, chaotic at this amplitude) or is not among the candidates",
+                if share > 0.005 {
+                    format!("only {:.0} %", 100.0 * share)
+                } else {
+                    "none".into()
+                }
             )),
             _ => {}
         }
