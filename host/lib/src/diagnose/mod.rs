@@ -385,8 +385,11 @@ pub struct Diagnosis {
 const SENSITIVE: &str = "sensitive to its start";
 
 /// The nominal's frequency-domain start replaces its time-domain fit when it scores this
-/// many FIT points higher in-sample ([`nominal_at_start`]).
-const NOMINAL_START_MARGIN: f64 = 1.0;
+/// many FIT points higher in-sample ([`nominal_at_start`]): a fit that went elsewhere, not
+/// one whose output-error cost weighs the record a little differently from the metric
+/// (EMPS, measured: the rigid fit 94.4 % in-sample, its start 96.2 %, with the Coulomb
+/// friction the linear model bends to; bench case 88: 65.1 % against 84.1 %).
+const NOMINAL_START_MARGIN: f64 = 5.0;
 
 /// One fitted model with its score.
 struct Fitted {
@@ -1400,10 +1403,11 @@ pub fn diagnose_segments(
         Some((start, at_start, after)) if at_start > after + NOMINAL_START_MARGIN => {
             warnings.push(format!(
                 "nominal: the time-domain fit ended at an in-sample band-passed velocity FIT of \
-                 {after:.1} %, below its frequency-domain start's {at_start:.1} %: it followed \
-                 the slow disturbance the position loop rejects, not the joint; the nominal is \
-                 the frequency-domain fit, and the candidates, fitted in the time domain, may \
-                 score below it for the same reason"
+                 {after:.1} %, far below its frequency-domain start's {at_start:.1} %: its \
+                 output-error cost followed what the metric does not weigh (at a small \
+                 amplitude, the slow disturbance the position loop rejects), not the joint; \
+                 the nominal is the frequency-domain fit, and the candidates, fitted in the \
+                 time domain, may score below it for the same reason"
             ));
             start
         }
