@@ -10,7 +10,9 @@
 //!    fit ([`crate::ident::nonlinear::linear_start`]) when the capture is periodic. When
 //!    that fit fails, the nominal is started automatically in the time domain, then from
 //!    the structure of each candidate's fit (the best in-sample first), and a warning says
-//!    so; the diagnosis stops only when no start fits.
+//!    so; the diagnosis stops only when no start fits. When the fit ends far below its
+//!    frequency-domain start on the estimation data's gap metric (its output-error cost
+//!    followed a slow disturbance), the start is the nominal (`nominal_at_start`).
 //! 2. **Gap metric** ([`metric::METRIC_NAME`]): the toolbox FIT of the band-passed motor
 //!    velocity (1–150 Hz) on the validation capture, the model simulated with the
 //!    simulator's exact laws from the measured torque plus a slow torque input estimated
@@ -54,7 +56,10 @@
 //! 5. **Where** ([`locate`]): the nominal's validation residual by operating region and
 //!    frequency band; the odd/even non-excited line levels of periodic captures
 //!    ([`crate::ident::frf`]); with two estimation captures, how distortion and gap change
-//!    with amplitude ([`crate::ident::frf::amplitude_trend`]).
+//!    with amplitude ([`crate::ident::frf::amplitude_trend`]). On a periodic validation
+//!    capture, the share of the nominal's residual at the non-excited odd lines each model
+//!    removes ([`locate::odd_explained`]): an answer that removes little of odd distortion
+//!    standing well above the noise does not explain it, and a warning says so.
 //!
 //! The second estimation capture serves the amplitude analysis only; the fits use the
 //! first.
