@@ -1897,7 +1897,7 @@ pub fn diagnose_segments(
         None => None,
     };
 
-    let verdict = if best == "none" {
+    let mut verdict = if best == "none" {
         format!(
             "no candidate effect closes a significant part of the gap: the nominal {} reaches \
              {nom_fit:.1} % (band-passed motor-velocity FIT on the validation data) and no \
@@ -1946,17 +1946,25 @@ pub fn diagnose_segments(
                  is not among the candidates, or its fit or its simulation failed (see each \
                  candidate's warnings)"
             )),
-            Some(share) if share < locate::ODD_EXPLAINED_DOUBT => warnings.push(format!(
-                "{left}; {best} removes {} of it, so {best} does not explain the distortion \
-                 and the answer is doubtful: the effect that makes it may be one whose \
-                 simulation from the measured torque cannot be scored (a strongly stiffening \
-                 spring, chaotic at this amplitude) or is not among the candidates",
-                if share > 0.005 {
+            Some(share) if share < locate::ODD_EXPLAINED_DOUBT => {
+                let removed = if share > 0.005 {
                     format!("only {:.0} %", 100.0 * share)
                 } else {
                     "none".into()
-                }
-            )),
+                };
+                warnings.push(format!(
+                    "{left}; {best} removes {removed} of it, so {best} does not explain the \
+                     distortion and the answer is doubtful: the effect that makes it may be \
+                     one whose simulation from the measured torque cannot be scored (a \
+                     strongly stiffening spring, chaotic at this amplitude) or is not among \
+                     the candidates"
+                ));
+                // the doubt goes with the verdict, where a reader of the top line sees it
+                verdict = format!(
+                    "{verdict}; doubtful: {best} removes {removed} of the odd nonlinear \
+                     distortion the nominal leaves (see the notes)"
+                );
+            }
             _ => {}
         }
     }

@@ -300,6 +300,7 @@ fn an_answer_that_leaves_the_odd_distortion_is_called_doubtful() {
     let told = if d.best == "none" {
         "no candidate removes it significantly"
     } else {
+        assert!(d.verdict.contains("doubtful"), "{}", d.verdict);
         "does not explain the distortion"
     };
     assert!(
