@@ -1714,6 +1714,7 @@ pub fn diagnose_segments(
                     Ok(f) => {
                         let (score, score_se, significant) =
                             judge(&f.scored.segments, &lead.scored.segments);
+                        let odd = odd_of(&f);
                         let cand = scored_candidate(
                             &name,
                             &f,
@@ -1731,9 +1732,9 @@ pub fn diagnose_segments(
                                     } else {
                                         " (not significant)"
                                     },
-                                    odd_words(odd_of(&f))
+                                    odd_words(odd)
                                 ),
-                                odd_of(&f),
+                                odd,
                             ),
                         );
                         // pairs of different leaders compare by their validation FIT,
@@ -1808,6 +1809,7 @@ pub fn diagnose_segments(
                     effect.name()
                 ));
                 if singles[i].0.score.is_nan() || singles[i].0.score < score {
+                    let odd = odd_of(&f);
                     singles[i] = (
                         scored_candidate(
                             effect.name(),
@@ -1825,9 +1827,9 @@ pub fn diagnose_segments(
                                         ripple_travel(&f.fit, &est_data)
                                     ),
                                     p.name,
-                                    odd_words(odd_of(&f))
+                                    odd_words(odd)
                                 ),
-                                odd_of(&f),
+                                odd,
                             ),
                         ),
                         Some(f),
