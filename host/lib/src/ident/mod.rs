@@ -6,6 +6,7 @@
 //!
 //! Nothing here does IO.
 
+pub mod controller;
 pub mod fit;
 pub mod frf;
 pub mod frf_fit;

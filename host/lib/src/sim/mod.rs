@@ -801,6 +801,52 @@ impl Simulation {
     /// [`SimError::BadReference`] for a reference that is not finite,
     /// [`SimError::NonFinite`] naming the first state or signal that is not finite.
     pub fn step(&mut self, r: f64) -> Result<Sample<'_>, SimError> {
+        let mut controller = self.controller.clone();
+        let signals = self.advance(r, 0.0, |meas| controller.step(r, meas))?;
+        self.controller = controller;
+        Ok(self.sample_of(signals))
+    }
+
+    /// [`Self::step`] with the torque reference from `law` (measured motor angle [rad] →
+    /// `u` [N·m]) in place of the configured controller, and a constant torque `load`
+    /// [N·m] added to the disturbance on the motor: a model run in the loop of a
+    /// controller identified from a record ([`crate::ident::controller`]).
+    ///
+    /// # Errors
+    /// As [`Self::step`].
+    pub fn step_with(
+        &mut self,
+        r: f64,
+        load: f64,
+        law: impl FnOnce(f64) -> f64,
+    ) -> Result<Sample<'_>, SimError> {
+        let signals = self.advance(r, load, law)?;
+        Ok(self.sample_of(signals))
+    }
+
+    /// The sample of the signals [`Self::advance`] returned, with the state before it.
+    fn sample_of(&self, s: Signals) -> Sample<'_> {
+        Sample {
+            k: s.k,
+            t_s: s.k as f64 * self.ts,
+            theta_ref: s.r,
+            u: s.u_rec,
+            theta_m: s.meas,
+            u_true: s.u,
+            tau_motor: self.before[2 * self.nb],
+            disturbance: s.w,
+            states: &self.before[..self.nx],
+        }
+    }
+
+    /// Sensors, `law`, then the plant propagated to `(k + 1) T` with `load` added to the
+    /// disturbance.
+    fn advance(
+        &mut self,
+        r: f64,
+        load: f64,
+        law: impl FnOnce(f64) -> f64,
+    ) -> Result<Signals, SimError> {
         let k = self.k;
         if !r.is_finite() {
             return Err(SimError::BadReference { index: k, value: r });
@@ -808,7 +854,7 @@ impl Simulation {
         let nx = self.nx;
         let x = &mut self.x;
         let meas = self.sensors.measure_theta(x[0]);
-        let u = self.controller.step(r, meas);
+        let u = law(meas);
         let u_rec = self.sensors.measure_u(u);
         let bad_state = x[..nx]
             .iter()
@@ -830,7 +876,7 @@ impl Simulation {
                 effects: self.effects.clone(),
             });
         }
-        let w = self.sensors.next_disturbance();
+        let w = self.sensors.next_disturbance() + load;
         self.before = *x;
         self.past_u[self.head] = u;
         self.head = (self.head + 1) % self.past_u.len();
@@ -839,18 +885,25 @@ impl Simulation {
         self.stepper
             .sample(&self.a, &mut self.x, &mut self.mode, u_old, u_new, w);
         self.k += 1;
-        Ok(Sample {
+        Ok(Signals {
             k,
-            t_s: k as f64 * self.ts,
-            theta_ref: r,
-            u: u_rec,
-            theta_m: meas,
-            u_true: u,
-            tau_motor: self.before[2 * self.nb],
-            disturbance: w,
-            states: &self.before[..nx],
+            r,
+            meas,
+            u,
+            u_rec,
+            w,
         })
     }
+}
+
+/// The signals of one simulated sample, before the state is attached.
+struct Signals {
+    k: usize,
+    r: f64,
+    meas: f64,
+    u: f64,
+    u_rec: f64,
+    w: f64,
 }
 
 /// What a streamed run leaves besides its samples.
