@@ -69,6 +69,7 @@
 //! simulates every validation segment from its own start and pools one sum of squares
 //! over them ([`metric::score_segments`]).
 
+pub mod in_loop;
 pub mod locate;
 pub mod metric;
 pub mod series;
@@ -931,6 +932,74 @@ fn evidence(effect: &str, w: &Where, fitted: Option<(f64, f64)>) -> String {
     }
 }
 
+/// Fits and scores one candidate model: nominal + effects, from a fit's values when given.
+type FitJob<'f> = &'f (dyn Fn(&(Vec<Effect>, Option<&NlFit>)) -> Result<Fitted, String> + Sync);
+
+/// The pair of the loop's best single `singles[0]` with the other single that gains most
+/// over it in the loop ([`in_loop`]), each other single significant there tried as its
+/// partner from the best's fit (fitted by `score`, judged by `judge` on the segments in the
+/// loop); `None` when no pair gains significantly.
+fn pair_in_loop(
+    singles: &[(Candidate, Option<Fitted>)],
+    l: &in_loop::InLoop,
+    (val, measured): (&Dataset, &Measured),
+    (score, judge): (FitJob<'_>, in_loop::Judge<'_>),
+    o: &DiagnoseOptions,
+) -> Option<(Candidate, Fitted)> {
+    let (Some(lead), true) = (singles.first()?.1.as_ref(), singles[0].0.significant) else {
+        return None;
+    };
+    let first = lead.fit.model.effects[0];
+    let jobs: Vec<(Vec<Effect>, Option<&NlFit>)> = singles[1..]
+        .iter()
+        .filter(|c| c.0.significant)
+        .filter_map(|c| c.1.as_ref())
+        .map(|p| (vec![first, p.fit.model.effects[0]], Some(&lead.fit)))
+        .collect();
+    if jobs.is_empty() {
+        return None;
+    }
+    let mut best: Option<(Candidate, Fitted)> = None;
+    for r in parallel(&jobs, o.threads, score) {
+        let Ok(f) = r else { continue };
+        let model = DrivenModel::of_fit(&f.fit);
+        let Ok((cs, odd)) = l
+            .scores
+            .score(measured, &model, val, (o.segments, o.settle_periods))
+        else {
+            continue;
+        };
+        let (gain, se, significant) = judge(&cs.segments, &l.best_segments);
+        if !significant
+            || cs.fit <= l.best_fit
+            || best.as_ref().is_some_and(|b| b.0.fit_val >= cs.fit)
+        {
+            continue;
+        }
+        let names: Vec<&str> = f.fit.model.effects.iter().map(|e| e.name()).collect();
+        let mut c = scored_candidate(
+            &names.join("+"),
+            &f,
+            (gain, se, significant),
+            true,
+            (
+                format!(
+                    "in the controller's loop: {} added to {}: validation FIT {gain:+.1} ± \
+                     {se:.1} points over {} alone{}",
+                    names[1],
+                    names[0],
+                    names[0],
+                    odd_words(odd)
+                ),
+                odd,
+            ),
+        );
+        c.fit_val = cs.fit;
+        best = Some((c, f));
+    }
+    best
+}
+
 /// The report's series of one diagnosis ([`DiagnosisSeries`]); `residual` is the nominal's
 /// over the scored range, `angle_order` the order of its pattern against the motor angle.
 fn series_of(
@@ -1419,7 +1488,7 @@ pub fn diagnose_segments(
         _ => nominal,
     };
     warnings.extend(nominal.warnings.iter().map(|w| format!("nominal: {w}")));
-    let nom_fit = nominal.scored.fit;
+    let mut nom_fit = nominal.scored.fit;
 
     // where the nominal's residual lies
     let s = skip;
@@ -1848,6 +1917,78 @@ pub fn diagnose_segments(
         best = c.name.clone();
         best_fit = c.fit_val;
     }
+    // the odd distortion the nominal leaves, and what the answer does with it
+    let mut best_odd = match &pair {
+        Some(p) => p.odd_explained,
+        None => singles
+            .first()
+            .filter(|c| c.0.significant)
+            .and_then(|c| c.0.odd_explained),
+    };
+    let odd_left = odd_nominal
+        .as_ref()
+        .filter(|n| n.vs_noise_db >= locate::ODD_RESIDUAL_ABOVE_NOISE_DB)
+        .map(|n| n.vs_noise_db);
+    // an answer that leaves it: the models scored in the controller's loop
+    let mut in_loop: Option<in_loop::InLoop> = None;
+    if let (Some(db), [one]) = (odd_left, val_segs) {
+        if best == "none" || best_odd.is_some_and(|s| s < locate::ODD_EXPLAINED_DOUBT) {
+            let answer = in_loop::LoopAnswer {
+                singles: &mut singles,
+                pair: &mut pair,
+                pair_fitted: &mut pair_fitted,
+            };
+            match answer.rescore(
+                (est[0], one, &parts[0]),
+                &nominal,
+                (&judge, o),
+                (&best, best_odd, db),
+            ) {
+                Ok(mut l) => {
+                    // the loop's best single with each other single significant there: the
+                    // open-loop pair search was led by a single the loop does not keep
+                    if o.pairs && pair.is_none() {
+                        if let Some((c, f)) =
+                            pair_in_loop(&singles, &l, (one, &parts[0]), (&score, &judge), o)
+                        {
+                            l.words.push_str(&format!(
+                                "; in the loop, {} adds {:+.1} ± {:.1} points to {} alone: the \
+                                 answer is the pair",
+                                f.fit.model.effects[1].name(),
+                                c.score,
+                                c.score_se,
+                                l.best
+                            ));
+                            l.best.clone_from(&c.name);
+                            l.best_fit = c.fit_val;
+                            l.best_odd = c.odd_explained;
+                            let theta = l
+                                .scores
+                                .score(
+                                    &parts[0],
+                                    &DrivenModel::of_fit(&f.fit),
+                                    one,
+                                    (o.segments, o.settle_periods),
+                                )
+                                .map(|s| s.0.theta_m);
+                            if let Ok(theta) = theta {
+                                l.velocities.1 = metric::velocity_band(&theta, ts, o.band_hz);
+                            }
+                            pair = Some(c);
+                            pair_fitted = Some(f);
+                        }
+                    }
+                    warnings.push(l.words.clone());
+                    nom_fit = l.scores.nominal.fit;
+                    best.clone_from(&l.best);
+                    best_fit = l.best_fit;
+                    best_odd = l.best_odd;
+                    in_loop = Some(l);
+                }
+                Err(e) => warnings.push(e),
+            }
+        }
+    }
     let gap = 100.0 - nom_fit;
     let gap_closed_share = if gap > 0.0 {
         (best_fit - nom_fit) / gap
@@ -1864,12 +2005,16 @@ pub fn diagnose_segments(
                 tau_c: u.tau_c,
                 offset: 0.0,
             };
-            let fit_sim_val = score_segments(&parts, &model, &val_data, 1)
-                .map(|s| s.fit)
-                .unwrap_or_else(|e| {
-                    warnings.push(format!("{}: {e}", u.name));
-                    f64::NAN
-                });
+            let fit_sim_val = match &in_loop {
+                Some(l) => parts[0]
+                    .score_closed(&model, &l.scores.law, &val_data[0], 1)
+                    .map(|s| s.fit),
+                None => score_segments(&parts, &model, &val_data, 1).map(|s| s.fit),
+            }
+            .unwrap_or_else(|e| {
+                warnings.push(format!("{}: {e}", u.name));
+                f64::NAN
+            });
             let nom_plant = DrivenModel::of_fit(&nominal.fit).plant;
             let mut up = u.plant.params;
             let mut np = nom_plant.params;
@@ -1899,23 +2044,29 @@ pub fn diagnose_segments(
         None => None,
     };
 
+    let looped = if in_loop.is_some() {
+        " in the controller's loop"
+    } else {
+        ""
+    };
     let mut verdict = if best == "none" {
         format!(
             "no candidate effect closes a significant part of the gap: the nominal {} reaches \
-             {nom_fit:.1} % (band-passed motor-velocity FIT on the validation data) and no \
-             effect gains more than {} FIT point beyond twice its standard error",
+             {nom_fit:.1} % (band-passed motor-velocity FIT on the validation data{looped}) and \
+             no effect gains more than {} FIT point beyond twice its standard error",
             req.structure.label(),
             o.min_gain
         )
     } else {
         format!(
             "{best} closes {:.0} % of the gap: band-passed motor-velocity FIT on the validation \
-             data {nom_fit:.1} % → {best_fit:.1} % ({:+.1} points)",
+             data{looped} {nom_fit:.1} % → {best_fit:.1} % ({:+.1} points)",
             100.0 * gap_closed_share,
             best_fit - nom_fit
         )
     };
-    if best != "none" {
+    // in the loop, the open-loop sensitivity of the answer no longer matters
+    if best != "none" && in_loop.is_none() {
         let best_warnings = match &pair {
             Some(p) => &p.warnings,
             None => &singles[0].0.warnings,
@@ -1924,23 +2075,11 @@ pub fn diagnose_segments(
             warnings.push(format!("{best}: {w}"));
         }
     }
-    // the odd distortion the nominal leaves, and what the answer does with it
-    let best_odd = match &pair {
-        Some(p) => p.odd_explained,
-        None => singles
-            .first()
-            .filter(|c| c.0.significant)
-            .and_then(|c| c.0.odd_explained),
-    };
-    if let Some(n) = odd_nominal
-        .as_ref()
-        .filter(|n| n.vs_noise_db >= locate::ODD_RESIDUAL_ABOVE_NOISE_DB)
-    {
+    if let Some(db) = odd_left.filter(|_| in_loop.is_none()) {
         let left = format!(
             "the nominal's residual at the non-excited odd lines of the validation capture \
-             stands {:.1} dB above the noise: odd nonlinear distortion (friction, backlash, a \
-             stiffening spring) that a linear model cannot follow",
-            n.vs_noise_db
+             stands {db:.1} dB above the noise: odd nonlinear distortion (friction, backlash, a \
+             stiffening spring) that a linear model cannot follow"
         );
         match best_odd {
             _ if best == "none" => warnings.push(format!(
@@ -2002,6 +2141,20 @@ pub fn diagnose_segments(
                 .map(|f| (c.0.name.clone(), f.scored.velocity.clone()))
         }),
     };
+    // in the loop, the figures show the loop's simulations
+    let (nominal, best_velocity, residual) = match &in_loop {
+        Some(l) => {
+            let mut n = nominal;
+            n.scored.velocity.clone_from(&l.velocities.0);
+            let residual: Vec<f64> = measured.velocity[s..]
+                .iter()
+                .zip(&l.velocities.0[s..])
+                .map(|(a, b)| a - b)
+                .collect();
+            (n, Some((best.clone(), l.velocities.1.clone())), residual)
+        }
+        None => (nominal, best_velocity, residual),
+    };
     let series = series_of(
         &measured,
         &nominal,
@@ -2013,7 +2166,12 @@ pub fn diagnose_segments(
     );
     let diagnosis = Diagnosis {
         verdict,
-        metric: metric::METRIC_NAME.into(),
+        metric: if in_loop.is_some() {
+            metric::CLOSED_LOOP_METRIC_NAME
+        } else {
+            metric::METRIC_NAME
+        }
+        .into(),
         structure: req.structure.label().into(),
         fit_nominal_val: nom_fit,
         fit_nominal_angle_val: nominal.scored.angle_fit,
