@@ -12,11 +12,14 @@
 //! true models score 99.2–99.8 % there.
 
 use super::locate;
-use super::metric::{velocity_band, ClosedScored, DrivenModel, Measured};
+use super::metric::{simulate_closed, velocity_band, ClosedScored, DrivenModel, Measured};
 use super::{odd_words, Candidate, DiagnoseOptions, Fitted};
-use crate::data::Dataset;
+use crate::data::{Dataset, IdData};
 use crate::ident::controller::{identify, LinearController};
 use crate::ident::frf::ClassLevel;
+use crate::ident::lm::{minimize, LeastSquares, LmOptions, Normal};
+use crate::ident::nonlinear::{sim_plant, NlFit, ParamDef, Scale};
+use nalgebra::{DMatrix, DVector};
 
 /// Smallest FIT of the identified law's `u` on the validation record for the loop to be
 /// used [%]. The simulator's cascade, identified at its default `u` noise: 98.4–99.8 % on
@@ -342,4 +345,194 @@ impl LoopAnswer<'_> {
             words,
         })
     }
+}
+
+/// Iterations of [`refine`].
+const REFINE_ITER: usize = 12;
+
+/// Finite-difference step of [`refine`]'s Jacobian in the layout's optimiser coordinate.
+const REFINE_STEP: f64 = 1e-4;
+
+/// The output error in the loop of a fit's parameters: the gap metric's band-passed motor
+/// velocity of the record simulated in the loop of `law`, against the measured one.
+struct LoopProblem<'a> {
+    fit: &'a NlFit,
+    layout: Vec<ParamDef>,
+    law: &'a LinearController,
+    data: &'a IdData,
+    measured: &'a Measured,
+    threads: usize,
+}
+
+impl LoopProblem<'_> {
+    /// The driven model at optimiser coordinates `z` (layout order).
+    fn model_at(&self, z: &[f64]) -> DrivenModel {
+        let p: Vec<f64> = self
+            .layout
+            .iter()
+            .zip(z)
+            .map(|(d, z)| d.from_z(*z))
+            .collect();
+        let (model, plant) = self.fit.model.with_values(&p);
+        let offset = self
+            .layout
+            .iter()
+            .position(|d| d.name == "offset")
+            .map_or(0.0, |i| p[i]);
+        DrivenModel {
+            plant: sim_plant(&model, &plant),
+            effects: model.effects,
+            tau_c: model.tau_c,
+            offset,
+        }
+    }
+
+    /// Band-passed simulated velocity over the scored range at `z`; `None` when the model
+    /// does not simulate.
+    fn simulated(&self, z: &[f64]) -> Option<Vec<f64>> {
+        let theta = simulate_closed(&self.model_at(z), self.law, self.data).ok()?;
+        let v = velocity_band(&theta, self.data.ts, self.measured.band);
+        let v = v[self.measured.skip..].to_vec();
+        v.iter().all(|x| x.is_finite()).then_some(v)
+    }
+
+    fn measured(&self) -> &[f64] {
+        &self.measured.velocity[self.measured.skip..]
+    }
+}
+
+impl LeastSquares for LoopProblem<'_> {
+    fn n_params(&self) -> usize {
+        self.layout.len()
+    }
+
+    fn n_residuals(&self) -> usize {
+        self.measured().len()
+    }
+
+    fn cost(&self, theta: &[f64]) -> f64 {
+        match self.simulated(theta) {
+            Some(v) => self
+                .measured()
+                .iter()
+                .zip(&v)
+                .map(|(y, s)| (y - s).powi(2))
+                .sum(),
+            None => f64::NAN,
+        }
+    }
+
+    fn normal_equations(&self, theta: &[f64], free: &[usize]) -> Normal {
+        let y = self.measured();
+        let n = y.len();
+        let base = self.simulated(theta);
+        let columns = super::parallel(free, self.threads, |&j| {
+            let mut z = theta.to_vec();
+            z[j] += REFINE_STEP;
+            self.simulated(&z)
+        });
+        let Some(base) = base else {
+            return Normal {
+                jtj: DMatrix::zeros(free.len(), free.len()),
+                jte: DVector::zeros(free.len()),
+                ssr: f64::NAN,
+            };
+        };
+        let mut jac = DMatrix::<f64>::zeros(n, free.len());
+        for (c, col) in columns.iter().enumerate() {
+            if let Some(v) = col {
+                for i in 0..n {
+                    jac[(i, c)] = (v[i] - base[i]) / REFINE_STEP;
+                }
+            }
+        }
+        let e = DVector::from_iterator(n, y.iter().zip(&base).map(|(y, s)| y - s));
+        Normal {
+            jtj: jac.transpose() * &jac,
+            jte: jac.transpose() * &e,
+            ssr: e.norm_squared(),
+        }
+    }
+}
+
+/// `fit` refined in the loop of `law` on the estimation record `data` (`measured` its
+/// measured side): Levenberg–Marquardt on the loop's output error ([`LoopProblem`]), every
+/// parameter of the layout free within its bounds but the initial velocity, the Jacobian by
+/// forward differences on `threads` threads. Returns the refined fit (values, standard
+/// deviations from the loop's covariance) and its in-sample gap metric before and after
+/// [%].
+///
+/// Why: the answer's fit was made open loop, on a cost the chaotic simulation makes rough
+/// (bench case 72: `k3` −13 % and `k_g` +24 % against the truth, 93.5 % in the loop where
+/// the true model scores 99.4 %).
+///
+/// # Errors
+/// The model does not simulate in the loop, or the minimisation fails, in words.
+pub fn refine(
+    fit: &NlFit,
+    law: &LinearController,
+    (data, measured): (&IdData, &Measured),
+    threads: usize,
+) -> Result<(NlFit, f64, f64), String> {
+    let layout = fit.model.layout();
+    let problem = LoopProblem {
+        fit,
+        layout: layout.clone(),
+        law,
+        data,
+        measured,
+        threads,
+    };
+    let z0: Vec<f64> = layout
+        .iter()
+        .zip(&fit.values)
+        .map(|(d, v)| d.to_z(*v))
+        .collect();
+    let opts = LmOptions {
+        max_iter: REFINE_ITER,
+        rel_cost_tol: 1e-6,
+        lower: layout.iter().map(|d| d.to_z(d.lower)).collect(),
+        upper: layout.iter().map(|d| d.to_z(d.upper)).collect(),
+        fixed: layout
+            .iter()
+            .zip(&fit.params)
+            .map(|(d, p)| d.name == "v0" || p.fixed)
+            .collect(),
+        ..LmOptions::default()
+    };
+    let ss_tot = {
+        let y = problem.measured();
+        let m = y.iter().sum::<f64>() / y.len().max(1) as f64;
+        y.iter().map(|v| (v - m).powi(2)).sum::<f64>()
+    };
+    let fit_of = |ssr: f64| 100.0 * (1.0 - (ssr / ss_tot).sqrt());
+    let before = problem.cost(&z0);
+    if !before.is_finite() {
+        return Err("the answer does not simulate in the loop on the estimation record".into());
+    }
+    let lm = minimize(&problem, &z0, &opts).map_err(|e| e.to_string())?;
+    let values: Vec<f64> = layout
+        .iter()
+        .zip(&lm.theta)
+        .map(|(d, z)| d.from_z(*z))
+        .collect();
+    let (model, plant) = fit.model.with_values(&values);
+    let mut out = fit.clone();
+    for ((p, d), (v, s)) in out
+        .params
+        .iter_mut()
+        .zip(&layout)
+        .zip(values.iter().zip(&lm.std))
+    {
+        p.value = *v;
+        // dp/dz: p for a log coordinate, the scale for a linear one
+        p.std = match d.scale {
+            Scale::Log => v.abs() * s,
+            Scale::Linear(k) => k.abs() * s,
+        };
+    }
+    out.model = model;
+    out.plant = plant;
+    out.values = values;
+    Ok((out, fit_of(before), fit_of(lm.ssr)))
 }
