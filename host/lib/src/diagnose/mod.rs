@@ -944,19 +944,15 @@ fn evidence(effect: &str, w: &Where, fitted: Option<(f64, f64)>) -> String {
 /// updated, when its validation FIT in the loop rises. What happened goes into `l.words`.
 fn refine_answer(
     l: &mut in_loop::InLoop,
-    (singles, pair, pair_fitted): (
-        &mut [(Candidate, Option<Fitted>)],
-        &mut Option<Candidate>,
-        &mut Option<Fitted>,
-    ),
+    answer: in_loop::LoopAnswer<'_>,
     (est, val, measured): (&Dataset, &Dataset, &Measured),
     judge: in_loop::Judge<'_>,
     o: &DiagnoseOptions,
 ) {
-    let is_pair = pair.is_some();
-    let (cand, fitted) = match (pair.as_mut(), pair_fitted.as_mut()) {
+    let is_pair = answer.pair.is_some();
+    let (cand, fitted) = match (answer.pair.as_mut(), answer.pair_fitted.as_mut()) {
         (Some(c), Some(f)) => (c, f),
-        _ => match singles.first_mut() {
+        _ => match answer.singles.first_mut() {
             Some((c, Some(f))) => (c, f),
             _ => return,
         },
@@ -2059,7 +2055,11 @@ pub fn diagnose_segments(
                     }
                     refine_answer(
                         &mut l,
-                        (&mut singles, &mut pair, &mut pair_fitted),
+                        in_loop::LoopAnswer {
+                            singles: &mut singles,
+                            pair: &mut pair,
+                            pair_fitted: &mut pair_fitted,
+                        },
                         (&est[0][0], one, &parts[0]),
                         &judge,
                         o,
