@@ -1003,6 +1003,7 @@ fn refine_answer(
         .collect();
     fitted.fit = refined;
     l.best_fit = cs.fit;
+    l.best_segments.clone_from(&cs.segments);
     l.best_odd = odd;
     l.velocities.1 = metric::velocity_band(&cs.theta_m, val.data.ts, measured.band);
 }
@@ -2020,50 +2021,60 @@ pub fn diagnose_segments(
                 (&best, best_odd, db),
             ) {
                 Ok(mut l) => {
-                    // the loop's best single with each other single significant there: the
-                    // open-loop pair search was led by a single the loop does not keep
-                    if o.pairs && pair.is_none() {
-                        if let Some((c, f)) =
-                            pair_in_loop(&singles, &l, (one, &parts[0]), (&score, &judge), o)
-                        {
-                            l.words.push_str(&format!(
-                                "; in the loop, {} adds {:+.1} ± {:.1} points to {} alone: the \
-                                 answer is the pair",
-                                f.fit.model.effects[1].name(),
-                                c.score,
-                                c.score_se,
-                                l.best
-                            ));
-                            l.best.clone_from(&c.name);
-                            l.best_fit = c.fit_val;
-                            l.best_odd = c.odd_explained;
-                            let theta = l
-                                .scores
-                                .score(
-                                    &parts[0],
-                                    &DrivenModel::of_fit(&f.fit),
-                                    one,
-                                    (o.segments, o.settle_periods),
-                                )
-                                .map(|s| s.0.theta_m);
-                            if let Ok(theta) = theta {
-                                l.velocities.1 = metric::velocity_band(&theta, ts, o.band_hz);
-                            }
-                            pair = Some(c);
-                            pair_fitted = Some(f);
-                        }
-                    }
-                    refine_answer(
+                    // the answer refined in the loop; then the loop's best single with each
+                    // other single significant there (the open-loop pair search was led by a
+                    // single the loop does not keep), the pair refined in its turn
+                    let refine = |l: &mut in_loop::InLoop, answer: in_loop::LoopAnswer<'_>| {
+                        refine_answer(l, answer, (&est[0][0], one, &parts[0]), &judge, o)
+                    };
+                    refine(
                         &mut l,
                         in_loop::LoopAnswer {
                             singles: &mut singles,
                             pair: &mut pair,
                             pair_fitted: &mut pair_fitted,
                         },
-                        (&est[0][0], one, &parts[0]),
-                        &judge,
-                        o,
                     );
+                    let found = if o.pairs && pair.is_none() {
+                        pair_in_loop(&singles, &l, (one, &parts[0]), (&score, &judge), o)
+                    } else {
+                        None
+                    };
+                    if let Some((c, f)) = found {
+                        l.words.push_str(&format!(
+                            "; in the loop, {} adds {:+.1} ± {:.1} points to {} alone: the \
+                             answer is the pair",
+                            f.fit.model.effects[1].name(),
+                            c.score,
+                            c.score_se,
+                            l.best
+                        ));
+                        l.best.clone_from(&c.name);
+                        l.best_fit = c.fit_val;
+                        l.best_odd = c.odd_explained;
+                        let theta = l
+                            .scores
+                            .score(
+                                &parts[0],
+                                &DrivenModel::of_fit(&f.fit),
+                                one,
+                                (o.segments, o.settle_periods),
+                            )
+                            .map(|s| s.0.theta_m);
+                        if let Ok(theta) = theta {
+                            l.velocities.1 = metric::velocity_band(&theta, ts, o.band_hz);
+                        }
+                        pair = Some(c);
+                        pair_fitted = Some(f);
+                        refine(
+                            &mut l,
+                            in_loop::LoopAnswer {
+                                singles: &mut singles,
+                                pair: &mut pair,
+                                pair_fitted: &mut pair_fitted,
+                            },
+                        );
+                    }
                     warnings.push(l.words.clone());
                     nom_fit = l.scores.nominal.fit;
                     best.clone_from(&l.best);
