@@ -509,8 +509,9 @@ impl Measured {
 /// ([`simulate_closed`]).
 pub const CLOSED_LOOP_METRIC_NAME: &str = "band-passed motor-velocity FIT [%] in the loop: \
      the same FIT, band and velocity, the model simulated with the simulator's exact laws in \
-     the loop of the controller's law identified from the validation record (θ_ref, θ_m → \
-     u), driven by the recorded reference, with its fitted constant torque as a load";
+     the loop of the controller's law identified from the estimation record (θ_ref, θ_m → \
+     u), driven by the validation record's reference, with its fitted constant torque as a \
+     load";
 
 /// `model` run in the loop of `law` from the reference of `data`: from rest with the motor
 /// at the first measured angle, the law started there with `u = −offset` (at rest against

@@ -991,6 +991,13 @@ fn refine_answer(
         let (score, se, significant) = judge(&cs.segments, &l.scores.nominal.segments);
         (cand.score, cand.score_se, cand.significant) = (score, se, significant);
     }
+    cand.reason = format!(
+        "refined in the controller's loop on the estimation record: validation FIT {:.1} % in \
+         the loop{}; before: {}",
+        cs.fit,
+        odd_words(odd),
+        cand.reason
+    );
     cand.fit_val = cs.fit;
     cand.odd_explained = odd;
     cand.parameters = effect_parameters(&refined, is_pair);
