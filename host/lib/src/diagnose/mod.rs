@@ -2031,17 +2031,19 @@ pub fn diagnose_segments(
                     // the answer refined in the loop; then the loop's best single with each
                     // other single significant there (the open-loop pair search was led by a
                     // single the loop does not keep), the pair refined in its turn
-                    let refine = |l: &mut in_loop::InLoop, answer: in_loop::LoopAnswer<'_>| {
-                        refine_answer(l, answer, (&est[0][0], one, &parts[0]), &judge, o)
-                    };
-                    refine(
-                        &mut l,
-                        in_loop::LoopAnswer {
-                            singles: &mut singles,
-                            pair: &mut pair,
-                            pair_fitted: &mut pair_fitted,
-                        },
-                    );
+                    let refine =
+                        |l: &mut in_loop::InLoop,
+                         singles: &mut Vec<(Candidate, Option<Fitted>)>,
+                         pair: &mut Option<Candidate>,
+                         pair_fitted: &mut Option<Fitted>| {
+                            let answer = in_loop::LoopAnswer {
+                                singles,
+                                pair,
+                                pair_fitted,
+                            };
+                            refine_answer(l, answer, (&est[0][0], one, &parts[0]), &judge, o);
+                        };
+                    refine(&mut l, &mut singles, &mut pair, &mut pair_fitted);
                     let found = if o.pairs && pair.is_none() {
                         pair_in_loop(&singles, &l, (one, &parts[0]), (&score, &judge), o)
                     } else {
@@ -2073,14 +2075,7 @@ pub fn diagnose_segments(
                         }
                         pair = Some(c);
                         pair_fitted = Some(f);
-                        refine(
-                            &mut l,
-                            in_loop::LoopAnswer {
-                                singles: &mut singles,
-                                pair: &mut pair,
-                                pair_fitted: &mut pair_fitted,
-                            },
-                        );
+                        refine(&mut l, &mut singles, &mut pair, &mut pair_fitted);
                     }
                     warnings.push(l.words.clone());
                     nom_fit = l.scores.nominal.fit;
