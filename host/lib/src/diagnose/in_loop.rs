@@ -18,7 +18,8 @@ use crate::data::{Dataset, IdData};
 use crate::ident::controller::{identify, LinearController};
 use crate::ident::frf::ClassLevel;
 use crate::ident::lm::{minimize, LeastSquares, LmOptions, Normal};
-use crate::ident::nonlinear::{sim_plant, NlFit, ParamDef, Scale};
+use crate::ident::nonlinear::{sim_plant, NlFit, NlParam, Owner, ParamDef, Scale};
+use crate::model::effects::Effect;
 use nalgebra::{DMatrix, DVector};
 
 /// Smallest FIT of the identified law's `u` on the validation record for the loop to be
@@ -535,4 +536,42 @@ pub fn refine(
     out.plant = plant;
     out.values = values;
     Ok((out, fit_of(before), fit_of(lm.ssr)))
+}
+
+/// `fit` with the effect `partner` added at its own values, every other value kept, each
+/// parameter held or free as in `fit` (the new ones free): the start of a pair refined in
+/// the loop.
+pub fn with_partner(fit: &NlFit, partner: Effect) -> NlFit {
+    let mut model = fit.model.clone();
+    model.effects.push(partner);
+    let values = model.values(
+        &fit.plant,
+        fit.get("offset").unwrap_or(0.0),
+        fit.get("v0").unwrap_or(0.0),
+    );
+    let held = |name: &str, owner: Owner| {
+        fit.params
+            .iter()
+            .any(|p| p.name == name && p.owner == owner && p.fixed)
+    };
+    let params = model
+        .layout()
+        .iter()
+        .zip(&values)
+        .map(|(d, v)| NlParam {
+            name: d.name,
+            owner: d.owner,
+            value: *v,
+            std: 0.0,
+            unit: d.unit,
+            fixed: held(d.name, d.owner),
+            at_bound: false,
+        })
+        .collect();
+    NlFit {
+        model,
+        params,
+        values,
+        ..fit.clone()
+    }
 }

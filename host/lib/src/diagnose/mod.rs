@@ -1015,37 +1015,37 @@ fn refine_answer(
     l.velocities.1 = metric::velocity_band(&cs.theta_m, val.data.ts, measured.band);
 }
 
-/// Fits and scores one candidate model: nominal + effects, from a fit's values when given.
-type FitJob<'f> = &'f (dyn Fn(&(Vec<Effect>, Option<&NlFit>)) -> Result<Fitted, String> + Sync);
-
-/// The pair of the loop's best single `singles[0]` with the other single that gains most
-/// over it in the loop ([`in_loop`]), each other single significant there tried as its
-/// partner from the best's fit (fitted by `score`, judged by `judge` on the segments in the
-/// loop); `None` when no pair gains significantly.
+/// The pair of the loop's best single `singles[0]` (refined in the loop) with the other
+/// single that gains most over it in the loop ([`in_loop`]): each other single significant
+/// there is added to the best's fit at its own fitted size ([`in_loop::with_partner`]) and
+/// the pair refined in the loop on the estimation record `est` ([`in_loop::refine`]; an
+/// open-loop fit would leave the loop's values for the chaotic cost), then judged by `judge`
+/// against the best on the validation segments in the loop; `None` when no pair gains
+/// significantly.
 fn pair_in_loop(
     singles: &[(Candidate, Option<Fitted>)],
     l: &in_loop::InLoop,
-    (val, measured): (&Dataset, &Measured),
-    (score, judge): (FitJob<'_>, in_loop::Judge<'_>),
+    (est, val, measured): (&Dataset, &Dataset, &Measured),
+    judge: in_loop::Judge<'_>,
     o: &DiagnoseOptions,
 ) -> Option<(Candidate, Fitted)> {
     let (Some(lead), true) = (singles.first()?.1.as_ref(), singles[0].0.significant) else {
         return None;
     };
-    let first = lead.fit.model.effects[0];
-    let jobs: Vec<(Vec<Effect>, Option<&NlFit>)> = singles[1..]
+    let m_est = Measured::new(&est.data, o.band_hz, o.skip_of(&est.data));
+    let mut best: Option<(Candidate, Fitted)> = None;
+    let partners = singles[1..]
         .iter()
         .filter(|c| c.0.significant)
-        .filter_map(|c| c.1.as_ref())
-        .map(|p| (vec![first, p.fit.model.effects[0]], Some(&lead.fit)))
-        .collect();
-    if jobs.is_empty() {
-        return None;
-    }
-    let mut best: Option<(Candidate, Fitted)> = None;
-    for r in parallel(&jobs, o.threads, score) {
-        let Ok(f) = r else { continue };
-        let model = DrivenModel::of_fit(&f.fit);
+        .filter_map(|c| c.1.as_ref());
+    for p in partners {
+        let start = in_loop::with_partner(&lead.fit, p.fit.model.effects[0]);
+        let Ok((fit, _, _)) =
+            in_loop::refine(&start, &l.scores.law, (&est.data, &m_est), o.threads)
+        else {
+            continue;
+        };
+        let model = DrivenModel::of_fit(&fit);
         let Ok((cs, odd)) = l
             .scores
             .score(measured, &model, val, (o.segments, o.settle_periods))
@@ -1059,7 +1059,12 @@ fn pair_in_loop(
         {
             continue;
         }
-        let names: Vec<&str> = f.fit.model.effects.iter().map(|e| e.name()).collect();
+        let names: Vec<&str> = fit.model.effects.iter().map(|e| e.name()).collect();
+        let f = Fitted {
+            fit,
+            scored: lead.scored.clone(),
+            warnings: Vec::new(),
+        };
         let mut c = scored_candidate(
             &names.join("+"),
             &f,
@@ -1067,8 +1072,8 @@ fn pair_in_loop(
             true,
             (
                 format!(
-                    "in the controller's loop: {} added to {}: validation FIT {gain:+.1} ± \
-                     {se:.1} points over {} alone{}",
+                    "in the controller's loop: {} added to {} and refined there: validation \
+                     FIT {gain:+.1} ± {se:.1} points over {} alone{}",
                     names[1],
                     names[0],
                     names[0],
@@ -1077,7 +1082,9 @@ fn pair_in_loop(
                 odd,
             ),
         );
+        // fitted in the loop only: no open-loop figure of its own
         c.fit_val = cs.fit;
+        c.fit_angle_val = f64::NAN;
         best = Some((c, f));
     }
     best
@@ -2030,22 +2037,15 @@ pub fn diagnose_segments(
                 Ok(mut l) => {
                     // the answer refined in the loop; then the loop's best single with each
                     // other single significant there (the open-loop pair search was led by a
-                    // single the loop does not keep), the pair refined in its turn
-                    let refine =
-                        |l: &mut in_loop::InLoop,
-                         singles: &mut Vec<(Candidate, Option<Fitted>)>,
-                         pair: &mut Option<Candidate>,
-                         pair_fitted: &mut Option<Fitted>| {
-                            let answer = in_loop::LoopAnswer {
-                                singles,
-                                pair,
-                                pair_fitted,
-                            };
-                            refine_answer(l, answer, (&est[0][0], one, &parts[0]), &judge, o);
-                        };
-                    refine(&mut l, &mut singles, &mut pair, &mut pair_fitted);
+                    // single the loop does not keep), each pair refined in the loop
+                    let answer = in_loop::LoopAnswer {
+                        singles: &mut singles,
+                        pair: &mut pair,
+                        pair_fitted: &mut pair_fitted,
+                    };
+                    refine_answer(&mut l, answer, (&est[0][0], one, &parts[0]), &judge, o);
                     let found = if o.pairs && pair.is_none() {
-                        pair_in_loop(&singles, &l, (one, &parts[0]), (&score, &judge), o)
+                        pair_in_loop(&singles, &l, (&est[0][0], one, &parts[0]), &judge, o)
                     } else {
                         None
                     };
@@ -2075,7 +2075,6 @@ pub fn diagnose_segments(
                         }
                         pair = Some(c);
                         pair_fitted = Some(f);
-                        refine(&mut l, &mut singles, &mut pair, &mut pair_fitted);
                     }
                     warnings.push(l.words.clone());
                     nom_fit = l.scores.nominal.fit;
