@@ -1015,37 +1015,37 @@ fn refine_answer(
     l.velocities.1 = metric::velocity_band(&cs.theta_m, val.data.ts, measured.band);
 }
 
-/// The pair of the loop's best single `singles[0]` (refined in the loop) with the other
-/// single that gains most over it in the loop ([`in_loop`]): each other single significant
-/// there is added to the best's fit at its own fitted size ([`in_loop::with_partner`]) and
-/// the pair refined in the loop on the estimation record `est` ([`in_loop::refine`]; an
-/// open-loop fit would leave the loop's values for the chaotic cost), then judged by `judge`
-/// against the best on the validation segments in the loop; `None` when no pair gains
-/// significantly.
+/// Fits and scores one candidate model: nominal + effects, from a fit's values when given.
+type FitJob<'f> = &'f (dyn Fn(&(Vec<Effect>, Option<&NlFit>)) -> Result<Fitted, String> + Sync);
+
+/// The pair of the loop's best single `singles[0]` with the other single that gains most
+/// over it in the loop ([`in_loop`]), each other single significant there tried as its
+/// partner from the best's fit (fitted by `score`, judged by `judge` on the segments in the
+/// loop); `None` when no pair gains significantly.
 fn pair_in_loop(
     singles: &[(Candidate, Option<Fitted>)],
     l: &in_loop::InLoop,
-    (est, val, measured): (&Dataset, &Dataset, &Measured),
-    judge: in_loop::Judge<'_>,
+    (val, measured): (&Dataset, &Measured),
+    (score, judge): (FitJob<'_>, in_loop::Judge<'_>),
     o: &DiagnoseOptions,
 ) -> Option<(Candidate, Fitted)> {
     let (Some(lead), true) = (singles.first()?.1.as_ref(), singles[0].0.significant) else {
         return None;
     };
-    let m_est = Measured::new(&est.data, o.band_hz, o.skip_of(&est.data));
-    let mut best: Option<(Candidate, Fitted)> = None;
-    let partners = singles[1..]
+    let first = lead.fit.model.effects[0];
+    let jobs: Vec<(Vec<Effect>, Option<&NlFit>)> = singles[1..]
         .iter()
         .filter(|c| c.0.significant)
-        .filter_map(|c| c.1.as_ref());
-    for p in partners {
-        let start = in_loop::with_partner(&lead.fit, p.fit.model.effects[0]);
-        let Ok((fit, _, _)) =
-            in_loop::refine(&start, &l.scores.law, (&est.data, &m_est), o.threads)
-        else {
-            continue;
-        };
-        let model = DrivenModel::of_fit(&fit);
+        .filter_map(|c| c.1.as_ref())
+        .map(|p| (vec![first, p.fit.model.effects[0]], Some(&lead.fit)))
+        .collect();
+    if jobs.is_empty() {
+        return None;
+    }
+    let mut best: Option<(Candidate, Fitted)> = None;
+    for r in parallel(&jobs, o.threads, score) {
+        let Ok(f) = r else { continue };
+        let model = DrivenModel::of_fit(&f.fit);
         let Ok((cs, odd)) = l
             .scores
             .score(measured, &model, val, (o.segments, o.settle_periods))
@@ -1059,12 +1059,7 @@ fn pair_in_loop(
         {
             continue;
         }
-        let names: Vec<&str> = fit.model.effects.iter().map(|e| e.name()).collect();
-        let f = Fitted {
-            fit,
-            scored: lead.scored.clone(),
-            warnings: Vec::new(),
-        };
+        let names: Vec<&str> = f.fit.model.effects.iter().map(|e| e.name()).collect();
         let mut c = scored_candidate(
             &names.join("+"),
             &f,
@@ -1072,8 +1067,8 @@ fn pair_in_loop(
             true,
             (
                 format!(
-                    "in the controller's loop: {} added to {} and refined there: validation \
-                     FIT {gain:+.1} ± {se:.1} points over {} alone{}",
+                    "in the controller's loop: {} added to {}: validation FIT {gain:+.1} ± \
+                     {se:.1} points over {} alone{}",
                     names[1],
                     names[0],
                     names[0],
@@ -1082,9 +1077,7 @@ fn pair_in_loop(
                 odd,
             ),
         );
-        // fitted in the loop only: no open-loop figure of its own
         c.fit_val = cs.fit;
-        c.fit_angle_val = f64::NAN;
         best = Some((c, f));
     }
     best
@@ -2035,17 +2028,10 @@ pub fn diagnose_segments(
                 (&best, best_odd, db),
             ) {
                 Ok(mut l) => {
-                    // the answer refined in the loop; then the loop's best single with each
-                    // other single significant there (the open-loop pair search was led by a
-                    // single the loop does not keep), each pair refined in the loop
-                    let answer = in_loop::LoopAnswer {
-                        singles: &mut singles,
-                        pair: &mut pair,
-                        pair_fitted: &mut pair_fitted,
-                    };
-                    refine_answer(&mut l, answer, (&est[0][0], one, &parts[0]), &judge, o);
+                    // the loop's best single with each other single significant there (the
+                    // open-loop pair search was led by a single the loop does not keep)
                     let found = if o.pairs && pair.is_none() {
-                        pair_in_loop(&singles, &l, (&est[0][0], one, &parts[0]), &judge, o)
+                        pair_in_loop(&singles, &l, (one, &parts[0]), (&score, &judge), o)
                     } else {
                         None
                     };
@@ -2069,12 +2055,70 @@ pub fn diagnose_segments(
                                 one,
                                 (o.segments, o.settle_periods),
                             )
-                            .map(|s| s.0.theta_m);
-                        if let Ok(theta) = theta {
-                            l.velocities.1 = metric::velocity_band(&theta, ts, o.band_hz);
+                            .map(|s| s.0);
+                        if let Ok(cs) = theta {
+                            l.velocities.1 = metric::velocity_band(&cs.theta_m, ts, o.band_hz);
+                            l.best_segments = cs.segments;
                         }
                         pair = Some(c);
                         pair_fitted = Some(f);
+                    }
+                    // the answer refined in the loop
+                    let ctx = (&est[0][0], one, &parts[0]);
+                    let answer = in_loop::LoopAnswer {
+                        singles: &mut singles,
+                        pair: &mut pair,
+                        pair_fitted: &mut pair_fitted,
+                    };
+                    refine_answer(&mut l, answer, ctx, &judge, o);
+                    // a pair stays only when it gains significantly over its lead refined in
+                    // the loop too (a lead fitted open loop on the chaotic cost may need a
+                    // partner that the refined lead does not: bench case 2)
+                    if pair.is_some() {
+                        let kept = (pair.take(), pair_fitted.take());
+                        let state = (
+                            l.best.clone(),
+                            l.best_fit,
+                            l.best_segments.clone(),
+                            l.best_odd,
+                            l.velocities.1.clone(),
+                            l.words.len(),
+                        );
+                        let lead_fit = singles[0].0.fit_val;
+                        l.best_fit = lead_fit;
+                        let answer = in_loop::LoopAnswer {
+                            singles: &mut singles,
+                            pair: &mut None,
+                            pair_fitted: &mut None,
+                        };
+                        refine_answer(&mut l, answer, ctx, &judge, o);
+                        let refined = l.best_fit > lead_fit;
+                        let (gain, se, needed) = judge(&state.2, &l.best_segments);
+                        l.words.truncate(state.5);
+                        if refined && !needed {
+                            l.words.push_str(&format!(
+                                "; refined alone in the loop, {} scores {:.1} % and the pair \
+                                 adds {gain:+.1} ± {se:.1} points to it, not significant: the \
+                                 answer is {} alone",
+                                singles[0].0.name, l.best_fit, singles[0].0.name
+                            ));
+                            l.best.clone_from(&singles[0].0.name);
+                        } else {
+                            (pair, pair_fitted) = kept;
+                            (
+                                l.best,
+                                l.best_fit,
+                                l.best_segments,
+                                l.best_odd,
+                                l.velocities.1,
+                            ) = (state.0, state.1, state.2, state.3, state.4);
+                            if refined {
+                                l.words.push_str(&format!(
+                                    "; the pair adds {gain:+.1} ± {se:.1} points to its lead \
+                                     refined alone in the loop"
+                                ));
+                            }
+                        }
                     }
                     warnings.push(l.words.clone());
                     nom_fit = l.scores.nominal.fit;
