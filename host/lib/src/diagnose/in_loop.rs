@@ -17,10 +17,13 @@ use super::{odd_words, Candidate, DiagnoseOptions, Fitted};
 use crate::data::{Dataset, IdData};
 use crate::ident::controller::{identify, LinearController};
 use crate::ident::frf::ClassLevel;
+use crate::ident::linalg::pinv_sym;
 use crate::ident::lm::{minimize, LeastSquares, LmOptions, Normal};
 use crate::ident::nonlinear::{sim_plant, NlFit, NlParam, Owner, ParamDef, Scale};
 use crate::model::effects::Effect;
 use nalgebra::{DMatrix, DVector};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
 
 /// Smallest FIT of the identified law's `u` on the validation record for the loop to be
 /// used [%]. The simulator's cascade, identified at its default `u` noise: 98.4–99.8 % on
@@ -351,6 +354,16 @@ impl LoopAnswer<'_> {
 /// Iterations of [`refine`].
 const REFINE_ITER: usize = 12;
 
+/// Most simulations one [`refine`] runs (its Jacobians and trial steps): a bound on its time
+/// whatever the model (bench case 86, a stiffening spring with a delay refined without the
+/// delay, ran its trial steps for minutes).
+const REFINE_SIMULATIONS: usize = 200;
+
+/// Longest time one [`refine`] simulates [s]: a model whose every simulation in the loop is
+/// slow (seconds each, bench case 86 refined without its delay) stops there with its best
+/// values so far. The bound on the number of simulations binds first on every other case.
+const REFINE_SECONDS: f64 = 30.0;
+
 /// Finite-difference step of [`refine`]'s Jacobian in the layout's optimiser coordinate.
 const REFINE_STEP: f64 = 1e-4;
 
@@ -363,6 +376,11 @@ struct LoopProblem<'a> {
     data: &'a IdData,
     measured: &'a Measured,
     threads: usize,
+    /// simulations run so far; past [`REFINE_SIMULATIONS`] none is run and the step is
+    /// rejected
+    runs: AtomicUsize,
+    /// past this instant no simulation is run either ([`REFINE_SECONDS`])
+    deadline: Instant,
 }
 
 impl LoopProblem<'_> {
@@ -391,6 +409,11 @@ impl LoopProblem<'_> {
     /// Band-passed simulated velocity over the scored range at `z`; `None` when the model
     /// does not simulate.
     fn simulated(&self, z: &[f64]) -> Option<Vec<f64>> {
+        if self.runs.fetch_add(1, Ordering::Relaxed) >= REFINE_SIMULATIONS
+            || Instant::now() > self.deadline
+        {
+            return None;
+        }
         let theta = simulate_closed(&self.model_at(z), self.law, self.data).ok()?;
         let v = velocity_band(&theta, self.data.ts, self.measured.band);
         let v = v[self.measured.skip..].to_vec();
@@ -440,11 +463,12 @@ impl LeastSquares for LoopProblem<'_> {
             };
         };
         let mut jac = DMatrix::<f64>::zeros(n, free.len());
+        // a column that did not simulate (or past the bounds) is unknown, not nought
         for (c, col) in columns.iter().enumerate() {
-            if let Some(v) = col {
-                for i in 0..n {
-                    jac[(i, c)] = (v[i] - base[i]) / REFINE_STEP;
-                }
+            for i in 0..n {
+                jac[(i, c)] = col
+                    .as_ref()
+                    .map_or(f64::NAN, |v| (v[i] - base[i]) / REFINE_STEP);
             }
         }
         let e = DVector::from_iterator(n, y.iter().zip(&base).map(|(y, s)| y - s));
@@ -483,6 +507,8 @@ pub fn refine(
         data,
         measured,
         threads,
+        runs: AtomicUsize::new(0),
+        deadline: Instant::now() + std::time::Duration::from_secs_f64(REFINE_SECONDS),
     };
     let z0: Vec<f64> = layout
         .iter()
@@ -499,6 +525,7 @@ pub fn refine(
             .zip(&fit.params)
             .map(|(d, p)| d.name == "v0" || p.fixed)
             .collect(),
+        covariance: false,
         ..LmOptions::default()
     };
     let ss_tot = {
@@ -512,6 +539,23 @@ pub fn refine(
         return Err("the answer does not simulate in the loop on the estimation record".into());
     }
     let lm = minimize(&problem, &z0, &opts).map_err(|e| e.to_string())?;
+    // the covariance at the end, past the bound on the minimisation's simulations but not
+    // past its time (then the deviations are unknown: NaN)
+    problem.runs.store(0, Ordering::Relaxed);
+    let free: Vec<usize> = (0..layout.len()).filter(|&i| !opts.fixed[i]).collect();
+    let mut std_z = vec![0.0; layout.len()];
+    let ne = problem.normal_equations(&lm.theta, &free);
+    if ne.ssr.is_finite() && ne.jtj.iter().all(|v| v.is_finite()) {
+        let sigma2 = ne.ssr / (problem.n_residuals() as f64 - free.len() as f64).max(1.0);
+        let cov = pinv_sym(&ne.jtj, 1e-13) * sigma2;
+        for (a, &i) in free.iter().enumerate() {
+            std_z[i] = cov[(a, a)].max(0.0).sqrt();
+        }
+    } else {
+        for &i in &free {
+            std_z[i] = f64::NAN;
+        }
+    }
     let values: Vec<f64> = layout
         .iter()
         .zip(&lm.theta)
@@ -523,7 +567,7 @@ pub fn refine(
         .params
         .iter_mut()
         .zip(&layout)
-        .zip(values.iter().zip(&lm.std))
+        .zip(values.iter().zip(&std_z))
     {
         p.value = *v;
         // dp/dz: p for a log coordinate, the scale for a linear one

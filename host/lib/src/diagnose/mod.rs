@@ -2071,55 +2071,6 @@ pub fn diagnose_segments(
                         pair_fitted: &mut pair_fitted,
                     };
                     refine_answer(&mut l, answer, ctx, &judge, o);
-                    // a pair stays only when it gains significantly over its lead refined in
-                    // the loop too (a lead fitted open loop on the chaotic cost may need a
-                    // partner that the refined lead does not: bench case 2)
-                    if pair.is_some() {
-                        let kept = (pair.take(), pair_fitted.take());
-                        let state = (
-                            l.best.clone(),
-                            l.best_fit,
-                            l.best_segments.clone(),
-                            l.best_odd,
-                            l.velocities.1.clone(),
-                            l.words.len(),
-                        );
-                        let lead_fit = singles[0].0.fit_val;
-                        l.best_fit = lead_fit;
-                        let answer = in_loop::LoopAnswer {
-                            singles: &mut singles,
-                            pair: &mut None,
-                            pair_fitted: &mut None,
-                        };
-                        refine_answer(&mut l, answer, ctx, &judge, o);
-                        let refined = l.best_fit > lead_fit;
-                        let (gain, se, needed) = judge(&state.2, &l.best_segments);
-                        l.words.truncate(state.5);
-                        if refined && !needed {
-                            l.words.push_str(&format!(
-                                "; refined alone in the loop, {} scores {:.1} % and the pair \
-                                 adds {gain:+.1} ± {se:.1} points to it, not significant: the \
-                                 answer is {} alone",
-                                singles[0].0.name, l.best_fit, singles[0].0.name
-                            ));
-                            l.best.clone_from(&singles[0].0.name);
-                        } else {
-                            (pair, pair_fitted) = kept;
-                            (
-                                l.best,
-                                l.best_fit,
-                                l.best_segments,
-                                l.best_odd,
-                                l.velocities.1,
-                            ) = (state.0, state.1, state.2, state.3, state.4);
-                            if refined {
-                                l.words.push_str(&format!(
-                                    "; the pair adds {gain:+.1} ± {se:.1} points to its lead \
-                                     refined alone in the loop"
-                                ));
-                            }
-                        }
-                    }
                     warnings.push(l.words.clone());
                     nom_fit = l.scores.nominal.fit;
                     best.clone_from(&l.best);
