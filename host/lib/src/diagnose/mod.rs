@@ -1021,14 +1021,14 @@ type FitJob<'f> = &'f (dyn Fn(&(Vec<Effect>, Option<&NlFit>)) -> Result<Fitted, 
 /// The pair of the loop's best single `singles[0]` with the other single that gains most
 /// over it in the loop ([`in_loop`]), each other single significant there tried as its
 /// partner from the best's fit (fitted by `score`, judged by `judge` on the segments in the
-/// loop); `None` when no pair gains significantly.
+/// loop); with its scores in the loop, `None` when no pair gains significantly.
 fn pair_in_loop(
     singles: &[(Candidate, Option<Fitted>)],
     l: &in_loop::InLoop,
     (val, measured): (&Dataset, &Measured),
     (score, judge): (FitJob<'_>, in_loop::Judge<'_>),
     o: &DiagnoseOptions,
-) -> Option<(Candidate, Fitted)> {
+) -> Option<(Candidate, Fitted, metric::ClosedScored)> {
     let (Some(lead), true) = (singles.first()?.1.as_ref(), singles[0].0.significant) else {
         return None;
     };
@@ -1042,7 +1042,7 @@ fn pair_in_loop(
     if jobs.is_empty() {
         return None;
     }
-    let mut best: Option<(Candidate, Fitted)> = None;
+    let mut best: Option<(Candidate, Fitted, metric::ClosedScored)> = None;
     for r in parallel(&jobs, o.threads, score) {
         let Ok(f) = r else { continue };
         let model = DrivenModel::of_fit(&f.fit);
@@ -1078,7 +1078,7 @@ fn pair_in_loop(
             ),
         );
         c.fit_val = cs.fit;
-        best = Some((c, f));
+        best = Some((c, f, cs));
     }
     best
 }
@@ -2035,7 +2035,7 @@ pub fn diagnose_segments(
                     } else {
                         None
                     };
-                    if let Some((c, f)) = found {
+                    if let Some((c, f, cs)) = found {
                         l.words.push_str(&format!(
                             "; in the loop, {} adds {:+.1} ± {:.1} points to {} alone: the \
                              answer is the pair",
@@ -2047,19 +2047,8 @@ pub fn diagnose_segments(
                         l.best.clone_from(&c.name);
                         l.best_fit = c.fit_val;
                         l.best_odd = c.odd_explained;
-                        let theta = l
-                            .scores
-                            .score(
-                                &parts[0],
-                                &DrivenModel::of_fit(&f.fit),
-                                one,
-                                (o.segments, o.settle_periods),
-                            )
-                            .map(|s| s.0);
-                        if let Ok(cs) = theta {
-                            l.velocities.1 = metric::velocity_band(&cs.theta_m, ts, o.band_hz);
-                            l.best_segments = cs.segments;
-                        }
+                        l.velocities.1 = metric::velocity_band(&cs.theta_m, ts, o.band_hz);
+                        l.best_segments = cs.segments;
                         pair = Some(c);
                         pair_fitted = Some(f);
                     }
