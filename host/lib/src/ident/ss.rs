@@ -20,6 +20,7 @@
 //! Isidori, "Nonlinear Control Systems", 3rd ed., specialised to the
 //! linear case).
 
+use crate::ident::linalg::expm;
 use nalgebra::{Complex, DMatrix, DVector, RowDVector, Schur};
 
 /// Discrete-time SISO state-space model (seed 000 eq. (9)).
@@ -396,7 +397,7 @@ impl ContinuousSs {
         let mut m = DMatrix::zeros(n + 1, n + 1);
         m.view_mut((0, 0), (n, n)).copy_from(&(&self.f * ts));
         m.view_mut((0, n), (n, 1)).copy_from(&(&self.g * ts));
-        let e = m.exp();
+        let e = expm(m);
         let a = e.view((0, 0), (n, n)).into_owned();
         let b = e.view((0, n), (n, 1)).column(0).into_owned();
         StateSpace::new(a, b, self.h.clone(), self.d, ts)

@@ -74,6 +74,7 @@
 
 use nalgebra::DMatrix;
 
+use crate::ident::linalg::expm;
 use crate::model::effects::{CoulombFriction, TorqueRipple};
 use crate::model::laws;
 use crate::model::plant::{Mechanism, MAX_BODIES, MAX_STATE};
@@ -169,13 +170,14 @@ impl ZohStep {
 }
 
 /// Zero-order-hold discretisation `(e^{F t}, ∫_0^t e^{Fτ} G dτ)` via the augmented
-/// exponential (seed 000 eq. (12)–(13)).
+/// exponential (seed 000 eq. (12)–(13)); NaN where it does not exist in floating point
+/// ([`expm`]).
 pub fn zoh(f: &DMatrix<f64>, g: &DMatrix<f64>, t: f64) -> (DMatrix<f64>, DMatrix<f64>) {
     let (n, m) = g.shape();
     let mut aug = DMatrix::zeros(n + m, n + m);
     aug.view_mut((0, 0), (n, n)).copy_from(&(f * t));
     aug.view_mut((0, n), (n, m)).copy_from(&(g * t));
-    let e = aug.exp();
+    let e = expm(aug);
     (
         e.view((0, 0), (n, n)).into_owned(),
         e.view((0, n), (n, m)).into_owned(),

@@ -3,6 +3,7 @@
 //! sample), in Hessenberg form for cheap evaluation at many lines.
 
 use super::*;
+use crate::ident::linalg::expm;
 
 pub(super) fn drive_model(model: &GreyBoxModel, lag_samples: f64) -> DrivenModel {
     DrivenModel {
@@ -51,7 +52,7 @@ fn hold_pair(f: &DMatrix<f64>, g: &DVector<f64>, h: f64) -> (DMatrix<f64>, DVect
     let mut m = DMatrix::zeros(n + 1, n + 1);
     m.view_mut((0, 0), (n, n)).copy_from(&(f * h));
     m.view_mut((0, n), (n, 1)).copy_from(&(g * h));
-    let e = m.exp();
+    let e = expm(m);
     (
         e.view((0, 0), (n, n)).into_owned(),
         e.view((0, n), (n, 1)).column(0).into_owned(),
