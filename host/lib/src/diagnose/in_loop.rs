@@ -20,7 +20,6 @@ use crate::ident::frf::ClassLevel;
 use crate::ident::linalg::pinv_sym;
 use crate::ident::lm::{minimize, LeastSquares, LmOptions, Normal};
 use crate::ident::nonlinear::{sim_plant, NlFit, NlParam, Owner, ParamDef, Scale};
-use crate::model::effects::Effect;
 use nalgebra::{DMatrix, DVector};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
@@ -582,40 +581,53 @@ pub fn refine(
     Ok((out, fit_of(before), fit_of(lm.ssr)))
 }
 
-/// `fit` with the effect `partner` added at its own values, every other value kept, each
-/// parameter held or free as in `fit` (the new ones free): the start of a pair refined in
-/// the loop.
-pub fn with_partner(fit: &NlFit, partner: Effect) -> NlFit {
+/// `fit` without its effect at `index`, every other value, deviation and hold kept: a
+/// pair's lead as the pair's fit has it, to judge whether the partner is needed.
+pub fn without_effect(fit: &NlFit, index: usize) -> NlFit {
     let mut model = fit.model.clone();
-    model.effects.push(partner);
+    model.effects.remove(index);
     let values = model.values(
         &fit.plant,
         fit.get("offset").unwrap_or(0.0),
         fit.get("v0").unwrap_or(0.0),
     );
-    let held = |name: &str, owner: Owner| {
-        fit.params
-            .iter()
-            .any(|p| p.name == name && p.owner == owner && p.fixed)
-    };
     let params = model
         .layout()
         .iter()
         .zip(&values)
-        .map(|(d, v)| NlParam {
-            name: d.name,
-            owner: d.owner,
-            value: *v,
-            std: 0.0,
-            unit: d.unit,
-            fixed: held(d.name, d.owner),
-            at_bound: false,
+        .map(|(d, v)| {
+            // the effects after `index` move down by one
+            let was = match d.owner {
+                Owner::Effect(e) if e >= index => Owner::Effect(e + 1),
+                o => o,
+            };
+            let old = fit
+                .params
+                .iter()
+                .find(|p| p.name == d.name && p.owner == was);
+            NlParam {
+                name: d.name,
+                owner: d.owner,
+                value: *v,
+                std: old.map_or(f64::NAN, |p| p.std),
+                unit: d.unit,
+                fixed: old.is_some_and(|p| p.fixed),
+                at_bound: old.is_some_and(|p| p.at_bound),
+            }
         })
+        .collect::<Vec<NlParam>>();
+    let has = |n: &str| params.iter().any(|p| p.name == n);
+    let correlated = fit
+        .correlated
+        .iter()
+        .filter(|c| has(c.a) && has(c.b))
+        .cloned()
         .collect();
     NlFit {
         model,
         params,
         values,
+        correlated,
         ..fit.clone()
     }
 }

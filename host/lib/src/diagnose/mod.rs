@@ -941,7 +941,9 @@ fn evidence(effect: &str, w: &Where, fitted: Option<(f64, f64)>) -> String {
 /// The loop's answer (the pair when there is one, else the best single) refined in the loop
 /// on the estimation record `est` ([`in_loop::refine`]) and scored again on `val`
 /// (`measured` its measured side); kept, with its candidate's FIT, parameters and score
-/// updated, when its validation FIT in the loop rises. What happened goes into `l.words`.
+/// updated, when its validation FIT in the loop rises. A refined pair whose partner no
+/// longer gains significantly over its lead at the same values ([`drop_partner`]) gives
+/// way to that lead. What happened goes into `l.words`.
 fn refine_answer(
     l: &mut in_loop::InLoop,
     answer: in_loop::LoopAnswer<'_>,
@@ -950,16 +952,17 @@ fn refine_answer(
     o: &DiagnoseOptions,
 ) {
     let is_pair = answer.pair.is_some();
-    let (cand, fitted) = match (answer.pair.as_mut(), answer.pair_fitted.as_mut()) {
-        (Some(c), Some(f)) => (c, f),
-        _ => match answer.singles.first_mut() {
-            Some((c, Some(f))) => (c, f),
-            _ => return,
-        },
+    let Some(start) = answer
+        .pair_fitted
+        .as_ref()
+        .or_else(|| answer.singles.first().and_then(|s| s.1.as_ref()))
+        .map(|f| f.fit.clone())
+    else {
+        return;
     };
     let m_est = Measured::new(&est.data, o.band_hz, o.skip_of(&est.data));
     let (refined, before, after) =
-        match in_loop::refine(&fitted.fit, &l.scores.law, (&est.data, &m_est), o.threads) {
+        match in_loop::refine(&start, &l.scores.law, (&est.data, &m_est), o.threads) {
             Ok(r) => r,
             Err(e) => {
                 l.words
@@ -967,12 +970,10 @@ fn refine_answer(
                 return;
             }
         };
-    let scored = l.scores.score(
-        measured,
-        &DrivenModel::of_fit(&refined),
-        val,
-        (o.segments, o.settle_periods),
-    );
+    let window = (o.segments, o.settle_periods);
+    let scored = l
+        .scores
+        .score(measured, &DrivenModel::of_fit(&refined), val, window);
     let Some((cs, odd)) = scored.ok().filter(|(cs, _)| cs.fit > l.best_fit) else {
         l.words.push_str(&format!(
             "; refined in the loop on the estimation record (in-sample {before:.1} → \
@@ -987,6 +988,26 @@ fn refine_answer(
          parameters and FIT are the refined fit's",
         cs.fit, l.best_fit
     ));
+    let mut refined = (refined, cs, odd);
+    if is_pair {
+        if let Some(lead) = drop_partner(l, &refined, (val, measured), judge, o) {
+            *answer.pair = None;
+            *answer.pair_fitted = None;
+            refined = lead;
+        }
+    }
+    let (refined, cs, odd) = refined;
+    let (cand, fitted) = match (answer.pair.as_mut(), answer.pair_fitted.as_mut()) {
+        (Some(c), Some(f)) => (c, f),
+        _ => {
+            let name = refined.model.effects[0].name();
+            let Some((c, Some(f))) = answer.singles.iter_mut().find(|s| s.0.name == name) else {
+                return;
+            };
+            (c, f)
+        }
+    };
+    let is_pair = refined.model.effects.len() > 1;
     if !is_pair {
         let (score, se, significant) = judge(&cs.segments, &l.scores.nominal.segments);
         (cand.score, cand.score_se, cand.significant) = (score, se, significant);
@@ -1000,6 +1021,9 @@ fn refine_answer(
     );
     cand.fit_val = cs.fit;
     cand.odd_explained = odd;
+    // the refined fit's own doubts; the open-loop fit's (and its sensitivity to its start,
+    // which the loop removes) no longer apply
+    cand.warnings = crate::ident::nonlinear::run::checks(&refined);
     cand.parameters = effect_parameters(&refined, is_pair);
     cand.structure_parameters = linear_parameters(&refined);
     cand.specs = refined
@@ -1008,11 +1032,59 @@ fn refine_answer(
         .iter()
         .map(|e| e.to_string())
         .collect();
+    l.best = cand.name.clone();
     fitted.fit = refined;
     l.best_fit = cs.fit;
     l.best_segments.clone_from(&cs.segments);
     l.best_odd = odd;
     l.velocities.1 = metric::velocity_band(&cs.theta_m, val.data.ts, measured.band);
+    answer
+        .singles
+        .sort_by(|a, b| by_score(&b.0).total_cmp(&by_score(&a.0)));
+}
+
+/// A refined pair `(fit, its scores in the loop, odd share)` without its partner: the lead
+/// alone at the pair's refined values, scored in the loop on `val`, when the partner gains
+/// nothing significant over it there (bench case 2: a stiffening spring whose backlash
+/// partner refined to a width of 83 ± 60 nrad). The same test that admitted the pair
+/// before its refinement.
+fn drop_partner(
+    l: &mut in_loop::InLoop,
+    (pair, pair_cs, _): &(NlFit, metric::ClosedScored, Option<f64>),
+    (val, measured): (&Dataset, &Measured),
+    judge: in_loop::Judge<'_>,
+    o: &DiagnoseOptions,
+) -> Option<(NlFit, metric::ClosedScored, Option<f64>)> {
+    let lead = in_loop::without_effect(pair, 1);
+    let (cs, odd) = l
+        .scores
+        .score(
+            measured,
+            &DrivenModel::of_fit(&lead),
+            val,
+            (o.segments, o.settle_periods),
+        )
+        .ok()?;
+    let (gain, se, significant) = judge(&pair_cs.segments, &cs.segments);
+    if significant && pair_cs.fit > cs.fit {
+        return None;
+    }
+    let partner: Vec<String> = pair
+        .params
+        .iter()
+        .filter(|p| p.owner == Owner::Effect(1))
+        .map(|p| format!("{} = {:.3e} ± {:.1e} {}", p.name, p.value, p.std, p.unit))
+        .collect();
+    l.words.push_str(&format!(
+        "; refined, the partner {} ({}) adds {gain:+.1} ± {se:.1} points only to {} at the \
+         same values ({:.2} %): the answer is {} alone",
+        pair.model.effects[1].name(),
+        partner.join(", "),
+        pair.model.effects[0].name(),
+        cs.fit,
+        pair.model.effects[0].name()
+    ));
+    Some((lead, cs, odd))
 }
 
 /// Fits and scores one candidate model: nominal + effects, from a fit's values when given.
