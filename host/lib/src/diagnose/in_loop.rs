@@ -288,6 +288,7 @@ impl LoopAnswer<'_> {
                     );
                     (c.score, c.score_se, c.significant) = (*score, *se, *significant);
                     c.fit_val = cs.fit;
+                    c.fit_angle_val = cs.angle_fit;
                     c.odd_explained = *odd;
                 }
                 None if f.is_some() => {
@@ -312,6 +313,7 @@ impl LoopAnswer<'_> {
                 );
                 (p.score, p.score_se, p.significant) = (score, se, significant);
                 p.fit_val = cs.fit;
+                p.fit_angle_val = cs.angle_fit;
                 p.odd_explained = odd;
             }
             _ => {

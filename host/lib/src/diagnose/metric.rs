@@ -569,6 +569,8 @@ pub struct ClosedScored {
     pub fit: f64,
     /// gap metric on each of the equal segments of the scored range [%]
     pub segments: Vec<f64>,
+    /// toolbox FIT of `θ_m` over the whole record [%]
+    pub angle_fit: f64,
 }
 
 impl Measured {
@@ -591,6 +593,7 @@ impl Measured {
         Ok(ClosedScored {
             segments: self.equal_segments(&velocity, k),
             fit,
+            angle_fit: fit_percent(&data.y, &theta_m).unwrap_or(f64::NAN),
             theta_m,
         })
     }

@@ -1020,6 +1020,7 @@ fn refine_answer(
         cand.reason
     );
     cand.fit_val = cs.fit;
+    cand.fit_angle_val = cs.angle_fit;
     cand.odd_explained = odd;
     // the refined fit's own doubts; the open-loop fit's (and its sensitivity to its start,
     // which the loop removes) no longer apply
@@ -1150,6 +1151,7 @@ fn pair_in_loop(
             ),
         );
         c.fit_val = cs.fit;
+        c.fit_angle_val = cs.angle_fit;
         best = Some((c, f, cs));
     }
     best
@@ -2300,6 +2302,7 @@ pub fn diagnose_segments(
         Some(l) => {
             let mut n = nominal;
             n.scored.velocity.clone_from(&l.velocities.0);
+            n.scored.angle_fit = l.scores.nominal.angle_fit;
             let residual: Vec<f64> = measured.velocity[s..]
                 .iter()
                 .zip(&l.velocities.0[s..])
