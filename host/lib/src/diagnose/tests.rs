@@ -404,7 +404,7 @@ fn a_partner_that_refines_to_nothing_in_the_loop_is_dropped() {
             current_loop_tau: 2.5e-4,
             ..ControllerConfig::default()
         },
-        (0.1412768459932043, 502),
+        (0.141_276_85, 502),
     );
     let req = DiagnoseRequest {
         r: params.r,
