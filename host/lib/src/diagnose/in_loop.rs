@@ -484,7 +484,9 @@ impl LeastSquares for LoopProblem<'_> {
 
 /// `fit` refined in the loop of `law` on the estimation record `data` (`measured` its
 /// measured side): Levenberg–Marquardt on the loop's output error ([`LoopProblem`]), every
-/// parameter of the layout free within its bounds but the initial velocity, the Jacobian by
+/// parameter of the layout free within its bounds but the initial velocity and the torque
+/// offset (the law's constant takes a constant torque, and what is left of it the metric's
+/// band leaves out: free, it came out correlated ±1 with every other parameter), the Jacobian by
 /// forward differences on `threads` threads. Returns the refined fit (values, standard
 /// deviations from the loop's covariance) and its in-sample gap metric before and after
 /// [%].
@@ -525,7 +527,7 @@ pub fn refine(
         fixed: layout
             .iter()
             .zip(&fit.params)
-            .map(|(d, p)| d.name == "v0" || p.fixed)
+            .map(|(d, p)| d.name == "v0" || d.name == "offset" || p.fixed)
             .collect(),
         covariance: false,
         ..LmOptions::default()
