@@ -2135,6 +2135,15 @@ pub fn diagnose_segments(
                     };
                     refine_answer(&mut l, answer, ctx, &judge, o);
                     warnings.push(l.words.clone());
+                    // the answer's own doubts, which no open-loop check covers here (bench
+                    // case 61: an arm spring the loop's refinement leaves undetermined)
+                    let answer = match &pair {
+                        Some(p) => Some(p),
+                        None => singles.first().map(|c| &c.0).filter(|c| c.name == l.best),
+                    };
+                    if let Some(c) = answer {
+                        warnings.extend(c.warnings.iter().map(|w| format!("{}: {w}", c.name)));
+                    }
                     nom_fit = l.scores.nominal.fit;
                     best.clone_from(&l.best);
                     best_fit = l.best_fit;

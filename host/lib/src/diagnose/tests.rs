@@ -384,7 +384,8 @@ fn a_partner_that_refines_to_nothing_in_the_loop_is_dropped() {
 /// A three-mass joint with the cubic spring `k3` under `controller` at `(rms_rad, seed)`,
 /// diagnosed among a backlash and the spring: the spring must be named in the controller's
 /// loop, not doubtful, its `k3` within 10 % and its reported FIT within 3 points of the true
-/// model's in the same loop. Returns the diagnosis, the captures and the request.
+/// model's in the same loop, with its doubts among the notes. Returns the diagnosis, the
+/// captures and the request.
 fn stiffness_named_in_the_loop(
     params: crate::sim::JointParams,
     k3: f64,
@@ -429,6 +430,14 @@ fn stiffness_named_in_the_loop(
         "{}; the true model {truth:.2} % in the loop",
         d.verdict
     );
+    // the refined answer's doubts reach the notes
+    for w in &d.effects[0].warnings {
+        assert!(
+            d.warnings.iter().any(|n| n.ends_with(w.as_str())),
+            "{w} is not among {:?}",
+            d.warnings
+        );
+    }
     (d, est, val, req)
 }
 
