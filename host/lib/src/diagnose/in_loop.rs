@@ -567,13 +567,19 @@ pub fn refine(
         .collect();
     let (model, plant) = fit.model.with_values(&values);
     let mut out = fit.clone();
-    for ((p, d), (v, s)) in out
+    for (i, ((p, d), (v, s))) in out
         .params
         .iter_mut()
         .zip(&layout)
         .zip(values.iter().zip(&std_z))
+        .enumerate()
     {
         p.value = *v;
+        // a held parameter keeps its value and its deviation from `fit`, and is marked held
+        if opts.fixed[i] {
+            p.fixed = true;
+            continue;
+        }
         // dp/dz: p for a log coordinate, the scale for a linear one
         p.std = match d.scale {
             Scale::Log => v.abs() * s,
@@ -582,6 +588,8 @@ pub fn refine(
     }
     out.model = model;
     out.plant = plant;
+    // how the refinement ended, not the open-loop fit
+    (out.termination, out.iterations) = (lm.termination, lm.iterations);
     out.values = values;
     Ok((out, fit_of(before), fit_of(lm.ssr)))
 }
