@@ -360,12 +360,8 @@ fn a_partner_that_refines_to_nothing_in_the_loop_is_dropped() {
         params,
         3.257253028288157e13,
         ControllerConfig {
-            kp: 30.0,
-            kv: 0.35,
-            ti: f64::INFINITY,
             u_max: 1e3,
-            current_loop_tau: 2.5e-4,
-            ..ControllerConfig::default()
+            ..crate::test_support::bench_tunings()[2]
         },
         (0.141_276_85, 502),
     );
@@ -584,12 +580,8 @@ mod pairs {
             (0.025173, 0.033564),
             (2.2070, 8681.0),
             ControllerConfig {
-                kp: 30.0,
-                kv: 0.35,
-                ti: f64::INFINITY,
                 u_max: 1e3,
-                current_loop_tau: 2.5e-4,
-                ..ControllerConfig::default()
+                ..crate::test_support::bench_tunings()[2]
             },
             (0.018614, 517),
         );

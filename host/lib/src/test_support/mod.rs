@@ -130,18 +130,11 @@ pub fn capture_csv(cubic: f64, seed: u64) -> String {
     text
 }
 
-/// One closed-loop joint of the robustness draws (the `fd_robustness` bench and
-/// the frequency-domain fit's tests): the default joint's eight three-mass
-/// parameters each scaled by U(0.7, 1.3), one of three controller tunings by
-/// `index % 3` (the default PI velocity loop; a softer one; a stiffer P loop
-/// with a faster current loop), torque limit lifted, and a reference RMS
-/// log-uniform in 0.01–0.4 rad.
-pub fn random_joint(
-    rng: &mut crate::ident::linalg::GaussRng,
-    index: usize,
-) -> (crate::sim::JointParams, crate::sim::ControllerConfig, f64) {
-    use crate::sim::{ControllerConfig, JointParams};
-    let tunings = [
+/// The battery's three controller tunings: the default PI velocity loop; a softer one; a
+/// stiffer P loop (no integrator) with a faster current loop.
+pub fn bench_tunings() -> [crate::sim::ControllerConfig; 3] {
+    use crate::sim::ControllerConfig;
+    [
         ControllerConfig::default(),
         ControllerConfig {
             kp: 10.0,
@@ -156,7 +149,20 @@ pub fn random_joint(
             current_loop_tau: 2.5e-4,
             ..ControllerConfig::default()
         },
-    ];
+    ]
+}
+
+/// One closed-loop joint of the robustness draws (the `fd_robustness` bench and
+/// the frequency-domain fit's tests): the default joint's eight three-mass
+/// parameters each scaled by U(0.7, 1.3), the controller tuning
+/// [`bench_tunings`]`[index % 3]`, torque limit lifted, and a reference RMS
+/// log-uniform in 0.01–0.4 rad.
+pub fn random_joint(
+    rng: &mut crate::ident::linalg::GaussRng,
+    index: usize,
+) -> (crate::sim::JointParams, crate::sim::ControllerConfig, f64) {
+    use crate::sim::JointParams;
+    let tunings = bench_tunings();
     let mut p = JointParams::default();
     for v in [
         &mut p.j_m,
