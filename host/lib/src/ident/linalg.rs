@@ -324,41 +324,6 @@ pub fn dvec(x: &[f64]) -> DVector<f64> {
     DVector::from_column_slice(x)
 }
 
-/// One-norm up to which [`expm`] leaves the scaling to nalgebra: its powers up to `M^27`
-/// stay finite there.
-const EXPM_NALGEBRA_NORM: f64 = (1u64 << 20) as f64;
-
-/// Most squarings [`expm`] adds: a matrix of one-norm up to `2^220`.
-const EXPM_MAX_SQUARINGS: i32 = 200;
-
-/// The matrix exponential `e^M`, all NaN when `M` is not finite or its one-norm passes
-/// `2^220`.
-///
-/// Past a one-norm of `2^20`, `M` is scaled down to it and the exponential squared back
-/// here. Why: nalgebra counts its squarings from norms of powers of `M`, which overflow for
-/// a stiff `M` (a spring of 10¹⁷ N·m/rad on a small inertia, tried by a fit near its
-/// bounds) and make the count unbounded: one simulation then ran for minutes. Each squaring
-/// doubles the relative error of the slow modes, as in any scaling and squaring.
-pub fn expm(m: DMatrix<f64>) -> DMatrix<f64> {
-    let norm = m.column_iter().map(|c| c.lp_norm(1)).fold(0.0, f64::max);
-    if !norm.is_finite() {
-        return DMatrix::from_element(m.nrows(), m.ncols(), f64::NAN);
-    }
-    if norm <= EXPM_NALGEBRA_NORM {
-        return m.exp();
-    }
-    let squarings = (norm / EXPM_NALGEBRA_NORM).log2().ceil();
-    if squarings > f64::from(EXPM_MAX_SQUARINGS) {
-        return DMatrix::from_element(m.nrows(), m.ncols(), f64::NAN);
-    }
-    let squarings = squarings as i32;
-    let mut e = (m * 2f64.powi(-squarings)).exp();
-    for _ in 0..squarings {
-        e = &e * &e;
-    }
-    e
-}
-
 #[cfg(test)]
 mod tests {
 
@@ -428,26 +393,5 @@ mod tests {
         let m = v.iter().sum::<f64>() / v.len() as f64;
         let var = v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len() as f64;
         assert!(m.abs() < 0.03 && (var - 1.0).abs() < 0.03, "{m} {var}");
-    }
-
-    #[test]
-    fn expm_of_a_stiff_matrix_is_finite_and_right_and_of_a_non_finite_one_nan() {
-        // |M|^27 overflows: nalgebra alone counts unbounded squarings here
-        let m = DMatrix::from_row_slice(2, 2, &[-1e12, 0.0, 3.0, -1.0]);
-        let e = expm(m);
-        assert!(e[(0, 0)].abs() < 1e-300 && e[(0, 1)].abs() < 1e-300);
-        // 40 squarings in all: the slow mode to about 2^40 ε
-        assert!((e[(1, 1)] / (-1.0f64).exp() - 1.0).abs() < 1e-3, "{e}");
-        // e^{Ft} of an undamped oscillator, ωt = 1.3 rad
-        let w = 2.0e3;
-        let t = 6.5e-4;
-        let m = DMatrix::from_row_slice(2, 2, &[0.0, t, -w * w * t, 0.0]);
-        let e = expm(m);
-        let (s, c) = (w * t).sin_cos();
-        for (got, want) in e.iter().zip([c, -w * s, s / w, c]) {
-            assert!((got - want).abs() < 1e-12 * want.abs().max(1.0), "{e}");
-        }
-        let m = DMatrix::from_row_slice(2, 2, &[f64::INFINITY, 0.0, 0.0, 1.0]);
-        assert!(expm(m).iter().all(|v| v.is_nan()));
     }
 }

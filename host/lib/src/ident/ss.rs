@@ -20,7 +20,7 @@
 //! Isidori, "Nonlinear Control Systems", 3rd ed., specialised to the
 //! linear case).
 
-use crate::ident::linalg::expm;
+use crate::sim::integrate::expm;
 use nalgebra::{Complex, DMatrix, DVector, RowDVector, Schur};
 
 /// Discrete-time SISO state-space model (seed 000 eq. (9)).

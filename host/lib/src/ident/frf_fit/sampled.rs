@@ -3,7 +3,7 @@
 //! sample), in Hessenberg form for cheap evaluation at many lines.
 
 use super::*;
-use crate::ident::linalg::expm;
+use crate::sim::integrate::expm;
 
 pub(super) fn drive_model(model: &GreyBoxModel, lag_samples: f64) -> DrivenModel {
     DrivenModel {
