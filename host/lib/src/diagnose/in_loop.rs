@@ -363,7 +363,7 @@ const REFINE_SIMULATIONS: usize = 200;
 /// slow stops there with its best values so far. (Bench case 86, a stiffening spring
 /// refined without its delay, once spent minutes in single simulations; the cause, an
 /// unbounded squaring count in the matrix exponential of a stiff trial step, is fixed in
-/// [`crate::ident::linalg::expm`], and this bound stays as a guard.)
+/// [`crate::sim::integrate::expm`], and this bound stays as a guard.)
 const REFINE_SECONDS: f64 = 30.0;
 
 /// Finite-difference step of [`refine`]'s Jacobian in the layout's optimiser coordinate.
