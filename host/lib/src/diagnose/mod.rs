@@ -961,31 +961,42 @@ fn refine_answer(
         return;
     };
     let m_est = Measured::new(&est.data, o.band_hz, o.skip_of(&est.data));
-    let (refined, before, after) =
-        match in_loop::refine(&start, &l.scores.law, (&est.data, &m_est), o.threads) {
-            Ok(r) => r,
-            Err(e) => {
-                l.words
-                    .push_str(&format!("; refining the answer in the loop failed: {e}"));
-                return;
-            }
-        };
+    let in_loop::Refined {
+        fit: refined,
+        before,
+        moved,
+        after,
+    } = match in_loop::refine(&start, &l.scores.law, (&est.data, &m_est), o.threads) {
+        Ok(r) => r,
+        Err(e) => {
+            l.words
+                .push_str(&format!("; refining the answer in the loop failed: {e}"));
+            return;
+        }
+    };
+    let before = match moved {
+        Some((name, factor, at)) => format!(
+            "{before:.1} %; the lowest cost came from a start with {name} ×{factor} ({at:.1} \
+             %; each spring was moved up and down to let the refinement leave a mode on a \
+             wrong frequency) → {after:.1} %"
+        ),
+        None => format!("{before:.1} → {after:.1} %"),
+    };
     let window = (o.segments, o.settle_periods);
     let scored = l
         .scores
         .score(measured, &DrivenModel::of_fit(&refined), val, window);
     let Some((cs, odd)) = scored.ok().filter(|(cs, _)| cs.fit > l.best_fit) else {
         l.words.push_str(&format!(
-            "; refined in the loop on the estimation record (in-sample {before:.1} → \
-             {after:.1} %), the answer did not score higher on validation, and its open-loop fit \
-             is kept"
+            "; refined in the loop on the estimation record (in-sample {before}), the answer \
+             did not score higher on validation, and its open-loop fit is kept"
         ));
         return;
     };
     l.words.push_str(&format!(
-        "; the answer refined in the loop on the estimation record (in-sample {before:.1} → \
-         {after:.1} %, every parameter free) scores {:.1} % on validation, from {:.1} %: its \
-         parameters and FIT are the refined fit's",
+        "; the answer refined in the loop on the estimation record (in-sample {before}, every \
+         parameter free) scores {:.1} % on validation, from {:.1} %: its parameters and FIT \
+         are the refined fit's",
         cs.fit, l.best_fit
     ));
     let mut refined = (refined, cs, odd);
