@@ -483,12 +483,12 @@ impl LeastSquares for LoopProblem<'_> {
 }
 
 /// `fit` refined in the loop of `law` on the estimation record `data` (`measured` its
-/// measured side): Levenberg–Marquardt on the loop's output error ([`LoopProblem`]), every
+/// measured side): Levenberg–Marquardt on the loop's output error (`LoopProblem`), every
 /// parameter of the layout free within its bounds but the initial velocity and the torque
 /// offset (the law's constant takes a constant torque, and what is left of it the metric's
 /// band leaves out: free, it came out correlated ±1 with every other parameter), the Jacobian by
 /// forward differences on `threads` threads. It starts from `fit`'s values and from each of
-/// [`spring_starts`] (within [`MULTI_START_SECONDS`]) and keeps the lowest cost. Returns
+/// `spring_starts` (within `MULTI_START_SECONDS`) and keeps the lowest cost. Returns
 /// the refined fit (values, standard deviations from the loop's covariance), its in-sample
 /// gap metric before and after [%], and the spring its winning start moved.
 ///

@@ -161,7 +161,7 @@ pub enum ControllerError {
 }
 
 /// The controller's law from the `θ_ref`, `θ_m` and `u` of `data` (least squares of the
-/// equation error, each order of [`ORDERS`]; the simplest order within [`ORDER_GAIN`] of
+/// equation error, each order of `ORDERS`; the simplest order within `ORDER_GAIN` of
 /// the best simulated FIT).
 ///
 /// # Errors

@@ -17,7 +17,7 @@
 //!   record's Welch FRF and refined on the motor velocity, which is the model (reporting
 //!   the velocity FIT, [`FitMetric`]) when the angle is dominated by a drift of the
 //!   rigid-body integrator, else the angle's fit is run, checked against that FRF and
-//!   replaced when it has followed the drift ([`spectral`], [`DRIFT_COST_RATIO`]); with
+//!   replaced when it has followed the drift (`spectral`, [`DRIFT_COST_RATIO`]); with
 //!   decimation the starts
 //!   run on the decimated data and the best one is refined at the capture
 //!   rate, where the zero-order hold is exact, and compared with the
@@ -242,7 +242,7 @@ pub enum FitError {
     /// the averaged FRF of a record without whole periods ([`crate::ident::frf::welch`])
     #[error("FRF by averaged spectra: {0}")]
     Welch(#[from] crate::ident::frf::FrfError),
-    /// the output-error refinement on the motor velocity ([`spectral`])
+    /// the output-error refinement on the motor velocity (`spectral`)
     #[error("output error on the motor velocity failed: {0}")]
     VelocityRefinement(String),
 }
@@ -326,7 +326,7 @@ pub enum FitMetric {
     #[default]
     Output,
     /// [`VELOCITY_FIT_NAME`]: the model was fitted on the prefiltered motor velocity
-    /// ([`spectral`]), where the drift the angle's FIT is dominated by does not enter
+    /// (`spectral`), where the drift the angle's FIT is dominated by does not enter
     Velocity,
 }
 
@@ -485,7 +485,7 @@ pub fn fit_prepared(data: &FitData, opts: &FitOptions) -> Result<Fitted, FitErro
 /// physical model is refined at the capture rate (with its current-loop lag), the black box
 /// at the prepared rate (within [`PEM_BUDGET`] over all samples); a physical model the
 /// longest record gave from the motor velocity ([`FitMetric::Velocity`]) is refined on the
-/// velocity over all records instead ([`spectral`]). One record is [`fit_prepared`].
+/// velocity over all records instead (`spectral`). One record is [`fit_prepared`].
 ///
 /// # Errors
 /// [`FitError::BadData`] for no record, [`FitError::SegmentsCoulomb`] for the rigid model

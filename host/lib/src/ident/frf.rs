@@ -123,7 +123,7 @@ pub struct PeriodSpectra {
 
 /// DFT of every whole period of `x` in `layout`, lines 0 … N/2, amplitude
 /// scaled (2/N for 0 < k < N/2, 1/N at DC and Nyquist), each period's
-/// leakage of the non-periodic part removed ([`period_jumps`]).
+/// leakage of the non-periodic part removed (`period_jumps`).
 ///
 /// # Errors
 /// [`FrfError::OutOfRange`] when the layout does not fit `x`.
@@ -362,7 +362,7 @@ pub struct FrfSpectra {
     /// `noise_freq_hz`); the excited line itself is among them
     pub pool: Vec<std::ops::Range<usize>>,
     /// for each excited line, the odd nonlinear distortion that falls on it, read from the
-    /// odd non-excited lines nearby ([`nonlinear_distortion`]); zero where none stands above
+    /// odd non-excited lines nearby (`nonlinear_distortion`); zero where none stands above
     /// the noise
     pub distortion: Vec<Distortion>,
 }

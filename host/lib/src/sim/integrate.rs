@@ -36,7 +36,7 @@
 //!     stuck motor at `T/2`, at the input switch and at the end (a breakaway), the gearbox
 //!     deflection at `T/2` and the end (a contact edge);
 //!   - the motor speed, predicted from the linear flow, sweeps the Stribeck bump so fast that
-//!     the bump's level varies by more than [`STRIBECK_VARIATION`] of itself over the sample:
+//!     the bump's level varies by more than `STRIBECK_VARIATION` of itself over the sample:
 //!     the current-loop lag, as slow as the sample, curves the speed within it and one RK4
 //!     quadrature of the friction torque is then not accurate to 1e-6.
 //! - **Event-aware RK4** (`IntegrationConfig::substeps` per sample, default 5): classical
@@ -56,7 +56,7 @@
 //! Coulomb friction alone behind the 1.5-sample delay 4.3e-7, 9.8e-7, 9.1e-7 (without the
 //! Stribeck refinement 1.1e-6, 3.7e-6, 2.2e-6); backlash, cubic spring and ripple alone
 //! below 3e-7. The margin under 1e-6 is thin for Coulomb friction with a Stribeck bump:
-//! [`STRIBECK_VARIATION`] trades it against speed. The reference differs from the same RK4 at 500 substeps by below 1e-10
+//! `STRIBECK_VARIATION` trades it against speed. The reference differs from the same RK4 at 500 substeps by below 1e-10
 //! (4e-8 for a Stribeck bump of 3 % of the Coulomb level, where stick–slip decisions are
 //! delicate). Not resolved at 2 kHz: a Stribeck velocity far below the default (0.01 rad/s
 //! on the motor: 5e-5, and 5e-6 for the event-aware RK4 at 5 substeps); raise
@@ -1270,7 +1270,7 @@ const SUBSTEPS: usize = 2;
 
 /// Exponential stepping of one sample of the nonlinear plant: one Lawson step over the whole
 /// sample (the delayed input's switch inside it exact in the linear part); when that step
-/// contains an event or sweeps the Stribeck bump too fast, [`SUBSTEPS`] Lawson substeps, and
+/// contains an event or sweeps the Stribeck bump too fast, `SUBSTEPS` Lawson substeps, and
 /// the event-aware RK4 in the substeps that contain an event.
 #[derive(Clone, Debug)]
 pub struct SampleStepper {

@@ -122,7 +122,7 @@ const DISTORTION_WARN_SHARE: f64 = 0.25;
 
 /// [`FitWarning::Distortion`] when the odd distortion's variance exceeds three times the
 /// noise's, and its σ [`NEGLIGIBLE_MISFIT`] of the response, on at least
-/// [`DISTORTION_WARN_SHARE`] of the excited lines (a noise-free simulation's rounding stands
+/// `DISTORTION_WARN_SHARE` of the excited lines (a noise-free simulation's rounding stands
 /// far above its noise and changes nothing).
 pub fn distortion_check(frf: &Frf) -> Option<FitWarning> {
     let total = frf.sigma_total();
@@ -224,7 +224,7 @@ pub fn periodic_fit_percent(frf: &Frf, g: &[Complex64]) -> f64 {
 
 /// The residuals the fit weighted, one per excited line of `frf`, `E|·|² = 1` at the
 /// true model: the sample-maximum-likelihood residuals of the model whose response
-/// `respond(f_hz)` gives ([`Lines`]); `(Ĝ − G)/σ` with [`Frf::sigma_total`] when the
+/// `respond(f_hz)` gives (`Lines`); `(Ĝ − G)/σ` with [`Frf::sigma_total`] when the
 /// FRF keeps no spectra. Also the number of real degrees of freedom of their variances.
 pub fn line_residuals(
     frf: &Frf,

@@ -24,7 +24,7 @@
 //! the previous one's plant, lag and friction, the mode from a grid over its mass, its
 //! frequency and the gearbox damping, screened by short fits (`fit_with_mode`), or from a
 //! race over its frequency where that grid, judging its points before any fit, keeps a mode
-//! that changes nothing ([`race_mode`]; bench case 10 of `benches/diagnose.rs`). On the
+//! that changes nothing (`race_mode`; bench case 10 of `benches/diagnose.rs`). On the
 //! three-mass with `F_c` = 0.06 N·m (`jointid simulate --model three-mass --effect
 //! coulomb_friction:fc=0.06,fs=0.06 --seed 4`, the torque below the level on 79 % of the
 //! samples) the fit from the grown start reaches the truth (validation FIT 72.15 %, the
@@ -50,7 +50,7 @@
 //!
 //! **The bump.** With a Stribeck law the first stage is fitted twice, with the bump free
 //! and with the level alone (`F_s = F_c`), and the level alone goes on only at a clearly
-//! lower cost ([`LEVEL_ALONE_SHARE`]); when the level
+//! lower cost (`LEVEL_ALONE_SHARE`); when the level
 //! alone wins, the stages after it fit the level alone and the grown law takes the seed's
 //! shape back (`F_s/F_c`, `v_s`) at the grown level, for the caller's fit to free. Neither
 //! start is the better one on every joint: bench case 60 of `benches/diagnose.rs`
@@ -474,10 +474,10 @@ pub fn dead_zone_gain(h: f64, a: f64) -> f64 {
 /// the lag (+4 %) and shows the softened gearbox (`k_g` −33 %).
 ///
 /// **What.** The backlash on the two-mass from the best point of a grid (widths
-/// [`BACKLASH_SHARES`] of the rms deflection `δ`, each at the linear `k_g` and at the
+/// `BACKLASH_SHARES` of the rms deflection `δ`, each at the linear `k_g` and at the
 /// contact stiffness whose describing gain at the deflection `√2 δ` gives the linear
-/// one, [`dead_zone_gain`], at most [`MAX_CONTACT_GAIN`]×), for each share
-/// [`BACKLASH_DAMPER_SHARES`] of the linear gearbox damper (it held the impacts' losses),
+/// one, [`dead_zone_gain`], at most `MAX_CONTACT_GAIN`×), for each share
+/// `BACKLASH_DAMPER_SHARES` of the linear gearbox damper (it held the impacts' losses),
 /// each fitted, the lower cost kept; for the three-mass the arm's second mass then added
 /// as an extra mode in series ([`fit_with_mode`]), as the stick-slip growth does. Case 21
 /// with its joint rounded to five digits: from the damper as it is the two-mass ends at
@@ -618,11 +618,11 @@ const SCREEN_ITER: usize = 20;
 
 /// The fit of `req` (one of its effects an extra mode, attached as it says, on the
 /// structure's values `plant`, with `offset` [N·m]) from the best of a grid
-/// ([`best_point`]): the mode's mass split off the first arm mass `J_a1` (5, 10, 20, 40 %)
+/// (`best_point`): the mode's mass split off the first arm mass `J_a1` (5, 10, 20, 40 %)
 /// or a quarter of it added (the automatic start's grid), its frequency with the arm held
 /// still from 3 to 60 Hz (9 steps), 5 % damping, the gearbox damper `d_g` at its value, a
 /// third and a tenth of it;
-/// the point of lowest output-error cost for each `d_g` fitted for [`SCREEN_ITER`]
+/// the point of lowest output-error cost for each `d_g` fitted for `SCREEN_ITER`
 /// iterations (smooth law), the lowest cost kept. The split keeps the arm's inertia, which
 /// the smaller structure fitted; the mass is a free axis because the mode's coupling, not
 /// its frequency alone, shapes the motor's response (`jointid simulate --model three-mass`
@@ -693,7 +693,7 @@ pub fn fit_with_mode(
     kept.ok_or(last)
 }
 
-/// [`fit_with_mode`], and a race over the mode's frequency ([`race_mode`]) kept when it
+/// [`fit_with_mode`], and a race over the mode's frequency (`race_mode`) kept when it
 /// ends lower: the grid judges its points unfitted.
 ///
 /// # Errors
