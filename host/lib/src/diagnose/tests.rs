@@ -149,6 +149,15 @@ fn soft_tuning() -> crate::sim::ControllerConfig {
     }
 }
 
+/// The default request with gear ratio `r` and the candidates `names`.
+fn request(r: f64, names: &[&str]) -> DiagnoseRequest {
+    DiagnoseRequest {
+        r,
+        candidates: names.iter().filter_map(|n| candidate(n)).collect(),
+        ..DiagnoseRequest::default()
+    }
+}
+
 /// Diagnoses a bench case as drawn (`benches/diagnose.rs`): the three-mass joint `params`
 /// with the hidden `effects` under `controller` at `rms_rad` RMS (4 periods, noise seed
 /// `seed`), from the candidates `names`; the diagnosis and the true model's gap metric.
@@ -160,12 +169,7 @@ fn bench_case(
     names: &[&str],
 ) -> (Diagnosis, f64) {
     let (cfg, est, val) = bench_captures(params, effects, controller, (rms_rad, seed));
-    let req = DiagnoseRequest {
-        r: params.r,
-        candidates: names.iter().filter_map(|n| candidate(n)).collect(),
-        ..DiagnoseRequest::default()
-    };
-    let d = diagnose(&[est], &val, &req).unwrap();
+    let d = diagnose(&[est], &val, &request(params.r, names)).unwrap();
     let true_fit = crate::diagnose::metric::true_fit(&cfg, &val);
     eprintln!(
         "{}; nominal {:.2} %, true model {true_fit:.2} %, {:.1} s",
@@ -407,14 +411,7 @@ fn a_mode_the_open_loop_fits_put_on_a_wrong_frequency_is_moved_by_the_loop_refin
         },
         (0.049_084_8, 561),
     );
-    let req = DiagnoseRequest {
-        r: params.r,
-        candidates: ["backlash", "nonlinear_stiffness", "time_delay"]
-            .iter()
-            .filter_map(|n| candidate(n))
-            .collect(),
-        ..DiagnoseRequest::default()
-    };
+    let req = request(params.r, &["backlash", "nonlinear_stiffness", "time_delay"]);
     let d = diagnose(std::slice::from_ref(&est), &val, &req).unwrap();
     named_in_the_loop(&d, ("backlash", "width", width), (&cfg, &est, &val));
 }
@@ -436,14 +433,7 @@ fn stiffness_named_in_the_loop(
         controller,
         (rms_rad, seed),
     );
-    let req = DiagnoseRequest {
-        r: params.r,
-        candidates: ["backlash", "nonlinear_stiffness"]
-            .iter()
-            .filter_map(|n| candidate(n))
-            .collect(),
-        ..DiagnoseRequest::default()
-    };
+    let req = request(params.r, &["backlash", "nonlinear_stiffness"]);
     let d = diagnose(std::slice::from_ref(&est), &val, &req).unwrap();
     named_in_the_loop(&d, ("nonlinear_stiffness", "k3", k3), (&cfg, &est, &val));
     (d, est, val, req)
