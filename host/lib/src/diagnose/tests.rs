@@ -207,7 +207,9 @@ fn bench_captures(
 /// at 0.0136 rad RMS, wider than the rms gearbox deflection the linear fit reads (8.8
 /// µrad); the linear structure bends away from the joint's (`J_a2` 21×), and from it the
 /// backlash fit ended at 0.4 µrad, no gain, and the answer was the cubic spring. Grown from
-/// the linear two-mass ([`grow::grow_backlash`]) it is found.
+/// the linear two-mass ([`grow::grow_backlash`]) it is found. Its fit then stops at its
+/// iteration limit in a flat valley, 76.9 % on validation against the true model's 80.4 %;
+/// continued ([`super::polish`]), the answer's closure comes within 3 points of the truth's.
 #[test]
 fn a_backlash_wider_than_the_linear_deflection_is_found() {
     use crate::model::effects::Backlash;
@@ -224,7 +226,7 @@ fn a_backlash_wider_than_the_linear_deflection_is_found() {
         f_m: 2.036282476e-3,
         ..JointParams::default()
     };
-    let (d, _) = bench_case(
+    let (d, true_fit) = bench_case(
         params,
         vec![Effect::Backlash(Backlash { width })],
         ControllerConfig {
@@ -238,6 +240,18 @@ fn a_backlash_wider_than_the_linear_deflection_is_found() {
     let w = param(&d, "width");
     assert!(within(w, width, 0.2), "width = {w:e}, truth {width:e}");
     assert!(d.fit_augmented_val > d.fit_nominal_val + 8.0);
+    assert!(
+        d.warnings
+            .iter()
+            .any(|w| w.starts_with("backlash: its fit stopped at its iteration limit")),
+        "{:?}",
+        d.warnings
+    );
+    assert!(
+        d.fit_augmented_val > true_fit - 3.0,
+        "{:.2} % against the true model's {true_fit:.2} %",
+        d.fit_augmented_val
+    );
 }
 
 /// Bench case 88 of `benches/diagnose.rs`: a linear three-mass joint at 0.0114 rad RMS
