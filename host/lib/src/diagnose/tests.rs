@@ -58,6 +58,16 @@ fn param(d: &Diagnosis, name: &str) -> f64 {
     c.parameters[name].value
 }
 
+/// Fails unless one of the diagnosis's notes contains `words`.
+fn assert_noted(d: &Diagnosis, words: &str) {
+    assert!(
+        d.warnings.iter().any(|w| w.contains(words)),
+        "no note says {words:?}: {}: {:?}",
+        d.verdict,
+        d.warnings
+    );
+}
+
 fn within(v: f64, truth: f64, tol: f64) -> bool {
     (v / truth - 1.0).abs() < tol
 }
@@ -240,13 +250,7 @@ fn a_backlash_wider_than_the_linear_deflection_is_found() {
     let w = param(&d, "width");
     assert!(within(w, width, 0.2), "width = {w:e}, truth {width:e}");
     assert!(d.fit_augmented_val > d.fit_nominal_val + 8.0);
-    assert!(
-        d.warnings
-            .iter()
-            .any(|w| w.starts_with("backlash: its fit stopped at its iteration limit")),
-        "{:?}",
-        d.warnings
-    );
+    assert_noted(&d, "backlash: its fit stopped at its iteration limit");
     assert!(
         d.fit_augmented_val > true_fit - 3.0,
         "{:.2} % against the true model's {true_fit:.2} %",
@@ -285,13 +289,7 @@ fn a_linear_joint_whose_time_domain_fit_follows_the_disturbance_keeps_its_nomina
         "nominal {:.2} %, true model {true_fit:.2} %",
         d.fit_nominal_val
     );
-    assert!(
-        d.warnings
-            .iter()
-            .any(|w| w.contains("below its frequency-domain start")),
-        "{:?}",
-        d.warnings
-    );
+    assert_noted(&d, "below its frequency-domain start");
 }
 
 /// Bench case 72 of `benches/diagnose.rs`: a strongly stiffening spring on a three-mass
@@ -342,17 +340,8 @@ fn a_chaotic_stiffening_spring_is_named_in_the_controller_loop() {
         assert!(d.verdict.contains("doubtful"), "{}", d.verdict);
         "does not explain the distortion"
     };
-    assert!(
-        d.warnings.iter().any(|w| w.contains(told)),
-        "{}: {:?}",
-        d.verdict,
-        d.warnings
-    );
-    assert!(
-        d.warnings.iter().any(|w| w.contains("no reference")),
-        "{:?}",
-        d.warnings
-    );
+    assert_noted(&d, told);
+    assert_noted(&d, "no reference");
 }
 
 /// Bench case 2: a stiffening spring, chaotic from the measured torque, under a P–P cascade
