@@ -20,6 +20,7 @@ def run_cli(cli, *args):
 def without_timing(doc):
     doc = dict(doc)
     doc.pop("elapsed_s", None)
+    doc.pop("seconds", None)
     return doc
 
 

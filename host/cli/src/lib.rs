@@ -179,15 +179,24 @@ pub fn check_plot_files(
         .try_for_each(|n| check_output(&dir.join(n), force))
 }
 
-/// Version of every `--json` document's shape: `"schema": "jointid-<kind>/1"`. A field
-/// renamed or removed, or a type changed, raises it; the schema files in
-/// `host/cli/schema/<kind>.schema.json` change with it.
-pub const SCHEMA_VERSION: u32 = 1;
+/// Version of a `--json` document's shape: `"schema": "jointid-<kind>/<version>"`. A field
+/// renamed or removed, or a type changed, raises its kind's; the schema file
+/// `host/cli/schema/<kind>.schema.json` changes with it. `diagnose` is at 2: its FITs
+/// took back the names the diagnosis's contract gives them (`fit_nominal_val`,
+/// `fit_augmented_val`, `fit_val`, `seconds`), `fit_validation` and `elapsed_s` kept
+/// beside the last two.
+pub fn schema_version(kind: &str) -> u32 {
+    match kind {
+        "diagnose" => 2,
+        _ => 1,
+    }
+}
 
-/// The name of a `--json` document's schema, `jointid-<kind>/<SCHEMA_VERSION>`; `kind` is
-/// the command, or the command and the document's variant (`fit-nonlinear`).
+/// The name of a `--json` document's schema, `jointid-<kind>/<version>`
+/// ([`schema_version`]); `kind` is the command, or the command and the document's variant
+/// (`fit-nonlinear`).
 pub fn schema_name(kind: &str) -> String {
-    format!("jointid-{kind}/{SCHEMA_VERSION}")
+    format!("jointid-{kind}/{}", schema_version(kind))
 }
 
 /// A `--json` document: its `schema` first, then the command's own fields.

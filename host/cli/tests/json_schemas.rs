@@ -1,6 +1,6 @@
 //! Every command's `--json` document against its JSON Schema file
 //! (`host/cli/schema/<kind>.schema.json`, the kind named by the document's own `schema`
-//! field, `jointid-<kind>/1`): each command runs on small simulated inputs (the simulator
+//! field, `jointid-<kind>/<version>`): each command runs on small simulated inputs (the simulator
 //! through the binary, as the other command-line tests make theirs) and must print exactly
 //! one JSON document that the schema accepts. The schemas declare every field
 //! (`additionalProperties: false` on every object with properties), so a field the code
@@ -170,14 +170,22 @@ fn schema(kind: &str) -> Value {
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
-/// the kind of a document, from its `schema` field `jointid-<kind>/1`
+/// the kind of a document, from its `schema` field `jointid-<kind>/<version>`, the version
+/// its kind's
 fn kind_of(doc: &Value) -> &str {
     let name = doc["schema"]
         .as_str()
         .unwrap_or_else(|| panic!("no `schema` field: {doc}"));
-    name.strip_prefix("jointid-")
-        .and_then(|r| r.strip_suffix("/1"))
-        .unwrap_or_else(|| panic!("`schema` is not jointid-<kind>/1: {name}"))
+    let (kind, version) = name
+        .strip_prefix("jointid-")
+        .and_then(|r| r.rsplit_once('/'))
+        .unwrap_or_else(|| panic!("`schema` is not jointid-<kind>/<version>: {name}"));
+    assert_eq!(
+        version,
+        jointid_cli::schema_version(kind).to_string(),
+        "{name}"
+    );
+    kind
 }
 
 /// `doc` is valid against the schema file its `schema` field names, which must be `kind`
@@ -264,7 +272,7 @@ fn schema_files_are_strict_and_cover_every_command() {
         );
         assert_eq!(
             s["properties"]["schema"]["const"],
-            format!("jointid-{kind}/1"),
+            jointid_cli::schema_name(kind),
             "{name}"
         );
         assert_eq!(s["required"][0], "schema", "{name}");

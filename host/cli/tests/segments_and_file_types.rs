@@ -228,8 +228,8 @@ fn diagnose_with_segment_all_names_the_hidden_friction_of_gapped_captures() {
         assert_eq!(s["samples"], l["samples"]);
     }
     for (pooled, each) in [
-        ("fit_nominal_validation", "fit_nominal"),
-        ("fit_augmented_validation", "fit_augmented"),
+        ("fit_nominal_val", "fit_nominal"),
+        ("fit_augmented_val", "fit_augmented"),
     ] {
         let p = num(&j[pooled]);
         let (a, b) = (num(&per[0][each]), num(&per[1][each]));
@@ -239,7 +239,7 @@ fn diagnose_with_segment_all_names_the_hidden_friction_of_gapped_captures() {
         );
     }
     assert!(
-        num(&j["fit_augmented_validation"]) > num(&j["fit_nominal_validation"]) + 10.0,
+        num(&j["fit_augmented_val"]) > num(&j["fit_nominal_val"]) + 10.0,
         "{j}"
     );
 }

@@ -234,9 +234,8 @@ pub struct Candidate {
     pub score: f64,
     /// standard error of that mean [FIT points]
     pub score_se: f64,
-    /// gap metric on the whole validation range [%] (JSON `fit_validation`, the name
-    /// every command gives a FIT on validation data)
-    #[serde(rename = "fit_validation")]
+    /// gap metric on the whole validation range [%] (JSON `fit_val`, the diagnosis's
+    /// name, and `fit_validation`, the name every command gives a FIT on validation data)
     pub fit_val: f64,
     /// toolbox FIT of `θ_m` on the validation capture [%]
     #[serde(rename = "fit_angle_validation")]
@@ -322,7 +321,6 @@ pub struct ParameterMismatch {
     /// where the simulation came from
     pub sim: String,
     /// gap metric of the user's simulation on the validation capture [%]
-    #[serde(rename = "fit_sim_validation")]
     pub fit_sim_val: f64,
     /// FIT points the parameters alone account for (nominal − simulation)
     pub parameter_part: f64,
@@ -356,26 +354,23 @@ pub struct Diagnosis {
     pub metric: String,
     /// structure of the nominal model
     pub structure: String,
-    /// the nominal's gap metric on the validation capture [%] (JSON
-    /// `fit_nominal_validation`)
-    #[serde(rename = "fit_nominal_validation")]
+    /// the nominal's gap metric on the validation capture [%]
     pub fit_nominal_val: f64,
     /// the nominal's toolbox FIT of `θ_m` on the validation capture [%]
-    #[serde(rename = "fit_nominal_angle_validation")]
     pub fit_nominal_angle_val: f64,
     /// the nominal's structure values, lag and offset
     pub nominal_parameters: BTreeMap<String, ParamValue>,
-    /// the best model's gap metric (the nominal's when `best` is `none`) [%] (JSON
-    /// `fit_augmented_validation`)
-    #[serde(rename = "fit_augmented_validation")]
+    /// the best model's gap metric (the nominal's when `best` is `none`) [%]
     pub fit_augmented_val: f64,
     /// share of the gap `100 − fit_nominal_val` the best closes [-]
     pub gap_closed_share: f64,
     /// the best effect, `a+b` for a pair, or `none`
     pub best: String,
     /// the pair tried with the best single effect that passed the test, if any
+    #[serde(serialize_with = "pair_json")]
     pub pair: Option<Candidate>,
     /// the candidates, best score first
+    #[serde(serialize_with = "candidates_json")]
     pub effects: Vec<Candidate>,
     /// where the gap lies
     #[serde(rename = "where")]
@@ -384,15 +379,41 @@ pub struct Diagnosis {
     pub parameter_mismatch: Option<ParameterMismatch>,
     /// the significance test in words
     pub test: String,
-    /// with several validation segments: the gap metric on each (`fit_nominal_validation`
-    /// and `fit_augmented_validation` pool them); empty, and left out of the JSON, for one
+    /// with several validation segments: the gap metric on each (`fit_nominal_val` and
+    /// `fit_augmented_val` pool them); empty, and left out of the JSON, for one
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub validation_segments: Vec<ValidationSegment>,
-    /// wall time [s] (JSON `elapsed_s`, as every command's wall time)
-    #[serde(rename = "elapsed_s")]
+    /// wall time [s] (the `--json` document gives it as `elapsed_s` too, as every
+    /// command's wall time)
     pub seconds: f64,
     /// notes
     pub warnings: Vec<String>,
+}
+
+/// A candidate in JSON: its fields, with its validation FIT also as `fit_validation`, the
+/// name every command gives a FIT on validation data.
+#[derive(Serialize)]
+struct CandidateJson<'a> {
+    #[serde(flatten)]
+    candidate: &'a Candidate,
+    fit_validation: f64,
+}
+
+impl<'a> From<&'a Candidate> for CandidateJson<'a> {
+    fn from(candidate: &'a Candidate) -> Self {
+        CandidateJson {
+            candidate,
+            fit_validation: candidate.fit_val,
+        }
+    }
+}
+
+fn candidates_json<S: serde::Serializer>(v: &[Candidate], s: S) -> Result<S::Ok, S::Error> {
+    s.collect_seq(v.iter().map(CandidateJson::from))
+}
+
+fn pair_json<S: serde::Serializer>(v: &Option<Candidate>, s: S) -> Result<S::Ok, S::Error> {
+    v.as_ref().map(CandidateJson::from).serialize(s)
 }
 
 /// Opening words of the warning on a model whose simulation does not forget its start.
