@@ -827,3 +827,47 @@ mod ripple {
         );
     }
 }
+
+/// A candidate's own start that does not simulate gives way to the automatic start
+/// ([`fit_and_score`]; bench case 57, where the extra mode's start from the four-mass linear
+/// fit did not simulate, so the mode was no candidate and its pair with the friction never
+/// formed). Here the mode's start is given a negative spring.
+#[test]
+fn a_start_that_does_not_simulate_gives_way_to_the_automatic_start() {
+    let mode = ExtraMode::default();
+    let effects = vec![Effect::ExtraMode(mode)];
+    let (est, val) = captures(&effects, 13);
+    let req = battery_request();
+    let o = &req.options;
+    let parts =
+        [Measured::new(&val.data, o.band_hz, o.skip_of(&val.data)).with_tracking(o.tracking_hz)];
+    let structure = linear_of(std::slice::from_ref(&est), &req, &mut Vec::new());
+    let (plant, lag) = structure.clone().expect("the linear start");
+    let unstable = ExtraMode { k: -1e9, ..mode };
+    let starts = LinearStarts {
+        structure,
+        extra_mode: Some((plant, unstable, lag)),
+        coulomb: None,
+        coulomb_extra_mode: None,
+        grown: None,
+        two_mass: None,
+    };
+    let (est, val) = ([est.data], [val.data]);
+    let fitted = |effects: Vec<Effect>| {
+        fit_and_score(&est, &val, &parts, &req, effects, &starts, None)
+            .unwrap_or_else(|e| panic!("{e}"))
+    };
+    let nominal = fitted(Vec::new());
+    let with_mode = fitted(effects);
+    let k = with_mode.fit.model.effects[0];
+    eprintln!(
+        "nominal {:.2} %, with the mode {:.2} % ({k:?})",
+        nominal.scored.fit, with_mode.scored.fit
+    );
+    assert!(
+        with_mode.scored.fit > nominal.scored.fit + 3.0,
+        "the mode from the automatic start: {:.2} %, the nominal {:.2} %",
+        with_mode.scored.fit,
+        nominal.scored.fit
+    );
+}
