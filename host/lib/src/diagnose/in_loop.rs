@@ -22,7 +22,6 @@ use crate::ident::lm::{minimize, LeastSquares, LmOptions, Normal};
 use crate::ident::nonlinear::{sim_plant, NlFit, NlParam, Owner, ParamDef, Scale};
 use nalgebra::{DMatrix, DVector};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::Instant;
 
 /// Smallest FIT of the identified law's `u` on the validation record for the loop to be
 /// used [%]. The simulator's cascade, identified at its default `u` noise: 98.4–99.8 % on
@@ -355,16 +354,15 @@ impl LoopAnswer<'_> {
 /// Iterations of [`refine`].
 const REFINE_ITER: usize = 12;
 
-/// Most simulations one [`refine`] runs (its Jacobians and trial steps): a bound on its time
-/// whatever the model.
+/// Most simulations one start of [`refine`] runs (its Jacobians and trial steps): a bound on
+/// its work whatever the model, counted, never timed, so that a busy machine gets the same
+/// answer as an idle one.
 const REFINE_SIMULATIONS: usize = 200;
 
-/// Longest time one [`refine`] simulates [s]: a model whose every simulation in the loop is
-/// slow stops there with its best values so far. (Bench case 86, a stiffening spring
-/// refined without its delay, once spent minutes in single simulations; the cause, an
-/// unbounded squaring count in the matrix exponential of a stiff trial step, is fixed in
-/// [`crate::sim::integrate::expm`], and this bound stays as a guard.)
-const REFINE_SECONDS: f64 = 30.0;
+/// Most simulations all the starts of one [`refine`] run together: past it no further start
+/// is tried. Seventeen whole starts, what a three-mass answer's starts take (about 160
+/// simulations each); a four-mass answer's later starts are left out.
+const REFINE_TOTAL_SIMULATIONS: usize = 17 * REFINE_SIMULATIONS;
 
 /// Finite-difference step of [`refine`]'s Jacobian in the layout's optimiser coordinate.
 const REFINE_STEP: f64 = 1e-4;
@@ -378,11 +376,11 @@ struct LoopProblem<'a> {
     data: &'a IdData,
     measured: &'a Measured,
     threads: usize,
-    /// simulations run so far; past [`REFINE_SIMULATIONS`] none is run and the step is
-    /// rejected
+    /// simulations run so far by this start; a cost or a Jacobian that would take it past
+    /// [`REFINE_SIMULATIONS`] is not evaluated, and the step is rejected. Taken whole before
+    /// the Jacobian's columns go to threads, so which evaluations run never depends on how
+    /// the threads are scheduled.
     runs: AtomicUsize,
-    /// past this instant no simulation is run either ([`REFINE_SECONDS`])
-    deadline: Instant,
 }
 
 impl LoopProblem<'_> {
@@ -408,14 +406,20 @@ impl LoopProblem<'_> {
         }
     }
 
+    /// Takes `n` simulations from the start's budget ([`REFINE_SIMULATIONS`]); false, taking
+    /// none, when fewer are left. Called from the minimisation's own thread only.
+    fn take(&self, n: usize) -> bool {
+        let used = self.runs.load(Ordering::Relaxed);
+        let ok = used + n <= REFINE_SIMULATIONS;
+        if ok {
+            self.runs.store(used + n, Ordering::Relaxed);
+        }
+        ok
+    }
+
     /// Band-passed simulated velocity over the scored range at `z`; `None` when the model
     /// does not simulate.
     fn simulated(&self, z: &[f64]) -> Option<Vec<f64>> {
-        if self.runs.fetch_add(1, Ordering::Relaxed) >= REFINE_SIMULATIONS
-            || Instant::now() > self.deadline
-        {
-            return None;
-        }
         let theta = simulate_closed(&self.model_at(z), self.law, self.data).ok()?;
         let v = velocity_band(&theta, self.data.ts, self.measured.band);
         let v = v[self.measured.skip..].to_vec();
@@ -437,6 +441,9 @@ impl LeastSquares for LoopProblem<'_> {
     }
 
     fn cost(&self, theta: &[f64]) -> f64 {
+        if !self.take(1) {
+            return f64::NAN;
+        }
         match self.simulated(theta) {
             Some(v) => self
                 .measured()
@@ -451,6 +458,13 @@ impl LeastSquares for LoopProblem<'_> {
     fn normal_equations(&self, theta: &[f64], free: &[usize]) -> Normal {
         let y = self.measured();
         let n = y.len();
+        if !self.take(1 + free.len()) {
+            return Normal {
+                jtj: DMatrix::zeros(free.len(), free.len()),
+                jte: DVector::zeros(free.len()),
+                ssr: f64::NAN,
+            };
+        }
         let base = self.simulated(theta);
         let columns = super::parallel(free, self.threads, |&j| {
             let mut z = theta.to_vec();
@@ -488,7 +502,7 @@ impl LeastSquares for LoopProblem<'_> {
 /// offset (the law's constant takes a constant torque, and what is left of it the metric's
 /// band leaves out: free, it came out correlated ±1 with every other parameter), the Jacobian by
 /// forward differences on `threads` threads. It starts from `fit`'s values and from each of
-/// `spring_starts` (within `MULTI_START_SECONDS`) and keeps the lowest cost. Returns
+/// `spring_starts` (within [`REFINE_TOTAL_SIMULATIONS`]) and keeps the lowest cost. Returns
 /// the refined fit (values, standard deviations from the loop's covariance), its in-sample
 /// gap metric before and after [%], and the spring its winning start moved.
 ///
@@ -505,7 +519,7 @@ pub fn refine(
     threads: usize,
 ) -> Result<Refined, String> {
     let layout = fit.model.layout();
-    let mut problem = LoopProblem {
+    let problem = LoopProblem {
         fit,
         layout: layout.clone(),
         law,
@@ -513,7 +527,6 @@ pub fn refine(
         measured,
         threads,
         runs: AtomicUsize::new(0),
-        deadline: Instant::now() + std::time::Duration::from_secs_f64(REFINE_SECONDS),
     };
     let z0: Vec<f64> = layout
         .iter()
@@ -545,14 +558,13 @@ pub fn refine(
     }
     // the answer's own values first, then each spring moved ([`spring_starts`]); the lowest
     // cost in the loop wins
-    let began = Instant::now();
+    let mut total = 0;
     let mut best: Option<(crate::ident::lm::LmFit, Option<Moved>)> = None;
     for (z, moved) in spring_starts(&layout, &opts.fixed, &z0) {
-        if best.is_some() && began.elapsed().as_secs_f64() > MULTI_START_SECONDS {
+        total += problem.runs.swap(0, Ordering::Relaxed);
+        if best.is_some() && total >= REFINE_TOTAL_SIMULATIONS {
             break;
         }
-        problem.runs.store(0, Ordering::Relaxed);
-        problem.deadline = Instant::now() + std::time::Duration::from_secs_f64(REFINE_SECONDS);
         let Ok(lm) = minimize(&problem, &z, &opts) else {
             continue;
         };
@@ -644,11 +656,6 @@ type SpringStart = (Vec<f64>, Option<(&'static str, f64)>);
 /// root, which keeps the mode's damping ratio): the mode's frequency moves by their square
 /// root, from a third to three times, in steps of 19 to 41 %.
 const SPRING_FACTORS: [f64; 8] = [0.125, 0.25, 0.5, 0.707, 1.414, 2.0, 4.0, 8.0];
-
-/// Longest time [`refine`] spends on its starts [s]: past it, no further start is tried. A
-/// guard: a three-mass answer's 17 starts take about 160 simulations each; on bench case 61
-/// (15,000 samples, two cores) they lengthen the whole diagnosis from 20.0 to 25.8 s.
-const MULTI_START_SECONDS: f64 = 60.0;
 
 /// The starts of [`refine`]: `z0`, then `z0` with each free spring of the structure
 /// multiplied by each of [`SPRING_FACTORS`], with the spring's name and factor.
