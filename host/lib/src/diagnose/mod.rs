@@ -1583,6 +1583,21 @@ pub fn diagnose_segments(
             )));
         }
     }
+    // validation on the estimation record itself measures nothing the fits did not see:
+    // every candidate's extra parameters gain there, so it would name effects on any joint
+    for e in est.iter().flat_map(|c| c.iter()) {
+        if let Some(v) = val
+            .iter()
+            .find(|v| v.data.u == e.data.u && v.data.y == e.data.y)
+        {
+            return Err(DiagnoseError::Input(format!(
+                "the validation capture {} holds the very samples of the estimation capture \
+                 {}: validate on another run of the joint (another excitation or noise \
+                 realisation), or the gains of the candidates say nothing",
+                v.name, e.name
+            )));
+        }
+    }
     let skip_of = |d: &Dataset| o.skip_of(&d.data);
     // the measured side of every validation segment, and of them joined (one segment: itself)
     let parts: Vec<Measured> = val

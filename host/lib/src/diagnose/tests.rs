@@ -29,9 +29,18 @@ fn battery_request() -> DiagnoseRequest {
 }
 
 fn run_case(label: &str, hidden: Option<Effect>, seed: u64) -> Diagnosis {
+    run_case_with(label, hidden, seed, &battery_request())
+}
+
+fn run_case_with(
+    label: &str,
+    hidden: Option<Effect>,
+    seed: u64,
+    req: &DiagnoseRequest,
+) -> Diagnosis {
     let effects: Vec<Effect> = hidden.into_iter().collect();
     let (est, val) = captures(&effects, seed);
-    let d = diagnose(&[est], &val, &battery_request()).unwrap();
+    let d = diagnose(&[est], &val, req).unwrap();
     eprintln!(
         "[battery] {label}: best {} ({}), nominal {:.2} % -> {:.2} %, {:.1} s",
         d.best, d.verdict, d.fit_nominal_val, d.fit_augmented_val, d.seconds
@@ -80,12 +89,20 @@ fn check_stiffness(k3: f64) {
     assert!(within(v, k3, 0.2), "k3 = {v:e}, truth {k3:e}");
 }
 
-fn check_delay(samples: f64) {
+fn check_delay(samples: f64) -> Diagnosis {
     let e = Effect::TimeDelay(TimeDelay { samples });
     let d = run_case(&format!("time_delay {samples}"), Some(e), 12);
     assert!(d.best.starts_with("time_delay"), "{}", d.verdict);
     let v = param(&d, "samples");
     assert!(within(v, samples, 0.2), "samples = {v}, truth {samples}");
+    d
+}
+
+/// The diagnosis as `--json` has it, less its wall time.
+fn without_timing(d: &Diagnosis) -> serde_json::Value {
+    let mut v = serde_json::to_value(d).unwrap();
+    v.as_object_mut().unwrap().remove("seconds");
+    v
 }
 
 fn check_extra_mode(scale: f64) {
@@ -136,9 +153,36 @@ fn battery_nonlinear_stiffness_default_and_larger() {
     check_stiffness(4.5e13);
 }
 
+/// Also: the same captures give the same diagnosis on one thread, with both cores kept
+/// busy by other work, as on two threads of an idle machine. No result may hang on the
+/// clock or on how the threads are scheduled (budgets count iterations and simulations,
+/// `in_loop::refine` among them).
 #[test]
 fn battery_time_delay_default_and_larger() {
-    check_delay(1.5);
+    let two_threads = check_delay(1.5);
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let load: Vec<_> = (0..2)
+        .map(|_| {
+            let stop = stop.clone();
+            std::thread::spawn(move || {
+                let mut x = 1.0_f64;
+                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                    x = std::hint::black_box(x.sin() + 1.0);
+                }
+            })
+        })
+        .collect();
+    let mut req = battery_request();
+    req.options.threads = 1;
+    let e = Effect::TimeDelay(TimeDelay { samples: 1.5 });
+    let one_thread = run_case_with("time_delay 1.5, one thread, loaded", Some(e), 12, &req);
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    load.into_iter().for_each(|t| t.join().unwrap());
+    assert_eq!(
+        without_timing(&one_thread),
+        without_timing(&two_threads),
+        "the diagnosis differs between one thread under load and two threads"
+    );
     check_delay(2.25);
 }
 
@@ -498,9 +542,21 @@ fn one_estimation_capture_or_two_and_a_candidate_are_required() {
         ..DiagnoseRequest::default()
     };
     assert!(matches!(
-        diagnose(&[est], &val, &none),
+        diagnose(&[est.clone()], &val, &none),
         Err(DiagnoseError::Input(_))
     ));
+}
+
+/// The estimation capture given again as the validation capture is refused before any fit:
+/// there every candidate's extra parameters gain, and effects would be named on any joint.
+#[test]
+fn the_estimation_capture_is_refused_as_the_validation_capture() {
+    let (est, _) = captures(&[], 1);
+    let err = diagnose(&[est.clone()], &est, &battery_request()).unwrap_err();
+    assert!(
+        matches!(&err, DiagnoseError::Input(m) if m.contains("very samples")),
+        "{err}"
+    );
 }
 
 /// Pairs of Coulomb friction and a parallel mode as the bench draws them: where the
