@@ -93,8 +93,7 @@ pub const RELIABLE_REL_SIGMA: f64 = 0.1;
 pub const SWAMPED_REL_SIGMA: f64 = 0.5;
 /// largest lag or delay considered [samples]
 pub const MAX_DRIVE_SAMPLES: f64 = 20.0;
-/// cost above this multiple of its expected value is reported
-pub const COST_RATIO_WARN: f64 = 2.0;
+pub use crate::ident::validate::COST_RATIO_WARN;
 /// a resonance of the FRF this prominent [dB] must be in the model
 pub const MISSED_PEAK_DB: f64 = 6.0;
 /// a model and an FRF resonance match within this relative distance

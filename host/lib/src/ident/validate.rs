@@ -36,8 +36,11 @@
 
 use rustfft::num_complex::Complex64;
 
-use crate::ident::frf_fit::COST_RATIO_WARN;
 use serde::Serialize;
+
+/// A fit's cost above this multiple of its expected value (the noise level) is reported:
+/// the frequency-domain fits warn, and the line residual test takes it as its bound.
+pub const COST_RATIO_WARN: f64 = 2.0;
 
 /// how a fit figure is labelled wherever it is shown
 pub const FIT_NAME: &str = "FIT (toolbox compare, NRMSE) [%]";

@@ -4,7 +4,7 @@
 //! ([`simulate_exact`], the series behind [`super::validate`]'s FITs, for plots).
 
 use super::fit::{NlError, NlFit};
-use super::run::sim_plant;
+use super::model::sim_plant;
 use crate::data::IdData;
 use crate::model::params::model_params;
 use crate::sim::{simulate_driven, DrivenStart};

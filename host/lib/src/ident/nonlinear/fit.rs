@@ -1055,7 +1055,7 @@ fn exact_velocity(problem: &Problem, data: &IdData, z: &[f64]) -> Option<Vec<f64
     let at = |o: Owner| problem.layout.iter().position(|d| d.owner == o);
     let offset = at(Owner::Offset).map_or(0.0, |i| values[i]);
     let v0 = at(Owner::InitialVelocity).map_or(0.0, |i| values[i]);
-    let plant = super::run::sim_plant(&m, &plant_values);
+    let plant = super::model::sim_plant(&m, &plant_values);
     let n = crate::model::plant::Mechanism::new(&plant, &m.effects).n_bodies();
     let u: Vec<f64> = data.u.iter().map(|u| u + offset).collect();
     let r = if m.structure == crate::model::spec::Structure::Rigid {

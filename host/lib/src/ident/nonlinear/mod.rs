@@ -22,11 +22,11 @@ pub use fit::{
 };
 pub use grow::{grow_with, stick_share, Grown, Seed, STICK_SHARE};
 pub use init::{automatic_start, automatic_start_with, RippleOrder, Start, Step};
-pub use model::{NlModel, Owner, ParamDef, Scale};
+pub use model::{sim_plant, NlModel, Owner, ParamDef, Scale};
 pub use run::{
     identify, identify_segments, linear_start, linear_start_segments, model_name, model_of, run,
-    sim_plant, validate, validate_segments, LinearStart, LinearStartError, NlData, NlRequest,
-    NlResult, NlRun, NlRunError, NlStart, NlValidation,
+    validate, validate_segments, LinearStart, LinearStartError, NlData, NlRequest, NlResult, NlRun,
+    NlRunError, NlStart, NlValidation,
 };
 
 #[cfg(test)]

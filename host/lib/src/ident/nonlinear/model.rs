@@ -27,7 +27,7 @@ use num_traits::Float;
 
 use crate::model::effects::{Attach, Effect};
 use crate::model::laws;
-use crate::model::params::unit_of;
+use crate::model::params::{model_params, unit_of, JointParams, Plant as SimPlant};
 use crate::model::spec::Structure;
 
 /// Most bodies: four-mass plus four extra modes.
@@ -766,4 +766,28 @@ impl<T: Float> Plant<T> {
         }
         true
     }
+}
+
+/// The simulator's plant for the structure's values `plant` (in
+/// [`Structure::param_names`] order) of `model`.
+pub fn sim_plant(model: &NlModel, plant: &[f64]) -> SimPlant {
+    let names = model.structure.param_names();
+    let mut p = JointParams {
+        r: model.r,
+        j_a1: 0.0,
+        j_a2: 0.0,
+        ..JointParams::default()
+    };
+    let kind = model.structure;
+    if model.structure == Structure::Rigid {
+        p.j_m = plant[0];
+        p.f_m = plant[1];
+    } else {
+        for (name, field) in model_params(kind) {
+            if let Some(i) = names.iter().position(|n| *n == name) {
+                *field(&mut p) = plant[i];
+            }
+        }
+    }
+    SimPlant { kind, params: p }
 }

@@ -11,7 +11,7 @@ use super::fit::{
     fit_output_error_segments, interval_velocity, pooled_velocity_fit, simulate_velocity,
 };
 use super::init::{automatic_start_with, RippleOrder, Step};
-use super::model::{NlModel, Owner};
+use super::model::{sim_plant, NlModel, Owner};
 use super::{NlError, NlFit, NlOptions};
 use crate::data::{Dataset, IdData};
 use crate::ident::frf::FrfError;
@@ -19,7 +19,6 @@ use crate::ident::frf_fit::{Drive, FrfFitError, FrfFitOptions};
 use crate::ident::lm::Termination;
 use crate::ident::validate::fit_percent;
 use crate::model::effects::Effect;
-use crate::model::params::{model_params, JointParams, Plant};
 use crate::model::spec::Structure;
 use crate::sim::{simulate_driven, DrivenStart};
 
@@ -1017,30 +1016,6 @@ pub fn checks(fit: &NlFit) -> Vec<String> {
         }
     }
     w
-}
-
-/// The simulator's plant for the structure's values `plant` (in
-/// [`Structure::param_names`] order) of `model`.
-pub fn sim_plant(model: &NlModel, plant: &[f64]) -> Plant {
-    let names = model.structure.param_names();
-    let mut p = JointParams {
-        r: model.r,
-        j_a1: 0.0,
-        j_a2: 0.0,
-        ..JointParams::default()
-    };
-    let kind = model.structure;
-    if model.structure == Structure::Rigid {
-        p.j_m = plant[0];
-        p.f_m = plant[1];
-    } else {
-        for (name, field) in model_params(kind) {
-            if let Some(i) = names.iter().position(|n| *n == name) {
-                *field(&mut p) = plant[i];
-            }
-        }
-    }
-    Plant { kind, params: p }
 }
 
 /// Validates `fit` on `val` (module documentation): the model simulated from the measured
