@@ -186,9 +186,10 @@ pub enum GreyBoxError {
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
-    use crate::ident::subspace::tests::{closed_loop, LoopSpec};
+    use crate::test_support::read_shared;
+    use crate::test_support::two_mass::{closed_loop, LoopSpec};
 
     /// Simulates the joint `structure` with `output` and parameters `p`, sampled
     /// every `ts` [s], in the closed loop of `spec`, and fits the same structure
@@ -346,20 +347,9 @@ pub(crate) mod tests {
         assert!(f.fit_percent > 95.0, "fit {}", f.fit_percent);
     }
 
-    /// a file of `shared/`, which sits beside the repository (or beside the
-    /// worktree folder)
-    pub(crate) fn read_shared(rel: &str) -> String {
-        let base = env!("CARGO_MANIFEST_DIR");
-        for up in ["/../../shared/", "/../../../shared/"] {
-            if let Ok(t) = std::fs::read_to_string(format!("{base}{up}{rel}")) {
-                return t;
-            }
-        }
-        panic!("shared file {rel} not found beside {base}");
-    }
-
+    /// EMPS's training record (`shared/data/emps`): force [N] and position [m]
     fn read_emps() -> IdData {
-        let text = read_shared("data/emps/emps_train_DATA_EMPS.csv");
+        let text = read_shared("emps/emps_train_DATA_EMPS.csv");
         let mut u = Vec::new();
         let mut y = Vec::new();
         for line in text.lines().skip(1) {

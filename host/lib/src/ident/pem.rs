@@ -721,7 +721,7 @@ mod tests {
                 th[3].exp(),
                 th[4].exp(),
             ];
-            crate::ident::subspace::tests::two_mass_angle_ct(j1, j2, k, d, fm).zoh(self.ts)
+            crate::test_support::two_mass::two_mass_angle_ct(j1, j2, k, d, fm).zoh(self.ts)
         }
     }
 
@@ -902,7 +902,7 @@ mod tests {
     #[test]
     fn daisy_robot_arm_order_4_subspace_and_pem_fit_second_half() {
         use crate::ident::subspace::{estimate, BdEstimate, Method, Order, SubspaceOptions};
-        let text = crate::ident::grey_box::tests::read_shared("data/daisy-robot-arm/robot_arm.csv");
+        let text = crate::test_support::read_shared("daisy-robot-arm/robot_arm.csv");
         let (mut u, mut y) = (Vec::new(), Vec::new());
         for line in text.lines().skip(1) {
             let c: Vec<&str> = line.split(',').collect();

@@ -14,6 +14,7 @@ use rustfft::num_complex::Complex64;
 use crate::data::IdData;
 
 pub mod synth;
+pub mod two_mass;
 
 /// xorshift64* with Box–Muller: reproducible Gaussian noise for tests
 pub struct Gauss(u64);
@@ -194,6 +195,15 @@ pub fn shared_data(path: &str) -> std::path::PathBuf {
         .find(|d| d.is_dir())
         .expect("shared/data beside the repository")
         .join(path)
+}
+
+/// The text of `shared/data/<path>` ([`shared_data`]).
+///
+/// # Panics
+/// When the file cannot be read.
+pub fn read_shared(path: &str) -> String {
+    let p = shared_data(path);
+    std::fs::read_to_string(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
 /// An estimation and a validation capture of `cfg` driven by `exc` (`exc` as given, and
