@@ -1,6 +1,6 @@
-//! The sample codec of a [`SampleBatch`] (the layout is in the `wire` module
-//! docs): tick deviations and per-channel predictor residuals as
-//! zigzag-LEB128 varints. [`BatchBuilder`] encodes; [`SampleBatch::samples`],
+//! The sample codec of a [`SampleBatch`] (the layout: `icd.rs`, *Sample data*):
+//! tick deviations and per-channel predictor residuals as zigzag-LEB128
+//! varints. [`BatchBuilder`] encodes; [`SampleBatch::samples`],
 //! [`SampleBatch::for_each_sample`] and [`SampleBatch::check`] decode.
 
 use super::{Crc32, RawSample, SampleBatch, BATCH_CAPACITY};
