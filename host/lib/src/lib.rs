@@ -23,4 +23,7 @@ pub mod model;
 pub mod report;
 pub mod scenario;
 pub mod sim;
+/// Fixtures with a known truth for the tests of this crate, its benches and the command
+/// line's tests: not part of the API.
+#[doc(hidden)]
 pub mod test_support;
