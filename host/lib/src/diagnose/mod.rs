@@ -812,6 +812,20 @@ fn scored_candidate(
     (reason, odd_explained): (String, Option<f64>),
 ) -> Candidate {
     let (score, score_se, significant) = judged;
+    // an effect fitted to no size is the nominal again: whatever it gained came from the
+    // refitted structure, not from the effect
+    let vanished = vanished_effects(&f.fit);
+    let (significant, reason) = if vanished.is_empty() {
+        (significant, reason)
+    } else {
+        (
+            false,
+            format!(
+                "{reason}; not an effect: {} fitted within its σ of nought",
+                vanished.join(", ")
+            ),
+        )
+    };
     Candidate {
         name: name.into(),
         specs: f.fit.model.effects.iter().map(|e| e.to_string()).collect(),
@@ -826,6 +840,48 @@ fn scored_candidate(
         reason,
         warnings: f.warnings.clone(),
     }
+}
+
+/// The parameter whose nought makes an effect vanish (the model is its nominal again), if it
+/// has one: friction level, backlash width, cubic stiffness, delay, ripple amplitude.
+fn size_parameter(e: &Effect) -> Option<&'static str> {
+    match e {
+        Effect::CoulombFriction(_) => Some("fc"),
+        Effect::Backlash(_) => Some("width"),
+        Effect::NonlinearStiffness(_) => Some("k3"),
+        Effect::TimeDelay(_) => Some("samples"),
+        Effect::TorqueRipple(_) => Some("amplitude"),
+        Effect::ExtraMode(_) => None,
+    }
+}
+
+/// The effects of `fit` whose size ([`size_parameter`]) came out within its standard
+/// deviation of nought (exactly nought where the deviation is unknown), as `name size`.
+fn vanished_effects(fit: &NlFit) -> Vec<String> {
+    fit.params
+        .iter()
+        .filter_map(|p| {
+            let Owner::Effect(i) = p.owner else {
+                return None;
+            };
+            let e = &fit.model.effects[i];
+            let nought = if p.std.is_finite() && p.std > 0.0 {
+                p.value.abs() <= p.std
+            } else {
+                p.value == 0.0
+            };
+            (size_parameter(e) == Some(p.name) && nought).then(|| {
+                format!(
+                    "{} {} = {:.3e} ± {:.1e} {}",
+                    e.name(),
+                    p.name,
+                    p.value,
+                    p.std,
+                    p.unit
+                )
+            })
+        })
+        .collect()
 }
 
 /// The share of the nominal's odd-line residual a model removes, in words (empty when not

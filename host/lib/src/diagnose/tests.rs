@@ -927,3 +927,42 @@ fn a_start_that_does_not_simulate_gives_way_to_the_automatic_start() {
         nominal.scored.fit
     );
 }
+
+/// An effect fitted within its σ of no size is not an effect (a delay of exactly 0 samples
+/// named a significant `time_delay` on a joint with none); one clearly above it is.
+#[test]
+fn an_effect_fitted_to_no_size_is_never_significant() {
+    use crate::ident::lm::Termination;
+    use crate::ident::nonlinear::{NlModel, NlParam, Owner};
+    let fit = |value: f64, std: f64| NlFit {
+        model: NlModel {
+            structure: Structure::TwoMass,
+            r: 1.0,
+            effects: vec![Effect::TimeDelay(TimeDelay { samples: value })],
+            tau_c: 0.0,
+            v_eps: 0.05,
+            dz_eps: 1e-6,
+            substeps: 1,
+        },
+        plant: Vec::new(),
+        params: vec![NlParam {
+            name: "samples",
+            owner: Owner::Effect(0),
+            value,
+            std,
+            unit: "samples",
+            fixed: false,
+            at_bound: false,
+        }],
+        values: vec![value],
+        ssr: 1.0,
+        n_residuals: 100,
+        iterations: 3,
+        termination: Termination::CostConverged,
+        fit_velocity_percent: 90.0,
+        correlated: Vec::new(),
+    };
+    assert_eq!(vanished_effects(&fit(0.0, f64::NAN)).len(), 1);
+    assert_eq!(vanished_effects(&fit(0.02, 0.05)).len(), 1);
+    assert!(vanished_effects(&fit(1.5, 0.05)).is_empty());
+}
