@@ -64,6 +64,10 @@ pub struct FitReport {
     pub fit_toolbox_estimation: Option<f64>,
     /// as `fit_toolbox_estimation`, on the validation data [%]
     pub fit_toolbox_validation: Option<f64>,
+    /// why the FIT shown is not the one the fit's domain reports, and what it measures
+    /// (the text report's; `fit_name` says it in `--json`)
+    #[serde(skip)]
+    pub fit_note: Option<String>,
     /// identified resonance frequencies [Hz]
     pub resonances_hz: Vec<f64>,
     /// identified anti-resonance frequencies [Hz]
@@ -186,6 +190,7 @@ fn linear_report(
         fit_validation: out.fit.validation,
         fit_toolbox_estimation: out.fit.toolbox.map(|t| t.0),
         fit_toolbox_validation: out.fit.toolbox.and_then(|t| t.1),
+        fit_note: out.fit.note.clone(),
         resonances_hz: l.resonances.resonances.iter().map(|r| r.freq_hz).collect(),
         antiresonances_hz: l
             .resonances
@@ -246,6 +251,9 @@ fn print_linear_text(out: &mut dyn Write, r: &FitReport) -> std::io::Result<()> 
     }
     if let Some(v) = r.fit_validation {
         writeln!(out, "    validation: {v:.2}")?;
+    }
+    if let Some(n) = &r.fit_note {
+        writeln!(out, "    note: {n}")?;
     }
     if let Some(e) = r.fit_toolbox_estimation {
         writeln!(
@@ -541,7 +549,7 @@ fn print_nonlinear_text(out: &mut dyn Write, r: &NlReport<'_>, fit: &NlFit) -> s
         } else {
             format!("± {:.3e}", p.std)
         };
-        let pct = if p.fixed || p.value == 0.0 {
+        let pct = if p.fixed {
             String::new()
         } else {
             format!("({} %)", std_percent(p.value, p.std))

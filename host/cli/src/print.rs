@@ -47,9 +47,15 @@ pub(crate) fn verdict(t: &CorrelationTest) -> String {
     }
 }
 
-/// The standard deviation `std` of `value` in per cent of it, two decimals.
+/// The standard deviation `std` of `value` in per cent of it, two decimals, or `—` where
+/// that is undefined (a value of 0, such as a delay fitted to none, or not finite).
 pub(crate) fn std_percent(value: f64, std: f64) -> String {
-    format!("{:.2}", 100.0 * std / value.abs().max(f64::MIN_POSITIVE))
+    let p = 100.0 * std / value.abs();
+    if value == 0.0 || !p.is_finite() {
+        "—".into()
+    } else {
+        format!("{p:.2}")
+    }
 }
 
 /// Prints each note on standard error as `note: ...`.
@@ -71,4 +77,18 @@ pub(crate) fn usable_segments(
     let u = jointid::data::segment::usable_segments(std::mem::take(segs), numbers, name, notes);
     print_notes(&u.notes);
     (u.datasets, u.segments)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn std_percent_is_a_dash_where_it_is_undefined() {
+        assert_eq!(std_percent(2.0, 0.02), "1.00");
+        assert_eq!(std_percent(-4.0, 1.0), "25.00");
+        assert_eq!(std_percent(0.0, 8e-6), "—");
+        assert_eq!(std_percent(0.0, 0.0), "—");
+        assert_eq!(std_percent(1.0, f64::NAN), "—");
+    }
 }
