@@ -216,3 +216,83 @@ impl PrepArgs {
         self.prep().apply(data)
     }
 }
+
+/// A data file with the column mapping of `fit`: the same flags as every
+/// analysis command, `--output-col` accepted as another name of `--output`.
+#[derive(Debug, Clone, Args)]
+pub struct FitDataArgs {
+    /// data file: capture CSV (`t,theta_ref,u,theta_m`), a mapped CSV, or `.jcap`
+    #[arg(value_name = "DATA")]
+    pub path: PathBuf,
+    /// time column [s] (with --input and --output)
+    #[arg(long, value_name = "COL", requires_all = ["input", "output_col"])]
+    pub time: Option<String>,
+    /// input column (torque [N·m] or force [N])
+    #[arg(long, value_name = "COL", requires_all = ["time", "output_col"])]
+    pub input: Option<String>,
+    /// output column (motor angle [rad] or position [m]; see --output-kind)
+    #[arg(
+        long = "output",
+        visible_alias = "output-col",
+        value_name = "COL",
+        requires_all = ["time", "input"]
+    )]
+    pub output_col: Option<String>,
+    /// reference column (default: the capture CSV's `theta_ref`)
+    #[arg(long, value_name = "COL")]
+    pub reference: Option<String>,
+    /// how to read the files and which part to use
+    #[command(flatten)]
+    pub read: ReadArgs,
+}
+
+impl FitDataArgs {
+    /// the same mapping as analysis' [`DataArgs`] for `path`
+    pub fn data_args(&self, path: &Path) -> DataArgs {
+        DataArgs {
+            path: path.to_path_buf(),
+            time: self.time.clone(),
+            input: self.input.clone(),
+            output: self.output_col.clone(),
+            reference: self.reference.clone(),
+            read: self.read.clone(),
+        }
+    }
+}
+
+/// `--lags M`: at least 1 (the residual tests need one lag)
+pub(crate) fn parse_lags(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(m) if m >= 1 => Ok(m),
+        _ => Err(format!("`{s}` is not a number of lags ≥ 1")),
+    }
+}
+
+/// The column mapping names three (or four) different columns: one column cannot be two
+/// signals.
+pub(crate) fn check_columns(data: &DataArgs) -> Result<(), String> {
+    let named = [
+        ("--time", &data.time),
+        ("--input", &data.input),
+        ("--output", &data.output),
+        ("--reference", &data.reference),
+    ];
+    for (i, (fa, a)) in named.iter().enumerate() {
+        for (fb, b) in &named[i + 1..] {
+            if let (Some(a), Some(b)) = (a, b) {
+                if a == b {
+                    return Err(format!(
+                        "{fa} and {fb} both name column `{a}`: one column cannot be two signals"
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `other` (a validation record, given by `flag`) has the sample interval of the estimation
+/// record `first` ([`jointid::ident::fit::check_same_rate`]).
+pub(crate) fn check_same_rate(first: &Dataset, other: &Dataset, flag: &str) -> Result<(), String> {
+    jointid::ident::fit::check_same_rate(first, other).map_err(|e| format!("{flag} {e}"))
+}

@@ -19,7 +19,7 @@ use std::path::PathBuf;
 use clap::Args;
 use serde::Serialize;
 
-use super::fit::write_bode;
+use super::views::write_bode;
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::capture::jcap::write_stream;
 use jointid::ident::frf::analyze_dataset;

@@ -10,11 +10,11 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::fit::{
-    check_same_rate, usable_segments, FitDataArgs, SegmentNotes, MIN_SEGMENT_SAMPLES,
-};
+use super::args::{check_same_rate, FitDataArgs};
+use super::print::usable_segments;
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::{check_output, write_file};
+use jointid::data::segment::{SegmentNotes, MIN_SEGMENT_SAMPLES};
 use jointid::data::Dataset;
 use jointid::diagnose::{diagnose_segments, DiagnoseRequest, Diagnosis, UserSim};
 use jointid::ident::grey_box::DEFAULT_GEAR_RATIO;
@@ -355,7 +355,7 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
 }
 
 /// The notes of a diagnosis over several segments of a capture
-/// ([`super::fit::usable_segments`]).
+/// ([`usable_segments`]).
 const DIAGNOSING_NOTES: SegmentNotes = SegmentNotes {
     leaving: |left| {
         format!(

@@ -31,7 +31,7 @@ pub struct ValidateArgs {
     pub simulated_file: Option<PathBuf>,
     /// lags M of the residual tests
     #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS,
-          value_parser = super::fit::parse_lags)]
+          value_parser = super::args::parse_lags)]
     pub lags: usize,
     /// preparation applied to measured and simulated data alike
     #[command(flatten)]
@@ -118,7 +118,7 @@ fn test_line(out: &mut dyn Write, t: &CorrelationTest) -> std::io::Result<()> {
         if t.statistic <= t.critical { "≤" } else { ">" },
         t.dof,
         t.critical,
-        super::fit::verdict(t)
+        super::print::verdict(t)
     )
 }
 

@@ -21,25 +21,25 @@ use std::path::PathBuf;
 use clap::Args;
 use serde::Serialize;
 
-use super::args::{DataArgs, PrepArgs, ReadArgs};
-use super::fit::velocity_record;
-use super::fit::{
-    check_columns, check_lags, print_tests, usable_segments, SegmentJson, SegmentNotes,
-    MIN_SEGMENT_SAMPLES,
-};
-use super::fit_nl::{FitsJson, NL_FIT_NAME};
+use super::args::{check_columns, DataArgs, PrepArgs, ReadArgs};
+use super::print::{print_tests, usable_segments};
 use super::validate::{self as column_validate, ValidateArgs};
 use super::views::{
     write_views, CompareRecord, Signals, Views, PERIODIC_COMPARED, VELOCITY_COMPARED, VIEW_FILES,
 };
 use super::{check_plot_files, print_json, CmdResult, Context, Outcome};
+use jointid::data::segment::{longest_segment, SegmentNotes, MIN_SEGMENT_SAMPLES};
 use jointid::data::IdData;
-use jointid::ident::fit::{FitData, FitMetric, VELOCITY_FIT_NAME};
+use jointid::ident::fit::{
+    check_lags, velocity_record, FitData, FitMetric, SegmentJson, NL_FIT_NAME, VELOCITY_FIT_NAME,
+};
 use jointid::ident::frf::{analyze_dataset, analyze_segments};
 use jointid::ident::frf_fit::{periodic_fit_percent, periodic_fit_signals, PERIODIC_FIT_NAME};
 use jointid::ident::grey_box::Output;
 use jointid::ident::model_file::SavedModel;
-use jointid::ident::nonlinear::{validate as nl_validate, validate_segments, NlOptions};
+use jointid::ident::nonlinear::{
+    validate as nl_validate, validate_segments, NlOptions, NlValidation,
+};
 use jointid::ident::validate::{Validation, DEFAULT_LAGS, FIT_NAME};
 
 /// Arguments of `jointid validate`.
@@ -71,7 +71,7 @@ pub struct ValidateCmdArgs {
     pub simulated_file: Option<PathBuf>,
     /// lags M of the residual tests (DATA needs more than 2M samples after preparation)
     #[arg(long, value_name = "M", default_value_t = DEFAULT_LAGS,
-          value_parser = super::fit::parse_lags)]
+          value_parser = super::args::parse_lags)]
     pub lags: usize,
     /// exit with 1 when the FIT [%] is below this
     #[arg(long, value_name = "X")]
@@ -187,7 +187,7 @@ pub fn run(args: &ValidateCmdArgs, ctx: &mut Context<'_>) -> CmdResult {
     let sel = data_args(&args.files[1]).select(ctx.loaders)?;
     let numbers = sel.segments.clone();
     let segs = sel.datasets;
-    let ds = super::fit::longest_segment(&segs).clone();
+    let ds = longest_segment(&segs).clone();
     // the model runs at the rate it was fitted at: the capture rate (a physical model
     // with `decimate_output` > 1) or the capture rate decimated by the model's preparation
     let capture_ts = if saved.decimate_output > 1 {
@@ -406,7 +406,7 @@ struct NlReport<'a> {
     require_fit: Option<f64>,
     fit_ok: bool,
     /// the three FITs of the model on DATA (pooled over the segments)
-    validation: FitsJson,
+    validation: NlValidation,
     /// with `--segment all` on a capture with gaps: each segment's velocity FIT (`fit`
     /// pools them)
     segments: Vec<SegmentJson>,
@@ -462,7 +462,7 @@ fn run_nonlinear(
     } else {
         (sel.datasets, sel.segments)
     };
-    let ds = super::fit::longest_segment(&segs);
+    let ds = longest_segment(&segs);
     check_model_rate(ds, saved.ts, mpath)?;
     let opts = NlOptions {
         highpass_hz: nl.highpass_hz,
@@ -510,7 +510,7 @@ fn run_nonlinear(
                 fit_estimation: saved.fit_estimation,
                 require_fit: args.require_fit,
                 fit_ok,
-                validation: v.into(),
+                validation: v,
                 segments,
             },
         )?;
@@ -609,7 +609,7 @@ fn write_segments(
             "  {fit_name} per segment (the figures above pool them):"
         )?;
         for sg in segments {
-            sg.write_line(out, "    ")?;
+            writeln!(out, "    {sg}")?;
         }
     }
     Ok(())

@@ -6,9 +6,12 @@
 
 use std::path::{Path, PathBuf};
 
-use jointid::ident::fit::Fitted;
+use jointid::data::Dataset;
+pub use jointid::ident::fit::CompareRecord;
+use jointid::ident::fit::{bode_figure, BodeFigure, Fitted};
 use jointid::ident::grey_box::Output;
 use jointid::ident::validate::Validation;
+use jointid::report::plot::bode_svg_in;
 use jointid::report::views::{
     compare_svg, interval_rate, pzmap_svg, resid_svg, step_horizon, step_response, step_svg,
     CompareModel, ComparePanel, PzModel, ResidRow, StepCurve, Units,
@@ -26,21 +29,6 @@ pub const VELOCITY_COMPARED: &str = "simulated from rest, both through the fit's
 
 /// The files [`write_views`] writes.
 pub const VIEW_FILES: [&str; 4] = ["compare.svg", "resid.svg", "pzmap.svg", "step.svg"];
-
-/// One record of `compare.svg`: measured and simulated output and the FIT the command
-/// printed for them.
-pub struct CompareRecord {
-    /// `estimation: FILE`, `validation: FILE`
-    pub title: String,
-    /// sample interval [s]
-    pub ts: f64,
-    /// measured output
-    pub y: Vec<f64>,
-    /// simulated output
-    pub y_hat: Vec<f64>,
-    /// the FIT [%] printed for it
-    pub fit: f64,
-}
 
 /// What the views of one model show.
 pub struct Views<'a> {
@@ -280,6 +268,50 @@ pub fn write_views(
         )?,
     )?;
     Ok(written)
+}
+
+/// Writes `name` into `dir`: Bode plot of `models` over the FRF of `ds` (its signals and
+/// units `io`, [`frf_label`]) (when `ds` is periodic) with ±2σ, up to 0.45 / Ts of the
+/// coarsest model ([`jointid::ident::fit::bode_figure`]); an existing file only with
+/// `force`.
+///
+/// # Errors
+/// Directory, plot and write errors.
+pub fn write_bode(
+    dir: &Path,
+    name: &str,
+    ds: &Dataset,
+    settle_periods: usize,
+    models: &[&Fitted],
+    io: &(String, String),
+    force: bool,
+) -> Result<PathBuf, Box<dyn std::error::Error + Send + Sync>> {
+    let fig = bode_figure(ds, settle_periods, models);
+    write_bode_figure(dir, name, &fig, &ds.name, io, force)
+}
+
+/// Writes `name` into `dir`: the Bode plot `fig` over the FRF of the record `record` (its
+/// signals and units `io`, [`frf_label`]); an existing file only with `force`.
+///
+/// # Errors
+/// Directory, plot and write errors.
+pub fn write_bode_figure(
+    dir: &Path,
+    name: &str,
+    fig: &BodeFigure,
+    record: &str,
+    io: &(String, String),
+    force: bool,
+) -> Result<PathBuf, Box<dyn std::error::Error + Send + Sync>> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let path = dir.join(name);
+    let title = format!("models over the FRF {}: {}", io.0, short_name(record));
+    write_svg(
+        &path,
+        &bode_svg_in(&title, Some(&io.1), fig.band.as_ref(), &fig.curves)?,
+        force,
+    )?;
+    Ok(path)
 }
 
 #[cfg(test)]

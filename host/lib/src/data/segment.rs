@@ -402,6 +402,105 @@ impl Record {
     }
 }
 
+/// The longest of `segs` (the first of equal length): the record a fit over several
+/// segments is named after, plots and starts from.
+///
+/// # Panics
+/// When `segs` is empty (a [`Selected`] always holds one record or more).
+pub fn longest_segment(segs: &[Dataset]) -> &Dataset {
+    segs.iter()
+        .enumerate()
+        .max_by_key(|(i, d)| (d.data.len(), usize::MAX - i))
+        .map_or(&segs[0], |(_, d)| d)
+}
+
+/// Segment numbers as `1, 3`.
+pub fn segment_list(numbers: &[usize]) -> String {
+    numbers
+        .iter()
+        .map(usize::to_string)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Least samples of a segment that a time-domain fit takes with `--segment all`; shorter
+/// ones are left out with a note (each would add an initial state for little data).
+pub const MIN_SEGMENT_SAMPLES: usize = 200;
+
+/// The two notes of a command on several segments ([`usable_segments`]), in its words.
+#[derive(Clone, Copy, Debug)]
+pub struct SegmentNotes {
+    /// from the segments left out, listed (`segment 2 (150 samples)`)
+    pub leaving: fn(&str) -> String,
+    /// from the numbers of the segments used, listed (`1, 3`)
+    pub using: fn(&str) -> String,
+}
+
+/// The notes of a fit over several segments ([`usable_segments`]): the segments it leaves
+/// out, the segments it fits.
+pub const FITTING_NOTES: SegmentNotes = SegmentNotes {
+    leaving: |left| {
+        format!(
+            "the time-domain fit leaves out {left}: shorter than {MIN_SEGMENT_SAMPLES} samples, \
+             each would add an initial state for little data"
+        )
+    },
+    using: |list| {
+        format!(
+            "fitting segments {list} as separate experiments (one parameter vector, each \
+             segment its own initial state)"
+        )
+    },
+};
+
+/// The segments a time-domain computation takes ([`usable_segments`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct UsableSegments {
+    /// the segments of [`MIN_SEGMENT_SAMPLES`] samples or more, in order
+    pub datasets: Vec<Dataset>,
+    /// their numbers (from 1, as [`Record::segments`] lists them)
+    pub segments: Vec<usize>,
+    /// `NAME: ...` for the user: the segments left out and why (when any), and how the
+    /// others are used ([`SegmentNotes`])
+    pub notes: Vec<String>,
+}
+
+/// The segments `segs` (numbered `numbers`) of the record `name` that a time-domain
+/// computation takes: those of [`MIN_SEGMENT_SAMPLES`] samples or more, each of which
+/// is an experiment with its own initial state; the notes say which are left out and how
+/// the others are used, in the words of `notes`.
+pub fn usable_segments(
+    segs: Vec<Dataset>,
+    numbers: &[usize],
+    name: &str,
+    notes: SegmentNotes,
+) -> UsableSegments {
+    let mut datasets = Vec::new();
+    let mut segments = Vec::new();
+    let mut left = Vec::new();
+    for (d, &k) in segs.into_iter().zip(numbers) {
+        if d.data.len() >= MIN_SEGMENT_SAMPLES {
+            datasets.push(d);
+            segments.push(k);
+        } else {
+            left.push(format!("segment {k} ({} samples)", d.data.len()));
+        }
+    }
+    let mut said = Vec::new();
+    if !left.is_empty() {
+        said.push(format!("{name}: {}", (notes.leaving)(&left.join(", "))));
+    }
+    said.push(format!(
+        "{name}: {}",
+        (notes.using)(&segment_list(&segments))
+    ));
+    UsableSegments {
+        datasets,
+        segments,
+        notes: said,
+    }
+}
+
 /// Excitation sample index of `ds`'s first sample, unrounded (`t0 / ts`).
 fn first_sample_f(ds: &Dataset) -> f64 {
     ds.t0 / ds.data.ts
@@ -584,6 +683,36 @@ mod tests {
         assert_eq!(
             "0".parse::<SegmentChoice>(),
             Err("segments are numbered from 1".to_string())
+        );
+    }
+
+    #[test]
+    fn usable_segments_leave_out_the_short_ones_with_a_note_and_longest_is_the_first_of_equals() {
+        let piece = |n: usize| Dataset {
+            name: "g.csv".into(),
+            data: crate::data::IdData {
+                ts: 1e-3,
+                u: vec![0.0; n],
+                y: vec![0.0; n],
+                r: None,
+            },
+            t0: 0.0,
+            excitation: None,
+            meta: Default::default(),
+        };
+        let segs = vec![piece(300), piece(150), piece(300)];
+        assert!(std::ptr::eq(longest_segment(&segs), &segs[0]));
+        let u = usable_segments(segs, &[1, 2, 4], "g.csv", FITTING_NOTES);
+        assert_eq!(u.segments, [1, 4]);
+        assert_eq!(u.datasets.len(), 2);
+        assert_eq!(
+            u.notes,
+            [
+                "g.csv: the time-domain fit leaves out segment 2 (150 samples): shorter than \
+                 200 samples, each would add an initial state for little data",
+                "g.csv: fitting segments 1, 4 as separate experiments (one parameter vector, \
+                 each segment its own initial state)"
+            ]
         );
     }
 }

@@ -33,6 +33,11 @@
 //! estimated on each record as `compare` does by default. Residual tests are
 //! those of [`crate::ident::validate`] (Ljung 1999, §16.6).
 //!
+//! [`run`] is `jointid fit` as one call: the path the model and the records call for
+//! (nonlinear engine, frequency domain, time domain; one record or several segments), the
+//! checks before the work, and everything the command prints, saves and draws
+//! ([`FitOutcome`]).
+//!
 //! Why here: the estimators do no IO and know nothing of files or JSON; the
 //! command line (the `jointid` binary) and the experiments ([`crate::scenario::paper`])
 //! share this one path, so a FIT printed by `jointid fit` and one in the
@@ -58,11 +63,30 @@ use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
 use crate::ident::validate::{self, Validation};
 use crate::model::spec::{Family, ModelSpec, Structure};
 
+mod figures;
+pub use figures::{
+    bode_figure, simulated_record, velocity_record, BodeFigure, CompareRecord, Compared,
+    FigureError, VelocityFigure,
+};
 mod frequency;
 pub use frequency::{below_frf, fit_frequency_domain};
+mod outcome;
+pub use outcome::{
+    FitFigures, FitOutcome, FitRunError, FittedModel, LinearFit, NonlinearFit, SegmentJson,
+    NL_FIT_NAME,
+};
+mod request;
+pub use request::{
+    check_lags, check_same_rate, Domain, FitRecords, FitRequest, LagsError, NlInputs, RequestError,
+    SampleRateDiffers,
+};
+mod run;
+pub use run::run;
 mod spectral;
 pub use spectral::DRIFT_COST_RATIO;
 
+#[cfg(test)]
+mod run_tests;
 #[cfg(test)]
 mod segments_tests;
 

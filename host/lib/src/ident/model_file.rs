@@ -23,8 +23,10 @@ use thiserror::Error;
 
 use crate::data::Prep;
 use crate::ident::fit::{
-    output_name, param_map, FitMetric, Fitted, ParamJson, RigidFriction, VELOCITY_FIT_NAME,
+    output_name, param_map, FitMetric, FitOutcome, Fitted, FittedModel, ParamJson, RigidFriction,
+    NL_FIT_NAME, VELOCITY_FIT_NAME,
 };
+use crate::ident::frf_fit::PERIODIC_FIT_NAME;
 use crate::ident::grey_box::{Output, PhysParam};
 use crate::ident::lm::Termination;
 use crate::ident::nonlinear::{simulate_args, NlFit, NlModel, NlParam, Owner};
@@ -32,6 +34,36 @@ use crate::ident::ss::StateSpace;
 use crate::model::effects::Effect;
 use crate::model::params::unit_of;
 use crate::model::spec::{Family, ModelSpec, Structure};
+
+impl FitOutcome {
+    /// The model file of `jointid fit --save`, the records prepared with `prep`: the
+    /// linear model with its headline FIT on the estimation record (the periodic FIT named
+    /// when it is the one reported, so that `validate` reports it too), or the model with
+    /// effects with its velocity FIT ([`NL_FIT_NAME`]).
+    pub fn to_saved(&self, prep: Prep) -> SavedModel {
+        match &self.model {
+            FittedModel::Linear(l) => {
+                let mut saved = l.fitted.to_saved(prep, &self.name, self.fit.estimation);
+                if self.fit.name == PERIODIC_FIT_NAME {
+                    saved.fit_name = Some(PERIODIC_FIT_NAME.to_string());
+                }
+                saved
+            }
+            FittedModel::Nonlinear(n) => {
+                let r = &n.run.result;
+                SavedModel::from_nonlinear(
+                    &r.fit,
+                    self.ts,
+                    &r.method,
+                    &self.name,
+                    self.fit.estimation,
+                    NL_FIT_NAME,
+                    r.options.highpass_hz,
+                )
+            }
+        }
+    }
+}
 
 impl Fitted {
     /// The model file.

@@ -208,8 +208,9 @@ pub struct NlResult {
     pub method: String,
 }
 
-/// Validation of a fitted model on data that played no part in the fit.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Validation of a fitted model on data that played no part in the fit (the `validation`
+/// of `fit --json` and `validate --json` for a model with effects).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct NlValidation {
     /// FIT of the interval-mean motor velocity through the fit's high-pass prefilter, the
     /// model simulated with the simulator's exact laws [%]

@@ -1,0 +1,94 @@
+//! Printing shared by the commands' text reports: the residual tests' lines (`fit`,
+//! `validate`), a standard deviation in per cent, and the notes on standard error about
+//! the segments a command uses.
+
+use std::io::Write;
+
+use jointid::data::segment::SegmentNotes;
+use jointid::data::Dataset;
+use jointid::ident::validate::{CorrelationTest, Validation};
+
+/// The two residual tests of `v` (whiteness, input independence), one line each, under
+/// the record's `label`.
+pub(crate) fn print_tests(out: &mut dyn Write, label: &str, v: &Validation) -> std::io::Result<()> {
+    for t in [&v.whiteness, &v.independence] {
+        print_test(out, label, t)?;
+    }
+    Ok(())
+}
+
+fn print_test(out: &mut dyn Write, label: &str, t: &CorrelationTest) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "    {label:<10} {:<40} {}: max |r| {:.3} vs bound {:.3} ({} of {} {} outside, {} {} allowed), χ² {:.1} {} {:.1}",
+        t.name,
+        verdict(t),
+        t.max_abs,
+        t.bound,
+        t.outside,
+        t.lags.len(),
+        t.unit,
+        if t.outside <= t.allowed { "≤" } else { ">" },
+        t.allowed,
+        t.statistic,
+        if t.statistic <= t.critical { "≤" } else { ">" },
+        t.critical
+    )
+}
+
+/// `pass`, `FAIL`, or `FAIL (N residual samples are NaN or infinite)`: the figures
+/// printed beside it (lags outside against those allowed, χ² against its 99 % point)
+/// say which criterion failed.
+pub(crate) fn verdict(t: &CorrelationTest) -> String {
+    match (t.pass, t.non_finite) {
+        (true, _) => "pass".into(),
+        (false, 0) => "FAIL".into(),
+        (false, _) => format!("FAIL ({})", t.failure().unwrap_or_default()),
+    }
+}
+
+/// The standard deviation `std` of `value` in per cent of it, two decimals, or `—` where
+/// that is undefined (a value of 0, such as a delay fitted to none, or not finite).
+pub(crate) fn std_percent(value: f64, std: f64) -> String {
+    let p = 100.0 * std / value.abs();
+    if value == 0.0 || !p.is_finite() {
+        "—".into()
+    } else {
+        format!("{p:.2}")
+    }
+}
+
+/// Prints each note on standard error as `note: ...`.
+pub(crate) fn print_notes(notes: &[String]) {
+    for n in notes {
+        let _ = writeln!(std::io::stderr(), "note: {n}");
+    }
+}
+
+/// The segments of `segs` (numbered `numbers`, of the record `name`) that a time-domain
+/// computation takes, and their numbers ([`jointid::data::segment::usable_segments`]);
+/// prints its notes in the words of `notes`. `segs` is left empty.
+pub(crate) fn usable_segments(
+    segs: &mut Vec<Dataset>,
+    numbers: &[usize],
+    name: &str,
+    notes: SegmentNotes,
+) -> (Vec<Dataset>, Vec<usize>) {
+    let u = jointid::data::segment::usable_segments(std::mem::take(segs), numbers, name, notes);
+    print_notes(&u.notes);
+    (u.datasets, u.segments)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn std_percent_is_a_dash_where_it_is_undefined() {
+        assert_eq!(std_percent(2.0, 0.02), "1.00");
+        assert_eq!(std_percent(-4.0, 1.0), "25.00");
+        assert_eq!(std_percent(0.0, 8e-6), "—");
+        assert_eq!(std_percent(0.0, 0.0), "—");
+        assert_eq!(std_percent(1.0, f64::NAN), "—");
+    }
+}
