@@ -40,7 +40,7 @@ mod fit_nl;
 mod info;
 mod simulate;
 mod validate;
-mod validate_cmd;
+mod validate_simulated;
 mod views;
 
 /// `jointid`: identification of one robot joint, from capture to validated models.
@@ -71,7 +71,7 @@ pub enum Command {
     /// fit a black-box or physical model: parameters, FIT, resonances, residual tests
     Fit(fit::FitArgs),
     /// FIT and residual tests of a saved model (or a simulated column) on data
-    Validate(validate_cmd::ValidateCmdArgs),
+    Validate(validate::ValidateArgs),
     /// the whole path on the simulated joint, through the wire encoder (no board needed)
     Demo(demo::DemoArgs),
     /// seed 000 Table 2 on simulated IRB1400-like data (FIT of black box 11, three-, four-mass)
@@ -142,7 +142,7 @@ pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
         Command::ExportModel(a) => export_model::run(a, ctx),
         Command::Analyze(a) => analyze::run(a, ctx),
         Command::Fit(a) => fit::run(a, ctx),
-        Command::Validate(a) => validate_cmd::run(a, ctx),
+        Command::Validate(a) => validate::run(a, ctx),
         Command::Demo(a) => demo::run(a, ctx),
         Command::Experiment(a) => experiment::run(a, ctx),
         Command::Simulate(a) => simulate::run(a, ctx),
