@@ -109,6 +109,32 @@ fn diagnose_names_coulomb_friction_on_the_measured_emps_drive() {
     );
 }
 
+/// `--effect SPEC` spelled as `fit --effect` and `simulate --effect`, values included: a
+/// value given is where the candidate's fit starts, and a ripple's `order` is taken as
+/// given (from the data alone this capture's ripple candidate takes order 72); `--model`
+/// takes every name `fit --model` takes (`three_mass`, through `ModelSpec::resolve`).
+#[test]
+fn diagnose_takes_effect_specs_with_values_and_the_model_names_of_fit() {
+    let dir = tmpdir("specs");
+    let est = simulate(&dir, "est.jcap", "5", "7");
+    let val = simulate(&dir, "val.jcap", "6", "8");
+    let j = json_of(&jointid(&[
+        "diagnose",
+        &est,
+        "--validation",
+        &val,
+        "--model",
+        "three_mass",
+        "--effect",
+        "torque_ripple:order=11",
+        "--json",
+    ]));
+    assert_eq!(j["structure"], "three-mass", "{j}");
+    assert_eq!(j["effects"][0]["name"], "torque_ripple", "{j}");
+    let spec = j["effects"][0]["specs"][0].as_str().unwrap();
+    assert!(spec.contains("order=11"), "{spec}");
+}
+
 #[test]
 fn diagnose_refuses_an_unknown_effect_and_a_missing_file_naming_them() {
     let dir = tmpdir("refuse");
@@ -124,9 +150,34 @@ fn diagnose_refuses_an_unknown_effect_and_a_missing_file_naming_them() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("--effects") && err.contains("warp_drive"),
+        err.contains("--effect") && err.contains("warp_drive"),
         "{err}"
     );
+    // the model flags as `fit` resolves them: a black box is no nominal of a diagnosis,
+    // and a candidate is named once
+    for (flags, says) in [
+        (
+            &["--model", "black-box:4"][..],
+            "diagnose fits a physical model",
+        ),
+        (
+            &["--effect", "backlash", "--effect", "backlash:width=1e-5"][..],
+            "--effect backlash: named twice",
+        ),
+        (&["--effect", "none"][..], "at least one candidate"),
+    ] {
+        let mut args = vec![
+            "diagnose",
+            missing.to_str().unwrap(),
+            "--validation",
+            missing.to_str().unwrap(),
+        ];
+        args.extend(flags);
+        let out = jointid(&args);
+        assert_eq!(out.status.code(), Some(2), "{flags:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(says), "{flags:?}: {err}");
+    }
     let out = jointid(&[
         "diagnose",
         missing.to_str().unwrap(),

@@ -178,8 +178,15 @@ pub struct DiagnoseRequest {
     pub structure: Structure,
     /// gear ratio `r` [-]
     pub r: f64,
-    /// candidate effects (their values are ignored: each fit starts automatically)
+    /// candidate effects (their values are ignored: each fit starts automatically, at the
+    /// values of [`DiagnoseRequest::given`] where it names them)
     pub candidates: Vec<Effect>,
+    /// start values the user gives, by candidate name: the keys of the effect's spec
+    /// ([`crate::model::effects::parse_given`]) that the single candidate's fit starts at,
+    /// or takes as given (a ripple's `order`), as `fit --effect name:key=value` does
+    /// ([`crate::ident::nonlinear::NlRequest::given`]); a pair starts from its singles'
+    /// fits
+    pub given: BTreeMap<String, Vec<(String, f64)>>,
     /// the user's simulation, when given
     pub user: Option<UserSim>,
     /// options
@@ -194,6 +201,7 @@ impl Default for DiagnoseRequest {
             structure: Structure::ThreeMass,
             r: DEFAULT_GEAR_RATIO,
             candidates: all_candidates(),
+            given: BTreeMap::new(),
             user: None,
             options: DiagnoseOptions::default(),
         }
@@ -449,9 +457,18 @@ fn fit_and_score(
     from: Option<&NlFit>,
 ) -> Result<Fitted, String> {
     let linear = &starts.structure;
+    // a single's keys the user gave start there (a pair starts from its singles' fits)
+    let given = match from {
+        None => effects
+            .iter()
+            .map(|e| req.given.get(e.name()).cloned().unwrap_or_default())
+            .collect(),
+        Some(_) => Vec::new(),
+    };
     let mut nl = NlRequest {
         tau_c: linear.as_ref().map_or(0.0, |l| l.1),
         linear: linear.as_ref().map(|l| l.0.clone()),
+        given,
         options: req.options.nl.clone(),
         ..NlRequest::new(req.structure, req.r, effects)
     };
@@ -489,8 +506,9 @@ fn fit_and_score(
         nl.tau_c = tau_c;
         nl.linear = Some(plant.clone());
         if extra_at.is_some() {
-            let mut given = vec![Vec::new(); nl.effects.len()];
-            given[ci] = keys;
+            let mut given = nl.given.clone();
+            given.resize(nl.effects.len(), Vec::new());
+            given[ci].extend(keys);
             nl.given = given;
             if let Some(b) = from {
                 // a pair: the lead's fitted friction, and the mode from the best point of
