@@ -56,7 +56,7 @@ pub struct DiagnoseArgs {
     /// nonlinear_stiffness, extra_mode, time_delay, torque_ripple), or `all` (the
     /// default). A value given is where that candidate's fit starts, as in `fit` (a ripple's
     /// `order` is taken as given); a pair starts from its singles' fits. One flag may list
-    /// several, comma-separated (`--effects backlash,coulomb_friction:fc=0.1`)
+    /// several, comma-separated (`--effect backlash,coulomb_friction:fc=0.1`)
     #[arg(
         long = "effect",
         visible_alias = "effects",
