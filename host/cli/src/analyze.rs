@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use super::args::{ColumnArgs, DataArgs, ReadArgs};
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
-use jointid::data::{fmt_sig, Dataset, SignalKind};
+use jointid::data::{fmt_sig, Dataset, Percent, SignalKind};
 use jointid::ident::frf::{
     amplitude_trend, analyze_dataset, analyze_segments, AmplitudeTrend, ClassLevel, ExcitedSource,
     FrfAnalysis, Instrument,
@@ -363,7 +363,7 @@ fn print_table(
             a.frf.freq_hz[i],
             mag[i],
             ph[i],
-            100.0 * a.frf.sigma[i] / a.frf.g[i].norm()
+            Percent(100.0 * a.frf.sigma[i] / a.frf.g[i].norm())
         )?;
     }
     for p in plots {

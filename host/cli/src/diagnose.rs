@@ -15,7 +15,7 @@ use super::args::{ColumnArgs, DataArgs, ReadArgs};
 use super::fit::{check_same_rate, usable_segments, SegmentNotes, MIN_SEGMENT_SAMPLES};
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::{check_output, write_file};
-use jointid::data::Dataset;
+use jointid::data::{Dataset, Percent};
 use jointid::diagnose::{diagnose_segments, DiagnoseRequest, Diagnosis, UserSim};
 use jointid::ident::grey_box::DEFAULT_GEAR_RATIO;
 use jointid::ident::model_file::SavedModel;
@@ -308,11 +308,11 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
         "  nominal {} on {val}: {:.2} % (motor-angle FIT {:.2} %); best {}: {:.2} % ({:.0} % of \
          the gap closed)",
         d.structure,
-        d.fit_nominal_val,
-        d.fit_nominal_angle_val,
+        Percent(d.fit_nominal_val),
+        Percent(d.fit_nominal_angle_val),
         d.best,
-        d.fit_augmented_val,
-        100.0 * d.gap_closed_share
+        Percent(d.fit_augmented_val),
+        Percent(100.0 * d.gap_closed_share)
     )?;
     if !d.validation_segments.is_empty() {
         writeln!(
@@ -323,7 +323,10 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
             writeln!(
                 out,
                 "    segment {} ({} samples): {:.2} → {:.2}",
-                s.segment, s.samples, s.fit_nominal, s.fit_augmented
+                s.segment,
+                s.samples,
+                Percent(s.fit_nominal),
+                Percent(s.fit_augmented)
             )?;
         }
     }
@@ -334,8 +337,8 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
             out,
             "    {:<20} {:+7.2} ± {:5.2} {:<16} {}",
             c.name,
-            c.score,
-            c.score_se,
+            Percent(c.score),
+            Percent(c.score_se),
             if c.significant {
                 "significant"
             } else {
@@ -363,7 +366,7 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
         r.torque_sign_change.energy_ratio,
         r.large_deflection.energy_ratio,
         r.angle_pattern.order,
-        100.0 * r.angle_pattern.share
+        Percent(100.0 * r.angle_pattern.share)
     )?;
     writeln!(
         out,
@@ -395,13 +398,19 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
             out,
             "  {}: {:.2} % on the validation data; parameters account for {:+.2} points, \
              structure for {:+.2}",
-            m.sim, m.fit_sim_val, m.parameter_part, m.structure_part
+            m.sim,
+            Percent(m.fit_sim_val),
+            Percent(m.parameter_part),
+            Percent(m.structure_part)
         )?;
         for p in &m.parameters {
             writeln!(
                 out,
                 "    {:<6} sim {:.4e}, fitted {:.4e} ({:+.1} %)",
-                p.name, p.sim, p.fitted, p.percent
+                p.name,
+                p.sim,
+                p.fitted,
+                Percent(p.percent)
             )?;
         }
     }

@@ -33,7 +33,7 @@ use super::views::{
     write_views, CompareRecord, Signals, Views, PERIODIC_COMPARED, VELOCITY_COMPARED, VIEW_FILES,
 };
 use super::{check_plot_files, print_json, CmdResult, Context, Outcome};
-use jointid::data::IdData;
+use jointid::data::{IdData, Percent};
 use jointid::ident::fit::{FitData, FitMetric, VELOCITY_FIT_NAME};
 use jointid::ident::frf::{analyze_dataset, analyze_segments};
 use jointid::ident::frf_fit::{periodic_fit_percent, periodic_fit_signals, PERIODIC_FIT_NAME};
@@ -350,11 +350,12 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
         )?;
         writeln!(
             out,
-            "  {fit_name}: {fit:.2} (estimation: {:.2})",
-            saved.fit_estimation
+            "  {fit_name}: {:.2} (estimation: {:.2})",
+            Percent(fit),
+            Percent(saved.fit_estimation)
         )?;
         if periodic.is_some() || velocity.is_some() {
-            writeln!(out, "  {FIT_NAME}: {:.2}", v.fit)?;
+            writeln!(out, "  {FIT_NAME}: {:.2}", Percent(v.fit))?;
         }
         write_segments(out, fit_name, &segments)?;
         writeln!(out, "  residual tests (99 %):")?;
@@ -509,18 +510,19 @@ fn run_nonlinear(
         )?;
         writeln!(
             out,
-            "  {fit_name}: {fit_pct:.2} (estimation: {:.2})",
-            saved.fit_estimation
+            "  {fit_name}: {:.2} (estimation: {:.2})",
+            Percent(fit_pct),
+            Percent(saved.fit_estimation)
         )?;
         writeln!(
             out,
             "  velocity FIT with the estimator's smooth laws [%]: {:.2}",
-            v.velocity_fit_smooth_percent
+            Percent(v.velocity_fit_smooth_percent)
         )?;
         writeln!(
             out,
             "  motor-angle FIT [%] (toolbox compare, exact laws, unfiltered): {:.2}",
-            v.angle_fit_percent
+            Percent(v.angle_fit_percent)
         )?;
         write_segments(out, fit_name, &segments)?;
         if !finite {

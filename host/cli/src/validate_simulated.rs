@@ -13,7 +13,7 @@ use serde::Serialize;
 
 use super::args::{DataArgs, PrepArgs};
 use super::{print_json, CmdResult, Context, Outcome};
-use jointid::data::ColumnMap;
+use jointid::data::{ColumnMap, Percent};
 use jointid::ident::validate::{validate, CorrelationTest, Validation, FIT_NAME};
 
 /// What `jointid validate DATA --simulated COL` compares: the measured data and the
@@ -80,7 +80,7 @@ pub fn run(args: &SimulatedColumn, ctx: &mut Context<'_>) -> CmdResult {
             "jointid validate: {} (simulated: {})",
             ds.name, args.simulated
         )?;
-        writeln!(ctx.out, "  {FIT_NAME}: {:.2}", v.fit)?;
+        writeln!(ctx.out, "  {FIT_NAME}: {:.2}", Percent(v.fit))?;
         test_line(ctx.out, &v.whiteness)?;
         test_line(ctx.out, &v.independence)?;
         writeln!(
