@@ -300,16 +300,24 @@ struct DiagnoseJson<'a> {
     elapsed_s: f64,
 }
 
+/// The gap metric's name, the head of its description (`band-passed motor-velocity FIT`
+/// of `band-passed motor-velocity FIT [%]: toolbox FIT of ...`).
+fn metric_name(metric: &str) -> String {
+    let head = metric.split(':').next().unwrap_or(metric);
+    head.replace(" [%]", "").trim().to_string()
+}
+
+/// The text report: one headline FIT, the gap metric (the nominal's toolbox FIT of `θ_m`
+/// is in `--json` and, with what it measures, in the HTML report).
 fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Result<()> {
     writeln!(out, "jointid diagnose: {}", d.verdict)?;
     writeln!(out, "  metric: {}", d.metric)?;
     writeln!(
         out,
-        "  nominal {} on {val}: {:.2} % (motor-angle FIT {:.2} %); best {}: {:.2} % ({:.0} % of \
-         the gap closed)",
+        "  {} on {val}: nominal {} {:.2} %, best {} {:.2} % ({:.0} % of the gap closed)",
+        metric_name(&d.metric),
         d.structure,
         Percent(d.fit_nominal_val),
-        Percent(d.fit_nominal_angle_val),
         d.best,
         Percent(d.fit_augmented_val),
         Percent(100.0 * d.gap_closed_share)

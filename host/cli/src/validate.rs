@@ -354,8 +354,23 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
             Percent(fit),
             Percent(saved.fit_estimation)
         )?;
-        if periodic.is_some() || velocity.is_some() {
-            writeln!(out, "  {FIT_NAME}: {:.2}", Percent(v.fit))?;
+        // one headline FIT; the toolbox FIT beside it says what it measures
+        if let Some(why) = match (periodic, &velocity) {
+            (Some(_), _) => Some(
+                "the whole record simulated from the measured input, drift and slow \
+                 disturbances included; the headline averages whole periods at the excited lines",
+            ),
+            (None, Some(_)) => Some(
+                "the motor angle simulated over the whole record, which its drift dominates; \
+                 the headline compares the velocity",
+            ),
+            (None, None) => None,
+        } {
+            writeln!(
+                out,
+                "  for reference, {FIT_NAME}: {:.2} ({why})",
+                Percent(v.fit)
+            )?;
         }
         write_segments(out, fit_name, &segments)?;
         writeln!(out, "  residual tests (99 %):")?;
@@ -516,13 +531,23 @@ fn run_nonlinear(
         )?;
         writeln!(
             out,
-            "  velocity FIT with the estimator's smooth laws [%]: {:.2}",
+            "  for reference, velocity FIT with the estimator's smooth laws [%]: {:.2} (the \
+             fit's own cost; the headline simulates the exact laws)",
             Percent(v.velocity_fit_smooth_percent)
         )?;
         writeln!(
             out,
-            "  motor-angle FIT [%] (toolbox compare, exact laws, unfiltered): {:.2}",
-            Percent(v.angle_fit_percent)
+            "  for reference, motor-angle FIT [%] (toolbox compare, exact laws, unfiltered): \
+             {:.2} (the angle sums every slow error of the velocity, drift included{})",
+            Percent(v.angle_fit_percent),
+            if nl.highpass_hz > 0.0 {
+                format!(
+                    "; the headline's velocity is high-passed at {} Hz",
+                    jointid::data::fmt_sig(nl.highpass_hz, 3)
+                )
+            } else {
+                String::new()
+            }
         )?;
         write_segments(out, fit_name, &segments)?;
         if !finite {
