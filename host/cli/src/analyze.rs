@@ -124,13 +124,14 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
             },
         )?;
     } else {
-        print_table(ctx.out, &ds.name, &a, &plots, args.all_lines)?;
+        print_table(ctx.out, &ds.name, &a, args.all_lines)?;
         if let Some(other) = &args.compare {
             writeln!(ctx.out, "amplitude comparison with {}", other.display())?;
             for t in &trend {
                 writeln!(ctx.out, "  {}", t.verdict)?;
             }
         }
+        super::print_written(ctx.out, &plots)?;
     }
     Ok(if args.require_linear && significant {
         Outcome::CheckFailed
@@ -247,13 +248,7 @@ fn same_multisine(
     Ok(())
 }
 
-fn print_table(
-    out: &mut dyn Write,
-    name: &str,
-    a: &FrfAnalysis,
-    plots: &[String],
-    all: bool,
-) -> std::io::Result<()> {
+fn print_table(out: &mut dyn Write, name: &str, a: &FrfAnalysis, all: bool) -> std::io::Result<()> {
     let l = &a.layout;
     writeln!(out, "jointid analyze: {name}")?;
     writeln!(
@@ -365,9 +360,6 @@ fn print_table(
             ph[i],
             Percent(100.0 * a.frf.sigma[i] / a.frf.g[i].norm())
         )?;
-    }
-    for p in plots {
-        writeln!(out, "plot: {p}")?;
     }
     Ok(())
 }

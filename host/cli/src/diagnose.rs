@@ -13,7 +13,7 @@ use clap::Args;
 
 use super::args::{ColumnArgs, DataArgs, ReadArgs};
 use super::fit::{check_same_rate, usable_segments, SegmentNotes, MIN_SEGMENT_SAMPLES};
-use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
+use super::{check_plot_files, print_json, print_written, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::{check_output, write_file};
 use jointid::data::{Dataset, Percent};
 use jointid::diagnose::{diagnose_segments, DiagnoseRequest, Diagnosis, UserSim};
@@ -258,6 +258,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         s.segment = k;
     }
     let val_name = val[0].name.clone();
+    let mut files = Vec::new();
     if let Some(path) = &args.report {
         let title = format!(
             "jointid diagnose: {} against {}",
@@ -269,13 +270,16 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         );
         let html = diagnosis_html(&title, &d, &series)?;
         write_file(path, args.force, |w| w.write_all(html.as_bytes()))?;
+        files.push(path.display().to_string());
     }
     if let Some(dir) = &args.plot {
         let figs = diagnosis_figures(&d, &series)?;
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         for f in &figs {
             for (svg, name) in f.svgs.iter().zip(f.file_names()) {
-                write_svg(&dir.join(name), svg, args.force)?;
+                let path = dir.join(name);
+                write_svg(&path, svg, args.force)?;
+                files.push(path.display().to_string());
             }
         }
     }
@@ -287,6 +291,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         print_json(ctx.out, "diagnose", &doc)?;
     } else {
         print_summary(ctx.out, &d, &val_name)?;
+        print_written(ctx.out, &files)?;
     }
     Ok(Outcome::Ok)
 }

@@ -150,6 +150,23 @@ pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
     }
 }
 
+/// Ends a command's text output with the files it wrote, under `wrote:`, one a line
+/// (nothing when it wrote none): the one place that lists them. `--json` lists them in the
+/// document instead (`files`, `out`, `csv`).
+///
+/// # Errors
+/// Write errors.
+pub fn print_written(out: &mut dyn Write, files: &[String]) -> std::io::Result<()> {
+    if files.is_empty() {
+        return Ok(());
+    }
+    writeln!(out, "wrote:")?;
+    for f in files {
+        writeln!(out, "  {f}")?;
+    }
+    Ok(())
+}
+
 /// Writes an SVG string (from [`jointid::report::plot`]) to `path` under the one rule of
 /// every output file ([`jointid::data::output`]: an existing file only with `--force`,
 /// whole or not at all).

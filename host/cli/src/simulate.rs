@@ -667,8 +667,8 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
     let o = &mut *ctx.out;
     writeln!(
         o,
-        "wrote {} ({} samples, {:.2} s at {} Hz)",
-        report.file, report.samples, report.duration_s, exc.fs_hz
+        "simulated {} samples, {:.2} s at {} Hz",
+        report.samples, report.duration_s, exc.fs_hz
     )?;
     if let Some(s) = &report.scale {
         writeln!(
@@ -700,9 +700,10 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         "integrator {}, u rms {:.4} N·m, theta_m rms {:.5} rad, saturated samples {}",
         report.integrator, report.u_rms, report.theta_m_rms, report.saturated_samples
     )?;
-    if let Some(p) = &report.params_out {
-        writeln!(o, "parameters: {p}")?;
-    }
+    let files: Vec<String> = std::iter::once(report.file.clone())
+        .chain(report.params_out.clone())
+        .collect();
+    super::print_written(o, &files)?;
     Ok(Outcome::Ok)
 }
 

@@ -32,7 +32,7 @@ use super::validate_simulated::{self, SimulatedColumn};
 use super::views::{
     write_views, CompareRecord, Signals, Views, PERIODIC_COMPARED, VELOCITY_COMPARED, VIEW_FILES,
 };
-use super::{check_plot_files, print_json, CmdResult, Context, Outcome};
+use super::{check_plot_files, print_json, print_written, CmdResult, Context, Outcome};
 use jointid::data::{IdData, Percent};
 use jointid::ident::fit::{FitData, FitMetric, VELOCITY_FIT_NAME};
 use jointid::ident::frf::{analyze_dataset, analyze_segments};
@@ -385,9 +385,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
             )?;
         }
         required_fit_line(out, args.require_fit, fit_ok)?;
-        for f in &files {
-            writeln!(out, "  wrote {f}")?;
-        }
+        print_written(out, &files)?;
     }
     Ok(outcome(fit_ok))
 }

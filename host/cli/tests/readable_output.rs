@@ -166,13 +166,15 @@ fn stiffening(dir: &std::path::Path, name: &str, seed: &str, exc_seed: &str) -> 
 /// `diagnose`'s text report names one headline FIT, the gap metric, with the nominal's
 /// and the best model's figures; the nominal's toolbox FIT of θ_m (-4503 % on these
 /// captures, printed beside the 75 % of the gap metric before) is left to `--json` and the
-/// HTML report, which says what it measures.
+/// HTML report, which says what it measures. It ends with the files it wrote, the report
+/// and the SVG files of `--plot` (it named none).
 #[test]
-fn diagnose_prints_one_headline_fit() {
+fn diagnose_prints_one_headline_fit_and_the_files_it_wrote() {
     let dir = tmpdir("diagnose");
     let est = stiffening(&dir, "est.jcap", "5", "7");
     let val = stiffening(&dir, "val.jcap", "6", "8");
     let report = dir.join("report.html");
+    let plots = dir.join("svg");
     let o = jointid(&[
         "diagnose",
         &est,
@@ -182,6 +184,8 @@ fn diagnose_prints_one_headline_fit() {
         "nonlinear_stiffness",
         "--report",
         report.to_str().unwrap(),
+        "--plot",
+        plots.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = String::from_utf8_lossy(&o.stdout);
@@ -207,6 +211,86 @@ fn diagnose_prints_one_headline_fit() {
     assert!(
         row.contains("for reference") && row.contains("drift"),
         "{row}"
+    );
+    // the files it wrote, at the end: the report and every SVG
+    let mut svgs: Vec<String> = std::fs::read_dir(&plots)
+        .unwrap()
+        .map(|e| e.unwrap().path().display().to_string())
+        .collect();
+    svgs.sort();
+    assert!(svgs.len() >= 5, "{svgs:?}");
+    let mut listed = written(&text);
+    assert_eq!(listed.remove(0), report.display().to_string(), "{text}");
+    listed.sort();
+    assert_eq!(listed, svgs, "{text}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The files listed under the last `wrote:` line of `text`, which must end the output.
+fn written(text: &str) -> Vec<String> {
+    let lines: Vec<&str> = text.lines().collect();
+    let at = lines
+        .iter()
+        .rposition(|l| *l == "wrote:")
+        .unwrap_or_else(|| panic!("no `wrote:` list: {text}"));
+    let files: Vec<String> = lines[at + 1..]
+        .iter()
+        .map(|l| {
+            assert!(l.starts_with("  "), "after the list: `{l}`");
+            l.trim().to_string()
+        })
+        .collect();
+    assert!(!files.is_empty(), "{text}");
+    files
+}
+
+/// `simulate`, `export`, `analyze --plot` and `capture` end their text output with the
+/// files they wrote (simulate named its capture on its first line and the parameters on
+/// another, export only on standard error, analyze its plots as `plot: ...` lines, capture
+/// not its events sidecar).
+#[test]
+fn commands_that_write_files_list_them_at_the_end() {
+    let dir = tmpdir("wrote");
+    let p = |name: &str| dir.join(name).display().to_string();
+    let run = |args: &[&str]| {
+        let o = jointid(args);
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let text = run(&[
+        "simulate",
+        "--model",
+        "two-mass",
+        "--out",
+        &p("run.jcap"),
+        "--params-out",
+        &p("params.json"),
+    ]);
+    assert_eq!(written(&text), [p("run.jcap"), p("params.json")], "{text}");
+    let text = run(&[
+        "export",
+        &p("run.jcap"),
+        "--csv",
+        &p("run.csv"),
+        "--mat",
+        &p("run.mat"),
+    ]);
+    assert_eq!(written(&text), [p("run.csv"), p("run.mat")], "{text}");
+    let text = run(&["analyze", &p("run.csv"), "--plot", &p("plots")]);
+    assert_eq!(
+        written(&text),
+        [p("plots/spectrum.svg"), p("plots/frf.svg")],
+        "{text}"
+    );
+    let text = run(&["capture", "--file", &p("run.jcap"), "--out", &p("cap.jcap")]);
+    assert_eq!(
+        written(&text),
+        [p("cap.jcap"), p("cap.jcap.events")],
+        "{text}"
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
