@@ -398,13 +398,12 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
             writeln!(
                 out,
                 "    amplitude: {} u RMS {:.3e} N·m, gap {:.2} points",
-                l.capture, l.u_rms, l.gap
+                l.capture,
+                l.u_rms,
+                Percent(l.gap)
             )?;
         }
-        writeln!(out, "    the gap {} with amplitude", a.gap_trend)?;
-        if let Some(t) = &a.distortion {
-            writeln!(out, "    {}", t.verdict)?;
-        }
+        writeln!(out, "    {}", a.summary())?;
     }
     if let Some(m) = &d.parameter_mismatch {
         writeln!(

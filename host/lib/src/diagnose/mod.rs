@@ -93,7 +93,9 @@ use thiserror::Error;
 
 use crate::data::{Dataset, IdData};
 use crate::ident::frf::analyze_segments;
-use crate::ident::frf::{amplitude_trend, analyze_dataset, AmplitudeTrend, FrfAnalysis, Linearity};
+use crate::ident::frf::{
+    amplitude_trend, analyze_dataset, AmplitudeTrend, FrfAnalysis, Linearity, TrendKind,
+};
 use crate::ident::grey_box::DEFAULT_GEAR_RATIO;
 use crate::ident::lm::Termination;
 use crate::ident::nonlinear::{grow, ripple};
@@ -295,6 +297,54 @@ pub struct Amplitude {
     pub distortion: Option<AmplitudeTrend>,
     /// `grows`, `falls` or `unclear` (changes by less than 1 point)
     pub gap_trend: String,
+}
+
+impl Amplitude {
+    /// The amplitude trend in one sentence, the gap's and the distortion's together. The two
+    /// measure different things and may part: the gap is all the nominal misses of the
+    /// band-passed velocity, fitted on the first estimation capture (in-sample there, out of
+    /// sample on the second, so it also holds how the joint's best linear model moves with
+    /// amplitude); the distortion is only what the nonlinearity puts on the lines the
+    /// multisine leaves empty, relative to the excited ones, whose trend tells the kind of
+    /// effect (seed 000 §3). When they part, the sentence says both with a `but` and why.
+    pub fn summary(&self) -> String {
+        let gap = match self.gap_trend.as_str() {
+            "grows" => "the nominal's gap grows with amplitude",
+            "falls" => "the nominal's gap falls as amplitude grows",
+            _ => "the nominal's gap changes by less than 1 point with amplitude",
+        };
+        let Some(d) = &self.distortion else {
+            return format!("{gap} (the distortion trend needs two periodic captures)");
+        };
+        let parted = matches!(
+            (self.gap_trend.as_str(), d.kind),
+            ("grows", TrendKind::FallsWithAmplitude) | ("falls", TrendKind::GrowsWithAmplitude)
+        );
+        let agreed = matches!(
+            (self.gap_trend.as_str(), d.kind),
+            ("grows", TrendKind::GrowsWithAmplitude) | ("falls", TrendKind::FallsWithAmplitude)
+        );
+        if parted {
+            format!(
+                "{gap}, but the distortion relative to the excited lines {}: the two measure \
+                 different things (the gap is all the nominal misses of the band-passed \
+                 velocity, and out of sample on the second estimation capture, as the nominal \
+                 is fitted on the first; the distortion is only what the nonlinearity puts on \
+                 the lines the excitation leaves empty, and its trend tells the kind of \
+                 effect): {}",
+                if d.kind == TrendKind::FallsWithAmplitude {
+                    "falls"
+                } else {
+                    "grows"
+                },
+                d.verdict
+            )
+        } else if agreed {
+            format!("{gap}, and so does the distortion: {}", d.verdict)
+        } else {
+            format!("{gap}; {}", d.verdict)
+        }
+    }
 }
 
 /// Where the nominal's residual lies.

@@ -507,22 +507,18 @@ pub fn diagnosis_html(
     if let Some(a) = &d.location.amplitude {
         let _ = writeln!(
             h,
-            "<p id=\"amplitude\">With amplitude: {}; the gap {} with amplitude{}.</p>",
+            "<p id=\"amplitude\">With amplitude: {}; {}.</p>",
             a.levels
                 .iter()
                 .map(|l| format!(
                     "{} (u RMS {} N·m) gap {:.2} points",
                     escape(&l.capture),
                     fmt_sig(l.u_rms, 3),
-                    l.gap
+                    Percent(l.gap)
                 ))
                 .collect::<Vec<_>>()
                 .join(", "),
-            escape(&a.gap_trend),
-            a.distortion
-                .as_ref()
-                .map(|t| format!("; {}", escape(&t.verdict)))
-                .unwrap_or_default()
+            escape(&a.summary())
         );
     }
     if let Some(m) = &d.parameter_mismatch {
