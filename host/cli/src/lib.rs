@@ -60,7 +60,7 @@ pub struct Cli {
 pub enum Command {
     /// record the board's stream (serial, CAN, slcan adapter, candump log, TCP or file) into a .jcap capture
     Capture(capture::CaptureArgs),
-    /// what a .jcap capture holds: board, excitation, samples, gaps, damaged frames
+    /// what a capture or data file holds: board, excitation, samples, rate, columns, gaps, damaged frames
     Info(info::InfoArgs),
     /// write a .jcap capture as the capture CSV (t,theta_ref,u,theta_m) or a MATLAB file
     Export(export::ExportArgs),

@@ -253,12 +253,12 @@ fn the_help_parser_reads_options_and_finds_a_wrong_flag() {
     assert_eq!(owners, ["fit", "fit", "simulate", "own"]);
 }
 
-/// The column flags are declared once: `analyze`, `validate` and `diagnose` give `--time`,
-/// `--input`, `--output` (alias `--output-col`) and `--reference` the same help.
+/// The column flags are declared once: `analyze`, `validate`, `diagnose` and `info` give
+/// `--time`, `--input`, `--output` (alias `--output-col`) and `--reference` the same help.
 #[test]
 fn the_column_flags_read_the_same_in_every_command_that_takes_them() {
     let mut seen: BTreeMap<&str, (String, String)> = BTreeMap::new();
-    for c in ["analyze", "validate", "diagnose"] {
+    for c in ["analyze", "validate", "diagnose", "info"] {
         let h = parse_help(&stdout(&[c, "--help"]));
         for f in ["--time", "--input", "--output", "--reference"] {
             let flag = h.flags.get(f).unwrap_or_else(|| panic!("`{c}` has no {f}"));
