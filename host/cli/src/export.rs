@@ -1,4 +1,4 @@
-//! `jointid export RUN.jcap --csv RUN.csv`: the capture CSV of DESIGN.md §5;
+//! `jointid export RUN.jcap --csv RUN.csv`: the capture CSV of ../shared/DESIGN.md §5;
 //! `--mat RUN.mat`: the same columns as MATLAB vectors ([`jointid::capture::export::export_mat`]).
 //!
 //! Writes only the samples that arrived; the `# gaps=` comment lists what did not (see

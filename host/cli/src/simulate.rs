@@ -16,7 +16,7 @@
 //!   `export`, `analyze` and `fit` read it exactly like a board capture. The wire carries integer counts: `u` and `θm` are rounded to the
 //!   scale of [`WireOptions::for_sim`] (at most half a count from the simulator's value),
 //!   the reference is regenerated from the header bit-exactly.
-//! - `--out RUN.csv` writes the capture CSV (DESIGN.md §5) with the simulator's values
+//! - `--out RUN.csv` writes the capture CSV (../shared/DESIGN.md §5) with the simulator's values
 //!   unquantised, the excitation config and `sim_*` keys in its comments.
 //! - Both outputs follow the one rule of every output file ([`jointid::data::output`]): an
 //!   existing file is replaced only with `--force`, checked before the simulation; each

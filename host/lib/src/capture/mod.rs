@@ -20,7 +20,7 @@
 //!   reference check, conversion to SI).
 //! - [`live`]: the capture loop (stop rules, progress, setup-error rule).
 //! - [`report`]: the summary (samples, gaps, damaged frames with byte offsets, overruns).
-//! - [`export`]: the capture CSV of DESIGN.md §5.
+//! - [`export`]: the capture CSV of ../shared/DESIGN.md §5.
 //!
 //! **Architecture invariant**: the `.jcap` holds exactly the received bytes; everything
 //! else (samples, gaps, SI values, reference) is derived from them on reading, so a better

@@ -1,4 +1,4 @@
-//! The capture CSV (DESIGN.md §5) and any CSV with a column mapping: read, checked for
+//! The capture CSV (../shared/DESIGN.md §5) and any CSV with a column mapping: read, checked for
 //! uniform sampling, and written back losslessly.
 //!
 //! # Capture CSV contract (`# key=value` comments)

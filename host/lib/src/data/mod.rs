@@ -9,7 +9,7 @@
 //!   all) in [`output`];
 //! - [`IdData`], [`Dataset`], whole excitation periods and the loader registry here.
 //!
-//! What: read the capture CSV of DESIGN.md §5 (and any CSV with a column
+//! What: read the capture CSV of ../shared/DESIGN.md §5 (and any CSV with a column
 //! mapping), check that sampling is uniform, and prepare the record for the
 //! estimators: detrending, integer decimation with an anti-alias filter,
 //! dropping the transient and cutting whole excitation periods, and the
@@ -225,7 +225,7 @@ pub struct ColumnMap {
 }
 
 impl ColumnMap {
-    /// the capture CSV header `t,theta_ref,u,theta_m` of DESIGN.md §5
+    /// the capture CSV header `t,theta_ref,u,theta_m` of ../shared/DESIGN.md §5
     pub fn capture() -> Self {
         ColumnMap {
             time: "t".into(),

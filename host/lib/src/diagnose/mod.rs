@@ -1,4 +1,4 @@
-//! Sim-to-real gap diagnosis (DESIGN.md §7): which unmodelled effect makes the simulated
+//! Sim-to-real gap diagnosis (../shared/DESIGN.md §7): which unmodelled effect makes the simulated
 //! joint depart from the measured one, how much of the gap it closes, and where the gap
 //! lies.
 //!

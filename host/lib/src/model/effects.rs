@@ -1,5 +1,5 @@
-//! Unmodelled effects that can be switched on over any plant (DESIGN.md §6), and the spec
-//! strings the CLI uses for them (`--effect backlash:width=0.002`).
+//! Unmodelled effects that can be switched on over any plant (../shared/DESIGN.md §6), and
+//! the spec strings the CLI uses for them (`--effect backlash:width=0.002`).
 //!
 //! Each effect has its own parameters with documented defaults. The defaults are sized so
 //! that the effect is clearly visible in the spectra of `u` and `θ_m` of the default

@@ -39,7 +39,7 @@
 //! the paper's 57.8 / 58.0 / 74.8 come from a real arm with more dynamics
 //! than any of the three models.
 //!
-//! Wire path (DESIGN.md §8, software in the loop): the simulated samples
+//! Wire path (../shared/DESIGN.md §8, software in the loop): the simulated samples
 //! become counts with the session's [`Scale`] and are streamed by the
 //! simulated board ([`crate::sim::board::encode_session`] with
 //! [`wire_options`]), written as a `.jcap` by the capture module's writer
