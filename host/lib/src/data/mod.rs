@@ -877,7 +877,7 @@ mod tests {
         assert_eq!(format!("{:>3.2}", Percent(f64::NEG_INFINITY)), "  —");
         assert_eq!(format!("{:.2}", Percent(-1e300)), "-1.00e300");
         assert_eq!(format!("{:.2}", Percent(-999_999.0)), "-999999.00");
-        assert_eq!(format!("{}", Percent(0.0 / 0.0)), UNDEFINED);
+        assert_eq!(format!("{}", Percent(f64::INFINITY)), UNDEFINED);
     }
 
     use super::*;
