@@ -1,4 +1,4 @@
-//! Emulated board, end to end (DESIGN.md §8): the thumbv7em firmware
+//! Emulated board, end to end (../shared/DESIGN.md §8): the thumbv7em firmware
 //! (`jointid-fw`, feature `mps2-an386`) runs in qemu-system-arm with
 //! `-icount shift=3,align=off,sleep=off`, streams its whole run (the seed-000
 //! excitation: ramp + 4 periods of 5000 samples + ramp = 24 000 samples) over

@@ -7,9 +7,9 @@ use std::path::PathBuf;
 use clap::Args;
 use serde::Serialize;
 
-use super::args::DataArgs;
+use super::args::{ColumnArgs, DataArgs, ReadArgs};
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
-use jointid::data::{fmt_sig, Dataset, SignalKind};
+use jointid::data::{fmt_sig, Dataset, Percent, SignalKind};
 use jointid::ident::frf::{
     amplitude_trend, analyze_dataset, analyze_segments, AmplitudeTrend, ClassLevel, ExcitedSource,
     FrfAnalysis, Instrument,
@@ -20,9 +20,16 @@ use jointid::report::plot::{analysis_spectrum_svg, bode_svg};
 /// Arguments of `jointid analyze`.
 #[derive(Debug, Clone, Args)]
 pub struct AnalyzeArgs {
-    /// data file and columns
+    /// data file: capture CSV (`t,theta_ref,u,theta_m`), any CSV or MAT-file with
+    /// --time/--input/--output, or a .jcap capture; `-`: standard input
+    #[arg(value_name = "DATA")]
+    pub path: PathBuf,
+    /// the columns of DATA
     #[command(flatten)]
-    pub data: DataArgs,
+    pub columns: ColumnArgs,
+    /// how to read DATA and which part to use
+    #[command(flatten)]
+    pub read: ReadArgs,
     /// whole periods dropped after the ramp-in as transient
     #[arg(long, value_name = "P", default_value_t = 1)]
     pub settle_periods: usize,
@@ -69,7 +76,8 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
     if let Some(dir) = &args.plot {
         check_plot_files(dir, &["spectrum.svg", "frf.svg"], args.force)?;
     }
-    let selected = args.data.select(ctx.loaders)?;
+    let data = DataArgs::new(&args.path, &args.columns, &args.read);
+    let selected = data.select(ctx.loaders)?;
     let ds = &selected.datasets[0];
     let a = analyze_segments(&selected.datasets, args.settle_periods)?;
     let mut plots = Vec::new();
@@ -95,9 +103,8 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
     let mut trend = Vec::new();
     if let Some(other) = &args.compare {
         let other_ds = args
-            .data
             .read
-            .select_one(ctx.loaders, other, args.data.column_map())?;
+            .select_one(ctx.loaders, other, data.column_map())?;
         let b = analyze_dataset(&other_ds, args.settle_periods)?;
         same_multisine((ds, &a), (&other_ds, &b))?;
         trend.push(amplitude_trend(&a.linearity_u, &b.linearity_u));
@@ -117,13 +124,14 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
             },
         )?;
     } else {
-        print_table(ctx.out, &ds.name, &a, &plots, args.all_lines)?;
+        print_table(ctx.out, &ds.name, &a, args.all_lines)?;
         if let Some(other) = &args.compare {
             writeln!(ctx.out, "amplitude comparison with {}", other.display())?;
             for t in &trend {
                 writeln!(ctx.out, "  {}", t.verdict)?;
             }
         }
+        super::print_written(ctx.out, &plots)?;
     }
     Ok(if args.require_linear && significant {
         Outcome::CheckFailed
@@ -240,13 +248,7 @@ fn same_multisine(
     Ok(())
 }
 
-fn print_table(
-    out: &mut dyn Write,
-    name: &str,
-    a: &FrfAnalysis,
-    plots: &[String],
-    all: bool,
-) -> std::io::Result<()> {
+fn print_table(out: &mut dyn Write, name: &str, a: &FrfAnalysis, all: bool) -> std::io::Result<()> {
     let l = &a.layout;
     writeln!(out, "jointid analyze: {name}")?;
     writeln!(
@@ -356,11 +358,8 @@ fn print_table(
             a.frf.freq_hz[i],
             mag[i],
             ph[i],
-            100.0 * a.frf.sigma[i] / a.frf.g[i].norm()
+            Percent(100.0 * a.frf.sigma[i] / a.frf.g[i].norm())
         )?;
-    }
-    for p in plots {
-        writeln!(out, "plot: {p}")?;
     }
     Ok(())
 }

@@ -31,10 +31,51 @@ pub struct ReadArgs {
     /// end of the time window (exclusive), as --from
     #[arg(long, value_name = "T|Np")]
     pub to: Option<TimeBound>,
+    /// how a CSV's columns are split
+    #[command(flatten)]
+    pub csv: DelimiterArg,
+}
+
+/// `--delimiter`: how a CSV's columns are split; declared once, in [`ReadArgs`] and in
+/// `info` (which reads a file whole, without a segment or window).
+#[derive(Debug, Clone, Copy, Default, Args)]
+pub struct DelimiterArg {
     /// CSV column delimiter, one character (`;`, `tab`); default `,`, or `;` or a tab
     /// when the header holds no `,` (with a note)
     #[arg(long, value_name = "CHAR", value_parser = parse_delimiter)]
     pub delimiter: Option<char>,
+}
+
+/// The columns of a data file that is not a capture CSV: declared once, flattened into
+/// every command that reads data through a column mapping (analyze, validate, diagnose,
+/// info). `fit` declares its own beside `--output-kind` (`fit::FitDataArgs`).
+#[derive(Debug, Clone, Default, Args)]
+pub struct ColumnArgs {
+    /// time column [s] (with --input and --output; default: the capture CSV's `t`)
+    #[arg(long, value_name = "COL", requires_all = ["input", "output"])]
+    pub time: Option<String>,
+    /// input column (torque [N·m] or force [N])
+    #[arg(long, value_name = "COL", requires_all = ["time", "output"])]
+    pub input: Option<String>,
+    /// output column (motor angle [rad] or position [m])
+    #[arg(
+        long,
+        visible_alias = "output-col",
+        value_name = "COL",
+        requires_all = ["time", "input"]
+    )]
+    pub output: Option<String>,
+    /// reference column (excitation); without a mapping the capture CSV's `theta_ref`
+    #[arg(long, value_name = "COL")]
+    pub reference: Option<String>,
+}
+
+impl ColumnArgs {
+    /// A column mapping was given (`--time`, `--input` and `--output`, which clap requires
+    /// together).
+    pub fn mapped(&self) -> bool {
+        self.time.is_some()
+    }
 }
 
 fn parse_delimiter(s: &str) -> Result<char, String> {
@@ -55,6 +96,11 @@ fn parse_delimiter(s: &str) -> Result<char, String> {
 }
 
 impl ReadArgs {
+    /// The `--delimiter` given.
+    pub fn delimiter(&self) -> Option<char> {
+        self.csv.delimiter
+    }
+
     /// The selection these arguments describe.
     pub fn selection(&self) -> Selection {
         Selection {
@@ -75,7 +121,7 @@ impl ReadArgs {
         path: &Path,
         mut map: ColumnMap,
     ) -> Result<Selected, DataError> {
-        map.delimiter = self.delimiter;
+        map.delimiter = self.delimiter();
         let record: Record = loaders.load_record(path, &map)?;
         let sel = record.select(&self.selection())?;
         for n in &sel.notes {
@@ -116,31 +162,38 @@ impl ReadArgs {
     }
 }
 
-/// A data file and, for CSV files that are not capture CSVs, its columns.
-#[derive(Debug, Clone, Args)]
+/// A data file, its column mapping and how to read it: what an analysis command loads,
+/// built from its flags ([`DataArgs::new`] from [`ColumnArgs`] and [`ReadArgs`]).
+#[derive(Debug, Clone)]
 pub struct DataArgs {
-    /// data file: capture CSV (`t,theta_ref,u,theta_m`), any CSV with
-    /// --time/--input/--output, or a registered format
-    #[arg(value_name = "DATA")]
+    /// data file: capture CSV (`t,theta_ref,u,theta_m`), any CSV or MAT-file with
+    /// --time/--input/--output, or a registered format; `-`: standard input
     pub path: PathBuf,
-    /// time column [s] (with --input and --output; default: capture CSV header)
-    #[arg(long, value_name = "COL", requires_all = ["input", "output"])]
+    /// time column [s]
     pub time: Option<String>,
-    /// input column (torque [N·m] or force [N])
-    #[arg(long, value_name = "COL", requires_all = ["time", "output"])]
+    /// input column
     pub input: Option<String>,
-    /// output column (motor angle [rad] or position [m])
-    #[arg(long, value_name = "COL", requires_all = ["time", "input"])]
+    /// output column
     pub output: Option<String>,
-    /// reference column (excitation); without a mapping the capture CSV's `theta_ref`
-    #[arg(long, value_name = "COL")]
+    /// reference column
     pub reference: Option<String>,
     /// how to read the file and which part to use
-    #[command(flatten)]
     pub read: ReadArgs,
 }
 
 impl DataArgs {
+    /// `path` read with the columns and the reading of these flags.
+    pub fn new(path: &Path, columns: &ColumnArgs, read: &ReadArgs) -> Self {
+        DataArgs {
+            path: path.to_path_buf(),
+            time: columns.time.clone(),
+            input: columns.input.clone(),
+            output: columns.output.clone(),
+            reference: columns.reference.clone(),
+            read: read.clone(),
+        }
+    }
+
     /// the column mapping these arguments describe
     pub fn column_map(&self) -> ColumnMap {
         match (&self.time, &self.input, &self.output) {
@@ -149,14 +202,14 @@ impl DataArgs {
                 input: i.clone(),
                 output: o.clone(),
                 reference: self.reference.clone(),
-                delimiter: self.read.delimiter,
+                delimiter: self.read.delimiter(),
             },
             _ => {
                 let mut m = ColumnMap::capture();
                 if let Some(r) = &self.reference {
                     m.reference = Some(r.clone());
                 }
-                m.delimiter = self.read.delimiter;
+                m.delimiter = self.read.delimiter();
                 m
             }
         }

@@ -283,6 +283,12 @@ pub fn run(args: &CaptureArgs, ctx: &mut Context<'_>) -> CmdResult {
             outcome.bytes, summary.out, summary.elapsed_s, summary.stop
         )?;
         writeln!(ctx.out, "{}", summary.report)?;
+        // the capture and, when the host logged events, its sidecar
+        let events = jointid::capture::jcap::events_path(&opts.out);
+        let files: Vec<String> = std::iter::once(summary.out.clone())
+            .chain(events.is_file().then(|| events.display().to_string()))
+            .collect();
+        super::print_written(ctx.out, &files)?;
     }
     Ok(if args.strict && !summary.report.is_clean() {
         Outcome::CheckFailed

@@ -214,9 +214,7 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     writeln!(out, "  seed 000 Table 2 on this joint:")?;
     write_table(out, &t)?;
-    for f in &files {
-        writeln!(out, "  wrote {f}")?;
-    }
     writeln!(out, "  done in {seconds:.1} s")?;
+    super::print_written(out, &files)?;
     Ok(Outcome::Ok)
 }

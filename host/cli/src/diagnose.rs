@@ -5,47 +5,66 @@
 //! segments, and where the nominal's residual lies. With `--segment all` every capture
 //! comes as its gap-free segments ([`jointid::diagnose::diagnose_segments`]).
 
+use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::PathBuf;
 
 use clap::Args;
 
-use super::args::{check_same_rate, FitDataArgs};
+use super::args::{check_same_rate, ColumnArgs, DataArgs, ReadArgs};
 use super::print::usable_segments;
-use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
+use super::{check_plot_files, print_json, print_written, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::{check_output, write_file};
 use jointid::data::segment::{SegmentNotes, MIN_SEGMENT_SAMPLES};
-use jointid::data::Dataset;
+use jointid::data::{Dataset, Percent};
 use jointid::diagnose::{diagnose_segments, DiagnoseRequest, Diagnosis, UserSim};
 use jointid::ident::grey_box::DEFAULT_GEAR_RATIO;
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::sim_plant;
-use jointid::model::effects::{Effect, EFFECT_NAMES};
-use jointid::model::spec::Structure;
+use jointid::model::effects::{parse_given, Effect};
+use jointid::model::spec::{Family, ModelSpec, Structure};
 use jointid::report::html::{diagnosis_figures, diagnosis_html, FIGURE_IDS, MAX_PANELS};
 use jointid::sim::SimConfig;
 
 /// Arguments of `jointid diagnose`.
 #[derive(Debug, Clone, Args)]
 pub struct DiagnoseArgs {
-    /// estimation capture and its columns (the same flags as `fit`)
+    /// estimation capture: a .jcap capture, a capture CSV, or any CSV or MAT-file with
+    /// --time/--input/--output
+    #[arg(value_name = "EST")]
+    pub path: PathBuf,
+    /// the columns of every capture (EST, EST2 and VAL alike)
     #[command(flatten)]
-    pub data: FitDataArgs,
+    pub columns: ColumnArgs,
+    /// how to read the captures and which part to use
+    #[command(flatten)]
+    pub read: ReadArgs,
     /// a second estimation capture at another amplitude (amplitude analysis)
     #[arg(value_name = "EST2")]
     pub second: Option<PathBuf>,
     /// validation capture (same columns), on which every candidate is scored
     #[arg(long, value_name = "VAL")]
     pub validation: PathBuf,
-    /// the user's simulation: `simulate --params-json` output or a jointid model file
+    /// the user's simulation: `simulate --params-out` output or a jointid model file
     #[arg(long, value_name = "SIM.json", conflicts_with = "model")]
     pub sim: Option<PathBuf>,
-    /// structure of the nominal model: rigid, two-mass, three-mass, four-mass
+    /// structure of the nominal model, as `fit --model`: rigid, two-mass, three-mass,
+    /// four-mass (default: the --sim file's, else three-mass)
     #[arg(long, value_name = "STRUCTURE")]
     pub model: Option<String>,
-    /// candidate effects: `all` or a comma-separated list of names
-    #[arg(long, value_name = "all|NAME,...", default_value = "all")]
-    pub effects: String,
+    /// candidate effect, repeatable, spelled as `fit --effect` and `simulate --effect`:
+    /// `name` or `name:key=value,...` (names: coulomb_friction, backlash,
+    /// nonlinear_stiffness, extra_mode, time_delay, torque_ripple), or `all` (the
+    /// default). A value given is where that candidate's fit starts, as in `fit` (a ripple's
+    /// `order` is taken as given); a pair starts from its singles' fits. One flag may list
+    /// several, comma-separated (`--effect backlash,coulomb_friction:fc=0.1`)
+    #[arg(
+        long = "effect",
+        visible_alias = "effects",
+        value_name = "SPEC",
+        value_parser = clap::builder::NonEmptyStringValueParser::new()
+    )]
+    pub effects: Vec<String>,
     /// gear ratio r = arm angle / motor angle
     #[arg(long, value_name = "R", default_value_t = DEFAULT_GEAR_RATIO)]
     pub gear_ratio: f64,
@@ -60,38 +79,81 @@ pub struct DiagnoseArgs {
     pub force: bool,
 }
 
-fn structure_of(label: &str) -> Result<Structure, String> {
-    Structure::ALL
-        .iter()
-        .copied()
-        .find(|s| s.label() == label)
-        .ok_or_else(|| {
-            format!(
-                "--model {label}: expected one of {}",
-                Structure::ALL
-                    .iter()
-                    .map(|s| s.label())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )
-        })
-}
-
-fn candidates(spec: &str) -> Result<Vec<Effect>, String> {
-    if spec.trim() == "all" {
-        return Ok(jointid::diagnose::all_candidates());
+/// The effect specs of `--effect` flags: each flag's value split on commas, an item that
+/// is only `key=value` continuing the spec before it (`backlash,coulomb_friction:fc=0.1,
+/// fs=0.2` is two specs), `all` replaced by every effect's name; none given: all.
+fn effect_specs(flags: &[String]) -> Vec<String> {
+    let mut specs: Vec<String> = Vec::new();
+    for item in flags.iter().flat_map(|f| f.split(',')).map(str::trim) {
+        match specs.last_mut() {
+            Some(last) if !item.contains(':') && item.contains('=') => {
+                last.push(',');
+                last.push_str(item);
+            }
+            _ if item.is_empty() => {}
+            _ => specs.push(item.to_string()),
+        }
     }
-    spec.split(',')
-        .map(|n| {
-            jointid::diagnose::candidate(n.trim()).ok_or_else(|| {
-                format!(
-                    "--effects: unknown effect `{}` (known: all, {})",
-                    n.trim(),
-                    EFFECT_NAMES.join(", ")
-                )
-            })
+    if specs.is_empty() {
+        specs.push("all".into());
+    }
+    specs
+        .into_iter()
+        .flat_map(|s| {
+            if s == "all" {
+                Effect::all_defaults()
+                    .iter()
+                    .map(|e| e.name().to_string())
+                    .collect()
+            } else {
+                vec![s]
+            }
         })
         .collect()
+}
+
+/// What `--model` and `--effect` ask for: the nominal structure (`None`: not given) and
+/// the candidates, with the values each candidate's spec gives.
+type Resolved = (
+    Option<Structure>,
+    Vec<Effect>,
+    BTreeMap<String, Vec<(String, f64)>>,
+);
+
+/// The nominal structure and the candidates, resolved from `--model` and `--effect` as
+/// `fit` resolves its model flags ([`ModelSpec::resolve`]), with the values each
+/// candidate's spec gives ([`parse_given`]).
+fn resolve(model: Option<&str>, flags: &[String]) -> Result<Resolved, String> {
+    let family = match model {
+        Some(m) => m.parse::<Family>().map_err(|e| format!("--model: {e}"))?,
+        None => Family::Physical(Structure::ThreeMass),
+    };
+    let specs = effect_specs(flags);
+    let spec =
+        ModelSpec::resolve(family, false, &specs, false, None, None).map_err(|e| e.to_string())?;
+    let structure = spec.family.structure().ok_or_else(|| {
+        format!(
+            "--model {}: diagnose fits a physical model ({})",
+            spec.family.name(),
+            Structure::ALL.map(Structure::label).join(", ")
+        )
+    })?;
+    let candidates = spec.effects.unwrap_or_default();
+    if candidates.is_empty() {
+        return Err("--effect none: diagnose needs at least one candidate effect".into());
+    }
+    let mut given = BTreeMap::new();
+    for (s, e) in specs.iter().zip(&candidates) {
+        let (_, keys) = parse_given(s).map_err(|err| format!("--effect: {err}"))?;
+        if given.insert(e.name().to_string(), keys).is_some() {
+            return Err(format!(
+                "--effect {}: named twice (each candidate once, its values in one spec)",
+                e.name()
+            ));
+        }
+    }
+    given.retain(|_, keys: &mut Vec<(String, f64)>| !keys.is_empty());
+    Ok((model.map(|_| structure), candidates, given))
 }
 
 /// The user's simulation from `simulate --params-json` output or a model file.
@@ -132,7 +194,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
     if !(args.gear_ratio.is_finite() && args.gear_ratio > 0.0) {
         return Err(format!("--gear-ratio {}: must be finite and > 0", args.gear_ratio).into());
     }
-    let cands = candidates(&args.effects)?;
+    let (model, cands, given) = resolve(args.model.as_deref(), &args.effects)?;
     if let Some(path) = &args.report {
         check_output(path, args.force)?;
     }
@@ -152,17 +214,13 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         )?;
     }
     let user = args.sim.as_deref().map(user_sim).transpose()?;
-    let structure = match (&args.model, &user) {
-        (Some(m), _) => structure_of(m)?,
-        (None, Some(u)) => u.plant.kind,
-        (None, None) => Structure::ThreeMass,
-    };
+    let structure = model
+        .or(user.as_ref().map(|u| u.plant.kind))
+        .unwrap_or(Structure::ThreeMass);
     // every capture as its gap-free segments: one, or all of them with --segment all
     // (those shorter than a time-domain fit takes left out, with a note)
     let capture = |p: &PathBuf, what: &str| -> Result<(Vec<Dataset>, Vec<usize>), String> {
-        let sel = args
-            .data
-            .data_args(p)
+        let sel = DataArgs::new(p, &args.columns, &args.read)
             .select(ctx.loaders)
             .map_err(|e| format!("{what}{}: {e}", p.display()))?;
         if sel.datasets.len() == 1 {
@@ -178,7 +236,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         }
         Ok((segs, numbers))
     };
-    let mut est: Vec<Vec<Dataset>> = vec![capture(&args.data.path, "")?.0];
+    let mut est: Vec<Vec<Dataset>> = vec![capture(&args.path, "")?.0];
     if let Some(p) = &args.second {
         let (segs, _) = capture(p, "")?;
         check_same_rate(&est[0][0], &segs[0], "EST2")?;
@@ -190,6 +248,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         structure,
         r: args.gear_ratio,
         candidates: cands,
+        given,
         user,
         ..DiagnoseRequest::default()
     };
@@ -200,6 +259,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         s.segment = k;
     }
     let val_name = val[0].name.clone();
+    let mut files = Vec::new();
     if let Some(path) = &args.report {
         let title = format!(
             "jointid diagnose: {} against {}",
@@ -211,13 +271,16 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         );
         let html = diagnosis_html(&title, &d, &series)?;
         write_file(path, args.force, |w| w.write_all(html.as_bytes()))?;
+        files.push(path.display().to_string());
     }
     if let Some(dir) = &args.plot {
         let figs = diagnosis_figures(&d, &series)?;
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         for f in &figs {
             for (svg, name) in f.svgs.iter().zip(f.file_names()) {
-                write_svg(&dir.join(name), svg, args.force)?;
+                let path = dir.join(name);
+                write_svg(&path, svg, args.force)?;
+                files.push(path.display().to_string());
             }
         }
     }
@@ -229,6 +292,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         print_json(ctx.out, "diagnose", &doc)?;
     } else {
         print_summary(ctx.out, &d, &val_name)?;
+        print_written(ctx.out, &files)?;
     }
     Ok(Outcome::Ok)
 }
@@ -242,19 +306,27 @@ struct DiagnoseJson<'a> {
     elapsed_s: f64,
 }
 
+/// The gap metric's name, the head of its description (`band-passed motor-velocity FIT`
+/// of `band-passed motor-velocity FIT [%]: toolbox FIT of ...`).
+fn metric_name(metric: &str) -> String {
+    let head = metric.split(':').next().unwrap_or(metric);
+    head.replace(" [%]", "").trim().to_string()
+}
+
+/// The text report: one headline FIT, the gap metric (the nominal's toolbox FIT of `θ_m`
+/// is in `--json` and, with what it measures, in the HTML report).
 fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Result<()> {
     writeln!(out, "jointid diagnose: {}", d.verdict)?;
     writeln!(out, "  metric: {}", d.metric)?;
     writeln!(
         out,
-        "  nominal {} on {val}: {:.2} % (motor-angle FIT {:.2} %); best {}: {:.2} % ({:.0} % of \
-         the gap closed)",
+        "  {} on {val}: nominal {} {:.2} %, best {} {:.2} % ({:.0} % of the gap closed)",
+        metric_name(&d.metric),
         d.structure,
-        d.fit_nominal_val,
-        d.fit_nominal_angle_val,
+        Percent(d.fit_nominal_val),
         d.best,
-        d.fit_augmented_val,
-        100.0 * d.gap_closed_share
+        Percent(d.fit_augmented_val),
+        Percent(100.0 * d.gap_closed_share)
     )?;
     if !d.validation_segments.is_empty() {
         writeln!(
@@ -265,7 +337,10 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
             writeln!(
                 out,
                 "    segment {} ({} samples): {:.2} → {:.2}",
-                s.segment, s.samples, s.fit_nominal, s.fit_augmented
+                s.segment,
+                s.samples,
+                Percent(s.fit_nominal),
+                Percent(s.fit_augmented)
             )?;
         }
     }
@@ -276,8 +351,8 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
             out,
             "    {:<20} {:+7.2} ± {:5.2} {:<16} {}",
             c.name,
-            c.score,
-            c.score_se,
+            Percent(c.score),
+            Percent(c.score_se),
             if c.significant {
                 "significant"
             } else {
@@ -305,7 +380,7 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
         r.torque_sign_change.energy_ratio,
         r.large_deflection.energy_ratio,
         r.angle_pattern.order,
-        100.0 * r.angle_pattern.share
+        Percent(100.0 * r.angle_pattern.share)
     )?;
     writeln!(
         out,
@@ -324,26 +399,31 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
             writeln!(
                 out,
                 "    amplitude: {} u RMS {:.3e} N·m, gap {:.2} points",
-                l.capture, l.u_rms, l.gap
+                l.capture,
+                l.u_rms,
+                Percent(l.gap)
             )?;
         }
-        writeln!(out, "    the gap {} with amplitude", a.gap_trend)?;
-        if let Some(t) = &a.distortion {
-            writeln!(out, "    {}", t.verdict)?;
-        }
+        writeln!(out, "    {}", a.summary())?;
     }
     if let Some(m) = &d.parameter_mismatch {
         writeln!(
             out,
             "  {}: {:.2} % on the validation data; parameters account for {:+.2} points, \
              structure for {:+.2}",
-            m.sim, m.fit_sim_val, m.parameter_part, m.structure_part
+            m.sim,
+            Percent(m.fit_sim_val),
+            Percent(m.parameter_part),
+            Percent(m.structure_part)
         )?;
         for p in &m.parameters {
             writeln!(
                 out,
                 "    {:<6} sim {:.4e}, fitted {:.4e} ({:+.1} %)",
-                p.name, p.sim, p.fitted, p.percent
+                p.name,
+                p.sim,
+                p.fitted,
+                Percent(p.percent)
             )?;
         }
     }
@@ -371,3 +451,43 @@ const DIAGNOSING_NOTES: SegmentNotes = SegmentNotes {
         )
     },
 };
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn effect_specs_split_comma_lists_and_keep_a_specs_own_keys_together() {
+        let flags = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert_eq!(
+            effect_specs(&flags(&[
+                "backlash,coulomb_friction:fc=0.1, fs=0.2",
+                "time_delay"
+            ])),
+            ["backlash", "coulomb_friction:fc=0.1,fs=0.2", "time_delay"]
+        );
+        let all = effect_specs(&[]);
+        assert_eq!(all.len(), Effect::all_defaults().len());
+        assert_eq!(effect_specs(&flags(&["all"])), all);
+    }
+
+    #[test]
+    fn resolve_gives_the_candidates_and_the_values_their_specs_give() {
+        let (model, cands, given) = resolve(
+            Some("Two_Mass"),
+            &["backlash,coulomb_friction:fc=0.1".to_string()],
+        )
+        .unwrap();
+        assert_eq!(model, Some(Structure::TwoMass));
+        let names: Vec<&str> = cands.iter().map(Effect::name).collect();
+        assert_eq!(names, ["backlash", "coulomb_friction"]);
+        match cands[1] {
+            // the pure law, as `fit --effect coulomb_friction:fc=0.1` resolves it
+            Effect::CoulombFriction(c) => assert_eq!((c.fc, c.fs), (0.1, 0.1)),
+            e => panic!("{e:?}"),
+        }
+        assert_eq!(given.len(), 1);
+        assert_eq!(given["coulomb_friction"], [("fc".to_string(), 0.1)]);
+        assert!(resolve(Some("five-mass"), &[]).is_err());
+    }
+}

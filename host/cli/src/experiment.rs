@@ -6,6 +6,7 @@ use clap::Args;
 use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
+use jointid::data::Percent;
 use jointid::scenario::paper::{experiment, write_table, ModelRow, Table};
 
 /// Arguments of `jointid experiment`.
@@ -81,7 +82,12 @@ pub fn run(args: &ExperimentArgs, ctx: &mut Context<'_>) -> CmdResult {
     } else if tables.len() > 1 {
         writeln!(ctx.out, "mean over {} experiments:", tables.len())?;
         for ((m, e), (_, v)) in me.iter().zip(&mv) {
-            writeln!(ctx.out, "  {m:<14} est {e:6.1}  val {v:6.1}")?;
+            writeln!(
+                ctx.out,
+                "  {m:<14} est {:6.1}  val {:6.1}",
+                Percent(*e),
+                Percent(*v)
+            )?;
         }
     }
     Ok(Outcome::Ok)

@@ -1,4 +1,4 @@
-//! `jointid export RUN.jcap --csv RUN.csv`: the capture CSV of DESIGN.md §5;
+//! `jointid export RUN.jcap --csv RUN.csv`: the capture CSV of ../shared/DESIGN.md §5;
 //! `--mat RUN.mat`: the same columns as MATLAB vectors ([`jointid::capture::export::export_mat`]).
 //!
 //! Writes only the samples that arrived; the `# gaps=` comment lists what did not (see
@@ -121,13 +121,21 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
         }
         let _ = writeln!(
             std::io::stderr(),
-            "exported {} samples to {} ({} gaps, {} samples missing, {} damaged frames)",
+            "exported {} samples{} ({} gaps, {} samples missing, {} damaged frames)",
             record.samples.len(),
-            written.join(" and "),
+            if to_stdout {
+                format!(" to {}", written.join(" and "))
+            } else {
+                String::new()
+            },
             r.gaps.len(),
             r.missing_samples,
             r.damaged_frames.len()
         );
+        // standard output lists the files, unless it carries the CSV
+        if !ctx.json && !to_stdout {
+            super::print_written(ctx.out, &written)?;
+        }
     }
     if ctx.json {
         let summary = ExportSummary {

@@ -1,34 +1,60 @@
-//! `jointid info RUN.jcap [--json]`: what a capture holds.
+//! `jointid info FILE [--json]`: what a capture or a data file holds.
 //!
-//! Board, session, sample rate, excitation, scale, then the report: samples, gaps, damaged
-//! frames with byte offsets, board counters, link events. `--json` prints one object with
-//! the same report fields as `capture --json`, plus `file` and `header` (null when no
-//! session header arrived). Works on a capture without a header and on one whose
-//! excitation cannot be regenerated (the reference check is then skipped).
+//! A `.jcap` capture: board, session, sample rate, excitation, scale, then the report:
+//! samples, gaps, damaged frames with byte offsets, board counters, link events.
+//! `--json` prints one object with the same report fields as `capture --json`, plus
+//! `file` and `header` (null when no session header arrived). Works on a capture without a
+//! header and on one whose excitation cannot be regenerated (the reference check is then
+//! skipped).
+//!
+//! Any other input the analysis commands read (a capture CSV, a CSV or MAT-file with a
+//! column mapping, `-` standard input): its format, its columns (a CSV's header, a
+//! MAT-file's variables), the columns read, samples, rate, gaps and gap-free segments, the
+//! excitation and other `# key=value` comments, and the reader's notes (`--json`: the
+//! document `info-data`). A CSV or MAT-file without the capture columns and without
+//! `--time/--input/--output` is described by its columns alone, with the flags that read
+//! it.
+//!
 //! Exit status: 0, 1 with `--strict` when anything is missing or damaged, 2 error.
 
-use std::path::PathBuf;
+use std::collections::BTreeMap;
+use std::io::Read;
+use std::path::{Path, PathBuf};
 
 use jointid_core::wire::SessionHeader;
 use serde::Serialize;
 
+use super::args::{ColumnArgs, DelimiterArg};
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::export::kind_name;
-use jointid::capture::{read_jcap_session_reports, segments_of, CaptureReport};
-use jointid::data::{fmt_sig, SegmentInfo};
+use jointid::capture::{
+    jcap_session_reports, read_jcap_session_reports, segments_of, CaptureReport,
+};
+use jointid::data::{
+    csv::header_columns, fmt_sig, mat, matlab_kind, ColumnMap, ExcitationConfig, Input, Record,
+    SegmentInfo, JCAP_MAGIC_PREFIX, MATLAB_V5,
+};
 
 /// Arguments of `jointid info`.
-#[derive(Clone, Debug, PartialEq, clap::Args)]
+#[derive(Clone, Debug, clap::Args)]
 pub struct InfoArgs {
-    /// Capture file to read
-    #[arg(value_name = "RUN.jcap")]
-    pub input: PathBuf,
-    /// Report only this session, by its id (default: every session, the first one on top)
+    /// Capture or data file: a .jcap capture, a capture CSV, any CSV or MAT-file (its
+    /// samples with --time/--input/--output), `-` for standard input
+    #[arg(value_name = "FILE")]
+    pub file: PathBuf,
+    /// Report only this session of a .jcap capture, by its id (default: every session, the
+    /// first one on top)
     #[arg(long, value_name = "K")]
     pub session: Option<u32>,
     /// Exit with status 1 when anything is missing or damaged
     #[arg(long)]
     pub strict: bool,
+    /// the columns of a data file that is no capture
+    #[command(flatten)]
+    pub columns: ColumnArgs,
+    /// how a CSV's columns are split
+    #[command(flatten)]
+    pub csv: DelimiterArg,
 }
 
 /// One session of `info --json`'s `per_session`.
@@ -63,10 +89,31 @@ pub struct InfoSummary {
 /// missing or damaged.
 ///
 /// # Errors
-/// [`jointid::capture::CaptureError::Jcap`] when the file cannot be read or is no jcap
-/// file; output errors.
+/// The file cannot be read, is a damaged jcap file ([`jointid::capture::CaptureError`])
+/// or data the loaders refuse ([`jointid::data::DataError`]); `--session` on a file that
+/// is no capture; output errors.
 pub fn run(args: &InfoArgs, ctx: &mut Context<'_>) -> CmdResult {
-    let mut all = read_jcap_session_reports(&args.input, args.session)?;
+    let stdin = args.file.as_os_str() == "-";
+    let name = if stdin {
+        "standard input".to_string()
+    } else {
+        args.file.display().to_string()
+    };
+    let bytes = if stdin {
+        let mut b = Vec::new();
+        std::io::stdin().lock().read_to_end(&mut b).map(|_| b)
+    } else {
+        std::fs::read(&args.file)
+    }
+    .map_err(|e| format!("{name}: {e}"))?;
+    if !bytes.starts_with(JCAP_MAGIC_PREFIX) {
+        return run_data(args, ctx, &name, &bytes);
+    }
+    let mut all = if stdin {
+        jcap_session_reports(Path::new(&name), &bytes, args.session)?
+    } else {
+        read_jcap_session_reports(&args.file, args.session)?
+    };
     let clean = all.iter().all(|(r, _)| r.is_clean());
     let segs = |r: &CaptureReport, h: &Option<SessionHeader>| {
         h.as_ref().map_or_else(Vec::new, |h| segments_of(r, h))
@@ -84,7 +131,7 @@ pub fn run(args: &InfoArgs, ctx: &mut Context<'_>) -> CmdResult {
         report,
     }));
     let summary = InfoSummary {
-        file: args.input.display().to_string(),
+        file: name,
         header,
         report,
         segments,
@@ -141,7 +188,7 @@ fn describe_session(
                 "board {:#010x}  session {}  protocol {}\n\
                  sampling    {} Hz (timer {} Hz), {duration:.3} s up to the last sample\n\
                  scale       {} N·m/count, {} rad/count\n\
-                 excitation  {} fs={} Hz N={} F={} cutoff={} Hz rms={} rad seed={} ramp={} periods={}\n",
+                 excitation  {}\n",
                 h.board_id,
                 h.session_id,
                 h.protocol_version,
@@ -149,15 +196,7 @@ fn describe_session(
                 h.timer_hz,
                 h.scale.torque_nm_per_count,
                 h.scale.angle_rad_per_count,
-                kind_name(x.kind),
-                x.fs_hz,
-                x.period_samples,
-                x.max_line,
-                x.cutoff_hz,
-                x.rms_rad,
-                x.seed,
-                x.ramp_samples,
-                x.periods,
+                excitation_text(x),
             ));
         }
     }
@@ -167,16 +206,278 @@ fn describe_session(
             "\nsegments         {} gap-free (--segment N of analyze, fit, validate, diagnose)\n",
             segments.len()
         ));
-        for g in segments {
-            out.push_str(&format!(
-                "  {:>3}  from {} s, {} s, {} samples, {} whole periods\n",
-                g.index,
-                fmt_sig(g.start_s, 6),
-                fmt_sig(g.length_s, 6),
-                g.samples,
-                g.whole_periods.unwrap_or(0)
-            ));
-        }
+        segment_lines(out, segments);
     }
     out.push('\n');
+}
+
+/// The excitation's parameters on one line.
+fn excitation_text(x: &ExcitationConfig) -> String {
+    format!(
+        "{} fs={} Hz N={} F={} cutoff={} Hz rms={} rad seed={} ramp={} periods={}",
+        kind_name(x.kind),
+        x.fs_hz,
+        x.period_samples,
+        x.max_line,
+        x.cutoff_hz,
+        x.rms_rad,
+        x.seed,
+        x.ramp_samples,
+        x.periods,
+    )
+}
+
+/// One line per gap-free segment.
+fn segment_lines(out: &mut String, segments: &[SegmentInfo]) {
+    for g in segments {
+        out.push_str(&format!(
+            "  {:>3}  from {} s, {} s, {} samples, {}\n",
+            g.index,
+            fmt_sig(g.start_s, 6),
+            fmt_sig(g.length_s, 6),
+            g.samples,
+            g.whole_periods.map_or_else(
+                || "periods unknown".to_string(),
+                |p| format!("{p} whole periods")
+            )
+        ));
+    }
+}
+
+/// The columns a data file was read with.
+#[derive(Debug, Serialize)]
+pub struct ColumnsRead {
+    /// time column [s]
+    pub time: String,
+    /// input column
+    pub input: String,
+    /// output column
+    pub output: String,
+    /// reference column, if any
+    pub reference: Option<String>,
+}
+
+/// What `info --json` prints for a file that is no `.jcap` capture (kind `info-data`).
+#[derive(Debug, Serialize)]
+pub struct DataInfo {
+    /// the file read (`standard input` for `-`)
+    pub file: String,
+    /// `capture CSV`, `CSV` or the MATLAB file's kind
+    pub format: String,
+    /// the file's columns: a CSV's header, a MAT-file's variables (each with its size)
+    pub columns: Vec<String>,
+    /// the rows under a CSV's header (null for a MAT-file)
+    pub rows: Option<usize>,
+    /// the columns read (null: none, the file has no capture columns and no mapping was
+    /// given)
+    pub read: Option<ColumnsRead>,
+    /// samples read (null when nothing was read)
+    pub samples: Option<usize>,
+    /// sample rate [Hz]
+    pub sample_rate_hz: Option<f64>,
+    /// from the first sample to the end of the last [s]
+    pub duration_s: Option<f64>,
+    /// samples missing in the gaps between the segments
+    pub missing_samples: Option<u64>,
+    /// the excitation from the file's `# key=value` comments
+    pub excitation: Option<ExcitationConfig>,
+    /// every other `# key=value` comment
+    pub comments: BTreeMap<String, String>,
+    /// the gap-free segments (what `--segment N` picks)
+    pub segments: Vec<SegmentInfo>,
+    /// what the reader ignored or guessed, or what reads the file
+    pub notes: Vec<String>,
+}
+
+/// The capture CSV's columns: time, input, output (the reference beside them when there).
+const CAPTURE_COLUMNS: [&str; 3] = ["t", "u", "theta_m"];
+
+/// `info` of a file that is no capture (module documentation).
+fn run_data(args: &InfoArgs, ctx: &mut Context<'_>, name: &str, bytes: &[u8]) -> CmdResult {
+    if let Some(k) = args.session {
+        return Err(format!(
+            "--session {k}: {name} is no .jcap capture; only a capture has sessions"
+        )
+        .into());
+    }
+    let delimiter = args.csv.delimiter;
+    let is_mat = matlab_kind(bytes) == Some(MATLAB_V5);
+    // the file's own columns, as far as they can be told without reading the samples
+    let (columns, rows) = if is_mat {
+        let m = mat::read_mat(bytes, name)?;
+        let cols = m
+            .vars
+            .iter()
+            .map(|(n, v)| format!("{n} ({})", v.describe()))
+            .collect();
+        let names: Vec<String> = m.vars.iter().map(|(n, _)| n.clone()).collect();
+        (cols, (None, names))
+    } else {
+        match std::str::from_utf8(bytes)
+            .ok()
+            .and_then(|t| header_columns(t, delimiter))
+        {
+            Some((cols, n)) => (cols.clone(), (Some(n), cols)),
+            None => (Vec::new(), (None, Vec::new())),
+        }
+    };
+    let (rows, names) = rows;
+    let has = |c: &str| names.iter().any(|n| n == c);
+    let map = if args.columns.mapped() {
+        let c = &args.columns;
+        Some(ColumnMap {
+            time: c.time.clone().unwrap_or_default(),
+            input: c.input.clone().unwrap_or_default(),
+            output: c.output.clone().unwrap_or_default(),
+            reference: c.reference.clone(),
+            delimiter,
+        })
+    } else if CAPTURE_COLUMNS.iter().all(|c| has(c)) || names.is_empty() {
+        // a capture CSV (or what the reader says about a file it cannot split)
+        let mut m = ColumnMap::capture();
+        if !has("theta_ref") && !names.is_empty() {
+            m.reference = args.columns.reference.clone();
+        }
+        m.delimiter = delimiter;
+        Some(m)
+    } else {
+        None
+    };
+    let format = if is_mat {
+        MATLAB_V5.to_string()
+    } else if !args.columns.mapped() && map.is_some() {
+        "capture CSV".to_string()
+    } else {
+        "CSV".to_string()
+    };
+    let mut info = DataInfo {
+        file: name.to_string(),
+        format,
+        columns,
+        rows,
+        read: None,
+        samples: None,
+        sample_rate_hz: None,
+        duration_s: None,
+        missing_samples: None,
+        excitation: None,
+        comments: BTreeMap::new(),
+        segments: Vec::new(),
+        notes: Vec::new(),
+    };
+    match &map {
+        Some(map) => {
+            let input = Input {
+                name,
+                path: (args.file.as_os_str() != "-").then_some(args.file.as_path()),
+                bytes,
+            };
+            let record = ctx.loaders.load_input(&input, map)?;
+            describe_record(&mut info, &record, map);
+        }
+        None => info.notes.push(format!(
+            "no capture columns ({}): give --time COL --input COL --output COL to read its \
+             samples, rate, gaps and segments",
+            CAPTURE_COLUMNS.join(", ")
+        )),
+    }
+    let missing = info.missing_samples.unwrap_or(0) > 0;
+    if ctx.json {
+        print_json(ctx.out, "info-data", &info)?;
+    } else {
+        write!(ctx.out, "{}", describe_data(&info))?;
+    }
+    Ok(if args.strict && missing {
+        Outcome::CheckFailed
+    } else {
+        Outcome::Ok
+    })
+}
+
+/// The figures of a record read with `map` into `info`.
+fn describe_record(info: &mut DataInfo, record: &Record, map: &ColumnMap) {
+    let first = &record.pieces[0];
+    let last = &record.pieces[record.pieces.len() - 1];
+    let ts = first.data.ts;
+    info.read = Some(ColumnsRead {
+        time: map.time.clone(),
+        input: map.input.clone(),
+        output: map.output.clone(),
+        reference: map.reference.clone(),
+    });
+    info.samples = Some(record.pieces.iter().map(|p| p.data.len()).sum());
+    info.sample_rate_hz = Some(1.0 / ts);
+    info.duration_s = Some(last.t0 + last.data.len() as f64 * ts - first.t0);
+    info.missing_samples = Some(record.missing_samples());
+    info.excitation = first.excitation;
+    info.comments = first.meta.clone();
+    info.segments = record.segments();
+    info.notes = record.notes.clone();
+}
+
+/// The text `info` prints for a file that is no capture.
+fn describe_data(d: &DataInfo) -> String {
+    let mut out = format!("{}\nformat      {}\n", d.file, d.format);
+    if !d.columns.is_empty() {
+        out.push_str(&format!("columns     {}\n", d.columns.join(", ")));
+    }
+    if let Some(r) = &d.read {
+        out.push_str(&format!(
+            "read        time {}, input {}, output {}, reference {}\n",
+            r.time,
+            r.input,
+            r.output,
+            r.reference.as_deref().unwrap_or("none")
+        ));
+    }
+    match (d.samples, d.sample_rate_hz, d.duration_s) {
+        (Some(n), Some(fs), Some(t)) => out.push_str(&format!(
+            "samples     {n} at {} Hz (Ts = {} s), {} s{}\n",
+            fmt_sig(fs, 6),
+            fmt_sig(1.0 / fs, 4),
+            fmt_sig(t, 6),
+            match d.missing_samples {
+                Some(0) | None => String::new(),
+                Some(m) => format!(
+                    " with {} gap(s), {m} samples missing",
+                    d.segments.len().saturating_sub(1)
+                ),
+            }
+        )),
+        _ => {
+            if let Some(r) = d.rows {
+                out.push_str(&format!("rows        {r}\n"));
+            }
+        }
+    }
+    if d.read.is_some() {
+        out.push_str(&format!(
+            "excitation  {}\n",
+            d.excitation.as_ref().map_or_else(
+                || "not stated (no `# kind=...` comments)".to_string(),
+                |x| format!("{} (from the file's comments)", excitation_text(x))
+            )
+        ));
+    }
+    if !d.comments.is_empty() {
+        out.push_str(&format!(
+            "comments    {}\n",
+            d.comments
+                .iter()
+                .map(|(k, v)| format!("{k}={v}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    if !d.segments.is_empty() {
+        out.push_str(&format!(
+            "segments    {} gap-free (--segment N of analyze, fit, validate, diagnose)\n",
+            d.segments.len()
+        ));
+        segment_lines(&mut out, &d.segments);
+    }
+    for n in &d.notes {
+        out.push_str(&format!("note: {n}\n"));
+    }
+    out
 }

@@ -41,7 +41,7 @@ mod info;
 mod print;
 mod simulate;
 mod validate;
-mod validate_cmd;
+mod validate_simulated;
 mod views;
 
 /// `jointid`: identification of one robot joint, from capture to validated models.
@@ -61,7 +61,7 @@ pub struct Cli {
 pub enum Command {
     /// record the board's stream (serial, CAN, slcan adapter, candump log, TCP or file) into a .jcap capture
     Capture(capture::CaptureArgs),
-    /// what a .jcap capture holds: board, excitation, samples, gaps, damaged frames
+    /// what a capture or data file holds: board, excitation, samples, rate, columns, gaps, damaged frames
     Info(info::InfoArgs),
     /// write a .jcap capture as the capture CSV (t,theta_ref,u,theta_m) or a MATLAB file
     Export(export::ExportArgs),
@@ -72,7 +72,7 @@ pub enum Command {
     /// fit a black-box or physical model: parameters, FIT, resonances, residual tests
     Fit(fit::FitArgs),
     /// FIT and residual tests of a saved model (or a simulated column) on data
-    Validate(validate_cmd::ValidateCmdArgs),
+    Validate(validate::ValidateArgs),
     /// the whole path on the simulated joint, through the wire encoder (no board needed)
     Demo(demo::DemoArgs),
     /// seed 000 Table 2 on simulated IRB1400-like data (FIT of black box 11, three-, four-mass)
@@ -143,12 +143,29 @@ pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
         Command::ExportModel(a) => export_model::run(a, ctx),
         Command::Analyze(a) => analyze::run(a, ctx),
         Command::Fit(a) => fit::run(a, ctx),
-        Command::Validate(a) => validate_cmd::run(a, ctx),
+        Command::Validate(a) => validate::run(a, ctx),
         Command::Demo(a) => demo::run(a, ctx),
         Command::Experiment(a) => experiment::run(a, ctx),
         Command::Simulate(a) => simulate::run(a, ctx),
         Command::Diagnose(a) => diagnose::run(a, ctx),
     }
+}
+
+/// Ends a command's text output with the files it wrote, under `wrote:`, one a line
+/// (nothing when it wrote none): the one place that lists them. `--json` lists them in the
+/// document instead (`files`, `out`, `csv`).
+///
+/// # Errors
+/// Write errors.
+pub fn print_written(out: &mut dyn Write, files: &[String]) -> std::io::Result<()> {
+    if files.is_empty() {
+        return Ok(());
+    }
+    writeln!(out, "wrote:")?;
+    for f in files {
+        writeln!(out, "  {f}")?;
+    }
+    Ok(())
 }
 
 /// Writes an SVG string (from [`jointid::report::plot`]) to `path` under the one rule of

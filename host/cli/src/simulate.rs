@@ -16,7 +16,7 @@
 //!   `export`, `analyze` and `fit` read it exactly like a board capture. The wire carries integer counts: `u` and `θm` are rounded to the
 //!   scale of [`WireOptions::for_sim`] (at most half a count from the simulator's value),
 //!   the reference is regenerated from the header bit-exactly.
-//! - `--out RUN.csv` writes the capture CSV (DESIGN.md §5) with the simulator's values
+//! - `--out RUN.csv` writes the capture CSV (../shared/DESIGN.md §5) with the simulator's values
 //!   unquantised, the excitation config and `sim_*` keys in its comments.
 //! - Both outputs follow the one rule of every output file ([`jointid::data::output`]): an
 //!   existing file is replaced only with `--force`, checked before the simulation; each
@@ -667,8 +667,8 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
     let o = &mut *ctx.out;
     writeln!(
         o,
-        "wrote {} ({} samples, {:.2} s at {} Hz)",
-        report.file, report.samples, report.duration_s, exc.fs_hz
+        "simulated {} samples, {:.2} s at {} Hz",
+        report.samples, report.duration_s, exc.fs_hz
     )?;
     if let Some(s) = &report.scale {
         writeln!(
@@ -700,9 +700,10 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         "integrator {}, u rms {:.4} N·m, theta_m rms {:.5} rad, saturated samples {}",
         report.integrator, report.u_rms, report.theta_m_rms, report.saturated_samples
     )?;
-    if let Some(p) = &report.params_out {
-        writeln!(o, "parameters: {p}")?;
-    }
+    let files: Vec<String> = std::iter::once(report.file.clone())
+        .chain(report.params_out.clone())
+        .collect();
+    super::print_written(o, &files)?;
     Ok(Outcome::Ok)
 }
 

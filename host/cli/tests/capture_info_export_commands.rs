@@ -655,13 +655,20 @@ fn capture_setup_errors_exit_2_with_one_line_and_leave_no_file() {
 #[test]
 fn info_and_export_name_the_problem_of_a_bad_capture_file() {
     let dir = tmpdir("badfile");
+    // a file is read by its content: a capture CSV without rows is one, named so; a
+    // capture of another version is refused at its version byte
     let p = dir.join("not.jcap");
     std::fs::write(&p, b"t,theta_ref,u,theta_m\n").unwrap();
     let o = jointid(&["info", p.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("not.jcap: 0 data rows"), "{err}");
+    std::fs::write(&p, b"JCAP\x02\r\n\x1a").unwrap();
+    let o = jointid(&["info", p.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.contains("not.jcap: not a jcap file (bad magic at byte 0)"),
+        err.contains("not.jcap: unsupported jcap version 2 at byte 4"),
         "{err}"
     );
     // a capture with no session header cannot be exported, and says why
@@ -688,6 +695,121 @@ fn info_and_export_name_the_problem_of_a_bad_capture_file() {
     let o = jointid(&["analyze", headless.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("no session header"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `info` on every input the analysis commands read, not only a `.jcap` (it said "not a
+/// jcap file (bad magic at byte 0)" of all of them): a capture CSV (samples, rate,
+/// excitation from its comments, segments), the same on standard input, a `.jcap` on
+/// standard input, a MAT-file, a CSV with a column mapping and a gap (two segments, the
+/// samples missing, `--strict` exits 1), and a CSV without capture columns and without a
+/// mapping (its columns and rows, and the flags that read it). `--session` is a capture's.
+#[test]
+fn info_describes_every_input_the_analysis_commands_read() {
+    let dir = tmpdir("info-data");
+    let p = |name: &str| dir.join(name).display().to_string();
+    json_of(&jointid(&[
+        "simulate",
+        "--model",
+        "two-mass",
+        "--periods",
+        "2",
+        "--out",
+        &p("run.jcap"),
+        "--json",
+    ]));
+    json_of(&jointid(&[
+        "export",
+        &p("run.jcap"),
+        "--csv",
+        &p("run.csv"),
+        "--mat",
+        &p("run.mat"),
+        "--json",
+    ]));
+    let text = |args: &[&str], stdin: Option<&str>| -> (Option<i32>, String) {
+        let mut cmd = Command::new(BIN);
+        cmd.args(args);
+        if let Some(f) = stdin {
+            cmd.stdin(std::fs::File::open(f).unwrap());
+        }
+        let o = cmd.output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stdout).into_owned() + &err,
+        )
+    };
+    for (args, stdin, format) in [
+        (vec!["info", &p("run.csv")], None, "capture CSV"),
+        (vec!["info", "-"], Some(p("run.csv")), "capture CSV"),
+        (vec!["info", &p("run.mat")], None, "MATLAB file (v5)"),
+    ] {
+        let (code, out) = text(&args, stdin.as_deref());
+        assert_eq!(code, Some(0), "{args:?}: {out}");
+        for want in [
+            format!("format      {format}"),
+            "samples     14000 at 2000 Hz".to_string(),
+            "excitation  special_odd_multisine fs=2000 Hz N=5000".to_string(),
+            "segments    1 gap-free".to_string(),
+            "14000 samples, 2 whole periods".to_string(),
+        ] {
+            assert!(out.contains(&want), "{args:?}: no `{want}` in {out}");
+        }
+    }
+    let (code, out) = text(&["info", "-"], Some(&p("run.jcap")));
+    assert_eq!(code, Some(0), "{out}");
+    assert!(out.starts_with("standard input\nboard "), "{out}");
+    // a mapped CSV with a gap of 3 samples after its 5th row
+    let mut csv = String::from("time;force;pos\n");
+    for k in (0..12).filter(|k| !(5..8).contains(k)) {
+        csv.push_str(&format!("{};{};{}\n", f64::from(k) * 0.01, k % 3, k));
+    }
+    std::fs::write(p("mapped.csv"), csv).unwrap();
+    let mapped = ["--time", "time", "--input", "force", "--output", "pos"];
+    let mapped_csv = p("mapped.csv");
+    let mut args = vec!["info", mapped_csv.as_str()];
+    args.extend(mapped);
+    let (code, out) = text(&args, None);
+    assert_eq!(code, Some(0), "{out}");
+    for want in [
+        "format      CSV",
+        "columns     time, force, pos",
+        "read        time time, input force, output pos, reference none",
+        "samples     9 at 100 Hz",
+        "with 1 gap(s), 3 samples missing",
+        "excitation  not stated",
+        "segments    2 gap-free",
+    ] {
+        assert!(out.contains(want), "no `{want}` in {out}");
+    }
+    args.push("--strict");
+    assert_eq!(text(&args, None).0, Some(1));
+    let v = json_of(&jointid(&[
+        "info",
+        &p("mapped.csv"),
+        "--time",
+        "time",
+        "--input",
+        "force",
+        "--output",
+        "pos",
+        "--json",
+    ]));
+    assert_eq!(v["missing_samples"], 3, "{v}");
+    assert_eq!(v["segments"].as_array().unwrap().len(), 2, "{v}");
+    // without the mapping: its columns and rows, and how to read it
+    let (code, out) = text(&["info", &p("mapped.csv")], None);
+    assert_eq!(code, Some(0), "{out}");
+    assert!(
+        out.contains("columns     time, force, pos")
+            && out.contains("rows        9")
+            && out.contains("--time COL --input COL --output COL"),
+        "{out}"
+    );
+    let (code, out) = text(&["info", &p("run.csv"), "--session", "2"], None);
+    assert_eq!(code, Some(2), "{out}");
+    assert!(out.contains("only a capture has sessions"), "{out}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -388,8 +388,9 @@ fn validator_rejects_missing_fields_wrong_types_and_undeclared_fields() {
     );
 }
 
-/// `simulate`, `capture --file`, `info`, `export` (to a file, and `--csv -`, where the CSV
-/// takes standard output and the document goes to standard error) and an error.
+/// `simulate`, `capture --file`, `info` (of a capture, of a capture CSV and of another
+/// CSV), `export` (to a file, and `--csv -`, where the CSV takes standard output and the
+/// document goes to standard error) and an error.
 #[test]
 fn capture_info_export_simulate_and_error_documents_match_their_schemas() {
     let dir = tmpdir("capture");
@@ -405,7 +406,7 @@ fn capture_info_export_simulate_and_error_documents_match_their_schemas() {
             "2",
         ],
     );
-    simulate(&dir, "run.csv", &["--periods", "2"]);
+    let run_csv = simulate(&dir, "run.csv", &["--periods", "2"]);
     let cap = dir.join("cap.jcap").display().to_string();
     let c = run_valid(
         &["capture", "--file", &jcap, "--out", &cap, "--json"],
@@ -414,6 +415,14 @@ fn capture_info_export_simulate_and_error_documents_match_their_schemas() {
     assert!(c["samples"].as_u64().unwrap() > 0);
     let i = run_valid(&["info", &cap, "--json"], "info");
     assert!(!i["segments"].as_array().unwrap().is_empty());
+    // a file that is no capture: read (the capture CSV), and described by its columns (a
+    // CSV without the capture columns and without a mapping)
+    let i = run_valid(&["info", &run_csv, "--json"], "info-data");
+    assert!(i["excitation"].is_object() && i["samples"].as_u64().unwrap() > 0);
+    let other = dir.join("other.csv");
+    std::fs::write(&other, "time,force,pos\n0,1,2\n0.001,1,2\n").unwrap();
+    let i = run_valid(&["info", other.to_str().unwrap(), "--json"], "info-data");
+    assert!(i["read"].is_null() && i["rows"] == 2, "{i}");
     let csv = dir.join("cap.csv").display().to_string();
     let e = run_valid(&["export", &cap, "--csv", &csv, "--json"], "export");
     assert_eq!(e["rows"], c["samples"]);

@@ -1,4 +1,4 @@
-//! The capture CSV of DESIGN.md §5, written from a [`CaptureRecord`].
+//! The capture CSV of ../shared/DESIGN.md §5, written from a [`CaptureRecord`].
 //!
 //! ```text
 //! # format=jointid capture csv

@@ -20,7 +20,7 @@
 //!   reference check, conversion to SI).
 //! - [`live`]: the capture loop (stop rules, progress, setup-error rule).
 //! - [`report`]: the summary (samples, gaps, damaged frames with byte offsets, overruns).
-//! - [`export`]: the capture CSV of DESIGN.md §5.
+//! - [`export`]: the capture CSV of ../shared/DESIGN.md §5.
 //!
 //! **Architecture invariant**: the `.jcap` holds exactly the received bytes; everything
 //! else (samples, gaps, SI values, reference) is derived from them on reading, so a better
@@ -326,8 +326,33 @@ pub fn read_jcap_session_reports(
     session: Option<u32>,
 ) -> Result<Vec<(CaptureReport, Option<SessionHeader>)>, CaptureError> {
     let (stream, events) = read_jcap_parts(path)?;
+    session_reports(path, &stream, events, session)
+}
+
+/// As [`read_jcap_session_reports`], for a capture already read whole (from standard
+/// input): `bytes` the file, magic included, and no events sidecar; `name` names it in
+/// messages.
+/// # Errors
+/// [`CaptureError::Jcap`] when `bytes` are no jcap file, [`CaptureError::NoSession`] as
+/// [`read_jcap_session_reports`].
+pub fn jcap_session_reports(
+    name: &Path,
+    bytes: &[u8],
+    session: Option<u32>,
+) -> Result<Vec<(CaptureReport, Option<SessionHeader>)>, CaptureError> {
+    jcap::check_header(name, bytes)?;
+    session_reports(name, &bytes[jcap::MAGIC.len()..], Vec::new(), session)
+}
+
+/// The reports of [`read_jcap_session_reports`] of the received bytes `stream`.
+fn session_reports(
+    path: &Path,
+    stream: &[u8],
+    events: Vec<JcapEvent>,
+    session: Option<u32>,
+) -> Result<Vec<(CaptureReport, Option<SessionHeader>)>, CaptureError> {
     let boundaries = boundaries_of(&events);
-    let first = report_of(&stream, &boundaries, events.clone(), None);
+    let first = report_of(stream, &boundaries, events.clone(), None);
     let ids = session_ids(&first.0);
     if let Some(k) = session {
         if !ids.contains(&k) {
@@ -337,12 +362,12 @@ pub fn read_jcap_session_reports(
                 available: ids,
             });
         }
-        return Ok(vec![report_of(&stream, &boundaries, events, Some(k))]);
+        return Ok(vec![report_of(stream, &boundaries, events, Some(k))]);
     }
     let first_id = first.1.map(|h| h.session_id);
     let mut out = vec![first];
     for id in ids.into_iter().filter(|id| Some(*id) != first_id) {
-        out.push(report_of(&stream, &boundaries, events.clone(), Some(id)));
+        out.push(report_of(stream, &boundaries, events.clone(), Some(id)));
     }
     Ok(out)
 }

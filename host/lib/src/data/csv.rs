@@ -1,4 +1,4 @@
-//! The capture CSV (DESIGN.md §5) and any CSV with a column mapping: read, checked for
+//! The capture CSV (../shared/DESIGN.md §5) and any CSV with a column mapping: read, checked for
 //! uniform sampling, and written back losslessly.
 //!
 //! # Capture CSV contract (`# key=value` comments)
@@ -141,29 +141,19 @@ fn parse_inner(
         }
         None
     };
-    let delim = match map.delimiter {
-        Some(d) => d,
-        None if header.contains(',') => ',',
-        None => match [';', '\t'].into_iter().find(|d| header.contains(*d)) {
-            Some(d) => {
-                notes.push(format!(
-                    "{name}: no `,` in the header line {header_line}: columns split on {} \
-                     (--delimiter sets it)",
-                    if d == '\t' {
-                        "tabs".to_string()
-                    } else {
-                        format!("`{d}`")
-                    }
-                ));
-                d
+    let (delim, guessed) = header_delimiter(header, map.delimiter);
+    if guessed {
+        notes.push(format!(
+            "{name}: no `,` in the header line {header_line}: columns split on {} \
+             (--delimiter sets it)",
+            if delim == '\t' {
+                "tabs".to_string()
+            } else {
+                format!("`{delim}`")
             }
-            None => ',',
-        },
-    };
-    let cols: Vec<&str> = header
-        .split(delim)
-        .map(|c| c.trim().trim_matches('"').trim())
-        .collect();
+        ));
+    }
+    let cols = header_cells(header, delim);
     let find = |c: &str| {
         cols.iter()
             .position(|h| *h == c)
@@ -216,6 +206,45 @@ fn parse_inner(
         line_of_row.push(ln);
     }
     record_from_columns(name, map, meta, excitation, notes, columns, line_of_row)
+}
+
+/// The delimiter of a CSV whose header line is `header`: `given`, else `,`, or `;` or a
+/// tab when the header holds no `,` (then `true`: guessed, worth a note).
+fn header_delimiter(header: &str, given: Option<char>) -> (char, bool) {
+    match given {
+        Some(d) => (d, false),
+        None if header.contains(',') => (',', false),
+        None => match [';', '\t'].into_iter().find(|d| header.contains(*d)) {
+            Some(d) => (d, true),
+            None => (',', false),
+        },
+    }
+}
+
+/// The column names of a header line split on `delim`, trimmed and unquoted.
+fn header_cells(header: &str, delim: char) -> Vec<&str> {
+    header
+        .split(delim)
+        .map(|c| c.trim().trim_matches('"').trim())
+        .collect()
+}
+
+/// What a CSV text holds before any column mapping: the columns of its header line (the
+/// first line that is neither blank nor a `#` comment, split as [`parse_csv_record`] splits
+/// it, `delimiter` or the one it would choose) and the rows under it (the lines that are
+/// neither blank nor comments). `None` when the text has no header line.
+pub fn header_columns(text: &str, delimiter: Option<char>) -> Option<(Vec<String>, usize)> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut lines = text
+        .lines()
+        .filter(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+    let header = lines.next()?;
+    let (delim, _) = header_delimiter(header, delimiter);
+    let columns = header_cells(header, delim)
+        .into_iter()
+        .map(str::to_string)
+        .collect();
+    Some((columns, lines.count()))
 }
 
 /// The record of columns already read (time, input, output and, when `map` has one, the
@@ -1012,6 +1041,20 @@ mod tests {
         assert!((ds.data.ts - 0.01).abs() < 1e-12);
         assert_eq!(ds.data.u[0], 0.22183165);
         assert_eq!(ds.data.y[1], -0.11470789);
+    }
+
+    #[test]
+    fn header_columns_lists_the_header_and_counts_the_rows_as_the_reader_splits_them() {
+        let text = "# kind=x\n\ntime;force;\"pos\"\n0;1;2\n# late comment\n1;2;3\n\n";
+        assert_eq!(
+            header_columns(text, None),
+            Some((vec!["time".into(), "force".into(), "pos".into()], 2))
+        );
+        assert_eq!(
+            header_columns("a,b\n", Some(';')),
+            Some((vec!["a,b".into()], 0))
+        );
+        assert_eq!(header_columns("# only\n\n", None), None);
     }
 
     #[test]

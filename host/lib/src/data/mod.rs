@@ -9,7 +9,7 @@
 //!   all) in [`output`];
 //! - [`IdData`], [`Dataset`], whole excitation periods and the loader registry here.
 //!
-//! What: read the capture CSV of DESIGN.md §5 (and any CSV with a column
+//! What: read the capture CSV of ../shared/DESIGN.md §5 (and any CSV with a column
 //! mapping), check that sampling is uniform, and prepare the record for the
 //! estimators: detrending, integer decimation with an anti-alias filter,
 //! dropping the transient and cutting whole excitation periods, and the
@@ -44,6 +44,53 @@ pub fn fmt_sig(x: f64, digits: usize) -> String {
     let rounded: f64 = format!("{:.*e}", digits.max(1) - 1, x).parse().unwrap_or(x);
     format!("{rounded}")
 }
+/// How an undefined figure is shown to the user (a 0/0 share, the FIT of a simulation that
+/// diverged): a dash, never `NaN` or `inf`.
+pub const UNDEFINED: &str = "—";
+
+/// A percentage (a FIT [%], a share [%], a relative error [%]) or a difference of them
+/// (FIT points) as the user reads it, for `{}` with the caller's precision, sign and width
+/// (`format!("{:+7.2}", Percent(x))`): [`UNDEFINED`] when `x` is not finite, and in
+/// scientific notation from a magnitude of 1e6 on (a FIT of a simulation that left the
+/// data far behind), so that no figure runs to hundreds of digits. Not for values written
+/// as data (`--json` writes a non-finite value as `null`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Percent(pub f64);
+
+/// Magnitude from which [`Percent`] writes a figure in scientific notation.
+pub const PERCENT_SCIENTIFIC_FROM: f64 = 1e6;
+
+impl fmt::Display for Percent {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let x = self.0;
+        let sign = if f.sign_plus() && x >= 0.0 { "+" } else { "" };
+        let text = if !x.is_finite() {
+            UNDEFINED.to_string()
+        } else if x.abs() >= PERCENT_SCIENTIFIC_FROM {
+            format!("{sign}{x:.2e}")
+        } else {
+            match f.precision() {
+                Some(p) => format!("{sign}{x:.p$}"),
+                None => format!("{sign}{x}"),
+            }
+        };
+        // right-aligned by default, as numbers are
+        let width = f.width().unwrap_or(0);
+        let len = text.chars().count();
+        if len >= width {
+            return f.write_str(&text);
+        }
+        let pad = width - len;
+        let (before, after) = match f.align() {
+            Some(fmt::Alignment::Left) => (0, pad),
+            Some(fmt::Alignment::Center) => (pad / 2, pad - pad / 2),
+            _ => (pad, 0),
+        };
+        let fill = f.fill().to_string();
+        write!(f, "{}{text}{}", fill.repeat(before), fill.repeat(after))
+    }
+}
+
 pub mod dsp;
 pub mod mat;
 pub mod output;
@@ -178,7 +225,7 @@ pub struct ColumnMap {
 }
 
 impl ColumnMap {
-    /// the capture CSV header `t,theta_ref,u,theta_m` of DESIGN.md §5
+    /// the capture CSV header `t,theta_ref,u,theta_m` of ../shared/DESIGN.md §5
     pub fn capture() -> Self {
         ColumnMap {
             time: "t".into(),
@@ -818,6 +865,19 @@ mod tests {
         assert_eq!(fmt_sig(1.0 / 3.0, 4), "0.3333");
         assert_eq!(fmt_sig(-0.126, 2), "-0.13");
         assert_eq!(fmt_sig(f64::NAN, 4), "NaN");
+    }
+
+    #[test]
+    fn percent_shows_undefined_and_huge_figures_readably_in_the_callers_format() {
+        assert_eq!(format!("{:.2}", Percent(67.004)), "67.00");
+        assert_eq!(format!("{:+.1}", Percent(2.25)), "+2.2");
+        assert_eq!(format!("{:+.1}", Percent(-2.25)), "-2.2");
+        assert_eq!(format!("{:>7.2}", Percent(-1.5)), "  -1.50");
+        assert_eq!(format!("{:<4.0}|", Percent(f64::NAN)), "—   |");
+        assert_eq!(format!("{:>3.2}", Percent(f64::NEG_INFINITY)), "  —");
+        assert_eq!(format!("{:.2}", Percent(-1e300)), "-1.00e300");
+        assert_eq!(format!("{:.2}", Percent(-999_999.0)), "-999999.00");
+        assert_eq!(format!("{}", Percent(f64::INFINITY)), UNDEFINED);
     }
 
     use super::*;

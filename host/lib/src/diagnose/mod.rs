@@ -1,4 +1,4 @@
-//! Sim-to-real gap diagnosis (DESIGN.md §7): which unmodelled effect makes the simulated
+//! Sim-to-real gap diagnosis (../shared/DESIGN.md §7): which unmodelled effect makes the simulated
 //! joint depart from the measured one, how much of the gap it closes, and where the gap
 //! lies.
 //!
@@ -93,7 +93,9 @@ use thiserror::Error;
 
 use crate::data::{Dataset, IdData};
 use crate::ident::frf::analyze_segments;
-use crate::ident::frf::{amplitude_trend, analyze_dataset, AmplitudeTrend, FrfAnalysis, Linearity};
+use crate::ident::frf::{
+    amplitude_trend, analyze_dataset, AmplitudeTrend, FrfAnalysis, Linearity, TrendKind,
+};
 use crate::ident::grey_box::DEFAULT_GEAR_RATIO;
 use crate::ident::lm::Termination;
 use crate::ident::nonlinear::{grow, ripple};
@@ -178,8 +180,15 @@ pub struct DiagnoseRequest {
     pub structure: Structure,
     /// gear ratio `r` [-]
     pub r: f64,
-    /// candidate effects (their values are ignored: each fit starts automatically)
+    /// candidate effects (their values are ignored: each fit starts automatically, at the
+    /// values of [`DiagnoseRequest::given`] where it names them)
     pub candidates: Vec<Effect>,
+    /// start values the user gives, by candidate name: the keys of the effect's spec
+    /// ([`crate::model::effects::parse_given`]) that the single candidate's fit starts at,
+    /// or takes as given (a ripple's `order`), as `fit --effect name:key=value` does
+    /// ([`crate::ident::nonlinear::NlRequest::given`]); a pair starts from its singles'
+    /// fits
+    pub given: BTreeMap<String, Vec<(String, f64)>>,
     /// the user's simulation, when given
     pub user: Option<UserSim>,
     /// options
@@ -194,6 +203,7 @@ impl Default for DiagnoseRequest {
             structure: Structure::ThreeMass,
             r: DEFAULT_GEAR_RATIO,
             candidates: all_candidates(),
+            given: BTreeMap::new(),
             user: None,
             options: DiagnoseOptions::default(),
         }
@@ -287,6 +297,54 @@ pub struct Amplitude {
     pub distortion: Option<AmplitudeTrend>,
     /// `grows`, `falls` or `unclear` (changes by less than 1 point)
     pub gap_trend: String,
+}
+
+impl Amplitude {
+    /// The amplitude trend in one sentence, the gap's and the distortion's together. The two
+    /// measure different things and may part: the gap is all the nominal misses of the
+    /// band-passed velocity, fitted on the first estimation capture (in-sample there, out of
+    /// sample on the second, so it also holds how the joint's best linear model moves with
+    /// amplitude); the distortion is only what the nonlinearity puts on the lines the
+    /// multisine leaves empty, relative to the excited ones, whose trend tells the kind of
+    /// effect (seed 000 §3). When they part, the sentence says both with a `but` and why.
+    pub fn summary(&self) -> String {
+        let gap = match self.gap_trend.as_str() {
+            "grows" => "the nominal's gap grows with amplitude",
+            "falls" => "the nominal's gap falls as amplitude grows",
+            _ => "the nominal's gap changes by less than 1 point with amplitude",
+        };
+        let Some(d) = &self.distortion else {
+            return format!("{gap} (the distortion trend needs two periodic captures)");
+        };
+        let parted = matches!(
+            (self.gap_trend.as_str(), d.kind),
+            ("grows", TrendKind::FallsWithAmplitude) | ("falls", TrendKind::GrowsWithAmplitude)
+        );
+        let agreed = matches!(
+            (self.gap_trend.as_str(), d.kind),
+            ("grows", TrendKind::GrowsWithAmplitude) | ("falls", TrendKind::FallsWithAmplitude)
+        );
+        if parted {
+            format!(
+                "{gap}, but the distortion relative to the excited lines {}: the two measure \
+                 different things (the gap is all the nominal misses of the band-passed \
+                 velocity, and out of sample on the second estimation capture, as the nominal \
+                 is fitted on the first; the distortion is only what the nonlinearity puts on \
+                 the lines the excitation leaves empty, and its trend tells the kind of \
+                 effect): {}",
+                if d.kind == TrendKind::FallsWithAmplitude {
+                    "falls"
+                } else {
+                    "grows"
+                },
+                d.verdict
+            )
+        } else if agreed {
+            format!("{gap}, and so does the distortion: {}", d.verdict)
+        } else {
+            format!("{gap}; {}", d.verdict)
+        }
+    }
 }
 
 /// Where the nominal's residual lies.
@@ -449,9 +507,18 @@ fn fit_and_score(
     from: Option<&NlFit>,
 ) -> Result<Fitted, String> {
     let linear = &starts.structure;
+    // a single's keys the user gave start there (a pair starts from its singles' fits)
+    let given = match from {
+        None => effects
+            .iter()
+            .map(|e| req.given.get(e.name()).cloned().unwrap_or_default())
+            .collect(),
+        Some(_) => Vec::new(),
+    };
     let mut nl = NlRequest {
         tau_c: linear.as_ref().map_or(0.0, |l| l.1),
         linear: linear.as_ref().map(|l| l.0.clone()),
+        given,
         options: req.options.nl.clone(),
         ..NlRequest::new(req.structure, req.r, effects)
     };
@@ -489,8 +556,9 @@ fn fit_and_score(
         nl.tau_c = tau_c;
         nl.linear = Some(plant.clone());
         if extra_at.is_some() {
-            let mut given = vec![Vec::new(); nl.effects.len()];
-            given[ci] = keys;
+            let mut given = nl.given.clone();
+            given.resize(nl.effects.len(), Vec::new());
+            given[ci].extend(keys);
             nl.given = given;
             if let Some(b) = from {
                 // a pair: the lead's fitted friction, and the mode from the best point of

@@ -966,3 +966,41 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
     assert_eq!(vanished_effects(&fit(0.02, 0.05)).len(), 1);
     assert!(vanished_effects(&fit(1.5, 0.05)).is_empty());
 }
+
+/// The amplitude sentence: a gap that grows while the distortion falls is said with a
+/// `but` and what each measures; trends that agree are said as one; no distortion trend
+/// without two periodic captures.
+#[test]
+fn amplitude_summary_says_both_trends_with_a_but_when_they_part() {
+    let trend = |kind: TrendKind| AmplitudeTrend {
+        signal: "theta_m".into(),
+        excitation_change_db: 9.6,
+        odd_change_db: -12.9,
+        even_change_db: -9.6,
+        kind,
+        verdict: "theta_m: odd lines -12.9 dB: distortion falls as amplitude grows".into(),
+    };
+    let amp = |gap: &str, kind: Option<TrendKind>| Amplitude {
+        levels: Vec::new(),
+        distortion: kind.map(trend),
+        gap_trend: gap.into(),
+    };
+    let parted = amp("grows", Some(TrendKind::FallsWithAmplitude)).summary();
+    assert!(
+        parted.starts_with("the nominal's gap grows with amplitude, but the distortion")
+            && parted.contains("measure different things")
+            && parted.ends_with("distortion falls as amplitude grows"),
+        "{parted}"
+    );
+    let agreed = amp("falls", Some(TrendKind::FallsWithAmplitude)).summary();
+    assert!(agreed.contains("and so does the distortion"), "{agreed}");
+    assert!(!agreed.contains("but"), "{agreed}");
+    let unclear = amp("unclear", Some(TrendKind::FallsWithAmplitude)).summary();
+    assert!(
+        unclear.contains("less than 1 point with amplitude; theta_m"),
+        "{unclear}"
+    );
+    assert!(amp("grows", None)
+        .summary()
+        .contains("two periodic captures"));
+}

@@ -2,7 +2,7 @@
 //! its FIT on estimation and validation data, residual tests, identified
 //! resonance and anti-resonance frequencies, Bode data, and the model file.
 //!
-//! What: one entry point per model family of DESIGN.md §6, all returning a
+//! What: one entry point per model family of ../shared/DESIGN.md §6, all returning a
 //! [`Fitted`] model that simulates the motor angle (or velocity) from the
 //! torque:
 //! - black box of order `n` (seed 000 eq. (9)): subspace identification
@@ -29,7 +29,7 @@
 //!   see [`RigidFriction`]).
 //!
 //! FIT is the System Identification Toolbox's `compare` figure
-//! ([`crate::ident::validate::FIT_NAME`], DESIGN.md §7), with the initial state
+//! ([`crate::ident::validate::FIT_NAME`], ../shared/DESIGN.md §7), with the initial state
 //! estimated on each record as `compare` does by default. Residual tests are
 //! those of [`crate::ident::validate`] (Ljung 1999, §16.6).
 //!

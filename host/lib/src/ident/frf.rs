@@ -13,7 +13,7 @@
 //! period-averaged spectra. Averaging over periods keeps only what is
 //! synchronous with the reference, so the reference acts as the instrument
 //! and the feedback bias of a plain output/input ratio disappears
-//! (DESIGN.md §7). Its variance is the first-order errors-in-variables
+//! (../shared/DESIGN.md §7). Its variance is the first-order errors-in-variables
 //! expression from the sample (co)variances of the period spectra,
 //! σ²(Ĝ) = |Ĝ|² (σ²_Ȳ/|Ȳ|² + σ²_Ū/|Ū|² − 2 Re(σ²_ȲŪ / (Ȳ Ū*))),
 //! Pintelon & Schoukens, *System Identification: A Frequency Domain
@@ -32,7 +32,7 @@
 //!
 //! Records without whole periods: [`welch`] (Welch's averaged spectra).
 //!
-//! Two amplitudes (DESIGN.md §7): [`amplitude_trend`] compares the relative
+//! Two amplitudes (../shared/DESIGN.md §7): [`amplitude_trend`] compares the relative
 //! distortion of two runs; growing with amplitude points to saturation or
 //! polynomial stiffness, falling to backlash, dead zone or stiction.
 // Units in brackets (`[s]`, `[Hz]`, `[dB]`) are not intra-doc links.
@@ -1012,7 +1012,7 @@ pub enum TrendKind {
 /// smallest change of the relative distortion level counted as a trend [dB]
 pub const TREND_MIN_DB: f64 = 3.0;
 
-/// Distortion of one signal at two amplitudes (DESIGN.md §7, seed 000 §3).
+/// Distortion of one signal at two amplitudes (../shared/DESIGN.md §7, seed 000 §3).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct AmplitudeTrend {
     /// signal name

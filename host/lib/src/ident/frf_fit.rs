@@ -13,7 +13,7 @@
 //! Press 2001, ch. 7 and 10, the FDIDENT school).
 //!
 //! Model: the sampled response of [`GreyBoxModel`] (seed 000 eq. (5)–(8),
-//! DESIGN.md §6) behind an optional first-order current-loop lag `τ_c`
+//! ../shared/DESIGN.md §6) behind an optional first-order current-loop lag `τ_c`
 //! ([`DrivenModel`]) and a transport delay `D = n + φ` samples on the
 //! torque. The input is held (ZOH, seed 000 eq. (12)–(13)); with the switch
 //! of the held input delayed by `φT` inside the sample,

@@ -1,6 +1,6 @@
 //! Physically parameterised (grey-box) joint models and their fit.
 //!
-//! Models (DESIGN.md §6, notation of seed 000 Table 1, gear ratio `r` fixed,
+//! Models (../shared/DESIGN.md §6, notation of seed 000 Table 1, gear ratio `r` fixed,
 //! default 1/118, torque `u` on the motor, output motor angle `θ_m` or
 //! velocity `θ̇_m`):
 //! - rigid: `J θ̈ = u − F_v θ̇` (plus `F_c sgn(θ̇) + offset` in the
@@ -16,7 +16,7 @@
 //! [`crate::ident::pem`]) in log-parameters, so every parameter stays positive; the
 //! standard deviations follow by the delta method, `σ_p = p σ_{ln p}`.
 //!
-//! Initial values come from the data only (DESIGN.md §7, the weak point both
+//! Initial values come from the data only (../shared/DESIGN.md §7, the weak point both
 //! seeds name), in the spirit of seed 001's steps 1–2:
 //! 1. rigid body: total inertia seen by the motor `J` and viscous friction
 //!    from the low-frequency part of a high-order subspace model

@@ -3,7 +3,7 @@
 //!
 //! - FIT as the System Identification Toolbox's `compare` reports it,
 //!   `100·(1 − ‖y − ŷ‖ / ‖y − mean(y)‖)` [%] with ŷ the simulated output
-//!   (DESIGN.md §7). Seed 000 eq. (16) prints a variance ratio instead; the
+//!   (../shared/DESIGN.md §7). Seed 000 eq. (16) prints a variance ratio instead; the
 //!   paper used the toolbox, so the toolbox definition is the one used and
 //!   it is named [`FIT_NAME`] wherever shown.
 //! - Residual analysis after Ljung, *System Identification: Theory for the

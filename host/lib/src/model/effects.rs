@@ -1,5 +1,5 @@
-//! Unmodelled effects that can be switched on over any plant (DESIGN.md §6), and the spec
-//! strings the CLI uses for them (`--effect backlash:width=0.002`).
+//! Unmodelled effects that can be switched on over any plant (../shared/DESIGN.md §6), and
+//! the spec strings the CLI uses for them (`--effect backlash:width=0.002`).
 //!
 //! Each effect has its own parameters with documented defaults. The defaults are sized so
 //! that the effect is clearly visible in the spectra of `u` and `θ_m` of the default
@@ -646,73 +646,89 @@ impl FromStr for Effect {
 
     /// Parses `name` or `name:key=value,key=value` (whitespace around items is ignored).
     fn from_str(spec: &str) -> Result<Self, Self::Err> {
-        let (name, rest, rest_col) = match spec.find(':') {
-            Some(i) => (&spec[..i], Some(&spec[i + 1..]), i + 2),
-            None => (spec, None, 0),
-        };
-        let name = name.trim();
-        let mut effect =
-            Effect::default_by_name(name).ok_or_else(|| EffectParseError::UnknownEffect {
-                name: name.to_string(),
-                known: EFFECT_NAMES.join(", "),
-            })?;
-        let mut fs_named = false;
-        if let Some(rest) = rest {
-            let mut col = rest_col;
-            for item in rest.split(',') {
-                let item_col = col + (item.len() - item.trim_start().len());
-                col += item.len() + 1;
-                let trimmed = item.trim();
-                if trimmed.is_empty() {
-                    continue;
-                }
-                let Some(eq) = trimmed.find('=') else {
-                    return Err(EffectParseError::Malformed {
-                        spec: spec.to_string(),
-                        column: item_col,
-                    });
-                };
-                let key = trimmed[..eq].trim();
-                let value = trimmed[eq + 1..].trim();
-                fs_named |= key == "fs";
-                let value_col = item_col + eq + 1;
-                match effect.set(key, value) {
-                    Ok(true) => {}
-                    Ok(false) => {
-                        return Err(EffectParseError::UnknownKey {
-                            effect: effect.name(),
-                            key: key.to_string(),
-                            column: item_col,
-                            known: effect.keys().join(", "),
-                        })
-                    }
-                    Err(reason) => {
-                        return Err(EffectParseError::BadValue {
-                            effect: effect.name(),
-                            key: key.to_string(),
-                            value: value.to_string(),
-                            column: value_col,
-                            reason,
-                        })
-                    }
-                }
-            }
-        }
-        // a level named above the default breakaway level, and no breakaway level: the
-        // pure law at that level (module documentation)
-        if let Effect::CoulombFriction(c) = &mut effect {
-            if !fs_named && c.fs < c.fc {
-                c.fs = c.fc;
-            }
-        }
-        effect
-            .check()
-            .map_err(|reason| EffectParseError::Inconsistent {
-                effect: effect.name(),
-                reason,
-            })?;
-        Ok(effect)
+        parse_given(spec).map(|(effect, _)| effect)
     }
+}
+
+/// Parses `spec` as [`Effect`]'s `from_str` does (`name` or `name:key=value,...`), and
+/// returns beside the effect the keys the spec gives a number, in the order given, with
+/// that number [SI] (`k3` of `nonlinear_stiffness:k3=3e13`, `order` of
+/// `torque_ripple:order=3`; `attach=parallel` is no number): what a fit starts those keys
+/// at, or takes as given ([`crate::ident::nonlinear::NlRequest::given`]).
+///
+/// # Errors
+/// As [`Effect`]'s `from_str`.
+pub fn parse_given(spec: &str) -> Result<(Effect, Vec<(String, f64)>), EffectParseError> {
+    let (name, rest, rest_col) = match spec.find(':') {
+        Some(i) => (&spec[..i], Some(&spec[i + 1..]), i + 2),
+        None => (spec, None, 0),
+    };
+    let name = name.trim();
+    let mut effect =
+        Effect::default_by_name(name).ok_or_else(|| EffectParseError::UnknownEffect {
+            name: name.to_string(),
+            known: EFFECT_NAMES.join(", "),
+        })?;
+    let mut given = Vec::new();
+    let mut fs_named = false;
+    if let Some(rest) = rest {
+        let mut col = rest_col;
+        for item in rest.split(',') {
+            let item_col = col + (item.len() - item.trim_start().len());
+            col += item.len() + 1;
+            let trimmed = item.trim();
+            if trimmed.is_empty() {
+                continue;
+            }
+            let Some(eq) = trimmed.find('=') else {
+                return Err(EffectParseError::Malformed {
+                    spec: spec.to_string(),
+                    column: item_col,
+                });
+            };
+            let key = trimmed[..eq].trim();
+            let value = trimmed[eq + 1..].trim();
+            fs_named |= key == "fs";
+            let value_col = item_col + eq + 1;
+            match effect.set(key, value) {
+                Ok(true) => {}
+                Ok(false) => {
+                    return Err(EffectParseError::UnknownKey {
+                        effect: effect.name(),
+                        key: key.to_string(),
+                        column: item_col,
+                        known: effect.keys().join(", "),
+                    })
+                }
+                Err(reason) => {
+                    return Err(EffectParseError::BadValue {
+                        effect: effect.name(),
+                        key: key.to_string(),
+                        value: value.to_string(),
+                        column: value_col,
+                        reason,
+                    })
+                }
+            }
+            if let Ok(x) = value.parse::<f64>() {
+                given.push((key.to_string(), x));
+            }
+        }
+    }
+    // a level named above the default breakaway level, and no breakaway level: the
+    // pure law at that level (module documentation)
+    if let Effect::CoulombFriction(c) = &mut effect {
+        if !fs_named && c.fs < c.fc {
+            c.fs = c.fc;
+        }
+    }
+    effect
+        .check()
+        .map_err(|reason| EffectParseError::Inconsistent {
+            effect: effect.name(),
+            reason,
+        })?;
+    Ok((effect, given))
 }
 
 /// Parses several specs (one per `--effect` flag). `none` alone gives no effects.
@@ -734,6 +750,23 @@ pub fn parse_effects<S: AsRef<str>>(specs: &[S]) -> Result<Vec<Effect>, EffectPa
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn parse_given_returns_the_numbers_a_spec_gives_in_order() {
+        let (e, given) = parse_given("torque_ripple:phase=0.5, order=3").unwrap();
+        assert_eq!(
+            e,
+            "torque_ripple:phase=0.5,order=3".parse::<Effect>().unwrap()
+        );
+        assert_eq!(
+            given,
+            [("phase".to_string(), 0.5), ("order".to_string(), 3.0)]
+        );
+        let (_, given) = parse_given("extra_mode:attach=serial,k=2e4").unwrap();
+        assert_eq!(given, [("k".to_string(), 2e4)]);
+        assert_eq!(parse_given("backlash").unwrap().1, []);
+        assert!(parse_given("backlash:gap=1").is_err());
+    }
 
     #[test]
     fn parse_name_only_gives_defaults() {

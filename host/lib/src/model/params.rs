@@ -5,7 +5,7 @@
 //! `J_a1`, `J_a2`, parallel inertia `J_p`, spring constants `k_g` (gearbox), `k_a` (arm),
 //! `k_p` (parallel mass), the matching dampings `d_g`, `d_a`, `d_p`, viscous motor
 //! friction `f_m` and the gear ratio `r = 1/118`. The nonlinear two-mass model of seed 001
-//! (eq. (4)–(9), DESIGN.md §6) adds the cubic spring coefficient `k3` and the Coulomb
+//! (eq. (4)–(9), ../shared/DESIGN.md §6) adds the cubic spring coefficient `k3` and the Coulomb
 //! friction level `F_c`; its `k1`, `d`, `F_v`, `J_a` are `k_g`, `d_g`, `f_m` and
 //! `J_a1 + J_a2` here.
 //!

@@ -39,7 +39,7 @@
 //! the paper's 57.8 / 58.0 / 74.8 come from a real arm with more dynamics
 //! than any of the three models.
 //!
-//! Wire path (DESIGN.md §8, software in the loop): the simulated samples
+//! Wire path (../shared/DESIGN.md §8, software in the loop): the simulated samples
 //! become counts with the session's [`Scale`] and are streamed by the
 //! simulated board ([`crate::sim::board::encode_session`] with
 //! [`wire_options`]), written as a `.jcap` by the capture module's writer
@@ -515,6 +515,7 @@ pub fn experiment(seed: u64) -> Result<Table, ExperimentError> {
 
 /// Prints `t` as seed 000 Table 2 (plus the true model's column).
 pub fn write_table(out: &mut dyn std::io::Write, t: &Table) -> std::io::Result<()> {
+    use crate::data::Percent;
     let name = |m: &str| match m {
         "black-box:11" => "11th order".to_string(),
         "three-mass" => "3 mass".to_string(),
@@ -528,14 +529,14 @@ pub fn write_table(out: &mut dyn std::io::Write, t: &Table) -> std::io::Result<(
     writeln!(out, " {:>11}", "true model")?;
     write!(out, "  {:<12}", "Est. data")?;
     for r in &t.rows {
-        write!(out, " {:>11.1}", r.fit_estimation)?;
+        write!(out, " {:>11.1}", Percent(r.fit_estimation))?;
     }
-    writeln!(out, " {:>11.1}", t.true_fit.0)?;
+    writeln!(out, " {:>11.1}", Percent(t.true_fit.0))?;
     write!(out, "  {:<12}", "Val. data")?;
     for r in &t.rows {
-        write!(out, " {:>11.1}", r.fit_validation)?;
+        write!(out, " {:>11.1}", Percent(r.fit_validation))?;
     }
-    writeln!(out, " {:>11.1}", t.true_fit.1)?;
+    writeln!(out, " {:>11.1}", Percent(t.true_fit.1))?;
     writeln!(
         out,
         "  ({}, {} / {} samples at Ts = {} s after decimation by {DECIMATE})",
@@ -573,7 +574,7 @@ pub fn write_table(out: &mut dyn std::io::Write, t: &Table) -> std::io::Result<(
                 p.estimate,
                 p.std,
                 p.truth,
-                p.error_percent,
+                Percent(p.error_percent),
                 p.z()
             )?;
         }
