@@ -333,9 +333,11 @@ fn run_data(args: &InfoArgs, ctx: &mut Context<'_>, name: &str, bytes: &[u8]) ->
             delimiter,
         })
     } else if CAPTURE_COLUMNS.iter().all(|c| has(c)) || names.is_empty() {
-        // a capture CSV (or what the reader says about a file it cannot split)
+        // a capture CSV (or what the reader says about a file it cannot split); its
+        // reference `theta_ref` unless --reference names another, as the analysis
+        // commands read it, none when it has neither
         let mut m = ColumnMap::capture();
-        if !has("theta_ref") && !names.is_empty() {
+        if args.columns.reference.is_some() || (!has("theta_ref") && !names.is_empty()) {
             m.reference = args.columns.reference.clone();
         }
         m.delimiter = delimiter;
