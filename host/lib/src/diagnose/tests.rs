@@ -542,7 +542,7 @@ fn one_estimation_capture_or_two_and_a_candidate_are_required() {
         ..DiagnoseRequest::default()
     };
     assert!(matches!(
-        diagnose(&[est.clone()], &val, &none),
+        diagnose(std::slice::from_ref(&est), &val, &none),
         Err(DiagnoseError::Input(_))
     ));
 }
@@ -552,7 +552,7 @@ fn one_estimation_capture_or_two_and_a_candidate_are_required() {
 #[test]
 fn the_estimation_capture_is_refused_as_the_validation_capture() {
     let (est, _) = captures(&[], 1);
-    let err = diagnose(&[est.clone()], &est, &battery_request()).unwrap_err();
+    let err = diagnose(std::slice::from_ref(&est), &est, &battery_request()).unwrap_err();
     assert!(
         matches!(&err, DiagnoseError::Input(m) if m.contains("very samples")),
         "{err}"

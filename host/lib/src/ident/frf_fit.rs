@@ -64,9 +64,8 @@ use nalgebra::{DMatrix, DVector};
 use rustfft::num_complex::Complex64;
 use thiserror::Error;
 
-use crate::ident::fit::DrivenModel;
 use crate::ident::frf::{Frf, FrfSpectra};
-use crate::ident::grey_box::{self, Features, GreyBoxModel, Output, PhysParam};
+use crate::ident::grey_box::{self, DrivenModel, Features, GreyBoxModel, Output, PhysParam};
 use crate::ident::lm::{self, LeastSquares, LmFit, LmOptions, Normal, Termination};
 use crate::ident::ss::{ContinuousSs, StateSpace};
 use crate::model::spec::Structure;

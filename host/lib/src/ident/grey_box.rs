@@ -62,11 +62,13 @@ use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
 use crate::model::params::unit_of;
 use crate::model::spec::Structure;
 
+mod driven;
 mod fit;
 mod idim;
 mod init;
 mod linear;
 
+pub use driven::DrivenModel;
 pub use fit::{fit, GreyBoxFit, GreyBoxOptions};
 pub use idim::{rigid_idim, IdimOptions, RigidFit};
 use init::clamp_vec;
