@@ -135,7 +135,7 @@ fn parse_slcan_bitrate(s: &str) -> Result<u32, String> {
     let v: u32 = s
         .parse()
         .map_err(|_| format!("`{s}` is not a bit rate in bit/s"))?;
-    jointid::capture::canlog::slcan_bitrate_command(v)?;
+    jointid::capture::canlog::slcan_bitrate_command(v).map_err(|e| e.to_string())?;
     Ok(v)
 }
 
@@ -143,7 +143,7 @@ fn parse_slcan_data_bitrate(s: &str) -> Result<u32, String> {
     let v: u32 = s
         .parse()
         .map_err(|_| format!("`{s}` is not a bit rate in bit/s"))?;
-    jointid::capture::canlog::slcan_data_bitrate_command(v)?;
+    jointid::capture::canlog::slcan_data_bitrate_command(v).map_err(|e| e.to_string())?;
     Ok(v)
 }
 

@@ -65,10 +65,139 @@ pub struct BadLine {
     pub detail: String,
 }
 
+/// Why a run of hex digits could not be read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum HexError {
+    /// bytes need two digits each
+    #[error("odd number of hex digits ({0})")]
+    OddCount(usize),
+    /// a character that is not `0-9`, `a-f` or `A-F`
+    #[error("`{}` is not a hex digit", .0.escape_ascii())]
+    NotDigit(u8),
+}
+
+/// The part of a line a [`HexError`] is in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LinePart {
+    /// the CAN identifier
+    Identifier,
+    /// slcan: the length (DLC) digit
+    Length,
+    /// slcan: the timestamp after the data
+    Timestamp,
+    /// the data bytes
+    Data,
+    /// candump: the flags digit of a CAN FD frame
+    FdFlags,
+}
+
+impl std::fmt::Display for LinePart {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            LinePart::Identifier => "identifier",
+            LinePart::Length => "length",
+            LinePart::Timestamp => "timestamp",
+            LinePart::Data => "data",
+            LinePart::FdFlags => "FD flags",
+        })
+    }
+}
+
+/// Why one slcan or candump line could not be read; the text names what was expected.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum LineError {
+    /// a part of the line is not hex where hex digits belong
+    #[error("{part}: {source}")]
+    Hex {
+        /// where in the line
+        part: LinePart,
+        /// what is wrong with its digits
+        #[source]
+        source: HexError,
+    },
+    /// an 11-bit identifier above 0x7ff
+    #[error("identifier {0:#x} is above the 11-bit maximum 0x7ff")]
+    StandardId(u32),
+    /// a 29-bit identifier above 0x1fffffff
+    #[error("identifier {0:#x} is above the 29-bit maximum 0x1fffffff")]
+    ExtendedId(u32),
+    /// slcan: the first character is no frame type and no reply
+    #[error("unknown line type `{}` (expected t, T, d, D, b, B, r, R or a reply)", .0.escape_ascii())]
+    UnknownType(u8),
+    /// slcan: the line ends before its identifier and length digit
+    #[error("too short: {0} identifier digits and a length digit expected")]
+    TooShort(usize),
+    /// slcan: a classic frame's length digit above 8
+    #[error("length {0} of a classic frame is above 8")]
+    ClassicLength(u8),
+    /// slcan: fewer data digits than the length digit says
+    #[error("{expected} data digits for {bytes} bytes, {present} present")]
+    DataDigits {
+        /// digits the length needs
+        expected: usize,
+        /// bytes the length says
+        bytes: usize,
+        /// digits there
+        present: usize,
+    },
+    /// slcan: what follows the data is no 4- or 8-digit timestamp
+    #[error("{0} characters after the data (expected none or a 4- or 8-digit timestamp)")]
+    Trailing(usize),
+    /// an overlong line (its length in characters; only its start was kept)
+    #[error("line of {0} characters (at most {MAX_LINE})")]
+    Overlong(usize),
+    /// candump: bytes that are not UTF-8
+    #[error("not UTF-8 text")]
+    NotUtf8,
+    /// candump: no `(SECONDS.MICROS)` timestamp first
+    #[error("expected `(SECONDS.MICROS) IFACE ID#DATA`")]
+    Timestamp,
+    /// candump: the interface or the frame missing
+    #[error("expected an interface name and a frame after the timestamp")]
+    NoFrame,
+    /// candump: more after the frame than the direction `R` or `T`
+    #[error("unexpected text after the frame")]
+    TextAfterFrame,
+    /// candump: the frame (quoted) has no `#`
+    #[error("`{0}` has no `#` between identifier and data")]
+    NoHash(String),
+    /// candump: an identifier of neither 3 nor 8 digits
+    #[error("identifier `{id}` has {digits} digits (3 for 11-bit, 8 for 29-bit)")]
+    IdDigits {
+        /// the identifier's text
+        id: String,
+        /// its digits
+        digits: usize,
+    },
+    /// candump: a CAN XL frame (`###`)
+    #[error("CAN XL frames are not supported")]
+    CanXl,
+    /// candump: `##` with nothing after it
+    #[error("CAN FD frame without its flags digit")]
+    NoFdFlags,
+    /// candump: a CAN FD frame of a length no DLC gives
+    #[error("{0} data bytes is not a CAN FD length (0-8, 12, 16, 20, 24, 32, 48, 64)")]
+    FdLength(usize),
+    /// candump: a remote frame with something else than a length after `R`
+    #[error("remote frame `R{0}`: expected `R` or `R` and a length")]
+    Remote(String),
+    /// candump: more than 8 bytes in a classic frame
+    #[error("{0} data bytes in a classic frame (at most 8; FD frames are written `##`)")]
+    ClassicTooLong(usize),
+    /// candump: a raw DLC `_X` that is not 9-F after 8 bytes
+    #[error("`_{0}`: a raw DLC 9-F follows 8 data bytes only")]
+    RawDlc(String),
+}
+
+/// `part` of a line is not hex: the [`LineError`] naming it.
+fn in_part(part: LinePart) -> impl Fn(HexError) -> LineError {
+    move |source| LineError::Hex { part, source }
+}
+
 /// The bytes of a hex string; an error for a character that is not a hex digit or an odd count.
-fn hex_bytes(s: &[u8]) -> Result<Vec<u8>, String> {
+fn hex_bytes(s: &[u8]) -> Result<Vec<u8>, HexError> {
     if !s.len().is_multiple_of(2) {
-        return Err(format!("odd number of hex digits ({})", s.len()));
+        return Err(HexError::OddCount(s.len()));
     }
     s.chunks(2)
         .map(|p| {
@@ -79,30 +208,30 @@ fn hex_bytes(s: &[u8]) -> Result<Vec<u8>, String> {
         .collect()
 }
 
-fn hex_digit(c: u8) -> Result<u8, String> {
+fn hex_digit(c: u8) -> Result<u8, HexError> {
     (c as char)
         .to_digit(16)
         .map(|d| d as u8)
-        .ok_or_else(|| format!("`{}` is not a hex digit", c.escape_ascii()))
+        .ok_or(HexError::NotDigit(c))
 }
 
-fn hex_u32(s: &[u8]) -> Result<u32, String> {
+fn hex_u32(s: &[u8]) -> Result<u32, HexError> {
     s.iter()
         .try_fold(0u32, |v, &c| Ok(v << 4 | u32::from(hex_digit(c)?)))
 }
 
-fn standard(raw: u32) -> Result<Id, String> {
+fn standard(raw: u32) -> Result<Id, LineError> {
     u16::try_from(raw)
         .ok()
         .and_then(StandardId::new)
         .map(Id::Standard)
-        .ok_or_else(|| format!("identifier {raw:#x} is above the 11-bit maximum 0x7ff"))
+        .ok_or(LineError::StandardId(raw))
 }
 
-fn extended(raw: u32) -> Result<Id, String> {
+fn extended(raw: u32) -> Result<Id, LineError> {
     ExtendedId::new(raw)
         .map(Id::Extended)
-        .ok_or_else(|| format!("identifier {raw:#x} is above the 29-bit maximum 0x1fffffff"))
+        .ok_or(LineError::ExtendedId(raw))
 }
 
 /// Data length of a CAN FD DLC code (ISO 11898-1: 0–8, then 12, 16, 20, 24, 32, 48, 64).
@@ -123,7 +252,7 @@ fn fd_dlc_len(code: u8) -> usize {
 ///
 /// # Errors
 /// What is wrong, naming what was expected.
-pub fn parse_slcan(line: &[u8]) -> Result<CanLine, String> {
+pub fn parse_slcan(line: &[u8]) -> Result<CanLine, LineError> {
     let Some((&kind, rest)) = line.split_first() else {
         return Ok(CanLine::Reply);
     };
@@ -135,53 +264,43 @@ pub fn parse_slcan(line: &[u8]) -> Result<CanLine, String> {
         b'd' | b'b' => (3, true, false),
         b'D' | b'B' => (8, true, false),
         b'z' | b'Z' | b'V' | b'v' | b'N' | b'F' => return Ok(CanLine::Reply),
-        _ => {
-            return Err(format!(
-                "unknown line type `{}` (expected t, T, d, D, b, B, r, R or a reply)",
-                kind.escape_ascii()
-            ))
-        }
+        _ => return Err(LineError::UnknownType(kind)),
     };
     if rest.len() < id_len + 1 {
-        return Err(format!(
-            "too short: {id_len} identifier digits and a length digit expected"
-        ));
+        return Err(LineError::TooShort(id_len));
     }
-    let raw = hex_u32(&rest[..id_len]).map_err(|e| format!("identifier: {e}"))?;
+    let raw = hex_u32(&rest[..id_len]).map_err(in_part(LinePart::Identifier))?;
     let id = if id_len == 3 {
         standard(raw)?
     } else {
         extended(raw)?
     };
-    let code = hex_digit(rest[id_len]).map_err(|e| format!("length: {e}"))?;
+    let code = hex_digit(rest[id_len]).map_err(in_part(LinePart::Length))?;
     let len = if fd {
         fd_dlc_len(code)
     } else if code <= 8 {
         usize::from(code)
     } else {
-        return Err(format!("length {code} of a classic frame is above 8"));
+        return Err(LineError::ClassicLength(code));
     };
     let body = &rest[id_len + 1..];
     let data_digits = if remote { 0 } else { 2 * len };
     if body.len() < data_digits {
-        return Err(format!(
-            "{} data digits for {len} bytes, {} present",
-            data_digits,
-            body.len()
-        ));
+        return Err(LineError::DataDigits {
+            expected: data_digits,
+            bytes: len,
+            present: body.len(),
+        });
     }
     let stamp = &body[data_digits..];
     if !matches!(stamp.len(), 0 | 4 | 8) {
-        return Err(format!(
-            "{} characters after the data (expected none or a 4- or 8-digit timestamp)",
-            stamp.len()
-        ));
+        return Err(LineError::Trailing(stamp.len()));
     }
-    hex_u32(stamp).map_err(|e| format!("timestamp: {e}"))?;
+    hex_u32(stamp).map_err(in_part(LinePart::Timestamp))?;
     if remote {
         return Ok(CanLine::Remote);
     }
-    let data = hex_bytes(&body[..data_digits]).map_err(|e| format!("data: {e}"))?;
+    let data = hex_bytes(&body[..data_digits]).map_err(in_part(LinePart::Data))?;
     Ok(CanLine::Data(MemFrame { id, data }))
 }
 
@@ -189,8 +308,8 @@ pub fn parse_slcan(line: &[u8]) -> Result<CanLine, String> {
 ///
 /// # Errors
 /// What is wrong, naming what was expected.
-pub fn parse_candump(line: &[u8]) -> Result<CanLine, String> {
-    let text = std::str::from_utf8(line).map_err(|_| "not UTF-8 text".to_string())?;
+pub fn parse_candump(line: &[u8]) -> Result<CanLine, LineError> {
+    let text = std::str::from_utf8(line).map_err(|_| LineError::NotUtf8)?;
     let mut words = text.split_ascii_whitespace();
     let stamp = words.next().unwrap_or("");
     let ok_stamp = stamp
@@ -204,44 +323,42 @@ pub fn parse_candump(line: &[u8]) -> Result<CanLine, String> {
                 && b.bytes().all(|c| c.is_ascii_digit())
         });
     if !ok_stamp {
-        return Err("expected `(SECONDS.MICROS) IFACE ID#DATA`".into());
+        return Err(LineError::Timestamp);
     }
     let (Some(_iface), Some(frame)) = (words.next(), words.next()) else {
-        return Err("expected an interface name and a frame after the timestamp".into());
+        return Err(LineError::NoFrame);
     };
     // newer can-utils may end a line with the direction, `R` or `T`
     match words.next() {
         None | Some("R" | "T") if words.next().is_none() => {}
-        _ => return Err("unexpected text after the frame".into()),
+        _ => return Err(LineError::TextAfterFrame),
     }
     let (id_text, rest) = frame
         .split_once('#')
-        .ok_or_else(|| format!("`{frame}` has no `#` between identifier and data"))?;
-    let raw = hex_u32(id_text.as_bytes()).map_err(|e| format!("identifier: {e}"))?;
+        .ok_or_else(|| LineError::NoHash(frame.to_string()))?;
+    let raw = hex_u32(id_text.as_bytes()).map_err(in_part(LinePart::Identifier))?;
     let id = match id_text.len() {
         3 => standard(raw)?,
         8 if raw & CAN_ERR_FLAG != 0 => return Ok(CanLine::ErrorFrame(raw & !CAN_ERR_FLAG)),
         8 => extended(raw)?,
         n => {
-            return Err(format!(
-                "identifier `{id_text}` has {n} digits (3 for 11-bit, 8 for 29-bit)"
-            ))
+            return Err(LineError::IdDigits {
+                id: id_text.to_string(),
+                digits: n,
+            })
         }
     };
     let digits = |s: &str| -> Vec<u8> { s.bytes().filter(|&c| c != b'.').collect() };
     if let Some(fd) = rest.strip_prefix('#') {
         if fd.starts_with('#') {
-            return Err("CAN XL frames are not supported".into());
+            return Err(LineError::CanXl);
         }
         let mut chars = fd.bytes();
-        let flags = chars.next().ok_or("CAN FD frame without its flags digit")?;
-        hex_digit(flags).map_err(|e| format!("FD flags: {e}"))?;
-        let data = hex_bytes(&digits(&fd[1..])).map_err(|e| format!("data: {e}"))?;
+        let flags = chars.next().ok_or(LineError::NoFdFlags)?;
+        hex_digit(flags).map_err(in_part(LinePart::FdFlags))?;
+        let data = hex_bytes(&digits(&fd[1..])).map_err(in_part(LinePart::Data))?;
         if data.len() > 64 || fd_len(data.len()) != data.len() {
-            return Err(format!(
-                "{} data bytes is not a CAN FD length (0-8, 12, 16, 20, 24, 32, 48, 64)",
-                data.len()
-            ));
+            return Err(LineError::FdLength(data.len()));
         }
         return Ok(CanLine::Data(MemFrame { id, data }));
     }
@@ -252,9 +369,7 @@ pub fn parse_candump(line: &[u8]) -> Result<CanLine, String> {
         return if ok {
             Ok(CanLine::Remote)
         } else {
-            Err(format!(
-                "remote frame `R{r}`: expected `R` or `R` and a length"
-            ))
+            Err(LineError::Remote(r.to_string()))
         };
     }
     // a classic frame of 8 bytes may carry its raw DLC 9..F as `_X`
@@ -262,17 +377,14 @@ pub fn parse_candump(line: &[u8]) -> Result<CanLine, String> {
         Some((h, d)) => (h, Some(d)),
         None => (rest, None),
     };
-    let data = hex_bytes(&digits(hex)).map_err(|e| format!("data: {e}"))?;
+    let data = hex_bytes(&digits(hex)).map_err(in_part(LinePart::Data))?;
     if data.len() > 8 {
-        return Err(format!(
-            "{} data bytes in a classic frame (at most 8; FD frames are written `##`)",
-            data.len()
-        ));
+        return Err(LineError::ClassicTooLong(data.len()));
     }
     if let Some(d) = dlc {
         let ok = data.len() == 8 && d.len() == 1 && hex_digit(d.as_bytes()[0]).is_ok_and(|v| v > 8);
         if !ok {
-            return Err(format!("`_{d}`: a raw DLC 9-F follows 8 data bytes only"));
+            return Err(LineError::RawDlc(d.to_string()));
         }
     }
     Ok(CanLine::Data(MemFrame { id, data }))
@@ -436,10 +548,7 @@ impl LineReader {
     fn end_line(&mut self, data: &mut Vec<u8>, out: &mut Vec<Piece>) {
         self.stats.lines += 1;
         let parsed = if self.overlong > 0 {
-            Err(format!(
-                "line of {} characters (at most {MAX_LINE})",
-                self.line.len() + self.overlong
-            ))
+            Err(LineError::Overlong(self.line.len() + self.overlong))
         } else if self.format == LineFormat::Candump && self.line.is_empty() {
             // blank lines of a log carry nothing
             Ok(CanLine::Reply)
@@ -484,39 +593,57 @@ fn flush(data: &mut Vec<u8>, out: &mut Vec<Piece>) {
     }
 }
 
+/// The slcan bit-rate commands: `S0` (10 kbit/s) to `S8` (1 Mbit/s).
+const NOMINAL_RATES: [(u32, &str); 9] = [
+    (10_000, "S0"),
+    (20_000, "S1"),
+    (50_000, "S2"),
+    (100_000, "S3"),
+    (125_000, "S4"),
+    (250_000, "S5"),
+    (500_000, "S6"),
+    (800_000, "S7"),
+    (1_000_000, "S8"),
+];
+
+/// The slcan data-phase bit-rate commands of CAN FD adapters.
+const DATA_RATES: [(u32, &str); 5] = [
+    (500_000, "Y0"),
+    (1_000_000, "Y1"),
+    (2_000_000, "Y2"),
+    (4_000_000, "Y4"),
+    (5_000_000, "Y5"),
+];
+
+/// A bit rate the slcan adapter has no command for [bit/s]; the message lists those it has.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum BitrateError {
+    /// the nominal (arbitration) bit rate
+    #[error("{0} bit/s is not an slcan bit rate ({rates})", rates = rate_list(&NOMINAL_RATES))]
+    Nominal(u32),
+    /// the CAN FD data-phase bit rate
+    #[error("{0} bit/s is not an slcan data bit rate ({rates})", rates = rate_list(&DATA_RATES))]
+    Data(u32),
+}
+
+/// The bit rates of `rates`, comma separated.
+fn rate_list(rates: &[(u32, &str)]) -> String {
+    let list: Vec<String> = rates.iter().map(|(r, _)| r.to_string()).collect();
+    list.join(", ")
+}
+
+/// The command of `bitrate` in `rates`.
+fn rate_command(rates: &[(u32, &'static str)], bitrate: u32) -> Option<&'static str> {
+    rates.iter().find(|(r, _)| *r == bitrate).map(|(_, c)| *c)
+}
+
 /// The slcan bit-rate command for `bitrate` [bit/s]: `S0` (10 kbit/s) to `S8` (1 Mbit/s).
 ///
 /// # Errors
-/// The bit rates there are, when `bitrate` is not one of them.
-pub fn slcan_bitrate_command(bitrate: u32) -> Result<&'static str, String> {
-    const RATES: [(u32, &str); 9] = [
-        (10_000, "S0"),
-        (20_000, "S1"),
-        (50_000, "S2"),
-        (100_000, "S3"),
-        (125_000, "S4"),
-        (250_000, "S5"),
-        (500_000, "S6"),
-        (800_000, "S7"),
-        (1_000_000, "S8"),
-    ];
-    rate_command(&RATES, bitrate, "an slcan bit rate")
-}
-
-/// The command of `bitrate` in `rates`, or an error naming `what` and the rates there are.
-fn rate_command(
-    rates: &[(u32, &'static str)],
-    bitrate: u32,
-    what: &str,
-) -> Result<&'static str, String> {
-    rates
-        .iter()
-        .find(|(r, _)| *r == bitrate)
-        .map(|(_, c)| *c)
-        .ok_or_else(|| {
-            let list: Vec<String> = rates.iter().map(|(r, _)| r.to_string()).collect();
-            format!("{bitrate} bit/s is not {what} ({})", list.join(", "))
-        })
+/// [`BitrateError::Nominal`], listing the bit rates there are, when `bitrate` is not one
+/// of them.
+pub fn slcan_bitrate_command(bitrate: u32) -> Result<&'static str, BitrateError> {
+    rate_command(&NOMINAL_RATES, bitrate).ok_or(BitrateError::Nominal(bitrate))
 }
 
 /// The slcan data-phase bit-rate command of CAN FD adapters (CANable 2.0, WeAct
@@ -524,16 +651,10 @@ fn rate_command(
 /// the firmware's).
 ///
 /// # Errors
-/// The bit rates there are, when `bitrate` is not one of them.
-pub fn slcan_data_bitrate_command(bitrate: u32) -> Result<&'static str, String> {
-    const RATES: [(u32, &str); 5] = [
-        (500_000, "Y0"),
-        (1_000_000, "Y1"),
-        (2_000_000, "Y2"),
-        (4_000_000, "Y4"),
-        (5_000_000, "Y5"),
-    ];
-    rate_command(&RATES, bitrate, "an slcan data bit rate")
+/// [`BitrateError::Data`], listing the bit rates there are, when `bitrate` is not one of
+/// them.
+pub fn slcan_data_bitrate_command(bitrate: u32) -> Result<&'static str, BitrateError> {
+    rate_command(&DATA_RATES, bitrate).ok_or(BitrateError::Data(bitrate))
 }
 
 #[cfg(test)]
@@ -544,15 +665,15 @@ mod tests {
         Id::Standard(StandardId::new(raw).unwrap())
     }
 
-    fn data(line: &str, parse: fn(&[u8]) -> Result<CanLine, String>) -> MemFrame {
+    fn data(line: &str, parse: fn(&[u8]) -> Result<CanLine, LineError>) -> MemFrame {
         match parse(line.as_bytes()) {
             Ok(CanLine::Data(f)) => f,
             other => panic!("{line}: {other:?}"),
         }
     }
 
-    fn err(line: &str, parse: fn(&[u8]) -> Result<CanLine, String>) -> String {
-        parse(line.as_bytes()).expect_err(line)
+    fn err(line: &str, parse: fn(&[u8]) -> Result<CanLine, LineError>) -> String {
+        parse(line.as_bytes()).expect_err(line).to_string()
     }
 
     #[test]
@@ -597,6 +718,22 @@ mod tests {
             let e = err(line, parse_slcan);
             assert!(e.contains(want), "{line}: {e}");
         }
+        // the error says which part of the line holds what, as values
+        assert_eq!(
+            parse_slcan(b"t1G11AA"),
+            Err(LineError::Hex {
+                part: LinePart::Identifier,
+                source: HexError::NotDigit(b'G'),
+            })
+        );
+        assert_eq!(
+            parse_slcan(b"t1013AABB"),
+            Err(LineError::DataDigits {
+                expected: 6,
+                bytes: 3,
+                present: 4,
+            })
+        );
     }
 
     #[test]
@@ -750,8 +887,10 @@ mod tests {
         assert_eq!(slcan_bitrate_command(125_000), Ok("S4"));
         assert_eq!(slcan_data_bitrate_command(5_000_000), Ok("Y5"));
         assert!(slcan_data_bitrate_command(3_000_000).is_err());
-        assert!(slcan_bitrate_command(2_000_000)
-            .unwrap_err()
-            .contains("not an slcan bit rate"));
+        assert_eq!(
+            slcan_bitrate_command(2_000_000).unwrap_err().to_string(),
+            "2000000 bit/s is not an slcan bit rate (10000, 20000, 50000, 100000, 125000, \
+             250000, 500000, 800000, 1000000)"
+        );
     }
 }

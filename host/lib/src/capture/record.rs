@@ -23,7 +23,7 @@
 
 use std::sync::Arc;
 
-use jointid_core::excitation::{Excitation, ExcitationConfig};
+use jointid_core::excitation::{Excitation, ExcitationConfig, ExcitationError};
 use jointid_core::wire::{
     Crc32, DecodeError, DecodeEvent, Decoder, Message, RawSample, SessionHeader, Status,
     BATCH_CAPACITY,
@@ -89,8 +89,8 @@ pub struct StreamAnalyzer {
     /// kept samples in SI, with `theta_ref` from `reference`
     kept: Vec<CaptureSample>,
     /// the reported session's reference, regenerated when its header arrives (only when
-    /// samples are kept); the error message when it cannot be
-    reference: Option<Result<Arc<Reference>, String>>,
+    /// samples are kept); the generator's error when it cannot be
+    reference: Option<Result<Arc<Reference>, ExcitationError>>,
     batches: Vec<BatchRef>,
     duplicates: u64,
     out_of_order: u64,
@@ -366,11 +366,7 @@ impl StreamAnalyzer {
             self.header = Some(*h);
             self.reported = Some(idx);
             if self.keep_samples {
-                self.reference = Some(
-                    Reference::new(&h.excitation)
-                        .map(Arc::new)
-                        .map_err(|e| e.to_string()),
-                );
+                self.reference = Some(Reference::new(&h.excitation).map(Arc::new));
             }
         }
         let first = self.current.is_none();
@@ -731,9 +727,9 @@ impl StreamAnalyzer {
         let fresh;
         let (reference, kept_filled) = match &self.reference {
             Some(Ok(r)) => (&**r, true),
-            Some(Err(message)) => {
+            Some(Err(e)) => {
                 return Err(CaptureError::Excitation {
-                    message: message.clone(),
+                    message: e.to_string(),
                 })
             }
             None => {
@@ -787,7 +783,7 @@ struct Reference {
 }
 
 impl Reference {
-    fn new(cfg: &ExcitationConfig) -> Result<Self, jointid_core::excitation::ExcitationError> {
+    fn new(cfg: &ExcitationConfig) -> Result<Self, ExcitationError> {
         let n = cfg.period_samples as usize;
         let r = cfg.ramp_samples as u64;
         let mut table = vec![0.0f32; n];

@@ -712,10 +712,12 @@ fn open_slcan(
     };
     let mut commands = vec!["C"];
     if let Some(b) = bitrate {
-        commands.push(super::canlog::slcan_bitrate_command(b).map_err(refused)?);
+        commands.push(super::canlog::slcan_bitrate_command(b).map_err(|e| refused(e.to_string()))?);
     }
     if let Some(b) = data_bitrate {
-        commands.push(super::canlog::slcan_data_bitrate_command(b).map_err(refused)?);
+        commands.push(
+            super::canlog::slcan_data_bitrate_command(b).map_err(|e| refused(e.to_string()))?,
+        );
     }
     let mut link = open_serial(port, baud)?;
     commands.push("O");

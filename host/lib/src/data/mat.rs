@@ -62,7 +62,138 @@ pub struct MatError {
     /// file name
     pub file: String,
     /// what is wrong, at which byte or in which variable
-    pub reason: String,
+    #[source]
+    pub reason: MatReason,
+}
+
+/// What is wrong with a MAT-file, at which byte or in which variable.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MatReason {
+    /// fewer bytes than the 128 of the header
+    #[error("{0} bytes: a MAT-file header has 128")]
+    ShortHeader(usize),
+    /// the endian indicator at bytes 126–127 (as text) is neither `IM` nor `MI`
+    #[error(
+        "endian indicator {0:?} at byte 126 is neither `IM` nor `MI`: not a MATLAB Level-5 \
+         MAT-file"
+    )]
+    Endian(String),
+    /// the version at bytes 124–125 is not Level 5's
+    #[error("version {0:#06x} at byte 124; a Level-5 MAT-file has 0x0100")]
+    Version(u16),
+    /// a data element that cannot be read, at byte `pos` of the file (`inflated`: in the
+    /// content of the compressed element there)
+    #[error("byte {pos}{}: {source}", if *.inflated { " (inflated)" } else { "" })]
+    Element {
+        /// offset of the top-level element [bytes]
+        pos: usize,
+        /// the fault lies in the element's inflated content
+        inflated: bool,
+        /// what is wrong with it
+        #[source]
+        source: ElementError,
+    },
+    /// a compressed element whose zlib stream does not inflate
+    #[error("byte {pos}: compressed element does not inflate ({status:?})")]
+    Inflate {
+        /// offset of the element [bytes]
+        pos: usize,
+        /// the inflater's status
+        status: miniz_oxide::inflate::TINFLStatus,
+    },
+    /// a variable asked for is missing or no signal
+    #[error(transparent)]
+    Variable(#[from] VectorError),
+    /// a variable asked for is not as long as the time's
+    #[error("variable `{name}` has {len} samples, `{time}` has {time_len}")]
+    Length {
+        /// the variable
+        name: String,
+        /// its samples
+        len: usize,
+        /// the time variable
+        time: String,
+        /// its samples
+        time_len: usize,
+    },
+}
+
+/// What is wrong with one data element of a MAT-file.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ElementError {
+    /// fewer bytes left than a tag takes
+    #[error("{0} bytes left, a data element tag needs 8")]
+    ShortTag(usize),
+    /// a small data element claiming more than its 4 bytes
+    #[error("small data element of {0} bytes (at most 4)")]
+    SmallTooLong(usize),
+    /// an element claiming more bytes than are left
+    #[error("data element of type {ty} claims {claims} bytes, {left} are left")]
+    Overrun {
+        /// its data type (MAT-File Format, Table 1-1)
+        ty: u32,
+        /// bytes it claims
+        claims: usize,
+        /// bytes left
+        left: usize,
+    },
+    /// numbers where the data type is none
+    #[error("data type {0} is not numeric")]
+    NotNumeric(u32),
+    /// a variable's values of a data type that is not numeric
+    #[error("variable `{name}`: data type {ty} is not numeric")]
+    VariableNotNumeric {
+        /// the variable
+        name: String,
+        /// the data type (MAT-File Format, Table 1-1)
+        ty: u32,
+    },
+    /// an array's flags element shorter than 8 bytes
+    #[error("array flags shorter than 8 bytes")]
+    ShortFlags,
+    /// a variable with another number of values than its dimensions give
+    #[error("variable `{name}`: {values} values for dimensions {}", dims_text(.dims))]
+    Count {
+        /// the variable
+        name: String,
+        /// values stored
+        values: usize,
+        /// its dimensions
+        dims: Vec<usize>,
+    },
+}
+
+/// Why a variable of a MAT-file is no signal ([`MatFile::vector`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum VectorError {
+    /// no variable of that name
+    #[error("variable `{name}` not found; variables are: {names}")]
+    NotFound {
+        /// the name asked for
+        name: String,
+        /// the file's variables, comma separated
+        names: String,
+    },
+    /// a numeric array that is no vector, or empty
+    #[error(
+        "variable `{name}` is {} {}; expected a real numeric vector (1×N or N×1)",
+        dims_text(.dims),
+        if .dims.iter().product::<usize>() == 0 { "(empty)" } else { "matrix" }
+    )]
+    NotVector {
+        /// the variable
+        name: String,
+        /// its dimensions
+        dims: Vec<usize>,
+    },
+    /// not a real numeric array (what it is instead: `char`, `struct`, `complex`, ...)
+    #[error("variable `{name}` is {what}; expected a real numeric vector")]
+    NotNumeric {
+        /// the variable
+        name: String,
+        /// what it holds ([`MatValue::describe`])
+        what: String,
+    },
 }
 
 /// What a variable of a MAT-file holds.
@@ -126,29 +257,28 @@ impl MatFile {
     /// The vector `name` (`1×N` or `N×1`, real numeric).
     ///
     /// # Errors
-    /// A message naming the variable and what it is instead.
-    pub fn vector(&self, name: &str) -> Result<&[f64], String> {
+    /// [`VectorError`] naming the variable and what it is instead.
+    pub fn vector(&self, name: &str) -> Result<&[f64], VectorError> {
         match self.get(name) {
-            None => Err(format!(
-                "variable `{name}` not found; variables are: {}",
-                self.names()
-            )),
+            None => Err(VectorError::NotFound {
+                name: name.to_string(),
+                names: self.names(),
+            }),
             Some(MatValue::Numeric { dims, data }) => {
                 let long = dims.iter().filter(|&&d| d != 1).count();
                 if long <= 1 && !data.is_empty() {
                     Ok(data)
                 } else {
-                    Err(format!(
-                        "variable `{name}` is {} {}; expected a real numeric vector (1×N or N×1)",
-                        dims_text(dims),
-                        if data.is_empty() { "(empty)" } else { "matrix" }
-                    ))
+                    Err(VectorError::NotVector {
+                        name: name.to_string(),
+                        dims: dims.clone(),
+                    })
                 }
             }
-            Some(v) => Err(format!(
-                "variable `{name}` is {}; expected a real numeric vector",
-                v.describe()
-            )),
+            Some(v) => Err(VectorError::NotNumeric {
+                name: name.to_string(),
+                what: v.describe(),
+            }),
         }
     }
 }
@@ -201,19 +331,16 @@ struct Element<'a> {
 }
 
 /// Reads the element at the start of `b`; returns it and the bytes it takes with padding.
-fn element(b: &[u8], o: Order) -> Result<(Element<'_>, usize), String> {
+fn element(b: &[u8], o: Order) -> Result<(Element<'_>, usize), ElementError> {
     if b.len() < 8 {
-        return Err(format!(
-            "{} bytes left, a data element tag needs 8",
-            b.len()
-        ));
+        return Err(ElementError::ShortTag(b.len()));
     }
     let first = o.u32(&b[0..4]);
     if first >> 16 != 0 {
         // small data element: the size in the upper 16 bits, the data in the next 4 bytes
         let n = (first >> 16) as usize;
         if n > 4 {
-            return Err(format!("small data element of {n} bytes (at most 4)"));
+            return Err(ElementError::SmallTooLong(n));
         }
         return Ok((
             Element {
@@ -225,10 +352,11 @@ fn element(b: &[u8], o: Order) -> Result<(Element<'_>, usize), String> {
     }
     let n = o.u32(&b[4..8]) as usize;
     if n > b.len() - 8 {
-        return Err(format!(
-            "data element of type {first} claims {n} bytes, {} are left",
-            b.len() - 8
-        ));
+        return Err(ElementError::Overrun {
+            ty: first,
+            claims: n,
+            left: b.len() - 8,
+        });
     }
     // compressed elements are not padded
     let padded = if first == mi::COMPRESSED {
@@ -246,7 +374,7 @@ fn element(b: &[u8], o: Order) -> Result<(Element<'_>, usize), String> {
 }
 
 /// The numbers of a numeric data element as `f64`.
-fn numbers(e: &Element<'_>, o: Order) -> Result<Vec<f64>, String> {
+fn numbers(e: &Element<'_>, o: Order) -> Result<Vec<f64>, ElementError> {
     let d = e.data;
     let v: Vec<f64> = match e.ty {
         mi::INT8 => d.iter().map(|&x| f64::from(x as i8)).collect(),
@@ -271,16 +399,16 @@ fn numbers(e: &Element<'_>, o: Order) -> Result<Vec<f64>, String> {
             .collect(),
         mi::INT64 => d.chunks_exact(8).map(|c| o.u64(c) as i64 as f64).collect(),
         mi::UINT64 => d.chunks_exact(8).map(|c| o.u64(c) as f64).collect(),
-        t => return Err(format!("data type {t} is not numeric")),
+        t => return Err(ElementError::NotNumeric(t)),
     };
     Ok(v)
 }
 
 /// Parses one `miMATRIX` element's content into a name and a value.
-fn matrix(d: &[u8], o: Order) -> Result<(String, MatValue), String> {
+fn matrix(d: &[u8], o: Order) -> Result<(String, MatValue), ElementError> {
     let (flags, n1) = element(d, o)?;
     if flags.data.len() < 8 {
-        return Err("array flags shorter than 8 bytes".into());
+        return Err(ElementError::ShortFlags);
     }
     let f = o.u32(&flags.data[0..4]);
     let class = (f & 0xff) as u8;
@@ -335,14 +463,20 @@ fn matrix(d: &[u8], o: Order) -> Result<(String, MatValue), String> {
         Vec::new()
     } else {
         let (re, _) = element(rest, o)?;
-        numbers(&re, o).map_err(|e| format!("variable `{name}`: {e}"))?
+        numbers(&re, o).map_err(|e| match e {
+            ElementError::NotNumeric(ty) => ElementError::VariableNotNumeric {
+                name: name.clone(),
+                ty,
+            },
+            e => e,
+        })?
     };
     if data.len() != count {
-        return Err(format!(
-            "variable `{name}`: {} values for dimensions {}",
-            data.len(),
-            dims_text(&dims)
-        ));
+        return Err(ElementError::Count {
+            name,
+            values: data.len(),
+            dims,
+        });
     }
     Ok((name, MatValue::Numeric { dims, data }))
 }
@@ -352,32 +486,34 @@ fn matrix(d: &[u8], o: Order) -> Result<(String, MatValue), String> {
 /// # Errors
 /// [`MatError`] naming the byte offset and what was expected there.
 pub fn read_mat(bytes: &[u8], file: &str) -> Result<MatFile, MatError> {
-    let err = |reason: String| MatError {
+    let err = |reason: MatReason| MatError {
         file: file.to_string(),
         reason,
     };
+    let at = |pos: usize, inflated: bool| {
+        move |source: ElementError| {
+            err(MatReason::Element {
+                pos,
+                inflated,
+                source,
+            })
+        }
+    };
     if bytes.len() < 128 {
-        return Err(err(format!(
-            "{} bytes: a MAT-file header has 128",
-            bytes.len()
-        )));
+        return Err(err(MatReason::ShortHeader(bytes.len())));
     }
     let o = match &bytes[126..128] {
         b"IM" => Order { big: false },
         b"MI" => Order { big: true },
         other => {
-            return Err(err(format!(
-                "endian indicator {:?} at byte 126 is neither `IM` nor `MI`: not a MATLAB \
-                 Level-5 MAT-file",
-                String::from_utf8_lossy(other)
+            return Err(err(MatReason::Endian(
+                String::from_utf8_lossy(other).into_owned(),
             )))
         }
     };
     let version = o.u16(&bytes[124..126]);
     if version != 0x0100 {
-        return Err(err(format!(
-            "version {version:#06x} at byte 124; a Level-5 MAT-file has 0x0100"
-        )));
+        return Err(err(MatReason::Version(version)));
     }
     let description = String::from_utf8_lossy(&bytes[..116])
         .trim_end_matches([' ', '\0'])
@@ -388,27 +524,22 @@ pub fn read_mat(bytes: &[u8], file: &str) -> Result<MatFile, MatError> {
     };
     let mut pos = 128;
     while pos + 8 <= bytes.len() {
-        let (e, used) = element(&bytes[pos..], o).map_err(|r| err(format!("byte {pos}: {r}")))?;
+        let (e, used) = element(&bytes[pos..], o).map_err(at(pos, false))?;
         match e.ty {
             // an empty matrix element holds no variable
             mi::MATRIX if !e.data.is_empty() => {
-                out.vars
-                    .push(matrix(e.data, o).map_err(|r| err(format!("byte {pos}: {r}")))?);
+                out.vars.push(matrix(e.data, o).map_err(at(pos, false))?);
             }
             mi::COMPRESSED => {
                 let inner = miniz_oxide::inflate::decompress_to_vec_zlib(e.data).map_err(|x| {
-                    err(format!(
-                        "byte {pos}: compressed element does not inflate ({:?})",
-                        x.status
-                    ))
+                    err(MatReason::Inflate {
+                        pos,
+                        status: x.status,
+                    })
                 })?;
-                let (ie, _) =
-                    element(&inner, o).map_err(|r| err(format!("byte {pos} (inflated): {r}")))?;
+                let (ie, _) = element(&inner, o).map_err(at(pos, true))?;
                 if ie.ty == mi::MATRIX && !ie.data.is_empty() {
-                    out.vars.push(
-                        matrix(ie.data, o)
-                            .map_err(|r| err(format!("byte {pos} (inflated): {r}")))?,
-                    );
+                    out.vars.push(matrix(ie.data, o).map_err(at(pos, true))?);
                 }
             }
             // other top-level elements carry no variable
@@ -438,21 +569,22 @@ pub fn parse_mat_record(bytes: &[u8], name: &str, map: &ColumnMap) -> Result<Rec
     }
     let mut columns = Vec::new();
     for v in &wanted {
-        let x = mat.vector(v).map_err(|reason| {
+        let x = mat.vector(v).map_err(|e| {
             wrap(MatError {
                 file: name.to_string(),
-                reason,
+                reason: e.into(),
             })
         })?;
         if let Some(first) = columns.first().map(Vec::len) {
             if x.len() != first {
                 return Err(wrap(MatError {
                     file: name.to_string(),
-                    reason: format!(
-                        "variable `{v}` has {} samples, `{}` has {first}",
-                        x.len(),
-                        map.time
-                    ),
+                    reason: MatReason::Length {
+                        name: v.to_string(),
+                        len: x.len(),
+                        time: map.time.clone(),
+                        time_len: first,
+                    },
                 }));
             }
         }
@@ -727,15 +859,22 @@ mod tests {
             })
         );
         assert_eq!(
-            m.vector("A").unwrap_err(),
+            m.vector("A").unwrap_err().to_string(),
             "variable `A` is 2×3 matrix; expected a real numeric vector (1×N or N×1)"
         );
         assert_eq!(
-            m.vector("qm").unwrap_err(),
+            m.vector("qm").unwrap_err().to_string(),
             "variable `qm` not found; variables are: x, row, Ts, note, p, A"
         );
         assert_eq!(
             m.vector("p").unwrap_err(),
+            VectorError::NotNumeric {
+                name: "p".into(),
+                what: "struct".into()
+            }
+        );
+        assert_eq!(
+            m.vector("p").unwrap_err().to_string(),
             "variable `p` is struct; expected a real numeric vector"
         );
     }
@@ -795,6 +934,17 @@ mod tests {
         // a truncated file names the byte where it breaks
         let e = read_mat(&f[..f.len() - 5], "be.mat").unwrap_err();
         assert!(e.to_string().starts_with("be.mat: byte "), "{e}");
+        assert!(
+            matches!(
+                e.reason,
+                MatReason::Element {
+                    inflated: false,
+                    source: ElementError::Overrun { .. },
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
     }
 
     #[test]

@@ -12,10 +12,12 @@
 //! true models score 99.2–99.8 % there.
 
 use super::locate;
-use super::metric::{simulate_closed, velocity_band, ClosedScored, DrivenModel, Measured};
+use super::metric::{
+    simulate_closed, velocity_band, ClosedScored, DrivenModel, Measured, MetricError,
+};
 use super::{odd_words, Candidate, DiagnoseOptions, Fitted};
 use crate::data::{Dataset, IdData};
-use crate::ident::controller::{identify, LinearController};
+use crate::ident::controller::{identify, ControllerError, LinearController};
 use crate::ident::frf::ClassLevel;
 use crate::ident::linalg::pinv_sym;
 use crate::ident::lm::{minimize, LeastSquares, LmOptions, Normal};
@@ -32,6 +34,48 @@ pub const LAW_FIT_MIN: f64 = 95.0;
 /// torque is white ([`crate::ident::controller::LawCheck::whiteness`]): the noise on a
 /// small recorded torque, not a wrong law.
 pub const LAW_WHITE_MIN: f64 = 0.8;
+
+/// Why the models could not be scored in the controller's loop ([`score_in_loop`]).
+#[derive(Debug, thiserror::Error)]
+pub enum LoopError {
+    /// no estimation segment to identify the law on
+    #[error("no estimation segment")]
+    NoSegment,
+    /// the law could not be identified on the estimation segment `capture` (the last tried)
+    #[error("{capture}: {source}")]
+    Law {
+        /// the estimation segment
+        capture: String,
+        /// why
+        #[source]
+        source: ControllerError,
+    },
+    /// the law could not be checked on the validation capture `capture`
+    #[error("{capture}: {source}")]
+    Check {
+        /// the validation capture
+        capture: String,
+        /// why
+        #[source]
+        source: ControllerError,
+    },
+    /// the law misses the validation torque, and not by white noise
+    #[error(
+        "the controller's law identified on the estimation record reproduces the torque of \
+         the validation record to {fit:.1} % only (at least {LAW_FIT_MIN} % needed), and what \
+         it misses is no white noise (whiteness {whiteness:.2}, at least {LAW_WHITE_MIN} \
+         needed): the controller is not linear, or not the same"
+    )]
+    LawMisses {
+        /// FIT of the law's torque on the validation record [%]
+        fit: f64,
+        /// whiteness of what it misses [-]
+        whiteness: f64,
+    },
+    /// the nominal does not simulate in the loop
+    #[error("the nominal in the loop: {0}")]
+    Nominal(#[source] MetricError),
+}
 
 /// The models scored in the loop.
 #[derive(Clone, Debug)]
@@ -56,7 +100,7 @@ pub struct LoopScores {
 /// (`measured` its measured side, `k` equal segments).
 ///
 /// # Errors
-/// In words: no reference, a law that does not reproduce `u` on the validation record
+/// [`LoopError`]: no reference, a law that does not reproduce `u` on the validation record
 /// ([`LAW_FIT_MIN`]), or a nominal that does not simulate in the loop.
 pub fn score_in_loop(
     est: &[Dataset],
@@ -65,8 +109,8 @@ pub fn score_in_loop(
     nominal: &DrivenModel,
     models: &[DrivenModel],
     (k, settle_periods): (usize, usize),
-) -> Result<LoopScores, String> {
-    let mut last = String::from("no estimation segment");
+) -> Result<LoopScores, LoopError> {
+    let mut last = LoopError::NoSegment;
     let mut law = None;
     for d in est {
         match identify(&d.data) {
@@ -74,26 +118,29 @@ pub fn score_in_loop(
                 law = Some(l);
                 break;
             }
-            Err(e) => last = format!("{}: {e}", d.name),
+            Err(source) => {
+                last = LoopError::Law {
+                    capture: d.name.clone(),
+                    source,
+                }
+            }
         }
     }
     let law = law.ok_or(last)?;
-    let check = law
-        .check_on(&val.data)
-        .map_err(|e| format!("{}: {e}", val.name))?;
+    let check = law.check_on(&val.data).map_err(|source| LoopError::Check {
+        capture: val.name.clone(),
+        source,
+    })?;
     let law_fit_val = check.fit;
     if !(law_fit_val >= LAW_FIT_MIN || check.whiteness >= LAW_WHITE_MIN) {
-        return Err(format!(
-            "the controller's law identified on the estimation record reproduces the torque of \
-             the validation record to {law_fit_val:.1} % only (at least {LAW_FIT_MIN} % needed), \
-             and what it misses is no white noise (whiteness {:.2}, at least {LAW_WHITE_MIN} \
-             needed): the controller is not linear, or not the same",
-            check.whiteness
-        ));
+        return Err(LoopError::LawMisses {
+            fit: law_fit_val,
+            whiteness: check.whiteness,
+        });
     }
     let nominal = measured
         .score_closed(nominal, &law, &val.data, k)
-        .map_err(|e| format!("the nominal in the loop: {e}"))?;
+        .map_err(LoopError::Nominal)?;
     let odd_nominal = locate::odd_residual(val, &nominal.theta_m, settle_periods);
     let mut scores = LoopScores {
         law,
@@ -122,7 +169,7 @@ impl LoopScores {
         model: &DrivenModel,
         val: &Dataset,
         (k, settle_periods): (usize, usize),
-    ) -> Result<(ClosedScored, Option<f64>), String> {
+    ) -> Result<(ClosedScored, Option<f64>), MetricError> {
         let s = measured.score_closed(model, &self.law, &val.data, k)?;
         let odd = self.odd_nominal.as_ref().and_then(|n| {
             let c = locate::odd_residual(val, &s.theta_m, settle_periods)?;
@@ -130,6 +177,81 @@ impl LoopScores {
         });
         Ok((s, odd))
     }
+}
+
+/// The controller's law in words: its orders, and how it reproduces the validation torque.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct LawSummary {
+    /// past torques of the law
+    pub na: usize,
+    /// lags of the reference and the angle
+    pub nl: usize,
+    /// FIT of its torque on the validation record [%]
+    pub fit: f64,
+    /// whiteness of what it misses there [-]
+    pub whiteness: f64,
+}
+
+impl LawSummary {
+    fn of(scores: &LoopScores) -> LawSummary {
+        LawSummary {
+            na: scores.law.a.len(),
+            nl: scores.law.b.len().saturating_sub(1),
+            fit: scores.law_fit_val,
+            whiteness: scores.law_whiteness,
+        }
+    }
+}
+
+impl std::fmt::Display for LawSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "the controller's law identified on the estimation record (θ_ref, θ_m → u; orders \
+             na = {}, nl = {}) reproduces the validation torque to {:.1} % (what it misses \
+             has whiteness {:.2}: 1 for white noise)",
+            self.na, self.nl, self.fit, self.whiteness
+        )
+    }
+}
+
+/// Why the controller's loop did not change the diagnosis's answer ([`LoopAnswer::rescore`]);
+/// the message is a note for the user.
+#[derive(Debug, thiserror::Error)]
+pub(super) enum LoopNote {
+    /// the models could not be scored in the loop
+    #[error("the models could not be scored in the controller's loop: {0}")]
+    Unscored(#[source] LoopError),
+    /// no candidate gains significantly in the loop either
+    #[error(
+        "in the loop of the controller ({law}), no candidate gains significantly over the \
+         nominal's {nominal:.1} % either"
+    )]
+    NoGain {
+        /// the law
+        law: LawSummary,
+        /// the nominal's gap metric in the loop [%]
+        nominal: f64,
+    },
+    /// the best in the loop leaves the odd distortion too
+    #[error(
+        "in the loop of the controller ({law}), {best} scores {best_fit:.1} % against the \
+         nominal's {nominal:.1} % but removes {removed:.0} % of the odd-line residual only: \
+         the loop does not settle the answer",
+        removed = 100.0 * .removed.max(0.0)
+    )]
+    OddLeft {
+        /// the law
+        law: LawSummary,
+        /// the best model in the loop
+        best: String,
+        /// its gap metric in the loop [%]
+        best_fit: f64,
+        /// the nominal's [%]
+        nominal: f64,
+        /// the share of the nominal's odd-line residual it removes [-]
+        removed: f64,
+    },
 }
 
 /// A segment judge: `(segments, base segments)` → `(mean gain, its SE, significant)`.
@@ -176,14 +298,14 @@ impl LoopAnswer<'_> {
     /// removed and the nominal's odd residual against the noise [dB].
     ///
     /// # Errors
-    /// Why the loop did not change the answer, in words (a note for the user).
+    /// [`LoopNote`], why the loop did not change the answer (a note for the user).
     pub fn rescore(
         self,
         (est, val, measured): (&[Dataset], &Dataset, &Measured),
         nominal: &Fitted,
         (judge, o): (Judge<'_>, &DiagnoseOptions),
         (was, was_odd, db): (&str, Option<f64>, f64),
-    ) -> Result<InLoop, String> {
+    ) -> Result<InLoop, LoopNote> {
         let mut models = Vec::new();
         let mut at = Vec::new();
         for (i, (_, f)) in self.singles.iter().enumerate() {
@@ -204,7 +326,7 @@ impl LoopAnswer<'_> {
             &models,
             (o.segments, o.settle_periods),
         )
-        .map_err(|e| format!("the models could not be scored in the controller's loop: {e}"))?;
+        .map_err(LoopNote::Unscored)?;
         let base = &scores.nominal.segments;
         let mut single: Vec<Option<Judged>> = vec![None; self.singles.len()];
         let mut pair_scores: Option<(&ClosedScored, Option<f64>)> = None;
@@ -215,26 +337,17 @@ impl LoopAnswer<'_> {
                 None => pair_scores = Some((cs, *odd)),
             }
         }
-        let law_words = format!(
-            "the controller's law identified on the estimation record (θ_ref, θ_m → u; orders \
-             na = {}, nl = {}) reproduces the validation torque to {:.1} % (what it misses \
-             has whiteness {:.2}: 1 for white noise)",
-            scores.law.a.len(),
-            scores.law.b.len().saturating_sub(1),
-            scores.law_fit_val,
-            scores.law_whiteness
-        );
+        let law = LawSummary::of(&scores);
         let top = single
             .iter()
             .enumerate()
             .filter_map(|(i, s)| s.as_ref().filter(|s| s.0 .2).map(|s| (i, s.1.fit)))
             .max_by(|a, b| a.1.total_cmp(&b.1));
         let Some((ti, top_fit)) = top else {
-            return Err(format!(
-                "in the loop of the controller ({law_words}), no candidate gains significantly \
-                 over the nominal's {:.1} % either",
-                scores.nominal.fit
-            ));
+            return Err(LoopNote::NoGain {
+                law,
+                nominal: scores.nominal.fit,
+            });
         };
         let top_cs = single[ti].as_ref().map(|s| s.1).expect("the top single");
         let pair_judged =
@@ -258,13 +371,13 @@ impl LoopAnswer<'_> {
         let (best_fit, best_segments) = (best_cs.fit, best_cs.segments.clone());
         let best_theta = &best_cs.theta_m;
         if best_odd.is_some_and(|s| s < locate::ODD_EXPLAINED_DOUBT) {
-            return Err(format!(
-                "in the loop of the controller ({law_words}), {best} scores {best_fit:.1} % \
-                 against the nominal's {:.1} % but removes {:.0} % of the odd-line residual \
-                 only: the loop does not settle the answer",
-                scores.nominal.fit,
-                100.0 * best_odd.unwrap_or(0.0).max(0.0)
-            ));
+            return Err(LoopNote::OddLeft {
+                law,
+                best,
+                best_fit,
+                nominal: scores.nominal.fit,
+                removed: best_odd.unwrap_or(0.0),
+            });
         }
         let velocities = (
             velocity_band(&scores.nominal.theta_m, val.data.ts, measured.band),
@@ -333,7 +446,7 @@ impl LoopAnswer<'_> {
              noise and {was_words}: a simulation from the measured torque cannot score this \
              joint (a strongly stiffening spring answers it chaotically, while the joint in its \
              loop repeats from period to period). Every model is scored in the controller's \
-             loop instead: {law_words}; there the nominal reaches {:.1} % and {best} {best_fit:.1} \
+             loop instead: {law}; there the nominal reaches {:.1} % and {best} {best_fit:.1} \
              %{}. The answer, the ranking, the FITs and the closure are those of the loop; where \
              the gap lies (bands, regions) is read on the open-loop nominal's residual",
             scores.nominal.fit,
@@ -511,13 +624,13 @@ impl LeastSquares for LoopProblem<'_> {
 /// the true model scores 99.4 %).
 ///
 /// # Errors
-/// The model does not simulate in the loop, or the minimisation fails, in words.
+/// [`RefineError`]: the model does not simulate in the loop, or the minimisation fails.
 pub fn refine(
     fit: &NlFit,
     law: &LinearController,
     (data, measured): (&IdData, &Measured),
     threads: usize,
-) -> Result<Refined, String> {
+) -> Result<Refined, RefineError> {
     let layout = fit.model.layout();
     let problem = LoopProblem {
         fit,
@@ -554,7 +667,7 @@ pub fn refine(
     let fit_of = |ssr: f64| 100.0 * (1.0 - (ssr / ss_tot).sqrt());
     let before = problem.cost(&z0);
     if !before.is_finite() {
-        return Err("the answer does not simulate in the loop on the estimation record".into());
+        return Err(RefineError::NotSimulating);
     }
     // the answer's own values first, then each spring moved ([`spring_starts`]); the lowest
     // cost in the loop wins
@@ -575,7 +688,7 @@ pub fn refine(
             best = Some((lm, at));
         }
     }
-    let (lm, moved) = best.ok_or("the minimisation failed from every start")?;
+    let (lm, moved) = best.ok_or(RefineError::EveryStartFailed)?;
     // the covariance at the end, past the bound on the minimisation's simulations but not
     // past its time (then the deviations are unknown: NaN)
     problem.runs.store(0, Ordering::Relaxed);
@@ -630,6 +743,17 @@ pub fn refine(
         moved,
         after: fit_of(lm.ssr),
     })
+}
+
+/// Why [`refine`] could not refine the answer in the loop.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum RefineError {
+    /// the answer's values do not simulate in the loop
+    #[error("the answer does not simulate in the loop on the estimation record")]
+    NotSimulating,
+    /// the minimisation refused every start
+    #[error("the minimisation failed from every start")]
+    EveryStartFailed,
 }
 
 /// What [`refine`] returns.
@@ -753,6 +877,39 @@ pub fn without_effect(fit: &NlFit, index: usize) -> NlFit {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn why_the_loop_did_not_settle_the_answer_names_the_law() {
+        let law = LawSummary {
+            na: 1,
+            nl: 2,
+            fit: 98.44,
+            whiteness: 0.9,
+        };
+        let note = LoopNote::NoGain {
+            law,
+            nominal: 63.94,
+        };
+        assert_eq!(
+            note.to_string(),
+            "in the loop of the controller (the controller's law identified on the estimation \
+             record (θ_ref, θ_m → u; orders na = 1, nl = 2) reproduces the validation torque to \
+             98.4 % (what it misses has whiteness 0.90: 1 for white noise)), no candidate gains \
+             significantly over the nominal's 63.9 % either"
+        );
+        let note = LoopNote::Unscored(LoopError::LawMisses {
+            fit: 80.0,
+            whiteness: 0.1,
+        });
+        assert!(
+            note.to_string().starts_with(
+                "the models could not be scored in the controller's loop: the controller's law \
+                 identified on the estimation record reproduces the torque of the validation \
+                 record to 80.0 % only"
+            ),
+            "{note}"
+        );
+    }
     use crate::ident::nonlinear::NlModel;
     use crate::model::spec::Structure;
 

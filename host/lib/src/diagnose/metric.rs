@@ -8,10 +8,42 @@ use crate::data::IdData;
 use crate::ident::linalg::{butter_highpass_sos, butter_lowpass_sos, filtfilt_lowpass, SosBank};
 use crate::ident::nonlinear::{interval_velocity, sim_plant, NlFit};
 use crate::ident::validate::fit_percent;
+use crate::ident::validate::ValidateError;
 use crate::model::effects::Effect;
 use crate::model::params::Plant;
 use crate::model::plant::Mechanism;
-use crate::sim::{simulate_driven_loaded, DrivenOutput, DrivenStart, IntegrationConfig};
+use crate::sim::{simulate_driven_loaded, DrivenOutput, DrivenStart, IntegrationConfig, SimError};
+
+/// Why a model could not be scored under the gap metric.
+#[derive(Debug, thiserror::Error)]
+pub enum MetricError {
+    /// the simulator refused the model or the record (open loop, exact laws)
+    #[error("simulation with the exact laws: {0}")]
+    Simulation(#[source] SimError),
+    /// the open-loop simulation left the finite numbers
+    #[error("the simulation with the exact laws is not finite")]
+    NotFinite,
+    /// the simulator refused the model or the record in the controller's loop
+    #[error(transparent)]
+    ClosedLoop(SimError),
+    /// the record has no reference `θ_ref` to run the loop from
+    #[error("the record holds no reference to run the loop from")]
+    NoReference,
+    /// no record to score on
+    #[error("no record to score")]
+    NoRecord,
+    /// measured sides and records differ in number
+    #[error("{parts} measured parts for {records} records")]
+    PartsMismatch {
+        /// measured sides given
+        parts: usize,
+        /// records given
+        records: usize,
+    },
+    /// the FIT is undefined (a constant measured velocity)
+    #[error(transparent)]
+    Fit(#[from] ValidateError),
+}
 
 /// Name of the gap metric, as every output states it.
 pub const METRIC_NAME: &str = "band-passed motor-velocity FIT [%]: toolbox FIT of the motor \
@@ -91,8 +123,8 @@ impl DrivenModel {
 /// measured motor angle ([`measured_ripple`]).
 ///
 /// # Errors
-/// The simulator's refusal, in words.
-pub fn simulate_fit(model: &DrivenModel, data: &IdData) -> Result<DrivenOutput, String> {
+/// [`MetricError::Simulation`], the simulator's refusal, or [`MetricError::NotFinite`].
+pub fn simulate_fit(model: &DrivenModel, data: &IdData) -> Result<DrivenOutput, MetricError> {
     let (others, load) = ripple_as_load(model, data);
     simulate_loaded(&others, data, &load)
 }
@@ -120,7 +152,7 @@ fn simulate_loaded(
     model: &DrivenModel,
     data: &IdData,
     load: &[f64],
-) -> Result<DrivenOutput, String> {
+) -> Result<DrivenOutput, MetricError> {
     let u: Vec<f64> = data.u.iter().map(|u| u + model.offset).collect();
     // no current loop in the model: a lag far below the sample interval
     let tc = if model.tau_c > 0.0 { model.tau_c } else { 1e-9 };
@@ -137,9 +169,9 @@ fn simulate_loaded(
         &start,
         &IntegrationConfig::default(),
     )
-    .map_err(|e| format!("simulation with the exact laws: {e}"))?;
+    .map_err(MetricError::Simulation)?;
     if out.theta_m.iter().any(|v| !v.is_finite()) {
-        return Err("the simulation with the exact laws is not finite".into());
+        return Err(MetricError::NotFinite);
     }
     Ok(out)
 }
@@ -211,7 +243,7 @@ pub fn simulate_tracked(
     model: &DrivenModel,
     data: &IdData,
     corner_hz: f64,
-) -> Result<(DrivenOutput, DrivenOutput, Vec<f64>), String> {
+) -> Result<(DrivenOutput, DrivenOutput, Vec<f64>), MetricError> {
     let (bare, load) = ripple_as_load(model, data);
     let first = simulate_loaded(&bare, data, &load)?;
     let n = data.len();
@@ -326,12 +358,17 @@ impl Measured {
     /// Scores `model` on `data` (the record `self` was made from).
     ///
     /// # Errors
-    /// The simulator's refusal or a constant record, in words.
-    pub fn score(&self, model: &DrivenModel, data: &IdData, k: usize) -> Result<Scored, String> {
+    /// [`MetricError`]: the simulator's refusal or a constant record.
+    pub fn score(
+        &self,
+        model: &DrivenModel,
+        data: &IdData,
+        k: usize,
+    ) -> Result<Scored, MetricError> {
         let (driven, open_loop, _) = simulate_tracked(model, data, self.tracking_hz)?;
         let velocity = velocity_band(&driven.theta_m, data.ts, self.band);
         let s = self.skip;
-        let fit = fit_percent(&self.velocity[s..], &velocity[s..]).map_err(|e| e.to_string())?;
+        let fit = fit_percent(&self.velocity[s..], &velocity[s..])?;
         let segments = self.equal_segments(&velocity, k);
         let angle_fit = fit_percent(&data.y, &open_loop.theta_m).unwrap_or(f64::NAN);
         Ok(Scored {
@@ -392,16 +429,15 @@ pub fn score_segments(
     model: &DrivenModel,
     data: &[IdData],
     k: usize,
-) -> Result<Scored, String> {
+) -> Result<Scored, MetricError> {
     match (parts, data) {
         ([m], [d]) => return m.score(model, d, k),
-        ([], _) => return Err("no record to score".into()),
+        ([], _) => return Err(MetricError::NoRecord),
         _ if parts.len() != data.len() => {
-            return Err(format!(
-                "{} measured parts for {} records",
-                parts.len(),
-                data.len()
-            ))
+            return Err(MetricError::PartsMismatch {
+                parts: parts.len(),
+                records: data.len(),
+            })
         }
         _ => {}
     }
@@ -435,7 +471,7 @@ pub fn score_segments(
         }
     }
     let pooled = Measured::joined(parts);
-    let fit = fit_percent(&pooled.velocity, &velocity).map_err(|e| e.to_string())?;
+    let fit = fit_percent(&pooled.velocity, &velocity)?;
     Ok(Scored {
         segments: pooled.equal_segments(&velocity, k),
         fit,
@@ -456,7 +492,7 @@ pub fn start_sensitivity_segments(
     model: &DrivenModel,
     data: &[IdData],
     scored: &Scored,
-) -> Result<f64, String> {
+) -> Result<f64, MetricError> {
     if let ([m], [d]) = (parts, data) {
         return m.start_sensitivity(model, d, scored);
     }
@@ -470,7 +506,7 @@ pub fn start_sensitivity_segments(
         let v = velocity_band(&driven.theta_m, d.ts, m.band);
         velocity.extend_from_slice(&v[m.skip..]);
     }
-    fit_percent(&scored.velocity, &velocity).map_err(|e| e.to_string())
+    Ok(fit_percent(&scored.velocity, &velocity)?)
 }
 
 /// Start perturbation of [`Measured::start_sensitivity`] [rad].
@@ -487,13 +523,13 @@ impl Measured {
     /// difference within seconds). Such a model cannot be scored by any simulation metric.
     ///
     /// # Errors
-    /// The simulator's refusal, in words.
+    /// [`MetricError`]: the simulator's refusal, or a constant simulation.
     pub fn start_sensitivity(
         &self,
         model: &DrivenModel,
         data: &IdData,
         scored: &Scored,
-    ) -> Result<f64, String> {
+    ) -> Result<f64, MetricError> {
         let mut moved = data.clone();
         if let Some(y0) = moved.y.first_mut() {
             *y0 += START_PERTURBATION_RAD;
@@ -501,7 +537,7 @@ impl Measured {
         let (driven, _, _) = simulate_tracked(model, &moved, self.tracking_hz)?;
         let velocity = velocity_band(&driven.theta_m, data.ts, self.band);
         let s = self.skip;
-        fit_percent(&scored.velocity[s..], &velocity[s..]).map_err(|e| e.to_string())
+        Ok(fit_percent(&scored.velocity[s..], &velocity[s..])?)
     }
 }
 
@@ -525,16 +561,14 @@ pub const CLOSED_LOOP_METRIC_NAME: &str = "band-passed motor-velocity FIT [%] in
 /// from period to period. In the loop the same true models score 99.9, 99.4 and 99.8 %.
 ///
 /// # Errors
-/// No reference in `data`, or the simulator's refusal, in words.
+/// [`MetricError::NoReference`] for no reference in `data`, or
+/// [`MetricError::ClosedLoop`], the simulator's refusal.
 pub fn simulate_closed(
     model: &DrivenModel,
     law: &crate::ident::controller::LinearController,
     data: &IdData,
-) -> Result<Vec<f64>, String> {
-    let r = data
-        .r
-        .as_deref()
-        .ok_or("the record holds no reference to run the loop from")?;
+) -> Result<Vec<f64>, MetricError> {
+    let r = data.r.as_deref().ok_or(MetricError::NoReference)?;
     let y0 = data.y.first().copied().unwrap_or(0.0);
     let cfg = crate::sim::SimConfig {
         plant: model.plant,
@@ -548,13 +582,13 @@ pub fn simulate_closed(
         sample_rate_hz: 1.0 / data.ts,
         integration: IntegrationConfig::default(),
     };
-    let mut sim = crate::sim::Simulation::new(&cfg, y0).map_err(|e| e.to_string())?;
+    let mut sim = crate::sim::Simulation::new(&cfg, y0).map_err(MetricError::ClosedLoop)?;
     let mut run = law.start(r[0], y0, -model.offset);
     let mut theta = Vec::with_capacity(r.len());
     for &rk in r {
         let s = sim
             .step_with(rk, model.offset, |y| run.step(rk, y))
-            .map_err(|e| e.to_string())?;
+            .map_err(MetricError::ClosedLoop)?;
         theta.push(s.theta_m);
     }
     Ok(theta)
@@ -585,11 +619,11 @@ impl Measured {
         law: &crate::ident::controller::LinearController,
         data: &IdData,
         k: usize,
-    ) -> Result<ClosedScored, String> {
+    ) -> Result<ClosedScored, MetricError> {
         let theta_m = simulate_closed(model, law, data)?;
         let velocity = velocity_band(&theta_m, data.ts, self.band);
         let s = self.skip;
-        let fit = fit_percent(&self.velocity[s..], &velocity[s..]).map_err(|e| e.to_string())?;
+        let fit = fit_percent(&self.velocity[s..], &velocity[s..])?;
         Ok(ClosedScored {
             segments: self.equal_segments(&velocity, k),
             fit,
@@ -655,6 +689,47 @@ fn true_model(cfg: &crate::sim::SimConfig) -> DrivenModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_record_that_cannot_be_scored_says_why() {
+        let cfg = crate::sim::SimConfig::default();
+        let model = DrivenModel {
+            plant: cfg.plant,
+            effects: Vec::new(),
+            tau_c: cfg.controller.current_loop_tau,
+            offset: 0.0,
+        };
+        let d = IdData {
+            ts: 5e-4,
+            u: vec![0.0; 100],
+            y: vec![0.0; 100],
+            r: None,
+        };
+        let m = Measured::new(&d, DEFAULT_BAND_HZ, 10);
+        let e = score_segments(&[], &model, std::slice::from_ref(&d), 4).unwrap_err();
+        assert!(matches!(e, MetricError::NoRecord), "{e:?}");
+        let e = score_segments(&[m.clone(), m.clone()], &model, std::slice::from_ref(&d), 4)
+            .unwrap_err();
+        assert_eq!(e.to_string(), "2 measured parts for 1 records");
+        // a joint at rest: the FIT of a constant velocity is undefined
+        let e = m.score(&model, &d, 1).unwrap_err();
+        assert!(
+            matches!(e, MetricError::Fit(ValidateError::ConstantOutput)),
+            "{e:?}"
+        );
+        let law = crate::ident::controller::LinearController {
+            a: vec![0.0],
+            b: vec![1.0],
+            c: vec![1.0],
+            bias: 0.0,
+            fit: 100.0,
+        };
+        let e = simulate_closed(&model, &law, &d).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "the record holds no reference to run the loop from"
+        );
+    }
 
     #[test]
     fn band_pass_keeps_the_band_and_removes_a_constant() {

@@ -108,7 +108,8 @@ use crate::model::params::{model_params, Plant};
 use crate::model::spec::Structure;
 use locate::{Band, Regions};
 use metric::{
-    score_segments, segment_gain, start_sensitivity_segments, DrivenModel, Measured, Scored,
+    score_segments, segment_gain, start_sensitivity_segments, DrivenModel, Measured, MetricError,
+    Scored,
 };
 use series::DiagnosisSeries;
 
@@ -211,14 +212,118 @@ impl Default for DiagnoseRequest {
 }
 
 /// Why a diagnosis could not run.
-#[derive(Clone, Debug, PartialEq, Error)]
+#[derive(Debug, Error)]
 pub enum DiagnoseError {
-    /// the request or the records cannot be used
-    #[error("{0}")]
-    Input(String),
-    /// the nominal model could not be fitted or simulated
-    #[error("the nominal model: {0}")]
-    Nominal(String),
+    /// no estimation capture, or more than two (their number)
+    #[error("{0} estimation captures: one or two are needed")]
+    EstimationCount(usize),
+    /// an estimation capture given as no segment
+    #[error("an estimation capture with no segment")]
+    NoEstimationSegment,
+    /// the validation capture given as no segment
+    #[error("a validation capture with no segment")]
+    NoValidationSegment,
+    /// no candidate effect applies to the structure
+    #[error("no candidate effect")]
+    NoCandidate,
+    /// the gear ratio is not a finite positive number
+    #[error("gear ratio {0}: must be finite and > 0")]
+    GearRatio(f64),
+    /// a capture cannot go to the estimators (too short, not finite)
+    #[error("{capture}: {source}")]
+    Record {
+        /// the capture
+        capture: String,
+        /// what is wrong with its record
+        #[source]
+        source: crate::data::RecordError,
+    },
+    /// a capture sampled at another rate than the validation capture
+    #[error("{capture}: sampled every {ts} s, the validation capture every {val_ts} s")]
+    RateMismatch {
+        /// the capture
+        capture: String,
+        /// its sample interval [s]
+        ts: f64,
+        /// the validation capture's [s]
+        val_ts: f64,
+    },
+    /// the validation capture holds the very samples of an estimation capture
+    #[error(
+        "the validation capture {validation} holds the very samples of the estimation capture \
+         {estimation}: validate on another run of the joint (another excitation or noise \
+         realisation), or the gains of the candidates say nothing"
+    )]
+    SameSamples {
+        /// the validation capture (segment)
+        validation: String,
+        /// the estimation capture (segment) it repeats
+        estimation: String,
+    },
+    /// the nominal model could not be fitted or simulated from any start
+    #[error("the nominal model: {capture}: {source}")]
+    Nominal {
+        /// the estimation capture
+        capture: String,
+        /// every start tried and why it failed
+        #[source]
+        source: NominalError,
+    },
+}
+
+/// Why one candidate model (the nominal plus effects) could not be fitted or scored.
+#[derive(Debug, Error)]
+pub enum CandidateError {
+    /// no estimation record
+    #[error("no estimation record")]
+    NoRecord,
+    /// the fit (or the start grown for it) failed
+    #[error(transparent)]
+    Fit(#[from] NlRunError),
+    /// its own start did not simulate, and the automatic start failed too (why)
+    #[error("{unstable}; from the automatic start: {0}", unstable = NlError::Unstable)]
+    AutomaticToo(#[source] NlRunError),
+    /// the fitted model could not be scored
+    #[error(transparent)]
+    Score(#[from] MetricError),
+}
+
+/// A start the nominal was fitted from ([`NominalError`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum NominalStart {
+    /// the linear fit in the frequency domain, the usual start
+    FrequencyDomain,
+    /// the automatic start in the time domain
+    TimeDomain,
+    /// the structure of the fit of the candidate named
+    Candidate(String),
+}
+
+impl std::fmt::Display for NominalStart {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            NominalStart::FrequencyDomain => f.write_str("from the frequency-domain start"),
+            NominalStart::TimeDomain => f.write_str("automatically in the time domain"),
+            NominalStart::Candidate(name) => write!(f, "from the {name} candidate's structure"),
+        }
+    }
+}
+
+/// Why no start of the nominal fits: each start tried, in order, and why it failed.
+#[derive(Debug, Error)]
+#[error("no start of the nominal fits ({})", attempts_text(.attempts))]
+pub struct NominalError {
+    /// the starts tried and their failures
+    pub attempts: Vec<(NominalStart, CandidateError)>,
+}
+
+/// `start: why; start: why`.
+fn attempts_text(attempts: &[(NominalStart, CandidateError)]) -> String {
+    attempts
+        .iter()
+        .map(|(start, e)| format!("{start}: {e}"))
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 /// One estimated parameter.
@@ -505,7 +610,7 @@ fn fit_and_score(
     effects: Vec<Effect>,
     starts: &LinearStarts,
     from: Option<&NlFit>,
-) -> Result<Fitted, String> {
+) -> Result<Fitted, CandidateError> {
     let linear = &starts.structure;
     // a single's keys the user gave start there (a pair starts from its singles' fits)
     let given = match from {
@@ -529,7 +634,7 @@ fn fit_and_score(
         .enumerate()
         .max_by_key(|(i, d)| (d.len(), usize::MAX - i))
         .map(|(_, d)| d)
-        .ok_or("no estimation record")?;
+        .ok_or(CandidateError::NoRecord)?;
     let extra_at = nl
         .effects
         .iter()
@@ -621,14 +726,9 @@ fn fit_and_score(
     // the answer was the friction alone, 10 points below the true model)
     let mut res = match identify_segments(est, &nl) {
         Err(NlRunError::Estimation(NlError::Unstable)) if nl != automatic => {
-            identify_segments(est, &automatic).map_err(|e| {
-                format!(
-                    "{}; from the automatic start: {e}",
-                    NlRunError::Estimation(NlError::Unstable)
-                )
-            })
+            identify_segments(est, &automatic).map_err(CandidateError::AutomaticToo)
         }
-        r => r.map_err(|e| e.to_string()),
+        r => r.map_err(CandidateError::Fit),
     };
     if let ([Effect::Backlash(_)], None, Some(two)) = (&nl.effects[..], from, &starts.two_mass) {
         // a gap as wide as the deflection bends the linear structure away from the joint's:
@@ -650,7 +750,7 @@ fn scored_fit(
     val: &[IdData],
     parts: &[Measured],
     req: &DiagnoseRequest,
-) -> Result<Fitted, String> {
+) -> Result<Fitted, CandidateError> {
     let model = DrivenModel::of_fit(&res.fit);
     let scored = score_segments(parts, &model, val, req.options.segments)?;
     let mut warnings = res.warnings;
@@ -745,13 +845,13 @@ fn backlash_grown(
 /// effect left out. The fit, and in words where it started; the reasons of every failure
 /// when all fail.
 fn recover_nominal(
-    failed: &str,
+    failed: CandidateError,
     est: &[IdData],
     val: &[IdData],
     parts: &[Measured],
     req: &DiagnoseRequest,
-    singles: &[Result<Fitted, String>],
-) -> Result<(Fitted, String), String> {
+    singles: &[Result<Fitted, CandidateError>],
+) -> Result<(Fitted, String), NominalError> {
     let none = LinearStarts {
         structure: None,
         extra_mode: None,
@@ -760,10 +860,10 @@ fn recover_nominal(
         grown: None,
         two_mass: None,
     };
-    let mut why = vec![format!("from the frequency-domain start: {failed}")];
+    let mut why = vec![(NominalStart::FrequencyDomain, failed)];
     match fit_and_score(est, val, parts, req, Vec::new(), &none, None) {
         Ok(f) => return Ok((f, "started automatically in the time domain instead".into())),
-        Err(e) => why.push(format!("automatically in the time domain: {e}")),
+        Err(e) => why.push((NominalStart::TimeDomain, e)),
     }
     let mut fits: Vec<&Fitted> = singles.iter().filter_map(|r| r.as_ref().ok()).collect();
     fits.sort_by(|a, b| {
@@ -787,10 +887,10 @@ fn recover_nominal(
                     format!("started from the structure of the {name} candidate's fit instead"),
                 ))
             }
-            Err(e) => why.push(format!("from the {name} candidate's structure: {e}")),
+            Err(e) => why.push((NominalStart::Candidate(name), e)),
         }
     }
-    Err(format!("no start of the nominal fits ({})", why.join("; ")))
+    Err(NominalError { attempts: why })
 }
 
 /// The linear nominal at its frequency-domain start `(values, lag)`, not moved by the time
@@ -1318,7 +1418,8 @@ fn drop_partner(
 }
 
 /// Fits and scores one candidate model: nominal + effects, from a fit's values when given.
-type FitJob<'f> = &'f (dyn Fn(&(Vec<Effect>, Option<&NlFit>)) -> Result<Fitted, String> + Sync);
+type FitJob<'f> =
+    &'f (dyn Fn(&(Vec<Effect>, Option<&NlFit>)) -> Result<Fitted, CandidateError> + Sync);
 
 /// The pair of the loop's best single `singles[0]` with the other single that gains most
 /// over it in the loop ([`in_loop`]), each other single significant there tried as its
@@ -1619,8 +1720,9 @@ pub fn all_candidates() -> Vec<Effect> {
 /// measured joint, on the validation capture `val` (module documentation).
 ///
 /// # Errors
-/// [`DiagnoseError::Input`] for no or more than two estimation captures, different sample
-/// rates, short records or no candidate; [`DiagnoseError::Nominal`] when the nominal cannot
+/// [`DiagnoseError`]: for no or more than two estimation captures, different sample rates,
+/// short records, the validation capture repeating an estimation capture, no candidate or
+/// a bad gear ratio, each its variant; [`DiagnoseError::Nominal`] when the nominal cannot
 /// be fitted or simulated.
 pub fn diagnose(
     est: &[Dataset],
@@ -1656,7 +1758,8 @@ pub fn diagnose_with_series(
 /// number for number.
 ///
 /// # Errors
-/// As [`diagnose`]; [`DiagnoseError::Input`] for a capture with no segment.
+/// As [`diagnose`]; [`DiagnoseError::NoEstimationSegment`] or
+/// [`DiagnoseError::NoValidationSegment`] for a capture with no segment.
 pub fn diagnose_segments(
     est: &[&[Dataset]],
     val: &[Dataset],
@@ -1665,21 +1768,14 @@ pub fn diagnose_segments(
     let t0 = Instant::now();
     let o = &req.options;
     if est.is_empty() || est.len() > 2 {
-        return Err(DiagnoseError::Input(format!(
-            "{} estimation captures: one or two are needed",
-            est.len()
-        )));
+        return Err(DiagnoseError::EstimationCount(est.len()));
     }
     if est.iter().any(|c| c.is_empty()) {
-        return Err(DiagnoseError::Input(
-            "an estimation capture with no segment".into(),
-        ));
+        return Err(DiagnoseError::NoEstimationSegment);
     }
     let val_segs = val;
     let Some(val0) = val.first() else {
-        return Err(DiagnoseError::Input(
-            "a validation capture with no segment".into(),
-        ));
+        return Err(DiagnoseError::NoValidationSegment);
     };
     // effects on the gearbox spring are no candidates of a rigid model
     let (candidates, inapplicable): (Vec<Effect>, Vec<Effect>) = req
@@ -1687,24 +1783,23 @@ pub fn diagnose_segments(
         .iter()
         .partition(|e| req.structure != Structure::Rigid || !e.acts_on_gearbox());
     if candidates.is_empty() {
-        return Err(DiagnoseError::Input("no candidate effect".into()));
+        return Err(DiagnoseError::NoCandidate);
     }
     if !(req.r.is_finite() && req.r > 0.0) {
-        return Err(DiagnoseError::Input(format!(
-            "gear ratio {}: must be finite and > 0",
-            req.r
-        )));
+        return Err(DiagnoseError::GearRatio(req.r));
     }
     let ts = val0.data.ts;
     for ds in est.iter().flat_map(|c| c.iter()).chain(val) {
-        ds.data
-            .check(200)
-            .map_err(|e| DiagnoseError::Input(format!("{}: {e}", ds.name)))?;
+        ds.data.check(200).map_err(|source| DiagnoseError::Record {
+            capture: ds.name.clone(),
+            source,
+        })?;
         if !crate::data::same_rate(ds.data.ts, ts) {
-            return Err(DiagnoseError::Input(format!(
-                "{}: sampled every {} s, the validation capture every {ts} s",
-                ds.name, ds.data.ts
-            )));
+            return Err(DiagnoseError::RateMismatch {
+                capture: ds.name.clone(),
+                ts: ds.data.ts,
+                val_ts: ts,
+            });
         }
     }
     // validation on the estimation record itself measures nothing the fits did not see:
@@ -1714,12 +1809,10 @@ pub fn diagnose_segments(
             .iter()
             .find(|v| v.data.u == e.data.u && v.data.y == e.data.y)
         {
-            return Err(DiagnoseError::Input(format!(
-                "the validation capture {} holds the very samples of the estimation capture \
-                 {}: validate on another run of the joint (another excitation or noise \
-                 realisation), or the gains of the candidates say nothing",
-                v.name, e.name
-            )));
+            return Err(DiagnoseError::SameSamples {
+                validation: v.name.clone(),
+                estimation: e.name.clone(),
+            });
         }
     }
     let skip_of = |d: &Dataset| o.skip_of(&d.data);
@@ -1856,15 +1949,19 @@ pub fn diagnose_segments(
     let results = parallel(&jobs, o.threads, score);
     let mut results = results.into_iter();
     let first = results.next().expect("the nominal job");
-    let results: Vec<Result<Fitted, String>> = results.collect();
+    let results: Vec<Result<Fitted, CandidateError>> = results.collect();
     let nominal = match first {
         Ok(n) => n,
         Err(e) => {
-            let (n, how) = recover_nominal(&e, &est_data, &val_data, &parts, req, &results)
-                .map_err(|e| DiagnoseError::Nominal(format!("{}: {e}", est[0][0].name)))?;
+            let usual = e.to_string();
+            let (n, how) = recover_nominal(e, &est_data, &val_data, &parts, req, &results)
+                .map_err(|source| DiagnoseError::Nominal {
+                    capture: est[0][0].name.clone(),
+                    source,
+                })?;
             warnings.push(format!(
-                "nominal: the fit from its usual start failed ({e}); {how}, so the nominal is \
-                 that fit's and not the one from the frequency-domain start"
+                "nominal: the fit from its usual start failed ({usual}); {how}, so the nominal \
+                 is that fit's and not the one from the frequency-domain start"
             ));
             n
         }
@@ -2076,7 +2173,7 @@ pub fn diagnose_segments(
                     odd_explained: None,
                     structure_parameters: BTreeMap::new(),
                     reason: format!("the fit failed: {e}"),
-                    warnings: vec![e],
+                    warnings: vec![e.to_string()],
                 },
                 None,
             ),
@@ -2428,7 +2525,7 @@ pub fn diagnose_segments(
                     best_odd = l.best_odd;
                     in_loop = Some(l);
                 }
-                Err(e) => warnings.push(e),
+                Err(e) => warnings.push(e.to_string()),
             }
         }
     }

@@ -533,18 +533,49 @@ fn battery_none_raises_no_false_alarm() {
 fn one_estimation_capture_or_two_and_a_candidate_are_required() {
     let (est, val) = captures(&[], 1);
     let req = DiagnoseRequest::default();
-    assert!(matches!(
-        diagnose(&[], &val, &req),
-        Err(DiagnoseError::Input(_))
-    ));
+    let err = diagnose(&[], &val, &req).unwrap_err();
+    assert!(matches!(err, DiagnoseError::EstimationCount(0)), "{err:?}");
+    assert_eq!(
+        err.to_string(),
+        "0 estimation captures: one or two are needed"
+    );
     let none = DiagnoseRequest {
         candidates: Vec::new(),
         ..DiagnoseRequest::default()
     };
     assert!(matches!(
         diagnose(std::slice::from_ref(&est), &val, &none),
-        Err(DiagnoseError::Input(_))
+        Err(DiagnoseError::NoCandidate)
     ));
+    let bent = DiagnoseRequest {
+        r: -1.0,
+        ..DiagnoseRequest::default()
+    };
+    let err = diagnose(std::slice::from_ref(&est), &val, &bent).unwrap_err();
+    assert_eq!(err.to_string(), "gear ratio -1: must be finite and > 0");
+}
+
+/// A nominal that fits from no start names each start and its failure.
+#[test]
+fn a_nominal_with_no_start_names_every_start_tried() {
+    let e = DiagnoseError::Nominal {
+        capture: "est.csv".into(),
+        source: NominalError {
+            attempts: vec![
+                (NominalStart::FrequencyDomain, CandidateError::NoRecord),
+                (
+                    NominalStart::Candidate("backlash".into()),
+                    CandidateError::Score(metric::MetricError::NotFinite),
+                ),
+            ],
+        },
+    };
+    assert_eq!(
+        e.to_string(),
+        "the nominal model: est.csv: no start of the nominal fits (from the frequency-domain \
+         start: no estimation record; from the backlash candidate's structure: the simulation \
+         with the exact laws is not finite)"
+    );
 }
 
 /// The estimation capture given again as the validation capture is refused before any fit:
@@ -554,7 +585,8 @@ fn the_estimation_capture_is_refused_as_the_validation_capture() {
     let (est, _) = captures(&[], 1);
     let err = diagnose(std::slice::from_ref(&est), &est, &battery_request()).unwrap_err();
     assert!(
-        matches!(&err, DiagnoseError::Input(m) if m.contains("very samples")),
+        matches!(&err, DiagnoseError::SameSamples { .. })
+            && err.to_string().contains("very samples"),
         "{err}"
     );
 }

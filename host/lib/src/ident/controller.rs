@@ -88,8 +88,7 @@ impl LinearController {
             return Err(ControllerError::TooShort(data.len()));
         }
         let sim = self.simulate(r, data);
-        let fit = fit_percent(&data.u[lags..], &sim[lags..])
-            .map_err(|e| ControllerError::NoFit(e.to_string()))?;
+        let fit = fit_percent(&data.u[lags..], &sim[lags..]).map_err(ControllerError::Fit)?;
         let e: Vec<f64> = data.u[lags..]
             .iter()
             .zip(&sim[lags..])
@@ -146,8 +145,8 @@ fn shift_in(x: &mut [f64], v: f64) {
     x[0] = v;
 }
 
-/// Why no controller law was identified.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+/// Why no controller law was identified, or checked.
+#[derive(Debug, PartialEq, thiserror::Error)]
 pub enum ControllerError {
     /// the record holds no reference
     #[error("the record holds no reference θ_ref, from which the controller's law would follow")]
@@ -155,9 +154,36 @@ pub enum ControllerError {
     /// too short for the orders tried
     #[error("{0} samples: too few to identify the controller's law")]
     TooShort(usize),
-    /// least squares failed or the simulated law blew up
+    /// least squares failed or the simulated law blew up, for every order (the last one's
+    /// failure)
     #[error("no order of the controller's law reproduces u: {0}")]
-    NoFit(String),
+    NoFit(#[source] OrderError),
+    /// the FIT of the law's simulated `u` cannot be computed (a constant torque)
+    #[error("the FIT of the controller's law: {0}")]
+    Fit(#[source] crate::ident::validate::ValidateError),
+}
+
+/// Why the law of one pair of orders was not identified.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum OrderError {
+    /// the least-squares problem could not be solved (the solver's reason)
+    #[error("orders ({na}, {nl}): least squares: {reason}")]
+    LeastSquares {
+        /// past torques
+        na: usize,
+        /// lags of the reference and the angle
+        nl: usize,
+        /// what the solver said
+        reason: &'static str,
+    },
+    /// the law's simulated torque is not finite at any pass
+    #[error("orders ({na}, {nl}): the simulated u is not finite")]
+    NotFinite {
+        /// past torques
+        na: usize,
+        /// lags of the reference and the angle
+        nl: usize,
+    },
 }
 
 /// The controller's law from the `θ_ref`, `θ_m` and `u` of `data` (least squares of the
@@ -174,7 +200,8 @@ pub fn identify(data: &IdData) -> Result<LinearController, ControllerError> {
         return Err(ControllerError::TooShort(n));
     }
     let mut best: Option<LinearController> = None;
-    let mut last_err = String::new();
+    // `ORDERS` is not empty: with no law, the last order's failure is set
+    let mut last_err = OrderError::NotFinite { na: 0, nl: 0 };
     for (na, nl) in ORDERS {
         match fit_order(r, data, na, nl) {
             Ok(c) => {
@@ -198,7 +225,12 @@ const IV_PASSES: usize = 2;
 /// 1989, §8: the noise on the recorded `u` biases least squares through its past values,
 /// which leaves the integrator of a PI leaky at a small torque); the pass with the best
 /// simulated FIT is kept.
-fn fit_order(r: &[f64], data: &IdData, na: usize, nl: usize) -> Result<LinearController, String> {
+fn fit_order(
+    r: &[f64],
+    data: &IdData,
+    na: usize,
+    nl: usize,
+) -> Result<LinearController, OrderError> {
     let lags = na.max(nl + 1);
     let n = data.len();
     let rows = n - lags;
@@ -250,7 +282,7 @@ fn fit_order(r: &[f64], data: &IdData, na: usize, nl: usize) -> Result<LinearCon
         .clone()
         .svd(true, true)
         .solve(&target, 1e-12)
-        .map_err(|e| e.to_string())?;
+        .map_err(|reason| OrderError::LeastSquares { na, nl, reason })?;
     let mut best = scored(law_of(&theta));
     let mut current = best.clone();
     for _ in 0..IV_PASSES {
@@ -269,7 +301,7 @@ fn fit_order(r: &[f64], data: &IdData, na: usize, nl: usize) -> Result<LinearCon
         }
     }
     best.map(|(law, _)| law)
-        .ok_or_else(|| format!("orders ({na}, {nl}): the simulated u is not finite"))
+        .ok_or(OrderError::NotFinite { na, nl })
 }
 
 #[cfg(test)]
@@ -359,5 +391,33 @@ mod tests {
         let (mut data, _) = record(ControllerConfig::default(), 0.0);
         data.r = None;
         assert_eq!(identify(&data), Err(ControllerError::NoReference));
+    }
+
+    #[test]
+    fn a_law_checked_on_a_constant_torque_says_the_fit_is_undefined() {
+        let (mut data, _) = record(ControllerConfig::default(), 0.0);
+        data.u = vec![0.5; data.u.len()];
+        let law = LinearController {
+            a: vec![-0.5],
+            b: vec![1.0, 0.0],
+            c: vec![1.0, 0.0],
+            bias: 0.0,
+            fit: f64::NAN,
+        };
+        let e = law.check_on(&data).unwrap_err();
+        assert_eq!(
+            e,
+            ControllerError::Fit(crate::ident::validate::ValidateError::ConstantOutput)
+        );
+        assert_eq!(
+            e.to_string(),
+            "the FIT of the controller's law: measured output is constant: fit undefined"
+        );
+        let e = ControllerError::NoFit(OrderError::NotFinite { na: 2, nl: 4 });
+        assert_eq!(
+            e.to_string(),
+            "no order of the controller's law reproduces u: orders (2, 4): the simulated u is \
+             not finite"
+        );
     }
 }

@@ -159,17 +159,37 @@ fn sqrtm(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
     None
 }
 
+/// Why a discrete model has no continuous one ([`continuous_of`]).
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum ContinuousError {
+    /// a real pole at or left of 0 (its value): no real logarithm
+    #[error(
+        "the discrete pole {0} lies on the negative real axis: no real continuous-time model \
+         samples to it"
+    )]
+    NegativeRealPole(f64),
+    /// the repeated square roots do not approach `I` within `MAX_SQUARE_ROOTS` of them
+    #[error("the square roots do not approach the identity")]
+    SquareRoots,
+    /// a square root's iteration does not converge
+    #[error("the square-root iteration does not converge")]
+    SquareRoot,
+    /// the logarithm, exponentiated, is this far from the matrix (relative)
+    #[error("the matrix logarithm is off by {0:.1e} (relative) when exponentiated")]
+    Check(f64),
+}
+
 /// Principal matrix logarithm (inverse scaling and squaring), or why there is no real one.
-fn logm(m: &DMatrix<f64>) -> Result<DMatrix<f64>, String> {
+fn logm(m: &DMatrix<f64>) -> Result<DMatrix<f64>, ContinuousError> {
     let n = m.nrows();
     let eye = DMatrix::<f64>::identity(n, n);
     let mut r = m.clone();
     let mut k = 0;
     while (&r - &eye).norm() > 0.25 {
         if k == MAX_SQUARE_ROOTS {
-            return Err("the square roots do not approach the identity".into());
+            return Err(ContinuousError::SquareRoots);
         }
-        r = sqrtm(&r).ok_or("the square-root iteration does not converge")?;
+        r = sqrtm(&r).ok_or(ContinuousError::SquareRoot)?;
         k += 1;
     }
     let x = &r - &eye;
@@ -187,20 +207,16 @@ fn logm(m: &DMatrix<f64>) -> Result<DMatrix<f64>, String> {
 /// module's doc).
 ///
 /// # Errors
-/// Why there is none: an eigenvalue of `A` on the closed negative real axis (no real
-/// logarithm), or the logarithm failing its check by `exp`.
-pub fn continuous_of(ss: &StateSpace) -> Result<ContinuousSs, String> {
+/// [`ContinuousError`], why there is none: an eigenvalue of `A` on the closed negative
+/// real axis (no real logarithm), or the logarithm failing its check by `exp`.
+pub fn continuous_of(ss: &StateSpace) -> Result<ContinuousSs, ContinuousError> {
     let n = ss.order();
     if let Some(l) = ss
         .poles()
         .into_iter()
         .find(|l| l.re <= 0.0 && l.im.abs() <= 1e-12 * l.norm().max(1e-300))
     {
-        return Err(format!(
-            "the discrete pole {} lies on the negative real axis: no real continuous-time \
-             model samples to it",
-            l.re
-        ));
+        return Err(ContinuousError::NegativeRealPole(l.re));
     }
     // the input column scaled to a norm of 0.1 (`diag(I, 1/β)` is a similarity: the
     // logarithm's last column scales by β alike), so that its size does not add square
@@ -214,9 +230,7 @@ pub fn continuous_of(ss: &StateSpace) -> Result<ContinuousSs, String> {
     let back = l.clone().exp();
     let err = (&back - &m).norm() / m.norm();
     if err.is_nan() || err > 1e-9 {
-        return Err(format!(
-            "the matrix logarithm is off by {err:.1e} (relative) when exponentiated"
-        ));
+        return Err(ContinuousError::Check(err));
     }
     Ok(ContinuousSs {
         f: l.view((0, 0), (n, n)).into_owned() / ss.ts,
@@ -306,7 +320,7 @@ impl ModelExport {
         };
         let (continuous, continuous_note) = match continuous_of(ss) {
             Ok(c) => (Some(c), None),
-            Err(e) => (None, Some(e)),
+            Err(e) => (None, Some(e.to_string())),
         };
         let mut parameters = saved.parameters.clone();
         for p in parameters.values_mut() {
@@ -537,7 +551,12 @@ mod tests {
             0.01,
         );
         let e = continuous_of(&s).unwrap_err();
-        assert!(e.contains("-0.5 lies on the negative real axis"), "{e}");
+        assert_eq!(e, ContinuousError::NegativeRealPole(-0.5));
+        assert!(
+            e.to_string()
+                .contains("-0.5 lies on the negative real axis"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -405,30 +405,30 @@ impl Effect {
 
     /// Sets one parameter from its text; `Err(reason)` when the value is not acceptable and
     /// `Ok(false)` when the key is unknown.
-    fn set(&mut self, key: &str, value: &str) -> Result<bool, String> {
+    fn set(&mut self, key: &str, value: &str) -> Result<bool, ValueError> {
         if let (Effect::ExtraMode(m), "attach") = (&mut *self, key) {
             m.attach = match value {
                 "parallel" => Attach::Parallel,
                 "serial" => Attach::Serial,
-                _ => return Err("expected `parallel` or `serial`".into()),
+                _ => return Err(ValueError::Attach),
             };
             return Ok(true);
         }
         let v: f64 = value
             .parse()
-            .map_err(|_| "not a number".to_string())
+            .map_err(|_| ValueError::NotNumber)
             .and_then(|v: f64| {
                 if v.is_finite() {
                     Ok(v)
                 } else {
-                    Err("not finite".to_string())
+                    Err(ValueError::NotFinite)
                 }
             })?;
         let Some(&(_, lo, hi, unit)) = self.bounds().iter().find(|(k, ..)| *k == key) else {
             return Ok(false);
         };
         if !(lo..=hi).contains(&v) {
-            return Err(bound_reason(lo, hi, unit));
+            return Err(ValueError::OutOfBounds(Bounds { lo, hi, unit }));
         }
         match (self, key) {
             (Effect::CoulombFriction(c), "fc") => c.fc = v,
@@ -512,33 +512,96 @@ impl Effect {
     /// parameter, its value and the bound.
     ///
     /// # Errors
-    /// What is wrong, in words.
-    pub fn check(&self) -> Result<(), String> {
+    /// [`EffectCheckError`]: the parameter out of its bounds with its value, or the
+    /// relation that does not hold.
+    pub fn check(&self) -> Result<(), EffectCheckError> {
         for &(key, lo, hi, unit) in self.bounds() {
             let v = self.value(key).unwrap_or(f64::NAN);
             if !(lo..=hi).contains(&v) {
-                return Err(format!("{key} = {v}: {}", bound_reason(lo, hi, unit)));
+                return Err(EffectCheckError::OutOfBounds {
+                    key,
+                    value: v,
+                    bounds: Bounds { lo, hi, unit },
+                });
             }
         }
         match self {
             Effect::CoulombFriction(c) if c.fs < c.fc => {
-                Err(format!("fs ({}) must be >= fc ({})", c.fs, c.fc))
+                Err(EffectCheckError::BreakawayBelowLevel { fs: c.fs, fc: c.fc })
             }
             _ => Ok(()),
         }
     }
 }
 
-/// `must be within [lo, hi] unit`
-fn bound_reason(lo: f64, hi: f64, unit: &str) -> String {
-    let num = |v: f64| {
-        if v == 0.0 || (1e-3..1e5).contains(&v.abs()) {
-            format!("{}", (v * 1e4).round() / 1e4)
-        } else {
-            format!("{v:e}")
-        }
-    };
-    format!("must be within [{}, {}] {unit}", num(lo), num(hi))
+/// The range of a parameter ([`Effect::bounds`]); shown as `must be within [lo, hi] unit`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bounds {
+    /// lowest value
+    pub lo: f64,
+    /// highest value
+    pub hi: f64,
+    /// unit
+    pub unit: &'static str,
+}
+
+impl fmt::Display for Bounds {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let num = |v: f64| {
+            if v == 0.0 || (1e-3..1e5).contains(&v.abs()) {
+                format!("{}", (v * 1e4).round() / 1e4)
+            } else {
+                format!("{v:e}")
+            }
+        };
+        write!(
+            f,
+            "must be within [{}, {}] {}",
+            num(self.lo),
+            num(self.hi),
+            self.unit
+        )
+    }
+}
+
+/// Why the text of one parameter's value in an effect spec was refused.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum ValueError {
+    /// `attach` takes a word
+    #[error("expected `parallel` or `serial`")]
+    Attach,
+    /// the text does not parse as a number
+    #[error("not a number")]
+    NotNumber,
+    /// NaN or infinite
+    #[error("not finite")]
+    NotFinite,
+    /// outside the parameter's range
+    #[error("{0}")]
+    OutOfBounds(Bounds),
+}
+
+/// Why an effect's parameters are not acceptable ([`Effect::check`]).
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum EffectCheckError {
+    /// a parameter outside its range
+    #[error("{key} = {value}: {bounds}")]
+    OutOfBounds {
+        /// the parameter
+        key: &'static str,
+        /// its value
+        value: f64,
+        /// its range
+        bounds: Bounds,
+    },
+    /// Coulomb friction whose breakaway level is below its sliding level
+    #[error("fs ({fs}) must be >= fc ({fc})")]
+    BreakawayBelowLevel {
+        /// breakaway level `F_s` [N·m]
+        fs: f64,
+        /// Coulomb level `F_c` [N·m]
+        fc: f64,
+    },
 }
 
 impl fmt::Display for Effect {
@@ -618,7 +681,8 @@ pub enum EffectParseError {
         /// 1-based column of the value
         column: usize,
         /// what is wrong with it
-        reason: String,
+        #[source]
+        reason: ValueError,
     },
     /// a parameter is not of the form `key=value`
     #[error("effect spec `{spec}`: expected key=value at column {column}")]
@@ -634,7 +698,8 @@ pub enum EffectParseError {
         /// effect name
         effect: &'static str,
         /// what is inconsistent
-        reason: String,
+        #[source]
+        reason: EffectCheckError,
     },
     /// `none` given together with other effects
     #[error("effect `none` cannot be combined with other effects")]
@@ -833,7 +898,7 @@ mod tests {
 
         let err = "backlash:width=abc".parse::<Effect>().unwrap_err();
         assert!(
-            matches!(err, EffectParseError::BadValue { column: 16, ref reason, .. } if reason == "not a number"),
+            matches!(err, EffectParseError::BadValue { column: 16, ref reason, .. } if *reason == ValueError::NotNumber),
             "{err:?}"
         );
         let err = "time_delay:samples=-1".parse::<Effect>().unwrap_err();
@@ -912,14 +977,30 @@ mod tests {
         }
         let e = Effect::TimeDelay(TimeDelay { samples: 1e12 });
         assert_eq!(
-            e.check().unwrap_err(),
+            e.check().unwrap_err().to_string(),
             "samples = 1000000000000: must be within [0, 100] samples"
+        );
+        assert_eq!(
+            e.check(),
+            Err(EffectCheckError::OutOfBounds {
+                key: "samples",
+                value: 1e12,
+                bounds: Bounds {
+                    lo: 0.0,
+                    hi: 100.0,
+                    unit: "samples"
+                },
+            })
         );
         let e = Effect::TorqueRipple(TorqueRipple {
             amplitude: f64::NAN,
             ..TorqueRipple::default()
         });
-        assert!(e.check().unwrap_err().starts_with("amplitude = NaN: "));
+        assert!(e
+            .check()
+            .unwrap_err()
+            .to_string()
+            .starts_with("amplitude = NaN: "));
     }
 
     #[test]

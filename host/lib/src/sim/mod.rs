@@ -576,7 +576,7 @@ fn check_effects(plant: &Plant, effects: &[Effect]) -> Result<(), SimError> {
     for e in effects {
         e.check().map_err(|reason| SimError::BadEffect {
             effect: e.name(),
-            reason,
+            reason: reason.to_string(),
         })?;
         let unique = matches!(
             e,

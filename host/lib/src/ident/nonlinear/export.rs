@@ -35,7 +35,7 @@ pub fn simulate_args(fit: &NlFit) -> Vec<String> {
 /// (as [`super::validate`] does).
 ///
 /// # Errors
-/// [`NlError::Data`] when the simulator refuses the model or the record.
+/// [`NlError::Simulation`] when the simulator refuses the model or the record.
 pub fn simulate_exact(fit: &NlFit, data: &IdData) -> Result<Vec<f64>, NlError> {
     let offset = fit.get("offset").unwrap_or(0.0);
     let u: Vec<f64> = data.u.iter().map(|u| u + offset).collect();
@@ -50,5 +50,5 @@ pub fn simulate_exact(fit: &NlFit, data: &IdData) -> Result<Vec<f64>, NlError> {
     };
     simulate_driven(&plant, &fit.model.effects, tc, data.ts, &u, &start)
         .map(|o| o.theta_m)
-        .map_err(|e| NlError::Data(format!("simulation with the exact laws: {e}")))
+        .map_err(NlError::Simulation)
 }

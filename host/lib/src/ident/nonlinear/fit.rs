@@ -57,11 +57,40 @@ use crate::ident::lm::{self, LeastSquares, LmOptions, Normal, Termination};
 use crate::ident::validate::fit_percent;
 
 /// Why a nonlinear fit could not run.
-#[derive(Clone, Debug, PartialEq, Error)]
+#[derive(Debug, Error)]
 pub enum NlError {
-    /// the record is too short or not finite
-    #[error("{0}")]
-    Data(String),
+    /// a record is too short or not finite
+    #[error(transparent)]
+    Record(#[from] crate::data::RecordError),
+    /// no record given to fit
+    #[error("no record to fit")]
+    NoRecord,
+    /// no record given to validate on
+    #[error("no record to validate on")]
+    NoValidationRecord,
+    /// the start's values do not match the model's parameters
+    #[error("{values} start values for {params} parameters")]
+    StartLength {
+        /// values given
+        values: usize,
+        /// parameters of the model
+        params: usize,
+    },
+    /// a step of the automatic start could not read the data
+    #[error(transparent)]
+    StartStep(#[from] crate::ident::grey_box::GreyBoxError),
+    /// step 1 of the automatic start found no positive inertia
+    #[error("no positive rigid-body inertia in the data (step 1 of the start)")]
+    NoInertia,
+    /// step 3 of the automatic start found no linear start for a flexible structure
+    #[error("no linear start for the flexible structure (step 3 of the start)")]
+    NoFlexibleStart,
+    /// the simulator refused the model or the record (the exact laws)
+    #[error("simulation with the exact laws: {0}")]
+    Simulation(#[source] crate::sim::SimError),
+    /// the simulator refused the model or the validation record
+    #[error("validation simulation: {0}")]
+    ValidationSimulation(#[source] crate::sim::SimError),
     /// the start does not simulate to finite values
     #[error("the start of the nonlinear fit does not simulate to finite values")]
     Unstable,
@@ -69,8 +98,8 @@ pub enum NlError {
     #[error("{0} free parameters; at most 32 can be estimated together")]
     TooManyParameters(usize),
     /// the optimiser refused the problem
-    #[error("{0}")]
-    Optimiser(String),
+    #[error(transparent)]
+    Optimiser(#[from] crate::ident::lm::LmError),
 }
 
 /// Default cut-off of the residual's high-pass prefilter [Hz]: above the slow torque
@@ -706,7 +735,7 @@ pub fn fit_output_error(
 /// `fit_velocity_percent` pools the records ([`pooled_velocity_fit`]).
 ///
 /// # Errors
-/// As [`fit_output_error`], for any of the records; [`NlError::Data`] for no record.
+/// As [`fit_output_error`], for any of the records; [`NlError::NoRecord`] for no record.
 pub fn fit_output_error_segments(
     data: &[IdData],
     model: &NlModel,
@@ -714,18 +743,17 @@ pub fn fit_output_error_segments(
     opts: &NlOptions,
 ) -> Result<NlFit, NlError> {
     if data.is_empty() {
-        return Err(NlError::Data("no record to fit".into()));
+        return Err(NlError::NoRecord);
     }
     for d in data {
-        d.check(20).map_err(|e| NlError::Data(e.to_string()))?;
+        d.check(20)?;
     }
     let layout = model.layout();
     if start.len() != layout.len() {
-        return Err(NlError::Data(format!(
-            "{} start values for {} parameters",
-            start.len(),
-            layout.len()
-        )));
+        return Err(NlError::StartLength {
+            values: start.len(),
+            params: layout.len(),
+        });
     }
     let velocities: Vec<Vec<f64>> = data.iter().map(|d| interval_velocity(&d.y, d.ts)).collect();
     let firsts: Vec<usize> = velocities
@@ -840,8 +868,7 @@ pub fn fit_output_error_segments(
         covariance: false,
         ..LmOptions::default()
     };
-    let res =
-        lm::minimize(&problem, &z0, &lm_opts).map_err(|e| NlError::Optimiser(e.to_string()))?;
+    let res = lm::minimize(&problem, &z0, &lm_opts)?;
     let mut z = res.theta.clone();
     let free: Vec<usize> = (0..z.len()).filter(|&i| !fixed_all[i]).collect();
     // the smoothing term of the σ and the exact-law correction (module documentation) on
@@ -1266,4 +1293,45 @@ fn sandwich_parts(
         }
     }
     (h, s)
+}
+
+#[cfg(test)]
+mod error_tests {
+    use super::*;
+    use crate::model::spec::Structure;
+
+    #[test]
+    fn a_fit_that_cannot_start_says_why() {
+        let model = NlModel {
+            structure: Structure::TwoMass,
+            r: 1.0 / 118.0,
+            effects: Vec::new(),
+            tau_c: 0.0,
+            v_eps: 0.05,
+            dz_eps: 1e-7,
+            substeps: 1,
+        };
+        let opts = NlOptions::default();
+        let e = fit_output_error_segments(&[], &model, &[], &opts).unwrap_err();
+        assert!(matches!(e, NlError::NoRecord), "{e:?}");
+        let short = IdData {
+            ts: 1e-3,
+            u: vec![0.0; 5],
+            y: vec![0.0; 5],
+            r: None,
+        };
+        let e = fit_output_error_segments(&[short], &model, &[], &opts).unwrap_err();
+        assert!(matches!(e, NlError::Record(_)), "{e:?}");
+        let data = IdData {
+            ts: 1e-3,
+            u: (0..400).map(|k| (k as f64 * 0.05).sin()).collect(),
+            y: (0..400).map(|k| 1e-3 * (k as f64 * 0.05).cos()).collect(),
+            r: None,
+        };
+        let e = fit_output_error_segments(&[data], &model, &[1.0], &opts).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!("1 start values for {} parameters", model.layout().len())
+        );
+    }
 }

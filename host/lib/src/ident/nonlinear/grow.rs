@@ -64,7 +64,7 @@
 
 use super::init::Step;
 use super::model::has_bump;
-use super::{identify_segments, NlFit, NlOptions, NlRequest};
+use super::{identify_segments, NlFit, NlOptions, NlRequest, NlRunError};
 use crate::data::IdData;
 use crate::ident::grey_box;
 use crate::model::effects::{Attach, CoulombFriction, Effect, ExtraMode};
@@ -72,6 +72,36 @@ use crate::model::spec::Structure;
 
 /// Share of samples with `|u| < F̂_c` from which the motor is taken to stick.
 pub const STICK_SHARE: f64 = 0.2;
+
+/// Why a start could not be grown.
+#[derive(Debug, thiserror::Error)]
+pub enum GrowError {
+    /// the stick-slip growth does not build this structure
+    #[error("no grown start for the {}", .0.label())]
+    Structure(Structure),
+    /// the backlash growth does not build this structure
+    #[error("no grown backlash start for the {}", .0.label())]
+    BacklashStructure(Structure),
+    /// no record given
+    #[error("no estimation record")]
+    NoRecord,
+    /// the linear two-mass gives no gearbox deflection to size the backlash by (its value
+    /// [rad]: not finite or not positive)
+    #[error("no gearbox deflection on the linear two-mass")]
+    NoDeflection(f64),
+    /// no point of the backlash grid simulates, or no fit from one converges
+    #[error("no point of the backlash grid simulates")]
+    NoGridPoint,
+    /// a stage's fit ended without the extra mode it was to add
+    #[error("{stage}: the fit lost its extra mode")]
+    LostMode {
+        /// the stage
+        stage: &'static str,
+    },
+    /// a stage's fit failed
+    #[error(transparent)]
+    Fit(#[from] NlRunError),
+}
 
 /// Share of the samples of `data` whose torque magnitude is below `level` [N·m].
 pub fn stick_share(data: &[IdData], level: f64) -> f64 {
@@ -150,16 +180,16 @@ pub fn friction_keys_of(e: &Effect) -> Vec<(String, f64)> {
 /// `tau_c` the lag to start from [s].
 ///
 /// # Errors
-/// Another structure, or a fit that fails.
+/// [`GrowError::Structure`] for another structure, or the fit that fails.
 pub fn grow(
     est: &[IdData],
     structure: Structure,
     r: f64,
     tau_c: f64,
     options: &NlOptions,
-) -> Result<Grown, String> {
+) -> Result<Grown, GrowError> {
     if structure == Structure::FourMass {
-        return Err(format!("no grown start for the {}", structure.label()));
+        return Err(GrowError::Structure(structure));
     }
     grow_with(
         est,
@@ -228,18 +258,14 @@ fn stage_step(name: &str, what: &str, fit: &NlFit) -> Step {
 /// `seed.law` grown from the two-mass on the records `est` (module documentation).
 ///
 /// # Errors
-/// Another structure, or a fit that fails.
-pub fn grow_with(est: &[IdData], seed: &Seed) -> Result<Grown, String> {
+/// [`GrowError::Structure`] for the rigid structure, or the stage that fails.
+pub fn grow_with(est: &[IdData], seed: &Seed) -> Result<Grown, GrowError> {
     let structure = seed.structure;
     if structure == Structure::Rigid {
-        return Err(format!("no grown start for the {}", structure.label()));
+        return Err(GrowError::Structure(structure));
     }
     let law = Effect::CoulombFriction(seed.law);
-    let fit = |req: NlRequest| {
-        identify_segments(est, &req)
-            .map(|r| r.fit)
-            .map_err(|e| e.to_string())
-    };
+    let fit = |req: NlRequest| identify_segments(est, &req).map(|r| r.fit);
     // a start: the smooth law's minimum, no covariance (the final fit corrects and
     // covers it)
     let options = NlOptions {
@@ -338,8 +364,8 @@ pub fn grow_with(est: &[IdData], seed: &Seed) -> Result<Grown, String> {
                     same: &[&str],
                     attach: Attach,
                     names: [&str; 3],
-                    (name, what): (&str, &str)|
-     -> Result<(NlFit, ExtraMode, Step), String> {
+                    (name, what): (&'static str, &str)|
+     -> Result<(NlFit, ExtraMode, Step), GrowError> {
         let mode = Effect::ExtraMode(ExtraMode {
             attach,
             ..ExtraMode::default()
@@ -352,7 +378,7 @@ pub fn grow_with(est: &[IdData], seed: &Seed) -> Result<Grown, String> {
         let offset = from.get("offset").unwrap_or(0.0);
         let f = fit_with_mode_raced(est, &req, &from.plant, offset)?;
         let Some(Effect::ExtraMode(x)) = f.model.effects.first().copied() else {
-            return Err(format!("{name}: the fit lost its extra mode"));
+            return Err(GrowError::LostMode { stage: name });
         };
         let step = stage_step(name, what, &f);
         Ok((f, x, step))
@@ -487,35 +513,29 @@ pub fn dead_zone_gain(h: f64, a: f64) -> f64 {
 /// The fits are a start: the smooth law's minimum, no covariance.
 ///
 /// # Errors
-/// Another structure, or a fit that fails.
+/// [`GrowError::BacklashStructure`] for another structure, [`GrowError::NoRecord`],
+/// [`GrowError::NoDeflection`], [`GrowError::NoGridPoint`], or the fit that fails.
 pub fn grow_backlash(
     est: &[IdData],
     structure: Structure,
     r: f64,
     (linear, tau_c): (&[f64], f64),
     options: &NlOptions,
-) -> Result<GrownBacklash, String> {
+) -> Result<GrownBacklash, GrowError> {
     if !matches!(structure, Structure::TwoMass | Structure::ThreeMass) {
-        return Err(format!(
-            "no grown backlash start for the {}",
-            structure.label()
-        ));
+        return Err(GrowError::BacklashStructure(structure));
     }
     let data = est
         .iter()
         .max_by_key(|d| d.len())
-        .ok_or("no estimation record")?;
+        .ok_or(GrowError::NoRecord)?;
     let options = NlOptions {
         cov_lags: 0,
         exact_correction: false,
         smoothing_sigma: false,
         ..options.clone()
     };
-    let fit = |req: &NlRequest| {
-        identify_segments(est, req)
-            .map(|r| r.fit)
-            .map_err(|e| e.to_string())
-    };
+    let fit = |req: &NlRequest| identify_segments(est, req).map(|r| r.fit);
     let backlash = Effect::Backlash(crate::model::effects::Backlash::default());
     let req = NlRequest {
         tau_c,
@@ -528,7 +548,7 @@ pub fn grow_backlash(
     let kg = linear.get(2).copied().unwrap_or(0.0);
     let delta = super::init::torque_rms(data) / r / kg;
     if !(delta > 0.0 && delta.is_finite()) {
-        return Err("no gearbox deflection on the linear two-mass".into());
+        return Err(GrowError::NoDeflection(delta));
     }
     // the grid's best point at each damper share, each fitted, the lowest cost kept
     let mut a: Option<NlFit> = None;
@@ -569,7 +589,7 @@ pub fn grow_backlash(
             }
         }
     }
-    let a = a.ok_or("no point of the backlash grid simulates")?;
+    let a = a.ok_or(GrowError::NoGridPoint)?;
     let width_of = |f: &NlFit| {
         f.model
             .effects
@@ -600,7 +620,9 @@ pub fn grow_backlash(
     };
     let b = fit_with_mode(est, &req, &a.plant, a.get("offset").unwrap_or(0.0))?;
     let Some(Effect::ExtraMode(x)) = b.model.effects.first().copied() else {
-        return Err("the grown backlash start lost its extra mode".into());
+        return Err(GrowError::LostMode {
+            stage: "the grown backlash start",
+        });
     };
     // [J_m, J_a1, k_g, d_g, f_m] and the mode → [J_m, J_a1, J_a2, k_g, k_a, d_g, d_a, f_m]
     let p = &b.plant;
@@ -639,12 +661,8 @@ pub fn fit_with_mode(
     req: &NlRequest,
     plant: &[f64],
     offset: f64,
-) -> Result<NlFit, String> {
-    let fit = |req: &NlRequest| {
-        identify_segments(est, req)
-            .map(|r| r.fit)
-            .map_err(|e| e.to_string())
-    };
+) -> Result<NlFit, NlRunError> {
+    let fit = |req: &NlRequest| identify_segments(est, req).map(|r| r.fit);
     let at = req
         .effects
         .iter()
@@ -682,15 +700,20 @@ pub fn fit_with_mode(
         return fit(req);
     }
     let mut kept: Option<NlFit> = None;
-    let mut last = String::new();
+    let mut last = None;
     for r in &starts {
         match fit(r) {
             Ok(f) if kept.as_ref().is_none_or(|k| f.ssr < k.ssr) => kept = Some(f),
             Ok(_) => {}
-            Err(e) => last = e,
+            Err(e) => last = Some(e),
         }
     }
-    kept.ok_or(last)
+    match (kept, last) {
+        (Some(f), _) => Ok(f),
+        (None, Some(e)) => Err(e),
+        // `starts` is not empty: no fit and no failure does not happen
+        (None, None) => fit(req),
+    }
 }
 
 /// [`fit_with_mode`], and a race over the mode's frequency (`race_mode`) kept when it
@@ -703,7 +726,7 @@ pub fn fit_with_mode_raced(
     req: &NlRequest,
     plant: &[f64],
     offset: f64,
-) -> Result<NlFit, String> {
+) -> Result<NlFit, NlRunError> {
     let f = fit_with_mode(est, req, plant, offset)?;
     Ok(match race_mode(est, req, plant, offset, &f) {
         Some(g) if g.ssr < f.ssr => g,
@@ -857,6 +880,21 @@ fn race_mode(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_structure_that_is_not_grown_is_named() {
+        let opts = NlOptions::default();
+        let e = grow(&[], Structure::FourMass, 1.0, 0.0, &opts).unwrap_err();
+        assert!(
+            matches!(e, GrowError::Structure(Structure::FourMass)),
+            "{e:?}"
+        );
+        assert_eq!(e.to_string(), "no grown start for the four-mass");
+        let e = grow_backlash(&[], Structure::Rigid, 1.0, (&[], 0.0), &opts).unwrap_err();
+        assert_eq!(e.to_string(), "no grown backlash start for the rigid");
+        let e = grow_backlash(&[], Structure::TwoMass, 1.0, (&[], 0.0), &opts).unwrap_err();
+        assert!(matches!(e, GrowError::NoRecord), "{e:?}");
+    }
 
     #[test]
     fn the_stick_share_counts_torques_below_the_level() {

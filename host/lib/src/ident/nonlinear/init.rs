@@ -84,7 +84,8 @@ pub enum RippleOrder {
 /// [`Structure::param_names`] order), used for step 3 instead of the subspace features.
 ///
 /// # Errors
-/// [`NlError::Data`] when a step cannot read the data.
+/// [`NlError::StartStep`], [`NlError::NoInertia`] or [`NlError::NoFlexibleStart`] when a
+/// step cannot read the data.
 pub fn automatic_start(
     data: &IdData,
     model: &NlModel,
@@ -106,7 +107,6 @@ pub fn automatic_start_with(
     let mut steps = Vec::new();
     let mut held: Vec<String> = Vec::new();
     let mut warnings: Vec<String> = Vec::new();
-    let err = |e: grey_box::GreyBoxError| NlError::Data(e.to_string());
     // step 1: rigid body
     let rigid = grey_box::rigid_idim(
         data,
@@ -116,13 +116,10 @@ pub fn automatic_start_with(
             offset: true,
             ..IdimOptions::default()
         },
-    )
-    .map_err(err)?;
+    )?;
     let j_total = rigid.get("J").unwrap_or(f64::NAN);
     if j_total.is_nan() || j_total <= 0.0 {
-        return Err(NlError::Data(
-            "no positive rigid-body inertia in the data (step 1 of the start)".into(),
-        ));
+        return Err(NlError::NoInertia);
     }
     steps.push(Step {
         name: "rigid body".into(),
@@ -149,8 +146,7 @@ pub fn automatic_start_with(
             offset: true,
             ..IdimOptions::default()
         },
-    )
-    .map_err(err)?;
+    )?;
     let mut fv = friction.get("Fv").unwrap_or(0.0);
     let mut fc = friction.get("Fc").unwrap_or(0.0);
     // the regression's offset is on the torque side (`u = … + offset`); the model's adds
@@ -184,8 +180,7 @@ pub fn automatic_start_with(
                 asymmetric: true,
                 ..IdimOptions::default()
             },
-        )
-        .map_err(err)?;
+        )?;
         let (fcp, fcn) = (a.get("Fc").unwrap_or(0.0), a.get("Fc_neg").unwrap_or(0.0));
         let (fvp, fvn) = (a.get("Fv").unwrap_or(0.0), a.get("Fv_neg").unwrap_or(0.0));
         if fcp > 0.0 && fcn > 0.0 {
@@ -251,9 +246,7 @@ pub fn automatic_start_with(
         s => plants.extend(modal_start(data, s, model.r, (j_used, fv_used))),
     }
     if plants.is_empty() {
-        return Err(NlError::Data(
-            "no linear start for the flexible structure (step 3 of the start)".into(),
-        ));
+        return Err(NlError::NoFlexibleStart);
     }
     let h = data.ts / model.substeps.max(1) as f64;
     for plant in &mut plants {

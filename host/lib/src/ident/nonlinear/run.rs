@@ -294,7 +294,7 @@ fn longest(data: &[IdData]) -> Option<&IdData> {
 /// As [`identify`]; [`NlRunError::Estimation`] for no record.
 pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, NlRunError> {
     req.check()?;
-    let data = longest(all).ok_or_else(|| NlError::Data("no record to fit".into()))?;
+    let data = longest(all).ok_or(NlError::NoRecord)?;
     let held = req.held();
     let mut model = model_of(req, data);
     if let Some(t) = held {
@@ -1024,7 +1024,7 @@ pub fn checks(fit: &NlFit) -> Vec<String> {
 /// first measured angle with the fitted initial velocity.
 ///
 /// # Errors
-/// [`NlError::Data`] for a short record, [`NlError::Unstable`] when the simulation is not
+/// [`NlError::Record`] for a short record, [`NlError::Unstable`] when the simulation is not
 /// finite.
 pub fn validate(fit: &NlFit, val: &IdData, opts: &NlOptions) -> Result<NlValidation, NlError> {
     validate_segments(fit, std::slice::from_ref(val), opts)
@@ -1035,14 +1035,14 @@ pub fn validate(fit: &NlFit, val: &IdData, opts: &NlOptions) -> Result<NlValidat
 /// pooled over all of them.
 ///
 /// # Errors
-/// As [`validate`], for any record; [`NlError::Data`] for no record.
+/// As [`validate`], for any record; [`NlError::NoValidationRecord`] for no record.
 pub fn validate_segments(
     fit: &NlFit,
     vals: &[IdData],
     opts: &NlOptions,
 ) -> Result<NlValidation, NlError> {
     if vals.is_empty() {
-        return Err(NlError::Data("no record to validate on".into()));
+        return Err(NlError::NoValidationRecord);
     }
     let model = &fit.model;
     let offset = fit.get("offset").unwrap_or(0.0);
@@ -1057,7 +1057,7 @@ pub fn validate_segments(
     let (mut exact, mut smooth_pairs) = (Vec::new(), Vec::new());
     let (mut y_all, mut yh_all) = (Vec::new(), Vec::new());
     for val in vals {
-        val.check(20).map_err(|e| NlError::Data(e.to_string()))?;
+        val.check(20).map_err(NlError::Record)?;
         let u: Vec<f64> = val.u.iter().map(|u| u + offset).collect();
         let out = simulate_driven(
             &plant,
@@ -1067,7 +1067,7 @@ pub fn validate_segments(
             &u,
             &DrivenStart::Rest { theta_m: val.y[0] },
         )
-        .map_err(|e| NlError::Data(format!("validation simulation: {e}")))?;
+        .map_err(NlError::ValidationSimulation)?;
         let v = interval_velocity(&val.y, val.ts);
         let vh = interval_velocity(&out.theta_m, val.ts);
         let smooth = simulate_velocity(model, &values, &val.u, val.ts, val.y[0], None)
