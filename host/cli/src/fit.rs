@@ -310,7 +310,8 @@ impl FitArgs {
     /// The library's error in the words of these flags (`--fix`, `--start PATH`).
     fn flagged(&self, e: FitRunError) -> Box<dyn std::error::Error + Send + Sync> {
         let nl = match &e {
-            FitRunError::Request(RequestError::Nonlinear(n)) | FitRunError::Nonlinear(n) => n,
+            FitRunError::Request(RequestError::Nonlinear(n)) => n,
+            FitRunError::Nonlinear(n) => &**n,
             _ => return e.into(),
         };
         match (nl, &self.start) {

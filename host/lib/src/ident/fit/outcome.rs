@@ -239,7 +239,7 @@ pub enum FitRunError {
     Figure(#[from] FigureError),
     /// the nonlinear engine, on no particular record (a start of another model)
     #[error(transparent)]
-    Nonlinear(NlRunError),
+    Nonlinear(Box<NlRunError>),
     /// the nonlinear engine on a record (its start, fit or validation)
     #[error("{record}: {source}")]
     NonlinearOn {
@@ -247,9 +247,9 @@ pub enum FitRunError {
         record: String,
         /// what failed
         #[source]
-        source: NlRunError,
+        source: Box<NlRunError>,
     },
     /// the velocity figure's simulation
     #[error(transparent)]
-    VelocityFigure(NlError),
+    VelocityFigure(Box<NlError>),
 }

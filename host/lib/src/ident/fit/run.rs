@@ -779,13 +779,13 @@ fn run_nonlinear(
     let why = |e: NlRunError| match e {
         NlRunError::Estimation(_) => FitRunError::NonlinearOn {
             record: ds.name.clone(),
-            source: e,
+            source: Box::new(e),
         },
         NlRunError::Validation(_) => FitRunError::NonlinearOn {
             record: val_name.to_string(),
-            source: e,
+            source: Box::new(e),
         },
-        e => FitRunError::Nonlinear(e),
+        e => FitRunError::Nonlinear(Box::new(e)),
     };
     let t0 = Instant::now();
     let done = nonlinear::run(
@@ -817,7 +817,10 @@ fn run_nonlinear(
             Some((v, n)) => (v, n.as_str()),
             None => (&est, ds.name.as_str()),
         };
-        Some(VelocityFigure::new(&done.result.fit, d, n).map_err(FitRunError::VelocityFigure)?)
+        Some(
+            VelocityFigure::new(&done.result.fit, d, n)
+                .map_err(|e| FitRunError::VelocityFigure(Box::new(e)))?,
+        )
     } else {
         None
     };
