@@ -4,26 +4,7 @@
 //! refusals.
 
 mod common;
-use common::{jointid, json_of, shared, tmpdir};
-
-fn simulate(dir: &std::path::Path, name: &str, seed: &str, exc_seed: &str) -> String {
-    let out = dir.join(name);
-    json_of(&jointid(&[
-        "simulate",
-        "--model",
-        "three-mass",
-        "--effect",
-        "nonlinear_stiffness",
-        "--seed",
-        seed,
-        "--excitation-seed",
-        exc_seed,
-        "--out",
-        out.to_str().unwrap(),
-        "--json",
-    ]));
-    out.display().to_string()
-}
+use common::{jointid, json_of, shared, stiffening_capture, tmpdir};
 
 /// `simulate --effect nonlinear_stiffness`, then `diagnose` with three candidates: the
 /// cubic spring ranks first among the single effects, significant, with `k3` near the
@@ -31,8 +12,8 @@ fn simulate(dir: &std::path::Path, name: &str, seed: &str, exc_seed: &str) -> St
 #[test]
 fn diagnose_finds_the_hidden_cubic_spring_of_a_simulated_capture() {
     let dir = tmpdir("cubic");
-    let est = simulate(&dir, "est.jcap", "5", "7");
-    let val = simulate(&dir, "val.jcap", "6", "8");
+    let est = stiffening_capture(&dir, "est.jcap", "5", "7");
+    let val = stiffening_capture(&dir, "val.jcap", "6", "8");
     let j = json_of(&jointid(&[
         "diagnose",
         &est,
@@ -116,8 +97,8 @@ fn diagnose_names_coulomb_friction_on_the_measured_emps_drive() {
 #[test]
 fn diagnose_takes_effect_specs_with_values_and_the_model_names_of_fit() {
     let dir = tmpdir("specs");
-    let est = simulate(&dir, "est.jcap", "5", "7");
-    let val = simulate(&dir, "val.jcap", "6", "8");
+    let est = stiffening_capture(&dir, "est.jcap", "5", "7");
+    let val = stiffening_capture(&dir, "val.jcap", "6", "8");
     let j = json_of(&jointid(&[
         "diagnose",
         &est,
@@ -365,8 +346,8 @@ fn diagnose_report_renders_in_headless_chromium_with_the_verdict_and_every_figur
         "the scan misses a script error or a load: {problems:?}"
     );
 
-    let est = simulate(&dir, "est.jcap", "5", "7");
-    let val = simulate(&dir, "val.jcap", "6", "8");
+    let est = stiffening_capture(&dir, "est.jcap", "5", "7");
+    let val = stiffening_capture(&dir, "val.jcap", "6", "8");
     let report = dir.join("report.html");
     let plots = dir.join("svg");
     let j = json_of(&jointid(&[

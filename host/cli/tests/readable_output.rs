@@ -3,7 +3,7 @@
 //! wrote listed at the end of its output.
 
 mod common;
-use common::{jointid, json_of, tmpdir};
+use common::{jointid, json_of, stiffening_capture, tmpdir};
 
 /// A black box of order 1 (`y[k+1] = a y[k] + u[k]`) saved as `fit --save` would, at the
 /// rate of `jointid::test_support::capture_csv` (1 kHz).
@@ -142,27 +142,6 @@ fn validate_prints_one_headline_fit_and_explains_the_other() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The three-mass joint with a cubic spring simulated into `dir/name` (a `.jcap`), as
-/// `diagnose_command` makes its captures.
-fn stiffening(dir: &std::path::Path, name: &str, seed: &str, exc_seed: &str) -> String {
-    let out = dir.join(name);
-    json_of(&jointid(&[
-        "simulate",
-        "--model",
-        "three-mass",
-        "--effect",
-        "nonlinear_stiffness",
-        "--seed",
-        seed,
-        "--excitation-seed",
-        exc_seed,
-        "--out",
-        out.to_str().unwrap(),
-        "--json",
-    ]));
-    out.display().to_string()
-}
-
 /// `diagnose`'s text report names one headline FIT, the gap metric, with the nominal's
 /// and the best model's figures; the nominal's toolbox FIT of θ_m (-4503 % on these
 /// captures, printed beside the 75 % of the gap metric before) is left to `--json` and the
@@ -171,8 +150,8 @@ fn stiffening(dir: &std::path::Path, name: &str, seed: &str, exc_seed: &str) -> 
 #[test]
 fn diagnose_prints_one_headline_fit_and_the_files_it_wrote() {
     let dir = tmpdir("diagnose");
-    let est = stiffening(&dir, "est.jcap", "5", "7");
-    let val = stiffening(&dir, "val.jcap", "6", "8");
+    let est = stiffening_capture(&dir, "est.jcap", "5", "7");
+    let val = stiffening_capture(&dir, "val.jcap", "6", "8");
     let report = dir.join("report.html");
     let plots = dir.join("svg");
     let o = jointid(&[

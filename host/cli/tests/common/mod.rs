@@ -55,3 +55,25 @@ pub fn shared(rel: &str) -> String {
         .display()
         .to_string()
 }
+
+/// `jointid simulate` of the three-mass joint with the default cubic spring into
+/// `dir/name` (noise seed `seed`, excitation phases `exc_seed`): a capture whose hidden
+/// effect `diagnose` must name. Returns its path.
+pub fn stiffening_capture(dir: &std::path::Path, name: &str, seed: &str, exc_seed: &str) -> String {
+    let out = dir.join(name);
+    json_of(&jointid(&[
+        "simulate",
+        "--model",
+        "three-mass",
+        "--effect",
+        "nonlinear_stiffness",
+        "--seed",
+        seed,
+        "--excitation-seed",
+        exc_seed,
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]));
+    out.display().to_string()
+}
