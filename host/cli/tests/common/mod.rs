@@ -59,6 +59,7 @@ pub fn shared(rel: &str) -> String {
 /// `jointid simulate` of the three-mass joint with the default cubic spring into
 /// `dir/name` (noise seed `seed`, excitation phases `exc_seed`): a capture whose hidden
 /// effect `diagnose` must name. Returns its path.
+#[allow(dead_code)]
 pub fn stiffening_capture(dir: &std::path::Path, name: &str, seed: &str, exc_seed: &str) -> String {
     let out = dir.join(name);
     json_of(&jointid(&[
