@@ -30,9 +30,14 @@ start=$(date +%s)
 echo "wheel built in $(( $(date +%s) - start )) s"
 "$work/venv/bin/pip" install --quiet "$work"/wheels/jointid-*.whl
 
-echo "== python: the release binary the tests compare with"
-cargo build --release --manifest-path "$root/Cargo.toml" -p jointid-cli
-export JOINTID_BIN="$target/release/jointid"
+# the release binary the tests compare with: the one `cargo test --release` built beside
+# the tests (.ci/run gives it), else built here
+if [ -z "${JOINTID_BIN:-}" ]; then
+    echo "== python: the release binary the tests compare with"
+    cargo build --release --manifest-path "$root/Cargo.toml" -p jointid-cli
+    export JOINTID_BIN="$target/release/jointid"
+fi
+echo "== python: comparing with $JOINTID_BIN"
 
 echo "== python: pytest"
 # run from the tests directory, so `import jointid` is the installed wheel, not python/jointid
