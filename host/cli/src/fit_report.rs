@@ -208,15 +208,30 @@ fn linear_report(
     }
 }
 
-fn print_linear_text(out: &mut dyn Write, r: &FitReport) -> std::io::Result<()> {
-    writeln!(out, "jointid fit: {} on {}", r.model, r.file)?;
-    writeln!(out, "  method: {}", r.method)?;
+/// The first lines of both reports: model, file, method, record and fitting time.
+fn print_heading(
+    out: &mut dyn Write,
+    (model, file, method): (&str, &str, &str),
+    samples: usize,
+    ts: f64,
+    seconds: f64,
+) -> std::io::Result<()> {
+    writeln!(out, "jointid fit: {model} on {file}")?;
+    writeln!(out, "  method: {method}")?;
     writeln!(
         out,
-        "  {} samples, Ts = {} s, fitted in {:.2} s",
+        "  {samples} samples, Ts = {} s, fitted in {seconds:.2} s",
+        jointid::data::fmt_sig(ts, 4)
+    )
+}
+
+fn print_linear_text(out: &mut dyn Write, r: &FitReport) -> std::io::Result<()> {
+    print_heading(
+        out,
+        (&r.model, &r.file, &r.method),
         r.samples,
-        jointid::data::fmt_sig(r.ts, 4),
-        r.seconds
+        r.ts,
+        r.seconds,
     )?;
     if !r.parameters.is_empty() {
         writeln!(
@@ -523,14 +538,12 @@ pub(crate) fn write_velocity_plot(
 }
 
 fn print_nonlinear_text(out: &mut dyn Write, r: &NlReport<'_>, fit: &NlFit) -> std::io::Result<()> {
-    writeln!(out, "jointid fit: {} on {}", r.model, r.file)?;
-    writeln!(out, "  method: {}", r.method)?;
-    writeln!(
+    print_heading(
         out,
-        "  {} samples, Ts = {} s, fitted in {:.2} s",
+        (&r.model, r.file, r.method),
         r.samples,
-        jointid::data::fmt_sig(r.ts, 4),
-        r.seconds
+        r.ts,
+        r.seconds,
     )?;
     writeln!(out, "  start: {}", r.start)?;
     for s in &r.steps {
