@@ -48,7 +48,7 @@ pub struct DelimiterArg {
 
 /// The columns of a data file that is not a capture CSV: declared once, flattened into
 /// every command that reads data through a column mapping (analyze, validate, diagnose,
-/// info). `fit` declares its own beside `--output-kind` (`fit::FitDataArgs`).
+/// info), and into `fit`'s [`FitDataArgs`].
 #[derive(Debug, Clone, Default, Args)]
 pub struct ColumnArgs {
     /// time column [s] (with --input and --output; default: the capture CSV's `t`)
@@ -277,23 +277,9 @@ pub struct FitDataArgs {
     /// data file: capture CSV (`t,theta_ref,u,theta_m`), a mapped CSV, or `.jcap`
     #[arg(value_name = "DATA")]
     pub path: PathBuf,
-    /// time column [s] (with --input and --output)
-    #[arg(long, value_name = "COL", requires_all = ["input", "output_col"])]
-    pub time: Option<String>,
-    /// input column (torque [N·m] or force [N])
-    #[arg(long, value_name = "COL", requires_all = ["time", "output_col"])]
-    pub input: Option<String>,
-    /// output column (motor angle [rad] or position [m]; see --output-kind)
-    #[arg(
-        long = "output",
-        visible_alias = "output-col",
-        value_name = "COL",
-        requires_all = ["time", "input"]
-    )]
-    pub output_col: Option<String>,
-    /// reference column (default: the capture CSV's `theta_ref`)
-    #[arg(long, value_name = "COL")]
-    pub reference: Option<String>,
+    /// which columns hold the signals
+    #[command(flatten)]
+    pub columns: ColumnArgs,
     /// how to read the files and which part to use
     #[command(flatten)]
     pub read: ReadArgs,
@@ -302,14 +288,7 @@ pub struct FitDataArgs {
 impl FitDataArgs {
     /// the same mapping as analysis' [`DataArgs`] for `path`
     pub fn data_args(&self, path: &Path) -> DataArgs {
-        DataArgs {
-            path: path.to_path_buf(),
-            time: self.time.clone(),
-            input: self.input.clone(),
-            output: self.output_col.clone(),
-            reference: self.reference.clone(),
-            read: self.read.clone(),
-        }
+        DataArgs::new(path, &self.columns, &self.read)
     }
 }
 

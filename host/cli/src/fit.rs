@@ -28,12 +28,13 @@ use jointid::ident::fit::{
     self as library, Domain, FitOptions, FitRecords, FitRequest, FitRunError, FittedModel,
     NlInputs, RequestError,
 };
-use jointid::ident::frf_fit;
 use jointid::ident::grey_box::{Output, DEFAULT_GEAR_RATIO};
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::NlRunError;
+use jointid::ident::sml;
 use jointid::ident::subspace::Method;
 use jointid::ident::validate::DEFAULT_LAGS;
+use jointid::model::effects::parse_given;
 use jointid::model::spec::{Family, ModelSpec, SpecError, Structure, NONLINEAR_TWO_MASS};
 
 /// Friction model of the rigid body.
@@ -202,10 +203,10 @@ fn parse_tau(s: &str) -> Result<f64, String> {
 
 fn parse_delay(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
-        Ok(d) if (0.0..=frf_fit::MAX_DRIVE_SAMPLES).contains(&d) => Ok(d),
+        Ok(d) if (0.0..=sml::MAX_DRIVE_SAMPLES).contains(&d) => Ok(d),
         _ => Err(format!(
             "`{s}` is not a delay in samples, 0 ≤ D ≤ {}",
-            frf_fit::MAX_DRIVE_SAMPLES
+            sml::MAX_DRIVE_SAMPLES
         )),
     }
 }
@@ -279,7 +280,12 @@ impl FitArgs {
         // one effect per spec, `none` gives none)
         let effects = spec.effects.as_ref().map_or(0, Vec::len);
         let specs = ModelSpec::effect_specs(self.model.nonlinear_two_mass, &self.effects);
-        let given = specs.iter().take(effects).map(|s| given_keys(s)).collect();
+        let given = specs
+            .iter()
+            .take(effects)
+            .map(|s| parse_given(s).map(|(_, given)| given))
+            .collect::<Result<_, _>>()
+            .map_err(|e| e.to_string())?;
         let options = FitOptions {
             spec,
             method: match self.method {
@@ -322,19 +328,6 @@ impl FitArgs {
             _ => e.into(),
         }
     }
-}
-
-/// Keys given a value in an `--effect` spec (`name:key=value,...`).
-fn given_keys(spec: &str) -> Vec<(String, f64)> {
-    let Some((_, rest)) = spec.split_once(':') else {
-        return Vec::new();
-    };
-    rest.split(',')
-        .filter_map(|item| {
-            let (k, v) = item.split_once('=')?;
-            Some((k.trim().to_string(), v.trim().parse().ok()?))
-        })
-        .collect()
 }
 
 /// `--fix NAME=VALUE` items.

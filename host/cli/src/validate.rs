@@ -34,12 +34,12 @@ use jointid::ident::fit::{
     check_lags, velocity_record, FitData, FitMetric, SegmentJson, NL_FIT_NAME, VELOCITY_FIT_NAME,
 };
 use jointid::ident::frf::{analyze_dataset, analyze_segments};
-use jointid::ident::frf_fit::{periodic_fit_percent, periodic_fit_signals, PERIODIC_FIT_NAME};
 use jointid::ident::grey_box::Output;
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::{
     validate as nl_validate, validate_segments, NlOptions, NlValidation,
 };
+use jointid::ident::sml::{periodic_fit_percent, periodic_fit_signals, PERIODIC_FIT_NAME};
 use jointid::ident::validate::{Validation, DEFAULT_LAGS, FIT_NAME};
 
 /// Arguments of `jointid validate`, both forms (a model file, or a simulated column).

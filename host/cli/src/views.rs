@@ -20,7 +20,7 @@ use jointid::report::views::{
 use super::write_svg;
 
 /// What `compare.svg` draws against the measured output on periodic data: the record's
-/// period under the periodic FIT ([`jointid::ident::frf_fit::periodic_fit_signals`]).
+/// period under the periodic FIT ([`jointid::ident::sml::periodic_fit_signals`]).
 pub const PERIODIC_COMPARED: &str = "the model's (one averaged period, reliable excited lines)";
 
 /// What `compare.svg` draws against the measured output's rate under the velocity FIT

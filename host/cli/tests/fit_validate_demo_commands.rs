@@ -248,7 +248,7 @@ fn validate_of_a_diverging_model_fails_both_tests_and_exits_1() {
         "\"source\"",
         &format!(
             "\"fit_name\":{},\"source\"",
-            serde_json::to_string(jointid::ident::frf_fit::PERIODIC_FIT_NAME).unwrap()
+            serde_json::to_string(jointid::ident::sml::PERIODIC_FIT_NAME).unwrap()
         ),
         1,
     );
@@ -263,7 +263,7 @@ fn validate_of_a_diverging_model_fails_both_tests_and_exits_1() {
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(
         j["fit_name"].as_str(),
-        Some(jointid::ident::frf_fit::PERIODIC_FIT_NAME),
+        Some(jointid::ident::sml::PERIODIC_FIT_NAME),
         "{j}"
     );
     assert!(j["fit"].is_null(), "NaN periodic FIT: {j}");

@@ -14,9 +14,9 @@ use std::time::Instant;
 
 use jointid::data::{Dataset, ExcitationConfig};
 use jointid::ident::frf::analyze_dataset;
-use jointid::ident::frf_fit::{fit_frf, FrfFitOptions};
 use jointid::ident::grey_box::{GreyBoxModel, Output};
 use jointid::ident::linalg::GaussRng;
+use jointid::ident::sml::{fit_frf, FrfFitOptions};
 use jointid::model::spec::Structure;
 use jointid::sim::{simulate_excitation, Plant, SimConfig};
 use jointid::test_support::random_joint;

@@ -9,7 +9,7 @@
 //! record) and the identified resonance / anti-resonance frequencies
 //! against the truth.
 //!
-//! The frequency-domain path ([`jointid::ident::frf_fit`]) is measured on the
+//! The frequency-domain path ([`jointid::ident::sml`]) is measured on the
 //! simulator's default closed-loop joint (quantised encoder, noise, slow
 //! torque disturbance, 0.5 ms current loop) at 15,000 and 150,000 samples:
 //! the FRF once, then the fit on its lines, with its time relative to the
@@ -21,11 +21,12 @@
 use std::hint::black_box;
 use std::time::Instant;
 
+use jointid::data::dsp::filtfilt_lowpass;
 use jointid::data::IdData;
 use jointid::ident::grey_box::{
     self, reference_three_mass, GreyBoxModel, GreyBoxOptions, Output, DEFAULT_GEAR_RATIO,
 };
-use jointid::ident::linalg::{filtfilt_lowpass, GaussRng};
+use jointid::ident::linalg::GaussRng;
 use jointid::ident::pem::{self, FullSs, ParamModel, PemOptions};
 use jointid::ident::ss::StateSpace;
 use jointid::ident::subspace::{self, estimate_x0, Method, Order, SubspaceOptions};
@@ -131,8 +132,8 @@ fn frequency_domain_case(n: usize, td_seconds: f64) {
     use jointid::data::{Dataset, ExcitationConfig};
     use jointid::ident::fit::DrivenModel;
     use jointid::ident::frf::analyze_dataset;
-    use jointid::ident::frf_fit::{fit_frf, periodic_fit_percent, FrfFitOptions};
     use jointid::ident::frf_subspace::black_box_frf;
+    use jointid::ident::sml::{fit_frf, periodic_fit_percent, FrfFitOptions};
     use jointid::sim::{simulate_excitation, SimConfig};
     // the paper's multisine (f0 = 0.4 Hz, N = 5000, lines up to 121.6 Hz)
     // without its ramp: 15,000 samples are three periods, the first dropped

@@ -234,8 +234,8 @@ fn code_in(root: &Path) -> BTreeMap<String, Vec<(usize, String)>> {
     out
 }
 
-/// The module path of a source file relative to its crate's `src/` (`ident/frf_fit.rs` is
-/// `[ident, frf_fit]`, `ident/mod.rs` is `[ident]`, `lib.rs` and `main.rs` are `[]`).
+/// The module path of a source file relative to its crate's `src/` (`ident/sml.rs` is
+/// `[ident, sml]`, `ident/mod.rs` is `[ident]`, `lib.rs` and `main.rs` are `[]`).
 fn module_of(rel: &str) -> Vec<String> {
     let mut parts: Vec<String> = rel
         .trim_end_matches(".rs")

@@ -22,6 +22,7 @@ use crate::ident::frf::ClassLevel;
 use crate::ident::linalg::pinv_sym;
 use crate::ident::lm::{minimize, LeastSquares, LmOptions, Normal};
 use crate::ident::nonlinear::{sim_plant, NlFit, NlParam, Owner, ParamDef, Scale};
+use crate::ident::validate::{centred_sum_of_squares, fit_from_sums};
 use nalgebra::{DMatrix, DVector};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -659,12 +660,8 @@ pub fn refine(
         covariance: false,
         ..LmOptions::default()
     };
-    let ss_tot = {
-        let y = problem.measured();
-        let m = y.iter().sum::<f64>() / y.len().max(1) as f64;
-        y.iter().map(|v| (v - m).powi(2)).sum::<f64>()
-    };
-    let fit_of = |ssr: f64| 100.0 * (1.0 - (ssr / ss_tot).sqrt());
+    let ss_tot = centred_sum_of_squares(problem.measured());
+    let fit_of = |ssr: f64| fit_from_sums(ssr, ss_tot);
     let before = problem.cost(&z0);
     if !before.is_finite() {
         return Err(RefineError::NotSimulating);

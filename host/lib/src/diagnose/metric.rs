@@ -4,8 +4,8 @@
 //! applied alike to the measured and the simulated velocity; the simulated one comes from
 //! the simulator's exact laws driven by the measured torque ([`simulate_fit`]).
 
+use crate::data::dsp::{butter_highpass_sos, butter_lowpass_sos, filtfilt_lowpass, SosBank};
 use crate::data::IdData;
-use crate::ident::linalg::{butter_highpass_sos, butter_lowpass_sos, filtfilt_lowpass, SosBank};
 use crate::ident::nonlinear::{interval_velocity, sim_plant, NlFit};
 use crate::ident::validate::fit_percent;
 use crate::ident::validate::ValidateError;

@@ -208,7 +208,7 @@ pub enum FitError {
     SegmentsCoulomb,
     /// the frequency-domain fit of a physical model (its message as it is)
     #[error(transparent)]
-    Frf(#[from] crate::ident::frf_fit::FrfFitError),
+    Frf(#[from] crate::ident::sml::FrfFitError),
     /// the frequency-domain black box (its message as it is)
     #[error(transparent)]
     FrfBlackBox(#[from] crate::ident::frf_subspace::FrfSubspaceError),
@@ -1152,7 +1152,7 @@ impl Fitted {
     /// the model (at its own rate: the capture rate of a physical model, [`Fitted::decimate`])
     /// driven by the measured torque from rest, its interval-mean motor velocity against the
     /// measured one, both through the second-order high-pass at
-    /// [`crate::ident::nonlinear::fit::DEFAULT_HIGHPASS_HZ`] the velocity fit's cost uses
+    /// [`crate::ident::nonlinear::output_error::DEFAULT_HIGHPASS_HZ`] the velocity fit's cost uses
     /// ([`crate::ident::nonlinear::pooled_velocity_fit`]). Started from rest, no initial
     /// state is fitted to the angle (whose drift would set it); the prefilter's transient and
     /// a torque offset's ramp decay within a fraction of a second.
@@ -1161,7 +1161,7 @@ impl Fitted {
     /// [`FitError::DecimationMismatch`] for a record at another rate, [`FitError::BadData`]
     /// for an unusable one, [`FitError::Validate`].
     pub fn velocity_fit_segments(&self, data: &[FitData]) -> Result<(f64, Vec<f64>), FitError> {
-        use crate::ident::nonlinear::fit::DEFAULT_HIGHPASS_HZ;
+        use crate::ident::nonlinear::output_error::DEFAULT_HIGHPASS_HZ;
         let pairs = data
             .iter()
             .map(|d| self.velocity_pair(d))
@@ -1220,7 +1220,7 @@ impl Fitted {
     /// # Errors
     /// As [`Fitted::velocity_fit_segments`].
     pub fn velocity_fit_signals(&self, d: &FitData) -> Result<(Vec<f64>, Vec<f64>), FitError> {
-        use crate::ident::nonlinear::fit::{highpassed_pair, DEFAULT_HIGHPASS_HZ};
+        use crate::ident::nonlinear::output_error::{highpassed_pair, DEFAULT_HIGHPASS_HZ};
         let (v, vh) = self.velocity_pair(d)?;
         Ok(highpassed_pair(&v, &vh, self.ts, DEFAULT_HIGHPASS_HZ))
     }

@@ -325,7 +325,7 @@ pub struct Frf {
     /// standard deviation of Ĝ(k) (complex, E|Ĝ − G|²)^½ [output unit / input unit]
     pub sigma: Vec<f64>,
     /// the input and output spectra behind `g`, for fits that weight by the
-    /// noise on both ([`crate::ident::frf_fit`]); not serialised
+    /// noise on both ([`crate::ident::sml`]); not serialised
     #[serde(skip)]
     pub spectra: FrfSpectra,
 }
@@ -337,7 +337,7 @@ pub struct Frf {
 /// A weight for the excited line `k` pools the noise of its window: with the
 /// paper's three periods one line's variance rests on 4 degrees of freedom,
 /// too few to weight by. The pooling is done by the fit with the model's
-/// response at each line of the window ([`crate::ident::frf_fit`]): in closed loop
+/// response at each line of the window ([`crate::ident::sml`]): in closed loop
 /// the noise on `u` and `θ_m` is strongly correlated and the output error's
 /// variance `σ²_Y + |G|² σ²_U − 2 Re(G* σ_YU)` nearly cancels, so pooling the
 /// raw (co)variances with one `G` would overstate it where `G` changes fast

@@ -1,6 +1,6 @@
 //! Black-box models from the FRF: frequency-domain subspace identification
 //! at the excited lines, refined by the same sample maximum-likelihood cost
-//! as the physical models ([`crate::ident::frf_fit`]).
+//! as the physical models ([`crate::ident::sml`]).
 //!
 //! Why: on undecimated 2 kHz data a time-domain subspace model of order 11
 //! spends its order on the noise and the drift, and its simulation drifts
@@ -27,11 +27,11 @@ use rustfft::num_complex::Complex64;
 use thiserror::Error;
 
 use crate::ident::frf::Frf;
-use crate::ident::frf_fit::{
+use crate::ident::lm::{self, LeastSquares, LmOptions, Termination};
+use crate::ident::sml::{
     output_kind_check, solve_hessenberg, unit_circle, unsupported_modes, Cost, FitWarning,
     FrfModel, Lines, Problem, COST_RATIO_WARN,
 };
-use crate::ident::lm::{self, LeastSquares, LmOptions, Termination};
 use crate::ident::ss::StateSpace;
 
 /// Why a black box could not be fitted to the FRF.
@@ -427,7 +427,7 @@ mod tests {
     use super::*;
     use crate::data::{Dataset, ExcitationConfig};
     use crate::ident::frf::analyze_dataset;
-    use crate::ident::frf_fit::periodic_fit_percent;
+    use crate::ident::sml::periodic_fit_percent;
     use crate::sim::{simulate_excitation, SimConfig};
 
     fn frf_of(cfg: &SimConfig, seed: u64) -> Frf {

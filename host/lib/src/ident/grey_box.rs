@@ -53,8 +53,9 @@
 use nalgebra::{DMatrix, DVector, RowDVector, SymmetricEigen};
 use thiserror::Error;
 
+use crate::data::dsp::{central_diff, filtfilt_lowpass};
 use crate::data::IdData;
-use crate::ident::linalg::{central_diff, filtfilt_lowpass, solve_spd};
+use crate::ident::linalg::solve_spd;
 use crate::ident::lm::LmOptions;
 use crate::ident::pem::{self, ParamModel, PemFit, PemOptions};
 use crate::ident::ss::{ContinuousSs, StateSpace};
@@ -63,19 +64,19 @@ use crate::model::params::unit_of;
 use crate::model::spec::Structure;
 
 mod driven;
-mod fit;
 mod idim;
 mod init;
 mod linear;
+mod output_error;
 
 pub use driven::DrivenModel;
-pub use fit::{fit, GreyBoxFit, GreyBoxOptions};
 pub use idim::{rigid_idim, IdimOptions, RigidFit};
 use init::clamp_vec;
 #[cfg(test)]
 use init::{chain_closed_form, chain_match, Chain};
 pub use init::{features, initial_values, rigid_from_response, Features};
 pub use linear::GreyBoxModel;
+pub use output_error::{fit, GreyBoxFit, GreyBoxOptions};
 
 /// Physical parameters from log-parameter estimates and their standard
 /// deviations (delta method, `σ_p = p σ_{ln p}`), names and units from

@@ -9,7 +9,6 @@
 pub mod controller;
 pub mod fit;
 pub mod frf;
-pub mod frf_fit;
 pub mod frf_subspace;
 pub mod grey_box;
 pub mod linalg;
@@ -18,6 +17,7 @@ pub mod model_export;
 pub mod model_file;
 pub mod nonlinear;
 pub mod pem;
+pub mod sml;
 pub mod ss;
 pub mod subspace;
 pub mod validate;

@@ -26,10 +26,10 @@ use crate::ident::fit::{
     output_name, param_map, FitMetric, FitOutcome, Fitted, FittedModel, ParamJson, RigidFriction,
     NL_FIT_NAME, VELOCITY_FIT_NAME,
 };
-use crate::ident::frf_fit::PERIODIC_FIT_NAME;
 use crate::ident::grey_box::{Output, PhysParam};
 use crate::ident::lm::Termination;
 use crate::ident::nonlinear::{simulate_args, NlFit, NlModel, NlParam, Owner};
+use crate::ident::sml::PERIODIC_FIT_NAME;
 use crate::ident::ss::StateSpace;
 use crate::model::effects::Effect;
 use crate::model::params::unit_of;
@@ -155,7 +155,7 @@ pub struct SavedModel {
     pub fit_estimation: f64,
     /// which FIT `fit_estimation` is, when not the toolbox's (a model fitted
     /// in the frequency domain: the periodic steady-state FIT,
-    /// [`crate::ident::frf_fit::PERIODIC_FIT_NAME`]; a model fitted on the motor
+    /// [`crate::ident::sml::PERIODIC_FIT_NAME`]; a model fitted on the motor
     /// velocity: [`crate::ident::fit::VELOCITY_FIT_NAME`]); `validate` reports the
     /// same one (the periodic one on periodic data)
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -83,18 +83,24 @@ pub fn fit_percent(y: &[f64], yhat: &[f64]) -> Result<f64, ValidateError> {
             simulated: yhat.len(),
         });
     }
-    let mean = y.iter().sum::<f64>() / y.len().max(1) as f64;
-    let den: f64 = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>().sqrt();
+    let den = centred_sum_of_squares(y);
     if den == 0.0 {
         return Err(ValidateError::ConstantOutput);
     }
-    let num: f64 = y
-        .iter()
-        .zip(yhat)
-        .map(|(a, b)| (a - b).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    Ok(100.0 * (1.0 - num / den))
+    let num: f64 = y.iter().zip(yhat).map(|(a, b)| (a - b).powi(2)).sum();
+    Ok(fit_from_sums(num, den))
+}
+
+/// `Σ (y − mean(y))²`, the denominator of the FIT (squared).
+pub fn centred_sum_of_squares(y: &[f64]) -> f64 {
+    let mean = y.iter().sum::<f64>() / y.len().max(1) as f64;
+    y.iter().map(|v| (v - mean).powi(2)).sum()
+}
+
+/// FIT [%] from the residual sum of squares `ssr` and [`centred_sum_of_squares`] `ss_tot`
+/// of the measured output, for a caller that has the sums already (an optimiser's cost).
+pub fn fit_from_sums(ssr: f64, ss_tot: f64) -> f64 {
+    100.0 * (1.0 - (ssr / ss_tot).sqrt())
 }
 
 /// One correlation test: values per lag against a bound.

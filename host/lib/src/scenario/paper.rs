@@ -12,7 +12,7 @@
 //! identification. Fitted: the 11th-order black box on the decimated data;
 //! the three-mass (eq. (6)) and four-mass (eq. (7)) models, as `jointid fit`
 //! does by default, on the FRF of the estimation run at the capture rate
-//! ([`crate::ident::frf_fit`], sample maximum likelihood, the σ that `fit`
+//! ([`crate::ident::sml`], sample maximum likelihood, the σ that `fit`
 //! reports) behind the simulator's known current-loop lag (the gear ratio is
 //! taken as known the same way; the delay is estimated), or, when the
 //! estimation run is not periodic, in the time domain, started on the

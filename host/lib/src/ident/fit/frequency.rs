@@ -1,14 +1,14 @@
 //! The frequency-domain path of [`super`]: the model of a [`FitOptions`] fitted to the FRF
 //! of periodic data at its excited lines, as a [`Fitted`]. A physical model goes to
-//! [`frf_fit`] (sample maximum likelihood, exact ZOH with the current-loop lag and a
+//! [`sml`] (sample maximum likelihood, exact ZOH with the current-loop lag and a
 //! fractional delay); the black box to [`black_box_frf`] (frequency-domain subspace,
 //! McKelvey et al. 1996, refined by the same cost). [`below_frf`] checks a time-domain fit
 //! against the frequency-domain fit of the same family.
 
 use crate::ident::frf::FrfAnalysis;
-use crate::ident::frf_fit::{self, Drive, DriveEstimate, FitWarning, FrfFit, FrfFitOptions};
 use crate::ident::frf_subspace::black_box_frf;
 use crate::ident::grey_box::PhysParam;
+use crate::ident::sml::{self, Drive, DriveEstimate, FitWarning, FrfFit, FrfFitOptions};
 use crate::model::spec::{Family, Structure};
 
 use super::{FitError, FitMetric, FitOptions, Fitted};
@@ -16,7 +16,7 @@ use super::{FitError, FitMetric, FitOptions, Fitted};
 /// Iterations of the black box's refinement by sample maximum likelihood.
 const BLACK_BOX_ITERATIONS: usize = 40;
 
-/// The options of [`frf_fit::fit_frf`] for `structure` at sample interval `ts` [s]: the
+/// The options of [`sml::fit_frf`] for `structure` at sample interval `ts` [s]: the
 /// output and gear ratio of `opts`; with `held`, the lag [s] and delay [samples] the spec
 /// holds (the others estimated).
 fn frf_options(structure: Structure, opts: &FitOptions, ts: f64, held: bool) -> FrfFitOptions {
@@ -50,7 +50,7 @@ pub fn fit_frequency_domain(
 ) -> Result<Fitted, FitError> {
     match opts.spec.family {
         Family::Physical(structure) => {
-            let ff = frf_fit::fit_frf(&analysis.frf, &frf_options(structure, opts, ts, true))?;
+            let ff = sml::fit_frf(&analysis.frf, &frf_options(structure, opts, ts, true))?;
             Ok(fitted_of(opts, &ff, analysis, decimate))
         }
         Family::BlackBox(n) => {
@@ -147,7 +147,7 @@ pub fn below_frf(
     let a = analysis;
     let reference = match opts.spec.family {
         Family::Physical(structure) => {
-            let ff = frf_fit::fit_frf(&a.frf, &frf_options(structure, opts, ts, false)).ok()?;
+            let ff = sml::fit_frf(&a.frf, &frf_options(structure, opts, ts, false)).ok()?;
             ff.freq_response(&a.frf.freq_hz)
         }
         Family::BlackBox(n) => black_box_frf(&a.frf, n, ts, opts.feedthrough, BLACK_BOX_ITERATIONS)
@@ -155,7 +155,7 @@ pub fn below_frf(
             .model
             .freq_response(&a.frf.freq_hz),
     };
-    let frf_fit = frf_fit::periodic_fit_percent(&a.frf, &reference);
-    let fit = frf_fit::periodic_fit_percent(&a.frf, &fitted.model.freq_response(&a.frf.freq_hz));
-    (fit < frf_fit - 10.0).then_some(FitWarning::FitBelowFrf { fit, frf_fit })
+    let sml = sml::periodic_fit_percent(&a.frf, &reference);
+    let fit = sml::periodic_fit_percent(&a.frf, &fitted.model.freq_response(&a.frf.freq_hz));
+    (fit < sml - 10.0).then_some(FitWarning::FitBelowFrf { fit, sml })
 }

@@ -29,7 +29,7 @@ pub const NL_FIT_NAME: &str = "velocity FIT [%] (interval-mean motor velocity th
 #[derive(Clone, Debug, PartialEq)]
 pub struct FitFigures {
     /// its definition ([`crate::ident::validate::FIT_NAME`],
-    /// [`crate::ident::frf_fit::PERIODIC_FIT_NAME`], [`super::VELOCITY_FIT_NAME`],
+    /// [`crate::ident::sml::PERIODIC_FIT_NAME`], [`super::VELOCITY_FIT_NAME`],
     /// [`NL_FIT_NAME`])
     pub name: &'static str,
     /// its short name: `toolbox`, `periodic` or `velocity`

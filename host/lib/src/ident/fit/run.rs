@@ -39,8 +39,8 @@ use super::{
 use crate::data::segment::{longest_segment, segment_list, usable_segments, FITTING_NOTES};
 use crate::data::{Dataset, IdData};
 use crate::ident::frf::{analyze_dataset, analyze_segments, FrfAnalysis, FrfError};
-use crate::ident::frf_fit::{self, PERIODIC_FIT_NAME};
 use crate::ident::nonlinear::{self, NlData, NlRequest, NlRunError};
+use crate::ident::sml::{self, PERIODIC_FIT_NAME};
 use crate::ident::ss::Resonances;
 use crate::ident::validate::{validate_periodic, Validation, FIT_NAME};
 use crate::model::spec::Family;
@@ -570,7 +570,7 @@ fn not_periodic_note(name: &str, why: &FrfError) -> String {
     )
 }
 
-/// The frequency-domain path ([`crate::ident::frf_fit`], [`fit_frequency_domain`]).
+/// The frequency-domain path ([`crate::ident::sml`], [`fit_frequency_domain`]).
 fn run_frequency_domain(req: &FitRequest, f: Frequency<'_>) -> Result<FitOutcome, FitRunError> {
     let Frequency {
         segs,
@@ -602,13 +602,13 @@ fn run_frequency_domain(req: &FitRequest, f: Frequency<'_>) -> Result<FitOutcome
     // disturbances and drift averaged out), at the capture rate; the residuals the fit
     // weighted, line by line, against their bound
     let tests = |d: &Dataset, a: &FrfAnalysis| -> Result<Validation, FitRunError> {
-        let s = frf_fit::periodic_steady_state(&d.data, &a.layout, respond).map_err(|source| {
+        let s = sml::periodic_steady_state(&d.data, &a.layout, respond).map_err(|source| {
             FitRunError::SteadyState {
                 name: d.name.clone(),
                 source,
             }
         })?;
-        let (line_e, nu) = frf_fit::line_residuals(&a.frf, respond);
+        let (line_e, nu) = sml::line_residuals(&a.frf, respond);
         validate_periodic(&s.u, &s.y, &s.y_hat, &line_e, nu, req.lags).map_err(|source| {
             FitRunError::Tests {
                 name: d.name.clone(),
@@ -617,7 +617,7 @@ fn run_frequency_domain(req: &FitRequest, f: Frequency<'_>) -> Result<FitOutcome
         })
     };
     let periodic_fit =
-        |a: &FrfAnalysis| frf_fit::periodic_fit_percent(&a.frf, &respond(&a.frf.freq_hz));
+        |a: &FrfAnalysis| sml::periodic_fit_percent(&a.frf, &respond(&a.frf.freq_hz));
     let (val_analysis, not_periodic) = match val_analysis {
         Some(Ok(a)) => (Some(a), None),
         Some(Err(e)) => (None, Some(e)),
@@ -630,7 +630,7 @@ fn run_frequency_domain(req: &FitRequest, f: Frequency<'_>) -> Result<FitOutcome
         // at the reliable lines, measured against the model's response
         let mut record = |title: String, a: &FrfAnalysis, period: usize| {
             let g = respond(&a.frf.freq_hz);
-            if let Some((y, y_hat)) = frf_fit::periodic_fit_signals(&a.frf, &g, period) {
+            if let Some((y, y_hat)) = sml::periodic_fit_signals(&a.frf, &g, period) {
                 records.push(CompareRecord {
                     title,
                     ts,

@@ -86,7 +86,7 @@ fn run_fits_the_three_mass_joint_on_periodic_data_in_the_frequency_domain() {
         tau.value
     );
     // one headline, the periodic FIT, on both records; the segment is the record
-    assert_eq!(out.fit.name, crate::ident::frf_fit::PERIODIC_FIT_NAME);
+    assert_eq!(out.fit.name, crate::ident::sml::PERIODIC_FIT_NAME);
     assert_eq!(out.fit.metric, "periodic");
     assert!(out.fit.estimation > 95.0, "{:?}", out.fit);
     assert!(

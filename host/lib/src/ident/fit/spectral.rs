@@ -9,7 +9,7 @@
 //! noise`, default sensors, `--domain time`, seed 1: `k_g` 4,363 N·m/rad against 127,500,
 //! FIT 6.9 %). The FRF of the same record is not hurt by the drift: Welch's averaged
 //! spectra with the reference as instrument ([`crate::ident::frf::welch`]) need no whole
-//! periods, and [`crate::ident::frf_fit::fit_frf`] on it gives both modes within 0.2 % and
+//! periods, and [`crate::ident::sml::fit_frf`] on it gives both modes within 0.2 % and
 //! the inertias and stiffnesses within about 1 % (the window's smearing biases the damping
 //! high, `d_a` +17 %). So:
 //!
@@ -18,7 +18,7 @@
 //!    ([`velocity_refined`]): the nonlinear engine with no effect attached
 //!    ([`crate::ident::nonlinear::identify`]), output error on the interval-mean velocity
 //!    through its second-order high-pass prefilter at
-//!    [`crate::ident::nonlinear::fit::DEFAULT_HIGHPASS_HZ`], the torque offset and the
+//!    [`crate::ident::nonlinear::output_error::DEFAULT_HIGHPASS_HZ`], the torque offset and the
 //!    initial velocity estimated. This is the treatment of the rigid-body integrator: on
 //!    the velocity the drift is one integration smaller and the prefilter removes what is
 //!    left below the resonances; the current-loop lag starts from the FRF fit's and is
@@ -73,9 +73,9 @@
 
 use crate::data::IdData;
 use crate::ident::frf::{welch_frf, Frf, WelchOptions};
-use crate::ident::frf_fit::{self, Drive, FrfFit, FrfFitOptions};
 use crate::ident::grey_box::{self, PhysParam};
 use crate::ident::nonlinear::{self, NlRequest, NlStart};
+use crate::ident::sml::{self, Drive, FrfFit, FrfFitOptions};
 use crate::model::spec::Structure;
 
 use super::{canonical_branches, DrivenModel, FitError, FitMetric, FitOptions, Fitted};
@@ -138,9 +138,9 @@ pub(super) fn welch_start(
     fo.r = opts.r;
     fo.delay = Drive::Fixed(0.0);
     if let Some(tau) = opts.spec.current_loop_tau {
-        fo.lag = Drive::Fixed((tau / raw.ts).clamp(0.0, frf_fit::MAX_DRIVE_SAMPLES));
+        fo.lag = Drive::Fixed((tau / raw.ts).clamp(0.0, sml::MAX_DRIVE_SAMPLES));
     }
-    let fit = frf_fit::fit_frf(&w.frf, &fo)?;
+    let fit = sml::fit_frf(&w.frf, &fo)?;
     let cost = frf_distance(&w.frf, &fit.freq_response(&w.frf.freq_hz));
     Ok(WelchStart {
         frf: w.frf,

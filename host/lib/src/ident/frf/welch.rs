@@ -249,7 +249,7 @@ mod tests {
         assert!(w.segments >= 8 && w.averages < w.segments as f64);
         let mut z2 = 0.0;
         for ((f, gh), s) in w.frf.freq_hz.iter().zip(&w.frf.g).zip(&w.frf.sigma) {
-            let z = crate::ident::frf_fit::unit_circle(&[*f], data.ts)[0];
+            let z = crate::ident::sml::unit_circle(&[*f], data.ts)[0];
             let e = (gh - lp.plant(z)).norm() / s;
             z2 += e * e;
         }

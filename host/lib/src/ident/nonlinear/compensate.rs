@@ -39,8 +39,9 @@
 //! `J_m` 1.003e-3, `k_g` 1.270e5, `d_g` 75, `F_c` 0.0301, lag 0.49 ms, validation FIT
 //! 77.6 % (27.1 % without the compensation).
 
+use crate::data::dsp::{central_diff, filtfilt_lowpass};
 use crate::data::{Dataset, IdData};
-use crate::ident::linalg::{central_diff, filtfilt_lowpass, solve_spd};
+use crate::ident::linalg::solve_spd;
 use crate::model::effects::CoulombFriction;
 use nalgebra::DMatrix;
 

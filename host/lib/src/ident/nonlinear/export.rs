@@ -3,8 +3,8 @@
 //! simulated with the simulator's exact laws from a measured torque
 //! ([`simulate_exact`], the series behind [`super::validate`]'s FITs, for plots).
 
-use super::fit::{NlError, NlFit};
 use super::model::sim_plant;
+use super::output_error::{NlError, NlFit};
 use crate::data::IdData;
 use crate::model::params::model_params;
 use crate::sim::{simulate_driven, DrivenStart};

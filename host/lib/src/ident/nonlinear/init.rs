@@ -17,8 +17,8 @@
 //!
 //! Each step's result is kept ([`Step`]) and reported, as seed 001 reports them.
 
-use super::fit::{fit_output_error, NlError, NlFit, NlOptions};
 use super::model::NlModel;
+use super::output_error::{fit_output_error, NlError, NlFit, NlOptions};
 use crate::data::IdData;
 use crate::ident::grey_box::{self, IdimOptions, Output};
 use crate::model::effects::{Attach, Effect, ExtraMode};
@@ -284,7 +284,7 @@ pub fn automatic_start_with(
             .iter()
             .filter_map(|p| {
                 let v = m.values(p, offset, 0.0);
-                super::fit::cost_at(data, &m, &v).map(|c| (c, v))
+                super::output_error::cost_at(data, &m, &v).map(|c| (c, v))
             })
             .min_by(|a, b| a.0.total_cmp(&b.0));
         let found = match best_plant {
@@ -323,7 +323,7 @@ pub fn automatic_start_with(
         searched = found;
     }
     let ripple_found = ripple.is_some() && held.is_empty();
-    let mut lin: Option<super::fit::NlFit> = None;
+    let mut lin: Option<super::output_error::NlFit> = None;
     for plant in &plants {
         // the Coulomb level: the regression's, or the grid value that explains the data best
         // with this linear start (the regression misses friction that shows only at reversals)
@@ -335,7 +335,9 @@ pub fn automatic_start_with(
                     effects: with_fc(f),
                     ..model.clone()
                 };
-                if let Some(c) = super::fit::cost_at(data, &m, &m.values(plant, offset, 0.0)) {
+                if let Some(c) =
+                    super::output_error::cost_at(data, &m, &m.values(plant, offset, 0.0))
+                {
                     if c < best {
                         best = c;
                         fc = f;
@@ -361,7 +363,9 @@ pub fn automatic_start_with(
                     effects: with,
                     ..model.clone()
                 };
-                if let Some(c) = super::fit::cost_at(data, &m, &m.values(plant, offset, 0.0)) {
+                if let Some(c) =
+                    super::output_error::cost_at(data, &m, &m.values(plant, offset, 0.0))
+                {
                     if best.as_ref().is_none_or(|(b, _)| c < *b) {
                         best = Some((c, cand));
                     }
@@ -523,7 +527,7 @@ pub fn automatic_start_with(
                 ..model.clone()
             };
             let values = m.values(&lin_plant, lin_offset, 0.0);
-            if let Some(cost) = super::fit::cost_at(data, &m, &values) {
+            if let Some(cost) = super::output_error::cost_at(data, &m, &values) {
                 if best.as_ref().is_none_or(|(c, _, _)| cost < *c) {
                     best = Some((cost, cand, lag));
                 }
@@ -762,7 +766,7 @@ fn two_mass_grid(
                 let dg = 2.0 * 0.1 * w * mu;
                 let plant = vec![jm, ja, kg, dg, fv];
                 let values = m.values(&plant, offset, 0.0);
-                if let Some(cost) = super::fit::cost_at(data, &m, &values) {
+                if let Some(cost) = super::output_error::cost_at(data, &m, &values) {
                     if best.as_ref().is_none_or(|(c, _)| cost < *c) {
                         best = Some((cost, plant));
                     }

@@ -1,6 +1,6 @@
 //! Nonlinear grey-box identification: a physical model (rigid, two-, three-, four-mass)
 //! with any of the simulator's effects attached ([`crate::model::effects`]), fitted by
-//! output error from the measured torque with exact derivatives ([`fit`]), from starting
+//! output error from the measured torque with exact derivatives ([`output_error`]), from starting
 //! values found in the data ([`init`], seed 001's three steps; when the motor sticks, grown in
 //! the time domain, [`grow`]). The equations are the
 //! simulator's ([`crate::model::laws`]); the non-smooth ones (Coulomb friction, backlash)
@@ -8,21 +8,21 @@
 
 pub mod compensate;
 pub mod export;
-pub mod fit;
 pub mod grow;
 pub mod init;
 pub mod model;
+pub mod output_error;
 pub mod ripple;
 pub mod run;
 
 pub use export::{simulate_args, simulate_exact};
-pub use fit::{
-    cost_at, fit_output_error, fit_output_error_segments, interval_velocity, pooled_velocity_fit,
-    simulate_velocity, Correlation, Gradient, NlError, NlFit, NlOptions, NlParam,
-};
 pub use grow::{grow_with, stick_share, Grown, Seed, STICK_SHARE};
 pub use init::{automatic_start, automatic_start_with, RippleOrder, Start, Step};
 pub use model::{sim_plant, NlModel, Owner, ParamDef, Scale};
+pub use output_error::{
+    cost_at, fit_output_error, fit_output_error_segments, interval_velocity, pooled_velocity_fit,
+    simulate_velocity, Correlation, Gradient, NlError, NlFit, NlOptions, NlParam,
+};
 pub use run::{
     identify, identify_segments, linear_start, linear_start_segments, model_name, model_of, run,
     validate, validate_segments, LinearStart, LinearStartError, NlData, NlRequest, NlResult, NlRun,

@@ -38,10 +38,10 @@ use nalgebra::{Matrix2, Vector2};
 use rustfft::num_complex::Complex64;
 use rustfft::FftPlanner;
 
-use super::fit::{interval_velocity, simulate_velocity, NlError};
 use super::model::NlModel;
+use super::output_error::{interval_velocity, simulate_velocity, NlError};
+use crate::data::dsp::{butter_highpass_sos, SosBank};
 use crate::data::IdData;
-use crate::ident::linalg::{butter_highpass_sos, SosBank};
 use crate::model::effects::TorqueRipple;
 
 /// Periods of the ripple the motor's travel must cover for its order to be a candidate.
@@ -405,10 +405,10 @@ fn coherence(g: &[Vec<f64>; 2], e: &[f64]) -> f64 {
     }
 }
 
-/// `x[1..]` through the cost's prefilter (the default high-pass, [`super::fit::cost_at`]).
+/// `x[1..]` through the cost's prefilter (the default high-pass, [`super::output_error::cost_at`]).
 fn highpassed(x: &[f64], ts: f64) -> Vec<f64> {
     let mut bank = SosBank::new(
-        butter_highpass_sos(2, super::fit::DEFAULT_HIGHPASS_HZ, ts),
+        butter_highpass_sos(2, super::output_error::DEFAULT_HIGHPASS_HZ, ts),
         1,
     );
     x.iter()

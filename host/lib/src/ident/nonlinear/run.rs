@@ -7,16 +7,16 @@
 
 use thiserror::Error;
 
-use super::fit::{
-    fit_output_error_segments, interval_velocity, pooled_velocity_fit, simulate_velocity,
-};
 use super::init::{automatic_start_with, RippleOrder, Step};
 use super::model::{sim_plant, NlModel, Owner};
+use super::output_error::{
+    fit_output_error_segments, interval_velocity, pooled_velocity_fit, simulate_velocity,
+};
 use super::{NlError, NlFit, NlOptions};
 use crate::data::{Dataset, IdData};
 use crate::ident::frf::FrfError;
-use crate::ident::frf_fit::{Drive, FrfFitError, FrfFitOptions};
 use crate::ident::lm::Termination;
+use crate::ident::sml::{Drive, FrfFitError, FrfFitOptions};
 use crate::ident::validate::fit_percent;
 use crate::model::effects::Effect;
 use crate::model::spec::Structure;
@@ -689,7 +689,7 @@ pub enum LinearStartError {
 
 /// The linear start of step 3 from periodic data: the frequency-domain fit of the
 /// request's structure to the FRF of `ds` (`settle` periods skipped) at the excited lines
-/// ([`crate::ident::frf_fit`]), which transients, drift and the nonlinear distortion at
+/// ([`crate::ident::sml`]), which transients, drift and the nonlinear distortion at
 /// the non-excited lines leave alone; the current-loop lag held when the request holds
 /// it, the delay held at 0 when an effect is a `time_delay`; otherwise the lag-only fit
 /// too, kept unless the fit with the delay free costs less, and the delay's time put on
@@ -730,7 +730,7 @@ pub fn linear_start_segments(
     {
         o.delay = Drive::Fixed(0.0);
     }
-    let mut raw = crate::ident::frf_fit::fit_frf(&analysis.frf, &o);
+    let mut raw = crate::ident::sml::fit_frf(&analysis.frf, &o);
     // the nonlinear model carries no frequency-domain delay (the FRF's delay goes to the
     // lag, below), and the search with the delay free can end in a worse basin than the
     // lag alone: with a lag to estimate and no `time_delay`, the lag-only search is made
@@ -745,7 +745,7 @@ pub fn linear_start_segments(
             delay: Drive::Fixed(0.0),
             ..o.clone()
         };
-        if let Ok(l) = crate::ident::frf_fit::fit_frf(&analysis.frf, &lag_only) {
+        if let Ok(l) = crate::ident::sml::fit_frf(&analysis.frf, &lag_only) {
             raw = match raw {
                 Ok(free) if free.cost_ratio() < l.cost_ratio() => Ok(free),
                 _ => Ok(l),
@@ -821,14 +821,14 @@ pub fn linear_start_segments(
 /// twice the ratio's spread for a right model, `√(2/2F)` relative over `F` lines (2F real
 /// residuals, chi-squared), so that a compensation the data do not ask for (seed 001's
 /// reference problem: 1.31 → 1.30) leaves the start alone.
-fn clear_drop(raw: &crate::ident::frf_fit::FrfFit) -> f64 {
+fn clear_drop(raw: &crate::ident::sml::FrfFit) -> f64 {
     let f = raw.lines.max(1) as f64;
     raw.cost_ratio() * (1.0 - 2.0 * (1.0 / f).sqrt())
 }
 
 /// The frequency-domain fit of the friction-compensated FRF ([`super::compensate`]).
 struct Compensated {
-    fit: crate::ident::frf_fit::FrfFit,
+    fit: crate::ident::sml::FrfFit,
     fc: f64,
     level: Option<super::compensate::Level>,
     lead: usize,
@@ -927,7 +927,7 @@ fn compensated_fit(
         let Ok(a) = crate::ident::frf::analyze_segments(&comp, settle) else {
             continue;
         };
-        let Ok(fit) = crate::ident::frf_fit::fit_frf(&a.frf, o) else {
+        let Ok(fit) = crate::ident::sml::fit_frf(&a.frf, o) else {
             continue;
         };
         if best

@@ -324,7 +324,7 @@ fn derivatives_by_dual_numbers_agree_with_central_differences() {
         .zip(&values)
         .map(|(d, &v)| d.to_z(v))
         .collect();
-    let ad = fit::jacobian_probe(&data, &model, &z, 1500);
+    let ad = output_error::jacobian_probe(&data, &model, &z, 1500);
     for (i, d) in layout.iter().enumerate() {
         let h = 1e-6 * z[i].abs().max(1.0);
         let mut zp = z.clone();

@@ -278,7 +278,7 @@ pub enum FitWarning {
         /// the model's FIT [%]
         fit: f64,
         /// the FRF's own FIT [%]
-        frf_fit: f64,
+        sml: f64,
     },
     /// a black box's lightly damped mode lies outside the reliable lines: no measured
     /// line holds it, so surplus states placed it where the noise let them
@@ -343,9 +343,9 @@ impl std::fmt::Display for FitWarning {
                  one, shows as added viscous damping), weighted by the distortion; fit a nonlinear model \
                  (--effect) or run `jointid diagnose` to name the effect"
             ),
-            FitWarning::FitBelowFrf { fit, frf_fit } => write!(
+            FitWarning::FitBelowFrf { fit, sml } => write!(
                 f,
-                "its periodic steady-state FIT on the estimation data, {fit:.1} %, is far below the {frf_fit:.1} % \
+                "its periodic steady-state FIT on the estimation data, {fit:.1} %, is far below the {sml:.1} % \
                  the same model family fitted to the FRF reaches (--domain frequency): the time-domain fit \
                  followed something else than the joint (drift, a slow disturbance)"
             ),

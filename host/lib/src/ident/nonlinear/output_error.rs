@@ -51,8 +51,9 @@ use nalgebra::{DMatrix, DVector};
 use thiserror::Error;
 
 use super::model::{NlModel, Owner, ParamDef, Plant, Scale};
+use crate::data::dsp::{butter_highpass_sos, SosBank};
 use crate::data::IdData;
-use crate::ident::linalg::{butter_highpass_sos, pinv_sym, SosBank};
+use crate::ident::linalg::pinv_sym;
 use crate::ident::lm::{self, LeastSquares, LmOptions, Normal, Termination};
 use crate::ident::validate::fit_percent;
 

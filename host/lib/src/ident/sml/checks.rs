@@ -219,7 +219,7 @@ pub fn periodic_fit_percent(frf: &Frf, g: &[Complex64]) -> f64 {
         e += (s.y[k] - g[k] * s.u[k]).norm_sqr();
         d += s.y[k].norm_sqr();
     }
-    100.0 * (1.0 - (e / d).sqrt())
+    crate::ident::validate::fit_from_sums(e, d)
 }
 
 /// The residuals the fit weighted, one per excited line of `frf`, `E|·|² = 1` at the
