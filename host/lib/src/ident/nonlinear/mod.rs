@@ -7,6 +7,7 @@
 //! enter the fit in their documented smooth form ([`model`]).
 
 pub mod compensate;
+pub mod dual;
 pub mod export;
 pub mod grow;
 pub mod init;

@@ -25,6 +25,7 @@
 
 use num_traits::Float;
 
+use super::dual::Real;
 use crate::model::effects::{Attach, Effect};
 use crate::model::laws;
 use crate::model::params::{model_params, unit_of, JointParams, Plant as SimPlant};
@@ -391,6 +392,8 @@ pub(crate) struct Plant<T> {
     /// viscous friction for negative velocity only [N·m·s/rad], when given
     fv_neg: Option<T>,
     v_eps: T,
+    /// motor speed beyond which the smooth Coulomb law is saturated, `25 v_ε` [rad/s]
+    saturated_speed: T,
     /// (amplitude, order, phase)
     ripple: Vec<(T, T, T)>,
     offset: T,
@@ -399,7 +402,7 @@ pub(crate) struct Plant<T> {
     v0: T,
 }
 
-impl<T: Float> Plant<T> {
+impl<T: Real> Plant<T> {
     /// The plant of `model` at the physical parameter values `p` (layout order).
     pub(crate) fn new(model: &NlModel, p: &[T]) -> Plant<T> {
         let zero = T::zero();
@@ -470,7 +473,7 @@ impl<T: Float> Plant<T> {
                     }
                 }
                 Effect::Backlash(_) => {
-                    half_gap = Some(p[i] * c(0.5));
+                    half_gap = Some(p[i] * 0.5);
                     i += 1;
                 }
                 Effect::NonlinearStiffness(_) => {
@@ -530,6 +533,7 @@ impl<T: Float> Plant<T> {
             fc_neg,
             fv_neg,
             v_eps: c(model.v_eps),
+            saturated_speed: c(25.0 * model.v_eps),
             ripple,
             offset,
             tau_c,
@@ -539,7 +543,8 @@ impl<T: Float> Plant<T> {
     }
 
     /// Accelerations `[ω̇_0 …]` of the bodies at angles `q`, velocities `w` and motor torque
-    /// `tau` [N·m] from the current loop.
+    /// `tau` [N·m] from the current loop; false when the Coulomb friction is there and not
+    /// saturated (its slope not nought).
     #[inline(always)]
     fn accel(
         &self,
@@ -548,8 +553,9 @@ impl<T: Float> Plant<T> {
         tau: T,
         ripple_angle: Option<f64>,
         acc: &mut [T; MAX_BODIES],
-    ) {
+    ) -> bool {
         let n = self.nb;
+        let mut saturated = true;
         for i in 0..n {
             acc[i] = -self.viscous[i] * w[i];
         }
@@ -559,6 +565,7 @@ impl<T: Float> Plant<T> {
             motor = motor + laws::ripple_torque(a, order, phase, theta);
         }
         if let Some(fc) = self.fc {
+            saturated = w[0] > self.saturated_speed || w[0] < -self.saturated_speed;
             let level = match self.bump {
                 Some((fs, vs)) => laws::stribeck_level(fc, fs, vs, w[0]),
                 None => fc,
@@ -576,8 +583,8 @@ impl<T: Float> Plant<T> {
         acc[0] = acc[0] + motor;
         for (si, s) in self.springs[..n.saturating_sub(1)].iter().enumerate() {
             let s = s.as_ref().expect("a tree of n bodies has n - 1 springs");
-            let delta = q[s.a] * c(s.ga) - q[s.b] * c(s.gb);
-            let ddelta = w[s.a] * c(s.ga) - w[s.b] * c(s.gb);
+            let delta = q[s.a] * s.ga - q[s.b] * s.gb;
+            let ddelta = w[s.a] * s.ga - w[s.b] * s.gb;
             let tau_s = if si == 0 {
                 match self.half_gap {
                     Some(h) => {
@@ -590,12 +597,170 @@ impl<T: Float> Plant<T> {
             } else {
                 laws::spring_torque(s.k, T::zero(), s.d, delta, ddelta)
             };
-            acc[s.a] = acc[s.a] - tau_s * c(s.ga);
-            acc[s.b] = acc[s.b] + tau_s * c(s.gb);
+            acc[s.a] = acc[s.a] - tau_s * s.ga;
+            acc[s.b] = acc[s.b] + tau_s * s.gb;
         }
         for (a, ij) in acc.iter_mut().zip(&self.inv_j).take(n) {
             *a = *a * *ij;
         }
+        saturated
+    }
+
+    /// The RK4 grid of a sample of `ts` [s] in `m` steps, with the delay's `switch` [s]
+    /// inside it. The stage times are the same in every sample, and so is the current
+    /// loop's decay from the sample's start (before the switch) or from the switch (after
+    /// it): its `exp` is taken here, once per simulation, not once per stage.
+    fn grid(&self, m: usize, ts: f64, switch: T) -> Grid<T> {
+        let h = ts / m as f64;
+        let stage_time = |i: usize| -> T {
+            if i == 3 * m {
+                return c(ts);
+            }
+            let t0: T = c((i / 3) as f64 * h);
+            match i % 3 {
+                0 => t0,
+                1 => t0 + 0.5 * h,
+                _ => t0 + h,
+            }
+        };
+        let stage = (0..=3 * m)
+            .map(|i| {
+                let t = stage_time(i);
+                let before = t < switch;
+                let decay = match self.tau_c {
+                    Some(tc) => laws::current_loop_decay(tc, if before { t } else { t - switch }),
+                    None => T::zero(),
+                };
+                (before, decay)
+            })
+            .collect();
+        Grid { m, h, stage }
+    }
+
+    /// Motor torque [N·m] at stage `i` of `grid` for the sample's `held` input.
+    #[inline(always)]
+    fn torque_at(&self, grid: &Grid<T>, i: usize, held: &Held<T>) -> T {
+        let (before, decay) = grid.stage[i];
+        match held.decay_at_switch {
+            Some(ds) => {
+                if before {
+                    laws::current_loop_decayed(held.tau0, held.a, decay)
+                } else {
+                    let at_switch = laws::current_loop_decayed(held.tau0, held.a, ds);
+                    laws::current_loop_decayed(at_switch, held.b, decay)
+                }
+            }
+            None => {
+                if before {
+                    held.a
+                } else {
+                    held.b
+                }
+            }
+        }
+    }
+
+    /// The RK4 steps of sample `k` on `grid` from `(q, w)`. With `only_saturated`, stops
+    /// and returns false at the first stage whose Coulomb friction is not saturated (the
+    /// state is then partly advanced; the caller restores it).
+    #[allow(clippy::too_many_arguments)]
+    fn sample_steps(
+        &self,
+        grid: &Grid<T>,
+        held: &Held<T>,
+        k: usize,
+        measured: Option<&[f64]>,
+        q: &mut [T; MAX_BODIES],
+        w: &mut [T; MAX_BODIES],
+        st: &mut Stages<T>,
+        only_saturated: bool,
+    ) -> bool {
+        let (n, m, h) = (self.nb, grid.m, grid.h);
+        let (a, b, switch) = (held.a, held.b, held.switch);
+        // mean of the held input over [t0, t0 + h] without a current loop; the share
+        // before the switch is taken as `switch − t0` also when the switch sits on t0
+        // (a whole-sample delay), so the derivative there is the one-sided one towards
+        // a longer delay, not nought (with nought a fit started on a whole sample never
+        // leaves it)
+        let mean_input = |t0: T| -> T {
+            let t1 = t0 + h;
+            let before = if switch >= t0 {
+                switch.min(t1) - t0
+            } else {
+                T::zero()
+            };
+            (a * before + b * (-before + h)) / h
+        };
+        for j in 0..m {
+            let t0: T = c(j as f64 * h);
+            let (ta, tb, tc_) = if self.tau_c.is_some() {
+                (
+                    self.torque_at(grid, 3 * j, held),
+                    self.torque_at(grid, 3 * j + 1, held),
+                    self.torque_at(grid, 3 * j + 2, held),
+                )
+            } else {
+                let t = mean_input(t0);
+                (t, t, t)
+            };
+            // classical RK4 on (q, w)
+            // the ripple at the measured angle, linear between samples (see `simulate`)
+            let at = |f: f64| {
+                measured.map(|y| {
+                    let a = y[k.min(y.len() - 1)];
+                    let b = y[(k + 1).min(y.len() - 1)];
+                    a + (b - a) * (j as f64 + f) / m as f64
+                })
+            };
+            let Stages {
+                acc,
+                k1q,
+                k1w,
+                k2q,
+                k2w,
+                k3q,
+                k3w,
+                qs,
+                ws,
+            } = st;
+            if !self.accel(q, w, ta, at(0.0), acc) && only_saturated {
+                return false;
+            }
+            for i in 0..n {
+                k1q[i] = w[i];
+                k1w[i] = acc[i];
+                qs[i] = q[i] + k1q[i] * (0.5 * h);
+                ws[i] = w[i] + k1w[i] * (0.5 * h);
+            }
+            if !self.accel(qs, ws, tb, at(0.5), acc) && only_saturated {
+                return false;
+            }
+            for i in 0..n {
+                k2q[i] = ws[i];
+                k2w[i] = acc[i];
+                qs[i] = q[i] + k2q[i] * (0.5 * h);
+                ws[i] = w[i] + k2w[i] * (0.5 * h);
+            }
+            if !self.accel(qs, ws, tb, at(0.5), acc) && only_saturated {
+                return false;
+            }
+            for i in 0..n {
+                k3q[i] = ws[i];
+                k3w[i] = acc[i];
+                qs[i] = q[i] + k3q[i] * h;
+                ws[i] = w[i] + k3w[i] * h;
+            }
+            if !self.accel(qs, ws, tc_, at(1.0), acc) && only_saturated {
+                return false;
+            }
+            for i in 0..n {
+                let k4q = ws[i];
+                let k4w = acc[i];
+                q[i] = q[i] + (k1q[i] + (k2q[i] + k3q[i]) * 2.0 + k4q) * (h / 6.0);
+                w[i] = w[i] + (k1w[i] + (k2w[i] + k3w[i]) * 2.0 + k4w) * (h / 6.0);
+            }
+        }
+        true
     }
 
     /// Simulates the motor driven by `u` [N·m] over `ts` [s] with `substeps` RK4 steps per
@@ -608,6 +773,14 @@ impl<T: Float> Plant<T> {
     /// rejects (encoder noise is far below that fraction). Starts at rest
     /// in the springs with every body moving at the rigid velocity `v0` (motor side) and the
     /// current loop at `u[0]`. Returns false when the state stops being finite.
+    ///
+    /// With Coulomb friction, the steps beyond the plain count (one, two with a delay) are
+    /// there for the smooth law's slope ([`NlModel::refined_for`]), which is nought where
+    /// the law is saturated (`|ω| > 25 v_ε`: `tanh` is ±1 to the last bit). A sample whose
+    /// every RK4 stage finds the friction saturated is therefore taken in the plain count
+    /// of steps, as a model without friction is; the others in `substeps`. The choice
+    /// follows the state, not the clock, and is the same for the value and its dual-number
+    /// derivatives.
     pub(crate) fn simulate(
         &self,
         u: &[f64],
@@ -632,26 +805,37 @@ impl<T: Float> Plant<T> {
         w[0] = self.v0;
         if let Some(s) = self.springs[0] {
             for wi in w.iter_mut().take(n).skip(1) {
-                *wi = self.v0 * c(s.ga);
+                *wi = self.v0 * s.ga;
             }
         }
         let m = substeps.max(1);
-        let h = ts / m as f64;
         let (n_whole, frac): (usize, T) = match self.delay {
             Some(d) => {
                 let whole = d.to_f64().unwrap_or(0.0).max(0.0).floor();
-                (whole as usize, d - c(whole))
+                (whole as usize, d - whole)
             }
             None => (0, zero),
         };
         let input = |k: usize| -> f64 { u[k.min(u.len() - 1)] };
         let mut tau = c::<T>(u[0]);
-        let mut acc = [zero; MAX_BODIES];
-        let (mut k1q, mut k1w) = ([zero; MAX_BODIES], [zero; MAX_BODIES]);
-        let (mut k2q, mut k2w) = ([zero; MAX_BODIES], [zero; MAX_BODIES]);
-        let (mut k3q, mut k3w) = ([zero; MAX_BODIES], [zero; MAX_BODIES]);
-        let (mut qs, mut ws) = ([zero; MAX_BODIES], [zero; MAX_BODIES]);
-        let inv_ts = T::one() / c(ts);
+        let mut st = Stages {
+            acc: [zero; MAX_BODIES],
+            k1q: [zero; MAX_BODIES],
+            k1w: [zero; MAX_BODIES],
+            k2q: [zero; MAX_BODIES],
+            k2w: [zero; MAX_BODIES],
+            k3q: [zero; MAX_BODIES],
+            k3w: [zero; MAX_BODIES],
+            qs: [zero; MAX_BODIES],
+            ws: [zero; MAX_BODIES],
+        };
+        let inv_ts = 1.0 / ts;
+        // the delay's switch inside every sample [s]
+        let switch = frac * ts;
+        let decay_at_switch = self.tau_c.map(|tc| laws::current_loop_decay(tc, switch));
+        let fine = self.grid(m, ts, switch);
+        let plain = if self.delay.is_some() { 2 } else { 1 };
+        let coarse = (self.fc.is_some() && m > plain).then(|| self.grid(plain, ts, switch));
         for k in 0..u.len() {
             // held input over sample k: `a` before the switch at frac·T, `b` after
             let b = c::<T>(if k >= n_whole {
@@ -668,104 +852,75 @@ impl<T: Float> Plant<T> {
             } else {
                 b
             };
-            let switch = frac * c(ts);
-            let tau0 = tau;
-            // motor torque at time t ∈ [0, T] of the sample
-            let torque_at = |t: T| -> T {
-                match self.tau_c {
-                    Some(tc) => {
-                        if t < switch {
-                            laws::current_loop(tau0, a, tc, t)
-                        } else {
-                            let at_switch = laws::current_loop(tau0, a, tc, switch);
-                            laws::current_loop(at_switch, b, tc, t - switch)
-                        }
-                    }
-                    None => {
-                        if t < switch {
-                            a
-                        } else {
-                            b
-                        }
-                    }
-                }
-            };
-            // mean of the held input over [t0, t0 + h] without a current loop; the share
-            // before the switch is taken as `switch − t0` also when the switch sits on t0
-            // (a whole-sample delay), so the derivative there is the one-sided one towards
-            // a longer delay, not nought (with nought a fit started on a whole sample never
-            // leaves it)
-            let mean_input = |t0: T| -> T {
-                let t1 = t0 + c(h);
-                let before = if switch >= t0 {
-                    switch.min(t1) - t0
-                } else {
-                    zero
-                };
-                (a * before + b * (c::<T>(h) - before)) / c(h)
+            let held = Held {
+                a,
+                b,
+                tau0: tau,
+                switch,
+                decay_at_switch,
             };
             let theta_prev = q[0];
-            for j in 0..m {
-                let t0: T = c(j as f64 * h);
-                let (ta, tb, tc_) = if self.tau_c.is_some() {
-                    (
-                        torque_at(t0),
-                        torque_at(t0 + c(0.5 * h)),
-                        torque_at(t0 + c(h)),
-                    )
-                } else {
-                    let t = mean_input(t0);
-                    (t, t, t)
-                };
-                // classical RK4 on (q, w)
-                // the ripple at the measured angle, linear between samples (see `simulate`)
-                let at = |f: f64| {
-                    measured.map(|y| {
-                        let a = y[k.min(y.len() - 1)];
-                        let b = y[(k + 1).min(y.len() - 1)];
-                        a + (b - a) * (j as f64 + f) / m as f64
-                    })
-                };
-                self.accel(&q, &w, ta, at(0.0), &mut acc);
-                for i in 0..n {
-                    k1q[i] = w[i];
-                    k1w[i] = acc[i];
-                    qs[i] = q[i] + k1q[i] * c(0.5 * h);
-                    ws[i] = w[i] + k1w[i] * c(0.5 * h);
+            let coarse_done = coarse.as_ref().is_some_and(|g| {
+                let (q0, w0) = (q, w);
+                let done = self.sample_steps(g, &held, k, measured, &mut q, &mut w, &mut st, true);
+                if !done {
+                    (q, w) = (q0, w0);
                 }
-                self.accel(&qs, &ws, tb, at(0.5), &mut acc);
-                for i in 0..n {
-                    k2q[i] = ws[i];
-                    k2w[i] = acc[i];
-                    qs[i] = q[i] + k2q[i] * c(0.5 * h);
-                    ws[i] = w[i] + k2w[i] * c(0.5 * h);
-                }
-                self.accel(&qs, &ws, tb, at(0.5), &mut acc);
-                for i in 0..n {
-                    k3q[i] = ws[i];
-                    k3w[i] = acc[i];
-                    qs[i] = q[i] + k3q[i] * c(h);
-                    ws[i] = w[i] + k3w[i] * c(h);
-                }
-                self.accel(&qs, &ws, tc_, at(1.0), &mut acc);
-                for i in 0..n {
-                    let k4q = ws[i];
-                    let k4w = acc[i];
-                    q[i] = q[i] + (k1q[i] + (k2q[i] + k3q[i]) * c(2.0) + k4q) * c(h / 6.0);
-                    w[i] = w[i] + (k1w[i] + (k2w[i] + k3w[i]) * c(2.0) + k4w) * c(h / 6.0);
-                }
+                done
+            });
+            if !coarse_done {
+                self.sample_steps(&fine, &held, k, measured, &mut q, &mut w, &mut st, false);
             }
-            tau = torque_at(c(ts));
+            tau = self.torque_at(&fine, 3 * m, &held);
             if !w[0].is_finite() || !q[0].is_finite() {
                 return false;
             }
             // θ_m moved from t_k to t_{k+1}: that interval's mean velocity is sample k + 1's
             if k + 1 < u.len() {
-                emit(k + 1, q[0] - c(theta0), (q[0] - theta_prev) * inv_ts);
+                emit(k + 1, q[0] - theta0, (q[0] - theta_prev) * inv_ts);
             }
         }
         true
     }
+}
+
+/// The RK4 grid of one sample ([`Plant::grid`]).
+struct Grid<T> {
+    /// RK4 steps per sample
+    m: usize,
+    /// step [s]
+    h: f64,
+    /// per stage time (`3j`, `3j + 1`, `3j + 2`: step `j`'s start, middle and end; `3m`:
+    /// the sample's end): whether it is before the delay's switch, and the current loop's
+    /// decay there
+    stage: Vec<(bool, T)>,
+}
+
+/// The input held over one sample.
+struct Held<T> {
+    /// reference before the delay's switch [N·m]
+    a: T,
+    /// reference after it [N·m]
+    b: T,
+    /// current-loop torque at the sample's start [N·m]
+    tau0: T,
+    /// the switch [s] after the sample's start
+    switch: T,
+    /// the current loop's decay over `[0, switch]`; `None` without a current loop
+    decay_at_switch: Option<T>,
+}
+
+/// The RK4 stages' workspace, kept across samples.
+struct Stages<T> {
+    acc: [T; MAX_BODIES],
+    k1q: [T; MAX_BODIES],
+    k1w: [T; MAX_BODIES],
+    k2q: [T; MAX_BODIES],
+    k2w: [T; MAX_BODIES],
+    k3q: [T; MAX_BODIES],
+    k3w: [T; MAX_BODIES],
+    qs: [T; MAX_BODIES],
+    ws: [T; MAX_BODIES],
 }
 
 /// The simulator's plant for the structure's values `plant` (in

@@ -46,10 +46,10 @@
 //! measured on the default three-mass joint with pure Coulomb friction, F_c +14 % at
 //! `v_ε` = 0.05 rad/s and +2.4 % at 0.0037: `p` = 0.68, factor 1.66.
 
-use hyperdual::Hyperdual;
 use nalgebra::{DMatrix, DVector};
 use thiserror::Error;
 
+use super::dual::Dual;
 use super::model::{NlModel, Owner, ParamDef, Plant, Scale};
 use crate::data::dsp::{butter_highpass_sos, SosBank};
 use crate::data::IdData;
@@ -374,36 +374,28 @@ struct Problem<'a> {
 macro_rules! with_dual {
     ($n:expr, $d:ident => $body:expr) => {
         match $n {
-            0..=4 => {
-                type $d = Hyperdual<f64, 5>;
+            0..=3 => {
+                type $d = Dual<4>;
                 $body
             }
-            5..=6 => {
-                type $d = Hyperdual<f64, 7>;
+            4..=7 => {
+                type $d = Dual<8>;
                 $body
             }
-            7..=8 => {
-                type $d = Hyperdual<f64, 9>;
+            8..=11 => {
+                type $d = Dual<12>;
                 $body
             }
-            9..=10 => {
-                type $d = Hyperdual<f64, 11>;
+            12..=15 => {
+                type $d = Dual<16>;
                 $body
             }
-            11..=12 => {
-                type $d = Hyperdual<f64, 13>;
-                $body
-            }
-            13..=16 => {
-                type $d = Hyperdual<f64, 17>;
-                $body
-            }
-            17..=24 => {
-                type $d = Hyperdual<f64, 25>;
+            16..=23 => {
+                type $d = Dual<24>;
                 $body
             }
             _ => {
-                type $d = Hyperdual<f64, 33>;
+                type $d = Dual<33>;
                 $body
             }
         }
