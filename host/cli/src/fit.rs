@@ -35,7 +35,9 @@ use jointid::ident::sml;
 use jointid::ident::subspace::Method;
 use jointid::ident::validate::DEFAULT_LAGS;
 use jointid::model::effects::parse_given;
-use jointid::model::spec::{Family, ModelSpec, SpecError, Structure, NONLINEAR_TWO_MASS};
+use jointid::model::spec::{
+    Family, FamilyParseError, ModelSpec, SpecError, Structure, NONLINEAR_TWO_MASS,
+};
 
 /// Friction model of the rigid body.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -233,9 +235,12 @@ fn parse_kind(s: &str) -> Result<FitModel, String> {
             kind,
             nonlinear_two_mass: false,
         })
-        .map_err(|e: String| match e.strip_suffix(')') {
-            Some(head) if head.contains("(known:") => format!("{head}, nonlinear-two-mass)"),
-            _ => e,
+        .map_err(|e| match e {
+            FamilyParseError::Unknown(name) => format!(
+                "unknown model `{name}` (known: black-box:ORDER, rigid, two-mass, three-mass, \
+                 four-mass, {NONLINEAR_TWO_MASS})"
+            ),
+            e => e.to_string(),
         })
 }
 

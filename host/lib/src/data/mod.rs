@@ -103,7 +103,9 @@ pub use csv::{
 };
 pub use dsp::{decimate, decimation_taps};
 pub use prep::{detrend, Detrend, Prep};
-pub use segment::{Record, SegmentChoice, SegmentInfo, Selected, Selection, TimeBound};
+pub use segment::{
+    Record, SegmentChoice, SegmentInfo, Selected, Selection, SelectionParseError, TimeBound,
+};
 
 /// Relative difference of two sample intervals below which two records count as sampled
 /// at one rate. Intervals estimated from recorded time stamps differ by tens of ppm
@@ -270,19 +272,31 @@ pub struct PeriodLayout {
     pub count: usize,
 }
 
+/// A record that holds no whole steady-state period ([`PeriodLayout::of`]).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{what} leave no whole period of {period} after {transient}")]
+pub struct NoWholePeriod {
+    /// the record's samples (`N samples`, or their excitation sample numbers)
+    pub what: String,
+    /// samples per period
+    pub period: usize,
+    /// where the steady state begins
+    pub transient: String,
+}
+
 impl PeriodLayout {
     /// The whole steady-state periods of `len` samples starting at excitation sample
     /// `first_sample` (see [`Dataset::period_layout`]); `start` is counted from the first
     /// of these samples.
     ///
     /// # Errors
-    /// Why no whole period remains.
+    /// [`NoWholePeriod`]: why no whole period remains.
     pub fn of(
         cfg: &ExcitationConfig,
         first_sample: usize,
         len: usize,
         settle_periods: usize,
-    ) -> Result<PeriodLayout, String> {
+    ) -> Result<PeriodLayout, NoWholePeriod> {
         let period = cfg.period_samples as usize;
         let ramp = cfg.ramp_samples as usize;
         let k0 = first_sample;
@@ -313,9 +327,11 @@ impl PeriodLayout {
                     format!("excitation sample {abs_start}"),
                 )
             };
-            return Err(format!(
-                "{what} leave no whole period of {period} after {transient}"
-            ));
+            return Err(NoWholePeriod {
+                what,
+                period,
+                transient,
+            });
         }
         Ok(PeriodLayout {
             period,
@@ -336,7 +352,7 @@ impl PeriodLayout {
         len: usize,
         settle_periods: usize,
         run_last: Option<usize>,
-    ) -> Result<PeriodLayout, String> {
+    ) -> Result<PeriodLayout, NoWholePeriod> {
         let ramp = cfg.ramp_samples as usize;
         let end = first_sample + len;
         match run_last {
@@ -402,9 +418,9 @@ impl Dataset {
             settle_periods,
             self.last_sample_of_run(),
         );
-        lay.map_err(|reason| DataError::NoPeriods {
+        lay.map_err(|e| DataError::NoPeriods {
             file: self.name.clone(),
-            reason,
+            reason: e.to_string(),
         })
     }
 

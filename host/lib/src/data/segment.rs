@@ -19,6 +19,7 @@ use std::fmt;
 use std::str::FromStr;
 
 use serde::Serialize;
+use thiserror::Error;
 
 use super::{fmt_sig, DataError, Dataset, ExcitationConfig, PeriodLayout};
 
@@ -33,16 +34,33 @@ pub enum SegmentChoice {
     All,
 }
 
+/// A `--segment`, `--from` or `--to` value that does not parse.
+#[derive(Clone, Debug, PartialEq, Eq, Error)]
+pub enum SelectionParseError {
+    /// `--segment 0`
+    #[error("segments are numbered from 1")]
+    SegmentZero,
+    /// neither `longest`, `all` nor a number
+    #[error("`{0}`: expected longest, all or a segment number")]
+    Segment(String),
+    /// `Np` with a non-integer `N`
+    #[error("`{0}`: whole periods are written as an integer and `p` (`3p`)")]
+    Periods(String),
+    /// not a time ≥ 0
+    #[error("`{0}`: expected seconds (`12.5`) or whole periods (`3p`), not negative")]
+    Seconds(String),
+}
+
 impl FromStr for SegmentChoice {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = SelectionParseError;
+    fn from_str(s: &str) -> Result<Self, SelectionParseError> {
         match s.trim() {
             "longest" => Ok(SegmentChoice::Longest),
             "all" => Ok(SegmentChoice::All),
             n => match n.parse::<usize>() {
-                Ok(0) => Err("segments are numbered from 1".into()),
+                Ok(0) => Err(SelectionParseError::SegmentZero),
                 Ok(k) => Ok(SegmentChoice::Index(k)),
-                Err(_) => Err(format!("`{n}`: expected longest, all or a segment number")),
+                Err(_) => Err(SelectionParseError::Segment(n.to_string())),
             },
         }
     }
@@ -68,24 +86,20 @@ pub enum TimeBound {
 }
 
 impl FromStr for TimeBound {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = SelectionParseError;
+    fn from_str(s: &str) -> Result<Self, SelectionParseError> {
         let s = s.trim();
         if let Some(p) = s.strip_suffix('p') {
             return p
                 .trim()
                 .parse::<u64>()
                 .map(TimeBound::Periods)
-                .map_err(|_| {
-                    format!("`{s}`: whole periods are written as an integer and `p` (`3p`)")
-                });
+                .map_err(|_| SelectionParseError::Periods(s.to_string()));
         }
         let secs = s.strip_suffix('s').unwrap_or(s).trim();
         match secs.parse::<f64>() {
             Ok(t) if t.is_finite() && t >= 0.0 => Ok(TimeBound::Seconds(t)),
-            _ => Err(format!(
-                "`{s}`: expected seconds (`12.5`) or whole periods (`3p`), not negative"
-            )),
+            _ => Err(SelectionParseError::Seconds(s.to_string())),
         }
     }
 }
@@ -682,7 +696,11 @@ mod tests {
         assert_eq!("2".parse(), Ok(SegmentChoice::Index(2)));
         assert_eq!(
             "0".parse::<SegmentChoice>(),
-            Err("segments are numbered from 1".to_string())
+            Err(SelectionParseError::SegmentZero)
+        );
+        assert_eq!(
+            "1.5p".parse::<TimeBound>().unwrap_err().to_string(),
+            "`1.5p`: whole periods are written as an integer and `p` (`3p`)"
         );
     }
 

@@ -220,7 +220,7 @@ pub enum ModelFileError {
     },
     /// the model family does not parse
     #[error("{0}")]
-    Model(String),
+    Model(#[from] crate::model::spec::FamilyParseError),
     /// an output other than `angle` or `velocity`
     #[error("unknown output `{output}`")]
     Output {

@@ -219,7 +219,7 @@ pub fn sim_spec(
     params: &JointParams,
 ) -> Result<ModelSpec, SpecError> {
     let specs = ModelSpec::effect_specs(nonlinear_two_mass, effects);
-    let mut parsed = parse_effects(&specs).map_err(|e| SpecError::Effect(e.to_string()))?;
+    let mut parsed = parse_effects(&specs)?;
     // the specs the alias added come first (seed 001 eq. (6)-(7), from `params`)
     let added = specs.len() - effects.len();
     for e in &mut parsed[..added] {

@@ -8,7 +8,7 @@
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use super::effects::{parse_effects, Effect};
+use super::effects::{parse_effects, Effect, EffectParseError};
 
 /// Mechanical structure of a joint model: the one list of structures the estimators fit
 /// and the simulator simulates ([`crate::model::params::Plant::kind`]); serialised by its
@@ -117,7 +117,7 @@ impl Family {
 }
 
 impl std::str::FromStr for Family {
-    type Err = String;
+    type Err = FamilyParseError;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let s = s.trim().to_ascii_lowercase().replace('_', "-");
         if let Some(n) = s
@@ -126,14 +126,12 @@ impl std::str::FromStr for Family {
         {
             return match n.parse::<usize>() {
                 Ok(n) if (1..=40).contains(&n) => Ok(Family::BlackBox(n)),
-                _ => Err(format!("black-box order `{n}` must be an integer 1 … 40")),
+                _ => Err(FamilyParseError::Order(n.to_string())),
             };
         }
         match Structure::ALL.into_iter().find(|st| st.label() == s) {
             Some(st) => Ok(Family::Physical(st)),
-            None => Err(format!(
-                "unknown model `{s}` (known: black-box:ORDER, rigid, two-mass, three-mass, four-mass)"
-            )),
+            None => Err(FamilyParseError::Unknown(s)),
         }
     }
 }
@@ -186,7 +184,20 @@ pub struct ModelSpec {
 pub enum SpecError {
     /// an `--effect` spec that does not parse
     #[error("--effect: {0}")]
-    Effect(String),
+    Effect(#[from] EffectParseError),
+}
+
+/// A model family name that does not parse ([`Family`]'s `FromStr`).
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+pub enum FamilyParseError {
+    /// `black-box:N` with `N` outside 1 … 40
+    #[error("black-box order `{0}` must be an integer 1 … 40")]
+    Order(String),
+    /// no family of that name
+    #[error(
+        "unknown model `{0}` (known: black-box:ORDER, rigid, two-mass, three-mass, four-mass)"
+    )]
+    Unknown(String),
 }
 
 /// The name of seed 001's nonlinear two-mass on the command line: the two-mass with
@@ -224,7 +235,7 @@ impl ModelSpec {
     ) -> Result<ModelSpec, SpecError> {
         let effects = if nonlinear_two_mass || !effects.is_empty() {
             let specs = Self::effect_specs(nonlinear_two_mass, effects);
-            let mut parsed = parse_effects(&specs).map_err(|e| SpecError::Effect(e.to_string()))?;
+            let mut parsed = parse_effects(&specs)?;
             // Coulomb friction is seed 001's pure law unless the spec names a breakaway
             // level `fs`: only then are `fs` and `v_stribeck` estimated beside `fc`
             for (e, spec) in parsed.iter_mut().zip(&specs) {

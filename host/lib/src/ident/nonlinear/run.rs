@@ -498,11 +498,11 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
     if own_start {
         if let Some(note) = grow_if_sticking(data.estimation, compensation.as_ref(), &mut req) {
             match note {
-                Ok((grown, note)) => {
+                Growth::Grown { steps: grown, note } => {
                     steps.extend(grown);
                     warnings.push(note);
                 }
-                Err(note) => warnings.push(note),
+                Growth::Failed { note } => warnings.push(note),
             }
         }
     }
@@ -581,7 +581,7 @@ fn grow_if_sticking(
     data: &[IdData],
     compensation: Option<&Step>,
     req: &mut NlRequest,
-) -> Option<Result<(Vec<Step>, String), String>> {
+) -> Option<Growth> {
     use super::grow::{grow_with, stick_share, Seed, STICK_SHARE};
     if req.structure == Structure::Rigid {
         return None;
@@ -618,10 +618,12 @@ fn grow_if_sticking(
     let g = match grow_with(data, &seed) {
         Ok(g) => g,
         Err(e) => {
-            return Some(Err(format!(
-                "{sticks}; the start grown in the time domain failed ({e}), the fit starts from \
-                 the frequency-domain linear fit"
-            )))
+            return Some(Growth::Failed {
+                note: format!(
+                    "{sticks}; the start grown in the time domain failed ({e}), the fit starts \
+                     from the frequency-domain linear fit"
+                ),
+            })
         }
     };
     req.tau_c = g.tau_c;
@@ -637,9 +639,9 @@ fn grow_if_sticking(
         req.start = NlStart::Values(model_of(req, longest).values(&g.plant, g.offset, 0.0));
     }
     let stages = g.steps.len();
-    Some(Ok((
-        g.steps,
-        format!(
+    Some(Growth::Grown {
+        steps: g.steps,
+        note: format!(
             "{sticks}; the start was grown in the time domain instead: the two-mass with \
              Coulomb friction by output error{}, {}",
             match stages {
@@ -658,7 +660,23 @@ fn grow_if_sticking(
                 "the fit starts from its plant, lag, offset and friction"
             }
         ),
-    )))
+    })
+}
+
+/// What [`grow_if_sticking`] did when the motor sticks.
+enum Growth {
+    /// the start was grown: its stages, and the note that says so
+    Grown {
+        /// the grown stages
+        steps: Vec<Step>,
+        /// for the user
+        note: String,
+    },
+    /// the growth failed; the note says why and where the fit starts instead
+    Failed {
+        /// for the user
+        note: String,
+    },
 }
 
 /// The linear start of step 3 from periodic data ([`linear_start`]).
