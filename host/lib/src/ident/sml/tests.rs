@@ -5,14 +5,7 @@ use crate::data::{Dataset, ExcitationConfig};
 use crate::ident::frf::analyze_dataset;
 use crate::ident::linalg::GaussRng;
 use crate::sim::{parse_effects, simulate_excitation, JointParams, Plant, SensorConfig, SimConfig};
-
-/// excitation of `jointid simulate` with `periods` full periods
-fn excitation(periods: u32, rms: f32) -> ExcitationConfig {
-    let mut e = ExcitationConfig::paper_default();
-    e.periods = periods;
-    e.rms_rad = rms;
-    e
-}
+use crate::test_support::sigma::{excitation, sigma_calibration, table_row, truth, Noise};
 
 /// FRF (first period dropped) of one simulated run
 fn frf_of(cfg: &SimConfig, exc: &ExcitationConfig) -> Frf {
@@ -25,33 +18,6 @@ fn frf_of(cfg: &SimConfig, exc: &ExcitationConfig) -> Frf {
         meta: Default::default(),
     };
     analyze_dataset(&ds, 1).expect("frf").frf
-}
-
-fn truth(p: &JointParams, s: Structure) -> Vec<f64> {
-    let all = [
-        ("J_m", p.j_m),
-        ("J_a1", p.j_a1),
-        ("J_a2", p.j_a2),
-        ("J_p", p.j_p),
-        ("k_g", p.k_g),
-        ("k_a", p.k_a),
-        ("k_p", p.k_p),
-        ("d_g", p.d_g),
-        ("d_a", p.d_a),
-        ("d_p", p.d_p),
-        ("f_m", p.f_m),
-    ];
-    s.param_names()
-        .iter()
-        .map(|n| {
-            if s == Structure::TwoMass && *n == "J_a1" {
-                // the simulator's two-mass arm is J_a1 + J_a2
-                p.j_a1 + p.j_a2
-            } else {
-                all.iter().find(|(m, _)| m == n).unwrap().1
-            }
-        })
-        .collect()
 }
 
 /// resonances [Hz] of the true linear model, computed as the fit's are
@@ -514,152 +480,6 @@ fn a_linear_joint_raises_no_distortion_warning() {
     );
 }
 
-/// noise conditions of the σ calibration
-#[derive(Clone, Copy, Debug)]
-enum Noise {
-    /// the simulator's default sensors
-    Default,
-    /// default, plus coloured noise in the band: the disturbance's low-pass
-    /// at 30 Hz, and AR(1) noise (pole 0.95) added to the measured angle
-    Coloured,
-    /// default with the slow disturbance ten times stronger
-    Disturbance10,
-}
-
-/// FRF of one run of `structure`'s default joint under `noise`
-fn noisy_frf(structure: Structure, noise: Noise, seed: u64, periods: u32) -> (Frf, JointParams) {
-    let mut cfg = SimConfig {
-        plant: Plant::new(structure),
-        seed,
-        ..SimConfig::default()
-    };
-    match noise {
-        Noise::Default => {}
-        Noise::Coloured => cfg.sensors.disturbance.noise_cutoff_hz = 30.0,
-        Noise::Disturbance10 => cfg.sensors.disturbance.noise_std *= 10.0,
-    }
-    let exc = excitation(periods, 0.02);
-    let out = simulate_excitation(&cfg, &exc).expect("simulation");
-    let mut data = out.to_id_data();
-    if let Noise::Coloured = noise {
-        let mut rng = GaussRng::new(seed ^ 0xC0102ED);
-        let (a, sd) = (0.95, 1e-5);
-        let b = sd * (1.0f64 - a * a).sqrt();
-        let mut e = 0.0;
-        for y in &mut data.y {
-            e = a * e + b * rng.normal();
-            *y += e;
-        }
-    }
-    let ds = Dataset {
-        name: "sim".into(),
-        data,
-        t0: 0.0,
-        excitation: Some(exc),
-        meta: Default::default(),
-    };
-    (analyze_dataset(&ds, 1).expect("frf").frf, cfg.plant.params)
-}
-
-/// One parameter's calibration over repeated noise realisations.
-struct Calibration {
-    name: String,
-    /// spread of ln p over the runs / median reported σ(ln p)
-    ratio: f64,
-    /// share of runs within 3 σ of the truth
-    within: f64,
-    /// RMS over the runs of the standardised error (ln p − ln p₀)/σ(ln p): 1
-    /// for honest σ, also where σ changes from run to run
-    z_rms: f64,
-}
-
-/// Per parameter (and the lag), its [`Calibration`].
-fn sigma_calibration(
-    structure: Structure,
-    noise: Noise,
-    runs: u64,
-    periods: u32,
-) -> Vec<Calibration> {
-    let mut vals: Vec<Vec<f64>> = Vec::new();
-    let mut stds: Vec<Vec<f64>> = Vec::new();
-    let mut within: Vec<usize> = Vec::new();
-    let mut z2: Vec<f64> = Vec::new();
-    let mut names: Vec<String> = Vec::new();
-    for seed in 0..runs {
-        let (frf, p) = noisy_frf(structure, noise, 900 + seed, periods);
-        let fit = fit_frf(&frf, &FrfFitOptions::new(structure, 5e-4)).unwrap();
-        let mut t = truth(&p, structure);
-        t.push(1.0); // the simulator's lag: 0.5 ms = 1 sample
-        let mut v: Vec<f64> = fit.params.iter().map(|q| q.value.ln()).collect();
-        let mut s: Vec<f64> = fit.params.iter().map(|q| q.std / q.value).collect();
-        let lag = fit.lag;
-        v.push(lag.value.max(1e-9).ln());
-        s.push(lag.std / lag.value.max(1e-9));
-        if names.is_empty() {
-            names = fit.params.iter().map(|q| q.name.clone()).collect();
-            names.push("lag".into());
-            within = vec![0; names.len()];
-            z2 = vec![0.0; names.len()];
-        }
-        for (i, w) in within.iter_mut().enumerate() {
-            if (v[i] - t[i].ln()).abs() <= 3.0 * s[i] {
-                *w += 1;
-            }
-            z2[i] += ((v[i] - t[i].ln()) / s[i]).powi(2);
-        }
-        if std::env::var("SIGMA_VERBOSE").is_ok() {
-            let errs: Vec<String> = (0..v.len())
-                .map(|i| format!("{:+.1}", 100.0 * (v[i] - t[i].ln())))
-                .collect();
-            println!(
-                "  seed {seed}: log errors [%] {} σ [%] {} delay {:.2} cost {:.3e} warnings {:?}",
-                errs.join(" "),
-                s.iter()
-                    .map(|x| format!("{:.2}", 100.0 * x))
-                    .collect::<Vec<_>>()
-                    .join(" "),
-                fit.delay.value,
-                fit.cost,
-                fit.warnings
-            );
-        }
-        vals.push(v);
-        stds.push(s);
-    }
-    let n = runs as f64;
-    (0..names.len())
-        .map(|i| {
-            let m = vals.iter().map(|v| v[i]).sum::<f64>() / n;
-            let spread = (vals.iter().map(|v| (v[i] - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-            let mut s: Vec<f64> = stds.iter().map(|s| s[i]).collect();
-            s.sort_by(f64::total_cmp);
-            let med = s[s.len() / 2];
-            Calibration {
-                name: names[i].clone(),
-                ratio: spread / med,
-                within: within[i] as f64 / n,
-                z_rms: (z2[i] / n).sqrt(),
-            }
-        })
-        .collect()
-}
-
-/// `name ratio/z_rms/within%` for each parameter.
-fn table_row(t: &[Calibration]) -> String {
-    t.iter()
-        .map(|c| {
-            format!(
-                "{} {:.2}/{:.2}/{:.0}%",
-                c.name,
-                c.ratio,
-                c.z_rms,
-                100.0 * c.within
-            )
-        })
-        .collect::<Vec<_>>()
-        .join("  ")
-}
-
 #[test]
 fn standard_deviations_hold_with_realistic_sensors() {
     // three-mass joint, 30 noise realisations in each of: the default
@@ -676,7 +496,7 @@ fn standard_deviations_hold_with_realistic_sensors() {
     let runs = 30;
     let mut failed = Vec::new();
     for noise in [Noise::Default, Noise::Coloured, Noise::Disturbance10] {
-        let t = sigma_calibration(Structure::ThreeMass, noise, runs, 4);
+        let t = sigma_calibration(Structure::ThreeMass, noise, runs, 4, false);
         println!("{noise:?}: {}", table_row(&t));
         for c in &t {
             // Both measures, except for the two whose σ changes several-fold from
@@ -699,29 +519,4 @@ fn standard_deviations_hold_with_realistic_sensors() {
         }
     }
     assert!(failed.is_empty(), "{failed:#?}");
-}
-
-#[test]
-#[ignore = "σ calibration of every structure, minutes in release: cargo test --release -p jointid \
-            --lib -- --ignored sigma_table --nocapture (SIGMA_RUNS=N, SIGMA_ONLY=\"TwoMass\", \
-            SIGMA_VERBOSE=1 for each run)"]
-fn sigma_table() {
-    let runs: u64 = std::env::var("SIGMA_RUNS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(30);
-    let only = std::env::var("SIGMA_ONLY").unwrap_or_default();
-    for structure in [
-        Structure::ThreeMass,
-        Structure::TwoMass,
-        Structure::FourMass,
-    ] {
-        for noise in [Noise::Default, Noise::Coloured, Noise::Disturbance10] {
-            if !only.is_empty() && !format!("{structure:?} {noise:?}").contains(&only) {
-                continue;
-            }
-            let t = sigma_calibration(structure, noise, runs, 4);
-            println!("{structure:?} {noise:?}: {}", table_row(&t));
-        }
-    }
 }
