@@ -14,10 +14,12 @@ use std::ops::{Add, Div, Index, IndexMut, Mul, Neg, Rem, Sub};
 
 use num_traits::{Float, Num, NumCast, One, ToPrimitive, Zero};
 
+use crate::model::laws::{fast_tanh, LawFloat};
+
 /// A scalar the simulation runs on: `f64` for the output, [`Dual`] for its derivatives,
 /// with arithmetic against plain `f64` constants.
 pub trait Real:
-    Float
+    LawFloat
     + Add<f64, Output = Self>
     + Sub<f64, Output = Self>
     + Mul<f64, Output = Self>
@@ -28,6 +30,14 @@ pub trait Real:
 impl Real for f64 {}
 
 impl<const K: usize> Real for Dual<K> {}
+
+impl<const K: usize> LawFloat for Dual<K> {
+    #[inline(always)]
+    fn tanh_law(self) -> Self {
+        let t = fast_tanh(self.real());
+        self.chain(t, 1.0 - t * t)
+    }
+}
 
 /// `[f, ∂f/∂z_1, …, ∂f/∂z_{K−1}]`: slot 0 the value, the others its derivatives.
 #[derive(Clone, Copy, Debug)]
@@ -508,6 +518,8 @@ mod tests {
         check("exp", x, Float::exp, f64::exp);
         check("ln", x, Float::ln, f64::ln);
         check("tanh", x, Float::tanh, f64::tanh);
+        check("tanh_law", x, LawFloat::tanh_law, f64::tanh);
+        check("tanh_law", 3.0, LawFloat::tanh_law, f64::tanh);
         check("sqrt", x, Float::sqrt, f64::sqrt);
         check("powi", x, |d| d.powi(3), |v| v.powi(3));
         check("powf", x, |d| d.powf(Dual::from_real(2.5)), |v| v.powf(2.5));
