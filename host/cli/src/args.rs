@@ -264,7 +264,7 @@ impl PrepArgs {
     /// Detrending, then decimation ([`Prep::apply`], the one order).
     ///
     /// # Errors
-    /// [`DataError::Decimation`].
+    /// [`DataError::DecimationTooShort`].
     pub fn apply(&self, data: &IdData) -> Result<IdData, DataError> {
         self.prep().apply(data)
     }

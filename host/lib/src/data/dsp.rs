@@ -43,10 +43,11 @@ pub fn decimation_taps(q: usize) -> Vec<f64> {
 /// undistorted. Output sample `j` is at input sample `j q`.
 ///
 /// # Errors
-/// [`DataError::Decimation`] when `q` is 0 or `x` is shorter than the filter.
+/// [`DataError::DecimationFactor`] when `q` is 0, [`DataError::DecimationTooShort`] when
+/// `x` is shorter than the filter.
 pub fn decimate(x: &[f64], q: usize) -> Result<Vec<f64>, DataError> {
     if q == 0 {
-        return Err(DataError::Decimation("factor must be at least 1".into()));
+        return Err(DataError::DecimationFactor);
     }
     if q == 1 {
         return Ok(x.to_vec());
@@ -55,10 +56,10 @@ pub fn decimate(x: &[f64], q: usize) -> Result<Vec<f64>, DataError> {
     let half = (h.len() - 1) / 2;
     let n = x.len();
     if n <= half + 1 {
-        return Err(DataError::Decimation(format!(
-            "record of {n} samples is shorter than the {}-tap anti-alias filter",
-            h.len()
-        )));
+        return Err(DataError::DecimationTooShort {
+            samples: n,
+            taps: h.len(),
+        });
     }
     let at = |k: isize| -> f64 {
         if k < 0 {
@@ -312,7 +313,7 @@ mod tests {
         }
         assert!(matches!(
             decimate(&x[..10], 5),
-            Err(DataError::Decimation(_))
+            Err(DataError::DecimationTooShort { samples: 10, .. })
         ));
     }
 }

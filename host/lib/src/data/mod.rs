@@ -199,8 +199,8 @@ impl IdData {
     /// [`decimate`]; the sample interval becomes `q * ts`
     ///
     /// # Errors
-    /// [`DataError::Decimation`] when `q` is 0 or the record is shorter than
-    /// the filter.
+    /// [`DataError::DecimationFactor`] when `q` is 0, [`DataError::DecimationTooShort`] when the
+    /// record is shorter than the filter.
     pub fn decimate(&self, q: usize) -> Result<IdData, DataError> {
         Ok(IdData {
             ts: self.ts * q as f64,
@@ -665,9 +665,19 @@ pub enum DataError {
         /// what was found
         reason: String,
     },
-    /// decimation impossible
-    #[error("decimation: {0}")]
-    Decimation(String),
+    /// decimation by a factor of nought
+    #[error("decimation: factor must be at least 1")]
+    DecimationFactor,
+    /// a record too short for the decimation's anti-alias filter
+    #[error(
+        "decimation: record of {samples} samples is shorter than the {taps}-tap anti-alias filter"
+    )]
+    DecimationTooShort {
+        /// samples in the record
+        samples: usize,
+        /// taps of the filter
+        taps: usize,
+    },
     /// a binary format recognised by its content, with no loader registered
     #[error("{file}: {format} file, and no loader for it is registered (known: {known})")]
     NoLoader {

@@ -58,7 +58,7 @@ impl Prep {
     /// `raw` detrended, then decimated.
     ///
     /// # Errors
-    /// [`DataError::Decimation`] when the record is shorter than the anti-alias filter.
+    /// [`DataError::DecimationTooShort`] when the record is shorter than the anti-alias filter.
     pub fn apply(&self, raw: &IdData) -> Result<IdData, DataError> {
         self.detrended(raw).decimate(self.decimate.max(1))
     }

@@ -215,9 +215,23 @@ pub enum FitError {
     /// the averaged FRF of a record without whole periods ([`crate::ident::frf::welch`])
     #[error("FRF by averaged spectra: {0}")]
     Welch(#[from] crate::ident::frf::FrfError),
-    /// the output-error refinement on the motor velocity (`spectral`)
+    /// the output-error refinement on the motor velocity (`spectral`) failed
     #[error("output error on the motor velocity failed: {0}")]
-    VelocityRefinement(String),
+    VelocityRefinement(#[source] Box<crate::ident::nonlinear::NlRunError>),
+    /// the refinement on the motor velocity was asked without a record
+    #[error("output error on the motor velocity: no record")]
+    VelocityNoRecord,
+    /// the refinement on the motor velocity was asked of a black box
+    #[error(
+        "output error on the motor velocity: a black box has no physical parameters to refine"
+    )]
+    VelocityBlackBox,
+    /// the start of the refinement on the motor velocity lacks a parameter
+    #[error("output error on the motor velocity: the start has no `{name}`")]
+    VelocityStartLacks {
+        /// the parameter's name
+        name: String,
+    },
 }
 
 /// Rigid body with viscous and Coulomb friction and a torque offset,

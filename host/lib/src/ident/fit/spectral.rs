@@ -174,14 +174,14 @@ fn refine(
     let longest = records
         .iter()
         .max_by_key(|d| d.len())
-        .ok_or_else(|| FitError::VelocityRefinement("no record".into()))?;
+        .ok_or(FitError::VelocityNoRecord)?;
     let mut req = NlRequest::new(structure, opts.r, Vec::new());
     req.tau_c = tau_c;
     req.held_tau_c = opts.spec.current_loop_tau;
     let model = nonlinear::model_of(&req, longest);
     req.start = NlStart::Values(model.values(plant, 0.0, 0.0));
     nonlinear::identify_segments(records, &req)
-        .map_err(|e| FitError::VelocityRefinement(e.to_string()))
+        .map_err(|e| FitError::VelocityRefinement(Box::new(e)))
 }
 
 /// The [`Fitted`] of a velocity refinement `res` at the capture rate `ts` [s], compared with
@@ -293,16 +293,20 @@ pub(super) fn velocity_refined_segments(
     opts: &FitOptions,
     decimate: usize,
 ) -> Result<Fitted, FitError> {
-    let structure = start.spec.family.structure().ok_or_else(|| {
-        FitError::VelocityRefinement("a black box has no physical parameters to refine".into())
-    })?;
+    let structure = start
+        .spec
+        .family
+        .structure()
+        .ok_or(FitError::VelocityBlackBox)?;
     let value = |n: &str| {
         start
             .params
             .iter()
             .find(|p| p.name == n)
             .map(|p| p.value)
-            .ok_or_else(|| FitError::VelocityRefinement(format!("the start has no `{n}`")))
+            .ok_or_else(|| FitError::VelocityStartLacks {
+                name: n.to_string(),
+            })
     };
     let plant = structure
         .param_names()
