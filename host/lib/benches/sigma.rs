@@ -3,7 +3,7 @@
 //! reports; RMS of the standardised errors; share within 3 σ), 1/1/≥ 99.7 % for honest σ.
 //! The library's test checks the three-mass joint; this prints the whole table.
 //!
-//! Run: `cargo bench -p jointid --bench sigma` (`SIGMA_RUNS=N` realisations per row,
+//! Run: `cargo bench -p jointid --features test-support --bench sigma` (`SIGMA_RUNS=N` realisations per row,
 //! default 30; `SIGMA_ONLY="TwoMass"` for the rows whose name holds it; `SIGMA_VERBOSE=1`
 //! for each run's errors).
 
@@ -31,7 +31,11 @@ fn main() {
                 continue;
             }
             let wall = Instant::now();
-            let t = sigma_calibration(structure, noise, runs, 4, verbose);
+            let t = sigma_calibration(structure, noise, runs, 4, |line| {
+                if verbose {
+                    println!("{line}");
+                }
+            });
             println!(
                 "{row}: {}  ({:.1} s)",
                 table_row(&t),

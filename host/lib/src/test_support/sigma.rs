@@ -113,13 +113,13 @@ pub struct Calibration {
 }
 
 /// Per parameter (and the lag), its [`Calibration`] over `runs` noise realisations of
-/// `periods` periods; `verbose` prints each run's errors and σ.
+/// `periods` periods; `each_run` gets a line with each run's errors and σ.
 pub fn sigma_calibration(
     structure: Structure,
     noise: Noise,
     runs: u64,
     periods: u32,
-    verbose: bool,
+    mut each_run: impl FnMut(String),
 ) -> Vec<Calibration> {
     let mut vals: Vec<Vec<f64>> = Vec::new();
     let mut stds: Vec<Vec<f64>> = Vec::new();
@@ -148,22 +148,20 @@ pub fn sigma_calibration(
             }
             z2[i] += ((v[i] - t[i].ln()) / s[i]).powi(2);
         }
-        if verbose {
-            let errs: Vec<String> = (0..v.len())
-                .map(|i| format!("{:+.1}", 100.0 * (v[i] - t[i].ln())))
-                .collect();
-            println!(
-                "  seed {seed}: log errors [%] {} σ [%] {} delay {:.2} cost {:.3e} warnings {:?}",
-                errs.join(" "),
-                s.iter()
-                    .map(|x| format!("{:.2}", 100.0 * x))
-                    .collect::<Vec<_>>()
-                    .join(" "),
-                fit.delay.value,
-                fit.cost,
-                fit.warnings
-            );
-        }
+        let errs: Vec<String> = (0..v.len())
+            .map(|i| format!("{:+.1}", 100.0 * (v[i] - t[i].ln())))
+            .collect();
+        each_run(format!(
+            "  seed {seed}: log errors [%] {} σ [%] {} delay {:.2} cost {:.3e} warnings {:?}",
+            errs.join(" "),
+            s.iter()
+                .map(|x| format!("{:.2}", 100.0 * x))
+                .collect::<Vec<_>>()
+                .join(" "),
+            fit.delay.value,
+            fit.cost,
+            fit.warnings
+        ));
         vals.push(v);
         stds.push(s);
     }

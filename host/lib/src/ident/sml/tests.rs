@@ -496,7 +496,7 @@ fn standard_deviations_hold_with_realistic_sensors() {
     let runs = 30;
     let mut failed = Vec::new();
     for noise in [Noise::Default, Noise::Coloured, Noise::Disturbance10] {
-        let t = sigma_calibration(Structure::ThreeMass, noise, runs, 4, false);
+        let t = sigma_calibration(Structure::ThreeMass, noise, runs, 4, |_| {});
         println!("{noise:?}: {}", table_row(&t));
         for c in &t {
             // Both measures, except for the two whose σ changes several-fold from
