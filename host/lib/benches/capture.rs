@@ -14,7 +14,7 @@
 //!
 //! Figures: MB/s of stream bytes and multiples of real time (one hour = 3600 s).
 //! Targets: decode ≥ 10 000× real time; one hour exported to CSV in < 5 s.
-//! Run: `cargo bench -p jointid --bench capture`.
+//! Run: `cargo bench -p jointid --features test-support --bench capture`.
 
 use std::hint::black_box;
 use std::io::Write;

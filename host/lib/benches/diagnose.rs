@@ -11,7 +11,7 @@
 //! 2 × 15,000 estimation and 15,000 validation samples, all six candidates, against the
 //! nominal fit alone in the same run.
 //!
-//! Run: `cargo bench -p jointid --bench diagnose` (`ROUNDS=N` draws N rounds of ten cases,
+//! Run: `cargo bench -p jointid --features test-support --bench diagnose` (`ROUNDS=N` draws N rounds of ten cases,
 //! default 2, each round with its own seed; `ONLY=K` or `ONLY=K,L` runs those cases alone,
 //! numbered across rounds (round 2 is 10–19); `SPEED=0` skips the speed case, `DETAIL=1`
 //! prints every candidate, `BATTERY=0` the battery).

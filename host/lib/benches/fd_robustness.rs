@@ -7,7 +7,7 @@
 //! within 3 % and 3 σ of the truth (f_m within 3 σ) and whose two modes are
 //! within 0.5 %; of the others, how many raised a warning.
 //!
-//! Run: `cargo bench -p jointid --bench fd_robustness` (`DRAWS=N` to change
+//! Run: `cargo bench -p jointid --features test-support --bench fd_robustness` (`DRAWS=N` to change
 //! the number of joints, `ONLY=K` to run draw K alone).
 
 use std::time::Instant;

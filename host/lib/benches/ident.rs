@@ -16,7 +16,7 @@
 //! time-domain grey-box fit of this bench's own 15,000-sample record (PD
 //! loop, no disturbance) measured in the same run.
 //!
-//! Run: `cargo bench -p jointid --bench ident`.
+//! Run: `cargo bench -p jointid --features test-support --bench ident`.
 
 use std::hint::black_box;
 use std::time::Instant;

@@ -18,7 +18,7 @@
 //! 4. Seed 001's model from the automatic start on 100 simulated joints (see `robustness`;
 //!    `JOINTID_BENCH_JOINTS=N` for another count).
 //!
-//! Run: `cargo bench -p jointid --bench nonlinear` (`JOINTID_BENCH_PARTS=seed001` for parts
+//! Run: `cargo bench -p jointid --features test-support --bench nonlinear` (`JOINTID_BENCH_PARTS=seed001` for parts
 //! 1 and 2 only). Figures of the README's peers on the same files (scipy TRF with finite
 //! differences 30.5 s, JAX + scipy 1.0 s, jax-sysid 6.1 s median per fit; validation FIT
 //! 96.87 %) are printed beside ours.

@@ -9,7 +9,7 @@
 //! three-mass joint with Coulomb friction driven by 60,000 samples (30 s) of the closed
 //! loop's recorded torque.
 //!
-//! Run: `cargo bench -p jointid --bench sim`. One thread; best of five runs per case. Both
+//! Run: `cargo bench -p jointid --features test-support --bench sim`. One thread; best of five runs per case. Both
 //! wall-clock time and this thread's CPU time (Linux `schedstat`) are printed: on a shared,
 //! loaded machine the CPU time is the figure that measures the simulator.
 

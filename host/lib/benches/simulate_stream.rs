@@ -10,7 +10,7 @@
 //! resident memory of the run (Linux: `VmHWM` of `/proc/self/status`, reset before each run
 //! through `/proc/self/clear_refs`), and the ratios of the two paths.
 //!
-//! Run: `cargo bench -p jointid --bench simulate_stream`.
+//! Run: `cargo bench -p jointid --features test-support --bench simulate_stream`.
 
 use std::time::Instant;
 

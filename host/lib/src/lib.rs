@@ -24,6 +24,7 @@ pub mod report;
 pub mod scenario;
 pub mod sim;
 /// Fixtures with a known truth for the tests of this crate, its benches and the command
-/// line's tests: not part of the API.
+/// line's tests (feature `test-support`): not part of the API.
+#[cfg(any(test, feature = "test-support"))]
 #[doc(hidden)]
 pub mod test_support;
