@@ -6,7 +6,7 @@
 //! comes as its gap-free segments ([`jointid::diagnose::diagnose_segments`]).
 
 use std::collections::BTreeMap;
-use std::io::Write;
+use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 
 use clap::Args;
@@ -17,7 +17,9 @@ use super::{check_plot_files, print_json, print_written, write_svg, CmdResult, C
 use jointid::data::output::{check_output, write_file};
 use jointid::data::segment::{SegmentNotes, MIN_SEGMENT_SAMPLES};
 use jointid::data::{Dataset, Percent};
-use jointid::diagnose::{diagnose_segments, DiagnoseRequest, Diagnosis, UserSim};
+use jointid::diagnose::{
+    diagnose_segments, DiagnoseRequest, Diagnosis, Progress, ProgressEvent, UserSim,
+};
 use jointid::ident::grey_box::DEFAULT_GEAR_RATIO;
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::sim_plant;
@@ -77,6 +79,9 @@ pub struct DiagnoseArgs {
     /// replace the report and the SVG files when they exist
     #[arg(long)]
     pub force: bool,
+    /// No progress lines on standard error (shown only when it is a terminal)
+    #[arg(long, short)]
+    pub quiet: bool,
 }
 
 /// The effect specs of `--effect` flags: each flag's value split on commas, an item that
@@ -244,16 +249,28 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     let (val, val_numbers) = capture(&args.validation, "--validation ")?;
     check_same_rate(&est[0][0], &val[0], "--validation")?;
+    let bar = progress_bar(args.quiet);
+    let shown = bar.clone();
     let req = DiagnoseRequest {
         structure,
         r: args.gear_ratio,
         candidates: cands,
         given,
         user,
+        progress: (!bar.is_hidden()).then(|| {
+            Progress::new(move |e| match e {
+                ProgressEvent::Started(what) => shown.set_message(format!("{what} …")),
+                ProgressEvent::Finished(what, outcome) => {
+                    shown.println(format!("{what}: {outcome}"))
+                }
+            })
+        }),
         ..DiagnoseRequest::default()
     };
     let est_refs: Vec<&[Dataset]> = est.iter().map(Vec::as_slice).collect();
-    let (mut d, series) = diagnose_segments(&est_refs, &val, &req)?;
+    let diagnosed = diagnose_segments(&est_refs, &val, &req);
+    bar.finish_and_clear();
+    let (mut d, series) = diagnosed?;
     // the capture's own numbering of the validation segments
     for (s, &k) in d.validation_segments.iter_mut().zip(&val_numbers) {
         s.segment = k;
@@ -451,6 +468,23 @@ const DIAGNOSING_NOTES: SegmentNotes = SegmentNotes {
         )
     },
 };
+
+/// One line per stage and candidate on standard error while the diagnosis runs (a spinner
+/// with the one running, the finished ones printed above it); hidden with `--quiet` or
+/// when standard error is not a terminal.
+fn progress_bar(quiet: bool) -> indicatif::ProgressBar {
+    if quiet || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new_spinner();
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} {elapsed_precise} {msg}")
+    {
+        bar.set_style(style);
+    }
+    bar.set_message("diagnosing …");
+    bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    bar
+}
 
 #[cfg(test)]
 mod tests {

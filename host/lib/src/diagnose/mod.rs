@@ -74,10 +74,14 @@
 //! take the first estimation capture's segments as separate experiments, the gap metric
 //! simulates every validation segment from its own start and pools one sum of squares
 //! over them ([`metric::score_segments`]).
+//!
+//! [`DiagnoseRequest::progress`] is told of each stage and candidate as it starts and ends
+//! ([`progress`]); the command line draws it as progress lines on a terminal.
 
 pub mod in_loop;
 pub mod locate;
 pub mod metric;
+pub mod progress;
 pub mod series;
 
 #[cfg(test)]
@@ -111,6 +115,7 @@ use metric::{
     score_segments, segment_gain, start_sensitivity_segments, DrivenModel, Measured, MetricError,
     Scored,
 };
+pub use progress::{Progress, ProgressEvent};
 use series::DiagnosisSeries;
 
 /// The user's simulation, for the parameter-against-structure split of the gap.
@@ -194,6 +199,9 @@ pub struct DiagnoseRequest {
     pub user: Option<UserSim>,
     /// options
     pub options: DiagnoseOptions,
+    /// who is told of each stage and candidate as it starts and ends (a terminal's progress
+    /// lines); it never changes the answer
+    pub progress: Option<Progress>,
 }
 
 impl Default for DiagnoseRequest {
@@ -207,6 +215,7 @@ impl Default for DiagnoseRequest {
             given: BTreeMap::new(),
             user: None,
             options: DiagnoseOptions::default(),
+            progress: None,
         }
     }
 }
@@ -1869,6 +1878,10 @@ pub fn diagnose_segments(
         _ => None,
     });
     let est_data: Vec<IdData> = est[0].iter().map(|d| d.data.clone()).collect();
+    progress::started(
+        req.progress.as_ref(),
+        "the linear starts (FRF and frequency-domain fits)",
+    );
     let (coulomb_start, level) = match coulomb {
         Some(c) => coulomb_linear_of(est[0], req, c),
         None => (None, None),
@@ -1907,7 +1920,16 @@ pub fn diagnose_segments(
                 Some((_, t)) if *t > 0.0 => *t,
                 _ => ts,
             };
-            match grow::grow(&est_data, req.structure, req.r, lag, &o.nl) {
+            let grown = progress::step(
+                req.progress.as_ref(),
+                "the structure grown in the time domain (the motor sticks)",
+                || grow::grow(&est_data, req.structure, req.r, lag, &o.nl),
+                |r| match r {
+                    Ok(_) => "grown".to_string(),
+                    Err(e) => format!("failed: {e}"),
+                },
+            );
+            match grown {
                 Ok(g) => {
                     warnings.push(format!(
                         "the motor sticks: the torque stays below the friction level \
@@ -1936,14 +1958,33 @@ pub fn diagnose_segments(
     // one candidate model (nominal + `effects`) fitted on the estimation data (started from
     // `from` when given) and scored
     let score = |(effects, from): &(Vec<Effect>, Option<&NlFit>)| {
-        fit_and_score(
-            &est_data,
-            &val_data,
-            &parts,
-            req,
-            effects.clone(),
-            &starts,
-            *from,
+        let label = if effects.is_empty() {
+            "nominal".to_string()
+        } else {
+            effects
+                .iter()
+                .map(|e| e.name())
+                .collect::<Vec<_>>()
+                .join(" + ")
+        };
+        progress::step(
+            req.progress.as_ref(),
+            &label,
+            || {
+                fit_and_score(
+                    &est_data,
+                    &val_data,
+                    &parts,
+                    req,
+                    effects.clone(),
+                    &starts,
+                    *from,
+                )
+            },
+            |r| match r {
+                Ok(_) => "fitted and scored".to_string(),
+                Err(e) => format!("failed: {e}"),
+            },
         )
     };
     let results = parallel(&jobs, o.threads, score);
@@ -2508,7 +2549,12 @@ pub fn diagnose_segments(
                         pair: &mut pair,
                         pair_fitted: &mut pair_fitted,
                     };
-                    refine_answer(&mut l, answer, ctx, &judge, o);
+                    progress::step(
+                        req.progress.as_ref(),
+                        "the answer refined in the controller's loop",
+                        || refine_answer(&mut l, answer, ctx, &judge, o),
+                        |_| "done".to_string(),
+                    );
                     warnings.push(l.words.clone());
                     // the answer's own doubts, which no open-loop check covers here (bench
                     // case 61: an arm spring the loop's refinement leaves undetermined)
