@@ -580,7 +580,7 @@ impl LeastSquares for LoopProblem<'_> {
             };
         }
         let base = self.simulated(theta);
-        let columns = super::parallel(free, self.threads, |&j| {
+        let columns = crate::ident::parallel::parallel(free, self.threads, |&j| {
             let mut z = theta.to_vec();
             z[j] += REFINE_STEP;
             self.simulated(&z)

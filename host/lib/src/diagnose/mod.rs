@@ -88,8 +88,6 @@ pub mod series;
 mod tests;
 
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 use std::time::Instant;
 
 use serde::Serialize;
@@ -107,6 +105,7 @@ use crate::ident::nonlinear::{
     identify_segments, linear_start_segments, model_of, NlError, NlFit, NlOptions, NlRequest,
     NlResult, NlRunError, NlStart, Owner,
 };
+use crate::ident::parallel::parallel;
 use crate::model::effects::{Attach, Effect, ExtraMode};
 use crate::model::params::{model_params, Plant};
 use crate::model::spec::Structure;
@@ -1084,29 +1083,6 @@ fn by_score(c: &Candidate) -> f64 {
     } else {
         f64::NEG_INFINITY
     }
-}
-
-/// Runs `jobs` on `threads` threads, results in job order.
-fn parallel<T: Send, J: Sync>(jobs: &[J], threads: usize, f: impl Fn(&J) -> T + Sync) -> Vec<T> {
-    let next = AtomicUsize::new(0);
-    let out: Mutex<Vec<Option<T>>> = Mutex::new((0..jobs.len()).map(|_| None).collect());
-    std::thread::scope(|s| {
-        for _ in 0..threads.clamp(1, jobs.len().max(1)) {
-            s.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                if i >= jobs.len() {
-                    break;
-                }
-                let r = f(&jobs[i]);
-                out.lock().expect("no panic while holding the lock")[i] = Some(r);
-            });
-        }
-    });
-    out.into_inner()
-        .expect("no panic while holding the lock")
-        .into_iter()
-        .map(|r| r.expect("every job ran"))
-        .collect()
 }
 
 /// The order [periods per revolution] of a torque ripple the search found: none held at

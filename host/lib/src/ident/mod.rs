@@ -16,6 +16,7 @@ pub mod lm;
 pub mod model_export;
 pub mod model_file;
 pub mod nonlinear;
+pub mod parallel;
 pub mod pem;
 pub mod sml;
 pub mod ss;

@@ -21,6 +21,7 @@ use super::model::NlModel;
 use super::output_error::{fit_output_error, NlError, NlFit, NlOptions};
 use crate::data::IdData;
 use crate::ident::grey_box::{self, IdimOptions, Output};
+use crate::ident::parallel::{machine_threads, parallel};
 use crate::model::effects::{Attach, Effect, ExtraMode};
 use crate::model::spec::Structure;
 
@@ -323,8 +324,9 @@ pub fn automatic_start_with(
         searched = found;
     }
     let ripple_found = ripple.is_some() && held.is_empty();
-    let mut lin: Option<super::output_error::NlFit> = None;
-    for plant in &plants {
+    // each linear start refined on its own thread; the lowest cost in start order wins, as
+    // on one
+    let refine = |plant: &Vec<f64>| -> Option<super::output_error::NlFit> {
         // the Coulomb level: the regression's, or the grid value that explains the data best
         // with this linear start (the regression misses friction that shows only at reversals)
         let mut fc = fc_used;
@@ -380,7 +382,7 @@ pub fn automatic_start_with(
             ..model.clone()
         };
         let lin_start = lin_model.values(plant, offset, 0.0);
-        let Ok(f) = fit_output_error(
+        fit_output_error(
             data,
             &lin_model,
             &lin_start,
@@ -396,9 +398,14 @@ pub fn automatic_start_with(
                 },
                 ..NlOptions::default()
             },
-        ) else {
-            continue;
-        };
+        )
+        .ok()
+    };
+    let mut lin: Option<super::output_error::NlFit> = None;
+    for f in parallel(&plants, machine_threads(), refine)
+        .into_iter()
+        .flatten()
+    {
         if lin.as_ref().is_none_or(|l| f.ssr < l.ssr) {
             lin = Some(f);
         }
@@ -752,7 +759,7 @@ fn two_mass_grid(
         effects: friction,
         ..model.clone()
     };
-    let mut best: Option<(f64, Vec<f64>)> = None;
+    let mut grid: Vec<Vec<f64>> = Vec::new();
     for js in [0.5, 0.7, 1.0, 1.4, 2.0] {
         let jt = j * js;
         for alpha in [0.25, 0.5, 0.75] {
@@ -764,13 +771,19 @@ fn two_mass_grid(
                 let mu = 1.0 / (1.0 / ja + r2 / jm);
                 let kg = w * w * mu;
                 let dg = 2.0 * 0.1 * w * mu;
-                let plant = vec![jm, ja, kg, dg, fv];
-                let values = m.values(&plant, offset, 0.0);
-                if let Some(cost) = super::output_error::cost_at(data, &m, &values) {
-                    if best.as_ref().is_none_or(|(c, _)| cost < *c) {
-                        best = Some((cost, plant));
-                    }
-                }
+                grid.push(vec![jm, ja, kg, dg, fv]);
+            }
+        }
+    }
+    // the grid's simulations on threads; the lowest cost in grid order wins, as on one
+    let costs = parallel(&grid, machine_threads(), |plant| {
+        super::output_error::cost_at(data, &m, &m.values(plant, offset, 0.0))
+    });
+    let mut best: Option<(f64, Vec<f64>)> = None;
+    for (plant, cost) in grid.into_iter().zip(costs) {
+        if let Some(cost) = cost {
+            if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+                best = Some((cost, plant));
             }
         }
     }
