@@ -11,11 +11,13 @@
 //! loop from the validation reference ([`super::metric::simulate_closed`]): the same
 //! true models score 99.2–99.8 % there.
 
+use super::fits::Fitted;
 use super::locate;
 use super::metric::{
     simulate_closed, velocity_band, ClosedScored, DrivenModel, Measured, MetricError,
 };
-use super::{odd_words, Candidate, DiagnoseOptions, Fitted};
+use super::table::{by_score, odd_words};
+use super::{Candidate, DiagnoseOptions};
 use crate::data::{Dataset, IdData};
 use crate::ident::controller::{identify, ControllerError, LinearController};
 use crate::ident::frf::ClassLevel;
@@ -415,7 +417,7 @@ impl LoopAnswer<'_> {
             }
         }
         self.singles
-            .sort_by(|a, b| super::by_score(&b.0).total_cmp(&super::by_score(&a.0)));
+            .sort_by(|a, b| by_score(&b.0).total_cmp(&by_score(&a.0)));
         match (pair_judged, pair_wins, self.pair.as_mut()) {
             (Some(((score, se, significant), cs, odd)), true, Some(p)) => {
                 p.reason = format!(

@@ -14,7 +14,9 @@
 use nalgebra::RowDVector;
 use rustfft::{num_complex::Complex64, FftPlanner};
 
-use super::metric::DrivenModel;
+use super::fits::Fitted;
+use super::metric::{DrivenModel, Measured};
+use crate::data::Dataset;
 use crate::ident::frf::FrfAnalysis;
 use crate::ident::ss::ContinuousSs;
 use crate::ident::validate::{BodeCurve, FrfBand};
@@ -233,6 +235,105 @@ pub fn loudest_window(x: &[f64], len: usize) -> std::ops::Range<usize> {
         }
     }
     at..at + len
+}
+
+/// The report's series of one diagnosis ([`DiagnosisSeries`]); `residual` is the nominal's
+/// over the scored range, `angle_order` the order of its pattern against the motor angle.
+pub(super) fn series_of(
+    measured: &Measured,
+    nominal: &Fitted,
+    best: Option<(String, Vec<f64>)>,
+    val: &Dataset,
+    analyses: &[(String, FrfAnalysis)],
+    residual: &[f64],
+    angle_order: u32,
+) -> DiagnosisSeries {
+    let s = measured.skip;
+    let ts = val.data.ts;
+    let meas = measured.velocity[s..].to_vec();
+    let best = best.map(|(n, v)| (n, v[s..].to_vec()));
+    let best_res: Option<Vec<f64>> = best
+        .as_ref()
+        .map(|(_, v)| meas.iter().zip(v).map(|(a, b)| a - b).collect());
+    // 2 s segments: 0.5 Hz lines, below the metric's 1 Hz edge
+    let seg = ((2.0 / ts) as usize).min(meas.len() / 2).max(16);
+    let (freq_hz, measured_asd) = asd(&meas, ts, seg);
+    let spectra = Spectra {
+        freq_hz,
+        measured: measured_asd,
+        nominal: asd(residual, ts, seg).1,
+        best: best_res.as_ref().map(|r| asd(r, ts, seg).1),
+    };
+    let model = DrivenModel::of_fit(&nominal.fit);
+    let frf = analyses
+        .iter()
+        .rev()
+        .find(|(n, _)| *n == val.name)
+        .or(analyses.first())
+        .and_then(|(name, a)| {
+            let frf = crate::ident::validate::FrfBand::from(&a.frf);
+            let pos = frf.freq_hz.iter().copied().filter(|f| *f > 0.0);
+            let lo = pos.clone().fold(f64::INFINITY, f64::min);
+            let hi = pos.fold(0.0, f64::max);
+            if !(lo.is_finite() && hi > lo) {
+                return None;
+            }
+            let grid = log_grid(lo / 1.1, (hi * 1.1).min(0.49 / ts), 400);
+            let response = nominal_response(&model, ts, &grid);
+            Some(FrfFigure {
+                capture: name.clone(),
+                frf,
+                nominal: crate::ident::validate::BodeCurve {
+                    name: format!("nominal {}", model.plant.kind.label()),
+                    freq_hz: grid,
+                    response,
+                },
+            })
+        });
+    let driven = &nominal.scored.driven;
+    let mut maps = vec![residual_map(
+        "motor velocity ω_m of the nominal [rad/s]",
+        &driven.omega_m[s..],
+        residual,
+    )];
+    if driven.gearbox_deflection[s..].iter().any(|d| *d != 0.0) {
+        maps.push(residual_map(
+            "gearbox deflection δ of the nominal [rad]",
+            &driven.gearbox_deflection[s..],
+            residual,
+        ));
+    }
+    let (angle, label) = if angle_order > 0 {
+        let p = 2.0 * std::f64::consts::PI / angle_order as f64;
+        (
+            val.data.y[s..].iter().map(|t| t.rem_euclid(p)).collect::<Vec<_>>(),
+            format!("measured motor angle θ_m modulo 2π/{angle_order} (the residual's order-{angle_order} pattern) [rad]"),
+        )
+    } else {
+        (
+            val.data.y[s..].to_vec(),
+            "measured motor angle θ_m [rad]".to_string(),
+        )
+    };
+    maps.push(residual_map(&label, &angle, residual));
+    let win = ((MOVING_RMS_S / ts).round() as usize).max(1);
+    let step = (win / 2).max(1);
+    DiagnosisSeries {
+        ts,
+        t0: s as f64 * ts,
+        validation: val.name.clone(),
+        nominal: nominal.scored.velocity[s..].to_vec(),
+        best,
+        frf,
+        lines: analyses.to_vec(),
+        spectra,
+        maps,
+        rms_step_s: step as f64 * ts,
+        nominal_rms: moving_rms(residual, win, step),
+        best_rms: best_res.as_ref().map(|r| moving_rms(r, win, step)),
+        window: loudest_window(residual, (WINDOW_S / ts).round() as usize),
+        measured: meas,
+    }
 }
 
 #[cfg(test)]

@@ -3,7 +3,12 @@
 //! disturbance), the paper's excitation with 4 periods; estimation and validation differ in
 //! the excitation's phases and in the noise seed.
 
+use super::fits::fit_and_score;
+use super::metric::Measured;
+use super::starts::{linear_of, LinearStarts};
+use super::table::vanished_effects;
 use super::*;
+use crate::ident::nonlinear::NlFit;
 use crate::model::effects::{ExtraMode, NonlinearStiffness, TimeDelay};
 use crate::sim::SimConfig;
 use jointid_core::excitation::ExcitationConfig;

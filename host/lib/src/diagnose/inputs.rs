@@ -1,0 +1,138 @@
+//! Stage 0, the inputs: the captures checked (count, length, rate, validation not the
+//! estimation's own samples), the candidates that apply to the structure, and the measured
+//! side of every validation segment, which every later stage scores against.
+
+use crate::data::{Dataset, IdData};
+use crate::model::effects::Effect;
+use crate::model::spec::Structure;
+
+use super::metric::Measured;
+use super::{DiagnoseError, DiagnoseRequest};
+
+/// The checked inputs of one diagnosis.
+pub(super) struct Records<'a> {
+    /// every estimation capture as its segments (the fits take the first)
+    pub est: &'a [&'a [Dataset]],
+    /// the validation capture's segments
+    pub val_segs: &'a [Dataset],
+    /// the first estimation capture's records, the fits' experiments
+    pub est_data: Vec<IdData>,
+    /// the validation records
+    pub val_data: Vec<IdData>,
+    /// the measured side of each validation record
+    pub parts: Vec<Measured>,
+    /// the measured side of them joined (one segment: itself)
+    pub measured: Measured,
+    /// the validation record the location and the series read: the capture itself, or
+    /// its segments' scored ranges joined (then scored from its first sample)
+    pub val: Dataset,
+    /// the candidates that apply to the structure
+    pub candidates: Vec<Effect>,
+    /// sample period [s]
+    pub ts: f64,
+}
+
+/// The inputs of [`super::diagnose_segments`] checked and prepared; a note for the
+/// candidates that do not apply to the structure goes into `warnings`.
+pub(super) fn prepare<'a>(
+    est: &'a [&'a [Dataset]],
+    val: &'a [Dataset],
+    req: &DiagnoseRequest,
+    warnings: &mut Vec<String>,
+) -> Result<Records<'a>, DiagnoseError> {
+    let o = &req.options;
+    if est.is_empty() || est.len() > 2 {
+        return Err(DiagnoseError::EstimationCount(est.len()));
+    }
+    if est.iter().any(|c| c.is_empty()) {
+        return Err(DiagnoseError::NoEstimationSegment);
+    }
+    let Some(val0) = val.first() else {
+        return Err(DiagnoseError::NoValidationSegment);
+    };
+    // effects on the gearbox spring are no candidates of a rigid model
+    let (candidates, inapplicable): (Vec<Effect>, Vec<Effect>) = req
+        .candidates
+        .iter()
+        .partition(|e| req.structure != Structure::Rigid || !e.acts_on_gearbox());
+    if candidates.is_empty() {
+        return Err(DiagnoseError::NoCandidate);
+    }
+    if !(req.r.is_finite() && req.r > 0.0) {
+        return Err(DiagnoseError::GearRatio(req.r));
+    }
+    let ts = val0.data.ts;
+    for ds in est.iter().flat_map(|c| c.iter()).chain(val) {
+        ds.data.check(200).map_err(|source| DiagnoseError::Record {
+            capture: ds.name.clone(),
+            source,
+        })?;
+        if !crate::data::same_rate(ds.data.ts, ts) {
+            return Err(DiagnoseError::RateMismatch {
+                capture: ds.name.clone(),
+                ts: ds.data.ts,
+                val_ts: ts,
+            });
+        }
+    }
+    // validation on the estimation record itself measures nothing the fits did not see:
+    // every candidate's extra parameters gain there, so it would name effects on any joint
+    for e in est.iter().flat_map(|c| c.iter()) {
+        if let Some(v) = val
+            .iter()
+            .find(|v| v.data.u == e.data.u && v.data.y == e.data.y)
+        {
+            return Err(DiagnoseError::SameSamples {
+                validation: v.name.clone(),
+                estimation: e.name.clone(),
+            });
+        }
+    }
+    let parts: Vec<Measured> = val
+        .iter()
+        .map(|d| Measured::new(&d.data, o.band_hz, o.skip_of(&d.data)).with_tracking(o.tracking_hz))
+        .collect();
+    let measured = Measured::joined(&parts);
+    let joined = if let [one] = val {
+        one.clone()
+    } else {
+        let mut data = IdData {
+            ts,
+            u: Vec::new(),
+            y: Vec::new(),
+            r: None,
+        };
+        for (d, m) in val.iter().zip(&parts) {
+            data.u.extend_from_slice(&d.data.u[m.skip..]);
+            data.y.extend_from_slice(&d.data.y[m.skip..]);
+        }
+        Dataset {
+            name: val0.name.clone(),
+            data,
+            t0: val0.t0,
+            excitation: None,
+            meta: val0.meta.clone(),
+        }
+    };
+    if !inapplicable.is_empty() {
+        warnings.push(format!(
+            "{}: not candidates of a rigid model (they act on the gearbox spring)",
+            inapplicable
+                .iter()
+                .map(|e| e.name())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    Ok(Records {
+        est,
+        val_segs: val,
+        est_data: est[0].iter().map(|d| d.data.clone()).collect(),
+        val_data: val.iter().map(|d| d.data.clone()).collect(),
+        parts,
+        measured,
+        val: joined,
+        candidates,
+        ts,
+    })
+}

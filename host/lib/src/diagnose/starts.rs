@@ -1,0 +1,216 @@
+//! The linear starts: the frequency-domain fits the candidates start from (the structure,
+//! the structure with one more mass for an extra mode, the friction-compensated FRF for
+//! Coulomb friction), and where the motor sticks, the structure grown in the time domain
+//! ([`grow`]), since the FRF is then the friction's and not the structure's.
+
+use crate::data::Dataset;
+use crate::ident::nonlinear::{grow, linear_start_segments, NlRequest};
+use crate::model::effects::{Attach, Effect, ExtraMode};
+use crate::model::spec::Structure;
+
+use super::inputs::Records;
+use super::{progress, DiagnoseRequest};
+
+/// The starts of the candidates in `rec` (notes into `warnings`).
+pub(super) fn linear_starts(
+    rec: &Records<'_>,
+    req: &DiagnoseRequest,
+    warnings: &mut Vec<String>,
+) -> LinearStarts {
+    let o = &req.options;
+    let est0 = rec.est[0];
+    let coulomb = rec
+        .candidates
+        .iter()
+        .find(|e| matches!(e, Effect::CoulombFriction(_)))
+        .copied();
+    let extra = rec.candidates.iter().find_map(|e| match e {
+        Effect::ExtraMode(x) => Some(x.attach),
+        _ => None,
+    });
+    progress::started(
+        req.progress.as_ref(),
+        "the linear starts (FRF and frequency-domain fits)",
+    );
+    let (coulomb_start, level) = match coulomb {
+        Some(c) => coulomb_linear_of(est0, req, c),
+        None => (None, None),
+    };
+    let mut starts = LinearStarts {
+        structure: linear_of(est0, req, warnings),
+        extra_mode: extra.and_then(|a| extra_mode_start(est0, req.structure, req.r, a, None)),
+        coulomb: coulomb_start,
+        coulomb_extra_mode: match (coulomb, extra) {
+            (Some(c), Some(a)) if o.pairs => {
+                extra_mode_start(est0, req.structure, req.r, a, Some(c))
+            }
+            _ => None,
+        },
+        grown: None,
+        two_mass: None,
+    };
+    if rec
+        .candidates
+        .iter()
+        .any(|e| matches!(e, Effect::Backlash(_)))
+        && matches!(req.structure, Structure::TwoMass | Structure::ThreeMass)
+    {
+        starts.two_mass = linear_start_segments(
+            est0,
+            1,
+            &NlRequest::new(Structure::TwoMass, req.r, Vec::new()),
+        )
+        .ok()
+        .map(|l| (l.values, l.tau_c));
+    }
+    // stick-slip: the Coulomb candidates start from the structure grown in the time domain
+    let Some(level) = level else {
+        return starts;
+    };
+    let share = grow::stick_share(&rec.est_data, level);
+    if share <= grow::STICK_SHARE
+        || !matches!(req.structure, Structure::TwoMass | Structure::ThreeMass)
+    {
+        return starts;
+    }
+    let lag = match &starts.structure {
+        Some((_, t)) if *t > 0.0 => *t,
+        _ => rec.ts,
+    };
+    let grown = progress::step(
+        req.progress.as_ref(),
+        "the structure grown in the time domain (the motor sticks)",
+        || grow::grow(&rec.est_data, req.structure, req.r, lag, &o.nl),
+        |r| match r {
+            Ok(_) => "grown".to_string(),
+            Err(e) => format!("failed: {e}"),
+        },
+    );
+    match grown {
+        Ok(g) => {
+            warnings.push(format!(
+                "the motor sticks: the torque stays below the friction level {level:.3e} N·m \
+                 on {:.0} % of the estimation samples, so the FRF is the friction's and not \
+                 the structure's; the candidates with Coulomb friction (Stribeck law) start \
+                 from the {} grown in the time domain from the two-mass",
+                100.0 * share,
+                req.structure.label()
+            ));
+            starts.grown = Some(g);
+        }
+        Err(e) => warnings.push(format!(
+            "the motor sticks (the torque below the friction level on {:.0} % of the \
+             samples) but the time-domain start failed: {e}",
+            100.0 * share
+        )),
+    }
+    starts
+}
+
+/// The linear starts the candidate fits take from the frequency-domain fits.
+pub(super) struct LinearStarts {
+    /// the structure's values and current-loop lag [s]
+    pub structure: Option<(Vec<f64>, f64)>,
+    /// the structure's values, the extra mode and the lag [s], from the structure with one
+    /// more mass ([`extra_mode_start`])
+    pub extra_mode: Option<(Vec<f64>, ExtraMode, f64)>,
+    /// as `structure`, from the friction-compensated FRF
+    /// ([`crate::ident::nonlinear::compensate`]), for candidates with Coulomb friction; `None`
+    /// when the compensation was not used
+    pub coulomb: Option<(Vec<f64>, f64)>,
+    /// as `extra_mode`, from the friction-compensated FRF, for pairs of Coulomb friction and
+    /// an extra mode
+    pub coulomb_extra_mode: Option<(Vec<f64>, ExtraMode, f64)>,
+    /// when the motor sticks, the start grown in the time domain ([`grow`]), which every
+    /// candidate with Coulomb friction takes instead of the above
+    pub grown: Option<grow::Grown>,
+    /// the linear two-mass's values and lag [s] from the frequency-domain fit, from which
+    /// the backlash candidate is also grown ([`grow::grow_backlash`])
+    pub two_mass: Option<(Vec<f64>, f64)>,
+}
+
+/// The start of `structure` with an extra mode attached as `attach` says, from the
+/// frequency-domain fit of the structure with one more mass where that is the same
+/// mechanism: a two-mass joint with a mode on its arm is a three-mass chain, a three-mass
+/// joint with a mode in parallel on its first arm mass is seed 000's four-mass model
+/// (eq. (7), `J_p` on `k_p`). The automatic start's grid over the mode's frequency misses
+/// it when the structure's own fit took the extra resonance for one of its modes.
+fn extra_mode_start(
+    ds: &[Dataset],
+    structure: Structure,
+    r: f64,
+    attach: Attach,
+    coulomb: Option<Effect>,
+) -> Option<(Vec<f64>, ExtraMode, f64)> {
+    // the bigger structure, and where its extra body's inertia, spring and damper sit
+    let (bigger, keep, extra): (Structure, &[usize], [usize; 3]) = match (structure, attach) {
+        // [J_m, J_a1, J_a2, k_g, k_a, d_g, d_a, f_m]
+        (Structure::TwoMass, _) => (Structure::ThreeMass, &[0, 1, 3, 5, 7], [2, 4, 6]),
+        // [J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m]
+        (Structure::ThreeMass, Attach::Parallel) => {
+            (Structure::FourMass, &[0, 1, 2, 4, 5, 7, 8, 10], [3, 6, 9])
+        }
+        _ => return None,
+    };
+    let l = linear_start_segments(
+        ds,
+        1,
+        &NlRequest::new(bigger, r, coulomb.into_iter().collect()),
+    )
+    .ok()?;
+    if coulomb.is_some() && !compensation_used(&l) {
+        return None;
+    }
+    let plant = keep.iter().map(|&i| l.values[i]).collect();
+    let [j, k, d] = extra.map(|i| l.values[i]);
+    Some((plant, ExtraMode { j, k, d, attach }, l.tau_c))
+}
+
+/// Whether a linear start is the friction-compensated FRF's.
+fn compensation_used(l: &crate::ident::nonlinear::LinearStart) -> bool {
+    l.compensation
+        .as_ref()
+        .is_some_and(|c| c.values.iter().any(|(n, v, _)| n == "used" && *v > 0.0))
+}
+
+/// The linear start from the friction-compensated FRF ([`LinearStarts::coulomb`]), and the
+/// friction level the compensation's regression found [N·m] (before its
+/// [`crate::ident::nonlinear::compensate::SHARE`]).
+#[allow(clippy::type_complexity)]
+fn coulomb_linear_of(
+    ds: &[Dataset],
+    req: &DiagnoseRequest,
+    coulomb: Effect,
+) -> (Option<(Vec<f64>, f64)>, Option<f64>) {
+    let Ok(l) = linear_start_segments(ds, 1, &NlRequest::new(req.structure, req.r, vec![coulomb]))
+    else {
+        return (None, None);
+    };
+    let level = l.compensation.as_ref().and_then(|c| {
+        let taken = c.values.iter().find(|v| v.0 == "fc")?.1;
+        let regressed = c.values.iter().any(|v| v.0 == "fc_std");
+        regressed.then_some(taken / crate::ident::nonlinear::compensate::SHARE)
+    });
+    let start = compensation_used(&l).then_some((l.values, l.tau_c));
+    (start, level)
+}
+
+pub(super) fn linear_of(
+    ds: &[Dataset],
+    req: &DiagnoseRequest,
+    warnings: &mut Vec<String>,
+) -> Option<(Vec<f64>, f64)> {
+    match linear_start_segments(ds, 1, &NlRequest::new(req.structure, req.r, Vec::new())) {
+        Ok(l) => Some((l.values, l.tau_c)),
+        Err(e) => {
+            if ds.first().is_some_and(|d| d.excitation.is_some()) {
+                warnings.push(format!(
+                    "{}: the frequency-domain linear start failed ({e}); the fits start \
+                     automatically in the time domain",
+                    ds[0].name
+                ));
+            }
+            None
+        }
+    }
+}

@@ -1,0 +1,272 @@
+//! The candidate table: one row ([`Candidate`]) per fitted model, with its parameters, its
+//! evidence in words and its doubts. An effect fitted to no size is never significant
+//! ([`vanished_effects`]).
+
+use std::collections::BTreeMap;
+
+use crate::data::IdData;
+use crate::ident::nonlinear::{ripple, NlFit, Owner};
+use crate::model::effects::Effect;
+
+use super::fits::Fitted;
+use super::locate::{self, Band};
+use super::{Candidate, ParamValue, Where};
+
+/// The candidate `name` of the fitted model `f`, judged `(score, score_se, significant)`
+/// against its base; its effect parameters named `effect.key` for a pair.
+pub(super) fn scored_candidate(
+    name: &str,
+    f: &Fitted,
+    judged: (f64, f64, bool),
+    pair: bool,
+    (reason, odd_explained): (String, Option<f64>),
+) -> Candidate {
+    let (score, score_se, significant) = judged;
+    // an effect fitted to no size is the nominal again: whatever it gained came from the
+    // refitted structure, not from the effect
+    let vanished = vanished_effects(&f.fit);
+    let (significant, reason) = if vanished.is_empty() {
+        (significant, reason)
+    } else {
+        (
+            false,
+            format!(
+                "{reason}; not an effect: {} fitted within its σ of nought",
+                vanished.join(", ")
+            ),
+        )
+    };
+    Candidate {
+        name: name.into(),
+        specs: f.fit.model.effects.iter().map(|e| e.to_string()).collect(),
+        score,
+        score_se,
+        fit_val: f.scored.fit,
+        fit_angle_val: f.scored.angle_fit,
+        significant,
+        parameters: effect_parameters(&f.fit, pair),
+        odd_explained,
+        structure_parameters: linear_parameters(&f.fit),
+        reason,
+        warnings: f.warnings.clone(),
+    }
+}
+
+/// The parameter whose nought makes an effect vanish (the model is its nominal again), if it
+/// has one: friction level, backlash width, cubic stiffness, delay, ripple amplitude.
+fn size_parameter(e: &Effect) -> Option<&'static str> {
+    match e {
+        Effect::CoulombFriction(_) => Some("fc"),
+        Effect::Backlash(_) => Some("width"),
+        Effect::NonlinearStiffness(_) => Some("k3"),
+        Effect::TimeDelay(_) => Some("samples"),
+        Effect::TorqueRipple(_) => Some("amplitude"),
+        Effect::ExtraMode(_) => None,
+    }
+}
+
+/// The effects of `fit` whose size ([`size_parameter`]) came out within its standard
+/// deviation of nought (exactly nought where the deviation is unknown), as `name size`.
+pub(super) fn vanished_effects(fit: &NlFit) -> Vec<String> {
+    fit.params
+        .iter()
+        .filter_map(|p| {
+            let Owner::Effect(i) = p.owner else {
+                return None;
+            };
+            let e = &fit.model.effects[i];
+            let nought = if p.std.is_finite() && p.std > 0.0 {
+                p.value.abs() <= p.std
+            } else {
+                p.value == 0.0
+            };
+            (size_parameter(e) == Some(p.name) && nought).then(|| {
+                format!(
+                    "{} {} = {:.3e} ± {:.1e} {}",
+                    e.name(),
+                    p.name,
+                    p.value,
+                    p.std,
+                    p.unit
+                )
+            })
+        })
+        .collect()
+}
+
+/// The share of the nominal's odd-line residual a model removes, in words (empty when not
+/// read).
+pub(super) fn odd_words(share: Option<f64>) -> String {
+    match share {
+        None => String::new(),
+        Some(s) if s < -0.005 => format!(
+            "; it leaves {:.0} % more than the nominal's residual at the non-excited odd lines",
+            -100.0 * s
+        ),
+        Some(s) => format!(
+            "; it removes {:.0} % of the nominal's residual at the non-excited odd lines",
+            100.0 * s.max(0.0)
+        ),
+    }
+}
+
+/// A candidate's place in the ranking: its score, a failed fit last.
+pub(super) fn by_score(c: &Candidate) -> f64 {
+    if c.score.is_finite() {
+        c.score
+    } else {
+        f64::NEG_INFINITY
+    }
+}
+
+/// The order [periods per revolution] of a torque ripple the search found: none held at
+/// amplitude 0, whose order was never fitted.
+fn found_order(e: &Effect) -> Option<f64> {
+    match e {
+        Effect::TorqueRipple(r) if r.amplitude != 0.0 => Some(r.order),
+        _ => None,
+    }
+}
+
+/// The effects' fitted parameters of a fit (keys `effect.key` when `prefix`), with a torque
+/// ripple's order, found by its search and held in the fit (standard deviation 0; none
+/// when the search found no order and the ripple was held at amplitude 0).
+pub(super) fn effect_parameters(fit: &NlFit, prefix: bool) -> BTreeMap<String, ParamValue> {
+    let key = |e: &Effect, name: &str| {
+        if prefix {
+            format!("{}.{name}", e.name())
+        } else {
+            name.to_string()
+        }
+    };
+    let orders = fit.model.effects.iter().filter_map(|e| {
+        found_order(e).map(|order| {
+            (
+                key(e, "order"),
+                ParamValue {
+                    value: order,
+                    std: 0.0,
+                    unit: e
+                        .bounds()
+                        .iter()
+                        .find(|b| b.0 == "order")
+                        .map_or("", |b| b.3)
+                        .into(),
+                },
+            )
+        })
+    });
+    fit.params
+        .iter()
+        .filter_map(|p| match p.owner {
+            Owner::Effect(i) => Some((
+                key(&fit.model.effects[i], p.name),
+                ParamValue {
+                    value: p.value,
+                    std: p.std,
+                    unit: p.unit.to_string(),
+                },
+            )),
+            _ => None,
+        })
+        .chain(orders)
+        .collect()
+}
+
+/// The structure's values, lag and offset of a fit.
+pub(super) fn linear_parameters(fit: &NlFit) -> BTreeMap<String, ParamValue> {
+    fit.params
+        .iter()
+        .filter(|p| matches!(p.owner, Owner::Plant | Owner::CurrentLoop | Owner::Offset))
+        .map(|p| {
+            (
+                p.name.to_string(),
+                ParamValue {
+                    value: p.value,
+                    std: p.std,
+                    unit: p.unit.to_string(),
+                },
+            )
+        })
+        .collect()
+}
+
+/// A fit's torque ripple: its order and the periods of it the motor's travel on the
+/// longest of `est` covers; `None` without one, or held at amplitude 0 (no order found).
+pub(super) fn ripple_travel(fit: &NlFit, est: &[IdData]) -> Option<(f64, f64)> {
+    let order = fit.model.effects.iter().find_map(found_order)?;
+    let longest = est.iter().max_by_key(|d| d.len())?;
+    Some((order, ripple::travel_periods(longest, order)))
+}
+
+/// The evidence for `effect` in the residual's location, in words; `fitted`: the fitted
+/// ripple's order and the periods of it the travel covers ([`ripple_travel`]).
+pub(super) fn evidence(effect: &str, w: &Where, fitted: Option<(f64, f64)>) -> String {
+    let times = |r: &locate::Region, what: &str| {
+        if r.energy_ratio.is_finite() {
+            format!("residual {:.1}× the average {what}", r.energy_ratio)
+        } else {
+            format!("no samples {what}")
+        }
+    };
+    let top_band = w
+        .bands_hz
+        .iter()
+        .filter(|b| b.residual_ratio.is_finite())
+        .max_by(|a, b| a.residual_ratio.total_cmp(&b.residual_ratio));
+    let band = |b: Option<&Band>| match b {
+        Some(b) => format!(
+            "residual {:.0} % of the measured motion at {}–{} Hz (its largest band)",
+            100.0 * b.residual_ratio.sqrt(),
+            b.lo_hz,
+            b.hi_hz
+        ),
+        None => "no band to compare".into(),
+    };
+    let odd = w.distortion.first().map(|d| {
+        format!(
+            "odd non-excited lines {:.1} dB below the excited ones{}",
+            -d.linearity.odd.vs_excited_db,
+            if d.linearity.odd.detected {
+                ""
+            } else {
+                " (noise level)"
+            }
+        )
+    });
+    let r = &w.regions;
+    match effect {
+        "coulomb_friction" => times(&r.near_zero_velocity, "near zero velocity"),
+        "backlash" => times(&r.torque_sign_change, "at torque sign changes"),
+        "nonlinear_stiffness" => {
+            let mut s = times(&r.large_deflection, "at large gearbox deflection");
+            if let Some(o) = odd {
+                s = format!("{s}; {o}");
+            }
+            s
+        }
+        "torque_ripple" => {
+            let pattern = format!(
+                "the residual's strongest pattern against the motor angle, order {} per \
+                 revolution, explains {:.1} % of it",
+                r.angle_pattern.order,
+                100.0 * r.angle_pattern.share
+            );
+            match fitted {
+                Some((n, p)) if p < ripple::MIN_PERIODS => format!(
+                    "the fitted ripple, order {n:.0}, spans {p:.2} of its periods over the \
+                     motor's travel: a torque against the angle whose order these data do not \
+                     fix; {pattern}"
+                ),
+                Some((n, p)) => format!(
+                    "the fitted ripple has order {n:.0} per revolution ({p:.1} periods over \
+                     the motor's travel); {pattern}"
+                ),
+                None => pattern,
+            }
+        }
+        "extra_mode" => band(top_band),
+        "time_delay" => band(w.bands_hz.last()),
+        _ => String::new(),
+    }
+}

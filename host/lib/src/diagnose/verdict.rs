@@ -1,0 +1,294 @@
+//! Stage 8, the verdict: the answer's closure of the gap in one sentence with its doubts,
+//! the user's simulation split into parameter and structure parts, and the
+//! [`Diagnosis`] with the series of its report.
+
+use std::time::Instant;
+
+use crate::model::params::model_params;
+
+use super::evidence::Evidence;
+use super::fits::{Fitted, Fitter};
+use super::in_loop::InLoop;
+use super::metric::{self, score_segments, DrivenModel};
+use super::select::Answer;
+use super::series::{series_of, DiagnosisSeries};
+use super::table::linear_parameters;
+use super::{locate, Diagnosis, Mismatch, ParameterMismatch, ValidationSegment, SENSITIVE};
+
+/// The answer's figures: its name (`none`), the nominal's and its gap metric [%], the share
+/// of the nominal's odd residual it removes; in the loop, the loop's.
+struct Figures {
+    best: String,
+    nom_fit: f64,
+    best_fit: f64,
+    best_odd: Option<f64>,
+}
+
+/// The diagnosis from the stages' results; `t0` its start.
+pub(super) fn conclude(
+    fitter: &Fitter<'_>,
+    nominal: Fitted,
+    ev: Evidence,
+    answer: Answer,
+    in_loop: Option<InLoop>,
+    mut warnings: Vec<String>,
+    t0: Instant,
+) -> (Diagnosis, DiagnosisSeries) {
+    let (rec, req, o) = (fitter.rec, fitter.req, &fitter.req.options);
+    let f = match &in_loop {
+        Some(l) => Figures {
+            best: l.best.clone(),
+            nom_fit: l.scores.nominal.fit,
+            best_fit: l.best_fit,
+            best_odd: l.best_odd,
+        },
+        None => Figures {
+            best: answer.best().map_or("none".into(), |c| c.name.clone()),
+            nom_fit: nominal.scored.fit,
+            best_fit: answer.best().map_or(nominal.scored.fit, |c| c.fit_val),
+            best_odd: answer.best().and_then(|c| c.odd_explained),
+        },
+    };
+    let gap = 100.0 - f.nom_fit;
+    let gap_closed_share = if gap > 0.0 {
+        (f.best_fit - f.nom_fit) / gap
+    } else {
+        0.0
+    };
+    let parameter_mismatch =
+        parameter_mismatch(fitter, &nominal, &f, in_loop.as_ref(), &mut warnings);
+    let verdict = verdict(fitter, &ev, &answer, &f, in_loop.is_some(), &mut warnings);
+    let nominal_parameters = linear_parameters(&nominal.fit);
+    let validation_segments = if rec.parts.len() > 1 {
+        let best_records = answer.best_fitted().map_or_else(
+            || nominal.scored.per_record.clone(),
+            |f| f.scored.per_record.clone(),
+        );
+        rec.val_segs
+            .iter()
+            .zip(&nominal.scored.per_record)
+            .zip(&best_records)
+            .enumerate()
+            .map(|(i, ((d, &n), &b))| ValidationSegment {
+                segment: i + 1,
+                samples: d.data.len(),
+                fit_nominal: n,
+                fit_augmented: b,
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let best_velocity = answer
+        .best()
+        .zip(answer.best_fitted())
+        .map(|(c, fitted)| (c.name.clone(), fitted.scored.velocity.clone()));
+    // in the loop, the figures show the loop's simulations
+    let measured = &rec.measured;
+    let s = measured.skip;
+    let (nominal, best_velocity, residual) = match &in_loop {
+        Some(l) => {
+            let mut n = nominal;
+            n.scored.velocity.clone_from(&l.velocities.0);
+            n.scored.angle_fit = l.scores.nominal.angle_fit;
+            let residual: Vec<f64> = measured.velocity[s..]
+                .iter()
+                .zip(&l.velocities.0[s..])
+                .map(|(a, b)| a - b)
+                .collect();
+            (n, Some((f.best.clone(), l.velocities.1.clone())), residual)
+        }
+        None => (nominal, best_velocity, ev.residual),
+    };
+    let series = series_of(
+        measured,
+        &nominal,
+        best_velocity,
+        &rec.val,
+        &ev.analyses,
+        &residual,
+        ev.location.regions.angle_pattern.order,
+    );
+    let Answer { singles, pair, .. } = answer;
+    let diagnosis = Diagnosis {
+        verdict,
+        metric: if in_loop.is_some() {
+            metric::CLOSED_LOOP_METRIC_NAME
+        } else {
+            metric::METRIC_NAME
+        }
+        .into(),
+        structure: req.structure.label().into(),
+        fit_nominal_val: f.nom_fit,
+        fit_nominal_angle_val: nominal.scored.angle_fit,
+        nominal_parameters,
+        fit_augmented_val: f.best_fit,
+        gap_closed_share,
+        best: f.best,
+        pair,
+        effects: singles.into_iter().map(|c| c.0).collect(),
+        location: ev.location,
+        parameter_mismatch,
+        test: test_words(rec.parts.len(), o),
+        validation_segments,
+        seconds: t0.elapsed().as_secs_f64(),
+        warnings,
+    };
+    (diagnosis, series)
+}
+
+/// The significance test in words, for `parts` validation segments.
+fn test_words(parts: usize, o: &super::DiagnoseOptions) -> String {
+    if parts == 1 {
+        format!(
+            "the validation record (after {:.2} s) is split into {} equal segments; the gain \
+             of the metric over the nominal is computed on each; score = mean gain; \
+             significant when mean − 2·(standard error over the segments) > {} FIT point",
+            o.skip_s, o.segments, o.min_gain
+        )
+    } else {
+        format!(
+            "the validation capture's {parts} gap-free segments, each scored after {:.2} s, are \
+             joined and split into {} equal parts; the gain of the metric over the nominal is \
+             computed on each; score = mean gain; significant when mean − 2·(standard error \
+             over the parts) > {} FIT point",
+            o.skip_s, o.segments, o.min_gain
+        )
+    }
+}
+
+/// The user's simulation against the nominal: its FIT, and the gap split into the
+/// parameters' part and the structure's.
+fn parameter_mismatch(
+    fitter: &Fitter<'_>,
+    nominal: &Fitted,
+    f: &Figures,
+    in_loop: Option<&InLoop>,
+    warnings: &mut Vec<String>,
+) -> Option<ParameterMismatch> {
+    let rec = fitter.rec;
+    let u = fitter.req.user.as_ref()?;
+    let model = DrivenModel {
+        plant: u.plant,
+        effects: u.effects.clone(),
+        tau_c: u.tau_c,
+        offset: 0.0,
+    };
+    let fit_sim_val = match in_loop {
+        Some(l) => rec.parts[0]
+            .score_closed(&model, &l.scores.law, &rec.val_data[0], 1)
+            .map(|s| s.fit),
+        None => score_segments(&rec.parts, &model, &rec.val_data, 1).map(|s| s.fit),
+    }
+    .unwrap_or_else(|e| {
+        warnings.push(format!("{}: {e}", u.name));
+        f64::NAN
+    });
+    let nom_plant = DrivenModel::of_fit(&nominal.fit).plant;
+    let mut up = u.plant.params;
+    let mut np = nom_plant.params;
+    let user_names: Vec<&str> = model_params(u.plant.kind).iter().map(|p| p.0).collect();
+    let parameters = model_params(nom_plant.kind)
+        .into_iter()
+        .filter(|(n, _)| user_names.contains(n))
+        .map(|(name, field)| {
+            let sim = *field(&mut up);
+            let fitted = *field(&mut np);
+            Mismatch {
+                name: name.into(),
+                sim,
+                fitted,
+                percent: 100.0 * (fitted - sim) / sim,
+            }
+        })
+        .collect();
+    Some(ParameterMismatch {
+        sim: u.name.clone(),
+        fit_sim_val,
+        parameter_part: f.nom_fit - fit_sim_val,
+        structure_part: f.best_fit - f.nom_fit,
+        parameters,
+    })
+}
+
+/// The verdict sentence, with the answer's doubts (also into `warnings`).
+fn verdict(
+    fitter: &Fitter<'_>,
+    ev: &Evidence,
+    answer: &Answer,
+    f: &Figures,
+    looped: bool,
+    warnings: &mut Vec<String>,
+) -> String {
+    let (req, o) = (fitter.req, &fitter.req.options);
+    let (best, nom_fit, best_fit) = (&f.best, f.nom_fit, f.best_fit);
+    let gap = 100.0 - nom_fit;
+    let closed = if gap > 0.0 {
+        (best_fit - nom_fit) / gap
+    } else {
+        0.0
+    };
+    let in_loop_words = if looped {
+        " in the controller's loop"
+    } else {
+        ""
+    };
+    let mut verdict = if best == "none" {
+        format!(
+            "no candidate effect closes a significant part of the gap: the nominal {} reaches \
+             {nom_fit:.1} % (band-passed motor-velocity FIT on the validation \
+             data{in_loop_words}) and no effect gains more than {} FIT point beyond twice its \
+             standard error",
+            req.structure.label(),
+            o.min_gain
+        )
+    } else {
+        format!(
+            "{best} closes {:.0} % of the gap: band-passed motor-velocity FIT on the validation \
+             data{in_loop_words} {nom_fit:.1} % → {best_fit:.1} % ({:+.1} points)",
+            100.0 * closed,
+            best_fit - nom_fit
+        )
+    };
+    // in the loop, the open-loop sensitivity of the answer no longer matters
+    if let (false, Some(c)) = (looped, answer.best()) {
+        if let Some(w) = c.warnings.iter().find(|w| w.starts_with(SENSITIVE)) {
+            warnings.push(format!("{best}: {w}"));
+        }
+    }
+    let Some(db) = ev.odd_left_db().filter(|_| !looped) else {
+        return verdict;
+    };
+    let left = format!(
+        "the nominal's residual at the non-excited odd lines of the validation capture stands \
+         {db:.1} dB above the noise: odd nonlinear distortion (friction, backlash, a stiffening \
+         spring) that a linear model cannot follow"
+    );
+    match f.best_odd {
+        _ if best == "none" => warnings.push(format!(
+            "{left}, and no candidate removes it significantly: the effect that makes it is not \
+             among the candidates, or its fit or its simulation failed (see each candidate's \
+             warnings)"
+        )),
+        Some(share) if share < locate::ODD_EXPLAINED_DOUBT => {
+            let removed = if share > 0.005 {
+                format!("only {:.0} %", 100.0 * share)
+            } else {
+                "none".into()
+            };
+            warnings.push(format!(
+                "{left}; {best} removes {removed} of it, so {best} does not explain the \
+                 distortion and the answer is doubtful: the effect that makes it may be one \
+                 whose simulation from the measured torque cannot be scored (a strongly \
+                 stiffening spring, chaotic at this amplitude) or is not among the candidates"
+            ));
+            // the doubt goes with the verdict, where a reader of the top line sees it
+            verdict = format!(
+                "{verdict}; doubtful: {best} removes {removed} of the odd nonlinear distortion \
+                 the nominal leaves (see the notes)"
+            );
+        }
+        _ => {}
+    }
+    verdict
+}
