@@ -11,10 +11,17 @@
 //! 2 × 15,000 estimation and 15,000 validation samples, all six candidates, against the
 //! nominal fit alone in the same run.
 //!
+//! Every case's size, the true model's gain over the nominal on validation [FIT points],
+//! puts it in a band ([`BANDS`]); the answers are counted by band too, and each diagnosis's
+//! CPU time (user + system of the process, which load does not inflate) is printed beside
+//! its wall time.
+//!
 //! Run: `cargo bench -p jointid --features test-support --bench diagnose` (`ROUNDS=N` draws N rounds of ten cases,
-//! default 2, each round with its own seed; `ONLY=K` or `ONLY=K,L` runs those cases alone,
-//! numbered across rounds (round 2 is 10–19); `SPEED=0` skips the speed case, `DETAIL=1`
-//! prints every candidate, `BATTERY=0` the battery).
+//! default 2, each round with its own seed; `SMALL=1` draws the hidden effects' sizes
+//! log-uniform in 0.1–1.6 × their defaults instead, for effects that cost the nominal
+//! about a point; `ONLY=K` or `ONLY=K,L` runs those cases alone, numbered across rounds
+//! (round 2 is 10–19); `SPEED=0` skips the speed case, `DETAIL=1` prints every candidate,
+//! `BATTERY=0` the battery).
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -74,6 +81,46 @@ fn size_keys(e: &Effect) -> Vec<(&'static str, f64)> {
 /// points above the nominal (issue 12, item 7: "the validation FIT drops 3–30 points").
 const IN_BAND: std::ops::RangeInclusive<f64> = 3.0..=30.0;
 
+/// The bands of effect size by which the answers are counted: the true model's gain over
+/// the nominal on validation [FIT points].
+const BANDS: [(f64, f64); 5] = [
+    (f64::NEG_INFINITY, 1.0),
+    (1.0, 3.0),
+    (3.0, 6.0),
+    (6.0, 12.0),
+    (12.0, f64::INFINITY),
+];
+
+/// The band of a gain, as a label.
+fn band_of(gain: f64) -> String {
+    let (lo, hi) = BANDS
+        .iter()
+        .copied()
+        .find(|(lo, hi)| gain >= *lo && gain < *hi)
+        .unwrap_or(BANDS[0]);
+    match (lo.is_finite(), hi.is_finite()) {
+        (false, _) => format!("< {hi} points"),
+        (_, false) => format!("≥ {lo} points"),
+        _ => format!("{lo}–{hi} points"),
+    }
+}
+
+/// CPU time of this process so far [s] (user + system, `/proc/self/stat`; NaN elsewhere).
+fn cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return f64::NAN;
+    };
+    // fields after the command name in parentheses; utime and stime are the 14th and 15th
+    let rest = stat.rsplit_once(')').map_or("", |r| r.1);
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok());
+    match (ticks(11), ticks(12)) {
+        // the kernel's USER_HZ, 100 on Linux
+        (Some(u), Some(s)) => (u + s) / 100.0,
+        _ => f64::NAN,
+    }
+}
+
 /// Cases per round: each of the six effects alone, two pairs, two `none`.
 const ROUND: usize = 10;
 
@@ -81,7 +128,9 @@ const ROUND: usize = 10;
 /// the same distributions (round 0 is the original battery). Case `k·ROUND + i` has the
 /// controller tuning `(k·ROUND + i) mod 3`, so each effect meets other tunings in later
 /// rounds.
-fn cases(rounds: usize) -> Vec<Case> {
+fn cases(rounds: usize, small: bool) -> Vec<Case> {
+    // the size's range as a multiple of the default
+    let (lo, hi): (f64, f64) = if small { (0.1, 1.6) } else { (0.7, 1.6) };
     let mut hidden: Vec<Vec<&str>> = EFFECT_NAMES.iter().map(|n| vec![*n]).collect();
     hidden.push(vec!["nonlinear_stiffness", "time_delay"]);
     hidden.push(vec!["extra_mode", "coulomb_friction"]);
@@ -96,7 +145,7 @@ fn cases(rounds: usize) -> Vec<Case> {
             let (params, controller, rms) = random_joint(&mut rng, index);
             let effects = names
                 .iter()
-                .map(|n| scaled(n, 0.7 * (1.6f64 / 0.7).powf(rng.uniform())))
+                .map(|n| scaled(n, lo * (hi / lo).powf(rng.uniform())))
                 .collect();
             out.push(Case {
                 hidden: effects,
@@ -188,7 +237,12 @@ fn battery() {
         .ok()
         .and_then(|v| v.trim().parse().ok())
         .unwrap_or(2usize);
-    let all = cases(rounds);
+    let small = std::env::var("SMALL").is_ok_and(|v| v == "1");
+    let all = cases(rounds, small);
+    // band -> (cases, right answers); right: a single's top-1, a pair's both effects in
+    // the top two, `none` on none
+    let mut by_band: BTreeMap<String, (usize, usize)> = BTreeMap::new();
+    let mut cpu: Vec<f64> = Vec::new();
     let only: Option<Vec<usize>> = std::env::var("ONLY")
         .ok()
         .map(|v| v.split(',').filter_map(|k| k.trim().parse().ok()).collect());
@@ -226,6 +280,7 @@ fn battery() {
         };
         let truth = true_fit(&config(case), &val);
         let t = Instant::now();
+        let c0 = cpu_seconds();
         let d = match diagnose(std::slice::from_ref(&est), &val, &request(r)) {
             Ok(d) => d,
             Err(e) => {
@@ -254,7 +309,9 @@ fn battery() {
             }
         };
         let secs = t.elapsed().as_secs_f64();
+        let cpu_s = cpu_seconds() - c0;
         times.push(secs);
+        cpu.push(cpu_s);
         // a diagnosis scored in the controller's loop is compared with the truth in the loop
         let looped = d.metric == CLOSED_LOOP_METRIC_NAME;
         let truth = if looped {
@@ -272,7 +329,7 @@ fn battery() {
         let errs = param_errors(&d, &case.hidden);
         let closure_err = d.fit_augmented_val - truth;
         println!(
-            "case {i:>2} {label:<34} rms {:.3} rad: best {:<34} nominal {:6.2} → {:6.2} % (true model {:6.2} %, closure error {:+.2} points{}) top {:?} params {:?} {:.0} s",
+            "case {i:>2} {label:<34} rms {:.3} rad: best {:<34} nominal {:6.2} → {:6.2} % (true model {:6.2} %, closure error {:+.2} points{}) top {:?} params {:?} {:.0} s wall, {cpu_s:.0} s CPU",
             case.rms,
             d.best,
             d.fit_nominal_val,
@@ -304,6 +361,24 @@ fn battery() {
             println!("    hidden {:?}; warnings {:?}", case.hidden, d.warnings);
         }
         let answered = d.best.clone();
+        let right = match case.hidden.len() {
+            0 => answered == "none",
+            1 => answered.split('+').next() == Some(case.hidden[0].name()),
+            _ => {
+                let top2: Vec<&str> = ranked.iter().take(2).copied().collect();
+                case.hidden
+                    .iter()
+                    .all(|e| top2.contains(&e.name()) || answered.split('+').any(|b| b == e.name()))
+            }
+        };
+        let band = if case.hidden.is_empty() {
+            "none".to_string()
+        } else {
+            band_of(truth - d.fit_nominal_val)
+        };
+        let cell = by_band.entry(band).or_default();
+        cell.0 += 1;
+        cell.1 += usize::from(right);
         *confusion
             .entry(label.clone())
             .or_default()
@@ -382,6 +457,21 @@ fn battery() {
         let worst = closure_errs.iter().fold(0.0f64, |m, e| m.max(e.abs()));
         println!(
             "reported closure against the true model's validation metric: worst {worst:.2} points (target 3)"
+        );
+    }
+    println!(
+        "right answers by effect size (the true model's gain over the nominal on validation):"
+    );
+    for (band, (n, right)) in &by_band {
+        println!("  {band:<16} {right}/{n}");
+    }
+    if !cpu.is_empty() {
+        cpu.sort_by(f64::total_cmp);
+        println!(
+            "CPU time per diagnosis (user + system): median {:.1} s, worst {:.1} s, total {:.0} s",
+            cpu[cpu.len() / 2],
+            cpu[cpu.len() - 1],
+            cpu.iter().sum::<f64>()
         );
     }
     if !times.is_empty() {
