@@ -82,6 +82,10 @@ pub struct DiagnoseArgs {
     /// No progress lines on standard error (shown only when it is a terminal)
     #[arg(long, short)]
     pub quiet: bool,
+    /// exit 1 when the diagnosis names no effect because its nominal is not to be trusted
+    /// (it does not describe the validation data)
+    #[arg(long)]
+    pub strict: bool,
 }
 
 /// The effect specs of `--effect` flags: each flag's value split on commas, an item that
@@ -311,7 +315,11 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         print_summary(ctx.out, &d, &val_name)?;
         print_written(ctx.out, &files)?;
     }
-    Ok(Outcome::Ok)
+    Ok(if args.strict && d.refused.is_some() {
+        Outcome::CheckFailed
+    } else {
+        Outcome::Ok
+    })
 }
 
 /// The `--json` document: the diagnosis, its wall time also as `elapsed_s`, the name
@@ -337,10 +345,12 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
     writeln!(out, "  metric: {}", d.metric)?;
     writeln!(
         out,
-        "  {} on {val}: nominal {} {:.2} %, best {} {:.2} % ({:.0} % of the gap closed)",
+        "  {} on {val}: nominal {} {:.2} % (in-sample {:.2} %), best {} {:.2} % ({:.0} % of \
+         the gap closed)",
         metric_name(&d.metric),
         d.structure,
         Percent(d.fit_nominal_val),
+        Percent(d.fit_nominal_est),
         d.best,
         Percent(d.fit_augmented_val),
         Percent(100.0 * d.gap_closed_share)
@@ -362,11 +372,20 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
         }
     }
     writeln!(out, "  test: {}", d.test)?;
-    writeln!(out, "  candidates (gain over the nominal, FIT points):")?;
+    writeln!(
+        out,
+        "  candidates (gain over the nominal; over the answer {}, FIT points):",
+        d.best
+    )?;
     for c in &d.effects {
+        let over = match c.over_answer {
+            Some((m, se)) => format!("{:+7.2} ± {:5.2}", Percent(m), Percent(se)),
+            None if c.name == d.best => format!("{:>15}", "answer"),
+            None => format!("{:>15}", "—"),
+        };
         writeln!(
             out,
-            "    {:<20} {:+7.2} ± {:5.2} {:<16} {}",
+            "    {:<20} {:+7.2} ± {:5.2} {:<16} {over}  {}",
             c.name,
             Percent(c.score),
             Percent(c.score_se),

@@ -241,6 +241,56 @@ fn diagnose_refuses_an_unknown_effect_and_a_missing_file_naming_them() {
     assert!(err.contains("nope.csv"), "{err}");
 }
 
+/// A nominal fitted on one joint (three-mass) and validated on the record of another (a
+/// rigid one) describes nothing there: the diagnosis says so first, names no effect, and
+/// `--strict` exits 1 (without it, 0).
+#[test]
+fn diagnose_refuses_a_validation_record_of_another_plant() {
+    let dir = tmpdir("mismatch");
+    let capture = |model: &str, seed: &str, name: &str| {
+        let out = dir.join(name);
+        json_of(&jointid(&[
+            "simulate",
+            "--model",
+            model,
+            "--periods",
+            "2",
+            "--seed",
+            seed,
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+        ]));
+        out.display().to_string()
+    };
+    let est = capture("three-mass", "22", "est.csv");
+    let val = capture("rigid", "23", "val.csv");
+    let args = [
+        "diagnose",
+        &est,
+        "--validation",
+        &val,
+        "--effect",
+        "coulomb_friction",
+    ];
+    let out = jointid(&args);
+    assert_eq!(out.status.code(), Some(0));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.starts_with("jointid diagnose: not diagnosed: the nominal does not describe"),
+        "{text}"
+    );
+    let mut strict = args.to_vec();
+    strict.extend(["--strict", "--json"]);
+    let out = jointid(&strict);
+    assert_eq!(out.status.code(), Some(1));
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("stdout is JSON");
+    assert_eq!(j["best"], "none", "{j}");
+    assert!(j["refused"].as_str().is_some(), "{j}");
+    assert_eq!(j["effects"][0]["significant"], false, "{j}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// The ids of the report's figures (`jointid::report::html::FIGURE_IDS`).
 const FIGURES: [&str; 5] = [
     "fig-frf",

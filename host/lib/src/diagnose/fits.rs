@@ -82,6 +82,25 @@ impl Fitter<'_> {
         let r = self.rec;
         polish(f, &r.est_data, &r.val_data, &r.parts, self.req)
     }
+
+    /// [`continued`] on these records: the fit `f` continued when it stopped at its
+    /// iteration limit, kept on its in-sample cost alone.
+    pub fn continued(&self, f: &Fitted) -> Option<Fitted> {
+        let r = self.rec;
+        continued(f, &r.est_data, &r.val_data, &r.parts, self.req)
+    }
+
+    /// The gap metric [%] of `model` on the estimation records themselves (in-sample),
+    /// scored as on validation; `None` when it does not simulate.
+    pub fn in_sample(&self, model: &DrivenModel) -> Option<f64> {
+        let o = &self.req.options;
+        let est = &self.rec.est_data;
+        let ms: Vec<Measured> = est
+            .iter()
+            .map(|d| Measured::new(d, o.band_hz, o.skip_of(d)).with_tracking(o.tracking_hz))
+            .collect();
+        score_segments(&ms, model, est, 1).map(|s| s.fit).ok()
+    }
 }
 
 /// One fitted model with its score.

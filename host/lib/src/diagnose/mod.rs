@@ -347,6 +347,11 @@ pub struct Candidate {
     pub fit_angle_val: f64,
     /// passes the significance test (module documentation)
     pub significant: bool,
+    /// mean and standard error of the gain of the gap metric over the answer's model
+    /// (negative: below it) [FIT points]; `None` for the answer itself, with no answer, a
+    /// failed fit, or when the answer was scored in the controller's loop
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub over_answer: Option<(f64, f64)>,
     /// the effects' fitted parameters, `effect.key` for pairs
     pub parameters: BTreeMap<String, ParamValue>,
     /// share of the nominal's residual at the non-excited odd lines of the validation
@@ -509,6 +514,13 @@ pub struct Diagnosis {
     pub structure: String,
     /// the nominal's gap metric on the validation capture [%]
     pub fit_nominal_val: f64,
+    /// the nominal's gap metric on the (first) estimation capture, in-sample [%] (NaN:
+    /// it did not simulate there)
+    pub fit_nominal_est: f64,
+    /// why no effect is named though the candidates were scored: the nominal every effect
+    /// is measured against is not to be trusted (`none` otherwise)
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refused: Option<String>,
     /// the nominal's toolbox FIT of `θ_m` on the validation capture [%]
     pub fit_nominal_angle_val: f64,
     /// the nominal's structure values, lag and offset
@@ -658,13 +670,19 @@ pub fn diagnose_segments(
     let first = results.next().expect("the nominal job");
     let results: Vec<_> = results.collect();
     let nominal = nominal::settle(&fitter, first, &results, &mut warnings)?;
+    let trust = nominal::trust(&fitter, &nominal);
     let ev = evidence::gather(&fitter, &nominal);
     let mut answer = select::singles(&fitter, &nominal, &ev, results);
-    select::pairs(&fitter, &ev, &mut answer, &mut warnings);
-    select::reduce(&fitter, &nominal, &ev, &mut answer, &mut warnings);
-    select::polish_answer(&fitter, &nominal, &ev, &mut answer, &mut warnings);
-    let in_loop = loop_answer::rescore(&fitter, &nominal, &ev, &mut answer, &mut warnings);
+    // a nominal not to be trusted is no base to build an answer on
+    let in_loop = if trust.1.is_none() {
+        select::pairs(&fitter, &ev, &mut answer, &mut warnings);
+        select::reduce(&fitter, &nominal, &ev, &mut answer, &mut warnings);
+        select::polish_answer(&fitter, &nominal, &ev, &mut answer, &mut warnings);
+        loop_answer::rescore(&fitter, &nominal, &ev, &mut answer, &mut warnings)
+    } else {
+        None
+    };
     Ok(verdict::conclude(
-        &fitter, nominal, ev, answer, in_loop, warnings, t0,
+        &fitter, nominal, trust, ev, answer, in_loop, warnings, t0,
     ))
 }

@@ -14,7 +14,7 @@ use crate::model::spec::Structure;
 
 use super::evidence::Evidence;
 use super::fits::{Fitted, Fitter, Job};
-use super::table::{by_score, evidence, odd_words, ripple_travel, scored_candidate};
+use super::table::{by_score, evidence, lag_and_delay, odd_words, ripple_travel, scored_candidate};
 use super::{Candidate, CandidateError};
 
 /// The candidates and the answer among them, as the stages leave them.
@@ -47,6 +47,28 @@ impl Answer {
         }
     }
 
+    /// Every other scored model's gain over the answer's ([`Candidate::over_answer`]), by
+    /// the same test: what a candidate adds to the leader, not to the nominal.
+    pub fn judge_against_answer(&mut self, fitter: &Fitter<'_>) {
+        let Some((name, base)) = self
+            .best()
+            .map(|c| c.name.clone())
+            .zip(self.best_fitted().map(|f| f.scored.segments.clone()))
+        else {
+            return;
+        };
+        let pair = self.pair.as_mut().zip(self.pair_fitted.as_ref());
+        let rows = self
+            .singles
+            .iter_mut()
+            .filter_map(|(c, f)| f.as_ref().map(|f| (c, f)))
+            .chain(pair);
+        for (c, f) in rows.filter(|(c, _)| c.name != name) {
+            let (mean, se, _) = fitter.judge(&f.scored.segments, &base);
+            c.over_answer = Some((mean, se));
+        }
+    }
+
     fn sort(&mut self) {
         self.singles
             .sort_by(|a, b| by_score(&b.0).total_cmp(&by_score(&a.0)));
@@ -64,8 +86,10 @@ pub(super) fn single_of(
     let judged = fitter.judge(&f.scored.segments, &nominal.scored.segments);
     let (score, score_se, significant) = judged;
     let odd = ev.odd_of(&fitter.rec.val, f);
+    let lag = lag_and_delay(&f.fit, nominal.fit.model.tau_c, fitter.rec.ts)
+        .map_or(String::new(), |w| format!("; {w}"));
     let reason = format!(
-        "{}; validation FIT {:+.1} ± {:.1} points{}{}",
+        "{}; validation FIT {:+.1} ± {:.1} points{}{}{lag}",
         evidence(
             effect.name(),
             &ev.location,
@@ -148,6 +172,7 @@ pub(super) fn singles(
                     fit_val: f64::NAN,
                     fit_angle_val: f64::NAN,
                     significant: false,
+                    over_answer: None,
                     parameters: BTreeMap::new(),
                     odd_explained: None,
                     structure_parameters: BTreeMap::new(),

@@ -44,6 +44,7 @@ pub(super) fn scored_candidate(
         fit_val: f.scored.fit,
         fit_angle_val: f.scored.angle_fit,
         significant,
+        over_answer: None,
         parameters: effect_parameters(&f.fit, pair),
         odd_explained,
         structure_parameters: linear_parameters(&f.fit),
@@ -92,6 +93,26 @@ pub(super) fn vanished_effects(fit: &NlFit) -> Vec<String> {
             })
         })
         .collect()
+}
+
+/// How a fitted transport delay was told apart from the drive's current-loop lag, in words
+/// (`None` when `fit` has no delay): both are fitted together, the lag `τ_c` a first-order
+/// lag whose phase stays within 90°, the delay a phase that grows with frequency without
+/// bound; the nominal's lag `nominal_tau_c` [s] beside them; `ts` the sample period [s].
+pub(super) fn lag_and_delay(fit: &NlFit, nominal_tau_c: f64, ts: f64) -> Option<String> {
+    let samples = fit.model.effects.iter().find_map(|e| match e {
+        Effect::TimeDelay(d) => Some(d.samples),
+        _ => None,
+    })?;
+    Some(format!(
+        "lag and delay told apart by their phase, fitted together: the current-loop lag \
+         τ_c = {:.3} ms (first order, its phase within 90°) and a transport delay of {samples:.2} \
+         samples = {:.3} ms beyond it (its phase growing with frequency); the nominal's lag \
+         alone τ_c = {:.3} ms",
+        1e3 * fit.model.tau_c,
+        1e3 * samples * ts,
+        1e3 * nominal_tau_c
+    ))
 }
 
 /// The share of the nominal's odd-line residual a model removes, in words (empty when not

@@ -25,9 +25,11 @@ struct Figures {
 }
 
 /// The diagnosis from the stages' results; `t0` its start.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn conclude(
     fitter: &Fitter<'_>,
     nominal: Fitted,
+    (fit_nominal_est, refused): (Option<f64>, Option<String>),
     ev: Evidence,
     answer: Answer,
     in_loop: Option<InLoop>,
@@ -41,6 +43,12 @@ pub(super) fn conclude(
             nom_fit: l.scores.nominal.fit,
             best_fit: l.best_fit,
             best_odd: l.best_odd,
+        },
+        None if refused.is_some() => Figures {
+            best: "none".into(),
+            nom_fit: nominal.scored.fit,
+            best_fit: nominal.scored.fit,
+            best_odd: None,
         },
         None => Figures {
             best: answer.best().map_or("none".into(), |c| c.name.clone()),
@@ -57,8 +65,13 @@ pub(super) fn conclude(
     };
     let parameter_mismatch =
         parameter_mismatch(fitter, &nominal, &f, in_loop.as_ref(), &mut warnings);
-    let verdict = verdict(fitter, &ev, &answer, &f, in_loop.is_some(), &mut warnings);
+    let verdict = match &refused {
+        Some(why) => format!("not diagnosed: {why}"),
+        None => verdict(fitter, &ev, &answer, &f, in_loop.is_some(), &mut warnings),
+    };
     let nominal_parameters = linear_parameters(&nominal.fit);
+    // the answer's fit, none when refused
+    let shown = answer.best_fitted().filter(|_| refused.is_none());
     let validation_segments = if rec.parts.len() > 1 {
         let best_records = answer.best_fitted().map_or_else(
             || nominal.scored.per_record.clone(),
@@ -81,7 +94,7 @@ pub(super) fn conclude(
     };
     let best_velocity = answer
         .best()
-        .zip(answer.best_fitted())
+        .zip(shown)
         .map(|(c, fitted)| (c.name.clone(), fitted.scored.velocity.clone()));
     // in the loop, the figures show the loop's simulations
     let measured = &rec.measured;
@@ -109,7 +122,19 @@ pub(super) fn conclude(
         &residual,
         ev.location.regions.angle_pattern.order,
     );
-    let Answer { singles, pair, .. } = answer;
+    let mut answer = answer;
+    if in_loop.is_none() && refused.is_none() {
+        answer.judge_against_answer(fitter);
+    }
+    let Answer {
+        mut singles, pair, ..
+    } = answer;
+    if refused.is_some() {
+        // measured against a nominal that does not hold, no gain is significant
+        for (c, _) in &mut singles {
+            c.significant = false;
+        }
+    }
     let diagnosis = Diagnosis {
         verdict,
         metric: if in_loop.is_some() {
@@ -120,6 +145,8 @@ pub(super) fn conclude(
         .into(),
         structure: req.structure.label().into(),
         fit_nominal_val: f.nom_fit,
+        fit_nominal_est: fit_nominal_est.unwrap_or(f64::NAN),
+        refused,
         fit_nominal_angle_val: nominal.scored.angle_fit,
         nominal_parameters,
         fit_augmented_val: f.best_fit,
