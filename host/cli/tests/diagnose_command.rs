@@ -4,7 +4,7 @@
 //! refusals.
 
 mod common;
-use common::{jointid, json_of, shared, stiffening_capture, tmpdir};
+use common::{jointid, json_of, shared, simulated, stiffening_capture, tmpdir};
 
 /// `simulate --effect nonlinear_stiffness`, then `diagnose` with three candidates: the
 /// cubic spring ranks first among the single effects, significant, with `k3` near the
@@ -248,20 +248,11 @@ fn diagnose_refuses_an_unknown_effect_and_a_missing_file_naming_them() {
 fn diagnose_refuses_a_validation_record_of_another_plant() {
     let dir = tmpdir("mismatch");
     let capture = |model: &str, seed: &str, name: &str| {
-        let out = dir.join(name);
-        json_of(&jointid(&[
-            "simulate",
-            "--model",
-            model,
-            "--periods",
-            "2",
-            "--seed",
-            seed,
-            "--out",
-            out.to_str().unwrap(),
-            "--json",
-        ]));
-        out.display().to_string()
+        simulated(
+            &dir,
+            name,
+            &["--model", model, "--periods", "2", "--seed", seed],
+        )
     };
     let est = capture("three-mass", "22", "est.csv");
     let val = capture("rigid", "23", "val.csv");

@@ -56,6 +56,17 @@ pub fn shared(rel: &str) -> String {
         .to_string()
 }
 
+/// `jointid simulate ARGS --out DIR/NAME --json`, the capture's path.
+#[allow(dead_code)]
+pub fn simulated(dir: &std::path::Path, name: &str, args: &[&str]) -> String {
+    let out = dir.join(name);
+    let mut all = vec!["simulate"];
+    all.extend(args);
+    all.extend(["--out", out.to_str().unwrap(), "--json"]);
+    json_of(&jointid(&all));
+    out.display().to_string()
+}
+
 /// `jointid simulate` of the three-mass joint with the default cubic spring into
 /// `dir/name` (noise seed `seed`, excitation phases `exc_seed`): a capture whose hidden
 /// effect `diagnose` must name. Returns its path.

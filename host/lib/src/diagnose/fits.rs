@@ -77,17 +77,48 @@ impl Fitter<'_> {
         (m, se, m - 2.0 * se > self.req.options.min_gain)
     }
 
-    /// [`polish`] on these records.
+    /// The answer's fit `f` continued ([`Fitter::continued`]), kept when its validation FIT
+    /// does not drop. Only the answer: its FIT is the closure the diagnosis reports, and
+    /// every candidate at once would slow each diagnosis (bench case 21, a 16 µrad backlash
+    /// at 0.014 rad RMS: the fit stopped at 60 iterations in a flat valley with `f_m` ×4 and
+    /// 76.9 % on validation against the true model's 80.4 %; continued, it reaches 78.4 % at
+    /// the limit of the 140 further iterations).
     pub fn polish(&self, f: &Fitted) -> Option<Fitted> {
-        let r = self.rec;
-        polish(f, &r.est_data, &r.val_data, &r.parts, self.req)
+        let g = self.continued(f)?;
+        (g.scored.fit >= f.scored.fit).then_some(g)
     }
 
-    /// [`continued`] on these records: the fit `f` continued when it stopped at its
-    /// iteration limit, kept on its in-sample cost alone.
+    /// The fit `f` continued from its values for at most [`POLISH_ITER`] more iterations
+    /// when it stopped at its iteration limit, what it held still held, and scored on the
+    /// validation records; `None` when it had converged, or the continuation fails or does
+    /// not lower the in-sample cost (the only criterion).
     pub fn continued(&self, f: &Fitted) -> Option<Fitted> {
+        if f.fit.termination != Termination::MaxIterations {
+            return None;
+        }
+        let req = self.req;
+        let mut options = req.options.nl.clone();
+        options.max_iter = POLISH_ITER;
+        options.fixed = f
+            .fit
+            .params
+            .iter()
+            .filter(|p| p.fixed && p.owner != Owner::InitialVelocity)
+            .map(|p| p.name.to_string())
+            .collect();
+        let nl = NlRequest {
+            tau_c: f.fit.model.tau_c,
+            linear: Some(f.fit.plant.clone()),
+            start: NlStart::Values(f.fit.values.clone()),
+            options,
+            ..NlRequest::new(req.structure, req.r, f.fit.model.effects.clone())
+        };
         let r = self.rec;
-        continued(f, &r.est_data, &r.val_data, &r.parts, self.req)
+        let res = identify_segments(&r.est_data, &nl).ok()?;
+        if res.fit.ssr >= f.fit.ssr {
+            return None;
+        }
+        scored_fit(res, &r.val_data, &r.parts, req).ok()
     }
 
     /// The gap metric [%] of `model` on the estimation records themselves (in-sample),
@@ -285,64 +316,9 @@ pub(super) fn scored_fit(
     })
 }
 
-/// Most further iterations of an answer whose fit stopped at its iteration limit
-/// ([`polish`]).
+/// Most further iterations of a fit that stopped at its iteration limit
+/// ([`Fitter::continued`]).
 const POLISH_ITER: usize = 140;
-
-/// The answer's fit `f` continued from its values for at most [`POLISH_ITER`] more
-/// iterations when it stopped at its iteration limit, what it held still held, and scored
-/// on `val`; `None` when it had converged, or the continuation fails, does not lower the
-/// in-sample cost or lowers the validation FIT. Only the answer: its FIT is the closure
-/// the diagnosis reports, and every candidate at once would slow each diagnosis (bench
-/// case 21, a 16 µrad backlash at 0.014 rad RMS: the fit stopped at 60 iterations in a
-/// flat valley with `f_m` ×4 and 76.9 % on validation against the true model's 80.4 %;
-/// continued, it reaches 78.4 % at the limit of the 140 further iterations).
-fn polish(
-    f: &Fitted,
-    est: &[IdData],
-    val: &[IdData],
-    parts: &[Measured],
-    req: &DiagnoseRequest,
-) -> Option<Fitted> {
-    let g = continued(f, est, val, parts, req)?;
-    (g.scored.fit >= f.scored.fit).then_some(g)
-}
-
-/// The fit `f` continued from its values for at most [`POLISH_ITER`] more iterations when it
-/// stopped at its iteration limit, what it held still held, and scored on `val`; `None`
-/// when it had converged, or the continuation fails or does not lower the in-sample cost.
-fn continued(
-    f: &Fitted,
-    est: &[IdData],
-    val: &[IdData],
-    parts: &[Measured],
-    req: &DiagnoseRequest,
-) -> Option<Fitted> {
-    if f.fit.termination != Termination::MaxIterations {
-        return None;
-    }
-    let mut options = req.options.nl.clone();
-    options.max_iter = POLISH_ITER;
-    options.fixed = f
-        .fit
-        .params
-        .iter()
-        .filter(|p| p.fixed && p.owner != Owner::InitialVelocity)
-        .map(|p| p.name.to_string())
-        .collect();
-    let nl = NlRequest {
-        tau_c: f.fit.model.tau_c,
-        linear: Some(f.fit.plant.clone()),
-        start: NlStart::Values(f.fit.values.clone()),
-        options,
-        ..NlRequest::new(req.structure, req.r, f.fit.model.effects.clone())
-    };
-    let res = identify_segments(est, &nl).ok()?;
-    if res.fit.ssr >= f.fit.ssr {
-        return None;
-    }
-    scored_fit(res, val, parts, req).ok()
-}
 
 /// The backlash candidate `nl` fitted from the start grown from the linear two-mass (its
 /// values and lag [s], [`grow::grow_backlash`]); `None` when the growth or the fit fails,

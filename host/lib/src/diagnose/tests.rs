@@ -268,7 +268,7 @@ fn bench_captures(
 /// backlash fit ended at 0.4 µrad, no gain, and the answer was the cubic spring. Grown from
 /// the linear two-mass ([`grow::grow_backlash`]) it is found. Its fit then stops at its
 /// iteration limit in a flat valley, 76.9 % on validation against the true model's 80.4 %;
-/// continued ([`super::polish`]), the answer's closure comes within 3 points of the truth's.
+/// continued ([`super::fits::Fitter::polish`]), the answer's closure comes within 3 points of the truth's.
 #[test]
 fn a_backlash_wider_than_the_linear_deflection_is_found() {
     use crate::model::effects::Backlash;
