@@ -176,6 +176,8 @@ pub struct Sensors {
     lp_a: f64,
     lp_b: f64,
     k: u64,
+    /// the encoder's resolution, [`SensorConfig::angle_resolution`] [rad/count]
+    resolution: Option<f64>,
 }
 
 impl Sensors {
@@ -199,12 +201,13 @@ impl Sensors {
             lp_a,
             lp_b,
             k: 0,
+            resolution: cfg.angle_resolution(),
         }
     }
 
     /// Measured motor angle from the true one [rad].
     pub fn measure_theta(&mut self, theta: f64) -> f64 {
-        let q = match self.cfg.angle_resolution() {
+        let q = match self.resolution {
             Some(res) => (theta / res).round() * res,
             None => theta,
         };
