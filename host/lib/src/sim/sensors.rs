@@ -159,6 +159,45 @@ impl Rng {
     }
 }
 
+/// Normal deviates drawn ahead in blocks per stream [-].
+const NORMAL_BLOCK: usize = 32;
+
+/// One stream's standard normal deviates, [`Rng::normal`] drawn [`NORMAL_BLOCK`] at a time
+/// and handed out in the same order: the same sequence, with the logarithms, square roots
+/// and rejections of a block computed together instead of in the middle of the closed
+/// loop's chain of sample-to-sample dependencies.
+#[derive(Clone, Debug)]
+struct Normals {
+    rng: Rng,
+    block: [f64; NORMAL_BLOCK],
+    /// index of the next deviate in `block` (`NORMAL_BLOCK`: draw the next block)
+    next: usize,
+}
+
+impl Normals {
+    fn new(rng: Rng) -> Self {
+        Normals {
+            rng,
+            block: [0.0; NORMAL_BLOCK],
+            next: NORMAL_BLOCK,
+        }
+    }
+
+    /// The stream's next deviate.
+    #[inline]
+    fn next(&mut self) -> f64 {
+        if self.next == NORMAL_BLOCK {
+            for z in &mut self.block {
+                *z = self.rng.normal();
+            }
+            self.next = 0;
+        }
+        let z = self.block[self.next];
+        self.next += 1;
+        z
+    }
+}
+
 /// Stream ids of [`Rng::new`].
 const STREAM_THETA: u64 = 1;
 const STREAM_U: u64 = 2;
@@ -169,9 +208,9 @@ const STREAM_DIST: u64 = 3;
 pub struct Sensors {
     cfg: SensorConfig,
     ts: f64,
-    rng_theta: Rng,
-    rng_u: Rng,
-    rng_dist: Rng,
+    rng_theta: Normals,
+    rng_u: Normals,
+    rng_dist: Normals,
     lp_state: f64,
     lp_a: f64,
     lp_b: f64,
@@ -185,17 +224,17 @@ impl Sensors {
     pub fn new(cfg: SensorConfig, ts: f64, seed: u64) -> Self {
         let lp_a = (-2.0 * PI * cfg.disturbance.noise_cutoff_hz * ts).exp();
         let lp_b = cfg.disturbance.noise_std * (1.0 - lp_a * lp_a).sqrt();
-        let mut rng_dist = Rng::new(seed, STREAM_DIST);
+        let mut rng_dist = Normals::new(Rng::new(seed, STREAM_DIST));
         let lp_state = if cfg.disturbance.noise_std > 0.0 {
-            cfg.disturbance.noise_std * rng_dist.normal()
+            cfg.disturbance.noise_std * rng_dist.next()
         } else {
             0.0
         };
         Sensors {
             cfg,
             ts,
-            rng_theta: Rng::new(seed, STREAM_THETA),
-            rng_u: Rng::new(seed, STREAM_U),
+            rng_theta: Normals::new(Rng::new(seed, STREAM_THETA)),
+            rng_u: Normals::new(Rng::new(seed, STREAM_U)),
             rng_dist,
             lp_state,
             lp_a,
@@ -212,7 +251,7 @@ impl Sensors {
             None => theta,
         };
         if self.cfg.theta_noise_std > 0.0 {
-            q + self.cfg.theta_noise_std * self.rng_theta.normal()
+            q + self.cfg.theta_noise_std * self.rng_theta.next()
         } else {
             q
         }
@@ -221,7 +260,7 @@ impl Sensors {
     /// Recorded torque reference from the true one [N·m].
     pub fn measure_u(&mut self, u: f64) -> f64 {
         if self.cfg.u_noise_std > 0.0 {
-            u + self.cfg.u_noise_std * self.rng_u.normal()
+            u + self.cfg.u_noise_std * self.rng_u.next()
         } else {
             u
         }
@@ -236,7 +275,7 @@ impl Sensors {
             w += d.sine_amplitude * (2.0 * PI * d.sine_freq_hz * t).sin();
         }
         if d.noise_std > 0.0 {
-            self.lp_state = self.lp_a * self.lp_state + self.lp_b * self.rng_dist.normal();
+            self.lp_state = self.lp_a * self.lp_state + self.lp_b * self.rng_dist.next();
         }
         self.k += 1;
         w
