@@ -146,28 +146,46 @@ impl Rng {
         if let Some(z) = self.spare.take() {
             return z;
         }
+        let (a, b, r2) = self.polar_point();
+        let f = polar_factor(r2);
+        self.spare = Some(b * f);
+        a * f
+    }
+
+    /// The point of the polar method that gives the next pair of [`Self::normal`]: `(a, b)`
+    /// uniform in the unit disc without its centre, and `r² = a² + b²`.
+    #[inline]
+    fn polar_point(&mut self) -> (f64, f64, f64) {
         loop {
             let a = 2.0 * self.uniform() - 1.0;
             let b = 2.0 * self.uniform() - 1.0;
             let r2 = a * a + b * b;
             if r2 > 0.0 && r2 < 1.0 {
-                let f = (-2.0 * r2.ln() / r2).sqrt();
-                self.spare = Some(b * f);
-                return a * f;
+                return (a, b, r2);
             }
         }
     }
 }
 
+/// The polar method's factor `√(−2 ln r² / r²)` that turns the point `(a, b)` into two
+/// standard normal deviates `(a f, b f)`.
+#[inline]
+fn polar_factor(r2: f64) -> f64 {
+    (-2.0 * r2.ln() / r2).sqrt()
+}
+
 /// Normal deviates drawn ahead in blocks per stream [-].
 const NORMAL_BLOCK: usize = 32;
 
-/// One stream's standard normal deviates, [`Rng::normal`] drawn [`NORMAL_BLOCK`] at a time
-/// and handed out in the same order: the same sequence, with the logarithms, square roots
-/// and rejections of a block computed together instead of in the middle of the closed
-/// loop's chain of sample-to-sample dependencies.
+/// One stream's standard normal deviates, the sequence of [`Rng::normal`] on a fresh
+/// generator, drawn [`NORMAL_BLOCK`] at a time and handed out in order. A block is drawn in
+/// three passes: the polar method's accepted points (the same draws and rejections), then
+/// their logarithms, then the factors and deviates (the same operations on each value, so
+/// the same bits), which keeps the logarithms, divisions and square roots out of the closed
+/// loop's chain of sample-to-sample dependencies and lets them overlap.
 #[derive(Clone, Debug)]
 struct Normals {
+    /// never asked for a single deviate, so it holds no spare one
     rng: Rng,
     block: [f64; NORMAL_BLOCK],
     /// index of the next deviate in `block` (`NORMAL_BLOCK`: draw the next block)
@@ -175,9 +193,10 @@ struct Normals {
 }
 
 impl Normals {
-    fn new(rng: Rng) -> Self {
+    /// The deviates of stream `stream` of run seed `seed` ([`Rng::new`]).
+    fn new(seed: u64, stream: u64) -> Self {
         Normals {
-            rng,
+            rng: Rng::new(seed, stream),
             block: [0.0; NORMAL_BLOCK],
             next: NORMAL_BLOCK,
         }
@@ -187,14 +206,31 @@ impl Normals {
     #[inline]
     fn next(&mut self) -> f64 {
         if self.next == NORMAL_BLOCK {
-            for z in &mut self.block {
-                *z = self.rng.normal();
-            }
-            self.next = 0;
+            self.draw_block();
         }
         let z = self.block[self.next];
         self.next += 1;
         z
+    }
+
+    /// The next [`NORMAL_BLOCK`] deviates: pairs `(a f, b f)` of [`Rng::normal`].
+    fn draw_block(&mut self) {
+        const PAIRS: usize = NORMAL_BLOCK / 2;
+        let mut points = [(0.0, 0.0, 0.0); PAIRS];
+        for p in &mut points {
+            *p = self.rng.polar_point();
+        }
+        let mut logs = [0.0; PAIRS];
+        for (l, p) in logs.iter_mut().zip(&points) {
+            *l = p.2.ln();
+        }
+        for ((l, p), z) in logs.iter().zip(&points).zip(self.block.chunks_exact_mut(2)) {
+            // polar_factor, with the logarithm taken above
+            let f = (-2.0 * l / p.2).sqrt();
+            z[0] = p.0 * f;
+            z[1] = p.1 * f;
+        }
+        self.next = 0;
     }
 }
 
@@ -224,7 +260,7 @@ impl Sensors {
     pub fn new(cfg: SensorConfig, ts: f64, seed: u64) -> Self {
         let lp_a = (-2.0 * PI * cfg.disturbance.noise_cutoff_hz * ts).exp();
         let lp_b = cfg.disturbance.noise_std * (1.0 - lp_a * lp_a).sqrt();
-        let mut rng_dist = Normals::new(Rng::new(seed, STREAM_DIST));
+        let mut rng_dist = Normals::new(seed, STREAM_DIST);
         let lp_state = if cfg.disturbance.noise_std > 0.0 {
             cfg.disturbance.noise_std * rng_dist.next()
         } else {
@@ -233,8 +269,8 @@ impl Sensors {
         Sensors {
             cfg,
             ts,
-            rng_theta: Normals::new(Rng::new(seed, STREAM_THETA)),
-            rng_u: Normals::new(Rng::new(seed, STREAM_U)),
+            rng_theta: Normals::new(seed, STREAM_THETA),
+            rng_u: Normals::new(seed, STREAM_U),
             rng_dist,
             lp_state,
             lp_a,
@@ -296,6 +332,18 @@ mod tests {
         let vc: Vec<u64> = (0..8).map(|_| c.next_u64()).collect();
         assert_eq!(va, vb);
         assert_ne!(va, vc);
+    }
+
+    #[test]
+    fn normals_in_blocks_are_the_generator_s_deviates_to_the_bit() {
+        for (seed, stream) in [(1, STREAM_THETA), (7, STREAM_U), (u64::MAX, STREAM_DIST)] {
+            let mut one = Rng::new(seed, stream);
+            let mut blocks = Normals::new(seed, stream);
+            for k in 0..5 * NORMAL_BLOCK + 3 {
+                let (a, b) = (one.normal(), blocks.next());
+                assert_eq!(a.to_bits(), b.to_bits(), "seed {seed} stream {stream} deviate {k}");
+            }
+        }
     }
 
     #[test]
