@@ -153,7 +153,8 @@ impl Rng {
     }
 
     /// The point of the polar method that gives the next pair of [`Self::normal`]: `(a, b)`
-    /// uniform in the unit disc without its centre, and `r² = a² + b²`.
+    /// uniform in the unit disc without its centre, and `r² = a² + b²` (as drawn by
+    /// `Normals::draw_block`).
     #[inline]
     fn polar_point(&mut self) -> (f64, f64, f64) {
         loop {
@@ -213,12 +214,20 @@ impl Normals {
         z
     }
 
-    /// The next [`NORMAL_BLOCK`] deviates: pairs `(a f, b f)` of [`Rng::normal`].
+    /// The next [`NORMAL_BLOCK`] deviates: pairs `(a f, b f)` of [`Rng::normal`], its
+    /// points drawn as [`Rng::polar_point`] draws them.
     fn draw_block(&mut self) {
         const PAIRS: usize = NORMAL_BLOCK / 2;
-        let mut points = [(0.0, 0.0, 0.0); PAIRS];
-        for p in &mut points {
-            *p = self.rng.polar_point();
+        // polar_point PAIRS times: every candidate stored, the count moved on by the
+        // accepted ones only (no branch on the rejection, a coin toss of odds π/4)
+        let mut points = [(0.0, 0.0, 0.0); PAIRS + 1];
+        let mut n = 0;
+        while n < PAIRS {
+            let a = 2.0 * self.rng.uniform() - 1.0;
+            let b = 2.0 * self.rng.uniform() - 1.0;
+            let r2 = a * a + b * b;
+            points[n] = (a, b, r2);
+            n += usize::from(r2 > 0.0 && r2 < 1.0);
         }
         let mut logs = [0.0; PAIRS];
         for (l, p) in logs.iter_mut().zip(&points) {
