@@ -350,7 +350,11 @@ mod tests {
             let mut blocks = Normals::new(seed, stream);
             for k in 0..5 * NORMAL_BLOCK + 3 {
                 let (a, b) = (one.normal(), blocks.next());
-                assert_eq!(a.to_bits(), b.to_bits(), "seed {seed} stream {stream} deviate {k}");
+                assert_eq!(
+                    a.to_bits(),
+                    b.to_bits(),
+                    "seed {seed} stream {stream} deviate {k}"
+                );
             }
         }
     }
