@@ -628,6 +628,11 @@ pub fn write_table<W: Write + ?Sized>(
     table.finish()
 }
 
+/// Bytes of rows [`TableWriter`] collects before it hands them on [bytes]: as large as the
+/// 64 KiB buffer of [`crate::data::output`]'s writer, so that a `BufWriter` of that size
+/// passes each block straight to the file instead of copying it into its buffer first.
+const TABLE_BLOCK: usize = 1 << 16;
+
 /// The row writer of [`write_table`], one row at a time (for rows produced as they are
 /// written, e.g. a streamed simulation): the same bytes, the same refusal of a value that
 /// is not finite.
@@ -652,7 +657,7 @@ impl<'w, W: Write + ?Sized> TableWriter<'w, W> {
         Ok(TableWriter {
             out,
             fmt: zmij::Buffer::new(),
-            block: Vec::with_capacity(1 << 16),
+            block: Vec::with_capacity(TABLE_BLOCK + 256),
             rows: 0,
         })
     }
@@ -679,11 +684,13 @@ impl<'w, W: Write + ?Sized> TableWriter<'w, W> {
             if i > 0 {
                 self.block.push(b',');
             }
-            self.block.extend_from_slice(self.fmt.format(v).as_bytes());
+            // finite: checked above
+            self.block
+                .extend_from_slice(self.fmt.format_finite(v).as_bytes());
         }
         self.block.push(b'\n');
         self.rows += 1;
-        if self.block.len() >= (1 << 16) - 128 {
+        if self.block.len() >= TABLE_BLOCK {
             self.out.write_all(&self.block)?;
             self.block.clear();
         }

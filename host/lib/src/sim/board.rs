@@ -15,8 +15,8 @@
 
 use jointid_core::excitation::ExcitationConfig;
 use jointid_core::wire::{
-    encode_frame, header_interval_samples, BatchBuilder, EncodeError, Message, RawSample, Scale,
-    SessionHeader, Status, MAX_FRAME_LEN, PROTOCOL_VERSION,
+    encode_frame_ref, header_interval_samples, BatchBuilder, EncodeError, MessageRef, RawSample,
+    Scale, SessionHeader, Status, MAX_FRAME_LEN, PROTOCOL_VERSION,
 };
 
 use super::{
@@ -276,7 +276,7 @@ impl StreamEncoder {
             count: 0,
             last_seq: 0,
         };
-        enc.frame(&Message::Header(*header), FrameContent::Header, sink)?;
+        enc.frame(MessageRef::Header(header), FrameContent::Header, sink)?;
         Ok(enc)
     }
 
@@ -288,13 +288,23 @@ impl StreamEncoder {
     /// One frame of `msg` to `sink`.
     fn frame<E: From<BoardStreamError>>(
         &mut self,
-        msg: &Message,
+        msg: MessageRef<'_>,
         content: FrameContent,
         sink: &mut impl FnMut(&[u8], FrameSpan) -> Result<(), E>,
     ) -> Result<(), E> {
         let index = self.frames;
-        let n = encode_frame(msg, &mut self.buf)
+        let n = encode_frame_ref(msg, &mut self.buf)
             .map_err(|err| BoardStreamError::Frame { index, err })?;
+        self.emit(n, content, sink)
+    }
+
+    /// The frame of `n` bytes in `buf` to `sink`.
+    fn emit<E>(
+        &mut self,
+        n: usize,
+        content: FrameContent,
+        sink: &mut impl FnMut(&[u8], FrameSpan) -> Result<(), E>,
+    ) -> Result<(), E> {
         // the span starts after the frame's leading delimiter, as the decoder sees it
         let span = FrameSpan {
             offset: self.offset + 1,
@@ -315,28 +325,32 @@ impl StreamEncoder {
         }
     }
 
-    /// A full (or the last) batch, then the status and the header when due.
+    /// The batch the builder just finished (framed where it lies, not moved), then the
+    /// status and the header when due.
     fn batch<E: From<BoardStreamError>>(
         &mut self,
-        b: jointid_core::wire::SampleBatch,
         sink: &mut impl FnMut(&[u8], FrameSpan) -> Result<(), E>,
     ) -> Result<(), E> {
+        let b = self.builder.batch();
         let content = FrameContent::Batch {
             first: b.first_seq(),
             len: b.len() as u32,
         };
-        self.frame(&Message::Batch(b), content, sink)?;
+        let index = self.frames;
+        let n = encode_frame_ref(MessageRef::Batch(b), &mut self.buf)
+            .map_err(|err| BoardStreamError::Frame { index, err })?;
+        self.emit(n, content, sink)?;
         self.batches += 1;
         let every = self.layout.status_every;
         if every > 0 && self.batches.is_multiple_of(every) {
             let st = self.status(self.last_seq.wrapping_add(1));
-            self.frame(&Message::Status(st), FrameContent::Status, sink)?;
+            self.frame(MessageRef::Status(&st), FrameContent::Status, sink)?;
         }
         self.since_header += content_len(content);
         if self.layout.header_every > 0 && self.since_header >= self.layout.header_every {
             self.since_header = 0;
             let h = self.header;
-            self.frame(&Message::Header(h), FrameContent::Header, sink)?;
+            self.frame(MessageRef::Header(&h), FrameContent::Header, sink)?;
         }
         Ok(())
     }
@@ -353,9 +367,10 @@ impl StreamEncoder {
     ) -> Result<(), E> {
         self.count += 1;
         self.last_seq = s.seq;
-        match self.builder.push(s, r) {
-            Some(b) => self.batch(b, sink),
-            None => Ok(()),
+        if self.builder.push_sample(s, r) {
+            self.batch(sink)
+        } else {
+            Ok(())
         }
     }
 
@@ -368,12 +383,12 @@ impl StreamEncoder {
         mut self,
         sink: &mut impl FnMut(&[u8], FrameSpan) -> Result<(), E>,
     ) -> Result<u64, E> {
-        if let Some(b) = self.builder.flush() {
-            self.batch(b, sink)?;
+        if self.builder.finish() {
+            self.batch(sink)?;
         }
         if self.layout.end {
             let st = self.status(self.count);
-            self.frame(&Message::End(st), FrameContent::End, sink)?;
+            self.frame(MessageRef::End(&st), FrameContent::End, sink)?;
         }
         Ok(self.offset)
     }

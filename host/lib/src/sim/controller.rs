@@ -73,6 +73,8 @@ pub struct Controller {
     prev_ref: [f64; 2],
     started: bool,
     saturated: u64,
+    /// integral gain per sample `K_v T / T_i` (0 for P only)
+    ki: f64,
 }
 
 impl Controller {
@@ -86,6 +88,11 @@ impl Controller {
             prev_ref: [0.0; 2],
             started: false,
             saturated: 0,
+            ki: if cfg.ti.is_finite() {
+                cfg.kv * ts / cfg.ti
+            } else {
+                0.0
+            },
         }
     }
 
@@ -114,12 +121,7 @@ impl Controller {
         };
         self.prev_ref = [theta_ref, self.prev_ref[0]];
         let e = c.kp * (theta_ref - theta_m) + w_ff - omega;
-        let ki = if c.ti.is_finite() {
-            c.kv * t / c.ti
-        } else {
-            0.0
-        };
-        let integral = self.integral + ki * e;
+        let integral = self.integral + self.ki * e;
         let raw = c.kv * e + integral + tau_ff;
         let u = raw.clamp(-c.u_max, c.u_max);
         if u != raw {

@@ -127,12 +127,20 @@ const MAX_SWITCHES: usize = 12;
 /// State vector storage.
 pub type State = [f64; MAX_STATE];
 
-/// One exact zero-order-hold step `x ← Φ x + Γ v`, stored row-major for speed.
+/// One exact zero-order-hold step `x ← Φ x + Γ v`, computed once per run and applied per
+/// sample without allocating.
+///
+/// `Φ` and `Γ` are stored column by column, so that one pass over a column updates every
+/// row at once (the compiler vectorises across rows); each row still sums
+/// `0 + Φ_i0 x_0 + … + Φ_i(n−1) x_(n−1) + Γ_i0 v_0 + …` in that order, so the result is
+/// the same to the bit as the row-by-row product. The state dimensions of the structures
+/// (`2 · bodies + 1`) are dispatched to fixed-size loops.
 #[derive(Clone, Debug)]
 pub struct ZohStep {
     n: usize,
-    m: usize,
+    /// `Φ[i][j]` at `j n + i`
     phi: Vec<f64>,
+    /// `Γ[i][j]` at `j n + i`
     gamma: Vec<f64>,
 }
 
@@ -143,28 +151,59 @@ impl ZohStep {
         let (n, m) = g.shape();
         ZohStep {
             n,
-            m,
-            phi: (0..n * n).map(|i| phi[(i / n, i % n)]).collect(),
-            gamma: (0..n * m).map(|i| gamma[(i / m, i % m)]).collect(),
+            phi: (0..n * n).map(|k| phi[(k % n, k / n)]).collect(),
+            gamma: (0..n * m).map(|k| gamma[(k % n, k / n)]).collect(),
         }
     }
 
-    /// `x ← Φ x + Γ v`.
+    /// `x ← Φ x + Γ v` (`v` the inputs, one per column of `Γ`).
+    #[inline]
     pub fn apply(&self, x: &mut State, v: &[f64]) {
-        let mut y = [0.0; MAX_STATE];
-        for (i, yi) in y.iter_mut().enumerate().take(self.n) {
-            let row = &self.phi[i * self.n..(i + 1) * self.n];
-            let mut acc = 0.0;
-            for (a, b) in row.iter().zip(x.iter()) {
-                acc += a * b;
-            }
-            let grow = &self.gamma[i * self.m..(i + 1) * self.m];
-            for (a, b) in grow.iter().zip(v) {
-                acc += a * b;
-            }
-            *yi = acc;
+        match self.n {
+            3 => self.apply_n::<3>(x, v),
+            5 => self.apply_n::<5>(x, v),
+            7 => self.apply_n::<7>(x, v),
+            9 => self.apply_n::<9>(x, v),
+            11 => self.apply_n::<11>(x, v),
+            13 => self.apply_n::<13>(x, v),
+            15 => self.apply_n::<15>(x, v),
+            17 => self.apply_n::<17>(x, v),
+            _ => self.apply_any(x, v),
         }
-        x[..self.n].copy_from_slice(&y[..self.n]);
+    }
+
+    /// [`Self::apply`] for `n == N`.
+    #[inline]
+    fn apply_n<const N: usize>(&self, x: &mut State, v: &[f64]) {
+        let mut y = [0.0; N];
+        for (col, &xj) in self.phi[..N * N].chunks_exact(N).zip(&x[..N]) {
+            for (yi, &a) in y.iter_mut().zip(col) {
+                *yi += a * xj;
+            }
+        }
+        for (col, &vj) in self.gamma.chunks_exact(N).zip(v) {
+            for (yi, &a) in y.iter_mut().zip(col) {
+                *yi += a * vj;
+            }
+        }
+        x[..N].copy_from_slice(&y);
+    }
+
+    /// [`Self::apply`] for any `n`.
+    fn apply_any(&self, x: &mut State, v: &[f64]) {
+        let n = self.n;
+        let mut y = [0.0; MAX_STATE];
+        for (col, &xj) in self.phi.chunks_exact(n).zip(x.iter()) {
+            for (yi, &a) in y.iter_mut().zip(col) {
+                *yi += a * xj;
+            }
+        }
+        for (col, &vj) in self.gamma.chunks_exact(n).zip(v) {
+            for (yi, &a) in y.iter_mut().zip(col) {
+                *yi += a * vj;
+            }
+        }
+        x[..n].copy_from_slice(&y[..n]);
     }
 }
 

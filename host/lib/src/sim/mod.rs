@@ -790,8 +790,10 @@ impl Simulation {
         if lag > self.k {
             return 0.0;
         }
+        // lag < n and head < n: the index is below 2n − 1 before the wrap
         let n = self.past_u.len();
-        self.past_u[(self.head + n - 1 - lag) % n]
+        let i = self.head + n - 1 - lag;
+        self.past_u[if i >= n { i - n } else { i }]
     }
 
     /// Sample `k` with reference `r` [rad]: sensors, controller, then the plant propagated
@@ -801,9 +803,7 @@ impl Simulation {
     /// [`SimError::BadReference`] for a reference that is not finite,
     /// [`SimError::NonFinite`] naming the first state or signal that is not finite.
     pub fn step(&mut self, r: f64) -> Result<Sample<'_>, SimError> {
-        let mut controller = self.controller.clone();
-        let signals = self.advance(r, 0.0, |meas| controller.step(r, meas))?;
-        self.controller = controller;
+        let signals = self.advance(r, 0.0, |c, meas| c.step(r, meas))?;
         Ok(self.sample_of(signals))
     }
 
@@ -820,7 +820,7 @@ impl Simulation {
         load: f64,
         law: impl FnOnce(f64) -> f64,
     ) -> Result<Sample<'_>, SimError> {
-        let signals = self.advance(r, load, law)?;
+        let signals = self.advance(r, load, |_, meas| law(meas))?;
         Ok(self.sample_of(signals))
     }
 
@@ -839,13 +839,15 @@ impl Simulation {
         }
     }
 
-    /// Sensors, `law`, then the plant propagated to `(k + 1) T` with `load` added to the
+    /// Sensors, `law` (the run's controller and the measured motor angle [rad] → `u`
+    /// [N·m]), then the plant propagated to `(k + 1) T` with `load` added to the
     /// disturbance.
+    #[inline]
     fn advance(
         &mut self,
         r: f64,
         load: f64,
-        law: impl FnOnce(f64) -> f64,
+        law: impl FnOnce(&mut Controller, f64) -> f64,
     ) -> Result<Signals, SimError> {
         let k = self.k;
         if !r.is_finite() {
@@ -854,7 +856,7 @@ impl Simulation {
         let nx = self.nx;
         let x = &mut self.x;
         let meas = self.sensors.measure_theta(x[0]);
-        let u = law(meas);
+        let u = law(&mut self.controller, meas);
         let u_rec = self.sensors.measure_u(u);
         let bad_state = x[..nx]
             .iter()
@@ -879,7 +881,10 @@ impl Simulation {
         let w = self.sensors.next_disturbance() + load;
         self.before = *x;
         self.past_u[self.head] = u;
-        self.head = (self.head + 1) % self.past_u.len();
+        self.head += 1;
+        if self.head == self.past_u.len() {
+            self.head = 0;
+        }
         let u_new = self.past(self.a.delay_whole);
         let u_old = self.past(self.a.delay_whole + 1);
         self.stepper

@@ -146,16 +146,100 @@ impl Rng {
         if let Some(z) = self.spare.take() {
             return z;
         }
+        let (a, b, r2) = self.polar_point();
+        let f = polar_factor(r2);
+        self.spare = Some(b * f);
+        a * f
+    }
+
+    /// The point of the polar method that gives the next pair of [`Self::normal`]: `(a, b)`
+    /// uniform in the unit disc without its centre, and `r² = a² + b²` (as drawn by
+    /// `Normals::draw_block`).
+    #[inline]
+    fn polar_point(&mut self) -> (f64, f64, f64) {
         loop {
             let a = 2.0 * self.uniform() - 1.0;
             let b = 2.0 * self.uniform() - 1.0;
             let r2 = a * a + b * b;
             if r2 > 0.0 && r2 < 1.0 {
-                let f = (-2.0 * r2.ln() / r2).sqrt();
-                self.spare = Some(b * f);
-                return a * f;
+                return (a, b, r2);
             }
         }
+    }
+}
+
+/// The polar method's factor `√(−2 ln r² / r²)` that turns the point `(a, b)` into two
+/// standard normal deviates `(a f, b f)`.
+#[inline]
+fn polar_factor(r2: f64) -> f64 {
+    (-2.0 * r2.ln() / r2).sqrt()
+}
+
+/// Normal deviates drawn ahead in blocks per stream [-].
+const NORMAL_BLOCK: usize = 32;
+
+/// One stream's standard normal deviates, the sequence of [`Rng::normal`] on a fresh
+/// generator, drawn [`NORMAL_BLOCK`] at a time and handed out in order. A block is drawn in
+/// three passes: the polar method's accepted points (the same draws and rejections), then
+/// their logarithms, then the factors and deviates (the same operations on each value, so
+/// the same bits), which keeps the logarithms, divisions and square roots out of the closed
+/// loop's chain of sample-to-sample dependencies and lets them overlap.
+#[derive(Clone, Debug)]
+struct Normals {
+    /// never asked for a single deviate, so it holds no spare one
+    rng: Rng,
+    block: [f64; NORMAL_BLOCK],
+    /// index of the next deviate in `block` (`NORMAL_BLOCK`: draw the next block)
+    next: usize,
+}
+
+impl Normals {
+    /// The deviates of stream `stream` of run seed `seed` ([`Rng::new`]).
+    fn new(seed: u64, stream: u64) -> Self {
+        Normals {
+            rng: Rng::new(seed, stream),
+            block: [0.0; NORMAL_BLOCK],
+            next: NORMAL_BLOCK,
+        }
+    }
+
+    /// The stream's next deviate.
+    #[inline]
+    fn next(&mut self) -> f64 {
+        if self.next == NORMAL_BLOCK {
+            self.draw_block();
+        }
+        let z = self.block[self.next];
+        self.next += 1;
+        z
+    }
+
+    /// The next [`NORMAL_BLOCK`] deviates: pairs `(a f, b f)` of [`Rng::normal`], its
+    /// points drawn as [`Rng::polar_point`] draws them.
+    fn draw_block(&mut self) {
+        const PAIRS: usize = NORMAL_BLOCK / 2;
+        // polar_point PAIRS times: every candidate stored, the count moved on by the
+        // accepted ones only (no branch on the rejection, a coin toss of odds π/4)
+        let mut points = [(0.0, 0.0, 0.0); PAIRS + 1];
+        let mut n = 0;
+        while n < PAIRS {
+            let a = 2.0 * self.rng.uniform() - 1.0;
+            let b = 2.0 * self.rng.uniform() - 1.0;
+            let r2 = a * a + b * b;
+            points[n] = (a, b, r2);
+            n += usize::from(r2 > 0.0 && r2 < 1.0);
+        }
+        let mut logs = [0.0; PAIRS];
+        for (l, p) in logs.iter_mut().zip(&points) {
+            *l = p.2.ln();
+        }
+        for ((l, p), z) in logs.iter().zip(&points).zip(self.block.chunks_exact_mut(2)) {
+            // polar_factor, with the logarithm taken above
+            let f = (-2.0 * l / p.2).sqrt();
+            z[0] = p.0 * f;
+            z[1] = p.1 * f;
+        }
+        self.next = 0;
     }
 }
 
@@ -169,13 +253,15 @@ const STREAM_DIST: u64 = 3;
 pub struct Sensors {
     cfg: SensorConfig,
     ts: f64,
-    rng_theta: Rng,
-    rng_u: Rng,
-    rng_dist: Rng,
+    rng_theta: Normals,
+    rng_u: Normals,
+    rng_dist: Normals,
     lp_state: f64,
     lp_a: f64,
     lp_b: f64,
     k: u64,
+    /// the encoder's resolution, [`SensorConfig::angle_resolution`] [rad/count]
+    resolution: Option<f64>,
 }
 
 impl Sensors {
@@ -183,33 +269,34 @@ impl Sensors {
     pub fn new(cfg: SensorConfig, ts: f64, seed: u64) -> Self {
         let lp_a = (-2.0 * PI * cfg.disturbance.noise_cutoff_hz * ts).exp();
         let lp_b = cfg.disturbance.noise_std * (1.0 - lp_a * lp_a).sqrt();
-        let mut rng_dist = Rng::new(seed, STREAM_DIST);
+        let mut rng_dist = Normals::new(seed, STREAM_DIST);
         let lp_state = if cfg.disturbance.noise_std > 0.0 {
-            cfg.disturbance.noise_std * rng_dist.normal()
+            cfg.disturbance.noise_std * rng_dist.next()
         } else {
             0.0
         };
         Sensors {
             cfg,
             ts,
-            rng_theta: Rng::new(seed, STREAM_THETA),
-            rng_u: Rng::new(seed, STREAM_U),
+            rng_theta: Normals::new(seed, STREAM_THETA),
+            rng_u: Normals::new(seed, STREAM_U),
             rng_dist,
             lp_state,
             lp_a,
             lp_b,
             k: 0,
+            resolution: cfg.angle_resolution(),
         }
     }
 
     /// Measured motor angle from the true one [rad].
     pub fn measure_theta(&mut self, theta: f64) -> f64 {
-        let q = match self.cfg.angle_resolution() {
+        let q = match self.resolution {
             Some(res) => (theta / res).round() * res,
             None => theta,
         };
         if self.cfg.theta_noise_std > 0.0 {
-            q + self.cfg.theta_noise_std * self.rng_theta.normal()
+            q + self.cfg.theta_noise_std * self.rng_theta.next()
         } else {
             q
         }
@@ -218,7 +305,7 @@ impl Sensors {
     /// Recorded torque reference from the true one [N·m].
     pub fn measure_u(&mut self, u: f64) -> f64 {
         if self.cfg.u_noise_std > 0.0 {
-            u + self.cfg.u_noise_std * self.rng_u.normal()
+            u + self.cfg.u_noise_std * self.rng_u.next()
         } else {
             u
         }
@@ -233,7 +320,7 @@ impl Sensors {
             w += d.sine_amplitude * (2.0 * PI * d.sine_freq_hz * t).sin();
         }
         if d.noise_std > 0.0 {
-            self.lp_state = self.lp_a * self.lp_state + self.lp_b * self.rng_dist.normal();
+            self.lp_state = self.lp_a * self.lp_state + self.lp_b * self.rng_dist.next();
         }
         self.k += 1;
         w
@@ -254,6 +341,22 @@ mod tests {
         let vc: Vec<u64> = (0..8).map(|_| c.next_u64()).collect();
         assert_eq!(va, vb);
         assert_ne!(va, vc);
+    }
+
+    #[test]
+    fn normals_in_blocks_are_the_generator_s_deviates_to_the_bit() {
+        for (seed, stream) in [(1, STREAM_THETA), (7, STREAM_U), (u64::MAX, STREAM_DIST)] {
+            let mut one = Rng::new(seed, stream);
+            let mut blocks = Normals::new(seed, stream);
+            for k in 0..5 * NORMAL_BLOCK + 3 {
+                let (a, b) = (one.normal(), blocks.next());
+                assert_eq!(
+                    a.to_bits(),
+                    b.to_bits(),
+                    "seed {seed} stream {stream} deviate {k}"
+                );
+            }
+        }
     }
 
     #[test]
