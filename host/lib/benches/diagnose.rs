@@ -358,6 +358,7 @@ fn battery() {
                     c.warnings
                 );
             }
+            println!("    verdict: {}", d.verdict);
             println!("    hidden {:?}; warnings {:?}", case.hidden, d.warnings);
         }
         let answered = d.best.clone();

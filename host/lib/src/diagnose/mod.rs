@@ -670,9 +670,10 @@ pub fn diagnose_segments(
     let first = results.next().expect("the nominal job");
     let results: Vec<_> = results.collect();
     let nominal = nominal::settle(&fitter, first, &results, &mut warnings)?;
-    let trust = nominal::trust(&fitter, &nominal);
     let ev = evidence::gather(&fitter, &nominal);
     let mut answer = select::singles(&fitter, &nominal, &ev, results);
+    let top = answer.singles.first().and_then(|s| s.1.as_ref());
+    let trust = nominal::trust(&fitter, &nominal, top);
     // a nominal not to be trusted is no base to build an answer on
     let in_loop = if trust.1.is_none() {
         select::pairs(&fitter, &ev, &mut answer, &mut warnings);

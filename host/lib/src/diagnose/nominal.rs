@@ -194,40 +194,56 @@ fn nominal_at_start(
     ))
 }
 
-/// A validation gap larger than this many times the nominal's gap in-sample, plus
-/// [`DESCRIBE_MARGIN`], is not an unmodelled effect of the joint the nominal was fitted on.
+/// A validation gap larger than this many times a model's gap in-sample, plus
+/// [`DESCRIBE_MARGIN`], is not an unmodelled effect of the joint the model was fitted on.
 /// An effect's share of the motion changes between two runs of one joint with the
-/// amplitude and the spectrum of the excitation, by well under this factor on the battery
-/// and the measured records (the largest, a Coulomb friction at a smaller validation
-/// amplitude, about 1.5×); another plant, another controller or sensor scaling, or a model
-/// the estimation record does not fix, leaves the validation motion unexplained (a
-/// three-mass nominal of one joint on the record of a rigid one: −117 % against 96 %
-/// in-sample).
+/// amplitude and the spectrum of the excitation; another plant, another controller or
+/// sensor scaling, or a model the estimation record does not fix, leaves the validation
+/// motion unexplained by every model (a three-mass nominal of one joint on the record of a
+/// rigid one: −117 % against 96 % in-sample, and no candidate better).
 pub(super) const DESCRIBE_FACTOR: f64 = 2.0;
 /// The margin of [`DESCRIBE_FACTOR`] [FIT points]: the noise of a small in-sample gap.
 pub(super) const DESCRIBE_MARGIN: f64 = 20.0;
 
+/// Whether a model scored `val` [%] on validation and `est` [%] in-sample describes the
+/// validation data ([`DESCRIBE_FACTOR`]).
+fn describes(est: f64, val: f64) -> bool {
+    100.0 - val <= DESCRIBE_FACTOR * (100.0 - est).max(0.0) + DESCRIBE_MARGIN
+}
+
 /// Whether the nominal can be the base of a diagnosis: its in-sample gap metric, and why
-/// not when it cannot (its validation gap beyond [`DESCRIBE_FACTOR`] × its in-sample gap
-/// \+ [`DESCRIBE_MARGIN`]: it does not describe the validation data).
-pub(super) fn trust(fitter: &Fitter<'_>, nominal: &Fitted) -> (Option<f64>, Option<String>) {
+/// not when it cannot. It cannot when neither it nor the best single `top` describes the
+/// validation data ([`describes`]): a nominal that misses an effect the single holds
+/// (a Coulomb friction of 25 points on a record the friction dominates) is still a base,
+/// the single's in-sample and validation gaps agreeing.
+pub(super) fn trust(
+    fitter: &Fitter<'_>,
+    nominal: &Fitted,
+    top: Option<&Fitted>,
+) -> (Option<f64>, Option<String>) {
     let fit_est = fitter.in_sample(&DrivenModel::of_fit(&nominal.fit));
     let val = nominal.scored.fit;
-    let refusal = fit_est.and_then(|est| {
-        let (gap_est, gap_val) = (100.0 - est, 100.0 - val);
-        (gap_val > DESCRIBE_FACTOR * gap_est.max(0.0) + DESCRIBE_MARGIN).then(|| {
-            format!(
-                "the nominal does not describe the validation data: its band-passed \
-                 motor-velocity FIT is {val:.1} % on {} against {est:.1} % on the estimation \
-                 data {}, a gap no unmodelled effect of one joint opens between two of its \
-                 runs; the captures are likely of different plants or settings (another \
-                 joint, payload, controller or sensor scaling), or the estimation record is \
-                 too short to fix the model, so no effect is named",
-                fitter.rec.val.name, fitter.rec.est[0][0].name
-            )
-        })
+    let Some(est) = fit_est.filter(|&est| !describes(est, val)) else {
+        return (fit_est, None);
+    };
+    let top_describes = top.is_some_and(|t| {
+        fitter
+            .in_sample(&DrivenModel::of_fit(&t.fit))
+            .is_some_and(|e| describes(e, t.scored.fit))
     });
-    (fit_est, refusal)
+    if top_describes {
+        return (fit_est, None);
+    }
+    let refusal = format!(
+        "the nominal does not describe the validation data: its band-passed motor-velocity \
+         FIT is {val:.1} % on {} against {est:.1} % on the estimation data {}, and no \
+         candidate's is nearer its own in-sample FIT, a gap no unmodelled effect of one joint \
+         opens between two of its runs; the captures are likely of different plants or \
+         settings (another joint, payload, controller or sensor scaling), or the estimation \
+         record is too short to fix the model, so no effect is named",
+        fitter.rec.val.name, fitter.rec.est[0][0].name
+    );
+    (fit_est, Some(refusal))
 }
 
 #[cfg(test)]

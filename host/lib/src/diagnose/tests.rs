@@ -966,32 +966,34 @@ fn a_start_that_does_not_simulate_gives_way_to_the_automatic_start() {
 }
 
 /// An effect fitted within its σ of no size is not an effect (a delay of exactly 0 samples
-/// named a significant `time_delay` on a joint with none); one clearly above it is.
+/// named a significant `time_delay` on a joint with none); one clearly above it is; a
+/// Stribeck friction has a size when either of its levels is clear of nought.
 #[test]
 fn an_effect_fitted_to_no_size_is_never_significant() {
     use crate::ident::lm::Termination;
     use crate::ident::nonlinear::{NlModel, NlParam, Owner};
-    let fit = |value: f64, std: f64| NlFit {
+    let param = |name: &'static str, (value, std): (f64, f64)| NlParam {
+        name,
+        owner: Owner::Effect(0),
+        value,
+        std,
+        unit: "",
+        fixed: false,
+        at_bound: false,
+    };
+    let with = |effect: Effect, params: Vec<NlParam>| NlFit {
         model: NlModel {
             structure: Structure::TwoMass,
             r: 1.0,
-            effects: vec![Effect::TimeDelay(TimeDelay { samples: value })],
+            effects: vec![effect],
             tau_c: 0.0,
             v_eps: 0.05,
             dz_eps: 1e-6,
             substeps: 1,
         },
         plant: Vec::new(),
-        params: vec![NlParam {
-            name: "samples",
-            owner: Owner::Effect(0),
-            value,
-            std,
-            unit: "samples",
-            fixed: false,
-            at_bound: false,
-        }],
-        values: vec![value],
+        values: params.iter().map(|p| p.value).collect(),
+        params,
         ssr: 1.0,
         n_residuals: 100,
         iterations: 3,
@@ -999,9 +1001,30 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
         fit_velocity_percent: 90.0,
         correlated: Vec::new(),
     };
+    let fit = |value: f64, std: f64| {
+        with(
+            Effect::TimeDelay(TimeDelay { samples: value }),
+            vec![param("samples", (value, std))],
+        )
+    };
     assert_eq!(vanished_effects(&fit(0.0, f64::NAN)).len(), 1);
     assert_eq!(vanished_effects(&fit(0.02, 0.05)).len(), 1);
     assert!(vanished_effects(&fit(1.5, 0.05)).is_empty());
+    let friction = |fc: (f64, f64), fs: (f64, f64)| {
+        with(
+            candidate("coulomb_friction").expect("a candidate"),
+            vec![
+                param("fc", fc),
+                param("fs", fs),
+                param("v_stribeck", (1.4, 1.8)),
+            ],
+        )
+    };
+    assert!(vanished_effects(&friction((2.1e-2, 4.2e-2), (3.9e-2, 1.3e-3))).is_empty());
+    assert_eq!(
+        vanished_effects(&friction((2.1e-2, 4.2e-2), (1e-3, 2e-3))).len(),
+        1
+    );
 }
 
 /// The amplitude sentence: a gap that grows while the distortion falls is said with a
