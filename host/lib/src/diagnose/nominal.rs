@@ -1,8 +1,10 @@
 //! Stage 1, the nominal: the linear physical model of the structure with no effect, the
 //! model every candidate extends. Fitted with the singles ([`super::fits`]); when that fit
-//! fails, started again elsewhere ([`recover_nominal`]); when it ends far below its
-//! frequency-domain start on the gap metric in-sample, the start is kept
-//! ([`nominal_at_start`]).
+//! fails, started again elsewhere ([`recover_nominal`]); when it stops at its iteration
+//! limit, continued on its in-sample cost ([`Fitter::continued`]); when it ends far below
+//! its frequency-domain start on the gap metric in-sample, the start is kept
+//! ([`nominal_at_start`]). Whether it can be the base of a diagnosis at all ([`trust`]):
+//! not when neither it nor the best single describes the validation data.
 
 use crate::data::IdData;
 use crate::ident::nonlinear::{identify_segments, model_of, NlFit, NlRequest, NlStart};
