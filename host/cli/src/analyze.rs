@@ -80,6 +80,17 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
     let selected = data.select(ctx.loaders)?;
     let ds = &selected.datasets[0];
     let a = analyze_segments(&selected.datasets, args.settle_periods)?;
+    let notes: Vec<String> = a
+        .left_out
+        .iter()
+        .map(|l| {
+            format!(
+                "{}: segment {} left out of the FRF: {}",
+                ds.name, selected.segments[l.index], l.reason
+            )
+        })
+        .collect();
+    super::print::print_notes(&notes);
     let mut plots = Vec::new();
     if let Some(dir) = &args.plot {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;

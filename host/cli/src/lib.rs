@@ -178,23 +178,56 @@ pub fn write_svg(path: &std::path::Path, svg: &str, force: bool) -> Result<(), O
     jointid::data::output::write_file(path, force, |w| w.write_all(svg.as_bytes()))
 }
 
+/// Why a `--plot DIR` cannot take its figures ([`check_plot_files`]).
+#[derive(Debug, thiserror::Error)]
+pub enum PlotDirError {
+    /// the directory does not exist and cannot be created
+    #[error("{}: cannot create the directory: {}", dir.display(), io_msg(err))]
+    Create {
+        /// the directory
+        dir: std::path::PathBuf,
+        /// what the operating system said
+        err: std::io::Error,
+    },
+    /// a figure's file cannot be written there (exists, directory not writable, ...):
+    /// the rule of output files that refused it, naming the file and its directory
+    #[error(transparent)]
+    File(#[from] OutputError),
+}
+
+/// An I/O error as one lowercase phrase without the `(os error N)` suffix.
+fn io_msg(e: &std::io::Error) -> String {
+    let mut m = e.to_string();
+    if let Some(i) = m.find(" (os error ") {
+        m.truncate(i);
+    }
+    if let Some(first) = m.get(..1) {
+        let lower = first.to_lowercase();
+        m.replace_range(..1, &lower);
+    }
+    m
+}
+
 /// Checks, before any work, that the files `names` can be written into the plot directory
-/// `dir` ([`jointid::data::output::check_output`]); a directory that does not exist yet is
-/// created later, with its parents, and holds nothing to overwrite.
+/// `dir` ([`jointid::data::output::check_output`], which creates and removes a probe file
+/// there): a directory that does not exist is created now, with its parents, so that one
+/// that cannot be (a read-only parent, a file in the way) is refused before the work too.
 ///
 /// # Errors
-/// [`OutputError`] naming the first file that cannot be written.
+/// [`PlotDirError`] naming the directory, and the first file that cannot be written.
 pub fn check_plot_files(
     dir: &std::path::Path,
     names: &[&str],
     force: bool,
-) -> Result<(), OutputError> {
-    if !dir.exists() {
-        return Ok(());
-    }
+) -> Result<(), PlotDirError> {
+    std::fs::create_dir_all(dir).map_err(|err| PlotDirError::Create {
+        dir: dir.to_path_buf(),
+        err,
+    })?;
     names
         .iter()
         .try_for_each(|n| check_output(&dir.join(n), force))
+        .map_err(PlotDirError::from)
 }
 
 /// Version of a `--json` document's shape: `"schema": "jointid-<kind>/<version>"`. A field

@@ -324,3 +324,94 @@ fn every_writer_refuses_an_existing_file_without_force_and_leaves_nothing_half_w
     assert_eq!(names(&dir), before);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `jointid args`, its exit status, stderr and how long it ran.
+fn timed(args: &[&str]) -> (Option<i32>, String, std::time::Duration) {
+    let t0 = std::time::Instant::now();
+    let o = jointid(args);
+    let took = t0.elapsed();
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+        took,
+    )
+}
+
+/// The README's promise for `--plot DIR`: checked before the work. A directory that cannot
+/// be created (a file in the way, a read-only parent) or is not writable is refused at once
+/// with exit 2, naming it, by `analyze`, `fit`, `validate` and `diagnose` (one helper,
+/// `check_plot_files`). Before: a missing directory was created only after the work, so
+/// `diagnose --plot` failed there after the whole diagnosis.
+#[test]
+fn every_plot_directory_that_cannot_take_the_figures_is_refused_before_the_work() {
+    let dir = tmpdir("plot-dir");
+    let s = |p: &Path| p.display().to_string();
+    let jcap = capture(&dir);
+    let model = dir.join("m.json");
+    let o = jointid(&[
+        "fit",
+        &s(&jcap),
+        "--model",
+        "two-mass",
+        "--save",
+        &s(&model),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let commands = |plots: &Path| -> Vec<Vec<String>> {
+        let (j, p) = (s(&jcap), s(plots));
+        [
+            vec!["analyze", &j, "--plot", &p],
+            vec!["fit", &j, "--model", "two-mass", "--plot", &p],
+            vec!["validate", &s(&model), &j, "--plot", &p],
+            vec!["diagnose", &j, "--validation", &j, "--plot", &p],
+        ]
+        .into_iter()
+        .map(|v| v.into_iter().map(String::from).collect())
+        .collect()
+    };
+    let refused = |args: &[String], what: &str| {
+        let a: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (code, err, took) = timed(&a);
+        assert_eq!(code, Some(2), "{a:?}: {err}");
+        assert_eq!(err.lines().count(), 1, "{a:?}: {err}");
+        assert!(err.contains(what), "{a:?}: {err}");
+        assert!(took.as_secs_f64() < 0.5, "{a:?}: refused after {took:?}");
+    };
+    // a file where the directory should be: for every user, root too
+    let file = dir.join("a-file");
+    std::fs::write(&file, "x").unwrap();
+    let under_file = file.join("plots");
+    for args in commands(&under_file) {
+        refused(
+            &args,
+            &format!(
+                "{}: cannot create the directory: not a directory",
+                s(&under_file)
+            ),
+        );
+    }
+    // a read-only directory: its missing subdirectory cannot be made, nor a file written
+    // into it (root writes anyway: then only the file case above is checked)
+    use std::os::unix::fs::PermissionsExt;
+    let ro = dir.join("read-only");
+    std::fs::create_dir(&ro).unwrap();
+    std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).unwrap();
+    let root = std::fs::write(ro.join("probe"), "x").is_ok();
+    if !root {
+        let missing = ro.join("plots");
+        for args in commands(&missing) {
+            refused(
+                &args,
+                &format!(
+                    "{}: cannot create the directory: permission denied",
+                    s(&missing)
+                ),
+            );
+        }
+        for args in commands(&ro) {
+            refused(&args, &format!("directory {} is not writable", s(&ro)));
+        }
+    }
+    std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -248,6 +248,17 @@ fn diagnose_with_segment_all_names_the_hidden_friction_of_gapped_captures() {
 /// 45 % and 55 % of its stream removed (cut at frame delimiters, as a serial unplug loses
 /// them): a capture with one gap. Returns its path and the simulation's `--json` report.
 fn gapped_simulation(dir: &Path, name: &str, args: &[&str]) -> (PathBuf, Value) {
+    gapped_simulation_cut(dir, name, args, (0.45, 0.55))
+}
+
+/// As [`gapped_simulation`], the frames that start between the fractions `cut` of the
+/// stream removed.
+fn gapped_simulation_cut(
+    dir: &Path,
+    name: &str,
+    args: &[&str],
+    cut: (f64, f64),
+) -> (PathBuf, Value) {
     let whole = dir.join(format!("whole-{name}"));
     let mut a = vec!["simulate", "--out", whole.to_str().unwrap(), "--json"];
     a.extend_from_slice(args);
@@ -258,7 +269,7 @@ fn gapped_simulation(dir: &Path, name: &str, args: &[&str]) -> (PathBuf, Value) 
         let from = (f * body.len() as f64) as usize;
         from + body[from..].iter().position(|b| *b == 0).unwrap()
     };
-    let (a, b) = (at(0.45), at(0.55));
+    let (a, b) = (at(cut.0), at(cut.1));
     let mut out = MAGIC.to_vec();
     out.extend_from_slice(&body[..a]);
     out.extend_from_slice(&body[b..]);
@@ -548,4 +559,58 @@ fn another_loggers_csv_on_standard_input_is_read_with_a_mapping_and_notes() {
     child.stdin.take().unwrap().write_all(&bytes).unwrap();
     let v = json_of(&child.wait_with_output().unwrap());
     assert_eq!(v["analysis"]["layout"]["count"], 14);
+}
+
+/// `--segment all` on a capture whose first segment is shorter than the ramp-in, the
+/// settling period and one period (9600 samples of 2000 + 5000 + 5000): that segment is
+/// left out of the FRF with a note naming it and why, and the command runs on the other.
+/// Before: `analyze` exited 2 ("no whole excitation period: 9600 samples leave no whole
+/// period of 5000 after 7000 transient samples") and `fit` fell back to the time domain.
+#[test]
+fn segment_all_leaves_out_a_segment_without_a_whole_period_after_the_transient() {
+    let dir = tmpdir("all-short-segment");
+    let (cap, _) = gapped_simulation_cut(
+        &dir,
+        "run.jcap",
+        &["--periods", "6", "--seed", "3"],
+        (0.28, 0.36),
+    );
+    let c = cap.to_str().unwrap();
+    let info = json_of(&jointid(&["info", c, "--json"]));
+    let listed = info["segments"].as_array().unwrap();
+    assert_eq!(listed.len(), 2, "{info}");
+    assert_eq!(listed[0]["samples"], 9600, "{info}");
+    let why = "segment 1 left out of the FRF: 9600 samples leave no whole period of 5000 \
+               after 7000 transient samples";
+    let out = jointid(&["analyze", c, "--segment", "all", "--json"]);
+    let a = json_of(&out);
+    assert!(stderr(&out).contains(why), "{}", stderr(&out));
+    // segment 2's three whole periods (it starts after the ramp: no settling dropped)
+    assert_eq!(a["analysis"]["layout"]["count"], 3, "{a}");
+    let out = jointid(&[
+        "fit",
+        c,
+        "--model",
+        "three-mass",
+        "--segment",
+        "all",
+        "--domain",
+        "frequency",
+        "--json",
+    ]);
+    json_of(&out);
+    let note = stderr(&out);
+    assert!(note.contains(why), "{note}");
+    assert!(
+        note.contains("the FRF averages the whole periods of segments 2"),
+        "{note}"
+    );
+    // no segment with a whole period: still refused
+    let out = jointid(&["analyze", c, "--segment", "all", "--settle-periods", "6"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("no whole excitation period"),
+        "{}",
+        stderr(&out)
+    );
 }

@@ -275,3 +275,69 @@ fn simulate_applies_the_boards_safety_limits_and_bounds_every_parameter() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Runs `jointid args`, killed after `limit`: its output, or `None` when it ran longer.
+fn run_within(args: &[&str], limit: std::time::Duration) -> Option<std::process::Output> {
+    let mut child = std::process::Command::new(common::BIN)
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run jointid");
+    let t0 = std::time::Instant::now();
+    while child.try_wait().expect("wait").is_none() {
+        if t0.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            return None;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    Some(child.wait_with_output().expect("output"))
+}
+
+/// A run larger than the free space of `--out`'s file system is refused before the
+/// simulation, with both figures. Before: `--periods 100000000` was accepted and wrote
+/// about 8 MB/s until killed (36 TB of CSV at the end).
+#[test]
+fn simulate_refuses_a_run_larger_than_the_free_space_before_simulating() {
+    let dir = tmpdir("runaway");
+    for name in ["x.csv", "x.jcap"] {
+        let out = dir.join(name);
+        let o = out.to_str().unwrap();
+        let args = ["simulate", "--periods", "100000000", "--out", o];
+        let Some(run) = run_within(&args, std::time::Duration::from_secs(10)) else {
+            let _ = std::fs::remove_dir_all(&dir);
+            panic!("{name}: still simulating after 10 s");
+        };
+        let err = String::from_utf8_lossy(&run.stderr).into_owned();
+        assert_eq!(run.status.code(), Some(2), "{name}: {err}");
+        // 2 ramps of 2000 samples and 1e8 periods of 5000
+        let head = format!("--periods 100000000: 500000004000 samples: {o}: about ");
+        assert!(err.contains(&head), "{err}");
+        let size = if name.ends_with("csv") {
+            "36.0 TB"
+        } else {
+            "2.75 TB"
+        };
+        assert!(
+            err.contains(&format!("{size} to write, more than the ")),
+            "{err}"
+        );
+        assert!(err.contains("free on the file system of"), "{err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(
+            std::fs::read_dir(&dir).unwrap().next().is_none(),
+            "a file was left"
+        );
+    }
+    // a run that fits is still written
+    let out = dir.join("small.jcap");
+    let run = jointid(&["simulate", "--periods", "1", "--out", out.to_str().unwrap()]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

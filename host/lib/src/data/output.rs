@@ -10,6 +10,9 @@
 //!   same directory, flushes it to disk and renames it over the target; on any failure
 //!   the temporary file is removed and the target left as it was.
 //!
+//! - a file whose size is known before the work (`simulate --out`) must fit in the free
+//!   space of its file system: [`check_room`].
+//!
 //! A path that exists and is neither a regular file nor a directory (`/dev/stdout`, a
 //! named pipe, `/dev/full`) is written in place: it holds nothing to protect and cannot
 //! be replaced. A symbolic link to a regular file is followed: the file it names is
@@ -52,6 +55,22 @@ pub enum OutputError {
         /// what the operating system said
         err: io::Error,
     },
+    /// The file would not fit in the free space of its file system ([`check_room`]).
+    #[error(
+        "{path}: about {} to write, more than the {} free on the file system of {dir}",
+        fmt_bytes(*needed),
+        fmt_bytes(*free)
+    )]
+    NoRoom {
+        /// the file
+        path: PathBuf,
+        /// its directory
+        dir: PathBuf,
+        /// the file's expected size [bytes]
+        needed: u64,
+        /// the space an unprivileged user may still fill there [bytes]
+        free: u64,
+    },
     /// Writing, flushing or renaming failed.
     #[error("{path}: {}", io_msg(err))]
     Io {
@@ -73,6 +92,87 @@ pub(crate) fn io_msg(e: &io::Error) -> String {
         m.replace_range(..1, &lower);
     }
     m
+}
+
+/// A size in bytes for people: `731 B`, `3.6 kB`, `36.5 TB` (decimal prefixes, three
+/// significant digits).
+pub fn fmt_bytes(n: u64) -> String {
+    const UNITS: [&str; 6] = ["kB", "MB", "GB", "TB", "PB", "EB"];
+    if n < 1000 {
+        return format!("{n} B");
+    }
+    let mut v = n as f64;
+    let mut unit = "B";
+    for u in UNITS {
+        if v < 1000.0 {
+            break;
+        }
+        v /= 1000.0;
+        unit = u;
+    }
+    let digits = if v < 10.0 {
+        2
+    } else if v < 100.0 {
+        1
+    } else {
+        0
+    };
+    format!("{v:.digits$} {unit}")
+}
+
+/// The bytes an unprivileged user may still write on the file system that holds `dir`
+/// (`statvfs`: available blocks × fragment size); `None` where that is unknown (not
+/// Unix, or the call failed).
+pub fn free_space(dir: &Path) -> Option<u64> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStrExt;
+        let c = std::ffi::CString::new(dir.as_os_str().as_bytes()).ok()?;
+        let mut st = std::mem::MaybeUninit::<libc::statvfs>::uninit();
+        // SAFETY: `c` is a NUL-terminated path and `st` points to writable memory of the
+        // struct's size; `statvfs` fills it completely when it returns 0.
+        let rc = unsafe { libc::statvfs(c.as_ptr(), st.as_mut_ptr()) };
+        if rc != 0 {
+            return None;
+        }
+        // SAFETY: initialised by the successful call above
+        let st = unsafe { st.assume_init() };
+        // the field types differ between platforms (u32 on some, u64 on others)
+        #[allow(clippy::unnecessary_cast)]
+        Some((st.f_bavail as u64).saturating_mul(st.f_frsize as u64))
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = dir;
+        None
+    }
+}
+
+/// Checks, before any work, that a file of about `bytes` fits at `path`: at most the free
+/// space of its directory's file system ([`free_space`]). A device or pipe (a stream,
+/// `/dev/stdout`) and a file system whose free space is unknown are not checked. An
+/// existing file being replaced does not count as free: the new one is written beside it
+/// first.
+///
+/// # Errors
+/// [`OutputError::NoRoom`] with both figures; [`OutputError::Io`] when the path cannot be
+/// examined.
+pub fn check_room(path: &Path, bytes: u64) -> Result<(), OutputError> {
+    let target = match existing(path)? {
+        Existing::Special(_) => return Ok(()),
+        Existing::File(resolved) => resolved,
+        Existing::Nothing => path.to_path_buf(),
+    };
+    let dir = dir_of(&target);
+    match free_space(&dir) {
+        Some(free) if bytes > free => Err(OutputError::NoRoom {
+            path: path.to_path_buf(),
+            dir,
+            needed: bytes,
+            free,
+        }),
+        _ => Ok(()),
+    }
 }
 
 /// The directory a file `path` goes into (`.` for a bare file name).
@@ -265,6 +365,40 @@ mod tests {
             .unwrap()
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
             .collect()
+    }
+
+    #[test]
+    fn check_room_refuses_a_file_larger_than_the_free_space_but_not_a_stream() {
+        let dir = tmp("room");
+        let p = dir.join("run.csv");
+        check_room(&p, 1000).unwrap();
+        let err = check_room(&p, u64::MAX).unwrap_err();
+        let OutputError::NoRoom { needed, free, .. } = &err else {
+            panic!("{err}")
+        };
+        assert_eq!(*needed, u64::MAX);
+        assert!(*free < u64::MAX, "{err}");
+        let msg = err.to_string();
+        assert!(
+            msg.starts_with(&format!(
+                "{}: about 18.4 EB to write, more than the ",
+                p.display()
+            )),
+            "{msg}"
+        );
+        assert!(msg.contains("free on the file system of"), "{msg}");
+        assert!(leftovers(&dir).is_empty());
+        // a device is a stream: no size to check
+        check_room(Path::new("/dev/null"), u64::MAX).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn fmt_bytes_gives_three_significant_digits_with_a_decimal_prefix() {
+        assert_eq!(fmt_bytes(731), "731 B");
+        assert_eq!(fmt_bytes(3_612), "3.61 kB");
+        assert_eq!(fmt_bytes(36_500_000_000_000), "36.5 TB");
+        assert_eq!(fmt_bytes(540_000_000_000), "540 GB");
     }
 
     #[test]

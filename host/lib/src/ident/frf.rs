@@ -44,7 +44,7 @@ use rustfft::num_complex::Complex64;
 use rustfft::{Fft, FftPlanner};
 use serde::Serialize;
 
-use crate::data::{Dataset, ExcitationConfig, IdData, PeriodLayout};
+use crate::data::{DataError, Dataset, ExcitationConfig, IdData, PeriodLayout};
 
 pub mod welch;
 pub use welch::{welch_frf, WelchFrf, WelchOptions};
@@ -553,6 +553,21 @@ pub struct FrfAnalysis {
     pub linearity_u: Linearity,
     /// linearity check of y
     pub linearity_y: Linearity,
+    /// the segments [`analyze_segments`] left out (none from [`analyze`]); the caller
+    /// says so
+    #[serde(skip)]
+    pub left_out: Vec<LeftOutSegment>,
+}
+
+/// A segment [`analyze_segments`] left out: no whole steady-state period remains in it
+/// after its transient.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LeftOutSegment {
+    /// its place among the segments given, from 0
+    pub index: usize,
+    /// why, as [`crate::data::NoWholePeriod`] says it (`9600 samples leave no whole period
+    /// of 5000 after 7000 transient samples`)
+    pub reason: String,
 }
 
 impl FrfAnalysis {
@@ -741,24 +756,54 @@ fn layout_of(
 /// transient dropped only where it holds the ramp-in and `settle_periods`), pooled, so
 /// the FRF and its σ average over every period of every segment. Per-period spectra do
 /// not see where two segments meet, so nothing is interpolated across a gap. The
-/// returned layout counts the pooled periods from the first segment's first one.
+/// returned layout counts the pooled periods from the first pooled segment's first one.
+///
+/// A segment with no whole period after its transient (a short piece before or after a
+/// gap) is left out and named in [`FrfAnalysis::left_out`], with the reason; the others
+/// are pooled.
 ///
 /// # Errors
-/// As [`analyze_dataset`] for each segment; [`FrfError::SegmentsDiffer`] when the
-/// segments differ in period, sample interval or reference column.
+/// As [`analyze_dataset`] for each segment, and when no segment holds a whole period;
+/// [`FrfError::SegmentsDiffer`] when the segments differ in period, sample interval or
+/// reference column.
 pub fn analyze_segments(
     segments: &[Dataset],
     settle_periods: usize,
 ) -> Result<FrfAnalysis, FrfError> {
-    let Some(first) = segments.first() else {
-        return Err(FrfError::SegmentsDiffer {
-            what: "no segment".into(),
-        });
-    };
     if segments.len() == 1 {
-        return analyze_dataset(first, settle_periods);
+        return analyze_dataset(&segments[0], settle_periods);
     }
-    let (lay0, excited) = layout_of(first, settle_periods)?;
+    // each segment's layout; those without a whole period left out
+    let mut laid = Vec::new();
+    let mut left_out = Vec::new();
+    let mut first_err = None;
+    for (index, ds) in segments.iter().enumerate() {
+        match layout_of(ds, settle_periods) {
+            Ok((lay, excited)) => laid.push((index, ds, lay, excited)),
+            // with an excitation config this is the one way a layout fails: no whole
+            // period after the transient
+            Err(FrfError::Data(DataError::NoPeriods { reason, .. })) if ds.excitation.is_some() => {
+                first_err.get_or_insert_with(|| {
+                    FrfError::Data(DataError::NoPeriods {
+                        file: ds.name.clone(),
+                        reason: reason.clone(),
+                    })
+                });
+                left_out.push(LeftOutSegment { index, reason });
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    let Some(&(_, first, lay0, excited)) = laid.first() else {
+        return Err(first_err.unwrap_or_else(|| FrfError::SegmentsDiffer {
+            what: "no segment".into(),
+        }));
+    };
+    if laid.len() == 1 {
+        let mut a = analyze_dataset(first, settle_periods)?;
+        a.left_out = left_out;
+        return Ok(a);
+    }
     let mut data = IdData {
         ts: first.data.ts,
         u: Vec::new(),
@@ -766,8 +811,7 @@ pub fn analyze_segments(
         r: first.data.r.as_ref().map(|_| Vec::new()),
     };
     let mut count = 0;
-    for (i, ds) in segments.iter().enumerate() {
-        let (lay, _) = layout_of(ds, settle_periods)?;
+    for (i, ds, lay, _) in laid {
         if lay.period != lay0.period
             || (ds.data.ts - data.ts).abs() > 1e-9 * data.ts
             || ds.data.r.is_some() != data.r.is_some()
@@ -806,6 +850,7 @@ pub fn analyze_segments(
         excited,
     )?;
     a.layout.start = lay0.start;
+    a.left_out = left_out;
     Ok(a)
 }
 
@@ -937,6 +982,7 @@ pub fn analyze(
         frf,
         linearity_u,
         linearity_y,
+        left_out: Vec::new(),
     })
 }
 

@@ -438,13 +438,27 @@ fn run_segments(
                 val_analysis: vp,
             },
         )?;
+        let left: Vec<usize> = pooled.left_out.iter().map(|l| l.index).collect();
+        let averaged: Vec<usize> = (0..numbers.len())
+            .filter(|i| !left.contains(i))
+            .map(|i| numbers[i])
+            .collect();
         out.notes.insert(
             0,
             format!(
                 "{name}: the FRF averages the whole periods of segments {}",
-                segment_list(numbers)
+                segment_list(&averaged)
             ),
         );
+        for (k, l) in pooled.left_out.iter().enumerate() {
+            out.notes.insert(
+                k,
+                format!(
+                    "{name}: segment {} left out of the FRF: {}",
+                    numbers[l.index], l.reason
+                ),
+            );
+        }
         return Ok(out);
     }
     let usable = usable_segments(segs.to_vec(), numbers, &name, FITTING_NOTES);
