@@ -669,7 +669,7 @@ pub fn diagnose_segments(
     let mut results = fitter.fit_all(&jobs).into_iter();
     let first = results.next().expect("the nominal job");
     let results: Vec<_> = results.collect();
-    let (nominal, unconverged) = nominal::settle(&fitter, first, &results, &mut warnings)?;
+    let nominal = nominal::settle(&fitter, first, &results, &mut warnings)?;
     let ev = evidence::gather(&fitter, &nominal);
     let mut answer = select::singles(&fitter, &nominal, &ev, results);
     let top = answer.singles.first().and_then(|s| s.1.as_ref());
@@ -684,13 +684,6 @@ pub fn diagnose_segments(
         None
     };
     Ok(verdict::conclude(
-        &fitter,
-        (nominal, unconverged),
-        trust,
-        ev,
-        answer,
-        in_loop,
-        warnings,
-        t0,
+        &fitter, nominal, trust, ev, answer, in_loop, warnings, t0,
     ))
 }

@@ -7,7 +7,6 @@
 //! not when neither it nor the best single describes the validation data.
 
 use crate::data::IdData;
-use crate::ident::lm::Termination;
 use crate::ident::nonlinear::{identify_segments, model_of, NlFit, NlRequest, NlStart};
 
 use super::fits::{fit_and_score, Fitted, Fitter};
@@ -16,14 +15,13 @@ use super::starts::LinearStarts;
 use super::{CandidateError, DiagnoseError, DiagnoseRequest, NominalError, NominalStart};
 
 /// The nominal of the diagnosis from its fit `first` (the singles' fits `singles` are the
-/// starts of last resort), with the iterations of its continuation when that stopped at its
-/// limit again (no minimum found); notes into `warnings`.
+/// starts of last resort); notes into `warnings`.
 pub(super) fn settle(
     fitter: &Fitter<'_>,
     first: Result<Fitted, CandidateError>,
     singles: &[Result<Fitted, CandidateError>],
     warnings: &mut Vec<String>,
-) -> Result<(Fitted, Option<usize>), DiagnoseError> {
+) -> Result<Fitted, DiagnoseError> {
     let (req, rec) = (fitter.req, fitter.rec);
     let (est, val, parts) = (&rec.est_data[..], &rec.val_data[..], &rec.parts[..]);
     let nominal = match first {
@@ -47,12 +45,8 @@ pub(super) fn settle(
     // and gains on it by converging further, which says nothing of its effect (a rigid
     // joint with neither: stopped at 60 iterations with `Fv` on a bound, it let a delay
     // gain 27 points and a Coulomb friction 21)
-    let mut unconverged = None;
     let nominal = match fitter.continued(&nominal) {
         Some(g) => {
-            if g.fit.termination == Termination::MaxIterations {
-                unconverged = Some(g.fit.iterations);
-            }
             warnings.push(format!(
                 "nominal: its fit stopped at its iteration limit ({} iterations) and was \
                  continued from there for {} more: in-sample cost {:+.1} %",
@@ -80,13 +74,12 @@ pub(super) fn settle(
                  the nominal is the frequency-domain fit, and the candidates, fitted in the \
                  time domain, may score below it for the same reason"
             ));
-            unconverged = None;
             start
         }
         _ => nominal,
     };
     warnings.extend(nominal.warnings.iter().map(|w| format!("nominal: {w}")));
-    Ok((nominal, unconverged))
+    Ok(nominal)
 }
 
 /// The nominal's frequency-domain start replaces its time-domain fit when it scores this

@@ -28,7 +28,7 @@ struct Figures {
 #[allow(clippy::too_many_arguments)]
 pub(super) fn conclude(
     fitter: &Fitter<'_>,
-    (nominal, unconverged): (Fitted, Option<usize>),
+    nominal: Fitted,
     (fit_nominal_est, refused): (Option<f64>, Option<String>),
     ev: Evidence,
     answer: Answer,
@@ -67,16 +67,6 @@ pub(super) fn conclude(
         parameter_mismatch(fitter, &nominal, &f, in_loop.as_ref(), &mut warnings);
     let verdict = match &refused {
         Some(why) => format!("not diagnosed: {why}"),
-        // every gain is measured against a nominal that is no minimum
-        None if f.best != "none" && unconverged.is_some() => {
-            format!(
-                "{}; doubtful: the nominal's fit stopped at its iteration limit again when \
-                 continued for {} more iterations, so part of each gain over it may be its own \
-                 shortfall",
-                verdict(fitter, &ev, &answer, &f, in_loop.is_some(), &mut warnings),
-                unconverged.unwrap_or(0)
-            )
-        }
         None => verdict(fitter, &ev, &answer, &f, in_loop.is_some(), &mut warnings),
     };
     let nominal_parameters = linear_parameters(&nominal.fit);
