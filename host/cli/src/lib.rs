@@ -182,7 +182,7 @@ pub fn write_svg(path: &std::path::Path, svg: &str, force: bool) -> Result<(), O
 #[derive(Debug, thiserror::Error)]
 pub enum PlotDirError {
     /// the directory does not exist and cannot be created
-    #[error("{}: cannot create the directory: {}", dir.display(), io_msg(err))]
+    #[error("{}: cannot create the directory: {}", dir.display(), jointid::data::output::io_msg(err))]
     Create {
         /// the directory
         dir: std::path::PathBuf,
@@ -193,19 +193,6 @@ pub enum PlotDirError {
     /// the rule of output files that refused it, naming the file and its directory
     #[error(transparent)]
     File(#[from] OutputError),
-}
-
-/// An I/O error as one lowercase phrase without the `(os error N)` suffix.
-fn io_msg(e: &std::io::Error) -> String {
-    let mut m = e.to_string();
-    if let Some(i) = m.find(" (os error ") {
-        m.truncate(i);
-    }
-    if let Some(first) = m.get(..1) {
-        let lower = first.to_lowercase();
-        m.replace_range(..1, &lower);
-    }
-    m
 }
 
 /// Checks, before any work, that the files `names` can be written into the plot directory

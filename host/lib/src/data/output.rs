@@ -82,7 +82,7 @@ pub enum OutputError {
 }
 
 /// An I/O error as one lowercase phrase without the `(os error N)` suffix.
-pub(crate) fn io_msg(e: &io::Error) -> String {
+pub fn io_msg(e: &io::Error) -> String {
     let mut m = e.to_string();
     if let Some(i) = m.find(" (os error ") {
         m.truncate(i);
