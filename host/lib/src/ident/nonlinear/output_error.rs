@@ -121,6 +121,9 @@ pub struct NlOptions {
     pub fixed: Vec<String>,
     /// plant parameters may move this factor either way from their start [-]
     pub plant_range: f64,
+    /// the values (layout order) `plant_range` is measured from, when not the start: a fit
+    /// continued from where an earlier one stopped keeps that one's bounds
+    pub range_from: Option<Vec<f64>>,
     /// most lags `L` of the covariance correction
     pub cov_lags: usize,
     /// samples at the start left out of the cost (transient of the flexible modes)
@@ -139,6 +142,9 @@ pub struct NlOptions {
     /// with Coulomb friction attached: the smoothing term of the σ (module documentation;
     /// not with `max_iter` 0)
     pub smoothing_sigma: bool,
+    /// stop when an accepted step lowers the cost by less than this share of it (the
+    /// optimiser's default: 10⁻⁹, a converged estimate)
+    pub rel_cost_tol: f64,
 }
 
 /// Size of the smooth Coulomb law's bias at `v_ε` over the change of the estimate when
@@ -171,6 +177,7 @@ impl Default for NlOptions {
             max_iter: 60,
             fixed: Vec::new(),
             plant_range: 100.0,
+            range_from: None,
             cov_lags: 40,
             skip: 0,
             highpass_hz: DEFAULT_HIGHPASS_HZ,
@@ -179,6 +186,7 @@ impl Default for NlOptions {
             gradient: Gradient::Dual,
             exact_correction: true,
             smoothing_sigma: true,
+            rel_cost_tol: LmOptions::default().rel_cost_tol,
         }
     }
 }
@@ -810,9 +818,14 @@ pub fn fit_output_error_segments(
         .iter()
         .flatten()
         .fold(0.0f64, |m, x| m.max(x.abs()));
+    let centre = opts
+        .range_from
+        .as_deref()
+        .filter(|c| c.len() == start.len())
+        .unwrap_or(start);
     let (lower, upper): (Vec<f64>, Vec<f64>) = layout
         .iter()
-        .zip(start)
+        .zip(centre)
         .map(|(d, &p)| {
             let (mut lo, mut hi) = (d.lower, d.upper);
             let log_effect = matches!(d.owner, Owner::Effect(_)) && d.scale == Scale::Log;
@@ -859,6 +872,7 @@ pub fn fit_output_error_segments(
         nuisance: 0,
         // the covariance is the sandwich below
         covariance: false,
+        rel_cost_tol: opts.rel_cost_tol,
         ..LmOptions::default()
     };
     let res = lm::minimize(&problem, &z0, &lm_opts)?;

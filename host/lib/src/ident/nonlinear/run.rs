@@ -16,7 +16,8 @@ use super::{NlError, NlFit, NlOptions};
 use crate::data::{Dataset, IdData};
 use crate::ident::frf::FrfError;
 use crate::ident::lm::Termination;
-use crate::ident::sml::{Drive, FrfFitError, FrfFitOptions};
+use crate::ident::parallel::{machine_threads, parallel};
+use crate::ident::sml::{Drive, FrfFit, FrfFitError, FrfFitOptions};
 use crate::ident::validate::fit_percent;
 use crate::model::effects::Effect;
 use crate::model::spec::Structure;
@@ -748,7 +749,6 @@ pub fn linear_start_segments(
     {
         o.delay = Drive::Fixed(0.0);
     }
-    let mut raw = crate::ident::sml::fit_frf(&analysis.frf, &o);
     // the nonlinear model carries no frequency-domain delay (the FRF's delay goes to the
     // lag, below), and the search with the delay free can end in a worse basin than the
     // lag alone: with a lag to estimate and no `time_delay`, the lag-only search is made
@@ -758,23 +758,62 @@ pub fn linear_start_segments(
     // with a 2.6-sample delay, no lag and a wrong arm at 3.2 times the noise's cost, the
     // lag-only one near the true arm at 2.7; the nominal fitted from the first stopped at
     // its iteration limit at twice the SSR of the second's minimum.
-    if held.is_none() && o.delay == Drive::Estimate {
-        let lag_only = FrfFitOptions {
-            delay: Drive::Fixed(0.0),
-            ..o.clone()
-        };
-        if let Ok(l) = crate::ident::sml::fit_frf(&analysis.frf, &lag_only) {
-            raw = match raw {
-                Ok(free) if free.cost_ratio() < l.cost_ratio() => Ok(free),
-                _ => Ok(l),
-            };
-        }
-    }
+    let lag_only = (held.is_none() && o.delay == Drive::Estimate).then(|| FrfFitOptions {
+        delay: Drive::Fixed(0.0),
+        ..o.clone()
+    });
     let law = req.effects.iter().find_map(|e| match e {
         Effect::CoulombFriction(c) => Some(*c),
         _ => None,
     });
-    let comp = law.and_then(|law| compensated_fit(segments, settle, req, &o, law));
+    // the fits are independent: on threads, each result in its place
+    let mut jobs = vec![Frf::Raw(&o)];
+    jobs.extend(lag_only.as_ref().map(Frf::Raw));
+    if let Some(law) = law {
+        jobs.extend(
+            compensation_leads(segments, req)
+                .into_iter()
+                .map(|l| Frf::Compensated(law, l)),
+        );
+    }
+    let done = parallel(&jobs, machine_threads(), |job| match *job {
+        Frf::Raw(opts) => Done::Raw(Box::new(crate::ident::sml::fit_frf(&analysis.frf, opts))),
+        Frf::Compensated(law, lead) => {
+            Done::Compensated(compensated_fit(segments, settle, req, &o, law, lead))
+        }
+    });
+    let mut raws = Vec::new();
+    let mut leads = Vec::new();
+    for d in done {
+        match d {
+            Done::Raw(r) => raws.push(*r),
+            Done::Compensated(c) => leads.push(c),
+        }
+    }
+    let mut raws = raws.into_iter();
+    let mut raw = raws.next().expect("the free fit is the first job");
+    if let Some(Ok(l)) = raws.next() {
+        raw = match raw {
+            Ok(free) if free.cost_ratio() < l.cost_ratio() => Ok(free),
+            _ => Ok(l),
+        };
+    }
+    // a lead whose level is no evidence of friction leaves out the compensation; else the
+    // lowest cost relative to the noise, the first lead on a tie
+    let comp = if law.is_none() || leads.iter().any(|c| matches!(c, Lead::NoEvidence)) {
+        None
+    } else {
+        leads
+            .into_iter()
+            .filter_map(|c| match c {
+                Lead::Fitted(c) => Some(*c),
+                _ => None,
+            })
+            .fold(None, |best: Option<Compensated>, c| match best {
+                Some(b) if b.fit.cost_ratio() <= c.fit.cost_ratio() => Some(b),
+                _ => Some(c),
+            })
+    };
     let (ff, compensation) = match (raw, comp) {
         (Ok(raw), Some(c)) if c.fit.cost_ratio() < clear_drop(&raw) => {
             let before = raw.cost_ratio();
@@ -897,74 +936,96 @@ impl Compensated {
     }
 }
 
-/// The best frequency-domain fit of the FRF with Coulomb friction of the shape `law` taken
-/// off the torque ([`super::compensate`]): the level held in the request, else the
-/// regression's (significant: above 3 σ); leads 1–3 samples, or the held lag's; the lowest
-/// cost relative to the noise kept. `None` when no level is found or no fit succeeds.
+/// A frequency-domain fit of [`linear_start_segments`].
+enum Frf<'a> {
+    /// the FRF as measured, with these options
+    Raw(&'a FrfFitOptions),
+    /// the FRF with Coulomb friction of this shape taken off the torque this many samples
+    /// ahead
+    Compensated(crate::model::effects::CoulombFriction, usize),
+}
+
+/// The result of an [`Frf`] job.
+enum Done {
+    Raw(Box<Result<FrfFit, FrfFitError>>),
+    Compensated(Lead),
+}
+
+/// A compensated fit at one lead.
+enum Lead {
+    /// the regression's level is not above 3 σ: no evidence of friction
+    NoEvidence,
+    /// no level, FRF or fit came of it
+    Failed,
+    Fitted(Box<Compensated>),
+}
+
+/// The leads [samples] the friction compensation tries: the held lag's, else 1–3.
+fn compensation_leads(segments: &[Dataset], req: &NlRequest) -> Vec<usize> {
+    let ts = segments.first().map_or(1.0, |d| d.data.ts);
+    match req.held() {
+        Some(t) => vec![1 + (t / ts).round() as usize],
+        None => vec![1, 2, 3],
+    }
+}
+
+/// The frequency-domain fit of the FRF with Coulomb friction of the shape `law` taken off
+/// the torque `lead` samples ahead ([`super::compensate`]): the level held in the request,
+/// else the regression's when significant (above 3 σ).
 fn compensated_fit(
     segments: &[Dataset],
     settle: usize,
     req: &NlRequest,
     o: &FrfFitOptions,
     law: crate::model::effects::CoulombFriction,
-) -> Option<Compensated> {
+    lead: usize,
+) -> Lead {
     use super::compensate;
-    let longest = segments
+    let Some(longest) = segments
         .iter()
         .enumerate()
         .max_by_key(|(i, d)| (d.data.len(), usize::MAX - i))
-        .map(|(_, d)| d)?;
-    let ts = longest.data.ts;
+        .map(|(_, d)| d)
+    else {
+        return Lead::Failed;
+    };
     let law = crate::model::effects::CoulombFriction {
         v_smooth: model_of(req, &longest.data).v_eps,
         ..law
     };
     let fixed_fc = req.fixed.iter().find(|(n, _)| n == "fc").map(|(_, v)| *v);
-    let leads: Vec<usize> = match req.held() {
-        Some(t) => vec![1 + (t / ts).round() as usize],
-        None => vec![1, 2, 3],
-    };
-    let mut best: Option<Compensated> = None;
-    for lead in leads {
-        let (fc, level) = match fixed_fc {
-            Some(f) => (f, None),
-            None => {
-                let l = compensate::level(&longest.data, lead, &law)?;
-                // a level not above 3 σ (or a NaN σ) is no evidence of friction
-                let significant = l.fc > 3.0 * l.std;
-                if !significant {
-                    return None;
-                }
-                (compensate::SHARE * l.fc, Some(l))
+    let (fc, level) = match fixed_fc {
+        Some(f) => (f, None),
+        None => {
+            let Some(l) = compensate::level(&longest.data, lead, &law) else {
+                return Lead::NoEvidence;
+            };
+            // a level not above 3 σ (or a NaN σ) is no evidence of friction
+            let significant = l.fc > 3.0 * l.std;
+            if !significant {
+                return Lead::NoEvidence;
             }
-        };
-        let comp: Vec<Dataset> = segments
-            .iter()
-            .map(|d| compensate::compensated(d, fc, lead, &law))
-            .collect();
-        let Ok(a) = crate::ident::frf::analyze_segments(&comp, settle) else {
-            continue;
-        };
-        let Ok(fit) = crate::ident::sml::fit_frf(&a.frf, o) else {
-            continue;
-        };
-        if best
-            .as_ref()
-            .is_none_or(|b| fit.cost_ratio() < b.fit.cost_ratio())
-        {
-            best = Some(Compensated {
-                fit,
-                fc,
-                level,
-                lead,
-            });
+            (compensate::SHARE * l.fc, Some(l))
         }
+    };
+    let comp: Vec<Dataset> = segments
+        .iter()
+        .map(|d| compensate::compensated(d, fc, lead, &law))
+        .collect();
+    let Ok(a) = crate::ident::frf::analyze_segments(&comp, settle) else {
+        return Lead::Failed;
+    };
+    match crate::ident::sml::fit_frf(&a.frf, o) {
+        Ok(fit) => Lead::Fitted(Box::new(Compensated {
+            fit,
+            fc,
+            level,
+            lead,
+        })),
+        Err(_) => Lead::Failed,
     }
-    best
 }
 
-/// The sample interval of the segments [s] (of the first; [`crate::ident::frf::analyze_segments`]
-/// checks that they agree).
 fn analysis_ts(segments: &[Dataset]) -> f64 {
     segments.first().map_or(1.0, |d| d.data.ts)
 }
