@@ -29,6 +29,20 @@ fn free_port() -> u16 {
         .port()
 }
 
+/// Whether a socket listens on loopback `port`, read from the kernel's table
+/// (`/proc/net/tcp`: local address `0100007F:PPPP`, state `0A` = LISTEN).
+fn is_listening(port: u16) -> bool {
+    let local = format!("0100007F:{port:04X}");
+    std::fs::read_to_string("/proc/net/tcp")
+        .expect("/proc/net/tcp (these tests run on Linux)")
+        .lines()
+        .skip(1)
+        .any(|line| {
+            let f: Vec<&str> = line.split_whitespace().collect();
+            f.len() > 3 && f[1] == local && f[3] == "0A"
+        })
+}
+
 #[test]
 fn emulated_board_capture_over_tcp_is_complete_in_order_and_bit_exact() {
     let elf = emulated_firmware_elf().unwrap_or_else(|e| panic!("{e}"));
@@ -128,10 +142,11 @@ fn r19_readme_recipe_qemu_connects_to_a_listening_capture() {
     let interrupt = AtomicBool::new(false);
     std::thread::scope(|scope| {
         let capture = scope.spawn(|| record_capture(&spec, &opts, &interrupt, |_, _| {}));
-        // listening once the port can no longer be bound (no probe connection, which
-        // the capture would take for the board)
+        // listening once the kernel lists the port as listening: neither a probe
+        // connection (the capture would take it for the board) nor a probe bind (the
+        // capture's own bind fails while the probe holds the port)
         let t0 = Instant::now();
-        while TcpListener::bind(&addr).is_ok() {
+        while !is_listening(port) {
             assert!(
                 t0.elapsed() < Duration::from_secs(10),
                 "capture never listened"
