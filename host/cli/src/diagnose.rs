@@ -18,7 +18,7 @@ use jointid::data::output::{check_output, write_file};
 use jointid::data::segment::{SegmentNotes, MIN_SEGMENT_SAMPLES};
 use jointid::data::{Dataset, Percent};
 use jointid::diagnose::{
-    diagnose_segments, DiagnoseRequest, Diagnosis, Progress, ProgressEvent, UserSim,
+    diagnose_segments, DiagnoseError, DiagnoseRequest, Diagnosis, Progress, ProgressEvent, UserSim,
 };
 use jointid::ident::grey_box::DEFAULT_GEAR_RATIO;
 use jointid::ident::model_file::SavedModel;
@@ -51,7 +51,8 @@ pub struct DiagnoseArgs {
     #[arg(long, value_name = "SIM.json", conflicts_with = "model")]
     pub sim: Option<PathBuf>,
     /// structure of the nominal model, as `fit --model`: rigid, two-mass, three-mass,
-    /// four-mass (default: the --sim file's, else three-mass)
+    /// four-mass, grounded (default: the --sim file's, else three-mass, or grounded with a
+    /// note when the data show a mass on a spring to the frame)
     #[arg(long, value_name = "STRUCTURE")]
     pub model: Option<String>,
     /// candidate effect, repeatable, spelled as `fit --effect` and `simulate --effect`:
@@ -255,7 +256,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
     check_same_rate(&est[0][0], &val[0], "--validation")?;
     let bar = progress_bar(args.quiet);
     let shown = bar.clone();
-    let req = DiagnoseRequest {
+    let mut req = DiagnoseRequest {
         structure,
         r: args.gear_ratio,
         candidates: cands,
@@ -272,9 +273,30 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         ..DiagnoseRequest::default()
     };
     let est_refs: Vec<&[Dataset]> = est.iter().map(Vec::as_slice).collect();
-    let diagnosed = diagnose_segments(&est_refs, &val, &req);
+    let mut diagnosed = diagnose_segments(&est_refs, &val, &req);
+    // the default structure assumed a free joint; data whose torque holds the angle like a
+    // spring to the frame are diagnosed as the grounded mass, and the report says so
+    let defaulted = model.is_none() && args.sim.is_none();
+    let mut switched = None;
+    if let Err(DiagnoseError::Nominal { source, .. }) = &diagnosed {
+        if defaulted && source.suggests_grounded() {
+            switched = Some(source.to_string());
+            req.structure = Structure::Grounded;
+            diagnosed = diagnose_segments(&est_refs, &val, &req);
+        }
+    }
     bar.finish_and_clear();
     let (mut d, series) = diagnosed?;
+    if let Some(why) = switched {
+        d.warnings.insert(
+            0,
+            format!(
+                "diagnosed as the grounded mass (`--model grounded`): the default structure \
+                 {} found no start ({why}); give --model to choose",
+                Structure::ThreeMass.label()
+            ),
+        );
+    }
     // the capture's own numbering of the validation segments
     for (s, &k) in d.validation_segments.iter_mut().zip(&val_numbers) {
         s.segment = k;

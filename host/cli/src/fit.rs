@@ -95,7 +95,7 @@ pub struct FitArgs {
     /// estimation data and columns
     #[command(flatten)]
     pub data: FitDataArgs,
-    /// model: black-box:ORDER, rigid, two-mass, three-mass, four-mass, or
+    /// model: black-box:ORDER, rigid, two-mass, three-mass, four-mass, grounded, or
     /// nonlinear-two-mass (seed 001: two-mass with nonlinear_stiffness and coulomb_friction)
     #[arg(long, value_name = "KIND", value_parser = parse_kind)]
     pub model: FitModel,

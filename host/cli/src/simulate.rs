@@ -79,11 +79,12 @@ pub struct SimModel {
 
 impl SimModel {
     /// Every `--model` value, in the order of the help.
-    pub const ALL: [SimModel; 5] = [
+    pub const ALL: [SimModel; 6] = [
         SimModel::of(Structure::Rigid),
         SimModel::of(Structure::TwoMass),
         SimModel::of(Structure::ThreeMass),
         SimModel::of(Structure::FourMass),
+        SimModel::of(Structure::Grounded),
         SimModel {
             structure: Structure::TwoMass,
             nonlinear_two_mass: true,

@@ -232,7 +232,8 @@ const TRACKING_PASSES: usize = 3;
 /// scores 56 % with the default disturbance, 100 % without it). How: `ŵ` starts at 0; each
 /// pass takes the angle error `e = θ_m − θ̂_m`, low-passes it with a zero-phase Butterworth
 /// at `corner_hz`, and adds the torque that moves the motor-side rigid body by it,
-/// `J_tot ë + f_m ė` (`J_tot` every body reflected to the motor). The input is a sum of
+/// `J_tot ë + f_m ė + K e` (`J_tot` every body reflected to the motor, `K` the springs to
+/// the frame of a grounded mass). The input is a sum of
 /// low-passed signals, so it holds nothing the band-pass of the metric above `corner_hz`
 /// scores: a model's error in the band is left to show. Returns the tracked simulation, the
 /// untracked one (the first pass) and `ŵ` [N·m].
@@ -255,9 +256,18 @@ pub fn simulate_tracked(
     let j_tot: f64 = mech
         .bodies
         .iter()
+        .filter(|b| b.inertia.is_finite())
         .map(|b| b.inertia * (r / b.gain).powi(2))
         .sum();
     let f_tot: f64 = mech.bodies.iter().map(|b| b.viscous).sum();
+    // a spring to the frame (the grounded mass) holds the rigid body too: `k` on the
+    // deflection `r θ_m`, `r² k` at the motor
+    let k_tot: f64 = mech
+        .springs
+        .iter()
+        .filter(|s| !mech.bodies[s.a].inertia.is_finite() || !mech.bodies[s.b].inertia.is_finite())
+        .map(|s| s.k * r * r)
+        .sum();
     let ts = data.ts;
     let mut w = vec![0.0; n];
     let mut out = first.clone();
@@ -275,7 +285,7 @@ pub fn simulate_tracked(
             let c = (k + 1).clamp(1, n - 2);
             let acc = (el[c + 1] - 2.0 * el[c] + el[c - 1]) / (ts * ts);
             let vel = (el[c + 1] - el[c - 1]) / (2.0 * ts);
-            *wk += j_tot * acc + f_tot * vel;
+            *wk += j_tot * acc + f_tot * vel + k_tot * el[c];
         }
         let driven = DrivenModel {
             offset: 0.0,

@@ -307,6 +307,25 @@ pub struct NominalError {
     pub attempts: Vec<(NominalStart, CandidateError)>,
 }
 
+impl NominalError {
+    /// Whether every start failed on a record whose torque holds the angle like a spring to
+    /// the frame ([`NlError::NoInertia`] with `grounded`): the structure to try is the
+    /// grounded mass.
+    pub fn suggests_grounded(&self) -> bool {
+        !self.attempts.is_empty()
+            && self.attempts.iter().any(|(_, e)| {
+                matches!(
+                    e,
+                    CandidateError::Fit(NlRunError::Estimation(NlError::NoInertia {
+                        grounded: true
+                    })) | CandidateError::AutomaticToo(NlRunError::Estimation(
+                        NlError::NoInertia { grounded: true }
+                    ))
+                )
+            })
+    }
+}
+
 /// `start: why; start: why`.
 fn attempts_text(attempts: &[(NominalStart, CandidateError)]) -> String {
     attempts

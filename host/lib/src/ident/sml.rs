@@ -79,8 +79,8 @@ pub use checks::{
 use sampled::{drive_model, Sampled};
 pub(crate) use sampled::{solve_hessenberg, unit_circle};
 use search::{
-    augmented_candidates, canonical_four_mass, features, is_loss, rigid_power, structure_name,
-    subsets, Candidate,
+    augmented_candidates, canonical_four_mass, features, grounded_start, is_loss, rigid_power,
+    structure_name, subsets, Candidate,
 };
 pub use search::{frf_peaks, reliable_lines};
 
@@ -184,6 +184,16 @@ pub enum FrfFitError {
         median_percent: f64,
         /// median `σ/|Ĝ|` of the distortion alone [%]
         distortion_percent: f64,
+    },
+    /// the grounded structure's mass and stiffness to ground are not positive on the FRF
+    #[error(
+        "no positive mass and stiffness to ground in the FRF lines ({detail}): the FRF does \
+         not level off to a finite static gain below a resonance; a free joint is `rigid` \
+         or a multi-mass structure"
+    )]
+    NoGroundedMass {
+        /// the values read and the lines they were read from
+        detail: String,
     },
     /// no positive rigid-body inertia could be read off the FRF
     #[error("no positive rigid-body inertia in the lowest FRF lines ({detail})")]
@@ -805,14 +815,19 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
             }
             tried.push(res_hz.clone());
             for &zeta in zetas {
-                let feat = match features(frf, opts.output, &res_hz, zeta) {
-                    Ok(f) => f,
+                let p0 = if structure == Structure::Grounded {
+                    grounded_start(frf, opts.output, opts.r)
+                } else {
+                    features(frf, opts.output, &res_hz, zeta)
+                        .map(|feat| grey_box::initial_values(structure, opts.r, &feat))
+                };
+                let p0 = match p0 {
+                    Ok(p) => p,
                     Err(e) => {
                         first_err.get_or_insert(e);
                         continue;
                     }
                 };
-                let p0 = grey_box::initial_values(structure, opts.r, &feat);
                 let mut th0: Vec<f64> = p0.iter().map(|v| v.max(1e-300).ln()).collect();
                 th0.extend([lag0, delay0]);
                 let (lower, upper) = bounds(&th0);

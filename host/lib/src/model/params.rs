@@ -100,6 +100,11 @@ pub struct JointParams {
     pub f_m: f64,
     /// gear ratio `r` [-] (arm angle per motor angle, 1/118 on the IRB1400 axis 1)
     pub r: f64,
+    /// stiffness to ground `k_0` of the grounded structure [N·m/rad] on the arm-side angle
+    /// `r θ_m` (a spring from the output to the frame); the default puts the default
+    /// joint's rigid inertia at 5.0 Hz
+    #[serde(default = "default_k_0")]
+    pub k_0: f64,
     /// cubic spring coefficient `k3` of the nonlinear two-mass model [N·m/rad³] (its
     /// `nonlinear_stiffness` effect)
     pub k3: f64,
@@ -129,10 +134,18 @@ impl Default for JointParams {
             d_p: 7.0,
             f_m: core.f_m,
             r: core.gear_ratio,
+            k_0: default_k_0(),
             k3: 3.0e13,
             f_c: 0.03,
         }
     }
+}
+
+/// `k_0` of the default grounded joint [N·m/rad]: `J ω² / r²` with the default rigid
+/// inertia `J = 1.882e-3 kg·m²`, `r = 1/118` and `ω = 2π · 5.0 Hz` (a test in `plant.rs`
+/// checks the frequency).
+fn default_k_0() -> f64 {
+    2.6e4
 }
 
 impl JointParams {
@@ -144,7 +157,7 @@ impl JointParams {
 
     /// Every parameter as (name, value, unit), names as in seed 000 Table 1, units from
     /// [`unit_of`].
-    pub fn table(&self) -> [(&'static str, f64, &'static str); 14] {
+    pub fn table(&self) -> [(&'static str, f64, &'static str); 15] {
         [
             ("J_m", self.j_m),
             ("J_a1", self.j_a1),
@@ -158,6 +171,7 @@ impl JointParams {
             ("d_p", self.d_p),
             ("f_m", self.f_m),
             ("r", self.r),
+            ("k_0", self.k_0),
             ("k3", self.k3),
             ("F_c", self.f_c),
         ]
@@ -181,6 +195,7 @@ pub fn model_params(structure: Structure) -> Vec<(&'static str, ParamField)> {
     let arm: [(&'static str, Field); 2] = [("k_a", |p| &mut p.k_a), ("d_a", |p| &mut p.d_a)];
     match structure {
         Structure::Rigid => {}
+        Structure::Grounded => v.push(("k_0", |p| &mut p.k_0)),
         Structure::TwoMass => v.extend(gearbox),
         Structure::ThreeMass => v.extend(gearbox.into_iter().chain(arm)),
         Structure::FourMass => {
@@ -243,10 +258,12 @@ pub fn sim_spec(
 
 /// The one unit table of the joint's physical parameters (rotary joint, SI): every name
 /// the simulator and the estimators use, with its unit. Seed 000 Table 1 (`J_*` [kg·m²],
-/// `k_*` [N·m/rad], `d_*` and `f_m` [N·m·s/rad]), the gear ratio `r` [-], seed 001's cubic
+/// `k_*` [N·m/rad], `d_*` and `f_m` [N·m·s/rad]), the gear ratio `r` [-], the grounded
+/// structure's stiffness to ground `k_0` [N·m/rad], seed 001's cubic
 /// spring `k3` [N·m/rad³] and Coulomb level `F_c` [N·m], and the rigid model of the
-/// estimators: `J` [kg·m²], viscous `Fv` [N·m·s/rad], Coulomb `Fc` and `offset` [N·m].
-pub const UNITS: [(&str, &str); 20] = [
+/// estimators: `J` [kg·m²], viscous `Fv` [N·m·s/rad], Coulomb `Fc` and `offset` [N·m],
+/// the motor-side stiffness to ground `K` [N·m/rad].
+pub const UNITS: [(&str, &str); 22] = [
     ("J_m", "kg·m²"),
     ("J_a1", "kg·m²"),
     ("J_a2", "kg·m²"),
@@ -259,6 +276,7 @@ pub const UNITS: [(&str, &str); 20] = [
     ("d_p", "N·m·s/rad"),
     ("f_m", "N·m·s/rad"),
     ("r", "-"),
+    ("k_0", "N·m/rad"),
     ("k3", "N·m/rad³"),
     ("F_c", "N·m"),
     ("J", "kg·m²"),
@@ -267,6 +285,7 @@ pub const UNITS: [(&str, &str); 20] = [
     ("Fv_neg", "N·m·s/rad"),
     ("Fc_neg", "N·m"),
     ("offset", "N·m"),
+    ("K", "N·m/rad"),
 ];
 
 /// Unit of the physical parameter `name` from [`UNITS`]; `""` for a name not there.

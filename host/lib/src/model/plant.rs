@@ -25,6 +25,17 @@ pub const MAX_BODIES: usize = 8;
 /// Largest state dimension, `2 MAX_BODIES + 1`.
 pub const MAX_STATE: usize = 2 * MAX_BODIES + 1;
 
+/// The frame of the grounded structure: a body of infinite inertia that never moves
+/// (every simulator divides by inertia, `1/∞ = 0`, and starts it at rest at angle 0).
+fn ground() -> Body {
+    Body {
+        name: "ground".to_string(),
+        inertia: f64::INFINITY,
+        gain: 1.0,
+        viscous: 0.0,
+    }
+}
+
 /// One rigid body of the lumped mechanism.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Body {
@@ -88,6 +99,12 @@ impl Mechanism {
         let spring = |a, b, k, d| Spring { a, b, k, d };
         let (bodies, springs) = match plant.kind {
             Structure::Rigid => (vec![motor(p.rigid_inertia())], vec![]),
+            // the frame as a body of infinite inertia (inverse 0) at rest at angle 0: the
+            // spring to it is spring 0, where the gearbox's effects act
+            Structure::Grounded => (
+                vec![motor(p.rigid_inertia()), ground()],
+                vec![spring(0, 1, p.k_0, 0.0)],
+            ),
             Structure::TwoMass => (
                 vec![motor(p.j_m), arm("a", p.j_a1 + p.j_a2)],
                 vec![spring(0, 1, p.k_g, p.d_g)],
@@ -116,6 +133,8 @@ impl Mechanism {
             if let Effect::ExtraMode(x) = e {
                 extra += 1;
                 let to = match x.attach {
+                    // the grounded mass carries every extra mode
+                    _ if plant.kind == Structure::Grounded => 0,
                     Attach::Parallel => usize::from(m.bodies.len() > 1),
                     Attach::Serial => m.bodies.len() - 1,
                 };

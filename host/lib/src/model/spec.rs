@@ -24,16 +24,28 @@ pub enum Structure {
     ThreeMass,
     /// seed 000 eq. (7)
     FourMass,
+    /// one mass held by a spring to ground (a flexure stage, a test bench, a balanced arm,
+    /// an electrical analogue): a resonance with a finite static gain, no rigid-body mode
+    Grounded,
 }
 
 impl Structure {
-    /// Every structure, in the order of increasing complexity.
-    pub const ALL: [Structure; 4] = [
+    /// Every structure: the free joints in the order of increasing complexity, then the
+    /// grounded mass.
+    pub const ALL: [Structure; 5] = [
         Structure::Rigid,
         Structure::TwoMass,
         Structure::ThreeMass,
         Structure::FourMass,
+        Structure::Grounded,
     ];
+
+    /// Whether the mechanism has a free rigid-body mode (every structure but the grounded
+    /// mass): its angle drifts under a constant torque, its FRF rises as `1/ω²` at low
+    /// frequencies.
+    pub fn is_free(self) -> bool {
+        self != Structure::Grounded
+    }
 
     /// Name on the command line and in model files (`three-mass`).
     pub fn label(self) -> &'static str {
@@ -42,6 +54,7 @@ impl Structure {
             Structure::TwoMass => "two-mass",
             Structure::ThreeMass => "three-mass",
             Structure::FourMass => "four-mass",
+            Structure::Grounded => "grounded",
         }
     }
 
@@ -53,6 +66,7 @@ impl Structure {
             Structure::TwoMass => "two_mass",
             Structure::ThreeMass => "three_mass",
             Structure::FourMass => "four_mass",
+            Structure::Grounded => "grounded",
         }
     }
 
@@ -63,6 +77,7 @@ impl Structure {
             Structure::TwoMass => "motor and one arm mass through the gearbox spring",
             Structure::ThreeMass => "seed 000 eq. (5)-(6): motor and two arm masses",
             Structure::FourMass => "seed 000 eq. (7)-(8): three-mass plus a parallel mass",
+            Structure::Grounded => "one mass on a spring and damper to ground (flexure, bench)",
         }
     }
 
@@ -73,13 +88,16 @@ impl Structure {
             Structure::TwoMass => 2,
             Structure::ThreeMass => 3,
             Structure::FourMass => 4,
+            Structure::Grounded => 1,
         }
     }
 
-    /// parameter names, seed 000 Table 1 (rigid: `J`, `Fv`)
+    /// parameter names, seed 000 Table 1 (rigid: `J`, `Fv`; grounded: `J`, `Fv` and the
+    /// stiffness to ground `k_0`)
     pub fn param_names(self) -> &'static [&'static str] {
         match self {
             Structure::Rigid => &["J", "Fv"],
+            Structure::Grounded => &["J", "Fv", "k_0"],
             Structure::TwoMass => &["J_m", "J_a1", "k_g", "d_g", "f_m"],
             Structure::ThreeMass => &["J_m", "J_a1", "J_a2", "k_g", "k_a", "d_g", "d_a", "f_m"],
             Structure::FourMass => &[
@@ -195,7 +213,7 @@ pub enum FamilyParseError {
     Order(String),
     /// no family of that name
     #[error(
-        "unknown model `{0}` (known: black-box:ORDER, rigid, two-mass, three-mass, four-mass)"
+        "unknown model `{0}` (known: black-box:ORDER, rigid, two-mass, three-mass, four-mass, grounded)"
     )]
     Unknown(String),
 }

@@ -518,6 +518,10 @@ fn plant_ranges(plant: &Plant) -> (Vec<Named>, Vec<Named>) {
     let mut nonneg = vec![("f_m", p.f_m)];
     match kind {
         Structure::Rigid => nonneg.push(("J_a1 + J_a2", p.j_a1 + p.j_a2)),
+        Structure::Grounded => {
+            nonneg.push(("J_a1 + J_a2", p.j_a1 + p.j_a2));
+            positive.push(("k_0", p.k_0));
+        }
         Structure::TwoMass => {
             positive.extend([("J_a1 + J_a2", p.j_a1 + p.j_a2), ("k_g", p.k_g)]);
             nonneg.push(("d_g", p.d_g));
@@ -985,6 +989,9 @@ fn at_rest(mech: &Mechanism, theta0: f64) -> State {
     for (i, b) in mech.bodies.iter().enumerate() {
         x[i] = if i == 0 {
             theta0
+        } else if b.inertia.is_infinite() {
+            // the frame of a grounded mass: at 0, its spring deflected by `r θ_0`
+            0.0
         } else {
             mech.bodies[0].gain * theta0 / b.gain
         };

@@ -25,6 +25,9 @@ pub struct IdimOptions {
     pub asymmetric: bool,
     /// keep one sample in `decimate` after filtering (1: all)
     pub decimate: usize,
+    /// include a stiffness to ground `K q` (name `K` [N·m/rad], motor side: `r² k_0` of the
+    /// grounded structure); angle output only
+    pub spring: bool,
 }
 
 impl Default for IdimOptions {
@@ -37,6 +40,7 @@ impl Default for IdimOptions {
             offset: true,
             asymmetric: false,
             decimate: 1,
+            spring: false,
         }
     }
 }
@@ -61,7 +65,7 @@ impl RigidFit {
 
 /// Inverse-dynamics least squares of the rigid body (seed 001 steps 1–2):
 /// `u = J q̈ + F_v q̇ + F_c sgn(q̇) + offset` (or the asymmetric friction of
-/// [`IdimOptions::asymmetric`]), with `q̇`, `q̈` from central
+/// [`IdimOptions::asymmetric`]; `+ K q` with [`IdimOptions::spring`]), with `q̇`, `q̈` from central
 /// differences of the zero-phase low-passed output and `u` low-passed by the
 /// same filter ("parallel filtering", which keeps the equation exact for
 /// the filtered signals). Standard deviations from `σ̂² (ΦᵀΦ)^{−1}`
@@ -106,6 +110,10 @@ pub fn rigid_idim(data: &IdData, opts: &IdimOptions) -> Result<RigidFit, GreyBox
     if offset {
         names.push("offset");
     }
+    let spring = opts.spring && opts.output == Output::Angle;
+    if spring {
+        names.push("K");
+    }
     let p = names.len();
     let mut m = DMatrix::<f64>::zeros(p, p);
     let mut rhs = DMatrix::<f64>::zeros(p, 1);
@@ -131,6 +139,10 @@ pub fn rigid_idim(data: &IdData, opts: &IdimOptions) -> Result<RigidFit, GreyBox
         }
         if offset {
             phi[k] = 1.0;
+            k += 1;
+        }
+        if spring {
+            phi[k] = yf[t];
         }
         for i in 0..p {
             for j in 0..p {

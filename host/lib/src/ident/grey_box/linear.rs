@@ -26,6 +26,18 @@ impl GreyBoxModel {
         let r = self.r;
         let (f, vel_state) = match self.structure {
             Structure::Rigid => (DMatrix::from_element(1, 1, -p[1] / p[0]), 0),
+            Structure::Grounded => {
+                // state [θ_m, ω_m]: J ω̇ = u − Fv ω − r² k_0 θ (the spring on `r θ_m`)
+                let [j, fv, k0] = [p[0], p[1], p[2]];
+                let f = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -r * r * k0 / j, -fv / j]);
+                let g = DVector::from_column_slice(&[0.0, 1.0 / j]);
+                let mut h = RowDVector::zeros(2);
+                h[match self.output {
+                    Output::Angle => 0,
+                    Output::Velocity => 1,
+                }] = 1.0;
+                return ContinuousSs { f, g, h, d: 0.0 };
+            }
             Structure::TwoMass => {
                 let [jm, ja, kg, dg, fm] = [p[0], p[1], p[2], p[3], p[4]];
                 (

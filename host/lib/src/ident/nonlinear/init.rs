@@ -30,6 +30,10 @@ use crate::model::spec::Structure;
 /// as one body, and above the rigid-body corner of the closed loop.
 const RIGID_CUTOFF_HZ: f64 = 8.0;
 
+/// The grounded mass's inverse-dynamics low-pass, as a share of the sample rate (0.1: a
+/// fifth of the Nyquist band, 200 Hz at 2 kHz), so that its resonance lies in the band.
+const GROUNDED_CUTOFF: f64 = 0.1;
+
 /// One step of the automatic start and what it found.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Step {
@@ -108,19 +112,40 @@ pub fn automatic_start_with(
     let mut steps = Vec::new();
     let mut held: Vec<String> = Vec::new();
     let mut warnings: Vec<String> = Vec::new();
-    // step 1: rigid body
+    // step 1: rigid body (the grounded mass with its spring, on a band that holds its
+    // resonance: below it the spring alone carries the torque and the inertia is not seen)
+    let grounded = model.structure == Structure::Grounded;
+    let cutoff_hz = if grounded {
+        GROUNDED_CUTOFF / data.ts
+    } else {
+        RIGID_CUTOFF_HZ
+    };
     let rigid = grey_box::rigid_idim(
         data,
         &IdimOptions {
-            cutoff_hz: RIGID_CUTOFF_HZ,
+            cutoff_hz,
             coulomb: false,
             offset: true,
+            spring: grounded,
             ..IdimOptions::default()
         },
     )?;
     let j_total = rigid.get("J").unwrap_or(f64::NAN);
     if j_total.is_nan() || j_total <= 0.0 {
-        return Err(NlError::NoInertia);
+        // what the data show instead: a mass held by a spring to the frame?
+        let held = grey_box::rigid_idim(
+            data,
+            &IdimOptions {
+                cutoff_hz: GROUNDED_CUTOFF / data.ts,
+                coulomb: false,
+                offset: true,
+                spring: true,
+                ..IdimOptions::default()
+            },
+        );
+        let positive = |f: &grey_box::RigidFit, n: &str| f.get(n).is_some_and(|v| v > 0.0);
+        let grounded = !grounded && held.is_ok_and(|f| positive(&f, "J") && positive(&f, "K"));
+        return Err(NlError::NoInertia { grounded });
     }
     steps.push(Step {
         name: "rigid body".into(),
@@ -142,9 +167,10 @@ pub fn automatic_start_with(
     let friction = grey_box::rigid_idim(
         data,
         &IdimOptions {
-            cutoff_hz: RIGID_CUTOFF_HZ,
+            cutoff_hz,
             coulomb: true,
             offset: true,
+            spring: grounded,
             ..IdimOptions::default()
         },
     )?;
@@ -239,6 +265,13 @@ pub fn automatic_start_with(
     }
     match model.structure {
         Structure::Rigid => plants.push(vec![j_used, fv_used]),
+        Structure::Grounded => {
+            let source = if has_coulomb { &friction } else { &rigid };
+            let k = source.get("K").unwrap_or(f64::NAN) / (model.r * model.r);
+            if k > 0.0 && k.is_finite() {
+                plants.push(vec![j_used, fv_used, k]);
+            }
+        }
         Structure::TwoMass => {
             plants.push(two_mass_grid(
                 data, model, j_used, fv_used, fc_used, offset, asym,
@@ -306,7 +339,7 @@ pub fn automatic_start_with(
                 // ground, which bends every start from the raw torque); its spring is only
                 // brought to what the simulation integrates, without a word, as a start
                 // among others
-                if f.short() && model.structure != Structure::Rigid {
+                if f.short() && model.structure.masses() > 1 {
                     let comp = super::ripple::compensated(data, r);
                     let s = model.structure;
                     if let Some(mut p) = modal_start(&comp, s, model.r, (j_used, fv_used)) {
@@ -513,10 +546,12 @@ pub fn automatic_start_with(
         .copied()
         .unwrap_or(0.0);
     // deflection level: the arm-side torque the motor torque implies, over the stiffness
-    let delta = if model.structure == Structure::Rigid || kg <= 0.0 {
-        0.0
-    } else {
-        u_rms / model.r / kg
+    let delta = match model.structure {
+        // the spring to ground deflects by the arm-side motion itself
+        Structure::Grounded => model.r * rms_about_mean(&data.y),
+        Structure::Rigid => 0.0,
+        _ if kg <= 0.0 => 0.0,
+        _ => u_rms / model.r / kg,
     };
     // the lag the linear fit refined with the structure's values; a delay takes its time
     // from it (below)
@@ -709,6 +744,13 @@ pub(crate) fn torque_rms(data: &IdData) -> f64 {
     (data.u.iter().map(|u| u * u).sum::<f64>() / data.u.len().max(1) as f64).sqrt()
 }
 
+/// Root mean square of `x` about its mean (an angle's motion, its offset aside).
+fn rms_about_mean(x: &[f64]) -> f64 {
+    let n = x.len().max(1) as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    (x.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n).sqrt()
+}
+
 /// The linear start of `structure` (gear ratio `r`) from the modal features of the
 /// subspace model of `data`, with the rigid body's inertia and the motor's viscous
 /// friction of steps 1–2 (`j_total` [kg·m²], `f_m` [N·m·s/rad]); `None` when the data
@@ -866,6 +908,9 @@ pub fn resolvable(structure: Structure, r: f64, plant: &mut [f64], h: f64) -> Op
     type Spring = (&'static str, &'static str, [(&'static str, f64); 2]);
     let springs: Vec<Spring> = match structure {
         Structure::Rigid => Vec::new(),
+        // the frame does not move: the mass's mobility alone (its damper `Fv` acts on `ω_m`,
+        // not on `r ω_m`, so its bound here is `r⁻²` times too loose: never reached)
+        Structure::Grounded => vec![("k_0", "Fv", [("J", r), ("J", 0.0)])],
         Structure::TwoMass | Structure::ThreeMass | Structure::FourMass => {
             let mut v = vec![("k_g", "d_g", [("J_m", r), ("J_a1", 1.0)])];
             if structure != Structure::TwoMass {
@@ -1017,9 +1062,14 @@ fn candidates(e: &Effect, plant: &[f64], model: &NlModel, delta: f64, u_rms: f64
             v
         }
         Effect::ExtraMode(x) if model.structure != Structure::Rigid => {
-            // the extra mass a quarter of the first arm mass, its frequency spread around
-            // the first resonance with the arm held still, 5 % damping
-            let j = 0.25 * plant[1];
+            // the extra mass a quarter of the first arm mass (of the grounded mass, arm
+            // side), its frequency spread around the first resonance with the arm held
+            // still, 5 % damping
+            let j = if model.structure == Structure::Grounded {
+                0.25 * plant[0] / (model.r * model.r)
+            } else {
+                0.25 * plant[1]
+            };
             let mut v = Vec::new();
             for f_hz in [3.0, 5.0, 8.0, 12.0, 18.0, 27.0, 40.0] {
                 let w = 2.0 * std::f64::consts::PI * f_hz;

@@ -81,8 +81,19 @@ pub enum NlError {
     #[error(transparent)]
     StartStep(#[from] crate::ident::grey_box::GreyBoxError),
     /// step 1 of the automatic start found no positive inertia
-    #[error("no positive rigid-body inertia in the data (step 1 of the start)")]
-    NoInertia,
+    #[error(
+        "no positive rigid-body inertia in the data (step 1 of the start){}",
+        if *grounded {
+            ": the torque holds the angle like a spring to the frame (a mass and a stiffness to \
+             ground fit the same regression, both positive): try `--model grounded`"
+        } else {
+            ""
+        }
+    )]
+    NoInertia {
+        /// the regression with a stiffness to ground finds a positive mass and stiffness
+        grounded: bool,
+    },
     /// step 3 of the automatic start found no linear start for a flexible structure
     #[error("no linear start for the flexible structure (step 3 of the start)")]
     NoFlexibleStart,
@@ -194,9 +205,11 @@ impl Default for NlOptions {
 impl NlOptions {
     /// The options fitted for `structure`: a rigid body is fitted without the high-pass
     /// prefilter, since its inertia and friction show at the low frequencies the prefilter
-    /// would remove (EMPS moves below 5 Hz); its torque offset is estimated instead.
+    /// would remove (EMPS moves below 5 Hz); its torque offset is estimated instead. So is
+    /// the grounded mass: it does not drift, and its spring shows below its resonance.
     pub fn for_structure(mut self, structure: crate::model::spec::Structure) -> Self {
-        if structure == crate::model::spec::Structure::Rigid {
+        use crate::model::spec::Structure;
+        if matches!(structure, Structure::Rigid | Structure::Grounded) {
             self.highpass_hz = 0.0;
         }
         self
@@ -1090,7 +1103,8 @@ fn exact_velocity(problem: &Problem, data: &IdData, z: &[f64]) -> Option<Vec<f64
     let offset = at(Owner::Offset).map_or(0.0, |i| values[i]);
     let v0 = at(Owner::InitialVelocity).map_or(0.0, |i| values[i]);
     let plant = super::model::sim_plant(&m, &plant_values);
-    let n = crate::model::plant::Mechanism::new(&plant, &m.effects).n_bodies();
+    let mech = crate::model::plant::Mechanism::new(&plant, &m.effects);
+    let n = mech.n_bodies();
     let u: Vec<f64> = data.u.iter().map(|u| u + offset).collect();
     let r = if m.structure == crate::model::spec::Structure::Rigid {
         1.0
@@ -1099,7 +1113,12 @@ fn exact_velocity(problem: &Problem, data: &IdData, z: &[f64]) -> Option<Vec<f64
     };
     let mut x = vec![0.0; 2 * n + 1];
     for i in 0..n {
-        let g = if i == 0 { 1.0 } else { r };
+        // the frame of the grounded mass (infinite inertia) stays at rest at 0
+        let g = match i {
+            0 => 1.0,
+            _ if mech.bodies[i].inertia.is_infinite() => 0.0,
+            _ => r,
+        };
         x[i] = g * data.y[0];
         x[n + i] = g * v0;
     }

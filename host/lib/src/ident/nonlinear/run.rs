@@ -584,7 +584,8 @@ fn grow_if_sticking(
     req: &mut NlRequest,
 ) -> Option<Growth> {
     use super::grow::{grow_with, stick_share, Seed, STICK_SHARE};
-    if req.structure == Structure::Rigid {
+    // (grown from the two-mass: a structure with an arm mass)
+    if req.structure.masses() < 2 {
         return None;
     }
     let (ci, law) = req.effects.iter().enumerate().find_map(|(i, e)| match e {

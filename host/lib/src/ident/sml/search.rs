@@ -128,10 +128,17 @@ pub(super) fn features(
     let g: Vec<Complex64> = low.iter().map(|&i| frf.g[i]).collect();
     let (j_total, f_m) = grey_box::rigid_from_response(&freqs, &g, output);
     if !(j_total > 0.0 && j_total.is_finite()) {
+        // a negative inertia `−K/ω²` is a spring to the frame: the response levels off
         return Err(FrfFitError::NoRigidBody {
             detail: format!(
-                "median inertia {j_total:.3e} kg·m² over {} lines below {top:.2} Hz",
-                low.len()
+                "median inertia {j_total:.3e} kg·m² over {} lines below {top:.2} Hz{}",
+                low.len(),
+                if j_total < 0.0 {
+                    ": the response levels off to a finite static gain there, as a mass on a \
+                     spring to the frame does; try `--model grounded`"
+                } else {
+                    ""
+                }
             ),
         });
     }
@@ -148,6 +155,54 @@ pub(super) fn features(
         zeta1: zeta,
         subspace_order: 0,
     })
+}
+
+/// Start of the grounded mass (`J`, `Fv`, `k_0`, gear ratio `r`) from the reliable lines: the
+/// angle's dynamic stiffness `1/G(jω) = r² k_0 − J ω² + j ω Fv` is linear in the three
+/// values, so its real part gives `r² k_0` and `J` and its imaginary part `Fv` by least
+/// squares, each line weighted by `|G|` (the relative error of the FRF is what the lines
+/// share). A damping the lag's phase turns negative is started at 5 % of critical.
+pub(super) fn grounded_start(frf: &Frf, output: Output, r: f64) -> Result<Vec<f64>, FrfFitError> {
+    let idx = reliable_lines(frf);
+    // normal equations of Re: [1, −ω²]·[K, J]; Im: ω·Fv
+    let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let (mut ww, mut wy) = (0.0, 0.0);
+    for &i in &idx {
+        let w = 2.0 * std::f64::consts::PI * frf.freq_hz[i];
+        let g_angle = match output {
+            Output::Angle => frf.g[i],
+            Output::Velocity => frf.g[i] / Complex64::new(0.0, w),
+        };
+        if g_angle.norm() == 0.0 || !g_angle.norm().is_finite() {
+            continue;
+        }
+        let z = g_angle.inv();
+        let q = g_angle.norm_sqr();
+        a11 += q;
+        a12 -= q * w * w;
+        a22 += q * w.powi(4);
+        b1 += q * z.re;
+        b2 -= q * w * w * z.re;
+        ww += q * w * w;
+        wy += q * w * z.im;
+    }
+    let det = a11 * a22 - a12 * a12;
+    let (k, j) = ((a22 * b1 - a12 * b2) / det, (a11 * b2 - a12 * b1) / det);
+    if !(k > 0.0 && j > 0.0 && k.is_finite() && j.is_finite()) {
+        return Err(FrfFitError::NoGroundedMass {
+            detail: format!(
+                "stiffness {k:.3e} N·m/rad and inertia {j:.3e} kg·m² over {} lines",
+                idx.len()
+            ),
+        });
+    }
+    let fv = wy / ww;
+    let fv = if fv > 0.0 && fv.is_finite() {
+        fv
+    } else {
+        2.0 * 0.05 * (k * j).sqrt()
+    };
+    Ok(vec![j, fv, k / (r * r)])
 }
 
 /// all `k`-subsets of `0..n`, in lexicographic order
@@ -215,6 +270,7 @@ pub(super) fn structure_name(s: Structure) -> &'static str {
         Structure::TwoMass => "two-mass",
         Structure::ThreeMass => "three-mass",
         Structure::FourMass => "four-mass",
+        Structure::Grounded => "grounded",
     }
 }
 
