@@ -464,3 +464,54 @@ fn diagnose_report_renders_in_headless_chromium_with_the_verdict_and_every_figur
         assert!(n >= 1, "--plot wrote no {id}*.svg");
     }
 }
+
+/// Issue 36 item 7: a mass on a hardening spring to the frame, measured open loop as any
+/// CSV with `--time/--input/--output` (no reference, no `--model`). The default structure
+/// assumes a free joint and finds no inertia; the diagnosis takes the grounded mass, says
+/// so, and names the spring. `fit --model two-mass` refuses, saying what the data show and
+/// which structure to try.
+#[test]
+fn diagnose_takes_a_mass_on_a_spring_to_ground_and_names_its_hardening() {
+    use jointid::test_support::grounded;
+    let dir = tmpdir("grounded");
+    let k3 = grounded::k3_at(0.1);
+    let (est, val) = grounded::records(k3, 11);
+    let write = |name: &str, ds: &jointid::data::Dataset| {
+        let mut s = String::from("time,force,position\n");
+        for (k, (u, y)) in ds.data.u.iter().zip(&ds.data.y).enumerate() {
+            s.push_str(&format!("{},{u:e},{y:e}\n", k as f64 * ds.data.ts));
+        }
+        let p = dir.join(name);
+        std::fs::write(&p, s).unwrap();
+        p.display().to_string()
+    };
+    let (est, val) = (write("est.csv", &est), write("val.csv", &val));
+    let cols = ["--time", "time", "--input", "force", "--output", "position"];
+    let mut args = vec!["diagnose", &est, "--validation", &val];
+    args.extend(cols);
+    args.extend([
+        "--effects",
+        "nonlinear_stiffness,coulomb_friction",
+        "--json",
+    ]);
+    let out = jointid(&args);
+    let j = json_of(&out);
+    assert_eq!(j["structure"], "grounded", "{j}");
+    assert_eq!(j["best"], "nonlinear_stiffness", "{j}");
+    assert!(
+        j["warnings"][0]
+            .as_str()
+            .unwrap()
+            .contains("diagnosed as the grounded mass"),
+        "{j}"
+    );
+    let mut args = vec!["fit", &est, "--model", "two-mass"];
+    args.extend(cols);
+    let out = jointid(&args);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("finite static gain") && err.contains("--model grounded"),
+        "{err}"
+    );
+}

@@ -261,12 +261,13 @@ pub fn simulate_tracked(
         .sum();
     let f_tot: f64 = mech.bodies.iter().map(|b| b.viscous).sum();
     // a spring to the frame (the grounded mass) holds the rigid body too: `k` on the
-    // deflection `r θ_m`, `r² k` at the motor
+    // deflection `g θ_m` (the motor's coordinate gain `g`), `g² k` at the motor
+    let g0 = mech.bodies[0].gain;
     let k_tot: f64 = mech
         .springs
         .iter()
         .filter(|s| !mech.bodies[s.a].inertia.is_finite() || !mech.bodies[s.b].inertia.is_finite())
-        .map(|s| s.k * r * r)
+        .map(|s| s.k * g0 * g0)
         .sum();
     let ts = data.ts;
     let mut w = vec![0.0; n];

@@ -1064,3 +1064,36 @@ fn amplitude_summary_says_both_trends_with_a_but_when_they_part() {
         .summary()
         .contains("two periodic captures"));
 }
+
+/// Issue 36 item 7: a measured-like grounded mass–spring–damper (open loop, no reference,
+/// 610 Hz, a resonance with a finite static gain) whose spring hardens by 3 % of its linear
+/// torque at three position RMS is diagnosed as `nonlinear_stiffness` with its `k3`, among
+/// all six candidates, whatever gear ratio the request carries; with a linear spring no
+/// effect is named.
+#[test]
+fn a_grounded_mass_on_a_hardening_spring_is_diagnosed_as_nonlinear_stiffness() {
+    use crate::test_support::grounded;
+    let req = DiagnoseRequest {
+        structure: Structure::Grounded,
+        // the robot's default gear ratio: the gearless grounded mass does not use it
+        candidates: Effect::all_defaults(),
+        ..DiagnoseRequest::default()
+    };
+    let k3 = grounded::k3_at(0.03);
+    let (est, val) = grounded::records(k3, 3);
+    let d = diagnose(std::slice::from_ref(&est), &val, &req).expect("diagnosis");
+    assert_eq!(
+        d.best, "nonlinear_stiffness",
+        "{}: {:?}",
+        d.verdict, d.warnings
+    );
+    assert!(
+        within(param(&d, "k3"), k3, 0.1),
+        "k3 {} vs {k3}",
+        param(&d, "k3")
+    );
+    assert!(d.refused.is_none(), "{:?}", d.refused);
+    let (est, val) = grounded::records(0.0, 4);
+    let d = diagnose(std::slice::from_ref(&est), &val, &req).expect("diagnosis");
+    assert_eq!(d.best, "none", "{}: {:?}", d.verdict, d.warnings);
+}

@@ -816,7 +816,7 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
             tried.push(res_hz.clone());
             for &zeta in zetas {
                 let p0 = if structure == Structure::Grounded {
-                    grounded_start(frf, opts.output, opts.r)
+                    grounded_start(frf, opts.output)
                 } else {
                     features(frf, opts.output, &res_hz, zeta)
                         .map(|feat| grey_box::initial_values(structure, opts.r, &feat))

@@ -100,9 +100,9 @@ pub struct JointParams {
     pub f_m: f64,
     /// gear ratio `r` [-] (arm angle per motor angle, 1/118 on the IRB1400 axis 1)
     pub r: f64,
-    /// stiffness to ground `k_0` of the grounded structure [N·m/rad] on the arm-side angle
-    /// `r θ_m` (a spring from the output to the frame); the default puts the default
-    /// joint's rigid inertia at 5.0 Hz
+    /// stiffness to ground `k_0` of the grounded structure [N·m/rad] on the motor angle
+    /// `θ_m` (the grounded mass has no gearbox: `r` is not used); the default puts the
+    /// default joint's rigid inertia at 5.0 Hz
     #[serde(default = "default_k_0")]
     pub k_0: f64,
     /// cubic spring coefficient `k3` of the nonlinear two-mass model [N·m/rad³] (its
@@ -141,11 +141,11 @@ impl Default for JointParams {
     }
 }
 
-/// `k_0` of the default grounded joint [N·m/rad]: `J ω² / r²` with the default rigid
-/// inertia `J = 1.882e-3 kg·m²`, `r = 1/118` and `ω = 2π · 5.0 Hz` (a test in `plant.rs`
-/// checks the frequency).
+/// `k_0` of the default grounded joint [N·m/rad]: `J ω²` with the default rigid inertia
+/// `J = 1.882e-3 kg·m²` and `ω = 2π · 5.0 Hz` (a test of the simulator checks the
+/// frequency).
 fn default_k_0() -> f64 {
-    2.6e4
+    1.86
 }
 
 impl JointParams {

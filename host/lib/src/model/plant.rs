@@ -99,10 +99,17 @@ impl Mechanism {
         let spring = |a, b, k, d| Spring { a, b, k, d };
         let (bodies, springs) = match plant.kind {
             Structure::Rigid => (vec![motor(p.rigid_inertia())], vec![]),
-            // the frame as a body of infinite inertia (inverse 0) at rest at angle 0: the
-            // spring to it is spring 0, where the gearbox's effects act
+            // no gearbox: the mass on the motor angle itself (coordinate gain 1); the frame
+            // as a body of infinite inertia (inverse 0) at rest at angle 0, the spring to it
+            // spring 0, where the gearbox's effects act
             Structure::Grounded => (
-                vec![motor(p.rigid_inertia()), ground()],
+                vec![
+                    Body {
+                        gain: 1.0,
+                        ..motor(p.rigid_inertia())
+                    },
+                    ground(),
+                ],
                 vec![spring(0, 1, p.k_0, 0.0)],
             ),
             Structure::TwoMass => (

@@ -25,8 +25,8 @@ pub struct IdimOptions {
     pub asymmetric: bool,
     /// keep one sample in `decimate` after filtering (1: all)
     pub decimate: usize,
-    /// include a stiffness to ground `K q` (name `K` [N·m/rad], motor side: `r² k_0` of the
-    /// grounded structure); angle output only
+    /// include a stiffness to ground `K q` (name `K` [N·m/rad]: `k_0` of the grounded
+    /// structure); angle output only
     pub spring: bool,
 }
 

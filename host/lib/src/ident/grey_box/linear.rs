@@ -27,9 +27,9 @@ impl GreyBoxModel {
         let (f, vel_state) = match self.structure {
             Structure::Rigid => (DMatrix::from_element(1, 1, -p[1] / p[0]), 0),
             Structure::Grounded => {
-                // state [θ_m, ω_m]: J ω̇ = u − Fv ω − r² k_0 θ (the spring on `r θ_m`)
+                // state [θ_m, ω_m]: J ω̇ = u − Fv ω − k_0 θ (no gearbox)
                 let [j, fv, k0] = [p[0], p[1], p[2]];
-                let f = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -r * r * k0 / j, -fv / j]);
+                let f = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -k0 / j, -fv / j]);
                 let g = DVector::from_column_slice(&[0.0, 1.0 / j]);
                 let mut h = RowDVector::zeros(2);
                 h[match self.output {

@@ -267,7 +267,7 @@ pub fn automatic_start_with(
         Structure::Rigid => plants.push(vec![j_used, fv_used]),
         Structure::Grounded => {
             let source = if has_coulomb { &friction } else { &rigid };
-            let k = source.get("K").unwrap_or(f64::NAN) / (model.r * model.r);
+            let k = source.get("K").unwrap_or(f64::NAN);
             if k > 0.0 && k.is_finite() {
                 plants.push(vec![j_used, fv_used, k]);
             }
@@ -547,8 +547,8 @@ pub fn automatic_start_with(
         .unwrap_or(0.0);
     // deflection level: the arm-side torque the motor torque implies, over the stiffness
     let delta = match model.structure {
-        // the spring to ground deflects by the arm-side motion itself
-        Structure::Grounded => model.r * rms_about_mean(&data.y),
+        // the spring to ground deflects by the motion itself
+        Structure::Grounded => rms_about_mean(&data.y),
         Structure::Rigid => 0.0,
         _ if kg <= 0.0 => 0.0,
         _ => u_rms / model.r / kg,
@@ -908,9 +908,8 @@ pub fn resolvable(structure: Structure, r: f64, plant: &mut [f64], h: f64) -> Op
     type Spring = (&'static str, &'static str, [(&'static str, f64); 2]);
     let springs: Vec<Spring> = match structure {
         Structure::Rigid => Vec::new(),
-        // the frame does not move: the mass's mobility alone (its damper `Fv` acts on `ω_m`,
-        // not on `r ω_m`, so its bound here is `r⁻²` times too loose: never reached)
-        Structure::Grounded => vec![("k_0", "Fv", [("J", r), ("J", 0.0)])],
+        // the frame does not move: the mass's mobility alone, its damper `Fv`
+        Structure::Grounded => vec![("k_0", "Fv", [("J", 1.0), ("J", 0.0)])],
         Structure::TwoMass | Structure::ThreeMass | Structure::FourMass => {
             let mut v = vec![("k_g", "d_g", [("J_m", r), ("J_a1", 1.0)])];
             if structure != Structure::TwoMass {
@@ -1028,9 +1027,19 @@ fn neutral(e: Effect) -> Effect {
 fn candidates(e: &Effect, plant: &[f64], model: &NlModel, delta: f64, u_rms: f64) -> Vec<Effect> {
     match *e {
         Effect::NonlinearStiffness(_) if delta > 0.0 => {
-            // the cubic term's size where it equals the linear spring at the deflection level
-            let unit = u_rms / model.r / (delta * delta * delta);
-            [-0.1, -0.03, 0.0, 0.03, 0.1, 0.3, 1.0, 3.0]
+            // the cubic term's size where it equals the linear spring at the deflection level;
+            // near nought a thousandth of it, not 0: the fit scales `k3` by its start, and a
+            // start of 0 gave a unit scale, a step of 1 N·m/rad³ against 10¹³ (a grounded
+            // mass's σ of `k3` came out 10⁻¹³ and its covariance degenerate)
+            // (the spring's coordinate gain at the motor: `r`, 1 for the gearless grounded
+            // mass)
+            let gain = if model.structure == Structure::Grounded {
+                1.0
+            } else {
+                model.r
+            };
+            let unit = u_rms / gain / (delta * delta * delta);
+            [-0.1, -0.03, 0.001, 0.03, 0.1, 0.3, 1.0, 3.0]
                 .iter()
                 .map(|f| {
                     Effect::NonlinearStiffness(crate::model::effects::NonlinearStiffness {
@@ -1062,11 +1071,11 @@ fn candidates(e: &Effect, plant: &[f64], model: &NlModel, delta: f64, u_rms: f64
             v
         }
         Effect::ExtraMode(x) if model.structure != Structure::Rigid => {
-            // the extra mass a quarter of the first arm mass (of the grounded mass, arm
-            // side), its frequency spread around the first resonance with the arm held
+            // the extra mass a quarter of the first arm mass (of the grounded mass), its
+            // frequency spread around the first resonance with the arm held
             // still, 5 % damping
             let j = if model.structure == Structure::Grounded {
-                0.25 * plant[0] / (model.r * model.r)
+                0.25 * plant[0]
             } else {
                 0.25 * plant[1]
             };

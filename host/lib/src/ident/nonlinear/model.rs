@@ -455,8 +455,9 @@ impl<T: Real> Plant<T> {
             }
             Structure::Grounded => {
                 // the frame: inverse inertia 0, at rest at angle 0 ([`Plant::simulate`])
+                // no gearbox: the spring on `θ_m` itself
                 inertia.extend([get("J"), T::infinity()]);
-                gains.extend([r, 1.0]);
+                gains.extend([1.0, 1.0]);
                 springs.push((0, 1, get("k_0"), zero));
                 get("Fv")
             }

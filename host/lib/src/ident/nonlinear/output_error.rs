@@ -1106,18 +1106,14 @@ fn exact_velocity(problem: &Problem, data: &IdData, z: &[f64]) -> Option<Vec<f64
     let mech = crate::model::plant::Mechanism::new(&plant, &m.effects);
     let n = mech.n_bodies();
     let u: Vec<f64> = data.u.iter().map(|u| u + offset).collect();
-    let r = if m.structure == crate::model::spec::Structure::Rigid {
-        1.0
-    } else {
-        m.r
-    };
     let mut x = vec![0.0; 2 * n + 1];
     for i in 0..n {
-        // the frame of the grounded mass (infinite inertia) stays at rest at 0
+        // the springs unloaded (a body at the motor's coordinate over its own); the frame
+        // of the grounded mass (infinite inertia) stays at rest at 0
         let g = match i {
             0 => 1.0,
             _ if mech.bodies[i].inertia.is_infinite() => 0.0,
-            _ => r,
+            _ => mech.bodies[0].gain / mech.bodies[i].gain,
         };
         x[i] = g * data.y[0];
         x[n + i] = g * v0;

@@ -223,8 +223,17 @@ pub struct NlValidation {
     pub angle_fit_percent: f64,
 }
 
+/// A lag to start from below this share of the sample interval is left out of the model
+/// (no current loop): RK4 samples the torque at its steps' ends and middle, and a torque
+/// that settles within a few per cent of a step is seen late by a sixth of the input's
+/// change, an error of first order in the step (an open-loop grounded mass at 610 Hz with a
+/// 6.4 µs lag from its frequency-domain start: its true values scored 94.3 % with two RK4
+/// steps per sample, 97.2 % with four and 98.6 % with eight, against 99.7 % without the
+/// lag).
+pub const UNRESOLVED_LAG: f64 = 0.1;
+
 /// The model the estimator integrates for `req` (smoothing of the non-smooth laws, RK4
-/// steps per sample).
+/// steps per sample; a lag to start from below [`UNRESOLVED_LAG`] of a sample left out).
 pub fn model_of(req: &NlRequest, data: &IdData) -> NlModel {
     let v_rms = velocity_rms(data);
     let delay = req
@@ -235,7 +244,11 @@ pub fn model_of(req: &NlRequest, data: &IdData) -> NlModel {
         structure: req.structure,
         r: req.r,
         effects: req.effects.clone(),
-        tau_c: req.tau_c,
+        tau_c: if req.tau_c < UNRESOLVED_LAG * data.ts {
+            0.0
+        } else {
+            req.tau_c
+        },
         // a few per cent of the motion's velocity: small against it, large enough that
         // RK4 at the sample rate stays stable on the friction's slope
         v_eps: (0.05 * v_rms).clamp(5e-3, 0.05),

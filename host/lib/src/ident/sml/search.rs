@@ -157,12 +157,12 @@ pub(super) fn features(
     })
 }
 
-/// Start of the grounded mass (`J`, `Fv`, `k_0`, gear ratio `r`) from the reliable lines: the
-/// angle's dynamic stiffness `1/G(jω) = r² k_0 − J ω² + j ω Fv` is linear in the three
+/// Start of the grounded mass (`J`, `Fv`, `k_0`) from the reliable lines: the angle's
+/// dynamic stiffness `1/G(jω) = k_0 − J ω² + j ω Fv` is linear in the three
 /// values, so its real part gives `r² k_0` and `J` and its imaginary part `Fv` by least
 /// squares, each line weighted by `|G|` (the relative error of the FRF is what the lines
 /// share). A damping the lag's phase turns negative is started at 5 % of critical.
-pub(super) fn grounded_start(frf: &Frf, output: Output, r: f64) -> Result<Vec<f64>, FrfFitError> {
+pub(super) fn grounded_start(frf: &Frf, output: Output) -> Result<Vec<f64>, FrfFitError> {
     let idx = reliable_lines(frf);
     // normal equations of Re: [1, −ω²]·[K, J]; Im: ω·Fv
     let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0, 0.0, 0.0, 0.0, 0.0);
@@ -202,7 +202,7 @@ pub(super) fn grounded_start(frf: &Frf, output: Output, r: f64) -> Result<Vec<f6
     } else {
         2.0 * 0.05 * (k * j).sqrt()
     };
-    Ok(vec![j, fv, k / (r * r)])
+    Ok(vec![j, fv, k])
 }
 
 /// all `k`-subsets of `0..n`, in lexicographic order

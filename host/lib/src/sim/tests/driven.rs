@@ -147,3 +147,39 @@ fn driven_refuses_a_start_state_that_does_not_fit_the_plant() {
         "names the component"
     );
 }
+
+/// The grounded mass (issue 36 item 7): under a constant torque `u` it settles at the
+/// spring's static deflection `u / k_0` (no gearbox), from a start at rest away from the frame's
+/// zero it swings back towards 0 (the frame stays put: its spring, not the start, sets the
+/// rest angle), and its mechanism resonates at the default 5.0 Hz with no anti-resonance.
+#[test]
+fn the_grounded_mass_settles_at_its_static_deflection_and_swings_about_the_frame() {
+    let plant = Plant::new(Structure::Grounded);
+    let modal = Mechanism::new(&plant, &[]).modal_frequencies();
+    assert_eq!(modal.anti_resonances_hz, Vec::<f64>::new());
+    assert_eq!(modal.resonances_hz.len(), 1);
+    assert!((modal.resonances_hz[0] - 5.0).abs() < 0.02, "{modal:?}");
+    let p = plant.params;
+    let ts = 5e-4;
+    let u = vec![0.5; 40_000];
+    let out = simulate_driven(&plant, &[], 5e-4, ts, &u, &DrivenStart::default()).unwrap();
+    let last = *out.theta_m.last().unwrap();
+    let static_angle = 0.5 / p.k_0;
+    assert!(
+        (last / static_angle - 1.0).abs() < 0.01,
+        "{last} vs {static_angle}"
+    );
+    let away = simulate_driven(
+        &plant,
+        &[],
+        5e-4,
+        ts,
+        &vec![0.0; 40_000],
+        &DrivenStart::Rest { theta_m: 0.01 },
+    )
+    .unwrap();
+    let end = away.theta_m[30_000..]
+        .iter()
+        .fold(0.0f64, |m, x| m.max(x.abs()));
+    assert!(end < 1e-3 * 0.01, "still {end} rad from the frame's zero");
+}

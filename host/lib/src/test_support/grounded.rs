@@ -1,0 +1,114 @@
+//! A measured-like grounded mass–spring–damper with a hardening spring, open loop: the
+//! electrical analogue of the nonlinear benchmarks (a mass on a cubic spring to the frame,
+//! driven by a force, its position sampled at 610 Hz), simulated by the simulator's exact
+//! laws with known truth.
+
+use super::Gauss;
+use crate::data::{Dataset, IdData};
+use crate::model::effects::{Effect, NonlinearStiffness};
+use crate::model::params::{JointParams, Plant};
+use crate::model::spec::Structure;
+use crate::sim::{simulate_driven, DrivenStart};
+
+/// Sample rate [Hz].
+pub const FS_HZ: f64 = 610.35;
+/// Resonance of the linear part [Hz].
+pub const F0_HZ: f64 = 60.0;
+/// Damping ratio of the linear part [-].
+pub const ZETA: f64 = 0.03;
+/// Samples of one multisine period.
+const PERIOD: usize = 8192;
+
+/// The linear grounded mass (`r = 1`, unit mass, [`F0_HZ`], [`ZETA`]): `J` 1 kg·m², `k_0`
+/// `(2π F0)²` N·m/rad, `Fv = 2ζ√(k_0 J)`.
+pub fn plant() -> Plant {
+    let k0 = (2.0 * std::f64::consts::PI * F0_HZ).powi(2);
+    Plant {
+        kind: Structure::Grounded,
+        params: JointParams {
+            j_m: 1.0,
+            j_a1: 0.0,
+            j_a2: 0.0,
+            r: 1.0,
+            k_0: k0,
+            f_m: 2.0 * ZETA * k0.sqrt(),
+            ..JointParams::default()
+        },
+    }
+}
+
+/// Estimation record (four periods of an odd multisine up to 200 Hz, unit RMS force) and
+/// validation record (as long, smoothed white noise at 1.2 times that RMS) of the grounded
+/// mass with a cubic spring `k3` [N·m/rad³], the position's noise 0.1 % of its RMS.
+pub fn records(k3: f64, seed: u64) -> (Dataset, Dataset) {
+    let mut g = Gauss::new(seed);
+    let lines: Vec<usize> = (1..(200.0 * PERIOD as f64 / FS_HZ) as usize)
+        .filter(|l| l % 2 == 1)
+        .collect();
+    let phases: Vec<f64> = lines
+        .iter()
+        .map(|_| 2.0 * std::f64::consts::PI * g.uniform())
+        .collect();
+    let mut period: Vec<f64> = (0..PERIOD)
+        .map(|n| {
+            lines
+                .iter()
+                .zip(&phases)
+                .map(|(&l, p)| {
+                    (2.0 * std::f64::consts::PI * (l * n) as f64 / PERIOD as f64 + p).cos()
+                })
+                .sum()
+        })
+        .collect();
+    normalise(&mut period, 1.0);
+    let est_u: Vec<f64> = period.iter().cycle().take(4 * PERIOD).copied().collect();
+    let white: Vec<f64> = (0..4 * PERIOD + 2).map(|_| g.next()).collect();
+    let mut val_u: Vec<f64> = white
+        .windows(3)
+        .map(|w| w.iter().sum::<f64>() / 3.0)
+        .collect();
+    normalise(&mut val_u, 1.2);
+    let effects = [Effect::NonlinearStiffness(NonlinearStiffness { k3 })];
+    let ts = 1.0 / FS_HZ;
+    let mut run = |name: &str, u: Vec<f64>| {
+        let out = simulate_driven(&plant(), &effects, 1e-6, ts, &u, &DrivenStart::default())
+            .expect("the grounded mass simulates");
+        let rms = (out.theta_m.iter().map(|y| y * y).sum::<f64>() / u.len() as f64).sqrt();
+        let y: Vec<f64> = out
+            .theta_m
+            .iter()
+            .map(|y| y + 1e-3 * rms * g.next())
+            .collect();
+        Dataset {
+            name: name.to_string(),
+            data: IdData { ts, u, y, r: None },
+            t0: 0.0,
+            excitation: None,
+            meta: Default::default(),
+        }
+    };
+    let est = run("grounded-est", est_u);
+    let val = run("grounded-val", val_u);
+    (est, val)
+}
+
+/// The cubic coefficient at which the cubic spring's torque reaches `share` of the linear
+/// one at three times the position RMS of the linear mass under [`records`]' estimation
+/// force [N·m/rad³].
+pub fn k3_at(share: f64) -> f64 {
+    let (est, _) = records(0.0, 1);
+    let y = &est.data.y;
+    let mean = y.iter().sum::<f64>() / y.len() as f64;
+    let sd = (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / y.len() as f64).sqrt();
+    share * plant().params.k_0 / (3.0 * sd).powi(2)
+}
+
+/// Scales `x` to zero mean and RMS `rms`.
+fn normalise(x: &mut [f64], rms: f64) {
+    let n = x.len() as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    let sd = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+    for v in x.iter_mut() {
+        *v = (*v - mean) * rms / sd;
+    }
+}
