@@ -50,6 +50,10 @@ pub struct DiagnoseArgs {
     /// the user's simulation: `simulate --params-out` output or a jointid model file
     #[arg(long, value_name = "SIM.json", conflicts_with = "model")]
     pub sim: Option<PathBuf>,
+    /// the axis is linear (force [N] → position [m]): the report's units kg, N·s/m, N, N/m,
+    /// m, m/s
+    #[arg(long)]
+    pub linear_axis: bool,
     /// structure of the nominal model, as `fit --model`: rigid, two-mass, three-mass,
     /// four-mass, grounded (default: the --sim file's, else three-mass, or grounded with a
     /// note when the data show a mass on a spring to the frame)
@@ -287,6 +291,9 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     bar.finish_and_clear();
     let (mut d, series) = diagnosed?;
+    if args.linear_axis {
+        d.in_linear_axis_units();
+    }
     if let Some(why) = switched {
         d.warnings.insert(
             0,

@@ -52,8 +52,8 @@ fn diagnose_finds_the_hidden_cubic_spring_of_a_simulated_capture() {
 
 /// EMPS (measured, `../shared/data/emps`): the nominal is the rigid model with viscous
 /// friction; Coulomb friction is named, significant, closes most of the gap, and its level
-/// is near the published 20.39 N (Janot et al. 2019, IDIM-LS). The gearbox effects are no
-/// candidates of a rigid model and are said to be left out.
+/// is near the published 20.39 N (Janot et al. 2019, IDIM-LS), in N with `--linear-axis`.
+/// The gearbox effects are no candidates of a rigid model and are said to be left out.
 #[test]
 fn diagnose_names_coulomb_friction_on_the_measured_emps_drive() {
     let j = json_of(&jointid(&[
@@ -71,6 +71,7 @@ fn diagnose_names_coulomb_friction_on_the_measured_emps_drive() {
         "rigid",
         "--gear-ratio",
         "1",
+        "--linear-axis",
         "--effects",
         "coulomb_friction,time_delay,backlash",
         "--json",
@@ -85,6 +86,10 @@ fn diagnose_names_coulomb_friction_on_the_measured_emps_drive() {
         .as_f64()
         .unwrap();
     assert!((fc / 20.39 - 1.0).abs() < 0.10, "F_c = {fc}");
+    // a linear axis's friction is a force, its inertia a mass
+    assert_eq!(j["effects"][0]["parameters"]["fc"]["unit"], "N", "{j}");
+    assert_eq!(j["nominal_parameters"]["J"]["unit"], "kg", "{j}");
+    assert!(!j.to_string().contains("N·m"), "{j}");
     let share = j["gap_closed_share"].as_f64().unwrap();
     assert!(share > 0.6, "closed share {share}");
     let notes = j["warnings"].to_string();

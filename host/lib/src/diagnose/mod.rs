@@ -75,6 +75,7 @@ mod select;
 pub mod series;
 mod starts;
 mod table;
+mod units;
 mod verdict;
 
 #[cfg(test)]

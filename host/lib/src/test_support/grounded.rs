@@ -17,7 +17,7 @@ pub const F0_HZ: f64 = 60.0;
 /// Damping ratio of the linear part [-].
 pub const ZETA: f64 = 0.03;
 /// Samples of one multisine period.
-const PERIOD: usize = 8192;
+const PERIOD: usize = 4096;
 
 /// The linear grounded mass (`r = 1`, unit mass, [`F0_HZ`], [`ZETA`]): `J` 1 kg·m², `k_0`
 /// `(2π F0)²` N·m/rad, `Fv = 2ζ√(k_0 J)`.
