@@ -560,7 +560,8 @@ fn create_capture(path: &Path, overwrite: bool) -> Result<File, JcapError> {
         Err(std::fs::TryLockError::Error(e)) if e.kind() == io::ErrorKind::Unsupported => {}
         Err(std::fs::TryLockError::Error(e)) => return Err(io_err(e)),
     }
-    if overwrite {
+    // a device or pipe (`/dev/null`) has nothing to truncate, and refuses to be
+    if overwrite && file.metadata().map_err(io_err)?.is_file() {
         file.set_len(0).map_err(io_err)?;
     }
     Ok(file)
