@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
 
-use super::args::{check_columns, parse_lags, FitDataArgs, PrepArgs};
+use super::args::{check_columns, one_of, parse_lags, refuse_outliers, FitDataArgs, PrepArgs};
 use super::print::print_notes;
 use super::views::{Signals, VIEW_FILES};
 use super::{check_plot_files, fit_report, CmdResult, Context, Outcome};
@@ -395,8 +395,14 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     check_columns(&args.data.data_args(&args.data.path))?;
     let sel = args.data.data_args(&args.data.path).select(ctx.loaders)?;
+    let map = args.data.data_args(&args.data.path).column_map();
+    refuse_outliers(&sel, &map)?;
     let val = match &args.validation {
-        Some(p) => Some(args.data.data_args(p).load(ctx.loaders)?),
+        Some(p) => {
+            let v = args.data.data_args(p).select(ctx.loaders)?;
+            refuse_outliers(&v, &map)?;
+            Some(one_of(v)?)
+        }
         None => None,
     };
     let records = FitRecords {

@@ -21,6 +21,7 @@ use std::str::FromStr;
 use serde::Serialize;
 use thiserror::Error;
 
+use super::screen::Outlier;
 use super::{fmt_sig, DataError, Dataset, ExcitationConfig, PeriodLayout};
 
 /// Which gap-free segment(s) of a record to use.
@@ -184,6 +185,12 @@ pub struct Selected {
     pub segments: Vec<usize>,
     /// what the user should know: the reader's notes, and the segments left out
     pub notes: Vec<String>,
+    /// the samples of the chosen pieces far outside their signal over the whole record
+    /// ([`super::screen::outliers`]), in signal and row order: the first
+    /// [`super::screen::MAX_KEPT`]
+    pub outliers: Vec<Outlier>,
+    /// how many there are
+    pub outlier_count: usize,
 }
 
 impl Record {
@@ -407,11 +414,16 @@ impl Record {
                 used
             }
         };
-        let (segments, datasets) = chosen.into_iter().unzip();
+        let (segments, datasets): (Vec<usize>, Vec<Dataset>) = chosen.into_iter().unzip();
+        let (outliers, outlier_count) = super::screen::outliers(&self.pieces, |o| {
+            datasets.iter().any(|d| super::screen::within(o, d))
+        });
         Ok(Selected {
             datasets,
             segments,
             notes,
+            outliers,
+            outlier_count,
         })
     }
 }
