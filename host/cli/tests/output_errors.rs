@@ -13,7 +13,7 @@ use std::process::{Command, Output};
 mod common;
 use common::{jointid, tmpdir, BIN};
 
-/// a one-period simulated capture in `dir`
+/// a two-period simulated capture in `dir` (the fewest a fit takes)
 fn capture(dir: &Path) -> PathBuf {
     let jcap = dir.join("run.jcap");
     let o = jointid(&[
@@ -21,7 +21,7 @@ fn capture(dir: &Path) -> PathBuf {
         "--model",
         "two-mass",
         "--periods",
-        "1",
+        "2",
         "--out",
         jcap.to_str().unwrap(),
     ]);

@@ -185,6 +185,14 @@ pub struct Selected {
     pub segments: Vec<usize>,
     /// what the user should know: the reader's notes, and the segments left out
     pub notes: Vec<String>,
+    /// samples the whole record holds (every piece, before the window): what the chosen
+    /// pieces are a share of
+    pub record_samples: usize,
+    /// samples the whole record spans from its first to its last, the missing ones
+    /// included
+    pub record_span: usize,
+    /// gap-free pieces of the whole record
+    pub record_pieces: usize,
     /// the samples of the chosen pieces far outside their signal over the whole record
     /// ([`super::screen::outliers`]), in signal and row order: the first
     /// [`super::screen::MAX_KEPT`]
@@ -422,6 +430,10 @@ impl Record {
             datasets,
             segments,
             notes,
+            record_samples: self.pieces.iter().map(|p| p.data.len()).sum(),
+            record_span: self.pieces.iter().map(|p| p.data.len()).sum::<usize>()
+                + usize::try_from(self.missing_samples()).unwrap_or(usize::MAX),
+            record_pieces: self.pieces.len(),
             outliers,
             outlier_count,
         })
@@ -533,7 +545,7 @@ fn first_sample_f(ds: &Dataset) -> f64 {
 }
 
 /// Whole excitation periods after the ramp-in in `ds` (`None` without an excitation).
-fn whole_periods(ds: &Dataset) -> Option<usize> {
+pub fn whole_periods(ds: &Dataset) -> Option<usize> {
     ds.excitation?;
     Some(ds.period_layout(0).map_or(0, |l| l.count))
 }
