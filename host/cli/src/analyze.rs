@@ -7,9 +7,10 @@ use std::path::PathBuf;
 use clap::Args;
 use serde::Serialize;
 
-use super::args::{ColumnArgs, DataArgs, ReadArgs};
+use super::args::{column_of, outlier_line, ColumnArgs, DataArgs, ReadArgs};
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
-use jointid::data::{fmt_sig, Dataset, Percent, SignalKind};
+use jointid::data::screen::{Outlier, MAX_MAGNITUDE, OUTLIER_SIGMAS};
+use jointid::data::{fmt_sig, Dataset, Percent, Selected, SignalKind};
 use jointid::ident::frf::{
     amplitude_trend, analyze_dataset, analyze_segments, AmplitudeTrend, ClassLevel, ExcitedSource,
     FrfAnalysis, Instrument,
@@ -66,6 +67,65 @@ struct Report<'a> {
     plots: Vec<String>,
     #[serde(skip_serializing_if = "Vec::is_empty")]
     amplitude_trend: Vec<AmplitudeTrend>,
+    /// samples far outside their column in the data analysed (at most [`LISTED_OUTLIERS`])
+    outliers: Vec<OutlierDoc<'a>>,
+    /// how many there are
+    outlier_count: usize,
+    /// the results that are not finite (no linearity verdict can rest on them)
+    non_finite: Vec<String>,
+}
+
+/// An outlier in `--json`: its column's name, then the library's fields.
+#[derive(Serialize)]
+struct OutlierDoc<'a> {
+    column: &'a str,
+    #[serde(flatten)]
+    outlier: &'a Outlier,
+}
+
+/// Most outliers `analyze` lists (`--json`; the text lists [`PRINTED_OUTLIERS`]).
+const LISTED_OUTLIERS: usize = 100;
+/// Most outliers the text output lists.
+const PRINTED_OUTLIERS: usize = 5;
+
+/// The results of `a` that are not finite, in words: the FRF and its σ at how many
+/// lines, and each linearity level.
+fn non_finite(a: &FrfAnalysis) -> Vec<String> {
+    let mut found = Vec::new();
+    let lines = a.frf.g.len();
+    let g = a
+        .frf
+        .g
+        .iter()
+        .filter(|g| !(g.re.is_finite() && g.im.is_finite()))
+        .count();
+    if g > 0 {
+        found.push(format!("the FRF at {g} of {lines} lines"));
+    }
+    let s = a.frf.sigma.iter().filter(|s| !s.is_finite()).count();
+    if s > 0 {
+        found.push(format!("the FRF's σ at {s} of {lines} lines"));
+    }
+    for lin in [&a.linearity_u, &a.linearity_y] {
+        let mut levels = vec![("excited lines' level", lin.excited_db)];
+        for (class, c) in [("odd non-excited", &lin.odd), ("even", &lin.even)] {
+            if c.lines > 0 {
+                levels.push((class, c.level_db));
+                levels.push((class, c.vs_excited_db));
+                levels.push((class, c.vs_noise_db));
+            }
+        }
+        let mut bad: Vec<&str> = levels
+            .iter()
+            .filter(|(_, v)| !v.is_finite())
+            .map(|(w, _)| *w)
+            .collect();
+        bad.dedup();
+        if !bad.is_empty() {
+            found.push(format!("{}: {}", lin.signal, bad.join(", ")));
+        }
+    }
+    found
 }
 
 /// Runs `jointid analyze`.
@@ -111,6 +171,10 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     let detected = a.distortion_detected();
     let significant = a.distortion_significant();
+    let map = data.column_map();
+    let not_finite = non_finite(&a);
+    // the check cannot pass on outliers or on results that are not finite
+    let refused = selected.outlier_count > 0 || !not_finite.is_empty();
     let mut trend = Vec::new();
     if let Some(other) = &args.compare {
         let other_ds = args
@@ -132,10 +196,22 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
                 distortion_significant: significant,
                 plots,
                 amplitude_trend: trend,
+                outliers: selected
+                    .outliers
+                    .iter()
+                    .take(LISTED_OUTLIERS)
+                    .map(|o| OutlierDoc {
+                        column: column_of(&map, o.signal),
+                        outlier: o,
+                    })
+                    .collect(),
+                outlier_count: selected.outlier_count,
+                non_finite: not_finite,
             },
         )?;
     } else {
         print_table(ctx.out, &ds.name, &a, args.all_lines)?;
+        print_data_check(ctx.out, &ds.name, &map, &selected, &not_finite)?;
         if let Some(other) = &args.compare {
             writeln!(ctx.out, "amplitude comparison with {}", other.display())?;
             for t in &trend {
@@ -144,11 +220,55 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
         }
         super::print_written(ctx.out, &plots)?;
     }
-    Ok(if args.require_linear && significant {
+    Ok(if args.require_linear && (significant || refused) {
         Outcome::CheckFailed
     } else {
         Outcome::Ok
     })
+}
+
+/// The data check after the table: the outliers (the first [`PRINTED_OUTLIERS`], by file,
+/// row and column) and the results that are not finite; on either no linearity verdict
+/// holds, and `--require-linear` fails.
+fn print_data_check(
+    out: &mut dyn Write,
+    name: &str,
+    map: &jointid::data::ColumnMap,
+    selected: &Selected,
+    not_finite: &[String],
+) -> std::io::Result<()> {
+    let (outliers, count) = (&selected.outliers, selected.outlier_count);
+    if count == 0 && not_finite.is_empty() {
+        return Ok(());
+    }
+    writeln!(out)?;
+    writeln!(
+        out,
+        "data check (no linearity verdict holds; --require-linear fails)"
+    )?;
+    if count > 0 {
+        writeln!(
+            out,
+            "  {count} outlier{} (beyond {OUTLIER_SIGMAS} robust σ, 1.4826·MAD, of {} column's \
+             median, of magnitude ≥ {MAX_MAGNITUDE:e}, or not finite):",
+            if count == 1 { "" } else { "s" },
+            if count == 1 { "its" } else { "their" }
+        )?;
+        for o in outliers.iter().take(PRINTED_OUTLIERS) {
+            writeln!(out, "    {}", outlier_line(name, map, o))?;
+        }
+        if count > PRINTED_OUTLIERS {
+            writeln!(
+                out,
+                "    and {} more (--json lists up to {LISTED_OUTLIERS})",
+                count - PRINTED_OUTLIERS
+            )?;
+        }
+    }
+    if !not_finite.is_empty() {
+        writeln!(out, "  not finite: {}", not_finite.join("; "))?;
+    }
+    Ok(())
 }
 
 /// Why two runs cannot be compared by amplitude: the runs of `--compare` must be the same

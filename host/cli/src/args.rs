@@ -8,9 +8,10 @@ use std::path::{Path, PathBuf};
 use clap::builder::{PossibleValue, TypedValueParser};
 use clap::Args;
 
+use jointid::data::screen::{Outlier, Signal, MAX_MAGNITUDE, OUTLIER_SIGMAS};
 use jointid::data::{
-    ColumnMap, DataError, Dataset, Detrend, IdData, Loaders, Prep, Record, SegmentChoice, Selected,
-    Selection, TimeBound,
+    fmt_sig, ColumnMap, DataError, Dataset, Detrend, IdData, Loaders, Prep, Record, SegmentChoice,
+    Selected, Selection, TimeBound,
 };
 
 /// How to read a data file and which part of it to use: declared once, flattened into
@@ -141,25 +142,77 @@ impl ReadArgs {
         path: &Path,
         map: ColumnMap,
     ) -> Result<Dataset, DataError> {
-        let mut sel = self.select(loaders, path, map)?;
-        if sel.datasets.len() > 1 {
-            let name = sel.datasets[0].name.clone();
-            return Err(DataError::Selection {
-                file: name,
-                reason: format!(
-                    "--segment all: this command takes one gap-free record, and segments {} \
-                     were selected; give --segment longest or --segment N (`analyze`, `fit`, \
-                     `validate MODEL.json` and `diagnose` use all of them)",
-                    sel.segments
-                        .iter()
-                        .map(usize::to_string)
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            });
-        }
-        Ok(sel.datasets.remove(0))
+        one_of(self.select(loaders, path, map)?)
     }
+}
+
+/// The one record of a selection, for a command that takes one.
+///
+/// # Errors
+/// [`DataError::Selection`] for `--segment all` when the selection holds more than one
+/// segment.
+pub fn one_of(mut sel: Selected) -> Result<Dataset, DataError> {
+    if sel.datasets.len() > 1 {
+        let name = sel.datasets[0].name.clone();
+        return Err(DataError::Selection {
+            file: name,
+            reason: format!(
+                "--segment all: this command takes one gap-free record, and segments {} \
+                 were selected; give --segment longest or --segment N (`analyze`, `fit`, \
+                 `validate MODEL.json` and `diagnose` use all of them)",
+                sel.segments
+                    .iter()
+                    .map(usize::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        });
+    }
+    Ok(sel.datasets.remove(0))
+}
+
+/// The column of `map` that holds `signal` (a capture's `u`, `theta_m`, `theta_ref`).
+pub fn column_of(map: &ColumnMap, signal: Signal) -> &str {
+    match signal {
+        Signal::Input => &map.input,
+        Signal::Output => &map.output,
+        Signal::Reference => map.reference.as_deref().unwrap_or("theta_ref"),
+    }
+}
+
+/// An outlier of the file `file` in words: `FILE: data row R (t = T s), column `C`: value V
+/// lies N robust σ from ...`.
+pub fn outlier_line(file: &str, map: &ColumnMap, o: &Outlier) -> String {
+    format!(
+        "{file}: data row {} (t = {} s), column `{}`: value {:e}: {}",
+        o.row,
+        fmt_sig(o.t_s, 8),
+        column_of(map, o.signal),
+        o.value,
+        o.why()
+    )
+}
+
+/// Refuses a selection that holds outliers ([`jointid::data::screen`]): a fit on it would
+/// be fitted to them (or, on a value near the largest `f64`, never end), naming the first
+/// by file, row and column.
+///
+/// # Errors
+/// The first outlier in words ([`outlier_line`]), how many there are and how to leave them
+/// out.
+pub fn refuse_outliers(sel: &Selected, map: &ColumnMap) -> Result<(), String> {
+    let Some(first) = sel.outliers.first() else {
+        return Ok(());
+    };
+    let name = sel.datasets.first().map_or("", |d| d.name.as_str());
+    let n = sel.outlier_count;
+    Err(format!(
+        "{}; a fit takes no outlier (a sample beyond {OUTLIER_SIGMAS} robust σ of its column's \
+         median, of magnitude ≥ {MAX_MAGNITUDE:e}, or not finite), and the data selected hold \
+         {n}: leave {} out with --from/--to or --segment",
+        outlier_line(name, map, first),
+        if n == 1 { "it" } else { "them" }
+    ))
 }
 
 /// A data file, its column mapping and how to read it: what an analysis command loads,

@@ -13,8 +13,6 @@
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::Duration;
 
 use serde::Serialize;
@@ -238,17 +236,9 @@ pub struct CaptureSummary {
 /// [`jointid::capture::live`] for what stays on disk), output errors.
 pub fn run(args: &CaptureArgs, ctx: &mut Context<'_>) -> CmdResult {
     let (spec, opts) = args.validate();
-    let interrupt = Arc::new(AtomicBool::new(false));
-    {
-        let flag = interrupt.clone();
-        // a second Ctrl-C while the capture winds down ends the process at once; the
-        // file is still readable (append-only)
-        let _ = ctrlc::set_handler(move || {
-            if flag.swap(true, Ordering::SeqCst) {
-                std::process::exit(130);
-            }
-        });
-    }
+    // a second Ctrl-C while the capture winds down ends the process at once; the file is
+    // still readable (append-only)
+    let interrupt = super::interrupt::graceful();
     let bar = if args.quiet || !std::io::stderr().is_terminal() {
         indicatif::ProgressBar::hidden()
     } else {
@@ -263,7 +253,7 @@ pub fn run(args: &CaptureArgs, ctx: &mut Context<'_>) -> CmdResult {
         bar
     };
     let mut rate = RateMeter::default();
-    let outcome = record_capture(&spec, &opts, &interrupt, |p, elapsed| {
+    let outcome = record_capture(&spec, &opts, interrupt, |p, elapsed| {
         bar.set_message(progress_line(p, rate.update(p.samples, elapsed)));
     });
     bar.finish_and_clear();

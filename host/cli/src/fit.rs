@@ -19,11 +19,13 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
 
-use super::args::{check_columns, parse_lags, FitDataArgs, PrepArgs};
+use super::args::{check_columns, one_of, parse_lags, refuse_outliers, FitDataArgs, PrepArgs};
 use super::print::print_notes;
 use super::views::{Signals, VIEW_FILES};
 use super::{check_plot_files, fit_report, CmdResult, Context, Outcome};
 use jointid::data::output::check_output;
+use jointid::data::segment::{segment_list, whole_periods};
+use jointid::data::{fmt_sig, Selected};
 use jointid::ident::fit::{
     self as library, Domain, FitOptions, FitRecords, FitRequest, FitRunError, FittedModel,
     NlInputs, RequestError,
@@ -395,8 +397,15 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     check_columns(&args.data.data_args(&args.data.path))?;
     let sel = args.data.data_args(&args.data.path).select(ctx.loaders)?;
+    let map = args.data.data_args(&args.data.path).column_map();
+    refuse_outliers(&sel, &map)?;
+    check_whole_periods(&sel)?;
     let val = match &args.validation {
-        Some(p) => Some(args.data.data_args(p).load(ctx.loaders)?),
+        Some(p) => {
+            let v = args.data.data_args(p).select(ctx.loaders)?;
+            refuse_outliers(&v, &map)?;
+            Some(one_of(v)?)
+        }
         None => None,
     };
     let records = FitRecords {
@@ -404,7 +413,8 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         numbers: &sel.segments,
         validation: val.as_ref(),
     };
-    let out = library::run(&req, records).map_err(|e| args.flagged(e))?;
+    let mut out = library::run(&req, records).map_err(|e| args.flagged(e))?;
+    out.warnings.extend(share_warning(&sel));
     print_notes(&out.notes);
     let mut files = Vec::new();
     if let Some(path) = &args.save {
@@ -433,6 +443,100 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         return Ok(Outcome::CheckFailed);
     }
     Ok(Outcome::Ok)
+}
+
+/// Fewest whole excitation periods a fit takes from data whose excitation is stated (a
+/// periodic record): one period holds each excited line once; a second is what tells the
+/// joint's response from noise and transient. Less is a scrap (a segment between gaps of
+/// a damaged capture) whose fit looks confident and is not.
+pub const MIN_FIT_PERIODS: usize = 2;
+
+/// The share of its file's time span below which a fit on a file with gaps warns that it
+/// uses a part only.
+pub const SHARE_WARNING: f64 = 0.5;
+
+/// `segment 45` or `segments 3, 4`: the pieces of a selection.
+fn pieces_phrase(sel: &Selected) -> String {
+    match sel.segments.as_slice() {
+        [k] => format!("segment {k}"),
+        ks => format!("segments {}", segment_list(ks)),
+    }
+}
+
+/// Samples the selection holds, and in words their share of the samples the file holds
+/// and of those its time span covers (the missing ones included).
+fn share(sel: &Selected) -> (usize, String) {
+    let used: usize = sel.datasets.iter().map(|d| d.data.len()).sum();
+    let pct = |of: usize| fmt_sig(100.0 * used as f64 / of.max(1) as f64, 2);
+    let mut words = format!(
+        "{} % of the {} samples the file holds",
+        pct(sel.record_samples),
+        sel.record_samples
+    );
+    if sel.record_span > sel.record_samples {
+        words += &format!(
+            ", {} % of the {} its time span covers",
+            pct(sel.record_span),
+            sel.record_span
+        );
+    }
+    (used, words)
+}
+
+/// Refuses a selection of periodic data (its excitation stated) that holds fewer than
+/// [`MIN_FIT_PERIODS`] whole periods, naming the file, the segments, their periods and
+/// their share of the file.
+fn check_whole_periods(sel: &Selected) -> Result<(), String> {
+    let Some(periods) = sel
+        .datasets
+        .iter()
+        .map(whole_periods)
+        .sum::<Option<usize>>()
+    else {
+        return Ok(());
+    };
+    if periods >= MIN_FIT_PERIODS {
+        return Ok(());
+    }
+    let d = &sel.datasets[0];
+    let n = d.excitation.map_or(0, |c| c.period_samples);
+    let (used, pct) = share(sel);
+    let (what, hint) = if sel.record_pieces > 1 {
+        (
+            pieces_phrase(sel),
+            format!(
+                "; the file has {} gap-free segments (`jointid info` lists them)",
+                sel.record_pieces
+            ),
+        )
+    } else {
+        (
+            "the data selected".to_string(),
+            "; give a longer record or a wider --from/--to".to_string(),
+        )
+    };
+    Err(format!(
+        "{}: {what} holds {periods} whole excitation period{} of {n} samples ({used} samples: \
+         {pct}); a fit needs at least {MIN_FIT_PERIODS}{hint}",
+        d.name,
+        if periods == 1 { "" } else { "s" },
+    ))
+}
+
+/// The warning of a fit on less than [`SHARE_WARNING`] of the time span of a file with
+/// gaps: which segments, how many samples, what share.
+fn share_warning(sel: &Selected) -> Option<String> {
+    let (used, pct) = share(sel);
+    if sel.record_pieces < 2 || used as f64 >= SHARE_WARNING * sel.record_span as f64 {
+        return None;
+    }
+    Some(format!(
+        "{}: the fit uses {} of the file's {} gap-free segments, {used} samples: {pct}; the \
+         rest lies in gaps and the other segments (`jointid info` lists them)",
+        sel.datasets[0].name,
+        pieces_phrase(sel),
+        sel.record_pieces,
+    ))
 }
 
 /// Writes the model file `path` ([`jointid::data::output`]: an existing file only with

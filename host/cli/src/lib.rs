@@ -38,6 +38,7 @@ mod export_model;
 mod fit;
 mod fit_report;
 mod info;
+pub mod interrupt;
 mod print;
 mod simulate;
 mod validate;

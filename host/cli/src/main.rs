@@ -53,6 +53,7 @@ fn main() -> ExitCode {
         }
         Err(e) => e.exit(),
     };
+    jointid_cli::interrupt::install();
     let loaders = default_loaders();
     let mut stdout = StdOut(std::io::stdout().lock());
     let mut result = run(
@@ -71,6 +72,12 @@ fn main() -> ExitCode {
         }
     }
     drop(stdout);
+    // temporary files of earlier runs that were killed, removed on the way
+    if !cli.json {
+        for stale in jointid::data::output::take_stale_removed() {
+            let _ = writeln!(std::io::stderr(), "note: {stale}");
+        }
+    }
     // output closed early (`jointid analyze x.csv | head`): stop quietly
     if let Err(e) = &result {
         if is_broken_pipe(e.as_ref()) {

@@ -1058,6 +1058,64 @@ fn capture_stops_cleanly_on_ctrl_c_with_the_summary_and_a_complete_file() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Issue 37 item 1: a second capture into a file another capture is writing (both with
+/// `--force`) is refused before it truncates anything, naming the file and the lock; the
+/// first capture keeps every byte it receives, before and after the refused attempt.
+#[test]
+fn a_second_capture_into_a_file_being_captured_is_refused_and_the_first_loses_nothing() {
+    let dir = tmpdir("locked");
+    let s = small();
+    let fifo = dir.join("board.fifo");
+    mkfifo(&fifo);
+    let out = dir.join("c.jcap");
+    let mut first = spawn_file_capture(&["--json"], &fifo, &out, &["--force"], Stdio::piped);
+    let half = batches(&s)[12];
+    let cut = (half.offset + half.len) as usize;
+    let mut w = OpenOptions::new().write(true).open(&fifo).unwrap();
+    w.write_all(&s.bytes[..cut]).unwrap();
+    wait_until("the first half on disk", Duration::from_secs(5), || {
+        file_len(&out) == 8 + cut as u64
+    });
+    // the second capture reads a recorded stream of its own into the same file
+    let other = dir.join("other.bin");
+    std::fs::write(&other, &s.bytes).unwrap();
+    let second = jointid(&[
+        "capture",
+        "--file",
+        other.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--force",
+    ]);
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert_eq!(second.status.code(), Some(2), "stderr: {err}");
+    assert_eq!(
+        err.trim_end(),
+        format!(
+            "jointid: error: {}: another capture is writing this file (it holds the file's \
+             lock); stop it first or choose another --out",
+            out.display()
+        )
+    );
+    assert_eq!(file_len(&out), 8 + cut as u64, "the refused capture wrote");
+    w.write_all(&s.bytes[cut..]).unwrap();
+    drop(w);
+    let v = json_of(&wait_exit(&mut first, Duration::from_secs(10)));
+    assert_eq!(v["samples"].as_u64().unwrap(), s.samples.len() as u64);
+    assert_eq!(&std::fs::read(&out).unwrap()[8..], &s.bytes[..]);
+    // once the first capture has stopped, the file may be replaced again
+    json_of(&jointid(&[
+        "capture",
+        "--file",
+        other.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--force",
+        "--json",
+    ]));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn export_refuses_a_capture_whose_scale_makes_samples_not_finite() {
     use jointid::sim::board::{encode_stream, StreamLayout};

@@ -13,7 +13,7 @@ use std::process::{Command, Output};
 mod common;
 use common::{jointid, tmpdir, BIN};
 
-/// a one-period simulated capture in `dir`
+/// a two-period simulated capture in `dir` (the fewest a fit takes)
 fn capture(dir: &Path) -> PathBuf {
     let jcap = dir.join("run.jcap");
     let o = jointid(&[
@@ -21,7 +21,7 @@ fn capture(dir: &Path) -> PathBuf {
         "--model",
         "two-mass",
         "--periods",
-        "1",
+        "2",
         "--out",
         jcap.to_str().unwrap(),
     ]);
@@ -414,4 +414,137 @@ fn every_plot_directory_that_cannot_take_the_figures_is_refused_before_the_work(
     }
     std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o755)).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Starts `jointid args` and sends it `signal` (`TERM`, `INT`) as soon as the temporary
+/// file of its output `out` (`.NAME.PID.tmp`) holds data; returns its exit code (`None`:
+/// ended by the signal itself) and the names left in `dir`.
+fn interrupted_while_writing(
+    args: &[&str],
+    out: &Path,
+    signal: &str,
+) -> (Option<i32>, Vec<String>) {
+    let mut child = Command::new(BIN)
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let name = out.file_name().unwrap().to_str().unwrap();
+    let tmp = out
+        .parent()
+        .unwrap()
+        .join(format!(".{name}.{}.tmp", child.id()));
+    let t0 = std::time::Instant::now();
+    while std::fs::metadata(&tmp).map_or(0, |m| m.len()) == 0 {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "{args:?} ended before its temporary file held data: make the output larger"
+        );
+        assert!(
+            t0.elapsed().as_secs() < 60,
+            "no temporary file {}",
+            tmp.display()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let kill = Command::new("kill")
+        .args([format!("-{signal}"), child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let status = child.wait().unwrap();
+    (status.code(), names(out.parent().unwrap()))
+}
+
+/// Issue 37 item 5: SIGTERM during `simulate` and Ctrl-C during `export` remove the
+/// temporary file being written (exit 130) and leave the output absent: nothing half
+/// written, no hidden file of hundreds of megabytes.
+#[test]
+fn an_interrupted_writer_leaves_no_temporary_file() {
+    let dir = tmpdir("interrupted");
+    let big = dir.join("big.csv");
+    let (code, left) = interrupted_while_writing(
+        &[
+            "simulate",
+            "--periods",
+            "2000",
+            "--out",
+            big.to_str().unwrap(),
+        ],
+        &big,
+        "TERM",
+    );
+    assert_eq!((code, left), (Some(130), vec![]), "simulate after SIGTERM");
+    // a capture of 5 million samples, whose CSV takes a while to write
+    let jcap = dir.join("run.jcap");
+    let o = jointid(&[
+        "simulate",
+        "--periods",
+        "1000",
+        "--out",
+        jcap.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = dir.join("run.csv");
+    let (code, left) = interrupted_while_writing(
+        &[
+            "export",
+            jcap.to_str().unwrap(),
+            "--csv",
+            csv.to_str().unwrap(),
+        ],
+        &csv,
+        "INT",
+    );
+    assert_eq!(
+        (code, left),
+        (Some(130), vec!["run.jcap".to_string()]),
+        "export after Ctrl-C"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 37 item 5: a temporary file that a process which no longer runs left beside an
+/// output (killed by SIGKILL, a power cut) is removed by the next run that writes that
+/// output, with a note naming it, its size and the process; one of a running process is
+/// left alone.
+#[test]
+fn a_stale_temporary_file_of_a_dead_process_is_removed_by_the_next_writer() {
+    let dir = tmpdir("stale");
+    let jcap = capture(&dir);
+    // the id of a process that has ended
+    let mut gone = Command::new("true").spawn().unwrap();
+    gone.wait().unwrap();
+    let stale = dir.join(format!(".run.csv.{}.tmp", gone.id()));
+    std::fs::write(&stale, vec![b'x'; 4321]).unwrap();
+    // and one of a process that runs: this test's
+    let live = dir.join(format!(".run.csv.{}.tmp", std::process::id()));
+    std::fs::write(&live, "still being written").unwrap();
+    let csv = dir.join("run.csv");
+    let o = jointid(&[
+        "export",
+        jcap.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains(&format!(
+            "note: {}: removed, a temporary file of 4.32 kB left by process {}, which no longer runs",
+            stale.display(),
+            gone.id()
+        )),
+        "{err}"
+    );
+    assert_eq!(
+        names(&dir),
+        [
+            format!(".run.csv.{}.tmp", std::process::id()),
+            "run.csv".to_string(),
+            "run.jcap".to_string()
+        ]
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -614,3 +614,72 @@ fn segment_all_leaves_out_a_segment_without_a_whole_period_after_the_transient()
         stderr(&out)
     );
 }
+
+/// Issue 37 item 4: a fit on the scrap of a damaged capture (1 % of its bytes flipped:
+/// over a hundred segments, none with a whole period) is refused, naming the segment, its
+/// periods and its share of the file; a fit on the longest segment of a capture with a
+/// gap, enough periods but less than half the file, warns with the share (and `--strict`
+/// fails on it).
+#[test]
+fn fit_refuses_a_scrap_of_a_damaged_capture_and_names_the_share_it_uses() {
+    let dir = tmpdir("fit-scrap");
+    let whole = dir.join("whole.jcap");
+    json_of(&jointid(&[
+        "simulate",
+        "--model",
+        "three-mass",
+        "--out",
+        whole.to_str().unwrap(),
+        "--json",
+    ]));
+    let mut bytes = std::fs::read(&whole).unwrap();
+    let mut rng = jointid_core::rng::SplitMix64::new(37);
+    let body = bytes.len() - MAGIC.len();
+    for _ in 0..body / 100 {
+        let at = MAGIC.len() + (rng.next_u64() % body as u64) as usize;
+        bytes[at] ^= 1 << (rng.next_u64() % 8);
+    }
+    let garbled = dir.join("garbled.jcap");
+    std::fs::write(&garbled, bytes).unwrap();
+    let g = garbled.to_str().unwrap();
+    let info = json_of(&jointid(&["info", g, "--json"]));
+    assert!(info["gaps"].as_array().unwrap().len() > 50, "{info}");
+    let o = jointid(&["fit", g, "--model", "three-mass"]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    let last = err.lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with(&format!("jointid: error: {g}: segment ")),
+        "{err}"
+    );
+    assert!(
+        last.contains(" holds 0 whole excitation periods of 5000 samples (")
+            && last.contains(" % of the ")
+            && last.contains(" its time span covers); ")
+            && last.contains("a fit needs at least 2; the file has "),
+        "{err}"
+    );
+
+    let (cap, _) = gapped_simulation(&dir, "gap.jcap", &["--model", "two-mass", "--periods", "8"]);
+    let c = cap.to_str().unwrap();
+    let v = json_of(&jointid(&["fit", c, "--model", "two-mass", "--json"]));
+    let warnings: Vec<&str> = v["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(Value::as_str)
+        .collect();
+    let share = warnings
+        .iter()
+        .find(|w| w.contains("the fit uses segment"))
+        .unwrap_or_else(|| panic!("no share warning: {warnings:?}"));
+    assert!(
+        share.starts_with(&format!("{c}: the fit uses segment "))
+            && share.contains(" its time span covers; the rest lies in gaps")
+            && share.contains("of the file's 2 gap-free segments"),
+        "{share}"
+    );
+    let o = jointid(&["fit", c, "--model", "two-mass", "--strict"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

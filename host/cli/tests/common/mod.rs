@@ -27,6 +27,28 @@ pub fn jointid(args: &[&str]) -> Output {
     Command::new(BIN).args(args).output().expect("run jointid")
 }
 
+/// runs `jointid` with `args`, killed after `limit`: its output, or `None` when it had to
+/// be killed (a hang is a test failure, never a runaway process)
+#[allow(dead_code)]
+pub fn jointid_within(args: &[&str], limit: std::time::Duration) -> Option<Output> {
+    let mut child = Command::new(BIN)
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run jointid");
+    let t0 = std::time::Instant::now();
+    while child.try_wait().expect("wait for jointid").is_none() {
+        if t0.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            return None;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    Some(child.wait_with_output().expect("jointid's output"))
+}
+
 /// stdout of a successful run parsed as JSON; fails the test with the exit status and
 /// stderr when the run failed
 pub fn json_of(out: &Output) -> Value {

@@ -77,6 +77,13 @@ pub enum JcapError {
         /// the file concerned
         path: PathBuf,
     },
+    /// Another capture is writing the file (it holds the file's exclusive lock): replacing
+    /// it would interleave two streams and truncate what the other captured.
+    #[error("{path}: another capture is writing this file (it holds the file's lock); stop it first or choose another --out")]
+    Locked {
+        /// the file concerned
+        path: PathBuf,
+    },
     /// A whole `.jcap` could not be written ([`write_stream`]).
     #[error(transparent)]
     Output(#[from] crate::data::output::OutputError),
@@ -262,13 +269,15 @@ pub struct JcapWriter {
 }
 
 impl JcapWriter {
-    /// Creates `path` (refusing to replace an existing file unless `overwrite`) and writes the header.
+    /// Creates `path` (refusing to replace an existing file unless `overwrite`), locks it
+    /// for the writer's lifetime and writes the header.
     ///
     /// # Errors
-    /// [`JcapError::Exists`] or [`JcapError::Io`]; on error nothing is left behind that
-    /// this call created.
+    /// [`JcapError::Exists`], [`JcapError::Locked`] (another capture writes the file: it is
+    /// left untouched) or [`JcapError::Io`]; on error nothing is left behind that this call
+    /// created.
     pub fn create(path: &Path, overwrite: bool, policy: FlushPolicy) -> Result<Self, JcapError> {
-        let mut file = create_output(path, overwrite)?;
+        let mut file = create_capture(path, overwrite)?;
         if let Err(source) = file.write_all(&MAGIC) {
             drop(file);
             let _ = std::fs::remove_file(path);
@@ -509,6 +518,62 @@ fn civil_from_days(days: i64) -> (i64, u32, u32) {
 }
 
 /// Opens `path` for writing: a new file, or (with `overwrite`) a truncated old one.
+///
+/// A capture file is locked exclusively (an advisory lock, released when the file is
+/// closed, also when the process dies) before anything is truncated or written: a second
+/// capture into the same file is refused with [`JcapError::Locked`] and the first one's
+/// bytes stay as they were. On a file system without locks the file is written unlocked.
+fn create_capture(path: &Path, overwrite: bool) -> Result<File, JcapError> {
+    let file = if overwrite {
+        // no truncation yet: the file may be another capture's, locked
+        OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(path)
+    } else {
+        OpenOptions::new().write(true).create_new(true).open(path)
+    };
+    let file = file.map_err(|err| match err.kind() {
+        io::ErrorKind::AlreadyExists if is_locked(path) => JcapError::Locked {
+            path: path.to_path_buf(),
+        },
+        io::ErrorKind::AlreadyExists => JcapError::Exists {
+            path: path.to_path_buf(),
+        },
+        _ => JcapError::Io {
+            path: path.to_path_buf(),
+            err,
+        },
+    })?;
+    let io_err = |err| JcapError::Io {
+        path: path.to_path_buf(),
+        err,
+    };
+    match file.try_lock() {
+        Ok(()) => {}
+        Err(std::fs::TryLockError::WouldBlock) => {
+            return Err(JcapError::Locked {
+                path: path.to_path_buf(),
+            })
+        }
+        Err(std::fs::TryLockError::Error(e)) if e.kind() == io::ErrorKind::Unsupported => {}
+        Err(std::fs::TryLockError::Error(e)) => return Err(io_err(e)),
+    }
+    // a device or pipe (`/dev/null`) has nothing to truncate, and refuses to be
+    if overwrite && file.metadata().map_err(io_err)?.is_file() {
+        file.set_len(0).map_err(io_err)?;
+    }
+    Ok(file)
+}
+
+/// True when another open file description holds the lock of the existing file `path`.
+fn is_locked(path: &Path) -> bool {
+    File::open(path).is_ok_and(|f| matches!(f.try_lock(), Err(std::fs::TryLockError::WouldBlock)))
+}
+
+/// Opens `path` (the `.events` sidecar) for writing: a new file, or (with `overwrite`) a
+/// truncated old one.
 fn create_output(path: &Path, overwrite: bool) -> Result<File, JcapError> {
     let mut opts = OpenOptions::new();
     opts.write(true);

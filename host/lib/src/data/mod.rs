@@ -7,6 +7,7 @@
 //! - integer decimation with a zero-phase anti-alias filter in [`dsp`];
 //! - the one rule of every output file (no overwrite without `--force`, whole or not at
 //!   all) in [`output`];
+//! - samples far outside their record (outliers, on a robust scale) in [`screen`];
 //! - [`IdData`], [`Dataset`], whole excitation periods and the loader registry here.
 //!
 //! What: read the capture CSV of ../shared/DESIGN.md §5 (and any CSV with a column
@@ -95,6 +96,7 @@ pub mod dsp;
 pub mod mat;
 pub mod output;
 pub mod prep;
+pub mod screen;
 pub mod segment;
 
 pub use csv::{

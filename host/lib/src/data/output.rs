@@ -13,6 +13,13 @@
 //! - a file whose size is known before the work (`simulate --out`) must fit in the free
 //!   space of its file system: [`check_room`].
 //!
+//! Temporary files (`DIR/.NAME.PID.tmp`) never outlive their process when it can help it:
+//! those being written are listed, so that an interrupt handler (Ctrl-C, SIGTERM: the
+//! command line's) removes them with [`remove_temporaries`] before the process ends; and
+//! one left by a process that no longer runs (killed by SIGKILL, a power cut) is removed
+//! by the next [`check_output`] or [`write_file`] of the same file, and listed for the
+//! caller to report ([`take_stale_removed`]).
+//!
 //! A path that exists and is neither a regular file nor a directory (`/dev/stdout`, a
 //! named pipe, `/dev/full`) is written in place: it holds nothing to protect and cannot
 //! be replaced. A symbolic link to a regular file is followed: the file it names is
@@ -20,6 +27,7 @@
 
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard};
 
 /// Why an output file cannot be (or was not) written.
 #[derive(Debug, thiserror::Error)]
@@ -221,9 +229,141 @@ fn existing(path: &Path) -> Result<Existing, OutputError> {
     }
 }
 
+/// The temporary files this process is writing: created, and renamed or removed, only
+/// while the list is locked, so that [`remove_temporaries`] sees every one that exists.
+static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// Stale temporary files removed so far ([`take_stale_removed`]).
+static STALE_REMOVED: Mutex<Vec<StaleTemporary>> = Mutex::new(Vec::new());
+
+/// Locks a list, whatever a thread that panicked holding it left in it.
+fn locked<T>(m: &'static Mutex<T>) -> MutexGuard<'static, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// The list of temporary files, held: while it lives no temporary file is created,
+/// renamed or removed by [`write_file`] (an interrupt handler keeps it until the process
+/// exits).
+#[derive(Debug)]
+pub struct TemporariesRemoved {
+    _held: MutexGuard<'static, Vec<PathBuf>>,
+    /// the temporary files removed
+    pub removed: Vec<PathBuf>,
+}
+
+/// Removes every temporary file this process is writing (for an interrupt handler: the
+/// outputs being written then never appear, and leave nothing behind); the returned
+/// guard keeps new ones from being made while it lives.
+pub fn remove_temporaries() -> TemporariesRemoved {
+    let mut held = locked(&TEMPORARIES);
+    let removed = held
+        .drain(..)
+        .filter(|p| std::fs::remove_file(p).is_ok())
+        .collect();
+    TemporariesRemoved {
+        _held: held,
+        removed,
+    }
+}
+
+/// A temporary file of an output that a process which no longer runs left behind, removed
+/// by [`check_output`] or [`write_file`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StaleTemporary {
+    /// the temporary file
+    pub path: PathBuf,
+    /// the process that wrote it
+    pub pid: u32,
+    /// its size [bytes]
+    pub bytes: u64,
+}
+
+impl std::fmt::Display for StaleTemporary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}: removed, a temporary file of {} left by process {}, which no longer runs",
+            self.path.display(),
+            fmt_bytes(self.bytes),
+            self.pid
+        )
+    }
+}
+
+/// The stale temporary files removed since the last call (for the caller to report).
+pub fn take_stale_removed() -> Vec<StaleTemporary> {
+    std::mem::take(&mut *locked(&STALE_REMOVED))
+}
+
+/// Whether process `pid` runs (Unix: `kill(pid, 0)`); `true` where that cannot be told,
+/// so that nothing another process may still be writing is removed.
+fn process_runs(pid: u32) -> bool {
+    #[cfg(unix)]
+    {
+        let Ok(p) = libc::pid_t::try_from(pid) else {
+            return true;
+        };
+        if p <= 0 {
+            return true;
+        }
+        // SAFETY: signal 0 sends nothing; the call only checks that the process exists
+        if unsafe { libc::kill(p, 0) } == 0 {
+            return true;
+        }
+        io::Error::last_os_error().raw_os_error() != Some(libc::ESRCH)
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = pid;
+        true
+    }
+}
+
+/// Removes the temporary files of `target` (`.NAME.PID.tmp` beside it) whose process no
+/// longer runs, and one with this process's id that this process is not writing (a
+/// process of the same id before it); records them for [`take_stale_removed`].
+fn remove_stale_temporaries(target: &Path) {
+    let Some(name) = target.file_name().map(|n| n.to_string_lossy().into_owned()) else {
+        return;
+    };
+    let prefix = format!(".{name}.");
+    let Ok(entries) = std::fs::read_dir(dir_of(target)) else {
+        return;
+    };
+    let held = locked(&TEMPORARIES);
+    let mut removed = Vec::new();
+    for e in entries.flatten() {
+        let file_name = e.file_name().to_string_lossy().into_owned();
+        let Some(pid) = file_name
+            .strip_prefix(&prefix)
+            .and_then(|r| r.strip_suffix(".tmp"))
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let path = e.path();
+        let ours = pid == std::process::id();
+        if (ours && held.contains(&path)) || (!ours && process_runs(pid)) {
+            continue;
+        }
+        let Ok(meta) = std::fs::symlink_metadata(&path) else {
+            continue;
+        };
+        if meta.is_file() && std::fs::remove_file(&path).is_ok() {
+            removed.push(StaleTemporary {
+                path,
+                pid,
+                bytes: meta.len(),
+            });
+        }
+    }
+    drop(held);
+    locked(&STALE_REMOVED).extend(removed);
+}
+
 /// Checks, before any work, that `path` can be written under the rule of this module:
 /// not a directory, its directory exists and takes a new file, and it does not exist
-/// unless `overwrite`.
+/// unless `overwrite`. Stale temporary files of `path` are removed first.
 ///
 /// # Errors
 /// [`OutputError::IsDirectory`], [`OutputError::NoDirectory`],
@@ -246,8 +386,11 @@ pub fn check_output(path: &Path, overwrite: bool) -> Result<(), OutputError> {
             dir,
         });
     }
+    remove_stale_temporaries(&target);
     // the honest test of "writable": create (and remove) a file there
     let probe = temp_path(&target);
+    // created and removed while the list is locked: an interrupt cannot leave it behind
+    let _list = locked(&TEMPORARIES);
     match std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
@@ -317,16 +460,24 @@ pub fn write_file(
             dir,
         });
     }
+    remove_stale_temporaries(&target);
     let tmp = temp_path(&target);
     let written = (|| {
-        let file = std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&tmp)?;
+        let file = {
+            let mut list = locked(&TEMPORARIES);
+            let file = std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&tmp)?;
+            list.push(tmp.clone());
+            file
+        };
         let mut w = io::BufWriter::with_capacity(1 << 16, file);
         write(&mut w)?;
         w.into_inner().map_err(|e| e.into_error())?.sync_all()
     })();
+    // renamed or removed while listed: an interrupt meanwhile waits for it
+    let mut list = locked(&TEMPORARIES);
     let result = written.map_err(io_err).and_then(|()| {
         if overwrite {
             return std::fs::rename(&tmp, &target).map_err(io_err);
@@ -346,6 +497,7 @@ pub fn write_file(
     });
     // after a rename the temporary name is gone; after a link or a failure it goes now
     let _ = std::fs::remove_file(&tmp);
+    list.retain(|p| p != &tmp);
     result
 }
 

@@ -21,6 +21,7 @@ use std::str::FromStr;
 use serde::Serialize;
 use thiserror::Error;
 
+use super::screen::Outlier;
 use super::{fmt_sig, DataError, Dataset, ExcitationConfig, PeriodLayout};
 
 /// Which gap-free segment(s) of a record to use.
@@ -184,6 +185,20 @@ pub struct Selected {
     pub segments: Vec<usize>,
     /// what the user should know: the reader's notes, and the segments left out
     pub notes: Vec<String>,
+    /// samples the whole record holds (every piece, before the window): what the chosen
+    /// pieces are a share of
+    pub record_samples: usize,
+    /// samples the whole record spans from its first to its last, the missing ones
+    /// included
+    pub record_span: usize,
+    /// gap-free pieces of the whole record
+    pub record_pieces: usize,
+    /// the samples of the chosen pieces far outside their signal over the whole record
+    /// ([`super::screen::outliers`]), in signal and row order: the first
+    /// [`super::screen::MAX_KEPT`]
+    pub outliers: Vec<Outlier>,
+    /// how many there are
+    pub outlier_count: usize,
 }
 
 impl Record {
@@ -407,11 +422,20 @@ impl Record {
                 used
             }
         };
-        let (segments, datasets) = chosen.into_iter().unzip();
+        let (segments, datasets): (Vec<usize>, Vec<Dataset>) = chosen.into_iter().unzip();
+        let (outliers, outlier_count) = super::screen::outliers(&self.pieces, |o| {
+            datasets.iter().any(|d| super::screen::within(o, d))
+        });
         Ok(Selected {
             datasets,
             segments,
             notes,
+            record_samples: self.pieces.iter().map(|p| p.data.len()).sum(),
+            record_span: self.pieces.iter().map(|p| p.data.len()).sum::<usize>()
+                + usize::try_from(self.missing_samples()).unwrap_or(usize::MAX),
+            record_pieces: self.pieces.len(),
+            outliers,
+            outlier_count,
         })
     }
 }
@@ -521,7 +545,7 @@ fn first_sample_f(ds: &Dataset) -> f64 {
 }
 
 /// Whole excitation periods after the ramp-in in `ds` (`None` without an excitation).
-fn whole_periods(ds: &Dataset) -> Option<usize> {
+pub fn whole_periods(ds: &Dataset) -> Option<usize> {
     ds.excitation?;
     Some(ds.period_layout(0).map_or(0, |l| l.count))
 }

@@ -1,0 +1,130 @@
+//! Data that is no measurement (issue 37 items 2 and 3), run on the built binary: one
+//! sample of a simulated capture CSV replaced by a spike (`1e6`) or by a value near the
+//! largest `f64` (`1e300`). `analyze --require-linear` must fail on it, naming the row,
+//! instead of passing with a NaN FRF; `fit` must refuse it up front instead of fitting
+//! the spike or never ending.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+#[allow(dead_code)] // not every helper is used here
+mod common;
+use common::{jointid, jointid_within, json_of, simulated, tmpdir};
+
+/// The data row (from 1) the spikes go into, and its time at 2 kHz.
+const ROW: usize = 15_000;
+const ROW_T: &str = "7.4995";
+
+/// `clean` with the cell of `column` in data row [`ROW`] replaced by `value`, as `name`.
+fn with_value(clean: &str, name: &str, column: &str, value: &str) -> PathBuf {
+    let text = std::fs::read_to_string(clean).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let header = lines.iter().position(|l| l.starts_with("t,")).unwrap();
+    let col = lines[header].split(',').position(|c| c == column).unwrap();
+    let mut cells: Vec<String> = lines[header + ROW].split(',').map(String::from).collect();
+    cells[col] = value.to_string();
+    lines[header + ROW] = cells.join(",");
+    let path = Path::new(clean).with_file_name(name);
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    path
+}
+
+#[test]
+fn analyze_require_linear_fails_on_a_spike_naming_its_row_and_on_results_that_are_not_finite() {
+    let dir = tmpdir("analyze");
+    let clean = simulated(&dir, "clean.csv", &["--model", "three-mass"]);
+    for (column, value, not_finite) in [
+        ("theta_m", "1e300", true),
+        ("theta_m", "1e6", false),
+        ("u", "1e6", false),
+    ] {
+        let what = format!("{column} = {value}");
+        let p = with_value(&clean, &format!("{column}-{value}.csv"), column, value);
+        let p = p.to_str().unwrap();
+        let o = jointid(&["analyze", p, "--require-linear"]);
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert_eq!(o.status.code(), Some(1), "{what}: {text}");
+        assert!(
+            text.contains(&format!(
+                "{p}: data row {ROW} (t = {ROW_T} s), column `{column}`: value {value}: "
+            )),
+            "{what}: {text}"
+        );
+        let why = if value == "1e300" {
+            "magnitude ≥ 1e100: too large to compute with"
+        } else {
+            "the limit is 50 σ"
+        };
+        assert!(text.contains(why), "{what}: {text}");
+        let o = jointid(&["analyze", p, "--require-linear", "--json"]);
+        assert_eq!(o.status.code(), Some(1), "{what}");
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(v["outlier_count"], 1, "{what}");
+        assert_eq!(v["outliers"][0]["row"], ROW, "{what}");
+        assert_eq!(v["outliers"][0]["column"], column, "{what}");
+        let nf = v["non_finite"].as_array().unwrap();
+        assert_eq!(!nf.is_empty(), not_finite, "{what}: {nf:?}");
+    }
+    // the clean record passes, with nothing to report
+    let v = json_of(&jointid(&["analyze", &clean, "--require-linear", "--json"]));
+    assert_eq!(v["outlier_count"], 0);
+    assert_eq!(v["non_finite"], serde_json::json!([]));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn fit_refuses_a_spike_or_a_value_near_the_largest_f64_up_front_naming_file_row_and_column() {
+    let dir = tmpdir("fit");
+    let clean = simulated(&dir, "clean.csv", &["--model", "three-mass"]);
+    for (column, value) in [("u", "1e300"), ("theta_m", "1e6")] {
+        let what = format!("{column} = {value}");
+        let p = with_value(&clean, &format!("{column}-{value}.csv"), column, value);
+        let p = p.to_str().unwrap();
+        // before: 240 s of silence on `u = 1e300`; the clean file takes well under a second
+        let o = jointid_within(
+            &["fit", p, "--model", "black-box:4"],
+            Duration::from_secs(60),
+        )
+        .unwrap_or_else(|| panic!("{what}: fit still running after 60 s"));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{what}: {err}");
+        assert!(
+            err.starts_with(&format!(
+                "jointid: error: {p}: data row {ROW} (t = {ROW_T} s), column `{column}`: value {value}: "
+            )),
+            "{what}: {err}"
+        );
+        assert!(
+            err.trim_end().ends_with(
+                "; a fit takes no outlier (a sample beyond 50 robust σ of its column's median, \
+                 of magnitude ≥ 1e100, or not finite), and the data selected hold 1: leave it \
+                 out with --from/--to or --segment"
+            ),
+            "{what}: {err}"
+        );
+    }
+    // the same data as validation is refused too, naming that file
+    let p = with_value(&clean, "val.csv", "u", "1e300");
+    let o = jointid(&[
+        "fit",
+        &clean,
+        "--model",
+        "black-box:4",
+        "--validation",
+        p.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains(&format!("{}: data row {ROW} ", p.display())),
+        "{err}"
+    );
+    json_of(&jointid(&[
+        "fit",
+        &clean,
+        "--model",
+        "black-box:4",
+        "--json",
+    ]));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
