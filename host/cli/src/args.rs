@@ -193,26 +193,46 @@ pub fn outlier_line(file: &str, map: &ColumnMap, o: &Outlier) -> String {
     )
 }
 
-/// Refuses a selection that holds outliers ([`jointid::data::screen`]): a fit on it would
-/// be fitted to them (or, on a value near the largest `f64`, never end), naming the first
-/// by file, row and column.
+/// Screens a selection for a fit ([`jointid::data::screen`]): refuses one that holds a
+/// sample no fit can compute with (not finite, or of magnitude ≥ [`MAX_MAGNITUDE`]: sums
+/// of squares overflow and an iteration may never end), naming the first by file, row and
+/// column; a sample beyond [`OUTLIER_SIGMAS`] robust σ is a warning, not a refusal (a
+/// glitch, or real data a robust scale misreads: a sparse pulse train, an axis parked
+/// far away for part of the record), returned in words.
 ///
 /// # Errors
-/// The first outlier in words ([`outlier_line`]), how many there are and how to leave them
-/// out.
-pub fn refuse_outliers(sel: &Selected, map: &ColumnMap) -> Result<(), String> {
-    let Some(first) = sel.outliers.first() else {
-        return Ok(());
-    };
+/// The first unusable sample in words ([`outlier_line`]), how many there are and how to
+/// leave them out.
+pub fn screen_for_fit(sel: &Selected, map: &ColumnMap) -> Result<Option<String>, String> {
     let name = sel.datasets.first().map_or("", |d| d.name.as_str());
-    let n = sel.outlier_count;
-    Err(format!(
-        "{}; a fit takes no outlier (a sample beyond {OUTLIER_SIGMAS} robust σ of its column's \
-         median, of magnitude ≥ {MAX_MAGNITUDE:e}, or not finite), and the data selected hold \
-         {n}: leave {} out with --from/--to or --segment",
-        outlier_line(name, map, first),
-        if n == 1 { "it" } else { "them" }
-    ))
+    let unusable = |o: &&Outlier| !o.value.is_finite() || o.value.abs() >= MAX_MAGNITUDE;
+    let n = sel.outliers.iter().filter(unusable).count();
+    if let Some(first) = sel.outliers.iter().find(unusable) {
+        return Err(format!(
+            "{}; a fit takes no sample of magnitude ≥ {MAX_MAGNITUDE:e} or not finite, and the \
+             data selected hold {n}: leave {} out with --from/--to or --segment",
+            outlier_line(name, map, first),
+            if n == 1 { "it" } else { "them" }
+        ));
+    }
+    Ok(sel.outliers.first().map(|first| {
+        let more = sel.outlier_count - 1;
+        format!(
+            "{}{}; the fit takes {} as measured (beyond {OUTLIER_SIGMAS} robust σ: a glitch \
+             pulls the fit towards it; leave {} out with --from/--to or --segment)",
+            outlier_line(name, map, first),
+            if more > 0 {
+                format!(
+                    ", and {more} more such sample{}",
+                    if more == 1 { "" } else { "s" }
+                )
+            } else {
+                String::new()
+            },
+            if more > 0 { "them" } else { "it" },
+            if more > 0 { "them" } else { "it" }
+        )
+    }))
 }
 
 /// A data file, its column mapping and how to read it: what an analysis command loads,

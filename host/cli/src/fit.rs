@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
 
-use super::args::{check_columns, one_of, parse_lags, refuse_outliers, FitDataArgs, PrepArgs};
+use super::args::{check_columns, one_of, parse_lags, screen_for_fit, FitDataArgs, PrepArgs};
 use super::print::print_notes;
 use super::views::{Signals, VIEW_FILES};
 use super::{check_plot_files, fit_report, CmdResult, Context, Outcome};
@@ -398,12 +398,12 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     check_columns(&args.data.data_args(&args.data.path))?;
     let sel = args.data.data_args(&args.data.path).select(ctx.loaders)?;
     let map = args.data.data_args(&args.data.path).column_map();
-    refuse_outliers(&sel, &map)?;
+    let mut screened: Vec<String> = screen_for_fit(&sel, &map)?.into_iter().collect();
     check_whole_periods(&sel)?;
     let val = match &args.validation {
         Some(p) => {
             let v = args.data.data_args(p).select(ctx.loaders)?;
-            refuse_outliers(&v, &map)?;
+            screened.extend(screen_for_fit(&v, &map)?);
             Some(one_of(v)?)
         }
         None => None,
@@ -415,6 +415,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     };
     let mut out = library::run(&req, records).map_err(|e| args.flagged(e))?;
     out.warnings.extend(share_warning(&sel));
+    out.warnings.extend(screened);
     print_notes(&out.notes);
     let mut files = Vec::new();
     if let Some(path) = &args.save {
