@@ -84,11 +84,11 @@ impl SimModel {
         SimModel::of(Structure::TwoMass),
         SimModel::of(Structure::ThreeMass),
         SimModel::of(Structure::FourMass),
-        SimModel::of(Structure::Grounded),
         SimModel {
             structure: Structure::TwoMass,
             nonlinear_two_mass: true,
         },
+        SimModel::of(Structure::Grounded),
     ];
 
     /// The plain structure `s`.
