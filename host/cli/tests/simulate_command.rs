@@ -11,7 +11,7 @@ use jointid_core::excitation::{ExcitationConfig, SignalKind};
 use serde_json::Value;
 
 mod common;
-use common::{jointid, json_of, tmpdir};
+use common::{jointid, jointid_within, json_of, tmpdir};
 
 #[test]
 fn simulate_jcap_is_the_wire_stream_and_reads_like_a_board_capture() {
@@ -276,26 +276,6 @@ fn simulate_applies_the_boards_safety_limits_and_bounds_every_parameter() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Runs `jointid args`, killed after `limit`: its output, or `None` when it ran longer.
-fn run_within(args: &[&str], limit: std::time::Duration) -> Option<std::process::Output> {
-    let mut child = std::process::Command::new(common::BIN)
-        .args(args)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("run jointid");
-    let t0 = std::time::Instant::now();
-    while child.try_wait().expect("wait").is_none() {
-        if t0.elapsed() > limit {
-            let _ = child.kill();
-            let _ = child.wait();
-            return None;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    Some(child.wait_with_output().expect("output"))
-}
-
 /// A run larger than the free space of `--out`'s file system is refused before the
 /// simulation, with both figures. Before: `--periods 100000000` was accepted and wrote
 /// about 8 MB/s until killed (36 TB of CSV at the end).
@@ -306,7 +286,7 @@ fn simulate_refuses_a_run_larger_than_the_free_space_before_simulating() {
         let out = dir.join(name);
         let o = out.to_str().unwrap();
         let args = ["simulate", "--periods", "100000000", "--out", o];
-        let Some(run) = run_within(&args, std::time::Duration::from_secs(10)) else {
+        let Some(run) = jointid_within(&args, std::time::Duration::from_secs(10)) else {
             let _ = std::fs::remove_dir_all(&dir);
             panic!("{name}: still simulating after 10 s");
         };
