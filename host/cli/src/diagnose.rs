@@ -11,7 +11,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::args::{check_same_rate, ColumnArgs, DataArgs, ReadArgs};
+use super::args::{check_same_rate, screen_for_fit, ColumnArgs, DataArgs, ReadArgs};
 use super::print::usable_segments;
 use super::{check_plot_files, print_json, print_written, write_svg, CmdResult, Context, Outcome};
 use jointid::data::output::{check_output, write_file};
@@ -233,10 +233,16 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         .unwrap_or(Structure::ThreeMass);
     // every capture as its gap-free segments: one, or all of them with --segment all
     // (those shorter than a time-domain fit takes left out, with a note)
-    let capture = |p: &PathBuf, what: &str| -> Result<(Vec<Dataset>, Vec<usize>), String> {
-        let sel = DataArgs::new(p, &args.columns, &args.read)
+    // samples far beyond their record, noted (the diagnosis fits them as measured)
+    let mut screened: Vec<String> = Vec::new();
+    let mut capture = |p: &PathBuf, what: &str| -> Result<(Vec<Dataset>, Vec<usize>), String> {
+        let data = DataArgs::new(p, &args.columns, &args.read);
+        let sel = data
             .select(ctx.loaders)
             .map_err(|e| format!("{what}{}: {e}", p.display()))?;
+        // a sample no fit computes with is refused before the work
+        screened
+            .extend(screen_for_fit(&sel, &data.column_map()).map_err(|e| format!("{what}{e}"))?);
         if sel.datasets.len() == 1 {
             return Ok((sel.datasets, sel.segments));
         }
@@ -291,6 +297,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     bar.finish_and_clear();
     let (mut d, series) = diagnosed?;
+    d.warnings.extend(screened);
     if args.linear_axis {
         d.in_linear_axis_units();
     }

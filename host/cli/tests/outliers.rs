@@ -1,8 +1,8 @@
 //! Data that is no measurement (issue 37 items 2 and 3), run on the built binary: one
 //! sample of a simulated capture CSV replaced by a spike (`1e6`) or by a value near the
 //! largest `f64` (`1e300`). `analyze --require-linear` must fail on it, naming the row,
-//! instead of passing with a NaN FRF; `fit` must refuse it up front instead of fitting
-//! the spike or never ending.
+//! instead of passing with a NaN FRF; `fit` and `diagnose` must refuse it up front
+//! instead of fitting the spike or never ending.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -142,5 +142,30 @@ fn fit_refuses_a_value_near_the_largest_f64_up_front_and_notes_a_far_spike_by_it
         "black-box:4",
         "--json",
     ]));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `diagnose` screens its captures as `fit` does: a validation capture with `u = 1e300`
+/// is refused before any fit, naming the flag, the file, the row and the column.
+#[test]
+fn diagnose_refuses_a_value_near_the_largest_f64_before_any_fit() {
+    let dir = tmpdir("diagnose");
+    let clean = simulated(&dir, "clean.csv", &["--model", "three-mass"]);
+    let val = with_value(&clean, "val.csv", "u", "1e300");
+    let val = val.to_str().unwrap();
+    let o = jointid_within(
+        &["diagnose", &clean, "--validation", val],
+        Duration::from_secs(30),
+    )
+    .expect("refused at once, not after the fits");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.starts_with(&format!(
+            "jointid: error: --validation {val}: data row {ROW} (t = {ROW_T} s), column `u`: \
+             value 1e300: "
+        )),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
