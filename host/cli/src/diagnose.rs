@@ -307,7 +307,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
             format!(
                 "diagnosed as the grounded mass (`--model grounded`): the default structure \
                  {} found no start ({why}); give --model to choose",
-                Structure::ThreeMass.label()
+                structure.label()
             ),
         );
     }

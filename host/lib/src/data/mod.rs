@@ -114,6 +114,14 @@ pub use segment::{
 /// (EMPS: 999.992 Hz against 1000.02 Hz); 0.1 % moves a 100 Hz resonance by 0.1 Hz.
 pub const SAME_RATE_TOLERANCE: f64 = 1e-3;
 
+/// Root mean square of `x` about its mean (a signal's spread, its offset aside); 0 for an
+/// empty `x`.
+pub fn rms_about_mean(x: &[f64]) -> f64 {
+    let n = x.len().max(1) as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    (x.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n).sqrt()
+}
+
 /// Whether sample intervals `a` and `b` [s] are one rate ([`SAME_RATE_TOLERANCE`]).
 pub fn same_rate(a: f64, b: f64) -> bool {
     (a - b).abs() <= SAME_RATE_TOLERANCE * a.abs().max(b.abs())

@@ -279,7 +279,7 @@ pub fn simulate_tracked(
     let j_tot: f64 = mech
         .bodies
         .iter()
-        .filter(|b| b.inertia.is_finite())
+        .filter(|b| !b.is_frame())
         .map(|b| b.inertia * (r / b.gain).powi(2))
         .sum();
     let f_tot: f64 = mech.bodies.iter().map(|b| b.viscous).sum();
@@ -289,7 +289,7 @@ pub fn simulate_tracked(
     let k_tot: f64 = mech
         .springs
         .iter()
-        .filter(|s| !mech.bodies[s.a].inertia.is_finite() || !mech.bodies[s.b].inertia.is_finite())
+        .filter(|s| mech.bodies[s.a].is_frame() || mech.bodies[s.b].is_frame())
         .map(|s| s.k * g0 * g0)
         .sum();
     let ts = data.ts;

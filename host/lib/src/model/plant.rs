@@ -49,6 +49,13 @@ pub struct Body {
     pub viscous: f64,
 }
 
+impl Body {
+    /// Whether the body is the grounded mass's frame (infinite inertia): it never moves.
+    pub fn is_frame(&self) -> bool {
+        self.inertia.is_infinite()
+    }
+}
+
 /// A spring–damper between two bodies.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Spring {

@@ -989,7 +989,7 @@ fn at_rest(mech: &Mechanism, theta0: f64) -> State {
     for (i, b) in mech.bodies.iter().enumerate() {
         x[i] = if i == 0 {
             theta0
-        } else if b.inertia.is_infinite() {
+        } else if b.is_frame() {
             // the frame of a grounded mass: at 0, its spring deflected by `r θ_0`
             0.0
         } else {

@@ -4,7 +4,7 @@
 //! laws with known truth.
 
 use super::Gauss;
-use crate::data::{Dataset, IdData};
+use crate::data::{rms_about_mean, Dataset, IdData};
 use crate::model::effects::{Effect, NonlinearStiffness};
 use crate::model::params::{JointParams, Plant};
 use crate::model::spec::Structure;
@@ -97,17 +97,13 @@ pub fn records(k3: f64, seed: u64) -> (Dataset, Dataset) {
 /// force [N·m/rad³].
 pub fn k3_at(share: f64) -> f64 {
     let (est, _) = records(0.0, 1);
-    let y = &est.data.y;
-    let mean = y.iter().sum::<f64>() / y.len() as f64;
-    let sd = (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / y.len() as f64).sqrt();
-    share * plant().params.k_0 / (3.0 * sd).powi(2)
+    share * plant().params.k_0 / (3.0 * rms_about_mean(&est.data.y)).powi(2)
 }
 
 /// Scales `x` to zero mean and RMS `rms`.
 fn normalise(x: &mut [f64], rms: f64) {
-    let n = x.len() as f64;
-    let mean = x.iter().sum::<f64>() / n;
-    let sd = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+    let mean = x.iter().sum::<f64>() / x.len().max(1) as f64;
+    let sd = rms_about_mean(x);
     for v in x.iter_mut() {
         *v = (*v - mean) * rms / sd;
     }

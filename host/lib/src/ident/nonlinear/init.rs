@@ -19,7 +19,7 @@
 
 use super::model::NlModel;
 use super::output_error::{fit_output_error, NlError, NlFit, NlOptions};
-use crate::data::IdData;
+use crate::data::{rms_about_mean, IdData};
 use crate::ident::grey_box::{self, IdimOptions, Output};
 use crate::ident::parallel::{machine_threads, parallel};
 use crate::model::effects::{Attach, Effect, ExtraMode};
@@ -742,13 +742,6 @@ fn short_order_warning(f: &super::ripple::OrderSearch) -> String {
 /// the deflection (`u_rms / r / k_g`) the effects' grids are laid on.
 pub(crate) fn torque_rms(data: &IdData) -> f64 {
     (data.u.iter().map(|u| u * u).sum::<f64>() / data.u.len().max(1) as f64).sqrt()
-}
-
-/// Root mean square of `x` about its mean (an angle's motion, its offset aside).
-fn rms_about_mean(x: &[f64]) -> f64 {
-    let n = x.len().max(1) as f64;
-    let mean = x.iter().sum::<f64>() / n;
-    (x.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n).sqrt()
 }
 
 /// The linear start of `structure` (gear ratio `r`) from the modal features of the

@@ -1112,7 +1112,7 @@ fn exact_velocity(problem: &Problem, data: &IdData, z: &[f64]) -> Option<Vec<f64
         // of the grounded mass (infinite inertia) stays at rest at 0
         let g = match i {
             0 => 1.0,
-            _ if mech.bodies[i].inertia.is_infinite() => 0.0,
+            _ if mech.bodies[i].is_frame() => 0.0,
             _ => mech.bodies[0].gain / mech.bodies[i].gain,
         };
         x[i] = g * data.y[0];
