@@ -16,7 +16,12 @@
 //! step is accepted only when it lowers the cost, then `λ ← λ/5`, otherwise
 //! `λ ← 8λ` until `λ > 1e12`. Some parameters may be fixed. Trailing
 //! *nuisance* parameters (an initial state, say) are free and unbounded and
-//! take no part in the step-size test.
+//! take no part in the step-size test. Optionally ([`LmOptions::within_noise`]) the loop
+//! stops when the Gauss–Newton step would lower the cost by less than a share of one
+//! residual variance: the Newton decrement `gᵀ(JᵀJ)⁻¹g` is the cost the linearised problem
+//! has left to lose, `σ²` times the squared distance to its minimum in standard deviations
+//! (Boyd & Vandenberghe, *Convex Optimization*, §9.5.1, for the decrement as a stopping
+//! rule).
 //!
 //! Uncertainty: `cov(θ̂) = σ̂² (JᵀJ)^{−1}` with `σ̂² = Σe² / (N − p)`
 //! (Ljung, *System Identification*, 2nd ed., §9.3; valid for white
@@ -78,6 +83,13 @@ pub struct LmOptions {
     pub nuisance: usize,
     /// initial Marquardt damping `λ`
     pub lambda0: f64,
+    /// stop when the Gauss–Newton step from the current point would lower the cost by
+    /// less than this many residual variances `σ̂² = Σe²/(N − p)` (the Newton decrement:
+    /// the point is then within `√τ` standard deviations, by the white-noise covariance,
+    /// of the linearised problem's minimum, so no further step can move it by a
+    /// distance the data resolve); parameters held on a bound by the step are left out;
+    /// 0: off
+    pub within_noise: f64,
     /// evaluate the normal equations once more at the end for `std` and `cov` (one
     /// Jacobian); off for callers that form their own covariance: `std` and `cov` are then
     /// zero and `ssr` is the final cost (the problem's cost must be `Σ e²`)
@@ -95,6 +107,7 @@ impl Default for LmOptions {
             fixed: Vec::new(),
             nuisance: 0,
             lambda0: 1e-3,
+            within_noise: 0.0,
             covariance: true,
         }
     }
@@ -112,6 +125,9 @@ pub enum Termination {
     /// no step lowered the cost even with very strong damping (a minimum
     /// within the problem's numerical resolution, or a bound)
     NoDescent,
+    /// the Gauss–Newton step would lower the cost by less than `within_noise` residual
+    /// variances
+    WithinNoise,
 }
 
 impl Termination {
@@ -122,6 +138,7 @@ impl Termination {
             Termination::StepConverged => "step converged",
             Termination::MaxIterations => "iteration limit reached",
             Termination::NoDescent => "no further descent",
+            Termination::WithinNoise => "within the noise of the minimum",
         }
     }
 }
@@ -192,6 +209,28 @@ pub enum LmError {
     NonFiniteStart,
 }
 
+/// The cost decrease `gᵀ H⁻¹ g` the Gauss–Newton step (`H = JᵀJ`, `g` the step's right
+/// side) predicts, over the parameters the step does not push against their bound
+/// (`held(j, step_j)`): those are dropped one at a time and the step solved again.
+fn newton_decrement(
+    jtj: &DMatrix<f64>,
+    jte: &DVector<f64>,
+    held: impl Fn(usize, f64) -> bool,
+) -> f64 {
+    let mut keep: Vec<usize> = (0..jtj.nrows()).collect();
+    loop {
+        let h = jtj.select_rows(&keep).select_columns(&keep);
+        let g = jte.select_rows(&keep);
+        let step = pinv_sym(&h, 1e-12) * &g;
+        match (0..keep.len()).find(|&a| held(keep[a], step[a])) {
+            Some(a) => {
+                keep.remove(a);
+            }
+            None => return g.dot(&step),
+        }
+    }
+}
+
 fn clamp(theta: &mut [f64], lower: &[f64], upper: &[f64]) {
     for (i, t) in theta.iter_mut().enumerate() {
         if let Some(&l) = lower.get(i) {
@@ -257,6 +296,19 @@ pub fn minimize<P: LeastSquares + ?Sized>(
             break;
         }
         let p = ne.jtj.nrows();
+        if opts.within_noise > 0.0 {
+            let dof = (problem.n_residuals() as f64 - p as f64).max(1.0);
+            let held = |j: usize, step: f64| {
+                let i = free[j];
+                i < n_main
+                    && ((step < 0.0 && lower.get(i).is_some_and(|&l| theta[i] <= l))
+                        || (step > 0.0 && upper.get(i).is_some_and(|&u| theta[i] >= u)))
+            };
+            if newton_decrement(&ne.jtj, &ne.jte, held) < opts.within_noise * ne.ssr / dof {
+                termination = Termination::WithinNoise;
+                break;
+            }
+        }
         let diag: Vec<f64> = (0..p).map(|i| ne.jtj[(i, i)].max(1e-300)).collect();
         loop {
             let mut a = ne.jtj.clone();
@@ -404,6 +456,50 @@ mod tests {
         assert!((f.theta[1] - 0.7).abs() < 1e-8, "{:?}", f.theta);
         assert!(f.termination != Termination::MaxIterations);
         assert!(f.cost_history.windows(2).all(|w| w[1] < w[0]));
+    }
+
+    /// Stopping within the noise ends a fit whose steps no longer move it by what the data
+    /// resolve: the estimate stands within a tenth of its σ of the fully converged one, in
+    /// fewer iterations; a bound the step pushes against does not keep it going.
+    #[test]
+    fn a_fit_within_the_noise_of_its_minimum_stops_there() {
+        let mut rng = crate::ident::linalg::GaussRng::new(7);
+        let noise = rng.normals(400, 0.05);
+        let p = exponential(3.0, 0.7, &noise);
+        let tight = LmOptions {
+            rel_cost_tol: 1e-15,
+            step_tol: 0.0,
+            ..LmOptions::default()
+        };
+        let full = minimize(&p, &[1.0, 3.0], &tight).unwrap();
+        let noisy = LmOptions {
+            within_noise: 0.01,
+            ..tight.clone()
+        };
+        let f = minimize(&p, &[1.0, 3.0], &noisy).unwrap();
+        assert_eq!(f.termination, Termination::WithinNoise);
+        assert!(
+            f.iterations < full.iterations,
+            "{} vs {}",
+            f.iterations,
+            full.iterations
+        );
+        for i in 0..2 {
+            let moved = (f.theta[i] - full.theta[i]).abs() / full.std[i];
+            assert!(moved < 0.1, "parameter {i} {moved} σ from the minimum");
+        }
+        // the amplitude held on a bound below its value, the rate at its best for it:
+        // the step that pushes the amplitude out is left out, and nothing else is left
+        let held = LmOptions {
+            fixed: vec![true, false],
+            ..tight
+        };
+        let at = minimize(&p, &[2.5, 3.0], &held).unwrap().theta;
+        let ne = p.normal_equations(&at, &[0, 1]);
+        let pushed = newton_decrement(&ne.jtj, &ne.jte, |j, step| j == 0 && step > 0.0);
+        let free = newton_decrement(&ne.jtj, &ne.jte, |_, _| false);
+        assert!(pushed < 1e-6 * full.sigma2, "{pushed}");
+        assert!(free > 100.0 * full.sigma2, "{free}");
     }
 
     #[test]
