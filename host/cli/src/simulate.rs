@@ -35,7 +35,8 @@
 //! seed 000 Table 1 (`J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r`) plus
 //! seed 001's `k3`, `F_c` for the nonlinear two-mass (see [`jointid::model::params`]); only
 //! the names the model uses are accepted ([`jointid::model::params::model_params`],
-//! [`jointid::model::params::seed_001_params`]).
+//! [`jointid::model::params::seed_001_params`]), each value within the parameter's
+//! physical range ([`jointid::model::params::param_range`]: `J_m` 1e-7 … 1e4 kg·m², ...).
 //!
 //! `--model` and `--effect` resolve into the one model description, a
 //! [`jointid::model::spec::ModelSpec`], by [`jointid::model::params::sim_spec`] over the
@@ -59,7 +60,9 @@ use jointid::data::output::{check_output, check_room, write_file, OutputError};
 use jointid::data::{capture_csv_comments, ExcitationConfig, SignalKind, TableWriter};
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::sim_plant;
-use jointid::model::params::{model_params, seed_001_params, sim_spec, ParamField};
+use jointid::model::params::{
+    model_params, param_range, seed_001_params, sim_spec, ParamField, ParamRange,
+};
 use jointid::model::spec::{Structure, NONLINEAR_TWO_MASS};
 use jointid::sim::board::{stream_session, BoardStreamError, StreamError, WireOptions};
 use jointid::sim::{
@@ -288,6 +291,16 @@ pub enum SimulateError {
         /// the names the model accepts, comma separated
         valid: String,
     },
+    /// `--param` with a value outside the parameter's physical range
+    #[error("--param `{name}`: `{value}` is outside its physical range: {range}")]
+    OutOfRange {
+        /// parameter name
+        name: String,
+        /// the value as given
+        value: String,
+        /// its range and unit
+        range: ParamRange,
+    },
     /// `--out` with an extension other than `.jcap` or `.csv`
     #[error("{path}: --out must end in .jcap or .csv")]
     OutExtension {
@@ -329,11 +342,13 @@ pub enum SimulateError {
     },
 }
 
-/// Applies `NAME=VALUE` overrides to the parameters of model `model`.
+/// Applies `NAME=VALUE` overrides to the parameters of model `model`, each within its
+/// physical range ([`param_range`]).
 ///
 /// # Errors
 /// [`SimulateError::ParamSyntax`], [`SimulateError::UnknownParam`] or
-/// [`SimulateError::BadValue`], each naming the parameter and listing the valid names.
+/// [`SimulateError::BadValue`], each naming the parameter and listing the valid names;
+/// [`SimulateError::OutOfRange`] naming the parameter, the value and the range.
 pub fn apply_params(
     model: SimModel,
     specs: &[String],
@@ -364,7 +379,17 @@ pub fn apply_params(
             });
         };
         match value.parse::<f64>() {
-            Ok(v) if v.is_finite() => *field(params) = v,
+            Ok(v) if v.is_finite() => {
+                // every name `model.params()` gives has a range
+                if let Some(range) = param_range(name).filter(|r| !r.contains(v)) {
+                    return Err(SimulateError::OutOfRange {
+                        name: name.to_string(),
+                        value: value.to_string(),
+                        range,
+                    });
+                }
+                *field(params) = v;
+            }
             _ => {
                 return Err(SimulateError::BadValue {
                     name: name.to_string(),
@@ -949,6 +974,11 @@ mod tests {
         assert!(matches!(err, SimulateError::ParamSyntax { .. }), "{err}");
         let err = apply_params(two, &["k_g=inf".into()], &mut p).unwrap_err();
         assert!(matches!(err, SimulateError::BadValue { .. }), "{err}");
+        let err = apply_params(two, &["J_m=1e-30".into()], &mut p).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "--param `J_m`: `1e-30` is outside its physical range: must be within [1e-7, 10000] kg·m²"
+        );
         assert_eq!(p, JointParams::default(), "nothing applied on error");
         apply_params(
             SimModel::ALL[4],
