@@ -4,7 +4,10 @@
 //! a MATLAB file (`mat`), or a Python script that rebuilds the model in python-control
 //! (`python-control`), each with the input and output, their units and the physical
 //! parameters. Written to `--out FILE` (an existing one only with `--force`) or to
-//! standard output (not `mat`).
+//! standard output (not `mat`). A model whose numbers overflow in the export (an entry of
+//! magnitude 1e100 or more, a transfer function whose coefficients overflow) is refused,
+//! naming the entry, and nothing is written
+//! ([`jointid::ident::model_export::ExportError`]).
 
 use std::fmt::Write as _;
 use std::io::Write;
@@ -54,8 +57,8 @@ pub struct ExportModelArgs {
 /// Runs `jointid export-model`.
 ///
 /// # Errors
-/// Reading the model file, a model without state space (fitted with effects), `mat` to
-/// standard output, and output errors naming the file.
+/// Reading the model file, a model without state space (fitted with effects), a model
+/// whose numbers overflow, `mat` to standard output, and output errors naming the file.
 pub fn run(args: &ExportModelArgs, ctx: &mut Context<'_>) -> CmdResult {
     if let Some(out) = &args.out {
         check_output(out, args.force)?;

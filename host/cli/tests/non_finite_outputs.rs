@@ -5,9 +5,11 @@
 //! naming the flag, the value and the range; a model whose numbers overflow is refused
 //! naming the entry, and nothing is written.
 
+use std::path::Path;
+
 #[allow(dead_code)] // not every helper is used here
 mod common;
-use common::{jointid, json_of, tmpdir};
+use common::{jointid, json_of, simulated, tmpdir};
 
 /// `jointid ARGS` must exit 2 with one line on standard error containing every one of
 /// `msgs` and nothing on standard output; its text.
@@ -87,5 +89,91 @@ fn simulate_refuses_a_param_outside_its_physical_range_naming_flag_value_and_ran
         "--json",
     ]));
     assert_eq!(run["config"]["plant"]["params"]["J_m"], 2e-3);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `m.json` of `dir` with `edit` applied to its JSON, as `name`; its path.
+fn edited(dir: &Path, name: &str, edit: impl FnOnce(&mut serde_json::Value)) -> String {
+    let mut m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("m.json")).unwrap()).unwrap();
+    edit(&mut m);
+    let p = dir.join(name);
+    std::fs::write(&p, m.to_string()).unwrap();
+    p.display().to_string()
+}
+
+#[test]
+fn export_model_refuses_a_model_whose_numbers_overflow_naming_the_entry_and_writes_nothing() {
+    let dir = tmpdir("export-overflow");
+    let run = simulated(&dir, "run.jcap", &["--model", "two-mass", "--periods", "3"]);
+    let m = dir.join("m.json");
+    json_of(&jointid(&[
+        "fit",
+        &run,
+        "--model",
+        "two-mass",
+        "--save",
+        m.to_str().unwrap(),
+        "--json",
+    ]));
+    // the fitted model exports whole, with no number that is not finite
+    let o = jointid(&[
+        "export-model",
+        m.to_str().unwrap(),
+        "--format",
+        "python-control",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let script = String::from_utf8(o.stdout).unwrap();
+    assert!(script.contains("sysd = control.ss("), "{script}");
+    for bad in ["NaN", "inf"] {
+        assert!(!script.contains(bad), "{bad} in {script}");
+    }
+    // a number of the file beyond computing with: named by matrix, row and column
+    let big = edited(&dir, "big.json", |v| v["a"][0][1] = 1e308.into());
+    let out = dir.join("x.out");
+    let o = out.to_str().unwrap();
+    for format in ["python-control", "json-ss", "json-tf"] {
+        refused(
+            &["export-model", &big, "--format", format],
+            &[&format!(
+                "{big}: A row 1, column 2 = 1e308: the model's numbers must be finite and of \
+                 magnitude below 1e100"
+            )],
+        );
+    }
+    refused(
+        &["export-model", &big, "--format", "mat", "--out", o],
+        &["A row 1, column 2 = 1e308"],
+    );
+    assert!(!out.exists());
+    // numbers the file may hold whose products overflow: the derived one named
+    let n = serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(&m).unwrap())
+        .unwrap()["a"]
+        .as_array()
+        .unwrap()
+        .len();
+    let diag = edited(&dir, "diag.json", |v| {
+        v["a"] = (0..n)
+            .map(|i| (0..n).map(|j| if i == j { 9e99 } else { 0.0 }).collect())
+            .collect::<Vec<Vec<f64>>>()
+            .into();
+    });
+    refused(
+        &[
+            "export-model",
+            &diag,
+            "--format",
+            "python-control",
+            "--out",
+            o,
+        ],
+        &[
+            "the discrete transfer function's ",
+            ", computed from the model's matrices, is ",
+            ", not a finite number: the model cannot be exported",
+        ],
+    );
+    assert!(!out.exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
