@@ -615,6 +615,29 @@ pub enum DataError {
         /// what is wrong
         reason: String,
     },
+    /// the comments' sample interval and the time column's contradict each other (a
+    /// header of 2 kHz over a time column at 1 kHz read as one gap after every sample)
+    #[error(
+        "{file}:{line}: the comments give a sample interval of {} s ({} Hz), but the time \
+         column's samples are {} s apart ({} Hz, the median of its {intervals} intervals): \
+         one of them is wrong; correct `sample_interval_s` or the time column",
+        fmt_sig(*stated_s, 6),
+        fmt_sig(1.0 / stated_s, 6),
+        fmt_sig(*column_s, 6),
+        fmt_sig(1.0 / column_s, 6)
+    )]
+    RateContradiction {
+        /// file name
+        file: String,
+        /// line of the `sample_interval_s` comment (1-based)
+        line: usize,
+        /// the comment's interval [s]
+        stated_s: f64,
+        /// the time column's interval, the median of its intervals [s]
+        column_s: f64,
+        /// the time column's intervals
+        intervals: usize,
+    },
     /// no whole excitation period could be found
     #[error("{file}: no whole excitation period: {reason}")]
     NoPeriods {
