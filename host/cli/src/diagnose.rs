@@ -47,7 +47,8 @@ pub struct DiagnoseArgs {
     /// validation capture (same columns), on which every candidate is scored
     #[arg(long, value_name = "VAL")]
     pub validation: PathBuf,
-    /// the user's simulation: `simulate --params-out` output or a jointid model file
+    /// the user's simulation: `simulate --params-out` output or a jointid model file (`-`
+    /// for standard input)
     #[arg(long, value_name = "SIM.json", conflicts_with = "model")]
     pub sim: Option<PathBuf>,
     /// the axis is linear (force [N] → position [m]): the report's units kg, N·s/m, N, N/m,
@@ -172,9 +173,9 @@ fn resolve(model: Option<&str>, flags: &[String]) -> Result<Resolved, String> {
 
 /// The user's simulation from `simulate --params-json` output or a model file.
 fn user_sim(path: &std::path::Path) -> Result<UserSim, String> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| format!("--sim {}: {e}", path.display()))?;
-    let name = path.display().to_string();
+    let name = jointid::data::input::input_name(path);
+    let text = jointid::data::input::read_input_text(path)
+        .map_err(|e| format!("--sim {name}: {}", jointid::data::output::io_msg(&e)))?;
     if let Ok(cfg) = serde_json::from_str::<SimConfig>(&text) {
         return Ok(UserSim {
             name,
@@ -185,13 +186,12 @@ fn user_sim(path: &std::path::Path) -> Result<UserSim, String> {
     }
     let saved: SavedModel = serde_json::from_str(&text).map_err(|e| {
         format!(
-            "--sim {}: neither `simulate --params-json` output nor a jointid model file: {e}",
-            path.display()
+            "--sim {name}: neither `simulate --params-json` output nor a jointid model file: {e}"
         )
     })?;
     let fit = saved
         .to_nonlinear()
-        .map_err(|e| format!("--sim {}: {e}", path.display()))?;
+        .map_err(|e| format!("--sim {name}: {e}"))?;
     Ok(UserSim {
         name,
         plant: sim_plant(&fit.model, &fit.plant),

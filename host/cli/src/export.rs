@@ -1,4 +1,5 @@
-//! `jointid export RUN.jcap --csv RUN.csv`: the capture CSV of ../shared/DESIGN.md §5;
+//! `jointid export RUN.jcap --csv RUN.csv`: the capture CSV of ../shared/DESIGN.md §5
+//! (`-` reads the capture from standard input, whole);
 //! `--mat RUN.mat`: the same columns as MATLAB vectors ([`jointid::capture::export::export_mat`]).
 //!
 //! Writes only the samples that arrived; the `# gaps=` comment lists what did not (see
@@ -16,13 +17,14 @@ use serde::Serialize;
 use super::{CmdResult, Context, Outcome};
 use jointid::capture::{export, read_jcap_session, session_ids, DamagedFrame, SeqGap};
 
+use jointid::data::input::input_name;
 use jointid::data::output::check_output;
 
 /// Arguments of `jointid export`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
 #[command(group(clap::ArgGroup::new("to").required(true).multiple(true).args(["csv", "mat"])))]
 pub struct ExportArgs {
-    /// Capture file to read
+    /// Capture file to read (`-` for standard input)
     #[arg(value_name = "RUN.jcap")]
     pub input: PathBuf,
     /// CSV file to write (`-` for stdout)
@@ -108,7 +110,7 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
         let list: Vec<String> = ids.iter().map(u32::to_string).collect();
         notes.push(format!(
             "{} holds {} sessions ({}); exported session {} (choose another with --session K)",
-            args.input.display(),
+            input_name(&args.input),
             ids.len(),
             list.join(", "),
             record.header.session_id
@@ -139,7 +141,7 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     if ctx.json {
         let summary = ExportSummary {
-            file: args.input.display().to_string(),
+            file: input_name(&args.input),
             csv: args.csv.as_ref().map(|p| p.display().to_string()),
             mat: args.mat.as_ref().map(|p| p.display().to_string()),
             session_id: record.header.session_id,

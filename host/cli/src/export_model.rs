@@ -13,7 +13,8 @@ use std::fmt::Write as _;
 use std::io::Write;
 use std::path::PathBuf;
 
-use jointid::data::output::{check_output, write_file};
+use jointid::data::input::{input_name, read_input_text};
+use jointid::data::output::{check_output, io_msg, write_file};
 use jointid::ident::model_export::{ModelExport, SsJson, TransferFunction};
 use jointid::ident::model_file::SavedModel;
 use serde_json::json;
@@ -37,7 +38,7 @@ pub enum ModelFormat {
 /// Arguments of `jointid export-model`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
 pub struct ExportModelArgs {
-    /// Model file written by `jointid fit --save`
+    /// Model file written by `jointid fit --save` (`-` for standard input)
     #[arg(value_name = "MODEL.json")]
     pub model: PathBuf,
     /// Output form
@@ -65,8 +66,8 @@ pub fn run(args: &ExportModelArgs, ctx: &mut Context<'_>) -> CmdResult {
     } else if args.format == ModelFormat::Mat {
         return Err("--format mat writes a binary file: name it with --out FILE".into());
     }
-    let name = args.model.display().to_string();
-    let text = std::fs::read_to_string(&args.model).map_err(|e| format!("{name}: {e}"))?;
+    let name = input_name(&args.model);
+    let text = read_input_text(&args.model).map_err(|e| format!("{name}: {}", io_msg(&e)))?;
     let saved: SavedModel = serde_json::from_str(&text)
         .map_err(|e| format!("{name}: not a model file of `jointid fit --save`: {e}"))?;
     if saved.nonlinear.is_some() {

@@ -113,8 +113,8 @@ pub struct FitArgs {
     /// effect's key such as `k3` or `fc`), repeatable
     #[arg(long = "fix", value_name = "NAME=VALUE")]
     pub fix: Vec<String>,
-    /// nonlinear fit: start from this model file (written by `fit --save` with effects)
-    /// instead of the automatic start
+    /// nonlinear fit: start from this model file (written by `fit --save` with effects;
+    /// `-` for standard input) instead of the automatic start
     #[arg(long, value_name = "MODEL.json")]
     pub start: Option<PathBuf>,
     /// friction of the rigid model
@@ -357,13 +357,14 @@ fn parse_fixes(fix: &[String]) -> Result<Vec<(String, f64)>, String> {
 
 /// The previous fit in the model file `--start PATH`.
 fn read_start(path: &Path) -> Result<jointid::ident::nonlinear::NlFit, String> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| format!("--start {}: {e}", path.display()))?;
+    let name = jointid::data::input::input_name(path);
+    let text = jointid::data::input::read_input_text(path)
+        .map_err(|e| format!("--start {name}: {}", jointid::data::output::io_msg(&e)))?;
     let saved: SavedModel = serde_json::from_str(&text)
-        .map_err(|e| format!("--start {}: not a jointid model file: {e}", path.display()))?;
+        .map_err(|e| format!("--start {name}: not a jointid model file: {e}"))?;
     saved
         .to_nonlinear()
-        .map_err(|e| format!("--start {}: {e}", path.display()))
+        .map_err(|e| format!("--start {name}: {e}"))
 }
 
 /// Runs `jointid fit`: the request from the flags, the records, one call of

@@ -56,7 +56,8 @@ use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::jcap::{write_stream_with, JcapError};
-use jointid::data::output::{check_output, check_room, write_file, OutputError};
+use jointid::data::input::{input_name, read_input_text};
+use jointid::data::output::{check_output, check_room, io_msg, write_file, OutputError};
 use jointid::data::{capture_csv_comments, ExcitationConfig, SignalKind, TableWriter};
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::sim_plant;
@@ -195,7 +196,8 @@ pub struct SimulateArgs {
     #[arg(long = "param", value_name = "NAME=VALUE")]
     pub params: Vec<String>,
     /// the plant and effects of a model fitted with effects (`jointid fit --effect ...
-    /// --save MODEL.json`) instead of --model; --param and --effect apply on top of it
+    /// --save MODEL.json`, `-` for standard input) instead of --model; --param and --effect
+    /// apply on top of it
     #[arg(long, value_name = "MODEL.json")]
     pub model_file: Option<PathBuf>,
     /// effect spec, repeatable: `name` or `name:key=value,...` (e.g. `backlash:width=2e-5`),
@@ -516,19 +518,14 @@ fn fitted_plant(
     path: &Path,
 ) -> Result<(Plant, Vec<jointid::model::effects::Effect>), Box<dyn std::error::Error + Send + Sync>>
 {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("--model-file {}: {e}", path.display()))?;
-    let saved: SavedModel = serde_json::from_str(&text).map_err(|e| {
-        format!(
-            "--model-file {}: not a jointid model file: {e}",
-            path.display()
-        )
-    })?;
+    let name = input_name(path);
+    let text = read_input_text(path).map_err(|e| format!("--model-file {name}: {}", io_msg(&e)))?;
+    let saved: SavedModel = serde_json::from_str(&text)
+        .map_err(|e| format!("--model-file {name}: not a jointid model file: {e}"))?;
     let fit = saved.to_nonlinear().map_err(|e| {
         format!(
-            "--model-file {}: {e} (a linear model file has no plant for the simulator; \
-             use --model and --param)",
-            path.display()
+            "--model-file {name}: {e} (a linear model file has no plant for the simulator; \
+             use --model and --param)"
         )
     })?;
     Ok((sim_plant(&fit.model, &fit.plant), fit.model.effects.clone()))

@@ -1,11 +1,13 @@
 //! What a command reads and where it writes (hardening issue, item 10), run on the built
-//! binary: a capture CSV whose comments state another rate than its time column is
-//! refused naming both rates (it was read as a gap after every sample: "11999 gaps",
-//! "--lags 25: … have 1 samples").
+//! binary: every command that reads a capture or a model file takes `-` for standard
+//! input, read whole (`export -` and `export-model -` looked for a file named `-`); a
+//! capture CSV whose comments state another rate than its time column is refused naming
+//! both rates (it was read as a gap after every sample: "11999 gaps", "--lags 25: … have
+//! 1 samples").
 
 #[allow(dead_code)] // not every helper is used here
 mod common;
-use common::{jointid, simulated, tmpdir};
+use common::{jointid, jointid_stdin, json_of, simulated, tmpdir};
 
 /// `jointid ARGS` must exit 2 with one line on standard error containing every one of
 /// `msgs`; its text.
@@ -71,5 +73,116 @@ fn a_capture_csv_whose_comments_state_another_rate_than_its_time_column_is_refus
     // the same file at its own rate reads
     let o = jointid(&["info", &run]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `jointid ARGS` with `input` on standard input, run to success; its standard output.
+fn piped(args: &[&str], input: &[u8]) -> Vec<u8> {
+    let o = jointid_stdin(args, input);
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    o.stdout
+}
+
+#[test]
+fn every_command_that_reads_a_capture_or_a_model_takes_dash_for_standard_input() {
+    let dir = tmpdir("stdin");
+    let run = simulated(&dir, "run.jcap", &["--model", "two-mass", "--periods", "3"]);
+    let jcap = std::fs::read(&run).unwrap();
+    let path = |n: &str| dir.join(n).display().to_string();
+    let (linear, nonlinear) = (path("m.json"), path("nl.json"));
+    json_of(&jointid(&[
+        "fit", &run, "--model", "two-mass", "--save", &linear, "--json",
+    ]));
+    json_of(&jointid(&[
+        "fit",
+        &run,
+        "--model",
+        "rigid",
+        "--effect",
+        "coulomb_friction",
+        "--save",
+        &nonlinear,
+        "--json",
+    ]));
+    let model = std::fs::read(&linear).unwrap();
+    let effects = std::fs::read(&nonlinear).unwrap();
+    let json = |bytes: Vec<u8>| -> serde_json::Value { serde_json::from_slice(&bytes).unwrap() };
+
+    // a capture: what the file gives, named `standard input`
+    let info = json(piped(&["info", "-", "--json"], &jcap));
+    assert_eq!(info["file"], "standard input");
+    assert_eq!(
+        info["samples"],
+        json_of(&jointid(&["info", &run, "--json"]))["samples"]
+    );
+    let csv = piped(&["export", "-", "--csv", "-"], &jcap);
+    assert_eq!(csv, jointid(&["export", &run, "--csv", "-"]).stdout);
+    let out = path("e.csv");
+    let e = json(piped(&["export", "-", "--csv", &out, "--json"], &jcap));
+    assert_eq!(e["file"], "standard input");
+    assert_eq!(std::fs::read(&out).unwrap(), csv);
+
+    // a model file
+    for format in ["python-control", "json-ss"] {
+        assert_eq!(
+            piped(&["export-model", "-", "--format", format], &model),
+            jointid(&["export-model", &linear, "--format", format]).stdout,
+            "{format}"
+        );
+    }
+    let v = json(piped(&["validate", "-", &run, "--json"], &model));
+    let by_file = json_of(&jointid(&["validate", &linear, &run, "--json"]));
+    assert_eq!(v["fit"], by_file["fit"]);
+    assert_eq!(v["model_file"], "standard input");
+    let s = json(piped(
+        &[
+            "simulate",
+            "--model-file",
+            "-",
+            "--periods",
+            "1",
+            "--out",
+            &path("s.csv"),
+            "--json",
+        ],
+        &effects,
+    ));
+    assert_eq!(s["model"], "rigid");
+    let f = json(piped(
+        &[
+            "fit",
+            &run,
+            "--model",
+            "rigid",
+            "--effect",
+            "coulomb_friction",
+            "--start",
+            "-",
+            "--json",
+        ],
+        &effects,
+    ));
+    assert!(f["fit_estimation"].as_f64().is_some(), "{f}");
+
+    // `-` twice in one command: both read the same bytes (a stream read once)
+    let f = json(piped(
+        &[
+            "fit",
+            "-",
+            "--model",
+            "two-mass",
+            "--validation",
+            "-",
+            "--json",
+        ],
+        &jcap,
+    ));
+    assert_eq!(f["file"], "standard input");
+    assert_eq!(f["validation_file"], "standard input");
+    assert_eq!(f["fit_estimation"], f["fit_validation"]);
     std::fs::remove_dir_all(&dir).unwrap();
 }

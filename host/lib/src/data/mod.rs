@@ -8,6 +8,8 @@
 //! - the one rule of every output file (no overwrite without `--force`, whole or not at
 //!   all) in [`output`];
 //! - samples far outside their record (outliers, on a robust scale) in [`screen`];
+//! - where an input comes from (a file, or `-` for standard input read whole) and how
+//!   messages name it in [`input`];
 //! - [`IdData`], [`Dataset`], whole excitation periods and the loader registry here.
 //!
 //! What: read the capture CSV of ../shared/DESIGN.md §5 (and any CSV with a column
@@ -93,6 +95,7 @@ impl fmt::Display for Percent {
 }
 
 pub mod dsp;
+pub mod input;
 pub mod mat;
 pub mod output;
 pub mod prep;
@@ -841,25 +844,14 @@ impl Loaders {
     /// [`DataError::Loader`] wrapping a loader's error, [`DataError::NotText`] for other
     /// binary content, else as [`csv::parse_csv_record`].
     pub fn load_record(&self, path: &Path, map: &ColumnMap) -> Result<Record, DataError> {
-        let stdin = path.as_os_str() == "-";
-        let name = if stdin {
-            "standard input".to_string()
-        } else {
-            path.display().to_string()
-        };
-        let bytes = if stdin {
-            let mut b = Vec::new();
-            std::io::Read::read_to_end(&mut std::io::stdin().lock(), &mut b).map(|_| b)
-        } else {
-            std::fs::read(path)
-        }
-        .map_err(|source| DataError::Io {
+        let name = input::input_name(path);
+        let bytes = input::read_input(path).map_err(|source| DataError::Io {
             file: name.clone(),
             source,
         })?;
         let input = Input {
             name: &name,
-            path: (!stdin).then_some(path),
+            path: (!input::is_stdin(path)).then_some(path),
             bytes: &bytes,
         };
         self.load_input(&input, map)
