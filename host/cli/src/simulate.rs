@@ -26,6 +26,11 @@
 //!   `--out`'s file system is refused before the simulation
 //!   ([`jointid::data::output::check_room`]), not after filling it. A device or pipe is a
 //!   stream and is not checked.
+//! - A device or pipe (`/dev/stdout`, a named pipe, [`jointid::data::output::is_stream`])
+//!   is written in place, as the capture CSV unless its name ends in `.jcap`; what it got
+//!   cannot be taken back, so the run is simulated once before it is written (twice the
+//!   time, constant memory) and a run that stops writes nothing there either. With
+//!   `--out /dev/stdout` the report (text or `--json`) goes to standard error.
 //! - The run is streamed: each sample is simulated ([`jointid::sim::Simulation`]), encoded
 //!   ([`jointid::sim::board::stream_session`]) or formatted ([`TableWriter`]) and written
 //!   as it comes, so memory does not grow with `--periods`; a simulation that stops (its
@@ -57,7 +62,9 @@ use serde::Serialize;
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::jcap::{write_stream_with, JcapError};
 use jointid::data::input::{input_name, read_input_text};
-use jointid::data::output::{check_output, check_room, io_msg, write_file, OutputError};
+use jointid::data::output::{
+    check_output, check_room, io_msg, is_stream, names_standard_output, write_file, OutputError,
+};
 use jointid::data::{capture_csv_comments, ExcitationConfig, SignalKind, TableWriter};
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::sim_plant;
@@ -303,8 +310,11 @@ pub enum SimulateError {
         /// its range and unit
         range: ParamRange,
     },
-    /// `--out` with an extension other than `.jcap` or `.csv`
-    #[error("{path}: --out must end in .jcap or .csv")]
+    /// `--out` with an extension other than `.jcap` or `.csv`, and no device or pipe
+    #[error(
+        "{path}: --out must end in .jcap or .csv (or be a device or a pipe, which takes the \
+         capture CSV)"
+    )]
     OutExtension {
         /// the path given
         path: PathBuf,
@@ -429,11 +439,14 @@ impl OutFormat {
     }
 }
 
-/// The format `path` asks for (extension `.jcap` or `.csv`, any case).
+/// The format `path` asks for: its extension `.jcap` or `.csv` (any case), else the
+/// capture CSV when it is a `stream` (a device, a pipe, `/dev/stdout`:
+/// [`jointid::data::output::is_stream`]), the text a terminal shows and `jointid info -`
+/// reads.
 ///
 /// # Errors
 /// [`SimulateError::OutExtension`] for anything else.
-pub fn out_format(path: &Path) -> Result<OutFormat, SimulateError> {
+pub fn out_format(path: &Path, stream: bool) -> Result<OutFormat, SimulateError> {
     match path
         .extension()
         .and_then(|e| e.to_str())
@@ -441,6 +454,7 @@ pub fn out_format(path: &Path) -> Result<OutFormat, SimulateError> {
     {
         Some(e) if e == "jcap" => Ok(OutFormat::Jcap),
         Some(e) if e == "csv" => Ok(OutFormat::Csv),
+        _ if stream => Ok(OutFormat::Csv),
         _ => Err(SimulateError::OutExtension {
             path: path.to_path_buf(),
         }),
@@ -666,12 +680,35 @@ fn write_run(
     Ok((summary.expect("a run that was written"), written))
 }
 
+/// Simulates the run of `cfg` on `exc` as [`write_run`] does, writing nothing: its first
+/// non-finite sample or a sample the wire cannot carry (`.jcap`) is the error.
+///
+/// # Errors
+/// The simulation's ([`StreamError`]).
+fn dry_run(
+    format: OutFormat,
+    cfg: &SimConfig,
+    exc: &ExcitationConfig,
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    match format {
+        OutFormat::Jcap => {
+            let opts = WireOptions::for_sim(cfg);
+            stream_session(cfg, exc, &opts, &mut std::io::sink(), |_| {})?;
+        }
+        OutFormat::Csv => {
+            stream_excitation(cfg, exc, |_| Ok::<(), StreamError>(()))?;
+        }
+    }
+    Ok(())
+}
+
 /// Runs `jointid simulate`.
 ///
 /// # Errors
 /// Bad `--param`, `--effect` or `--out`, invalid configuration or excitation, write errors.
 pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
-    let format = out_format(&args.out)?;
+    let stream = is_stream(&args.out)?;
+    let format = out_format(&args.out, stream)?;
     // both outputs are checked before the work, so that neither is written when the other
     // cannot be
     check_output(&args.out, args.force)?;
@@ -691,6 +728,11 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         err,
     })?;
     let params = cfg.params_json()? + "\n";
+    if stream {
+        // a device or pipe cannot take back what it got: the run must complete before any
+        // of it goes there (simulated twice, in constant memory)
+        dry_run(format, &cfg, &exc)?;
+    }
     let (mut u, mut theta_m) = (Moments::default(), Moments::default());
     let (summary, stream_bytes) = write_run(args, format, &cfg, &exc, |s| {
         u.push(s.u);
@@ -720,11 +762,17 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         anti_resonances_hz: modes.anti_resonances_hz,
         config: &cfg,
     };
+    // with the run on standard output, the report goes to standard error
+    let mut stderr = std::io::stderr().lock();
+    let o: &mut dyn std::io::Write = if names_standard_output(&args.out) {
+        &mut stderr
+    } else {
+        &mut *ctx.out
+    };
     if ctx.json {
-        print_json(ctx.out, "simulate", &report)?;
+        print_json(o, "simulate", &report)?;
         return Ok(Outcome::Ok);
     }
-    let o = &mut *ctx.out;
     writeln!(
         o,
         "simulated {} samples, {:.2} s at {} Hz",
@@ -1022,11 +1070,27 @@ mod tests {
         let err = run_cli(&cli).0.unwrap_err();
         assert_eq!(
             err.to_string(),
-            format!("{}: --out must end in .jcap or .csv", out.display())
+            format!(
+                "{}: --out must end in .jcap or .csv (or be a device or a pipe, which takes \
+                 the capture CSV)",
+                out.display()
+            )
         );
         assert!(!out.exists());
-        assert_eq!(out_format(Path::new("A.JCAP")).unwrap(), OutFormat::Jcap);
-        assert!(out_format(Path::new("run")).is_err());
+        assert_eq!(
+            out_format(Path::new("A.JCAP"), false).unwrap(),
+            OutFormat::Jcap
+        );
+        assert!(out_format(Path::new("run"), false).is_err());
+        // a device or pipe without an extension takes the capture CSV
+        assert_eq!(
+            out_format(Path::new("/dev/stdout"), true).unwrap(),
+            OutFormat::Csv
+        );
+        assert_eq!(
+            out_format(Path::new("fifo.jcap"), true).unwrap(),
+            OutFormat::Jcap
+        );
     }
 
     #[test]

@@ -186,3 +186,88 @@ fn every_command_that_reads_a_capture_or_a_model_takes_dash_for_standard_input()
     assert_eq!(f["fit_estimation"], f["fit_validation"]);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn simulate_writes_a_device_or_pipe_in_place_and_a_run_that_stops_writes_nothing_there() {
+    let dir = tmpdir("devices");
+    let path = |n: &str| dir.join(n).display().to_string();
+    let args = |out: &str| -> Vec<String> {
+        [
+            "simulate",
+            "--model",
+            "two-mass",
+            "--periods",
+            "1",
+            "--out",
+            out,
+            "--json",
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let run = |args: &[String]| jointid(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let file = run(&args(&path("run.csv")));
+    assert!(
+        file.status.success(),
+        "{}",
+        String::from_utf8_lossy(&file.stderr)
+    );
+    let csv = std::fs::read(path("run.csv")).unwrap();
+
+    // standard output (a pipe here) gets the capture CSV, the report goes to standard error
+    let o = run(&args("/dev/stdout"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        o.stdout == csv,
+        "{}",
+        String::from_utf8_lossy(&o.stdout[..200])
+    );
+    let report: serde_json::Value = serde_json::from_str(&err).unwrap();
+    assert_eq!(report["out"], "/dev/stdout");
+    assert_eq!(report["format"], "csv");
+    let o = run(&args("/dev/null"));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    // a named pipe, its name asking for a .jcap: read as it is written, no temporary file
+    let fifo = path("pipe.jcap");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read(fifo).unwrap())
+    };
+    let o = run(&args(&fifo));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let got = reader.join().unwrap();
+    let file = run(&args(&path("run.jcap")));
+    assert!(file.status.success());
+    assert!(
+        got == std::fs::read(path("run.jcap")).unwrap(),
+        "{} bytes",
+        got.len()
+    );
+    let names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.iter().all(|n| !n.ends_with(".tmp")), "{names:?}");
+
+    // a run that stops (its state not finite) writes nothing, even where nothing can be
+    // taken back
+    let mut diverging = args("/dev/stdout");
+    diverging.extend(["--effect".into(), "coulomb_friction:fv_neg_extra=-1".into()]);
+    let o = run(&diverging);
+    assert_eq!(o.status.code(), Some(2));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.starts_with("{\"schema\":\"jointid-error/1\"")
+            && text.contains("not finite at sample"),
+        "{text}"
+    );
+    assert_eq!(text.lines().count(), 1, "a sample was written: {text}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
