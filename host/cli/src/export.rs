@@ -6,7 +6,7 @@
 //! [`jointid::capture::export`]). An existing CSV is replaced only with `--force`; the CSV
 //! is written to a temporary file beside it and renamed, so a half-written export never
 //! looks complete ([`jointid::data::output`]); `--csv -` writes to stdout (and `--json`'s
-//! document then goes to stderr).
+//! document then goes to stderr), as does `--csv /dev/stdout`, written in place.
 //! Exit status: 0 exported, 1 `--strict` and something is missing or damaged, 2 error.
 
 use std::io::Write;
@@ -18,7 +18,7 @@ use super::{CmdResult, Context, Outcome};
 use jointid::capture::{export, read_jcap_session, session_ids, DamagedFrame, SeqGap};
 
 use jointid::data::input::input_name;
-use jointid::data::output::check_output;
+use jointid::data::output::{check_output, names_standard_output};
 
 /// Arguments of `jointid export`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
@@ -80,6 +80,13 @@ struct ExportSummary<'a> {
 /// [`jointid::capture::CaptureError::Excitation`]) or writing the CSV ([`jointid::capture::CaptureError::Output`]).
 pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
     let to_stdout = args.csv.as_ref().is_some_and(|c| c.as_os_str() == "-");
+    // standard output carries an export (`--csv -`, or a file named `/dev/stdout`): the
+    // report goes to standard error
+    let stdout_taken = to_stdout
+        || [&args.csv, &args.mat]
+            .into_iter()
+            .flatten()
+            .any(|p| names_standard_output(p));
     if let Some(csv) = args.csv.as_ref().filter(|_| !to_stdout) {
         check_output(csv, args.force)?;
     }
@@ -117,7 +124,7 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
         ));
     }
     // with `--csv - --json` standard error carries the JSON document alone
-    if !(ctx.json && to_stdout) {
+    if !(ctx.json && stdout_taken) {
         for n in &notes {
             let _ = writeln!(std::io::stderr(), "note: {n}");
         }
@@ -125,7 +132,7 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
             std::io::stderr(),
             "exported {} samples{} ({} gaps, {} samples missing, {} damaged frames)",
             record.samples.len(),
-            if to_stdout {
+            if stdout_taken {
                 format!(" to {}", written.join(" and "))
             } else {
                 String::new()
@@ -135,7 +142,7 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
             r.damaged_frames.len()
         );
         // standard output lists the files, unless it carries the CSV
-        if !ctx.json && !to_stdout {
+        if !ctx.json && !stdout_taken {
             super::print_written(ctx.out, &written)?;
         }
     }
@@ -153,7 +160,7 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
             overruns: r.overruns,
             notes,
         };
-        if to_stdout {
+        if stdout_taken {
             super::print_json(&mut std::io::stderr().lock(), "export", &summary)?;
         } else {
             super::print_json(ctx.out, "export", &summary)?;

@@ -14,7 +14,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use jointid::data::input::{input_name, read_input_text};
-use jointid::data::output::{check_output, io_msg, write_file};
+use jointid::data::output::{check_output, io_msg, names_standard_output, write_file};
 use jointid::ident::model_export::{ModelExport, SsJson, TransferFunction};
 use jointid::ident::model_file::SavedModel;
 use serde_json::json;
@@ -116,7 +116,7 @@ pub fn run(args: &ExportModelArgs, ctx: &mut Context<'_>) -> CmdResult {
             continuous_note: ex.continuous_note.as_deref(),
         };
         // with the export itself on standard output, the summary goes to standard error
-        if args.out.is_some() {
+        if args.out.as_ref().is_some_and(|o| !names_standard_output(o)) {
             super::print_json(ctx.out, "export-model", &summary)?;
         } else {
             super::print_json(&mut std::io::stderr().lock(), "export-model", &summary)?;

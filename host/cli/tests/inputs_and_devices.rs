@@ -188,7 +188,7 @@ fn every_command_that_reads_a_capture_or_a_model_takes_dash_for_standard_input()
 }
 
 #[test]
-fn simulate_writes_a_device_or_pipe_in_place_and_a_run_that_stops_writes_nothing_there() {
+fn a_device_or_pipe_is_written_in_place_and_a_run_that_stops_writes_nothing_there() {
     let dir = tmpdir("devices");
     let path = |n: &str| dir.join(n).display().to_string();
     let args = |out: &str| -> Vec<String> {
@@ -228,6 +228,42 @@ fn simulate_writes_a_device_or_pipe_in_place_and_a_run_that_stops_writes_nothing
     assert_eq!(report["format"], "csv");
     let o = run(&args("/dev/null"));
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // the other writers: standard output carries the file alone
+    let jcap = path("run.jcap");
+    let file = run(&args(&jcap));
+    assert!(file.status.success());
+    let dash = jointid(&["export", &jcap, "--csv", "-"]).stdout;
+    for json in [false, true] {
+        let mut a = vec!["export", &jcap, "--csv", "/dev/stdout"];
+        a.extend(json.then_some("--json"));
+        let o = jointid(&a);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(o.stdout == dash, "{a:?}: not the CSV alone");
+    }
+    let model = path("m.json");
+    // (a fit takes two periods)
+    let two = simulated(&dir, "two.jcap", &["--periods", "2"]);
+    let fit = jointid(&["fit", &two, "--model", "black-box:2", "--save", &model]);
+    assert!(
+        fit.status.success(),
+        "{}",
+        String::from_utf8_lossy(&fit.stderr)
+    );
+    let script = jointid(&["export-model", &model, "--format", "python-control"]).stdout;
+    let o = jointid(&[
+        "export-model",
+        &model,
+        "--format",
+        "python-control",
+        "--out",
+        "/dev/stdout",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        o.stdout == script,
+        "export-model --out /dev/stdout: not the script alone"
+    );
 
     // a named pipe, its name asking for a .jcap: read as it is written, no temporary file
     let fifo = path("pipe.jcap");
@@ -243,13 +279,7 @@ fn simulate_writes_a_device_or_pipe_in_place_and_a_run_that_stops_writes_nothing
     let o = run(&args(&fifo));
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let got = reader.join().unwrap();
-    let file = run(&args(&path("run.jcap")));
-    assert!(file.status.success());
-    assert!(
-        got == std::fs::read(path("run.jcap")).unwrap(),
-        "{} bytes",
-        got.len()
-    );
+    assert!(got == std::fs::read(&jcap).unwrap(), "{} bytes", got.len());
     let names: Vec<String> = std::fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
