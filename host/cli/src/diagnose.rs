@@ -14,6 +14,7 @@ use clap::Args;
 use super::args::{check_same_rate, screen_for_fit, ColumnArgs, DataArgs, ReadArgs};
 use super::print::usable_segments;
 use super::{check_plot_files, print_json, print_written, write_svg, CmdResult, Context, Outcome};
+use jointid::data::input::path_text;
 use jointid::data::output::{check_output, write_file};
 use jointid::data::segment::{SegmentNotes, MIN_SEGMENT_SAMPLES};
 use jointid::data::{Dataset, Percent};
@@ -328,7 +329,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         );
         let html = diagnosis_html(&title, &d, &series)?;
         write_file(path, args.force, |w| w.write_all(html.as_bytes()))?;
-        files.push(path.display().to_string());
+        files.push(path_text(path));
     }
     if let Some(dir) = &args.plot {
         let figs = diagnosis_figures(&d, &series)?;
@@ -337,7 +338,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
             for (svg, name) in f.svgs.iter().zip(f.file_names()) {
                 let path = dir.join(name);
                 write_svg(&path, svg, args.force)?;
-                files.push(path.display().to_string());
+                files.push(path_text(&path));
             }
         }
     }

@@ -17,7 +17,7 @@ use serde::Serialize;
 use super::{CmdResult, Context, Outcome};
 use jointid::capture::{export, read_jcap_session, session_ids, DamagedFrame, SeqGap};
 
-use jointid::data::input::input_name;
+use jointid::data::input::{input_name, path_text};
 use jointid::data::output::{check_output, names_standard_output};
 
 /// Arguments of `jointid export`.
@@ -108,7 +108,7 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
     let written: Vec<String> = [&args.csv, &args.mat]
         .into_iter()
         .flatten()
-        .map(|p| p.display().to_string())
+        .map(|p| path_text(p))
         .collect();
     let r = &record.report;
     let ids = session_ids(r);
@@ -149,8 +149,8 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
     if ctx.json {
         let summary = ExportSummary {
             file: input_name(&args.input),
-            csv: args.csv.as_ref().map(|p| p.display().to_string()),
-            mat: args.mat.as_ref().map(|p| p.display().to_string()),
+            csv: args.csv.as_ref().map(|p| path_text(p)),
+            mat: args.mat.as_ref().map(|p| path_text(p)),
             session_id: record.header.session_id,
             rows: record.samples.len(),
             samples: r.samples,

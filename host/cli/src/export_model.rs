@@ -13,7 +13,7 @@ use std::fmt::Write as _;
 use std::io::Write;
 use std::path::PathBuf;
 
-use jointid::data::input::{input_name, read_input_text};
+use jointid::data::input::{input_name, path_text, read_input_text};
 use jointid::data::output::{check_output, io_msg, names_standard_output, write_file};
 use jointid::ident::model_export::{ModelExport, SsJson, TransferFunction};
 use jointid::ident::model_file::SavedModel;
@@ -107,7 +107,7 @@ pub fn run(args: &ExportModelArgs, ctx: &mut Context<'_>) -> CmdResult {
         let summary = Summary {
             file: name,
             format: args.format,
-            out: args.out.as_ref().map(|p| p.display().to_string()),
+            out: args.out.as_ref().map(|p| path_text(p)),
             input: &ex.input,
             output: &ex.output,
             ts: ex.ts,

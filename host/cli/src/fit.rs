@@ -23,6 +23,7 @@ use super::args::{check_columns, one_of, parse_lags, screen_for_fit, FitDataArgs
 use super::print::print_notes;
 use super::views::{Signals, VIEW_FILES};
 use super::{check_plot_files, fit_report, CmdResult, Context, Outcome};
+use jointid::data::input::path_text;
 use jointid::data::output::check_output;
 use jointid::data::segment::{segment_list, whole_periods};
 use jointid::data::{fmt_sig, Selected};
@@ -421,13 +422,13 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     let mut files = Vec::new();
     if let Some(path) = &args.save {
         save_model(path, &out.to_saved(req.prep), args.force)?;
-        files.push(path.display().to_string());
+        files.push(path_text(path));
     }
     match &out.model {
         FittedModel::Nonlinear(nl) => {
             if let (Some(dir), Some(fig)) = (&args.plot, &nl.velocity) {
                 let p = fit_report::write_velocity_plot(dir, fig, args.force)?;
-                files.push(p.display().to_string());
+                files.push(path_text(&p));
             }
             let (start, saved) = (args.start.as_deref(), args.save.as_deref());
             fit_report::print_nonlinear(ctx.out, ctx.json, &out, nl, start, saved, files)?;

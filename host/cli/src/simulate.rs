@@ -61,7 +61,7 @@ use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::jcap::{write_stream_with, JcapError};
-use jointid::data::input::{input_name, read_input_text};
+use jointid::data::input::{input_name, path_text, read_input_text};
 use jointid::data::output::{
     check_output, check_room, io_msg, is_stream, names_standard_output, write_file, OutputError,
 };
@@ -745,13 +745,13 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     let modes = Mechanism::new(&cfg.plant, &cfg.effects).modal_frequencies();
     let report = Report {
-        file: args.out.display().to_string(),
+        file: path_text(&args.out),
         format,
         model: cfg.plant.kind.label(),
         effects: cfg.effects.iter().map(|e| e.to_string()).collect(),
         samples: summary.samples,
         duration_s: summary.samples as f64 * summary.sample_interval_s,
-        params_out: args.params_out.as_ref().map(|p| p.display().to_string()),
+        params_out: args.params_out.as_ref().map(|p| path_text(p)),
         scale,
         stream_bytes,
         integrator: summary.integrator,

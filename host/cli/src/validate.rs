@@ -16,7 +16,7 @@
 //! tests FAIL) or when `--require-fit X` was given and the FIT is below X;
 //! 2 on any error.
 
-use jointid::data::input::{input_name, read_input_text};
+use jointid::data::input::{input_name, path_text, read_input_text};
 use jointid::data::output::io_msg;
 use std::path::PathBuf;
 
@@ -310,7 +310,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
         };
         files = write_views(dir, &views, args.force)?
             .iter()
-            .map(|p| p.display().to_string())
+            .map(|p| path_text(p))
             .collect();
     }
     // a diverged simulation is never ok, with or without --require-fit

@@ -3,7 +3,9 @@
 //! input, read whole (`export -` and `export-model -` looked for a file named `-`); a
 //! capture CSV whose comments state another rate than its time column is refused naming
 //! both rates (it was read as a gap after every sample: "11999 gaps", "--lags 25: … have
-//! 1 samples").
+//! 1 samples"); a device or pipe given as an output is written in place (`simulate --out
+//! /dev/stdout` was refused); a file name that is not UTF-8 is named losslessly (`--json`
+//! gave U+FFFD in its place).
 
 #[allow(dead_code)] // not every helper is used here
 mod common;
@@ -299,5 +301,109 @@ fn a_device_or_pipe_is_written_in_place_and_a_run_that_stops_writes_nothing_ther
         "{text}"
     );
     assert_eq!(text.lines().count(), 1, "a sample was written: {text}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The bytes of a name as `--json` and the messages give it: `\\` a backslash, `\xHH` a
+/// byte, anything else itself.
+fn name_bytes(text: &str) -> Vec<u8> {
+    let (mut out, b) = (Vec::new(), text.as_bytes());
+    let mut i = 0;
+    while i < b.len() {
+        match (b[i], b.get(i + 1)) {
+            (b'\\', Some(b'\\')) => {
+                out.push(b'\\');
+                i += 2;
+            }
+            (b'\\', Some(b'x')) => {
+                out.push(u8::from_str_radix(&text[i + 2..i + 4], 16).unwrap());
+                i += 4;
+            }
+            (c, _) => {
+                out.push(c);
+                i += 1;
+            }
+        }
+    }
+    out
+}
+
+#[cfg(unix)]
+#[test]
+fn a_file_name_that_is_not_utf8_is_named_losslessly_in_json_and_messages() {
+    use std::ffi::OsStr;
+    use std::os::unix::ffi::OsStrExt;
+    use std::process::Command;
+    let dir = tmpdir("names");
+    // (analyze estimates the noise from 2 periods after the first)
+    let run = simulated(&dir, "run.jcap", &["--model", "two-mass", "--periods", "3"]);
+    // Latin-1 `runé.jcap`, `outé.csv`: names a shell passes as bytes
+    let latin1 = |name: &[u8]| dir.join(OsStr::from_bytes(name));
+    let (input, output) = (latin1(b"run\xe9.jcap"), latin1(b"out\xe9.csv"));
+    std::fs::copy(&run, &input).unwrap();
+    let prefix = dir.display().to_string();
+    let named = |v: &serde_json::Value, field: &str, path: &std::path::Path| {
+        let text = v[field]
+            .as_str()
+            .unwrap_or_else(|| panic!("{field} in {v}"));
+        assert!(!text.contains('\u{fffd}'), "{field}: {text}");
+        assert_eq!(
+            name_bytes(text),
+            path.as_os_str().as_bytes(),
+            "{field}: {text}"
+        );
+    };
+    let json = |args: &[&OsStr]| -> serde_json::Value {
+        let o = Command::new(common::BIN).args(args).output().unwrap();
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let os = |s: &'static str| OsStr::new(s);
+    let i = input.as_os_str();
+    named(&json(&[os("info"), i, os("--json")]), "file", &input);
+    named(&json(&[os("analyze"), i, os("--json")]), "file", &input);
+    named(
+        &json(&[os("fit"), i, os("--model"), os("black-box:2"), os("--json")]),
+        "file",
+        &input,
+    );
+    let e = json(&[
+        os("export"),
+        i,
+        os("--csv"),
+        output.as_os_str(),
+        os("--json"),
+    ]);
+    named(&e, "file", &input);
+    named(&e, "csv", &output);
+    assert!(output.exists());
+    let s = json(&[
+        os("simulate"),
+        os("--periods"),
+        os("1"),
+        os("--out"),
+        output.as_os_str(),
+        os("--force"),
+        os("--json"),
+    ]);
+    named(&s, "out", &output);
+    // a message names it the same way
+    let missing = latin1(b"none\xe9.jcap");
+    let o = Command::new(common::BIN)
+        .args([os("info"), missing.as_os_str()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains(&format!(
+            "{prefix}/none\\xE9.jcap: no such file or directory"
+        )),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
