@@ -9,6 +9,7 @@ use serde::Serialize;
 
 use super::args::{column_of, outlier_line, ColumnArgs, DataArgs, ReadArgs};
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
+use jointid::data::input::path_text;
 use jointid::data::screen::{Outlier, MAX_MAGNITUDE, OUTLIER_SIGMAS};
 use jointid::data::{fmt_sig, Dataset, Percent, Selected, SignalKind};
 use jointid::ident::frf::{
@@ -167,7 +168,7 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
             &bode_svg(&format!("FRF u -> theta_m: {}", ds.name), Some(&band), &[])?,
             args.force,
         )?;
-        plots = vec![spec.display().to_string(), frf.display().to_string()];
+        plots = vec![path_text(&spec), path_text(&frf)];
     }
     let detected = a.distortion_detected();
     let significant = a.distortion_significant();

@@ -347,7 +347,8 @@ impl PrepArgs {
 /// analysis command, `--output-col` accepted as another name of `--output`.
 #[derive(Debug, Clone, Args)]
 pub struct FitDataArgs {
-    /// data file: capture CSV (`t,theta_ref,u,theta_m`), a mapped CSV, or `.jcap`
+    /// data file: capture CSV (`t,theta_ref,u,theta_m`), a mapped CSV, or `.jcap`; `-`
+    /// for standard input
     #[arg(value_name = "DATA")]
     pub path: PathBuf,
     /// which columns hold the signals

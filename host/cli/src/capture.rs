@@ -21,6 +21,7 @@ use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::{
     record_capture, CaptureOptions, CaptureReport, Progress, SourceSpec, StopRule,
 };
+use jointid::data::input::path_text;
 
 /// Default serial baud rate: 2 kHz of samples needs about 420 kbaud (field notes §0.7).
 pub const DEFAULT_BAUD: u32 = 921_600;
@@ -259,7 +260,7 @@ pub fn run(args: &CaptureArgs, ctx: &mut Context<'_>) -> CmdResult {
     bar.finish_and_clear();
     let outcome = outcome?;
     let summary = CaptureSummary {
-        out: opts.out.display().to_string(),
+        out: path_text(&opts.out),
         stop: outcome.stop.to_string(),
         elapsed_s: outcome.elapsed.as_secs_f64(),
         report: outcome.report,
@@ -276,7 +277,7 @@ pub fn run(args: &CaptureArgs, ctx: &mut Context<'_>) -> CmdResult {
         // the capture and, when the host logged events, its sidecar
         let events = jointid::capture::jcap::events_path(&opts.out);
         let files: Vec<String> = std::iter::once(summary.out.clone())
-            .chain(events.is_file().then(|| events.display().to_string()))
+            .chain(events.is_file().then(|| path_text(&events)))
             .collect();
         super::print_written(ctx.out, &files)?;
     }

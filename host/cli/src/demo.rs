@@ -22,6 +22,7 @@ use serde::Serialize;
 use super::views::write_bode;
 use super::{check_plot_files, print_json, write_svg, CmdResult, Context, Outcome};
 use jointid::capture::jcap::write_stream;
+use jointid::data::input::path_text;
 use jointid::ident::frf::analyze_dataset;
 use jointid::ident::validate::FrfBand;
 use jointid::report::plot::{analysis_spectrum_svg, bode_svg};
@@ -103,8 +104,8 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
     let val_path = dir.join(FILES[1]);
     write_stream(&est_path, &est_stream, args.force)?;
     write_stream(&val_path, &val_stream, args.force)?;
-    let est_name = est_path.display().to_string();
-    let val_name = val_path.display().to_string();
+    let est_name = path_text(&est_path);
+    let val_name = path_text(&val_path);
     let est_ds = jointid::capture::load_dataset(&est_path)?;
     let val_ds = jointid::capture::load_dataset(&val_path)?;
     let mut files = vec![est_name.clone(), val_name.clone()];
@@ -116,7 +117,7 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
         &analysis_spectrum_svg("line spectra (seed 000 Fig. 3 style)", &a)?,
         args.force,
     )?;
-    files.push(spec.display().to_string());
+    files.push(path_text(&spec));
     let frf_path = dir.join(FILES[3]);
     write_svg(
         &frf_path,
@@ -127,7 +128,7 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
         )?,
         args.force,
     )?;
-    files.push(frf_path.display().to_string());
+    files.push(path_text(&frf_path));
 
     let (t, models) = table(&est_ds, &val_ds, &runs.sim, &PAPER_MODELS)?;
     let f = &models.fitted;
@@ -138,8 +139,8 @@ pub fn run(args: &DemoArgs, ctx: &mut Context<'_>) -> CmdResult {
     ));
     let p5 = write_bode(dir, FILES[4], &est_ds, 1, &[&f[0], &f[1]], &io, args.force)?;
     let p6 = write_bode(dir, FILES[5], &est_ds, 1, &[&f[0], &f[2]], &io, args.force)?;
-    files.push(p5.display().to_string());
-    files.push(p6.display().to_string());
+    files.push(path_text(&p5));
+    files.push(path_text(&p6));
     let seconds = t0.elapsed().as_secs_f64();
     if ctx.json {
         print_json(

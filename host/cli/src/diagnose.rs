@@ -14,6 +14,7 @@ use clap::Args;
 use super::args::{check_same_rate, screen_for_fit, ColumnArgs, DataArgs, ReadArgs};
 use super::print::usable_segments;
 use super::{check_plot_files, print_json, print_written, write_svg, CmdResult, Context, Outcome};
+use jointid::data::input::path_text;
 use jointid::data::output::{check_output, write_file};
 use jointid::data::segment::{SegmentNotes, MIN_SEGMENT_SAMPLES};
 use jointid::data::{Dataset, Percent};
@@ -47,7 +48,8 @@ pub struct DiagnoseArgs {
     /// validation capture (same columns), on which every candidate is scored
     #[arg(long, value_name = "VAL")]
     pub validation: PathBuf,
-    /// the user's simulation: `simulate --params-out` output or a jointid model file
+    /// the user's simulation: `simulate --params-out` output or a jointid model file (`-`
+    /// for standard input)
     #[arg(long, value_name = "SIM.json", conflicts_with = "model")]
     pub sim: Option<PathBuf>,
     /// the axis is linear (force [N] → position [m]): the report's units kg, N·s/m, N, N/m,
@@ -172,9 +174,9 @@ fn resolve(model: Option<&str>, flags: &[String]) -> Result<Resolved, String> {
 
 /// The user's simulation from `simulate --params-json` output or a model file.
 fn user_sim(path: &std::path::Path) -> Result<UserSim, String> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| format!("--sim {}: {e}", path.display()))?;
-    let name = path.display().to_string();
+    let name = jointid::data::input::input_name(path);
+    let text = jointid::data::input::read_input_text(path)
+        .map_err(|e| format!("--sim {name}: {}", jointid::data::output::io_msg(&e)))?;
     if let Ok(cfg) = serde_json::from_str::<SimConfig>(&text) {
         return Ok(UserSim {
             name,
@@ -185,13 +187,12 @@ fn user_sim(path: &std::path::Path) -> Result<UserSim, String> {
     }
     let saved: SavedModel = serde_json::from_str(&text).map_err(|e| {
         format!(
-            "--sim {}: neither `simulate --params-json` output nor a jointid model file: {e}",
-            path.display()
+            "--sim {name}: neither `simulate --params-json` output nor a jointid model file: {e}"
         )
     })?;
     let fit = saved
         .to_nonlinear()
-        .map_err(|e| format!("--sim {}: {e}", path.display()))?;
+        .map_err(|e| format!("--sim {name}: {e}"))?;
     Ok(UserSim {
         name,
         plant: sim_plant(&fit.model, &fit.plant),
@@ -328,7 +329,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
         );
         let html = diagnosis_html(&title, &d, &series)?;
         write_file(path, args.force, |w| w.write_all(html.as_bytes()))?;
-        files.push(path.display().to_string());
+        files.push(path_text(path));
     }
     if let Some(dir) = &args.plot {
         let figs = diagnosis_figures(&d, &series)?;
@@ -337,7 +338,7 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
             for (svg, name) in f.svgs.iter().zip(f.file_names()) {
                 let path = dir.join(name);
                 write_svg(&path, svg, args.force)?;
-                files.push(path.display().to_string());
+                files.push(path_text(&path));
             }
         }
     }

@@ -1,11 +1,12 @@
-//! `jointid export RUN.jcap --csv RUN.csv`: the capture CSV of ../shared/DESIGN.md §5;
+//! `jointid export RUN.jcap --csv RUN.csv`: the capture CSV of ../shared/DESIGN.md §5
+//! (`-` reads the capture from standard input, whole);
 //! `--mat RUN.mat`: the same columns as MATLAB vectors ([`jointid::capture::export::export_mat`]).
 //!
 //! Writes only the samples that arrived; the `# gaps=` comment lists what did not (see
 //! [`jointid::capture::export`]). An existing CSV is replaced only with `--force`; the CSV
 //! is written to a temporary file beside it and renamed, so a half-written export never
 //! looks complete ([`jointid::data::output`]); `--csv -` writes to stdout (and `--json`'s
-//! document then goes to stderr).
+//! document then goes to stderr), as does `--csv /dev/stdout`, written in place.
 //! Exit status: 0 exported, 1 `--strict` and something is missing or damaged, 2 error.
 
 use std::io::Write;
@@ -16,13 +17,14 @@ use serde::Serialize;
 use super::{CmdResult, Context, Outcome};
 use jointid::capture::{export, read_jcap_session, session_ids, DamagedFrame, SeqGap};
 
-use jointid::data::output::check_output;
+use jointid::data::input::{input_name, path_text};
+use jointid::data::output::{check_output, names_standard_output};
 
 /// Arguments of `jointid export`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
 #[command(group(clap::ArgGroup::new("to").required(true).multiple(true).args(["csv", "mat"])))]
 pub struct ExportArgs {
-    /// Capture file to read
+    /// Capture file to read (`-` for standard input)
     #[arg(value_name = "RUN.jcap")]
     pub input: PathBuf,
     /// CSV file to write (`-` for stdout)
@@ -78,6 +80,13 @@ struct ExportSummary<'a> {
 /// [`jointid::capture::CaptureError::Excitation`]) or writing the CSV ([`jointid::capture::CaptureError::Output`]).
 pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
     let to_stdout = args.csv.as_ref().is_some_and(|c| c.as_os_str() == "-");
+    // standard output carries an export (`--csv -`, or a file named `/dev/stdout`): the
+    // report goes to standard error
+    let stdout_taken = to_stdout
+        || [&args.csv, &args.mat]
+            .into_iter()
+            .flatten()
+            .any(|p| names_standard_output(p));
     if let Some(csv) = args.csv.as_ref().filter(|_| !to_stdout) {
         check_output(csv, args.force)?;
     }
@@ -99,7 +108,7 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
     let written: Vec<String> = [&args.csv, &args.mat]
         .into_iter()
         .flatten()
-        .map(|p| p.display().to_string())
+        .map(|p| path_text(p))
         .collect();
     let r = &record.report;
     let ids = session_ids(r);
@@ -108,14 +117,14 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
         let list: Vec<String> = ids.iter().map(u32::to_string).collect();
         notes.push(format!(
             "{} holds {} sessions ({}); exported session {} (choose another with --session K)",
-            args.input.display(),
+            input_name(&args.input),
             ids.len(),
             list.join(", "),
             record.header.session_id
         ));
     }
     // with `--csv - --json` standard error carries the JSON document alone
-    if !(ctx.json && to_stdout) {
+    if !(ctx.json && stdout_taken) {
         for n in &notes {
             let _ = writeln!(std::io::stderr(), "note: {n}");
         }
@@ -123,7 +132,7 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
             std::io::stderr(),
             "exported {} samples{} ({} gaps, {} samples missing, {} damaged frames)",
             record.samples.len(),
-            if to_stdout {
+            if stdout_taken {
                 format!(" to {}", written.join(" and "))
             } else {
                 String::new()
@@ -133,15 +142,15 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
             r.damaged_frames.len()
         );
         // standard output lists the files, unless it carries the CSV
-        if !ctx.json && !to_stdout {
+        if !ctx.json && !stdout_taken {
             super::print_written(ctx.out, &written)?;
         }
     }
     if ctx.json {
         let summary = ExportSummary {
-            file: args.input.display().to_string(),
-            csv: args.csv.as_ref().map(|p| p.display().to_string()),
-            mat: args.mat.as_ref().map(|p| p.display().to_string()),
+            file: input_name(&args.input),
+            csv: args.csv.as_ref().map(|p| path_text(p)),
+            mat: args.mat.as_ref().map(|p| path_text(p)),
             session_id: record.header.session_id,
             rows: record.samples.len(),
             samples: r.samples,
@@ -151,7 +160,7 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
             overruns: r.overruns,
             notes,
         };
-        if to_stdout {
+        if stdout_taken {
             super::print_json(&mut std::io::stderr().lock(), "export", &summary)?;
         } else {
             super::print_json(ctx.out, "export", &summary)?;

@@ -4,13 +4,17 @@
 //! a MATLAB file (`mat`), or a Python script that rebuilds the model in python-control
 //! (`python-control`), each with the input and output, their units and the physical
 //! parameters. Written to `--out FILE` (an existing one only with `--force`) or to
-//! standard output (not `mat`).
+//! standard output (not `mat`). A model whose numbers overflow in the export (an entry of
+//! magnitude 1e100 or more, a transfer function whose coefficients overflow) is refused,
+//! naming the entry, and nothing is written
+//! ([`jointid::ident::model_export::ExportError`]).
 
 use std::fmt::Write as _;
 use std::io::Write;
 use std::path::PathBuf;
 
-use jointid::data::output::{check_output, write_file};
+use jointid::data::input::{input_name, path_text, read_input_text};
+use jointid::data::output::{check_output, io_msg, names_standard_output, write_file};
 use jointid::ident::model_export::{ModelExport, SsJson, TransferFunction};
 use jointid::ident::model_file::SavedModel;
 use serde_json::json;
@@ -34,7 +38,7 @@ pub enum ModelFormat {
 /// Arguments of `jointid export-model`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
 pub struct ExportModelArgs {
-    /// Model file written by `jointid fit --save`
+    /// Model file written by `jointid fit --save` (`-` for standard input)
     #[arg(value_name = "MODEL.json")]
     pub model: PathBuf,
     /// Output form
@@ -54,16 +58,16 @@ pub struct ExportModelArgs {
 /// Runs `jointid export-model`.
 ///
 /// # Errors
-/// Reading the model file, a model without state space (fitted with effects), `mat` to
-/// standard output, and output errors naming the file.
+/// Reading the model file, a model without state space (fitted with effects), a model
+/// whose numbers overflow, `mat` to standard output, and output errors naming the file.
 pub fn run(args: &ExportModelArgs, ctx: &mut Context<'_>) -> CmdResult {
     if let Some(out) = &args.out {
         check_output(out, args.force)?;
     } else if args.format == ModelFormat::Mat {
         return Err("--format mat writes a binary file: name it with --out FILE".into());
     }
-    let name = args.model.display().to_string();
-    let text = std::fs::read_to_string(&args.model).map_err(|e| format!("{name}: {e}"))?;
+    let name = input_name(&args.model);
+    let text = read_input_text(&args.model).map_err(|e| format!("{name}: {}", io_msg(&e)))?;
     let saved: SavedModel = serde_json::from_str(&text)
         .map_err(|e| format!("{name}: not a model file of `jointid fit --save`: {e}"))?;
     if saved.nonlinear.is_some() {
@@ -103,7 +107,7 @@ pub fn run(args: &ExportModelArgs, ctx: &mut Context<'_>) -> CmdResult {
         let summary = Summary {
             file: name,
             format: args.format,
-            out: args.out.as_ref().map(|p| p.display().to_string()),
+            out: args.out.as_ref().map(|p| path_text(p)),
             input: &ex.input,
             output: &ex.output,
             ts: ex.ts,
@@ -112,7 +116,7 @@ pub fn run(args: &ExportModelArgs, ctx: &mut Context<'_>) -> CmdResult {
             continuous_note: ex.continuous_note.as_deref(),
         };
         // with the export itself on standard output, the summary goes to standard error
-        if args.out.is_some() {
+        if args.out.as_ref().is_some_and(|o| !names_standard_output(o)) {
             super::print_json(ctx.out, "export-model", &summary)?;
         } else {
             super::print_json(&mut std::io::stderr().lock(), "export-model", &summary)?;

@@ -23,6 +23,7 @@ use super::args::{check_columns, one_of, parse_lags, screen_for_fit, FitDataArgs
 use super::print::print_notes;
 use super::views::{Signals, VIEW_FILES};
 use super::{check_plot_files, fit_report, CmdResult, Context, Outcome};
+use jointid::data::input::path_text;
 use jointid::data::output::check_output;
 use jointid::data::segment::{segment_list, whole_periods};
 use jointid::data::{fmt_sig, Selected};
@@ -113,8 +114,8 @@ pub struct FitArgs {
     /// effect's key such as `k3` or `fc`), repeatable
     #[arg(long = "fix", value_name = "NAME=VALUE")]
     pub fix: Vec<String>,
-    /// nonlinear fit: start from this model file (written by `fit --save` with effects)
-    /// instead of the automatic start
+    /// nonlinear fit: start from this model file (written by `fit --save` with effects;
+    /// `-` for standard input) instead of the automatic start
     #[arg(long, value_name = "MODEL.json")]
     pub start: Option<PathBuf>,
     /// friction of the rigid model
@@ -357,13 +358,14 @@ fn parse_fixes(fix: &[String]) -> Result<Vec<(String, f64)>, String> {
 
 /// The previous fit in the model file `--start PATH`.
 fn read_start(path: &Path) -> Result<jointid::ident::nonlinear::NlFit, String> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| format!("--start {}: {e}", path.display()))?;
+    let name = jointid::data::input::input_name(path);
+    let text = jointid::data::input::read_input_text(path)
+        .map_err(|e| format!("--start {name}: {}", jointid::data::output::io_msg(&e)))?;
     let saved: SavedModel = serde_json::from_str(&text)
-        .map_err(|e| format!("--start {}: not a jointid model file: {e}", path.display()))?;
+        .map_err(|e| format!("--start {name}: not a jointid model file: {e}"))?;
     saved
         .to_nonlinear()
-        .map_err(|e| format!("--start {}: {e}", path.display()))
+        .map_err(|e| format!("--start {name}: {e}"))
 }
 
 /// Runs `jointid fit`: the request from the flags, the records, one call of
@@ -420,13 +422,13 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     let mut files = Vec::new();
     if let Some(path) = &args.save {
         save_model(path, &out.to_saved(req.prep), args.force)?;
-        files.push(path.display().to_string());
+        files.push(path_text(path));
     }
     match &out.model {
         FittedModel::Nonlinear(nl) => {
             if let (Some(dir), Some(fig)) = (&args.plot, &nl.velocity) {
                 let p = fit_report::write_velocity_plot(dir, fig, args.force)?;
-                files.push(p.display().to_string());
+                files.push(path_text(&p));
             }
             let (start, saved) = (args.start.as_deref(), args.save.as_deref());
             fit_report::print_nonlinear(ctx.out, ctx.json, &out, nl, start, saved, files)?;

@@ -20,6 +20,7 @@ use super::views::{
     frf_label, write_bode_figure, write_views, Signals, Views, PERIODIC_COMPARED, VELOCITY_COMPARED,
 };
 use super::{print_json, write_svg};
+use jointid::data::input::path_text;
 use jointid::ident::fit::{
     param_map, Compared, FitOutcome, LinearFit, NonlinearFit, ParamJson, SegmentJson,
     VelocityFigure,
@@ -106,7 +107,7 @@ pub(crate) fn plot_linear(
     if let Some(fig) = &l.bode {
         let io = frf_label(&signals);
         let p = write_bode_figure(dir, "bode.svg", fig, &out.name, &io, force)?;
-        files.push(p.display().to_string());
+        files.push(path_text(&p));
     }
     let mut tests = vec![("estimation", &l.tests)];
     if let Some(v) = &l.validation_tests {
@@ -134,7 +135,7 @@ pub(crate) fn plot_linear(
         file: &out.name,
     };
     for p in write_views(dir, &views, force)? {
-        files.push(p.display().to_string());
+        files.push(path_text(&p));
     }
     Ok(files)
 }
@@ -475,7 +476,7 @@ pub(crate) fn print_nonlinear(
         validation: nl.run.validation,
         highpass_hz: res.options.highpass_hz,
         simulate_command,
-        saved_model: saved.map(|p| p.display().to_string()),
+        saved_model: saved.map(path_text),
         seconds: out.seconds,
         files,
         warnings: &out.warnings,

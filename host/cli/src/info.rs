@@ -18,7 +18,6 @@
 //! Exit status: 0, 1 with `--strict` when anything is missing or damaged, 2 error.
 
 use std::collections::BTreeMap;
-use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use jointid_core::wire::SessionHeader;
@@ -30,6 +29,8 @@ use jointid::capture::export::kind_name;
 use jointid::capture::{
     jcap_session_reports, read_jcap_session_reports, segments_of, CaptureReport,
 };
+use jointid::data::input::{input_name, is_stdin, read_input};
+use jointid::data::output::io_msg;
 use jointid::data::{
     csv::header_columns, fmt_sig, mat, matlab_kind, ColumnMap, ExcitationConfig, Input, Record,
     SegmentInfo, JCAP_MAGIC_PREFIX, MATLAB_V5,
@@ -93,19 +94,9 @@ pub struct InfoSummary {
 /// or data the loaders refuse ([`jointid::data::DataError`]); `--session` on a file that
 /// is no capture; output errors.
 pub fn run(args: &InfoArgs, ctx: &mut Context<'_>) -> CmdResult {
-    let stdin = args.file.as_os_str() == "-";
-    let name = if stdin {
-        "standard input".to_string()
-    } else {
-        args.file.display().to_string()
-    };
-    let bytes = if stdin {
-        let mut b = Vec::new();
-        std::io::stdin().lock().read_to_end(&mut b).map(|_| b)
-    } else {
-        std::fs::read(&args.file)
-    }
-    .map_err(|e| format!("{name}: {e}"))?;
+    let stdin = is_stdin(&args.file);
+    let name = input_name(&args.file);
+    let bytes = read_input(&args.file).map_err(|e| format!("{name}: {}", io_msg(&e)))?;
     if !bytes.starts_with(JCAP_MAGIC_PREFIX) {
         return run_data(args, ctx, &name, &bytes);
     }
@@ -371,7 +362,7 @@ fn run_data(args: &InfoArgs, ctx: &mut Context<'_>, name: &str, bytes: &[u8]) ->
         Some(map) => {
             let input = Input {
                 name,
-                path: (args.file.as_os_str() != "-").then_some(args.file.as_path()),
+                path: (!is_stdin(&args.file)).then_some(args.file.as_path()),
                 bytes,
             };
             let record = ctx.loaders.load_input(&input, map)?;

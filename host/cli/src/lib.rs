@@ -295,9 +295,13 @@ pub fn error_message(e: Box<dyn std::error::Error + Send + Sync>) -> String {
     let mut msg = e.to_string();
     for cause in e.chain().skip(1) {
         let c = cause.to_string();
-        // an I/O error's text without its `(os error N)` suffix counts as stated
+        // an I/O error's text without its `(os error N)` suffix counts as stated, as does
+        // its phrase as `data::output::io_msg` gives it (lowercase)
         let plain = c.find(" (os error ").map_or(c.as_str(), |i| &c[..i]);
-        if !msg.contains(plain) {
+        let phrase = plain.get(..1).map_or(String::new(), |first| {
+            first.to_lowercase() + &plain[first.len()..]
+        });
+        if !msg.contains(plain) && !msg.contains(&phrase) {
             msg = format!("{msg}: {c}");
         }
     }

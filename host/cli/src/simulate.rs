@@ -26,6 +26,11 @@
 //!   `--out`'s file system is refused before the simulation
 //!   ([`jointid::data::output::check_room`]), not after filling it. A device or pipe is a
 //!   stream and is not checked.
+//! - A device or pipe (`/dev/stdout`, a named pipe, [`jointid::data::output::is_stream`])
+//!   is written in place, as the capture CSV unless its name ends in `.jcap`; what it got
+//!   cannot be taken back, so the run is simulated once before it is written (twice the
+//!   time, constant memory) and a run that stops writes nothing there either. With
+//!   `--out /dev/stdout` the report (text or `--json`) goes to standard error.
 //! - The run is streamed: each sample is simulated ([`jointid::sim::Simulation`]), encoded
 //!   ([`jointid::sim::board::stream_session`]) or formatted ([`TableWriter`]) and written
 //!   as it comes, so memory does not grow with `--periods`; a simulation that stops (its
@@ -35,7 +40,8 @@
 //! seed 000 Table 1 (`J_m, J_a1, J_a2, J_p, k_g, k_a, k_p, d_g, d_a, d_p, f_m, r`) plus
 //! seed 001's `k3`, `F_c` for the nonlinear two-mass (see [`jointid::model::params`]); only
 //! the names the model uses are accepted ([`jointid::model::params::model_params`],
-//! [`jointid::model::params::seed_001_params`]).
+//! [`jointid::model::params::seed_001_params`]), each value within the parameter's
+//! physical range ([`jointid::model::params::param_range`]: `J_m` 1e-7 … 1e4 kg·m², ...).
 //!
 //! `--model` and `--effect` resolve into the one model description, a
 //! [`jointid::model::spec::ModelSpec`], by [`jointid::model::params::sim_spec`] over the
@@ -55,11 +61,16 @@ use serde::Serialize;
 
 use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::jcap::{write_stream_with, JcapError};
-use jointid::data::output::{check_output, check_room, write_file, OutputError};
+use jointid::data::input::{input_name, path_text, read_input_text};
+use jointid::data::output::{
+    check_output, check_room, io_msg, is_stream, names_standard_output, write_file, OutputError,
+};
 use jointid::data::{capture_csv_comments, ExcitationConfig, SignalKind, TableWriter};
 use jointid::ident::model_file::SavedModel;
 use jointid::ident::nonlinear::sim_plant;
-use jointid::model::params::{model_params, seed_001_params, sim_spec, ParamField};
+use jointid::model::params::{
+    model_params, param_range, seed_001_params, sim_spec, ParamField, ParamRange,
+};
 use jointid::model::spec::{Structure, NONLINEAR_TWO_MASS};
 use jointid::sim::board::{stream_session, BoardStreamError, StreamError, WireOptions};
 use jointid::sim::{
@@ -192,7 +203,8 @@ pub struct SimulateArgs {
     #[arg(long = "param", value_name = "NAME=VALUE")]
     pub params: Vec<String>,
     /// the plant and effects of a model fitted with effects (`jointid fit --effect ...
-    /// --save MODEL.json`) instead of --model; --param and --effect apply on top of it
+    /// --save MODEL.json`, `-` for standard input) instead of --model; --param and --effect
+    /// apply on top of it
     #[arg(long, value_name = "MODEL.json")]
     pub model_file: Option<PathBuf>,
     /// effect spec, repeatable: `name` or `name:key=value,...` (e.g. `backlash:width=2e-5`),
@@ -288,8 +300,21 @@ pub enum SimulateError {
         /// the names the model accepts, comma separated
         valid: String,
     },
-    /// `--out` with an extension other than `.jcap` or `.csv`
-    #[error("{path}: --out must end in .jcap or .csv")]
+    /// `--param` with a value outside the parameter's physical range
+    #[error("--param `{name}`: `{value}` is outside its physical range: {range}")]
+    OutOfRange {
+        /// parameter name
+        name: String,
+        /// the value as given
+        value: String,
+        /// its range and unit
+        range: ParamRange,
+    },
+    /// `--out` with an extension other than `.jcap` or `.csv`, and no device or pipe
+    #[error(
+        "{path}: --out must end in .jcap or .csv (or be a device or a pipe, which takes the \
+         capture CSV)"
+    )]
     OutExtension {
         /// the path given
         path: PathBuf,
@@ -329,11 +354,13 @@ pub enum SimulateError {
     },
 }
 
-/// Applies `NAME=VALUE` overrides to the parameters of model `model`.
+/// Applies `NAME=VALUE` overrides to the parameters of model `model`, each within its
+/// physical range ([`param_range`]).
 ///
 /// # Errors
 /// [`SimulateError::ParamSyntax`], [`SimulateError::UnknownParam`] or
-/// [`SimulateError::BadValue`], each naming the parameter and listing the valid names.
+/// [`SimulateError::BadValue`], each naming the parameter and listing the valid names;
+/// [`SimulateError::OutOfRange`] naming the parameter, the value and the range.
 pub fn apply_params(
     model: SimModel,
     specs: &[String],
@@ -364,7 +391,17 @@ pub fn apply_params(
             });
         };
         match value.parse::<f64>() {
-            Ok(v) if v.is_finite() => *field(params) = v,
+            Ok(v) if v.is_finite() => {
+                // every name `model.params()` gives has a range
+                if let Some(range) = param_range(name).filter(|r| !r.contains(v)) {
+                    return Err(SimulateError::OutOfRange {
+                        name: name.to_string(),
+                        value: value.to_string(),
+                        range,
+                    });
+                }
+                *field(params) = v;
+            }
             _ => {
                 return Err(SimulateError::BadValue {
                     name: name.to_string(),
@@ -402,11 +439,14 @@ impl OutFormat {
     }
 }
 
-/// The format `path` asks for (extension `.jcap` or `.csv`, any case).
+/// The format `path` asks for: its extension `.jcap` or `.csv` (any case), else the
+/// capture CSV when it is a `stream` (a device, a pipe, `/dev/stdout`:
+/// [`jointid::data::output::is_stream`]), the text a terminal shows and `jointid info -`
+/// reads.
 ///
 /// # Errors
 /// [`SimulateError::OutExtension`] for anything else.
-pub fn out_format(path: &Path) -> Result<OutFormat, SimulateError> {
+pub fn out_format(path: &Path, stream: bool) -> Result<OutFormat, SimulateError> {
     match path
         .extension()
         .and_then(|e| e.to_str())
@@ -414,6 +454,7 @@ pub fn out_format(path: &Path) -> Result<OutFormat, SimulateError> {
     {
         Some(e) if e == "jcap" => Ok(OutFormat::Jcap),
         Some(e) if e == "csv" => Ok(OutFormat::Csv),
+        _ if stream => Ok(OutFormat::Csv),
         _ => Err(SimulateError::OutExtension {
             path: path.to_path_buf(),
         }),
@@ -491,19 +532,14 @@ fn fitted_plant(
     path: &Path,
 ) -> Result<(Plant, Vec<jointid::model::effects::Effect>), Box<dyn std::error::Error + Send + Sync>>
 {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("--model-file {}: {e}", path.display()))?;
-    let saved: SavedModel = serde_json::from_str(&text).map_err(|e| {
-        format!(
-            "--model-file {}: not a jointid model file: {e}",
-            path.display()
-        )
-    })?;
+    let name = input_name(path);
+    let text = read_input_text(path).map_err(|e| format!("--model-file {name}: {}", io_msg(&e)))?;
+    let saved: SavedModel = serde_json::from_str(&text)
+        .map_err(|e| format!("--model-file {name}: not a jointid model file: {e}"))?;
     let fit = saved.to_nonlinear().map_err(|e| {
         format!(
-            "--model-file {}: {e} (a linear model file has no plant for the simulator; \
-             use --model and --param)",
-            path.display()
+            "--model-file {name}: {e} (a linear model file has no plant for the simulator; \
+             use --model and --param)"
         )
     })?;
     Ok((sim_plant(&fit.model, &fit.plant), fit.model.effects.clone()))
@@ -644,12 +680,35 @@ fn write_run(
     Ok((summary.expect("a run that was written"), written))
 }
 
+/// Simulates the run of `cfg` on `exc` as [`write_run`] does, writing nothing: its first
+/// non-finite sample or a sample the wire cannot carry (`.jcap`) is the error.
+///
+/// # Errors
+/// The simulation's ([`StreamError`]).
+fn dry_run(
+    format: OutFormat,
+    cfg: &SimConfig,
+    exc: &ExcitationConfig,
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    match format {
+        OutFormat::Jcap => {
+            let opts = WireOptions::for_sim(cfg);
+            stream_session(cfg, exc, &opts, &mut std::io::sink(), |_| {})?;
+        }
+        OutFormat::Csv => {
+            stream_excitation(cfg, exc, |_| Ok::<(), StreamError>(()))?;
+        }
+    }
+    Ok(())
+}
+
 /// Runs `jointid simulate`.
 ///
 /// # Errors
 /// Bad `--param`, `--effect` or `--out`, invalid configuration or excitation, write errors.
 pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
-    let format = out_format(&args.out)?;
+    let stream = is_stream(&args.out)?;
+    let format = out_format(&args.out, stream)?;
     // both outputs are checked before the work, so that neither is written when the other
     // cannot be
     check_output(&args.out, args.force)?;
@@ -669,6 +728,11 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         err,
     })?;
     let params = cfg.params_json()? + "\n";
+    if stream {
+        // a device or pipe cannot take back what it got: the run must complete before any
+        // of it goes there (simulated twice, in constant memory)
+        dry_run(format, &cfg, &exc)?;
+    }
     let (mut u, mut theta_m) = (Moments::default(), Moments::default());
     let (summary, stream_bytes) = write_run(args, format, &cfg, &exc, |s| {
         u.push(s.u);
@@ -681,13 +745,13 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     let modes = Mechanism::new(&cfg.plant, &cfg.effects).modal_frequencies();
     let report = Report {
-        file: args.out.display().to_string(),
+        file: path_text(&args.out),
         format,
         model: cfg.plant.kind.label(),
         effects: cfg.effects.iter().map(|e| e.to_string()).collect(),
         samples: summary.samples,
         duration_s: summary.samples as f64 * summary.sample_interval_s,
-        params_out: args.params_out.as_ref().map(|p| p.display().to_string()),
+        params_out: args.params_out.as_ref().map(|p| path_text(p)),
         scale,
         stream_bytes,
         integrator: summary.integrator,
@@ -698,11 +762,17 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         anti_resonances_hz: modes.anti_resonances_hz,
         config: &cfg,
     };
+    // with the run on standard output, the report goes to standard error
+    let mut stderr = std::io::stderr().lock();
+    let o: &mut dyn std::io::Write = if names_standard_output(&args.out) {
+        &mut stderr
+    } else {
+        &mut *ctx.out
+    };
     if ctx.json {
-        print_json(ctx.out, "simulate", &report)?;
+        print_json(o, "simulate", &report)?;
         return Ok(Outcome::Ok);
     }
-    let o = &mut *ctx.out;
     writeln!(
         o,
         "simulated {} samples, {:.2} s at {} Hz",
@@ -949,6 +1019,11 @@ mod tests {
         assert!(matches!(err, SimulateError::ParamSyntax { .. }), "{err}");
         let err = apply_params(two, &["k_g=inf".into()], &mut p).unwrap_err();
         assert!(matches!(err, SimulateError::BadValue { .. }), "{err}");
+        let err = apply_params(two, &["J_m=1e-30".into()], &mut p).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "--param `J_m`: `1e-30` is outside its physical range: must be within [1e-7, 10000] kg·m²"
+        );
         assert_eq!(p, JointParams::default(), "nothing applied on error");
         apply_params(
             SimModel::ALL[4],
@@ -995,11 +1070,27 @@ mod tests {
         let err = run_cli(&cli).0.unwrap_err();
         assert_eq!(
             err.to_string(),
-            format!("{}: --out must end in .jcap or .csv", out.display())
+            format!(
+                "{}: --out must end in .jcap or .csv (or be a device or a pipe, which takes \
+                 the capture CSV)",
+                out.display()
+            )
         );
         assert!(!out.exists());
-        assert_eq!(out_format(Path::new("A.JCAP")).unwrap(), OutFormat::Jcap);
-        assert!(out_format(Path::new("run")).is_err());
+        assert_eq!(
+            out_format(Path::new("A.JCAP"), false).unwrap(),
+            OutFormat::Jcap
+        );
+        assert!(out_format(Path::new("run"), false).is_err());
+        // a device or pipe without an extension takes the capture CSV
+        assert_eq!(
+            out_format(Path::new("/dev/stdout"), true).unwrap(),
+            OutFormat::Csv
+        );
+        assert_eq!(
+            out_format(Path::new("fifo.jcap"), true).unwrap(),
+            OutFormat::Jcap
+        );
     }
 
     #[test]

@@ -16,6 +16,8 @@
 //! tests FAIL) or when `--require-fit X` was given and the FIT is below X;
 //! 2 on any error.
 
+use jointid::data::input::{input_name, path_text, read_input_text};
+use jointid::data::output::io_msg;
 use std::path::PathBuf;
 
 use clap::Args;
@@ -45,7 +47,8 @@ use jointid::ident::validate::{Validation, DEFAULT_LAGS, FIT_NAME};
 /// Arguments of `jointid validate`, both forms (a model file, or a simulated column).
 #[derive(Debug, Clone, Args)]
 pub struct ValidateArgs {
-    /// MODEL.json DATA (a model saved by `fit --save`), or DATA with --simulated
+    /// MODEL.json DATA (a model saved by `fit --save`), or DATA with --simulated; `-` for
+    /// standard input
     #[arg(value_name = "FILE", num_args = 1..=2, required = true)]
     pub files: Vec<PathBuf>,
     /// the columns of DATA
@@ -144,19 +147,20 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
         );
     }
     let mpath = &args.files[0];
-    let text = std::fs::read_to_string(mpath).map_err(|e| format!("{}: {e}", mpath.display()))?;
+    let text =
+        read_input_text(mpath).map_err(|e| format!("{}: {}", input_name(mpath), io_msg(&e)))?;
     let saved: SavedModel = serde_json::from_str(&text)
-        .map_err(|e| format!("{}: not a jointid model file: {e}", mpath.display()))?;
+        .map_err(|e| format!("{}: not a jointid model file: {e}", input_name(mpath)))?;
     // the model's description says which engine simulates it
     let spec = saved
         .spec()
-        .map_err(|e| format!("{}: {e}", mpath.display()))?;
+        .map_err(|e| format!("{}: {e}", input_name(mpath)))?;
     if spec.nonlinear() {
         if args.plot.is_some() {
             return Err(format!(
                 "--plot: {} holds a model with effects; the views are drawn for linear models \
                  (`fit --effect ... --plot` draws the nonlinear fit's velocity)",
-                mpath.display()
+                input_name(mpath)
             )
             .into());
         }
@@ -167,7 +171,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     let fitted = saved
         .to_fitted()
-        .map_err(|e| format!("{}: {e}", mpath.display()))?;
+        .map_err(|e| format!("{}: {e}", input_name(mpath)))?;
     let sel = data_args(&args.files[1]).select(ctx.loaders)?;
     let numbers = sel.segments.clone();
     let segs = sel.datasets;
@@ -306,7 +310,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
         };
         files = write_views(dir, &views, args.force)?
             .iter()
-            .map(|p| p.display().to_string())
+            .map(|p| path_text(p))
             .collect();
     }
     // a diverged simulation is never ok, with or without --require-fit
@@ -317,7 +321,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
             ctx.out,
             "validate",
             &Report {
-                model_file: mpath.display().to_string(),
+                model_file: input_name(mpath),
                 model: &saved.model,
                 file: &ds.name,
                 samples,
@@ -423,7 +427,7 @@ fn check_model_rate(
         "{}: sampled at {} Hz, the model {} was fitted on data at {} Hz",
         ds.name,
         jointid::data::fmt_sig(1.0 / ds.data.ts, 6),
-        mpath.display(),
+        input_name(mpath),
         jointid::data::fmt_sig(1.0 / model_ts, 6)
     ))
 }
@@ -443,7 +447,7 @@ fn run_nonlinear(
 ) -> CmdResult {
     let fit = saved
         .to_nonlinear()
-        .map_err(|e| format!("{}: {e}", mpath.display()))?;
+        .map_err(|e| format!("{}: {e}", input_name(mpath)))?;
     let nl = saved.nonlinear.as_ref().expect("a nonlinear section");
     let sel = data.select(ctx.loaders)?;
     let (segs, numbers) = if sel.datasets.len() > 1 {
@@ -498,7 +502,7 @@ fn run_nonlinear(
             ctx.out,
             "validate-nonlinear",
             &NlReport {
-                model_file: mpath.display().to_string(),
+                model_file: input_name(mpath),
                 model: &saved.model,
                 file: &ds.name,
                 samples,
@@ -603,7 +607,10 @@ fn outcome(fit_ok: bool) -> Outcome {
 
 /// The first line of the text report: `jointid validate: MODEL (FAMILY) on DATA`.
 fn title(mpath: &std::path::Path, model: &str, data: &str) -> String {
-    format!("jointid validate: {} ({model}) on {data}", mpath.display())
+    format!(
+        "jointid validate: {} ({model}) on {data}",
+        input_name(mpath)
+    )
 }
 
 /// The per-segment FITs under the pooled ones, when there are several segments.

@@ -153,8 +153,10 @@ fn a_closed_pipe_ends_quietly_without_a_panic() {
     let jcap = capture(&dir);
     let jcap = jcap.to_str().unwrap();
     let sim = dir.join("sim.jcap");
-    let cases: [(&[&str], usize); 5] = [
+    let cases: [(&[&str], usize); 6] = [
         (&["export", jcap, "--csv", "-"], 10),
+        // the run written to the pipe in place, by its device's name
+        (&["simulate", "--periods", "1", "--out", "/dev/stdout"], 10),
         (&["export", jcap, "--csv", "-"], 0),
         (&["--json", "info", jcap], 0),
         (&["info", jcap], 0),

@@ -137,7 +137,7 @@ fn simulate_bad_arguments_end_with_one_line_and_exit_2() {
         ),
         (
             &["simulate", "--model", "three-mass", "--param", "k_g=-1", "--out", out],
-            "parameter `k_g` = -1",
+            "--param `k_g`: `-1` is outside its physical range: must be within [0.001, 1e10] N·m/rad",
         ),
     ];
     for (args, msg) in cases {

@@ -27,6 +27,32 @@ pub fn jointid(args: &[&str]) -> Output {
     Command::new(BIN).args(args).output().expect("run jointid")
 }
 
+/// runs `jointid` with `args` and `input` on its standard input, to completion
+#[allow(dead_code)]
+pub fn jointid_stdin(args: &[&str], input: &[u8]) -> Output {
+    use std::io::Write;
+    use std::process::Stdio;
+    let mut child = Command::new(BIN)
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run jointid");
+    let mut stdin = child.stdin.take().expect("jointid's standard input");
+    // written from a thread: a large input would fill the pipe while jointid writes its
+    // own output; a command that stops reading early closes the pipe (not an error here)
+    let input = input.to_vec();
+    let writer = std::thread::spawn(move || {
+        let _ = stdin.write_all(&input);
+    });
+    let out = child.wait_with_output().expect("jointid's output");
+    writer
+        .join()
+        .expect("the writer of jointid's standard input");
+    out
+}
+
 /// runs `jointid` with `args`, killed after `limit`: its output, or `None` when it had to
 /// be killed (a hang is a test failure, never a runaway process)
 #[allow(dead_code)]

@@ -44,7 +44,7 @@
 //! names the stream offset; what was written before stays readable.
 
 use std::fs::{File, OpenOptions};
-use std::io::{self, Read, Write};
+use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -165,19 +165,18 @@ pub fn check_header(path: &Path, head: &[u8]) -> Result<(), JcapError> {
     Ok(())
 }
 
-/// Reads a whole `.jcap` file and returns the stream (the bytes after the header).
+/// Reads a whole `.jcap` file (`-`: standard input, [`crate::data::input::read_input`])
+/// and returns the stream (the bytes after the header).
 ///
 /// # Errors
 /// [`JcapError::Io`] when the file cannot be read, or a header error from [`check_header`].
 pub fn read_stream(path: &Path) -> Result<Vec<u8>, JcapError> {
-    let io_err = |source| JcapError::Io {
-        path: path.to_path_buf(),
-        err: source,
-    };
-    let mut file = File::open(path).map_err(io_err)?;
-    let mut all = Vec::new();
-    file.read_to_end(&mut all).map_err(io_err)?;
-    check_header(path, &all)?;
+    let name = PathBuf::from(crate::data::input::input_name(path));
+    let mut all = crate::data::input::read_input(path).map_err(|err| JcapError::Io {
+        path: name.clone(),
+        err,
+    })?;
+    check_header(&name, &all)?;
     all.drain(..MAGIC.len());
     Ok(all)
 }

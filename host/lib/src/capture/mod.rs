@@ -299,7 +299,7 @@ pub fn read_jcap(path: &Path) -> Result<CaptureRecord, CaptureError> {
 pub fn read_jcap_session(path: &Path, session: Option<u32>) -> Result<CaptureRecord, CaptureError> {
     let (stream, events) = read_jcap_parts(path)?;
     let boundaries = boundaries_of(&events);
-    decode_named(path, &stream, &boundaries, events, session)
+    decode_named(&capture_name(path), &stream, &boundaries, events, session)
 }
 
 /// Reads only the report of a capture (works without a session header, and when the
@@ -326,7 +326,7 @@ pub fn read_jcap_session_reports(
     session: Option<u32>,
 ) -> Result<Vec<(CaptureReport, Option<SessionHeader>)>, CaptureError> {
     let (stream, events) = read_jcap_parts(path)?;
-    session_reports(path, &stream, events, session)
+    session_reports(&capture_name(path), &stream, events, session)
 }
 
 /// As [`read_jcap_session_reports`], for a capture already read whole (from standard
@@ -447,11 +447,21 @@ fn report_of(
     (report, header)
 }
 
+/// The received bytes of the capture `path` (`-`: standard input, without events) and
+/// its events.
 fn read_jcap_parts(path: &Path) -> Result<(Vec<u8>, Vec<JcapEvent>), CaptureError> {
     let stream = jcap::read_stream(path)?;
+    if crate::data::input::is_stdin(path) {
+        return Ok((stream, Vec::new()));
+    }
     // a broken sidecar costs the annotations, never the samples
     let events = jcap::read_events(path).ok().flatten().unwrap_or_default();
     Ok((stream, events))
+}
+
+/// How messages name the capture `path` (`standard input` for `-`).
+fn capture_name(path: &Path) -> PathBuf {
+    PathBuf::from(crate::data::input::input_name(path))
 }
 
 /// Stream offsets at which the link was lost (decoder restarts there).

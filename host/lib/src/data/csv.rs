@@ -18,7 +18,13 @@
 //! | `ramp_samples` | u32 | raised-cosine ramp length [samples] |
 //! | `periods` | u32 | full-amplitude periods after the ramp-in (0 = endless) |
 //! | `sample_interval_s` | f64 | nominal sample interval [s] (optional) |
+//! | `gaps` | `a..b;c..d` or `none` | sequence numbers missing (`jointid export`; optional) |
 //!
+//! The time column must agree with the comments: `fs_hz` with its rate, and
+//! `sample_interval_s` with the median of its intervals, else the file is refused naming
+//! both rates ([`DataError::RateContradiction`]), not read as a gap after every sample.
+//! Only the missing samples a `gaps` comment lists may make the median a multiple of the
+//! stated interval (a capture that lost every other sample).
 //! The nine excitation keys come as a group: when `kind` is present all nine
 //! must be, and they are parsed into an [`ExcitationConfig`]. Any other key is
 //! kept verbatim in [`Dataset::meta`]. The sample `k = 0` of the file is the
@@ -291,11 +297,23 @@ pub(super) fn record_from_columns(
             });
         }
     }
-    let ts = nominal.unwrap_or_else(|| {
+    let median = {
         let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
         d.sort_by(f64::total_cmp);
         d[d.len() / 2]
-    });
+    };
+    let ts = nominal.unwrap_or(median);
+    if (median - ts).abs() > SAMPLE_INTERVAL_TOLERANCE * ts
+        && listed_missing(&meta).is_none_or(|listed| listed != implied_missing(t, ts))
+    {
+        return Err(DataError::RateContradiction {
+            file: file(),
+            line: meta["sample_interval_s"].0,
+            stated_s: ts,
+            column_s: median,
+            intervals: rows - 1,
+        });
+    }
     // piece boundaries: a jump by a whole number m ≥ 2 of intervals is a gap
     let mut starts = vec![0usize];
     let mut first_gap = None;
@@ -425,6 +443,32 @@ pub(super) fn record_from_columns(
         })
         .collect();
     Ok((Record { pieces, notes }, first_gap))
+}
+
+/// The samples the `gaps` comment (`a..b;c..d`, inclusive, or `none`) lists as missing;
+/// `None` without one or when it does not read.
+fn listed_missing(meta: &BTreeMap<String, (usize, String)>) -> Option<u64> {
+    let (_, v) = meta.get("gaps")?;
+    if v.trim() == "none" {
+        return Some(0);
+    }
+    v.split(';')
+        .map(|r| {
+            let (a, b) = r.trim().split_once("..")?;
+            let (a, b): (u64, u64) = (a.trim().parse().ok()?, b.trim().parse().ok()?);
+            (b >= a).then_some(b - a + 1)
+        })
+        .sum()
+}
+
+/// The samples the time column `t` lacks at the interval `ts` [s]: `m − 1` for each jump
+/// of about `m ≥ 2` intervals.
+fn implied_missing(t: &[f64], ts: f64) -> u64 {
+    t.windows(2)
+        .map(|w| ((w[1] - w[0]) / ts).round())
+        .filter(|m| *m >= 2.0)
+        .map(|m| m as u64 - 1)
+        .sum()
 }
 
 /// Largest share of its power by which a measured column (torque, angle) may differ
@@ -1019,6 +1063,66 @@ mod tests {
                 .starts_with("k.csv:2: `fs_hz`: 1000 Hz disagrees"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn a_sample_interval_the_time_column_contradicts_is_named_with_both_rates() {
+        // a header of 2 kHz over a time column at 1 kHz (and at 4 kHz): before, a gap
+        // after every sample (or a non-uniform step at the first row)
+        let rows = |dt: f64| -> String {
+            (0..40)
+                .map(|k| format!("{},0,{k},0\n", k as f64 * dt))
+                .collect()
+        };
+        for (dt, hz) in [(1e-3, "1000"), (2.5e-4, "4000")] {
+            let text = capture_text("# rig=b\n# sample_interval_s=0.0005\n", &rows(dt));
+            let e = parse_csv_record(&text, "k.csv", &ColumnMap::capture()).unwrap_err();
+            assert!(matches!(e, DataError::RateContradiction { .. }), "{e}");
+            assert_eq!(
+                e.to_string(),
+                format!(
+                    "k.csv:2: the comments give a sample interval of 0.0005 s (2000 Hz), but \
+                     the time column's samples are {dt} s apart ({hz} Hz, the median of its 39 \
+                     intervals): one of them is wrong; correct `sample_interval_s` or the time \
+                     column"
+                )
+            );
+        }
+        // the stated rate with a gap after every other sample: what `gaps` lists is read
+        let every_other: String = (0..40)
+            .map(|k| format!("{},0,{k},0\n", (2 * k) as f64 * 5e-4))
+            .collect();
+        let gaps: Vec<String> = (0..39).map(|k| format!("{0}..{0}", 2 * k + 1)).collect();
+        let listed = format!("# sample_interval_s=0.0005\n# gaps={}\n", gaps.join(";"));
+        let r = parse_csv_record(
+            &capture_text(&listed, &every_other),
+            "k.csv",
+            &ColumnMap::capture(),
+        )
+        .unwrap();
+        assert_eq!((r.pieces.len(), r.pieces[0].data.ts), (40, 5e-4));
+        // gaps that do not account for them: the contradiction
+        let short = format!(
+            "# sample_interval_s=0.0005\n# gaps={}\n",
+            gaps[..5].join(";")
+        );
+        let e = parse_csv_record(
+            &capture_text(&short, &every_other),
+            "k.csv",
+            &ColumnMap::capture(),
+        )
+        .unwrap_err();
+        assert!(matches!(e, DataError::RateContradiction { .. }), "{e}");
+        // the stated rate over its time column, with a gap: read
+        let ok: String = rows(5e-4)
+            .lines()
+            .enumerate()
+            .filter(|(k, _)| *k != 3)
+            .map(|(_, l)| format!("{l}\n"))
+            .collect();
+        let text = capture_text("# sample_interval_s=0.0005\n", &ok);
+        let r = parse_csv_record(&text, "k.csv", &ColumnMap::capture()).unwrap();
+        assert_eq!(r.pieces.len(), 2);
     }
 
     use crate::test_support::shared_data as shared;

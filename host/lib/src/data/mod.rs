@@ -8,6 +8,8 @@
 //! - the one rule of every output file (no overwrite without `--force`, whole or not at
 //!   all) in [`output`];
 //! - samples far outside their record (outliers, on a robust scale) in [`screen`];
+//! - where an input comes from (a file, or `-` for standard input read whole) and how
+//!   messages name it in [`input`];
 //! - [`IdData`], [`Dataset`], whole excitation periods and the loader registry here.
 //!
 //! What: read the capture CSV of ../shared/DESIGN.md §5 (and any CSV with a column
@@ -93,6 +95,7 @@ impl fmt::Display for Percent {
 }
 
 pub mod dsp;
+pub mod input;
 pub mod mat;
 pub mod output;
 pub mod prep;
@@ -615,6 +618,29 @@ pub enum DataError {
         /// what is wrong
         reason: String,
     },
+    /// the comments' sample interval and the time column's contradict each other (a
+    /// header of 2 kHz over a time column at 1 kHz read as one gap after every sample)
+    #[error(
+        "{file}:{line}: the comments give a sample interval of {} s ({} Hz), but the time \
+         column's samples are {} s apart ({} Hz, the median of its {intervals} intervals): \
+         one of them is wrong; correct `sample_interval_s` or the time column",
+        fmt_sig(*stated_s, 6),
+        fmt_sig(1.0 / stated_s, 6),
+        fmt_sig(*column_s, 6),
+        fmt_sig(1.0 / column_s, 6)
+    )]
+    RateContradiction {
+        /// file name
+        file: String,
+        /// line of the `sample_interval_s` comment (1-based)
+        line: usize,
+        /// the comment's interval [s]
+        stated_s: f64,
+        /// the time column's interval, the median of its intervals [s]
+        column_s: f64,
+        /// the time column's intervals
+        intervals: usize,
+    },
     /// no whole excitation period could be found
     #[error("{file}: no whole excitation period: {reason}")]
     NoPeriods {
@@ -818,25 +844,14 @@ impl Loaders {
     /// [`DataError::Loader`] wrapping a loader's error, [`DataError::NotText`] for other
     /// binary content, else as [`csv::parse_csv_record`].
     pub fn load_record(&self, path: &Path, map: &ColumnMap) -> Result<Record, DataError> {
-        let stdin = path.as_os_str() == "-";
-        let name = if stdin {
-            "standard input".to_string()
-        } else {
-            path.display().to_string()
-        };
-        let bytes = if stdin {
-            let mut b = Vec::new();
-            std::io::Read::read_to_end(&mut std::io::stdin().lock(), &mut b).map(|_| b)
-        } else {
-            std::fs::read(path)
-        }
-        .map_err(|source| DataError::Io {
+        let name = input::input_name(path);
+        let bytes = input::read_input(path).map_err(|source| DataError::Io {
             file: name.clone(),
             source,
         })?;
         let input = Input {
             name: &name,
-            path: (!stdin).then_some(path),
+            path: (!input::is_stdin(path)).then_some(path),
             bytes: &bytes,
         };
         self.load_input(&input, map)

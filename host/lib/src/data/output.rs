@@ -20,10 +20,13 @@
 //! by the next [`check_output`] or [`write_file`] of the same file, and listed for the
 //! caller to report ([`take_stale_removed`]).
 //!
-//! A path that exists and is neither a regular file nor a directory (`/dev/stdout`, a
-//! named pipe, `/dev/full`) is written in place: it holds nothing to protect and cannot
-//! be replaced. A symbolic link to a regular file is followed: the file it names is
-//! replaced, not the link.
+//! A path that exists and is neither a regular file nor a directory (a terminal, a named
+//! pipe, `/dev/null`, `/dev/full`) is written in place, opened for appending, without the
+//! temporary file: it holds nothing to protect and cannot be replaced; so is a path that
+//! names one of the process's descriptors ([`names_descriptor`]: `/dev/stdout`,
+//! `/dev/fd/N`), whatever it leads to (standard output redirected to a file with `>` or
+//! `>>` gets the output where the shell put it). A symbolic link to a regular file is
+//! followed: the file it names is replaced, not the link.
 
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
@@ -84,7 +87,8 @@ pub enum OutputError {
     Io {
         /// the file
         path: PathBuf,
-        /// what the operating system said
+        /// what the operating system said (the source: a closed pipe is told by its kind)
+        #[source]
         err: io::Error,
     },
 }
@@ -191,13 +195,56 @@ fn dir_of(path: &Path) -> PathBuf {
     }
 }
 
+/// The descriptor of this process that `path` names, if it names one: an entry `N` of
+/// its descriptor directory (`/dev/fd/N`, `/proc/self/fd/N`), or a link to one
+/// (`/dev/stdout` → `/proc/self/fd/1`). Told by the file system, not by the spelling.
+fn descriptor_of(path: &Path) -> Option<u32> {
+    let in_fd_dir = |p: &Path| -> Option<u32> {
+        let n = p.file_name()?.to_str()?.parse().ok()?;
+        let dir = std::fs::canonicalize(p.parent()?).ok()?;
+        let ours = ["/proc/self/fd", "/dev/fd"]
+            .iter()
+            .filter_map(|d| std::fs::canonicalize(d).ok())
+            .any(|d| d == dir);
+        ours.then_some(n)
+    };
+    // a link to an entry (a descriptor's own link leads to `pipe:[…]`, not absolute)
+    let linked = std::fs::read_link(path)
+        .ok()
+        .filter(|t| t.is_absolute())
+        .and_then(|t| in_fd_dir(&t));
+    linked.or_else(|| in_fd_dir(path))
+}
+
+/// Whether `path` names one of the process's descriptors (`/dev/stdout`, `/dev/fd/N`,
+/// `/proc/self/fd/N`): written in place, whatever it leads to.
+pub fn names_descriptor(path: &Path) -> bool {
+    descriptor_of(path).is_some()
+}
+
+/// Whether `path` names this process's standard output (`/dev/stdout`, `/dev/fd/1`,
+/// `/proc/self/fd/1`): a command writing there prints its report elsewhere.
+pub fn names_standard_output(path: &Path) -> bool {
+    descriptor_of(path) == Some(1)
+}
+
+/// Whether `path` is written in place ([`write_file`]): it exists and is a device or a
+/// pipe, or it names a descriptor ([`names_descriptor`]).
+///
+/// # Errors
+/// [`OutputError::IsDirectory`], [`OutputError::Io`] when the path cannot be examined.
+pub fn is_stream(path: &Path) -> Result<bool, OutputError> {
+    Ok(matches!(existing(path)?, Existing::Special(_)))
+}
+
 /// What an existing path is.
 enum Existing {
     /// nothing there
     Nothing,
     /// a regular file (through a symlink: the file it names)
     File(PathBuf),
-    /// a device, a pipe: written in place
+    /// a device, a pipe, a descriptor: written in place (the path as given: a pipe's
+    /// `/dev/stdout` resolves to no file)
     Special(PathBuf),
 }
 
@@ -206,6 +253,15 @@ fn existing(path: &Path) -> Result<Existing, OutputError> {
         path: path.to_path_buf(),
         err,
     };
+    if names_descriptor(path) {
+        return match std::fs::metadata(path) {
+            Ok(m) if m.is_dir() => Err(OutputError::IsDirectory {
+                path: path.to_path_buf(),
+            }),
+            Ok(_) => Ok(Existing::Special(path.to_path_buf())),
+            Err(e) => Err(io(e)),
+        };
+    }
     match std::fs::metadata(path) {
         Err(e) if e.kind() == io::ErrorKind::NotFound => {
             if std::fs::symlink_metadata(path).is_ok() {
@@ -218,14 +274,8 @@ fn existing(path: &Path) -> Result<Existing, OutputError> {
         Ok(m) if m.is_dir() => Err(OutputError::IsDirectory {
             path: path.to_path_buf(),
         }),
-        Ok(m) => {
-            let resolved = std::fs::canonicalize(path).map_err(io)?;
-            Ok(if m.is_file() {
-                Existing::File(resolved)
-            } else {
-                Existing::Special(resolved)
-            })
-        }
+        Ok(m) if m.is_file() => Ok(Existing::File(std::fs::canonicalize(path).map_err(io)?)),
+        Ok(_) => Ok(Existing::Special(path.to_path_buf())),
     }
 }
 
@@ -420,8 +470,9 @@ fn temp_path(target: &Path) -> PathBuf {
 
 /// Writes `path` under the rule of this module: `write` fills a buffered temporary file
 /// in the same directory, which is flushed, synced and renamed to `path` only when
-/// `write` succeeded; an existing regular file is replaced only if `overwrite`. A device
-/// or pipe is written in place.
+/// `write` succeeded; an existing regular file is replaced only if `overwrite`. A device,
+/// a pipe or a descriptor ([`is_stream`]) is written in place, as `write` goes: what it
+/// got before a failure stays there.
 ///
 /// # Errors
 /// As [`check_output`], and [`OutputError::Io`] when writing, flushing or renaming
@@ -437,8 +488,9 @@ pub fn write_file(
     };
     let target = match existing(path)? {
         Existing::Special(dev) => {
+            // appending: a descriptor the shell opened with `>>` keeps what it holds
             let file = std::fs::OpenOptions::new()
-                .write(true)
+                .append(true)
                 .open(dev)
                 .map_err(io_err)?;
             let mut w = io::BufWriter::with_capacity(1 << 16, file);
@@ -622,6 +674,25 @@ mod tests {
         // a device is written in place, without --force
         check_output(Path::new("/dev/null"), false).unwrap();
         write_file(Path::new("/dev/null"), false, |w| w.write_all(b"x")).unwrap();
+        assert!(is_stream(Path::new("/dev/null")).unwrap());
+        assert!(!is_stream(&dir.join("none.csv")).unwrap());
+        // a descriptor, whatever it leads to (a pipe's resolves to no file)
+        for (p, descriptor, stdout) in [
+            ("/dev/stdout", true, true),
+            ("/dev/fd/1", true, true),
+            ("/proc/self/fd/1", true, true),
+            ("/dev/stderr", true, false),
+            ("/dev/fd/12", true, false),
+            ("/dev/fd/../fd/1", true, true),
+            ("/dev/fd/", false, false),
+            ("/dev/fd/x", false, false),
+            ("/dev/null", false, false),
+            ("out/dev/stdout", false, false),
+        ] {
+            assert_eq!(names_descriptor(Path::new(p)), descriptor, "{p}");
+            assert_eq!(names_standard_output(Path::new(p)), stdout, "{p}");
+        }
+        assert!(is_stream(Path::new("/dev/stderr")).unwrap());
         let _ = std::fs::remove_dir_all(&dir);
     }
 

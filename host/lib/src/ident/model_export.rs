@@ -17,6 +17,14 @@
 //! Transfer functions come from the poles (eigenvalues of `A`), the zeros
 //! ([`siso_zeros`]) and the gain, the first non-zero Markov parameter `C A^{ρ−1} B`
 //! (or `D` when it is not zero): `G(x) = k ∏(x − z_i) / ∏(x − p_i)`.
+//!
+//! No number that is not finite is exported ([`ExportError`]): a model file whose
+//! matrices or sample interval hold a number of magnitude [`MAX_MAGNITUDE`] (1e100) or
+//! more is refused, naming the entry (the eigenvalues and the coefficients take products
+//! and sums of squares of them, as the script's `control.ss` does: `A = 1e308` wrote
+//! `NaN` and `-inf` into the script), and so is a model whose derived numbers (the
+//! continuous matrices, the transfer functions' coefficients, roots and gain) overflow,
+//! naming which.
 // Units in brackets (`[s]`, `[Hz]`) are not intra-doc links.
 #![allow(rustdoc::broken_intra_doc_links)]
 
@@ -26,6 +34,7 @@ use nalgebra::{Complex, DMatrix, DVector, RowDVector};
 use serde::Serialize;
 
 use crate::data::mat::{MatOut, MatWriter};
+use crate::data::screen::MAX_MAGNITUDE;
 use crate::ident::fit::ParamJson;
 use crate::ident::model_file::{ModelFileError, SavedModel};
 use crate::ident::ss::{eigenvalues, siso_zeros, ContinuousSs, StateSpace};
@@ -284,6 +293,84 @@ pub struct ModelExport {
     pub fit_name: Option<String>,
 }
 
+/// Why a model file cannot be exported ([`ModelExport::of`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ExportError {
+    /// the file does not read back as a linear model
+    #[error(transparent)]
+    Model(#[from] ModelFileError),
+    /// a number of the model file no export computes with
+    #[error(
+        "{what} = {value:e}: the model's numbers must be finite and of magnitude below \
+         {MAX_MAGNITUDE:e} (its eigenvalues and transfer functions, here and in the exported \
+         script, multiply them)"
+    )]
+    Magnitude {
+        /// where it is (`A row 1, column 2`, `parameter k_g (std)`)
+        what: String,
+        /// the number
+        value: f64,
+    },
+    /// a parameter, or a number the export derives from the model, that is not finite
+    /// (the derived ones overflow)
+    #[error("{what} is {value}, not a finite number: the model cannot be exported")]
+    NotFinite {
+        /// which (`parameter `k_g` (std)`, `the discrete transfer function's denominator,
+        /// coefficient 3`)
+        what: String,
+        /// the number (NaN or infinite)
+        value: f64,
+    },
+}
+
+/// The first entry of `values` (`(where, number)`) that is not finite, or whose magnitude
+/// reaches `limit`.
+fn first_beyond(
+    values: impl IntoIterator<Item = (String, f64)>,
+    limit: f64,
+) -> Option<(String, f64)> {
+    values
+        .into_iter()
+        .find(|(_, v)| !v.is_finite() || v.abs() >= limit)
+}
+
+/// Every number of a state space with where it is (`A row 1, column 2`, 1-based; `B entry
+/// 3`), `prefix` naming the model.
+fn ss_numbers(prefix: &str, s: &SsJson) -> Vec<(String, f64)> {
+    let mut v = Vec::new();
+    for (i, row) in s.a.iter().enumerate() {
+        for (j, &x) in row.iter().enumerate() {
+            v.push((format!("{prefix}A row {}, column {}", i + 1, j + 1), x));
+        }
+    }
+    for (name, col) in [("B", &s.b), ("C", &s.c)] {
+        for (i, &x) in col.iter().enumerate() {
+            v.push((format!("{prefix}{name} entry {}", i + 1), x));
+        }
+    }
+    v.push((format!("{prefix}D"), s.d));
+    v
+}
+
+/// Every number of a transfer function with where it is, `what` naming it.
+fn tf_numbers(what: &str, t: &TransferFunction) -> Vec<(String, f64)> {
+    let mut v = Vec::new();
+    for (part, coefficients) in [("numerator", &t.num), ("denominator", &t.den)] {
+        for (i, &x) in coefficients.iter().enumerate() {
+            v.push((format!("{what}'s {part}, coefficient {}", i + 1), x));
+        }
+    }
+    for (part, roots) in [("zero", &t.zeros), ("pole", &t.poles)] {
+        for (i, r) in roots.iter().enumerate() {
+            v.push((format!("{what}'s {part} {}, real part", i + 1), r[0]));
+            v.push((format!("{what}'s {part} {}, imaginary part", i + 1), r[1]));
+        }
+    }
+    v.push((format!("{what}'s gain"), t.gain));
+    v
+}
+
 /// The linear-axis unit of a rotary one (force [N] → position [m]).
 pub fn linear_axis_unit(rotary: &str) -> &str {
     match rotary {
@@ -302,9 +389,33 @@ impl ModelExport {
     /// [m] instead of torque and angle.
     ///
     /// # Errors
-    /// [`ModelFileError`] when the file is inconsistent or the model nonlinear (it has no
-    /// state space).
-    pub fn of(saved: &SavedModel, linear_axis: bool) -> Result<ModelExport, ModelFileError> {
+    /// [`ExportError::Model`] when the file is inconsistent or the model nonlinear (it has
+    /// no state space); [`ExportError::Magnitude`] naming the first entry of `A`, `B`, `C`,
+    /// `D` or `Ts` that is not finite or of magnitude [`MAX_MAGNITUDE`] or more;
+    /// [`ExportError::NotFinite`] naming the first parameter value or σ that is not finite
+    /// (they are written, not computed with), or the first derived number that overflows.
+    pub fn of(saved: &SavedModel, linear_axis: bool) -> Result<ModelExport, ExportError> {
+        let discrete = SsJson {
+            a: saved.a.clone(),
+            b: saved.b.clone(),
+            c: saved.c.clone(),
+            d: saved.d,
+        };
+        let own = ss_numbers("", &discrete)
+            .into_iter()
+            .chain(std::iter::once(("Ts".to_string(), saved.ts)));
+        let params = saved.parameters.iter().flat_map(|(k, p)| {
+            [
+                (format!("parameter `{k}` (value)"), p.value),
+                (format!("parameter `{k}` (std)"), p.std),
+            ]
+        });
+        if let Some((what, value)) = first_beyond(own, MAX_MAGNITUDE) {
+            return Err(ExportError::Magnitude { what, value });
+        }
+        if let Some((what, value)) = first_beyond(params, f64::INFINITY) {
+            return Err(ExportError::NotFinite { what, value });
+        }
         let fitted = saved.to_fitted()?;
         let ss = &fitted.model;
         let unit = |u: &str| {
@@ -326,7 +437,7 @@ impl ModelExport {
         for p in parameters.values_mut() {
             p.unit = unit(&p.unit);
         }
-        Ok(ModelExport {
+        let ex = ModelExport {
             model: saved.model.clone(),
             method: saved.method.clone(),
             source: saved.source.clone(),
@@ -349,7 +460,25 @@ impl ModelExport {
             parameters,
             fit_estimation: saved.fit_estimation,
             fit_name: saved.fit_name.clone(),
-        })
+        };
+        let derived = ex
+            .continuous
+            .iter()
+            .flat_map(|c| ss_numbers("the continuous model's ", c))
+            .chain(tf_numbers(
+                "the discrete transfer function",
+                &ex.discrete_tf,
+            ))
+            .chain(
+                ex.continuous_tf
+                    .iter()
+                    .flat_map(|t| tf_numbers("the continuous transfer function", t)),
+            )
+            .map(|(what, v)| (format!("{what}, computed from the model's matrices,"), v));
+        match first_beyond(derived, f64::INFINITY) {
+            Some((what, value)) => Err(ExportError::NotFinite { what, value }),
+            None => Ok(ex),
+        }
     }
 
     /// The discrete model as a [`StateSpace`].
@@ -489,7 +618,7 @@ pub fn nonlinear_mat(saved: &SavedModel) -> Vec<u8> {
 ///
 /// # Errors
 /// As [`ModelExport::of`] for a linear model file.
-pub fn model_mat(saved: &SavedModel) -> Result<Vec<u8>, ModelFileError> {
+pub fn model_mat(saved: &SavedModel) -> Result<Vec<u8>, ExportError> {
     if saved.nonlinear.is_some() {
         return Ok(nonlinear_mat(saved));
     }
@@ -557,6 +686,50 @@ mod tests {
                 .contains("-0.5 lies on the negative real axis"),
             "{e}"
         );
+    }
+
+    /// A one-state model file (`x(k+1) = a x + u`, `y = x`) with a parameter.
+    fn one_state(a: f64) -> SavedModel {
+        let mut m: SavedModel = serde_json::from_value(serde_json::json!({
+            "format": crate::ident::model_file::MODEL_FORMAT, "model": "black-box:1",
+            "method": "test", "output": "angle", "ts": 5e-4,
+            "prep": {"decimate": 1, "detrend": "none"},
+            "a": [[0.5]], "b": [1.0], "c": [1.0], "d": 0.0,
+            "parameters": {"J": {"value": 2e-3, "std": 1e-5, "unit": "kg·m²"}},
+            "friction": null, "fit_estimation": 90.0, "source": "test",
+        }))
+        .unwrap();
+        // (JSON holds no NaN)
+        m.a[0][0] = a;
+        m
+    }
+
+    #[test]
+    fn a_model_with_a_number_beyond_computing_or_not_finite_is_refused_naming_it() {
+        assert!(ModelExport::of(&one_state(0.5), false).is_ok());
+        // `A = 1e308` wrote `NaN` and `-inf` into the python-control script
+        for a in [1e308, 1e100, -1e100, f64::NAN] {
+            let e = ModelExport::of(&one_state(a), false).unwrap_err();
+            assert!(matches!(e, ExportError::Magnitude { .. }), "{a}: {e}");
+            assert!(
+                e.to_string().starts_with("A row 1, column 1 = "),
+                "{a}: {e}"
+            );
+        }
+        let mut m = one_state(0.5);
+        m.ts = 1e200;
+        let e = ModelExport::of(&m, false).unwrap_err().to_string();
+        assert!(e.starts_with("Ts = 1e200: "), "{e}");
+        // a parameter is written, not computed with: refused only when not finite
+        let mut m = one_state(0.5);
+        m.parameters.get_mut("J").unwrap().std = f64::INFINITY;
+        let e = ModelExport::of(&m, false).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "parameter `J` (std) is inf, not a finite number: the model cannot be exported"
+        );
+        m.parameters.get_mut("J").unwrap().std = 1e300;
+        assert!(ModelExport::of(&m, false).is_ok());
     }
 
     #[test]

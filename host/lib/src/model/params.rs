@@ -58,10 +58,30 @@
 //! frequency of 32 Hz: `J_p = 2.33 kg·m²`, `k_p = 9.42e4 N·m/rad`. Seed 001 defaults use the
 //! defaults of the matching effects (see [`super::effects`]): `k3 = 3e13 N·m/rad³` and
 //! `F_c = 0.03 N·m`, sized to be visible at the small default excitation (0.02 rad RMS).
+//!
+//! # Physical ranges
+//! A value given on the command line (`simulate --param NAME=VALUE`) must lie in its
+//! parameter's range ([`param_range`]), as an effect's keys must lie in theirs
+//! ([`super::effects`]): wide enough for any real joint (and for a linear axis fitted
+//! with `--linear-axis`, whose masses in kg, stiffnesses in N/m and dampings in N·s/m take
+//! the same numbers), narrow enough that the simulator integrates physics, not numbers
+//! far outside it (`J_m = 1e-30` made the motor's own mode so fast that the angle grew to
+//! 1e69 rad over a run, and exited 0).
+//!
+//! | name | range | unit | why |
+//! |---|---|---|---|
+//! | `J_m` | 1e-7 … 1e4 | kg·m² | 1 g·cm² is below the rotor of the smallest servo motor; 1e4: a 10 t linear axis |
+//! | `J_a1`, `J_a2`, `J_p` | 0, or 1e-6 … 1e5 | kg·m² | 0: no such mass (the rigid and grounded structures, a lumped two-mass); 1e5: a tonne at 10 m |
+//! | `k_g`, `k_a`, `k_p` | 1e-3 … 1e10 | N·m/rad | as an extra mode's `k`, ten times wider above: a ball screw in N/m |
+//! | `k_0` | 1e-6 … 1e10 | N·m/rad | a flexure's spring to ground, from a thousandth of a hertz |
+//! | `d_g`, `d_a`, `d_p`, `f_m` | 0 … 1e6 | N·m·s/rad | as an extra mode's `d` |
+//! | `r` | 1e-4 … 100 | - | 1:10 000, beyond any reducer, to a 100:1 step-up; 1 is direct drive |
+//! | `k3` | −1e16 … 1e16 | N·m/rad³ | `nonlinear_stiffness`'s `k3` |
+//! | `F_c` | 0 … 100 | N·m | `coulomb_friction`'s `fc` |
 
 use serde::{Deserialize, Serialize};
 
-use super::effects::{parse_effects, CoulombFriction, Effect, NonlinearStiffness};
+use super::effects::{parse_effects, Bounds, CoulombFriction, Effect, NonlinearStiffness};
 use super::spec::{Family, ModelSpec, SpecError, Structure};
 
 /// Named physical parameters, seed 000 Table 1 plus seed 001's `k3`, `F_c`.
@@ -215,6 +235,73 @@ pub fn model_params(structure: Structure) -> Vec<(&'static str, ParamField)> {
 /// ([`sim_spec`]): `k3` [N·m/rad³] and `F_c` [N·m], after [`model_params`] of the two-mass.
 pub fn seed_001_params() -> [(&'static str, ParamField); 2] {
     [("k3", |p| &mut p.k3), ("F_c", |p| &mut p.f_c)]
+}
+
+/// The physical range of a plant parameter ([`param_range`]; the table in the module
+/// documentation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParamRange {
+    /// lowest and highest value, in the parameter's unit ([`unit_of`])
+    pub bounds: Bounds,
+    /// 0 is taken too, outside the range: a mass the structure may lack (an arm inertia)
+    pub zero: bool,
+}
+
+impl ParamRange {
+    /// Whether `v` is in the range (NaN never is).
+    pub fn contains(&self, v: f64) -> bool {
+        (self.zero && v == 0.0) || (self.bounds.lo..=self.bounds.hi).contains(&v)
+    }
+}
+
+impl std::fmt::Display for ParamRange {
+    /// `must be within [lo, hi] unit`, or `must be 0 or within …` when 0 is taken.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let within = self.bounds.to_string();
+        match within.strip_prefix("must be ").filter(|_| self.zero) {
+            Some(rest) => write!(f, "must be 0 or {rest}"),
+            None => f.write_str(&within),
+        }
+    }
+}
+
+/// The physical range of the plant parameter `name` (names as in [`JointParams::table`];
+/// the table and the reasons in the module documentation); `None` for a name that is
+/// not one. `k3` and `F_c` take the bounds of the effects they value
+/// (`nonlinear_stiffness`'s `k3`, `coulomb_friction`'s `fc`).
+pub fn param_range(name: &str) -> Option<ParamRange> {
+    let effect_key = |e: Effect, key: &str| {
+        e.bounds()
+            .iter()
+            .find(|(k, ..)| *k == key)
+            .map(|&(_, lo, hi, unit)| Bounds { lo, hi, unit })
+    };
+    let range = |lo: f64, hi: f64| Bounds {
+        lo,
+        hi,
+        unit: unit_of(name),
+    };
+    let (bounds, zero) = match name {
+        "J_m" => (range(1e-7, 1e4), false),
+        "J_a1" | "J_a2" | "J_p" => (range(1e-6, 1e5), true),
+        "k_g" | "k_a" | "k_p" => (range(1e-3, 1e10), false),
+        "k_0" => (range(1e-6, 1e10), false),
+        "d_g" | "d_a" | "d_p" | "f_m" => (range(0.0, 1e6), false),
+        "r" => (range(1e-4, 100.0), false),
+        "k3" => (
+            effect_key(
+                Effect::NonlinearStiffness(NonlinearStiffness::default()),
+                "k3",
+            )?,
+            false,
+        ),
+        "F_c" => (
+            effect_key(Effect::CoulombFriction(CoulombFriction::default()), "fc")?,
+            false,
+        ),
+        _ => return None,
+    };
+    Some(ParamRange { bounds, zero })
 }
 
 /// The simulator's model description: the [`ModelSpec`] of `structure` with the effects
@@ -399,6 +486,42 @@ mod tests {
             ModelSpec::linear(Family::Physical(Structure::FourMass))
         );
         assert!(sim_spec(Structure::Rigid, false, &["nope".into()], &p).is_err());
+    }
+
+    #[test]
+    fn every_parameter_has_a_physical_range_holding_its_default_and_refusing_the_absurd() {
+        let mut defaults = JointParams::default();
+        for (name, value, unit) in JointParams::default().table() {
+            let range = param_range(name).unwrap_or_else(|| panic!("{name} has no range"));
+            assert_eq!(range.bounds.unit, unit, "{name}");
+            assert!(range.contains(value), "{name} = {value}: {range}");
+            assert!(!range.contains(f64::NAN), "{name}");
+            assert!(!range.contains(1e30) && !range.contains(-1e30), "{name}");
+        }
+        // what `simulate --param J_m=1e-30` ran before: the motor's mode beyond any physics
+        let j_m = param_range("J_m").unwrap();
+        assert!(!j_m.contains(1e-30));
+        assert_eq!(j_m.to_string(), "must be within [1e-7, 10000] kg·m²");
+        // an arm inertia may be absent, not absurdly small
+        let j_a2 = param_range("J_a2").unwrap();
+        assert!(j_a2.contains(0.0) && !j_a2.contains(1e-300));
+        assert_eq!(j_a2.to_string(), "must be 0 or within [1e-6, 1e5] kg·m²");
+        // seed 001's two take their effects' bounds
+        assert_eq!(
+            param_range("k3").unwrap().to_string(),
+            "must be within [-1e16, 1e16] N·m/rad³"
+        );
+        assert_eq!(
+            param_range("F_c").unwrap().to_string(),
+            "must be within [0, 100] N·m"
+        );
+        assert_eq!(param_range("nope"), None);
+        // every name `--param` takes for every structure has one
+        for kind in Structure::ALL {
+            for (name, field) in model_params(kind).into_iter().chain(seed_001_params()) {
+                assert!(param_range(name).unwrap().contains(*field(&mut defaults)));
+            }
+        }
     }
 
     #[test]
