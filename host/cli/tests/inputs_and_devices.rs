@@ -9,20 +9,7 @@
 
 #[allow(dead_code)] // not every helper is used here
 mod common;
-use common::{jointid, jointid_stdin, json_of, simulated, tmpdir};
-
-/// `jointid ARGS` must exit 2 with one line on standard error containing every one of
-/// `msgs`; its text.
-fn refused(args: &[&str], msgs: &[&str]) -> String {
-    let o = jointid(args);
-    let err = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
-    assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
-    for m in msgs {
-        assert!(err.contains(m), "{args:?}: `{m}` not in {err}");
-    }
-    err
-}
+use common::{jointid, jointid_stdin, json_of, refused, simulated, tmpdir};
 
 /// The capture CSV `text` with its time column rewritten to `k · dt`.
 fn retimed(text: &str, dt: f64) -> String {
@@ -304,30 +291,6 @@ fn a_device_or_pipe_is_written_in_place_and_a_run_that_stops_writes_nothing_ther
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// The bytes of a name as `--json` and the messages give it: `\\` a backslash, `\xHH` a
-/// byte, anything else itself.
-fn name_bytes(text: &str) -> Vec<u8> {
-    let (mut out, b) = (Vec::new(), text.as_bytes());
-    let mut i = 0;
-    while i < b.len() {
-        match (b[i], b.get(i + 1)) {
-            (b'\\', Some(b'\\')) => {
-                out.push(b'\\');
-                i += 2;
-            }
-            (b'\\', Some(b'x')) => {
-                out.push(u8::from_str_radix(&text[i + 2..i + 4], 16).unwrap());
-                i += 4;
-            }
-            (c, _) => {
-                out.push(c);
-                i += 1;
-            }
-        }
-    }
-    out
-}
-
 #[cfg(unix)]
 #[test]
 fn a_file_name_that_is_not_utf8_is_named_losslessly_in_json_and_messages() {
@@ -348,7 +311,7 @@ fn a_file_name_that_is_not_utf8_is_named_losslessly_in_json_and_messages() {
             .unwrap_or_else(|| panic!("{field} in {v}"));
         assert!(!text.contains('\u{fffd}'), "{field}: {text}");
         assert_eq!(
-            name_bytes(text),
+            jointid::data::input::path_bytes(text).expect("an escaped name"),
             path.as_os_str().as_bytes(),
             "{field}: {text}"
         );

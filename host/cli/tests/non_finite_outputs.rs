@@ -9,21 +9,7 @@ use std::path::Path;
 
 #[allow(dead_code)] // not every helper is used here
 mod common;
-use common::{jointid, json_of, simulated, tmpdir};
-
-/// `jointid ARGS` must exit 2 with one line on standard error containing every one of
-/// `msgs` and nothing on standard output; its text.
-fn refused(args: &[&str], msgs: &[&str]) -> String {
-    let o = jointid(args);
-    let err = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
-    assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
-    for m in msgs {
-        assert!(err.contains(m), "{args:?}: `{m}` not in {err}");
-    }
-    assert!(o.stdout.is_empty(), "{args:?} wrote to standard output");
-    err
-}
+use common::{jointid, json_of, refused, simulated, tmpdir};
 
 #[test]
 fn simulate_refuses_a_param_outside_its_physical_range_naming_flag_value_and_range() {

@@ -137,3 +137,18 @@ pub fn stiffening_capture(dir: &std::path::Path, name: &str, seed: &str, exc_see
     ]));
     out.display().to_string()
 }
+
+/// `jointid ARGS` must exit 2 with one line on standard error containing every one of
+/// `msgs`, and nothing on standard output; its text.
+#[allow(dead_code)]
+pub fn refused(args: &[&str], msgs: &[&str]) -> String {
+    let o = jointid(args);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+    assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
+    for m in msgs {
+        assert!(err.contains(m), "{args:?}: `{m}` not in {err}");
+    }
+    assert!(o.stdout.is_empty(), "{args:?} wrote to standard output");
+    err
+}

@@ -38,6 +38,31 @@ pub fn input_name(path: &Path) -> String {
     }
 }
 
+/// The bytes of a name [`path_text`] wrote: `\\` a backslash, `\xHH` a byte, anything else
+/// itself (for a caller that reads a name back from `--json`); `None` when an escape is
+/// cut short or not hexadecimal.
+pub fn path_bytes(text: &str) -> Option<Vec<u8>> {
+    let (mut out, b) = (Vec::new(), text.as_bytes());
+    let mut i = 0;
+    while i < b.len() {
+        match (b[i], b.get(i + 1)) {
+            (b'\\', Some(b'\\')) => {
+                out.push(b'\\');
+                i += 2;
+            }
+            (b'\\', Some(b'x')) => {
+                out.push(u8::from_str_radix(text.get(i + 2..i + 4)?, 16).ok()?);
+                i += 4;
+            }
+            (c, _) => {
+                out.push(c);
+                i += 1;
+            }
+        }
+    }
+    Some(out)
+}
+
 /// `path` as text, losslessly: as given, with a backslash written `\\` and each byte that
 /// is not printable UTF-8 text (not UTF-8, or a control character such as a newline)
 /// written `\xHH`, so that the name's bytes can be recovered and a message stays on one
@@ -153,27 +178,7 @@ mod tests {
         assert_eq!(text(b"x\xc3"), "x\\xC3");
         assert_eq!(text(b"\xff\xfe\xc3\xa9"), "\\xFF\\xFEé");
         // the bytes come back: the inverse of the escapes
-        let back = |s: &str| -> Vec<u8> {
-            let (mut out, b) = (Vec::new(), s.as_bytes());
-            let mut i = 0;
-            while i < b.len() {
-                match (b[i], b.get(i + 1)) {
-                    (b'\\', Some(b'\\')) => {
-                        out.push(b'\\');
-                        i += 2;
-                    }
-                    (b'\\', Some(b'x')) => {
-                        out.push(u8::from_str_radix(&s[i + 2..i + 4], 16).unwrap());
-                        i += 4;
-                    }
-                    (c, _) => {
-                        out.push(c);
-                        i += 1;
-                    }
-                }
-            }
-            out
-        };
+        let back = |s: &str| path_bytes(s).expect("an escaped name");
         for name in [
             &b"mess\xe9.csv"[..],
             b"a\\xE9.csv",
