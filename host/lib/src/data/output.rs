@@ -32,24 +32,26 @@ use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard};
 
+use super::input::path_text;
+
 /// Why an output file cannot be (or was not) written.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum OutputError {
     /// The file exists and overwriting was not asked for.
-    #[error("{path}: already exists (pass --force to overwrite)")]
+    #[error("{}: already exists (pass --force to overwrite)", path_text(path))]
     Exists {
         /// the file
         path: PathBuf,
     },
     /// The path names a directory.
-    #[error("{path}: is a directory, not a file")]
+    #[error("{}: is a directory, not a file", path_text(path))]
     IsDirectory {
         /// the path
         path: PathBuf,
     },
     /// The file's directory does not exist (or is not a directory).
-    #[error("{path}: directory {dir} does not exist")]
+    #[error("{}: directory {} does not exist", path_text(path), path_text(dir))]
     NoDirectory {
         /// the file
         path: PathBuf,
@@ -57,7 +59,12 @@ pub enum OutputError {
         dir: PathBuf,
     },
     /// The file's directory exists but a file cannot be created in it.
-    #[error("{path}: directory {dir} is not writable: {}", io_msg(err))]
+    #[error(
+        "{}: directory {} is not writable: {}",
+        path_text(path),
+        path_text(dir),
+        io_msg(err)
+    )]
     NotWritable {
         /// the file
         path: PathBuf,
@@ -68,9 +75,11 @@ pub enum OutputError {
     },
     /// The file would not fit in the free space of its file system ([`check_room`]).
     #[error(
-        "{path}: about {} to write, more than the {} free on the file system of {dir}",
+        "{}: about {} to write, more than the {} free on the file system of {}",
+        path_text(path),
         fmt_bytes(*needed),
-        fmt_bytes(*free)
+        fmt_bytes(*free),
+        path_text(dir)
     )]
     NoRoom {
         /// the file
@@ -83,7 +92,7 @@ pub enum OutputError {
         free: u64,
     },
     /// Writing, flushing or renaming failed.
-    #[error("{path}: {}", io_msg(err))]
+    #[error("{}: {}", path_text(path), io_msg(err))]
     Io {
         /// the file
         path: PathBuf,
@@ -333,7 +342,7 @@ impl std::fmt::Display for StaleTemporary {
         write!(
             f,
             "{}: removed, a temporary file of {} left by process {}, which no longer runs",
-            self.path.display(),
+            path_text(&self.path),
             fmt_bytes(self.bytes),
             self.pid
         )
@@ -556,6 +565,31 @@ pub fn write_file(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An output's name that is not UTF-8 is given losslessly in every refusal (`\xHH`,
+    /// as `--json` and the input messages give it), not as U+FFFD.
+    #[cfg(unix)]
+    #[test]
+    fn an_output_name_that_is_not_utf8_is_named_losslessly() {
+        use std::os::unix::ffi::OsStrExt;
+        let path = PathBuf::from(std::ffi::OsStr::from_bytes(b"/no/such/dir/r\xe9sultat.csv"));
+        let dir = path.parent().unwrap().to_path_buf();
+        for e in [
+            OutputError::Exists { path: path.clone() },
+            OutputError::NoDirectory {
+                path: path.clone(),
+                dir: dir.clone(),
+            },
+            OutputError::Io {
+                path: path.clone(),
+                err: io::Error::from(io::ErrorKind::BrokenPipe),
+            },
+        ] {
+            let m = e.to_string();
+            assert!(m.starts_with("/no/such/dir/r\\xE9sultat.csv: "), "{m}");
+            assert!(!m.contains('\u{FFFD}'), "{m}");
+        }
+    }
 
     fn tmp(name: &str) -> PathBuf {
         let d = std::env::temp_dir().join(format!("jointid-output-{}-{name}", std::process::id()));
