@@ -520,3 +520,49 @@ fn standard_deviations_hold_with_realistic_sensors() {
     }
     assert!(failed.is_empty(), "{failed:#?}");
 }
+
+/// starts of the search's first pass: each choice of `n_res` of the `n_res + 2` strongest
+/// peaks at two damping levels
+fn first_pass_starts(frf: &Frf, structure: Structure) -> usize {
+    let n_res = structure.masses() - 1;
+    let peaks = frf_peaks(frf, Output::Angle).len().min(n_res + 2);
+    2 * subsets(peaks, n_res.min(peaks)).len()
+}
+
+#[test]
+fn an_estimate_at_the_noise_level_ends_the_search_after_its_first_pass() {
+    // a four-mass model of a three-mass joint (the extra-mode candidate of a diagnosis):
+    // the FRF shows two peaks for three modes, and the first pass's log-FRF starts end
+    // tens of times above the noise level in SML cost, which their SML refinement then
+    // reaches. Judged on the log-cost starts, these four joints ran 32, 10, 33 and 12
+    // starts for the same cost (1.30 against 1.11 on draw 2)
+    let mut rng = GaussRng::new(42);
+    let mut failed = Vec::new();
+    for d in 0..8 {
+        let (p, controller, rms) = crate::test_support::random_joint(&mut rng, d);
+        if ![0, 2, 5, 7].contains(&d) {
+            continue;
+        }
+        let cfg = SimConfig {
+            plant: Plant {
+                kind: Structure::ThreeMass,
+                params: p,
+            },
+            controller,
+            seed: 100 + d as u64,
+            ..SimConfig::default()
+        };
+        let frf = frf_of(&cfg, &excitation(4, rms as f32));
+        let fit = fit_frf(&frf, &FrfFitOptions::new(Structure::FourMass, 5e-4)).unwrap();
+        let first = first_pass_starts(&frf, Structure::FourMass);
+        // at most one set beside the shown peaks, at its three dampings, after the first pass
+        if fit.cost_ratio() > 1.5 || fit.starts > first + 3 {
+            failed.push(format!(
+                "draw {d}: {} starts (first pass {first}), cost {:.2} × the noise level",
+                fit.starts,
+                fit.cost_ratio()
+            ));
+        }
+    }
+    assert!(failed.is_empty(), "{failed:#?}");
+}
