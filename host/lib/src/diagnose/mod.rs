@@ -41,10 +41,11 @@
 //! 4. **Pairs** ([`select::pairs`]): the best single (and the second when they tie) with
 //!    each other significant single, started from the singles' fits, judged against its
 //!    lead alone (nested).
-//! 5. **Reduction** ([`select::reduce`]): a pair's effects each refitted alone from the
-//!    pair's values; a single that does as well is the answer.
-//! 6. **Refinement** ([`select::polish_answer`]): the answer's fit continued when it
-//!    stopped at its iteration limit.
+//! 5. **Refinement** ([`select::polish_answer`]): the answer's fit continued when it
+//!    stopped at its iteration limit; a pair's before its reduction, since a pair stopped
+//!    short of its minimum is no measure of what its second effect adds.
+//! 6. **Reduction** ([`select::reduce`]): a pair's effects each refitted alone from the
+//!    pair's values; a single that does as well is the answer (and is refined in turn).
 //! 7. **In the loop** ([`loop_answer`], [`in_loop`]): an answer that leaves the odd
 //!    distortion standing above the noise, or `none` with it left, has every fitted model
 //!    scored again in the loop of the robot's controller, its law identified from the
@@ -697,8 +698,15 @@ pub fn diagnose_segments(
     // a nominal not to be trusted is no base to build an answer on
     let in_loop = if trust.1.is_none() {
         select::pairs(&fitter, &ev, &mut answer, &mut warnings);
+        // a pair is refined before its effects are judged apart, a single after
+        let pair = answer.pair.is_some();
+        if pair {
+            select::polish_answer(&fitter, &nominal, &ev, &mut answer, &mut warnings);
+        }
         select::reduce(&fitter, &nominal, &ev, &mut answer, &mut warnings);
-        select::polish_answer(&fitter, &nominal, &ev, &mut answer, &mut warnings);
+        if !pair || answer.pair.is_none() {
+            select::polish_answer(&fitter, &nominal, &ev, &mut answer, &mut warnings);
+        }
         loop_answer::rescore(&fitter, &nominal, &ev, &mut answer, &mut warnings)
     } else {
         None
