@@ -146,6 +146,22 @@ fn three_mass_holds_under_a_tenfold_disturbance() {
     assert!(bad.is_empty(), "{bad:?}");
 }
 
+/// Draw `d` of the random three-mass joints (±30 % joints, three controller tunings,
+/// 0.01–0.4 rad RMS): its parameters, its FRF and its RMS [rad]
+fn random_three_mass(rng: &mut GaussRng, d: usize) -> (JointParams, Frf, f64) {
+    let (p, controller, rms) = crate::test_support::random_joint(rng, d);
+    let cfg = SimConfig {
+        plant: Plant {
+            kind: Structure::ThreeMass,
+            params: p,
+        },
+        controller,
+        seed: 100 + d as u64,
+        ..SimConfig::default()
+    };
+    (p, frf_of(&cfg, &excitation(4, rms as f32)), rms)
+}
+
 #[test]
 fn three_mass_over_random_joints_controllers_and_amplitudes() {
     // ±30 % joints, three controller tunings, 0.01–0.4 rad RMS
@@ -153,17 +169,7 @@ fn three_mass_over_random_joints_controllers_and_amplitudes() {
     let draws = 8;
     let mut failed = Vec::new();
     for d in 0..draws {
-        let (p, controller, rms) = crate::test_support::random_joint(&mut rng, d);
-        let cfg = SimConfig {
-            plant: Plant {
-                kind: Structure::ThreeMass,
-                params: p,
-            },
-            controller,
-            seed: 100 + d as u64,
-            ..SimConfig::default()
-        };
-        let frf = frf_of(&cfg, &excitation(4, rms as f32));
+        let (p, frf, rms) = random_three_mass(&mut rng, d);
         let fit = fit_frf(&frf, &FrfFitOptions::new(Structure::ThreeMass, 5e-4)).unwrap();
         let bad = misses(&fit, &truth(&p, Structure::ThreeMass), 0.03, 3.0);
         let modes = true_modes(&p, Structure::ThreeMass);
@@ -539,20 +545,10 @@ fn an_estimate_at_the_noise_level_ends_the_search_after_its_first_pass() {
     let mut rng = GaussRng::new(42);
     let mut failed = Vec::new();
     for d in 0..8 {
-        let (p, controller, rms) = crate::test_support::random_joint(&mut rng, d);
+        let (_, frf, _) = random_three_mass(&mut rng, d);
         if ![0, 2, 5, 7].contains(&d) {
             continue;
         }
-        let cfg = SimConfig {
-            plant: Plant {
-                kind: Structure::ThreeMass,
-                params: p,
-            },
-            controller,
-            seed: 100 + d as u64,
-            ..SimConfig::default()
-        };
-        let frf = frf_of(&cfg, &excitation(4, rms as f32));
         let fit = fit_frf(&frf, &FrfFitOptions::new(Structure::FourMass, 5e-4)).unwrap();
         let first = first_pass_starts(&frf, Structure::FourMass);
         // at most one set beside the shown peaks, at its three dampings, after the first pass
