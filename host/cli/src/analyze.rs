@@ -140,7 +140,16 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
     let data = DataArgs::new(&args.path, &args.columns, &args.read);
     let selected = data.select(ctx.loaders)?;
     let ds = &selected.datasets[0];
+    super::progress::step(format!(
+        "analysing {} samples",
+        selected
+            .datasets
+            .iter()
+            .map(|d| d.data.len())
+            .sum::<usize>()
+    ));
     let a = analyze_segments(&selected.datasets, args.settle_periods)?;
+    super::progress::clear();
     let notes: Vec<String> = a
         .left_out
         .iter()
@@ -181,11 +190,13 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
         let other_ds = args
             .read
             .select_one(ctx.loaders, other, data.column_map())?;
+        super::progress::step(format!("analysing {} samples", other_ds.data.len()));
         let b = analyze_dataset(&other_ds, args.settle_periods)?;
         same_multisine((ds, &a), (&other_ds, &b))?;
         trend.push(amplitude_trend(&a.linearity_u, &b.linearity_u));
         trend.push(amplitude_trend(&a.linearity_y, &b.linearity_y));
     }
+    super::progress::finish();
     if ctx.json {
         print_json(
             ctx.out,

@@ -35,6 +35,10 @@ pub struct ReadArgs {
     /// how a CSV's columns are split
     #[command(flatten)]
     pub csv: DelimiterArg,
+    /// no progress line on standard error (shown only when it is a terminal, for a step
+    /// that lasts over 2 s: reading a large file, a fit, a diagnosis's stages)
+    #[arg(long, short)]
+    pub quiet: bool,
 }
 
 /// `--delimiter`: how a CSV's columns are split; declared once, in [`ReadArgs`] and in
@@ -123,8 +127,20 @@ impl ReadArgs {
         mut map: ColumnMap,
     ) -> Result<Selected, DataError> {
         map.delimiter = self.delimiter();
+        super::progress::start(self.quiet);
+        let size = std::fs::metadata(path)
+            .ok()
+            .filter(|m| m.is_file())
+            .map_or_else(String::new, |m| {
+                format!(" ({} MB)", fmt_sig(m.len() as f64 / 1e6, 3))
+            });
+        super::progress::step(format!(
+            "reading {}{size}",
+            jointid::data::input::input_name(path)
+        ));
         let record: Record = loaders.load_record(path, &map)?;
         let sel = record.select(&self.selection())?;
+        super::progress::clear();
         for n in &sel.notes {
             let _ = writeln!(std::io::stderr(), "note: {n}");
         }

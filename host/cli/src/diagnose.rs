@@ -86,9 +86,6 @@ pub struct DiagnoseArgs {
     /// replace the report and the SVG files when they exist
     #[arg(long)]
     pub force: bool,
-    /// No progress lines on standard error (shown only when it is a terminal)
-    #[arg(long, short)]
-    pub quiet: bool,
     /// exit 1 when the diagnosis names no effect because its nominal is not to be trusted
     /// (it does not describe the validation data)
     #[arg(long)]
@@ -265,7 +262,9 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     let (val, val_numbers) = capture(&args.validation, "--validation ")?;
     check_same_rate(&est[0][0], &val[0], "--validation")?;
-    let bar = progress_bar(args.quiet);
+    // the diagnosis's own lines take over from the reading's
+    super::progress::finish();
+    let bar = progress_bar(args.read.quiet);
     let shown = bar.clone();
     let mut req = DiagnoseRequest {
         structure,

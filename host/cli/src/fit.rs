@@ -415,7 +415,13 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         numbers: &sel.segments,
         validation: val.as_ref(),
     };
+    super::progress::step(format!(
+        "fitting {} on {} samples",
+        req.options.spec.name(),
+        sel.datasets.iter().map(|d| d.data.len()).sum::<usize>()
+    ));
     let mut out = library::run(&req, records).map_err(|e| args.flagged(e))?;
+    super::progress::finish();
     out.warnings.extend(share_warning(&sel));
     out.warnings.extend(screened);
     print_notes(&out.notes);

@@ -40,6 +40,7 @@ mod fit_report;
 mod info;
 pub mod interrupt;
 mod print;
+pub mod progress;
 mod simulate;
 mod validate;
 mod validate_simulated;
@@ -137,7 +138,7 @@ pub fn default_loaders() -> Loaders {
 /// Whatever the subcommand reports; main.rs prints it on one line (or as
 /// JSON with `--json`) and exits with 2.
 pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
-    match &cli.command {
+    let done = match &cli.command {
         Command::Capture(a) => capture::run(a, ctx),
         Command::Info(a) => info::run(a, ctx),
         Command::Export(a) => export::run(a, ctx),
@@ -149,7 +150,10 @@ pub fn run(cli: &Cli, ctx: &mut Context<'_>) -> CmdResult {
         Command::Experiment(a) => experiment::run(a, ctx),
         Command::Simulate(a) => simulate::run(a, ctx),
         Command::Diagnose(a) => diagnose::run(a, ctx),
-    }
+    };
+    // a command that ended early (an error) leaves no progress line behind
+    progress::finish();
+    done
 }
 
 /// Ends a command's text output with the files it wrote, under `wrote:`, one a line

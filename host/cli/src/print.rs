@@ -60,6 +60,7 @@ pub(crate) fn std_percent(value: f64, std: f64) -> String {
 
 /// Prints each note on standard error as `note: ...`.
 pub(crate) fn print_notes(notes: &[String]) {
+    super::progress::clear();
     for n in notes {
         let _ = writeln!(std::io::stderr(), "note: {n}");
     }

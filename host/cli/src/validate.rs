@@ -173,6 +173,10 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
         .to_fitted()
         .map_err(|e| format!("{}: {e}", input_name(mpath)))?;
     let sel = data_args(&args.files[1]).select(ctx.loaders)?;
+    super::progress::step(format!(
+        "validating on {} samples",
+        sel.datasets.iter().map(|d| d.data.len()).sum::<usize>()
+    ));
     let numbers = sel.segments.clone();
     let segs = sel.datasets;
     let ds = longest_segment(&segs).clone();
@@ -316,6 +320,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
     // a diverged simulation is never ok, with or without --require-fit
     let finite = fit.is_finite() && v.fit.is_finite() && v.whiteness.non_finite == 0;
     let fit_ok = finite && args.require_fit.is_none_or(|x| fit >= x);
+    super::progress::finish();
     if ctx.json {
         print_json(
             ctx.out,
@@ -471,6 +476,10 @@ fn run_nonlinear(
         ..NlOptions::default()
     };
     let records: Vec<IdData> = segs.iter().map(|d| d.data.clone()).collect();
+    super::progress::step(format!(
+        "validating on {} samples",
+        records.iter().map(IdData::len).sum::<usize>()
+    ));
     let v = validate_segments(&fit, &records, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
     let segments: Vec<SegmentJson> = if segs.len() > 1 {
         segs.iter()
@@ -497,6 +506,7 @@ fn run_nonlinear(
     let fit_name = saved.fit_name.as_deref().unwrap_or(NL_FIT_NAME);
     let finite = fit_pct.is_finite();
     let fit_ok = finite && args.require_fit.is_none_or(|x| fit_pct >= x);
+    super::progress::finish();
     if ctx.json {
         print_json(
             ctx.out,

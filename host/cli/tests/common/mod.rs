@@ -54,25 +54,52 @@ pub fn jointid_stdin(args: &[&str], input: &[u8]) -> Output {
 }
 
 /// runs `jointid` with `args`, killed after `limit`: its output, or `None` when it had to
-/// be killed (a hang is a test failure, never a runaway process)
+/// be killed (a hang is a test failure, never a runaway process). Its output is read while
+/// it runs, so a command that writes much never waits on a full pipe.
 #[allow(dead_code)]
 pub fn jointid_within(args: &[&str], limit: std::time::Duration) -> Option<Output> {
+    use std::io::Read;
     let mut child = Command::new(BIN)
         .args(args)
+        .stdin(std::process::Stdio::null())
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
         .expect("run jointid");
+    let drain = |mut r: Box<dyn Read + Send>| {
+        std::thread::spawn(move || {
+            let mut b = Vec::new();
+            let _ = r.read_to_end(&mut b);
+            b
+        })
+    };
+    let out = drain(Box::new(
+        child.stdout.take().expect("jointid's standard output"),
+    ));
+    let err = drain(Box::new(
+        child.stderr.take().expect("jointid's standard error"),
+    ));
     let t0 = std::time::Instant::now();
-    while child.try_wait().expect("wait for jointid").is_none() {
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("wait for jointid") {
+            break Some(status);
+        }
         if t0.elapsed() > limit {
             let _ = child.kill();
             let _ = child.wait();
-            return None;
+            break None;
         }
         std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    Some(child.wait_with_output().expect("jointid's output"))
+    };
+    let (stdout, stderr) = (
+        out.join().unwrap_or_default(),
+        err.join().unwrap_or_default(),
+    );
+    status.map(|status| Output {
+        status,
+        stdout,
+        stderr,
+    })
 }
 
 /// stdout of a successful run parsed as JSON; fails the test with the exit status and

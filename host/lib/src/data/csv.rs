@@ -64,7 +64,7 @@ pub const EXCITATION_KEYS: [&str; 9] = [
 /// As [`parse_csv_record`]; [`DataError::TimeGap`] naming the line of the first gap when
 /// the time column has one.
 pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, DataError> {
-    let (record, first_gap) = parse_inner(text, name, map)?;
+    let (record, first_gap) = parse_inner(text.as_bytes(), None, name, map)?;
     match first_gap {
         Some(e) => Err(e),
         None => record.into_single(),
@@ -85,24 +85,238 @@ pub fn parse_csv(text: &str, name: &str, map: &ColumnMap) -> Result<Dataset, Dat
 /// # Errors
 /// Every [`DataError`] naming `name`, the line and the column at fault.
 pub fn parse_csv_record(text: &str, name: &str, map: &ColumnMap) -> Result<Record, DataError> {
-    parse_inner(text, name, map).map(|(r, _)| r)
+    parse_inner(text.as_bytes(), None, name, map).map(|(r, _)| r)
+}
+
+/// Reads a CSV from `reader` line by line into its gap-free pieces, as
+/// [`parse_csv_record`] parses a text: the text is never held whole, only the columns
+/// `map` names, as `f64` (a ten-million-row file of 532 MB is read in the 240 MB of its
+/// three columns). `size`, the input's length in bytes when known, sizes the columns.
+///
+/// # Errors
+/// As [`parse_csv_record`]; [`DataError::NotText`] when the input is not UTF-8 text or
+/// holds a NUL (binary content: the first such byte by its offset, a byte that is not
+/// UTF-8 before a NUL, wherever they lie, as a check of the whole text would say),
+/// [`DataError::Io`] when it cannot be read.
+pub fn read_csv_record(
+    reader: impl io::BufRead,
+    size: Option<u64>,
+    name: &str,
+    map: &ColumnMap,
+) -> Result<Record, DataError> {
+    parse_inner(reader, size, name, map).map(|(r, _)| r)
+}
+
+/// The lines of a CSV read from a [`io::BufRead`], without their line ends (`\n`, or
+/// `\r\n`, as [`str::lines`] splits), numbered from 1, a leading byte-order mark
+/// dropped. One line is held at a time. A line that is not UTF-8 text or holds a NUL
+/// ends the reading with [`DataError::NotText`].
+struct Lines<R> {
+    reader: R,
+    name: String,
+    buf: Vec<u8>,
+    /// number of the line in `buf`
+    line: usize,
+    /// byte offset of the line after it
+    offset: u64,
+}
+
+impl<R: io::BufRead> Lines<R> {
+    fn new(reader: R, name: &str) -> Self {
+        Lines {
+            reader,
+            name: name.to_string(),
+            buf: Vec::new(),
+            line: 0,
+            offset: 0,
+        }
+    }
+
+    fn io(&self, source: io::Error) -> DataError {
+        DataError::Io {
+            file: self.name.clone(),
+            source,
+        }
+    }
+
+    /// Reads the next line into `buf` with its end; `false` at the end of the input.
+    fn fill(&mut self) -> Result<bool, DataError> {
+        self.buf.clear();
+        loop {
+            match self.reader.read_until(b'\n', &mut self.buf) {
+                Ok(0) => return Ok(false),
+                Ok(_) => return Ok(true),
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                Err(e) => return Err(self.io(e)),
+            }
+        }
+    }
+
+    /// The next line and its number; `None` at the end of the input.
+    fn next_line(&mut self) -> Result<Option<(usize, &str)>, DataError> {
+        let start = self.offset;
+        if !self.fill()? {
+            return Ok(None);
+        }
+        self.line += 1;
+        self.offset += self.buf.len() as u64;
+        let skip = if self.line == 1 && self.buf.starts_with("\u{feff}".as_bytes()) {
+            3
+        } else {
+            0
+        };
+        if std::str::from_utf8(&self.buf).is_err() || self.buf.contains(&0) {
+            return Err(self.not_text(start));
+        }
+        let mut l = &self.buf[skip..];
+        if let Some(rest) = l.strip_suffix(b"\n") {
+            l = rest.strip_suffix(b"\r").unwrap_or(rest);
+        }
+        // checked above; `l` ends at an ASCII byte, so it is text too
+        Ok(Some((
+            self.line,
+            std::str::from_utf8(l).unwrap_or_default(),
+        )))
+    }
+
+    /// The error of binary content found in the line in `buf` (at byte `start`) or after
+    /// it: the first byte that is not UTF-8, else the first NUL.
+    fn not_text(&mut self, mut start: u64) -> DataError {
+        let mut nul = None;
+        loop {
+            if let Err(e) = std::str::from_utf8(&self.buf) {
+                return self.binary(format!(
+                    "byte {} is not UTF-8 text",
+                    start + e.valid_up_to() as u64
+                ));
+            }
+            if let (None, Some(i)) = (nul, self.buf.iter().position(|b| *b == 0)) {
+                nul = Some(start + i as u64);
+            }
+            start += self.buf.len() as u64;
+            match self.fill() {
+                Ok(true) => {}
+                Ok(false) => break,
+                Err(e) => return e,
+            }
+        }
+        match nul {
+            Some(i) => self.binary(format!(
+                "byte {i} is a NUL: binary content of an unknown type"
+            )),
+            None => self.binary("not text".into()),
+        }
+    }
+
+    fn binary(&self, reason: String) -> DataError {
+        DataError::NotText {
+            file: self.name.clone(),
+            reason,
+        }
+    }
+
+    /// What the rest of the input says against `e`, an error found before its end: that
+    /// it is binary content ([`Lines::not_text`]), which a check of the whole text
+    /// reports first; else `e`.
+    fn rest_or(&mut self, e: DataError) -> DataError {
+        if matches!(e, DataError::NotText { .. } | DataError::Io { .. }) {
+            return e;
+        }
+        while let Ok(true) = self.fill() {
+            if std::str::from_utf8(&self.buf).is_err() || self.buf.contains(&0) {
+                let at = self.offset;
+                return self.not_text(at);
+            }
+            self.offset += self.buf.len() as u64;
+        }
+        e
+    }
+}
+
+/// Each data row's line in its file (a CSV's line, a MAT-file's sample), for messages:
+/// kept as the rows where the numbering jumps (blank or comment lines among the rows), so
+/// a file of ten million rows holds a handful of entries, not a number per row.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub(super) struct RowLines {
+    /// (row, its line) where a row's line is not the one before plus one
+    jumps: Vec<(usize, usize)>,
+    rows: usize,
+}
+
+impl RowLines {
+    /// Rows `0..rows` on the lines (samples) `first, first + 1, …`.
+    pub(super) fn counting(first: usize, rows: usize) -> Self {
+        RowLines {
+            jumps: vec![(0, first)],
+            rows,
+        }
+    }
+
+    /// The next row, on `line`.
+    fn push(&mut self, line: usize) {
+        let follows = self
+            .jumps
+            .last()
+            .is_some_and(|&(r, l)| l + (self.rows - r) == line);
+        if !follows {
+            self.jumps.push((self.rows, line));
+        }
+        self.rows += 1;
+    }
+
+    /// The number of rows.
+    pub(super) fn len(&self) -> usize {
+        self.rows
+    }
+
+    /// The line of row `row` (< [`RowLines::len`]).
+    pub(super) fn line(&self, row: usize) -> usize {
+        let i = self.jumps.partition_point(|&(r, _)| r <= row).max(1) - 1;
+        self.jumps.get(i).map_or(row + 1, |&(r, l)| l + (row - r))
+    }
 }
 
 /// Comment keys used from a CSV without the full excitation config (another logger's).
 pub const OTHER_LOGGER_KEYS: [&str; 4] = ["sample_interval_s", "period_samples", "f0_hz", "fs_hz"];
 
 fn parse_inner(
-    text: &str,
+    reader: impl io::BufRead,
+    size: Option<u64>,
     name: &str,
     map: &ColumnMap,
 ) -> Result<(Record, Option<DataError>), DataError> {
+    let mut lines = Lines::new(reader, name);
+    match read_columns(&mut lines, size, map) {
+        Ok((meta, excitation, notes, columns, rows)) => {
+            record_from_columns(name, map, meta, excitation, notes, columns, rows)
+        }
+        Err(e) => Err(lines.rest_or(e)),
+    }
+}
+
+/// What [`read_columns`] reads: the comment keys with their lines, the excitation, the
+/// notes, the columns `map` names and each row's line.
+type ReadColumns = (
+    BTreeMap<String, (usize, String)>,
+    Option<ExcitationConfig>,
+    Vec<String>,
+    Vec<Vec<f64>>,
+    RowLines,
+);
+
+/// Reads the comments, the header and the cells of the columns `map` names, row by row.
+fn read_columns(
+    lines: &mut Lines<impl io::BufRead>,
+    size: Option<u64>,
+    map: &ColumnMap,
+) -> Result<ReadColumns, DataError> {
+    let name = lines.name.clone();
+    let name = name.as_str();
     let file = || name.to_string();
     let mut notes = Vec::new();
     let mut meta: BTreeMap<String, (usize, String)> = BTreeMap::new();
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l));
     let (header_line, header) = loop {
-        match lines.next() {
+        match lines.next_line()? {
             None => return Err(DataError::NoHeader { file: file() }),
             Some((_, l)) if l.trim().is_empty() => continue,
             Some((ln, l)) if l.trim_start().starts_with('#') => {
@@ -111,9 +325,10 @@ fn parse_inner(
                     meta.insert(k.trim().to_string(), (ln, v.trim().to_string()));
                 }
             }
-            Some((ln, l)) => break (ln, l),
+            Some((ln, l)) => break (ln, l.to_string()),
         }
     };
+    let header = header.as_str();
     let excitation = if meta.contains_key("kind") {
         parse_excitation(&meta, name)?
     } else {
@@ -179,8 +394,10 @@ fn parse_inner(
         wanted.push((r.as_str(), find(r)?));
     }
     let mut columns: Vec<Vec<f64>> = vec![Vec::new(); wanted.len()];
-    let mut line_of_row = Vec::new();
-    for (ln, l) in lines {
+    let mut rows = RowLines::default();
+    // the columns sized from the first rows' length and the input's size
+    let (sizing_rows, rows_from) = (64, lines.offset);
+    while let Some((ln, l)) = lines.next_line()? {
         if l.trim().is_empty() || l.trim_start().starts_with('#') {
             continue;
         }
@@ -209,9 +426,19 @@ fn parse_inner(
             }
             columns[slot].push(v);
         }
-        line_of_row.push(ln);
+        rows.push(ln);
+        if let (Some(size), true) = (size, rows.len() == sizing_rows) {
+            let per_row = (lines.offset - rows_from) as f64 / sizing_rows as f64;
+            let left = size.saturating_sub(lines.offset) as f64 / per_row.max(1.0);
+            for c in &mut columns {
+                c.reserve((1.05 * left) as usize + 16);
+            }
+        }
     }
-    record_from_columns(name, map, meta, excitation, notes, columns, line_of_row)
+    for c in &mut columns {
+        c.shrink_to_fit();
+    }
+    Ok((meta, excitation, notes, columns, rows))
 }
 
 /// The delimiter of a CSV whose header line is `header`: `given`, else `,`, or `;` or a
@@ -254,7 +481,7 @@ pub fn header_columns(text: &str, delimiter: Option<char>) -> Option<(Vec<String
 }
 
 /// The record of columns already read (time, input, output and, when `map` has one, the
-/// reference), checked as [`parse_csv_record`] describes; `line_of_row` is each row's
+/// reference), checked as [`parse_csv_record`] describes; `line_of_row` gives each row's
 /// position for messages (a line of a CSV, a sample of a MAT-file), `meta` the comment
 /// keys with their lines. Also returns the first gap as an error, for [`parse_csv`].
 ///
@@ -267,7 +494,7 @@ pub(super) fn record_from_columns(
     excitation: Option<ExcitationConfig>,
     notes: Vec<String>,
     columns: Vec<Vec<f64>>,
-    line_of_row: Vec<usize>,
+    line_of_row: RowLines,
 ) -> Result<(Record, Option<DataError>), DataError> {
     let file = || name.to_string();
     let rows = line_of_row.len();
@@ -291,7 +518,7 @@ pub(super) fn record_from_columns(
         if t[k] <= t[k - 1] {
             return Err(DataError::NonMonotonic {
                 file: file(),
-                line: line_of_row[k],
+                line: line_of_row.line(k),
                 prev: t[k - 1],
                 next: t[k],
             });
@@ -299,8 +526,8 @@ pub(super) fn record_from_columns(
     }
     let median = {
         let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-        d.sort_by(f64::total_cmp);
-        d[d.len() / 2]
+        let mid = d.len() / 2;
+        *d.select_nth_unstable_by(mid, f64::total_cmp).1
     };
     let ts = nominal.unwrap_or(median);
     if (median - ts).abs() > SAMPLE_INTERVAL_TOLERANCE * ts
@@ -327,7 +554,7 @@ pub(super) fn record_from_columns(
             starts.push(k);
             first_gap.get_or_insert(DataError::TimeGap {
                 file: file(),
-                line: line_of_row[k],
+                line: line_of_row.line(k),
                 prev: t[k - 1],
                 next: t[k],
                 missing: m as u64 - 1,
@@ -336,7 +563,7 @@ pub(super) fn record_from_columns(
         }
         return Err(DataError::NonUniform {
             file: file(),
-            line: line_of_row[k],
+            line: line_of_row.line(k),
             prev: t[k - 1],
             next: t[k],
             dt,
@@ -389,17 +616,20 @@ pub(super) fn record_from_columns(
                 p => (f64::from(cfg.ramp_samples) + f64::from(p) * n as f64) * ts * (1.0 - 1e-9),
             },
         );
-        let in_periods: Vec<usize> = longest.filter(|&k| t[k] >= t_in && t[k] < t_out).collect();
-        let piece = |c: &[f64]| in_periods.iter().map(|&k| c[k]).collect::<Vec<f64>>();
+        // the time column increases, so they are one run of samples
+        let during =
+            |bound: f64| longest.start + t[longest.clone()].partition_point(|x| *x < bound);
+        let (first, end) = (during(t_in), during(t_out));
+        let span = first..end.max(first);
         // the reference repeats exactly; the measured columns to within their noise
         let reference = map
             .reference
             .as_ref()
-            .and_then(|_| repeat_misfit(&piece(&columns[3]), n))
+            .and_then(|_| repeat_misfit(&columns[3][span.clone()], n))
             .map(|rho| (rho, REFERENCE_MISFIT_LIMIT, "the reference column"));
         let measured = [1, 2]
             .iter()
-            .filter_map(|&c| repeat_misfit(&piece(&columns[c]), n))
+            .filter_map(|&c| repeat_misfit(&columns[c][span.clone()], n))
             .min_by(f64::total_cmp)
             .map(|rho| (rho, PERIOD_MISFIT_LIMIT, "both measured columns"));
         if let Some((rho, _, which)) = reference.or(measured).filter(|(rho, limit, _)| rho > limit)
@@ -422,26 +652,41 @@ pub(super) fn record_from_columns(
         .filter(|(k, _)| excitation.is_none() || !EXCITATION_KEYS.contains(&k.as_str()))
         .map(|(k, (_, v))| (k, v))
         .collect();
-    let r = map.reference.as_ref().map(|_| &columns[3]);
-    starts.push(rows);
-    let pieces = starts
-        .windows(2)
-        .map(|w| {
-            let range = w[0]..w[1];
-            Dataset {
-                name: name.to_string(),
-                data: IdData {
-                    ts,
-                    u: columns[1][range.clone()].to_vec(),
-                    y: columns[2][range.clone()].to_vec(),
-                    r: r.map(|r| r[range.clone()].to_vec()),
-                },
-                t0: t[w[0]],
-                excitation,
-                meta: meta.clone(),
+    // the pieces take the columns' samples, the last piece first, each column shrunk as
+    // it goes, so no moment holds a column twice (one piece, the usual file, moves them)
+    let t0: Vec<f64> = starts.iter().map(|&k| t[k]).collect();
+    let mut columns = columns.into_iter().skip(1);
+    let (mut u, mut y) = (
+        columns.next().unwrap_or_default(),
+        columns.next().unwrap_or_default(),
+    );
+    let mut r = map.reference.as_ref().and(columns.next());
+    let mut pieces = Vec::with_capacity(starts.len());
+    for (&k, &t0) in starts.iter().zip(&t0).rev() {
+        let take = |c: &mut Vec<f64>| {
+            if k == 0 {
+                return std::mem::take(c);
             }
-        })
-        .collect();
+            let tail = c[k..].to_vec();
+            c.truncate(k);
+            c.shrink_to_fit();
+            tail
+        };
+        let data = IdData {
+            ts,
+            u: take(&mut u),
+            y: take(&mut y),
+            r: r.as_mut().map(take),
+        };
+        pieces.push(Dataset {
+            name: name.to_string(),
+            data,
+            t0,
+            excitation,
+            meta: meta.clone(),
+        });
+    }
+    pieces.reverse();
     Ok((Record { pieces, notes }, first_gap))
 }
 

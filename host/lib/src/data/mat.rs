@@ -612,7 +612,7 @@ pub fn parse_mat_record(bytes: &[u8], name: &str, map: &ColumnMap) -> Result<Rec
     } else {
         None
     };
-    let rows = (1..=columns[0].len()).collect();
+    let rows = super::csv::RowLines::counting(1, columns[0].len());
     super::csv::record_from_columns(name, map, meta, excitation, Vec::new(), columns, rows)
         .map(|(r, _)| r)
 }

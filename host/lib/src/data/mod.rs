@@ -104,7 +104,8 @@ pub mod segment;
 
 pub use csv::{
     capture_csv_comments, excitation_comment_lines, load_csv, parse_csv, parse_csv_record,
-    write_capture_csv, write_table, TableWriter, EXCITATION_KEYS, SAMPLE_INTERVAL_TOLERANCE,
+    read_csv_record, write_capture_csv, write_table, TableWriter, EXCITATION_KEYS,
+    SAMPLE_INTERVAL_TOLERANCE,
 };
 pub use dsp::{decimate, decimation_taps};
 pub use prep::{detrend, Detrend, Prep};
@@ -835,8 +836,10 @@ impl Loaders {
         self.load_record(path, map)?.into_single()
     }
 
-    /// Reads `path` (`-`: standard input) whole and loads it by its content: a registered
-    /// format by its magic bytes, else CSV ([`csv::parse_csv_record`]).
+    /// Reads `path` (`-`: standard input) and loads it by its content: a registered
+    /// format by its magic bytes, else CSV ([`csv::parse_csv_record`]). A CSV file is read
+    /// line by line ([`csv::read_csv_record`]: never held whole); the other formats, and
+    /// standard input, are read whole.
     ///
     /// # Errors
     /// [`DataError::Io`] when it cannot be read, [`DataError::Unsupported`] for a MATLAB
@@ -844,17 +847,51 @@ impl Loaders {
     /// [`DataError::Loader`] wrapping a loader's error, [`DataError::NotText`] for other
     /// binary content, else as [`csv::parse_csv_record`].
     pub fn load_record(&self, path: &Path, map: &ColumnMap) -> Result<Record, DataError> {
+        use std::io::Read;
         let name = input::input_name(path);
-        let bytes = input::read_input(path).map_err(|source| DataError::Io {
+        let io = |source| DataError::Io {
             file: name.clone(),
             source,
-        })?;
+        };
+        let (bytes, path) = if input::is_stdin(path) {
+            (input::read_input(path).map_err(io)?, None)
+        } else {
+            // enough of the start to tell the format (a MATLAB header, HDF5 at byte 512)
+            let mut file = std::fs::File::open(path).map_err(io)?;
+            let mut head = Vec::new();
+            file.by_ref()
+                .take(FORMAT_HEAD)
+                .read_to_end(&mut head)
+                .map_err(io)?;
+            if self.is_text(&head) {
+                let size = file
+                    .metadata()
+                    .ok()
+                    .filter(|m| m.is_file())
+                    .map(|m| m.len());
+                let reader = std::io::BufReader::new(std::io::Cursor::new(head).chain(file));
+                return csv::read_csv_record(reader, size, &name, map);
+            }
+            file.read_to_end(&mut head).map_err(io)?;
+            (head, Some(path))
+        };
         let input = Input {
             name: &name,
-            path: (!input::is_stdin(path)).then_some(path),
+            path,
             bytes: &bytes,
         };
         self.load_input(&input, map)
+    }
+
+    /// Whether content starting with `head` goes to the CSV reader: no registered magic,
+    /// not a `.jcap`, not a MATLAB file.
+    fn is_text(&self, head: &[u8]) -> bool {
+        !self
+            .formats
+            .iter()
+            .any(|(_, m, _)| !m.is_empty() && head.starts_with(m))
+            && !head.starts_with(JCAP_MAGIC_PREFIX)
+            && matlab_kind(head).is_none()
     }
 
     /// Loads content already read (see [`Loaders::load_record`]).
@@ -891,19 +928,13 @@ impl Loaders {
                     .into(),
             });
         }
-        let text = std::str::from_utf8(input.bytes).map_err(|e| DataError::NotText {
-            file: name.clone(),
-            reason: format!("byte {} is not UTF-8 text", e.valid_up_to()),
-        })?;
-        if let Some(i) = text.find('\0') {
-            return Err(DataError::NotText {
-                file: name,
-                reason: format!("byte {i} is a NUL: binary content of an unknown type"),
-            });
-        }
-        csv::parse_csv_record(text, &name, map)
+        csv::read_csv_record(input.bytes, Some(input.bytes.len() as u64), &name, map)
     }
 }
+
+/// Bytes of a file's start that tell its format: [`matlab_kind`] reads the HDF5
+/// signature at byte 512.
+const FORMAT_HEAD: u64 = 520;
 
 #[cfg(test)]
 mod tests {

@@ -319,9 +319,14 @@ impl Record {
                 (((b - p.t0) / ts) - 0.5).ceil().clamp(0.0, n as f64) as usize
             });
             if hi > lo {
-                let mut d = p.clone();
-                d.data = p.data.slice(lo..hi);
-                d.t0 = p.t0 + lo as f64 * ts;
+                // the window's samples alone are copied (not the piece, then its window)
+                let d = Dataset {
+                    name: p.name.clone(),
+                    data: p.data.slice(lo..hi),
+                    t0: p.t0 + lo as f64 * ts,
+                    excitation: p.excitation,
+                    meta: p.meta.clone(),
+                };
                 cut.push((i + 1, d));
             }
         }

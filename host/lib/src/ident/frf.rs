@@ -205,7 +205,9 @@ fn dft_half(fft: &Arc<dyn Fft<f64>>, x: &[f64]) -> Vec<Complex64> {
     let n = x.len();
     let mut buf: Vec<Complex64> = x.iter().map(|v| Complex64::new(*v, 0.0)).collect();
     fft.process(&mut buf);
+    // kept for every period of a record: the half it keeps, not the whole buffer
     buf.truncate(n / 2 + 1);
+    buf.shrink_to_fit();
     for (k, v) in buf.iter_mut().enumerate() {
         let scale = if k == 0 || 2 * k == n { 1.0 } else { 2.0 };
         *v *= scale / n as f64;
@@ -655,32 +657,27 @@ pub fn detect_excited(stats: &LineStats) -> Vec<u32> {
 pub fn detect_period(x: &[f64], signal: &str) -> Result<usize, FrfError> {
     let n = x.len();
     let mean = x.iter().sum::<f64>() / n.max(1) as f64;
-    let xc: Vec<f64> = x.iter().map(|v| v - mean).collect();
-    let m = 2 * n;
-    let mut planner = FftPlanner::<f64>::new();
-    let mut buf: Vec<Complex64> = xc
-        .iter()
-        .map(|v| Complex64::new(*v, 0.0))
-        .chain(std::iter::repeat_n(Complex64::new(0.0, 0.0), m - n))
-        .collect();
-    planner.plan_fft_forward(m).process(&mut buf);
-    buf.iter_mut()
-        .for_each(|v| *v = Complex64::new(v.norm_sqr(), 0.0));
-    planner.plan_fft_inverse(m).process(&mut buf);
-    let mut cum = vec![0.0; n + 1];
-    for (i, v) in xc.iter().enumerate() {
-        cum[i + 1] = cum[i] + v * v;
-    }
-    let c = |tau: usize| -> f64 {
-        let num = buf[tau].re / m as f64;
-        let e1 = cum[n - tau];
-        let e2 = cum[n] - cum[tau];
-        if e1 <= 0.0 || e2 <= 0.0 {
+    // the lags c reads, normalised as they are computed: the energies of the overlap
+    // kept as running sums, so that a long record needs no copy of it (see
+    // `autocorrelation` for the transform's memory)
+    let mut cs = crate::data::dsp::autocorrelation(x, mean, n / 2 + 1);
+    let sq = |t: usize| (x[t] - mean) * (x[t] - mean);
+    let total: f64 = (0..n).map(sq).sum();
+    let (mut head, mut tail) = (0.0, 0.0);
+    for (tau, v) in cs.iter_mut().enumerate() {
+        // Σ over t < n − τ and over t ≥ τ of (x(t) − mean)²
+        let (e1, e2) = (total - tail, total - head);
+        *v = if e1 <= 0.0 || e2 <= 0.0 {
             0.0
         } else {
-            num / (e1 * e2).sqrt()
+            *v / (e1 * e2).sqrt()
+        };
+        if tau < n {
+            head += sq(tau);
+            tail += sq(n - 1 - tau);
         }
-    };
+    }
+    let c = |tau: usize| -> f64 { cs.get(tau).copied().unwrap_or(0.0) };
     let lags = 1..=n / 2;
     let start = lags.clone().find(|&t| c(t) < 0.0).unwrap_or(n / 2 + 1);
     let (mut best, mut lag) = (f64::NEG_INFINITY, 0);

@@ -72,6 +72,16 @@ pub fn run(req: &FitRequest, data: FitRecords<'_>) -> Result<FitOutcome, FitRunE
     if let Some(nl) = nl {
         return run_nonlinear(req, nl, data);
     }
+    // the single record's FRF analysis before its preparation copies it: its period
+    // detection's transform and the copies are then never held at once (item 9 of issue
+    // 37: memory on large inputs); its errors still come after the preparation's
+    let spec = &req.options.spec;
+    let analysed = match (req.domain, req.estimation_fraction) {
+        (Domain::Frequency | Domain::Auto, None) if segs.len() == 1 && !spec.coulomb => {
+            Some(analyze_dataset(ds, req.settle_periods))
+        }
+        _ => None,
+    };
     let prepare = |d: &IdData, name: &str| {
         FitData::new(d, req.prep).map_err(|source| FitRunError::Record {
             name: name.to_string(),
@@ -96,21 +106,22 @@ pub fn run(req: &FitRequest, data: FitRecords<'_>) -> Result<FitOutcome, FitRunE
     if segs.len() > 1 {
         return run_segments(req, segs, data.numbers, val, data.validation);
     }
-    let spec = &req.options.spec;
-    let periodic = match (req.domain, req.estimation_fraction) {
-        (Domain::Time, _) => None,
-        (Domain::Frequency, _) if spec.coulomb => return Err(FitRunError::CoulombInFrequency),
-        (Domain::Frequency, Some(_)) => return Err(FitRunError::FrequencyOfFraction),
-        (Domain::Frequency, None) => {
-            Some(analyze_dataset(ds, req.settle_periods).map_err(|source| {
-                FitRunError::NotPeriodic {
+    let periodic = match (req.domain, req.estimation_fraction, analysed) {
+        (Domain::Time, _, _) => None,
+        (Domain::Frequency, _, _) if spec.coulomb => return Err(FitRunError::CoulombInFrequency),
+        (Domain::Frequency, Some(_), _) => return Err(FitRunError::FrequencyOfFraction),
+        (Domain::Frequency, None, analysed) => Some(
+            analysed
+                .unwrap_or_else(|| analyze_dataset(ds, req.settle_periods))
+                .map_err(|source| FitRunError::NotPeriodic {
                     name: ds.name.clone(),
                     source,
-                }
-            })?)
-        }
-        (Domain::Auto, None) if !spec.coulomb => analyze_dataset(ds, req.settle_periods).ok(),
-        (Domain::Auto, _) => None,
+                })?,
+        ),
+        (Domain::Auto, None, analysed) if !spec.coulomb => analysed
+            .unwrap_or_else(|| analyze_dataset(ds, req.settle_periods))
+            .ok(),
+        (Domain::Auto, _, _) => None,
     };
     if let Some(a) = &periodic {
         // a validation record that is not periodic (band-limited noise, say) is compared
