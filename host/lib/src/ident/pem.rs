@@ -56,6 +56,12 @@ pub trait ParamModel {
     fn param_names(&self) -> Vec<String>;
     /// the discrete model for parameters `theta`
     fn to_ss(&self, theta: &[f64]) -> StateSpace;
+    /// `θ` is every entry of `A` (row-major), `B`, `C` and optionally `D`, in that order,
+    /// and there is no `K` ([`FullSs`] for output error): the sensitivities then take the
+    /// transposed filter of `normal_equations_full`
+    fn is_full_output_error(&self) -> bool {
+        false
+    }
     /// `∂(A, B, C, D, K)/∂θ_i`; the default takes central differences of
     /// [`ParamModel::to_ss`] with a relative step of 1e-6.
     fn d_ss(&self, theta: &[f64], i: usize) -> SsDerivative {
@@ -190,11 +196,140 @@ fn cost_of(m: &StateSpace, data: &IdData, x0: &DVector<f64>) -> f64 {
     s / data.y.len() as f64
 }
 
+/// Jacobian rows per block of the `JᵀJ` update in [`normal_equations`]
+const JTJ_BLOCK: usize = 64;
+
 /// sparse vector: (index, value)
 type Sparse = Vec<(usize, f64)>;
 /// one parameter's predictor derivatives: ∂Ā as (row, column, value), ∂B̄,
 /// ∂C, ∂D, ∂K
 type SparseDer = (Vec<(usize, usize, f64)>, Sparse, Sparse, f64, Sparse);
+
+/// `JᵀJ`, `Jᵀε` and `Σ ε²` accumulated over Jacobian rows: the rows are gathered in
+/// blocks and `JᵀJ` updated by one matrix product per block (a rank-one update per sample
+/// was most of the time at 100+ parameters).
+struct Accumulator {
+    block: DMatrix<f64>,
+    filled: usize,
+    jtj: DMatrix<f64>,
+    jte: DVector<f64>,
+    ssr: f64,
+}
+
+impl Accumulator {
+    fn new(p: usize) -> Self {
+        Accumulator {
+            block: DMatrix::zeros(JTJ_BLOCK, p),
+            filled: 0,
+            jtj: DMatrix::zeros(p, p),
+            jte: DVector::zeros(p),
+            ssr: 0.0,
+        }
+    }
+
+    /// one sample: the Jacobian row `phi` (`∂ŷ/∂θ`) and the error `e`
+    fn push(&mut self, phi: &[f64], e: f64) {
+        self.ssr += e * e;
+        for (i, &pi) in phi.iter().enumerate() {
+            self.block[(self.filled, i)] = pi;
+            self.jte[i] += pi * e;
+        }
+        self.filled += 1;
+        if self.filled == JTJ_BLOCK {
+            self.flush();
+        }
+    }
+
+    fn flush(&mut self) {
+        if self.filled > 0 {
+            let rows = self.block.rows(0, self.filled);
+            self.jtj.gemm(1.0, &rows.transpose(), &rows, 1.0);
+            self.filled = 0;
+        }
+    }
+
+    fn finish(mut self) -> (DMatrix<f64>, DVector<f64>, f64) {
+        self.flush();
+        (self.jtj, self.jte, self.ssr)
+    }
+}
+
+/// [`normal_equations`] of the output error of the full parameterisation ([`FullSs`]
+/// without `K`), by the transposed sensitivity filter: with `x(t+1) = A x + B u` and
+/// `ŷ = C x + D u`, `∂ŷ(t)/∂A_ij = Σ_k (C A^k)_i x_j(t−1−k)`, which is entry `i` of
+/// `w_j(t)`, `w_j(t+1) = Aᵀ w_j(t) + Cᵀ x_j(t)`; likewise `∂ŷ/∂B_i` from `u`. The
+/// `n + 1` filters of order `n` cost `n²(n + 1)` per sample instead of `n²` per parameter
+/// (`n²(n² + 2n)`): for `n = 11` about 12 times fewer operations, same numbers.
+fn normal_equations_full(
+    m: &StateSpace,
+    free: &[usize],
+    x0: &DVector<f64>,
+    with_x0: bool,
+    data: &IdData,
+) -> (DMatrix<f64>, DVector<f64>, f64) {
+    let n = m.order();
+    let nf = free.len();
+    let p = nf + if with_x0 { n } else { 0 };
+    let a: Vec<f64> = (0..n * n).map(|q| m.a[(q / n, q % n)]).collect();
+    let c = m.c.as_slice().to_vec();
+    let b = m.b.as_slice().to_vec();
+    let mut x = x0.as_slice().to_vec();
+    let mut xn = vec![0.0; n];
+    // wf[i * (n + 1) + j]: entry i of w_j (j = n: the filter of u)
+    let mut wf = vec![0.0; n * (n + 1)];
+    let mut wf_n = vec![0.0; n * (n + 1)];
+    let mut w = c.clone(); // C A^t
+    let mut wn = vec![0.0; n];
+    let mut phi = vec![0.0; p];
+    let mut acc = Accumulator::new(p);
+    let dotn = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    for (&ut, &yt) in data.u.iter().zip(&data.y) {
+        let e = yt - (dotn(&c, &x) + m.d * ut);
+        for (slot, &f) in phi.iter_mut().zip(free) {
+            *slot = if f < n * n {
+                wf[(f / n) * (n + 1) + f % n]
+            } else if f < n * n + n {
+                wf[(f - n * n) * (n + 1) + n]
+            } else if f < n * n + 2 * n {
+                x[f - n * n - n]
+            } else {
+                ut
+            };
+        }
+        if with_x0 {
+            phi[nf..].copy_from_slice(&w);
+            for (col, o) in wn.iter_mut().enumerate() {
+                *o = (0..n).map(|i| w[i] * a[i * n + col]).sum();
+            }
+            std::mem::swap(&mut w, &mut wn);
+        }
+        acc.push(&phi, e);
+        // W(t+1) = Aᵀ W(t) + Cᵀ [xᵀ u]
+        for i in 0..n {
+            let row = &mut wf_n[i * (n + 1)..(i + 1) * (n + 1)];
+            for (j, o) in row.iter_mut().enumerate() {
+                let v = if j < n { x[j] } else { ut };
+                *o = c[i] * v;
+            }
+            for k in 0..n {
+                let aki = a[k * n + i];
+                if aki == 0.0 {
+                    continue;
+                }
+                let src = &wf[k * (n + 1)..(k + 1) * (n + 1)];
+                for (o, s) in row.iter_mut().zip(src) {
+                    *o += aki * s;
+                }
+            }
+        }
+        std::mem::swap(&mut wf, &mut wf_n);
+        for i in 0..n {
+            xn[i] = dotn(&a[i * n..(i + 1) * n], &x) + b[i] * ut;
+        }
+        std::mem::swap(&mut x, &mut xn);
+    }
+    acc.finish()
+}
 
 /// Normal equations `JᵀJ`, `Jᵀε` over the free parameters then the `x0`
 /// entries, by forward sensitivities.
@@ -207,6 +342,9 @@ fn normal_equations<M: ParamModel + ?Sized>(
     data: &IdData,
 ) -> (DMatrix<f64>, DVector<f64>, f64) {
     let m = model.to_ss(theta);
+    if model.is_full_output_error() {
+        return normal_equations_full(&m, free, x0, with_x0, data);
+    }
     let n = m.order();
     let nf = free.len();
     let p = nf + if with_x0 { n } else { 0 };
@@ -266,16 +404,11 @@ fn normal_equations<M: ParamModel + ?Sized>(
     let mut sens_n = vec![0.0; nf * n];
     let mut w = c.clone(); // C Ā^t
     let mut wn = vec![0.0; n];
-    let mut jtj = DMatrix::<f64>::zeros(p, p);
-    let mut jte = DVector::<f64>::zeros(p);
     let mut phi = vec![0.0; p];
-    let mut ssr = 0.0;
-    let mut acc = vec![0.0; p * p];
+    let mut acc = Accumulator::new(p);
     let dotn = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
     for (&ut, &yt) in data.u.iter().zip(&data.y) {
-        let yh = dotn(&c, &x) + m.d * ut;
-        let e = yt - yh;
-        ssr += e * e;
+        let e = yt - (dotn(&c, &x) + m.d * ut);
         for (j, (_, _, dc, dd, _)) in sp.iter().enumerate() {
             let mut v = dotn(&c, &sens[j * n..(j + 1) * n]) + dd * ut;
             for &(i, cv) in dc {
@@ -294,17 +427,7 @@ fn normal_equations<M: ParamModel + ?Sized>(
             }
             std::mem::swap(&mut w, &mut wn);
         }
-        for i in 0..p {
-            let pi = phi[i];
-            if pi == 0.0 {
-                continue;
-            }
-            let row = &mut acc[i * p..(i + 1) * p];
-            for jj in i..p {
-                row[jj] += pi * phi[jj];
-            }
-            jte[i] += pi * e;
-        }
+        acc.push(&phi, e);
         // propagate sensitivities then the state
         for (j, (da, dbu, _, _, dk)) in sp.iter().enumerate() {
             let sj = &sens[j * n..(j + 1) * n];
@@ -330,13 +453,7 @@ fn normal_equations<M: ParamModel + ?Sized>(
         }
         std::mem::swap(&mut x, &mut xn);
     }
-    for i in 0..p {
-        for j in i..p {
-            jtj[(i, j)] = acc[i * p + j];
-            jtj[(j, i)] = acc[i * p + j];
-        }
-    }
-    (jtj, jte, ssr)
+    acc.finish()
 }
 
 /// The prediction-error criterion of `model` on the records `data` (separate experiments:
@@ -622,6 +739,10 @@ impl FullSs {
 }
 
 impl ParamModel for FullSs {
+    fn is_full_output_error(&self) -> bool {
+        !self.innovations
+    }
+
     fn n_params(&self) -> usize {
         self.n * self.n
             + 2 * self.n
@@ -852,6 +973,45 @@ mod tests {
             "{} vs {fd}",
             jtj[(i, i)]
         );
+    }
+
+    /// [`FullSs`] with the generic forward sensitivities (one filter per parameter)
+    struct GenericFull(FullSs);
+
+    impl ParamModel for GenericFull {
+        fn n_params(&self) -> usize {
+            self.0.n_params()
+        }
+        fn param_names(&self) -> Vec<String> {
+            self.0.param_names()
+        }
+        fn to_ss(&self, theta: &[f64]) -> StateSpace {
+            self.0.to_ss(theta)
+        }
+        fn d_ss(&self, theta: &[f64], i: usize) -> SsDerivative {
+            self.0.d_ss(theta, i)
+        }
+    }
+
+    #[test]
+    fn full_output_error_normal_equations_equal_the_forward_sensitivities() {
+        let (model, th_true) = two_mass_log_truth();
+        let data = data_for(&model.to_ss(&th_true), 12, 300, 1e-3);
+        let (fs, th) = FullSs::from_ss(&model.to_ss(&th_true), true, false);
+        let x0 = DVector::from_vec(vec![1e-3, -2e-4, 2e-4, 0.0]);
+        // a subset of A entries, B, C and D, with and without the initial state
+        let free: Vec<usize> = (0..fs.n_params()).filter(|i| i % 3 != 1).collect();
+        for with_x0 in [false, true] {
+            let fast = normal_equations(&fs, &th, &free, &x0, with_x0, &data);
+            let slow = normal_equations(&GenericFull(fs.clone()), &th, &free, &x0, with_x0, &data);
+            let scale = slow.0.amax();
+            assert!((fast.0 - &slow.0).amax() <= 1e-9 * scale, "JᵀJ differs");
+            assert!(
+                (fast.1 - &slow.1).amax() <= 1e-9 * slow.1.amax(),
+                "Jᵀε differs"
+            );
+            assert!((fast.2 - slow.2).abs() <= 1e-12 * slow.2);
+        }
     }
 
     #[test]
