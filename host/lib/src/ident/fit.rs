@@ -60,10 +60,12 @@ use crate::ident::grey_box::{self, GreyBoxOptions, IdimOptions, Output, PhysPara
 use crate::ident::lm::LmOptions;
 use crate::ident::pem::{self, FullSs, ParamModel, PemFit, PemOptions};
 use crate::ident::ss::{ContinuousSs, Resonances, StateSpace};
-use crate::ident::subspace::{self, Method, Order, SubspaceOptions};
+use crate::ident::subspace::{self, Method};
 use crate::ident::validate::{self, Validation};
 use crate::model::spec::{Family, ModelSpec, Structure};
 
+mod black_box;
+use black_box::{fit_black_box, integrator_part, with_integrator};
 mod figures;
 pub use figures::{
     bode_figure, simulated_record, velocity_record, BodeFigure, CompareRecord, Compared,
@@ -93,8 +95,10 @@ mod segments_tests;
 
 /// Largest `N · p²` (samples times squared parameter count) for which the
 /// black-box output-error refinement runs; above it the subspace model is
-/// kept. 1500 samples of an order-11 model (143 parameters) cost about 3e7.
-pub const PEM_BUDGET: f64 = 2.0e8;
+/// kept. 14,000 samples of the integrator structure of order 11 (120 parameters) cost
+/// 2e8 and refine in 0.5 s for 20 iterations ([`crate::ident::pem`]'s transposed
+/// sensitivity filter); the budget allows about five times that.
+pub const PEM_BUDGET: f64 = 1.0e9;
 
 /// Options of [`fit_model`].
 #[derive(Clone, Debug, PartialEq)]
@@ -501,9 +505,18 @@ pub fn fit_prepared_segments(data: &[FitData], opts: &FitOptions) -> Result<Fitt
     }
     match opts.spec.family {
         Family::BlackBox(_) => {
-            let records: Vec<IdData> = data.iter().map(|d| d.prepared.clone()).collect();
+            // the integrator structure refines its free part on the differenced records
+            let free = integrator_part(&start.model);
+            let records: Vec<IdData> = data
+                .iter()
+                .map(|d| match free {
+                    Some(_) => black_box::differenced(&d.prepared),
+                    None => d.prepared.clone(),
+                })
+                .collect();
             let samples: usize = records.iter().map(IdData::len).sum();
-            let (fam, th0) = FullSs::from_ss(&start.model, opts.feedthrough, false);
+            let refined_model = free.as_ref().unwrap_or(&start.model);
+            let (fam, th0) = FullSs::from_ss(refined_model, opts.feedthrough, false);
             let np = pem::ParamModel::n_params(&fam) as f64;
             let mut fitted = start;
             let note =
@@ -526,8 +539,13 @@ pub fn fit_prepared_segments(data: &[FitData], opts: &FitOptions) -> Result<Fitt
                     let start_cost = pf.cost_history.first().copied().unwrap_or(f64::INFINITY);
                     let end_cost = pf.cost_history.last().copied().unwrap_or(f64::INFINITY);
                     if pf.model.is_stable() && end_cost <= start_cost {
-                        fitted.model = pf.model;
-                        fitted.model.k = None;
+                        let mut m = pf.model;
+                        m.k = None;
+                        fitted.model = if free.is_some() {
+                            with_integrator(&m)
+                        } else {
+                            m
+                        };
                         fitted.method.push_str(&format!(
                             "; refined by output error over {} records as separate experiments",
                             records.len()
@@ -589,112 +607,6 @@ pub fn fit_prepared_segments(data: &[FitData], opts: &FitOptions) -> Result<Fitt
             Ok(physical_fitted(opts, &gm, &pf, (warnings, method), q))
         }
     }
-}
-
-/// One black-box start: the subspace model of `method`, refined by output
-/// error when affordable; returns the model, its estimation cost (mean
-/// squared simulation error with the best initial state), a description and
-/// notes.
-fn black_box_start(
-    data: &IdData,
-    n: usize,
-    method: Method,
-    opts: &FitOptions,
-) -> Result<(StateSpace, f64, String, Vec<String>), FitError> {
-    let sopts = SubspaceOptions {
-        method,
-        order: Order::Fixed(n),
-        feedthrough: opts.feedthrough,
-        ..SubspaceOptions::default()
-    };
-    let sf = subspace::estimate(data, &sopts)?;
-    let mut warnings = sf.warnings.clone();
-    let mut model = sf.model.clone();
-    model.k = None;
-    let mname = match method {
-        Method::Pbsid => "PBSID",
-        Method::Moesp => "PO-MOESP",
-    };
-    let mut desc = format!("{mname} order {n}");
-    let (fam, th0) = FullSs::from_ss(&model, opts.feedthrough, false);
-    let np = pem::ParamModel::n_params(&fam) as f64;
-    if opts.refine && (data.len() as f64) * np * np <= PEM_BUDGET {
-        let refined = pem::fit(&fam, &th0, data, &PemOptions::with_max_iter(40));
-        match refined {
-            Ok(pf) => {
-                let start_cost = pf.cost_history.first().copied().unwrap_or(f64::INFINITY);
-                let end_cost = pf.cost_history.last().copied().unwrap_or(f64::INFINITY);
-                if pf.model.is_stable() && end_cost <= start_cost {
-                    model = pf.model;
-                    model.k = None;
-                    desc.push_str(" + output-error refinement");
-                } else {
-                    warnings.push(format!(
-                        "{mname}: output-error refinement rejected (unstable or no descent)"
-                    ));
-                }
-            }
-            Err(e) => warnings.push(format!("{mname}: output-error refinement failed: {e}")),
-        }
-    } else if opts.refine {
-        warnings.push(format!(
-            "output-error refinement skipped: {} samples × {np} parameters exceed the budget",
-            data.len()
-        ));
-    }
-    let x0 = subspace::estimate_x0(&model, &data.u, &data.y);
-    let yh = model.simulate(&data.u, Some(&x0));
-    let cost = data
-        .y
-        .iter()
-        .zip(&yh)
-        .map(|(a, b)| (a - b) * (a - b))
-        .sum::<f64>()
-        / data.len() as f64;
-    let cost = if cost.is_finite() {
-        cost
-    } else {
-        f64::INFINITY
-    };
-    Ok((model, cost, desc, warnings))
-}
-
-/// Black box: the chosen subspace method, and the other one as a second
-/// start (PO-MOESP is biased under feedback but can still be the better
-/// start for the output-error criterion, and PBSID can give a marginal model
-/// the refinement cannot leave); the lower output-error cost on the
-/// estimation data wins, so the choice follows the criterion FIT measures.
-fn fit_black_box(data: &IdData, n: usize, opts: &FitOptions) -> Result<Fitted, FitError> {
-    let other = match opts.method {
-        Method::Pbsid => Method::Moesp,
-        Method::Moesp => Method::Pbsid,
-    };
-    let first = black_box_start(data, n, opts.method, opts)?;
-    let (model, _, desc, mut warnings) = match black_box_start(data, n, other, opts) {
-        Ok(second) if second.1 < first.1 => {
-            let mut w = second.3.clone();
-            w.push(format!(
-                "the {} start gave the lower output-error cost and was kept",
-                second.2
-            ));
-            (second.0, second.1, second.2, w)
-        }
-        _ => first,
-    };
-    warnings.dedup();
-    Ok(Fitted {
-        spec: opts.spec.clone(),
-        output: opts.output,
-        ts: data.ts,
-        model,
-        continuous: None,
-        params: Vec::new(),
-        friction: None,
-        warnings,
-        method: desc,
-        decimate: 1,
-        fit_metric: FitMetric::Output,
-    })
 }
 
 /// Physical model. `data` is what the initial values and the staged

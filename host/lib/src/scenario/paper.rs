@@ -359,6 +359,8 @@ pub struct Table {
     pub truth_antiresonances_hz: Vec<f64>,
     /// sample interval after decimation [s]
     pub ts: f64,
+    /// decimation of the records the models are fitted and scored on (1: the capture rate)
+    pub decimate: usize,
     /// estimation and validation samples after decimation (in JSON
     /// `{"estimation", "validation"}`)
     #[serde(serialize_with = "estimation_validation")]
@@ -390,7 +392,7 @@ pub const SETTLE_PERIODS: usize = 1;
 pub const DECIMATE: usize = 10;
 
 /// Fits `models` on the estimation dataset and evaluates them on both, as in
-/// Table 2; `truth` gives the true model and parameters.
+/// Table 2 (decimated by [`DECIMATE`]); `truth` gives the true model and parameters.
 ///
 /// # Errors
 /// [`ExperimentError`] from preparation or a fit.
@@ -400,11 +402,31 @@ pub fn table(
     truth: &SimConfig,
     models: &[Family],
 ) -> Result<(Table, TableModels), ExperimentError> {
-    let est_fd = prepared_both(est_ds, SETTLE_PERIODS, DECIMATE)?;
-    let val_fd = prepared_both(val_ds, SETTLE_PERIODS, DECIMATE)?;
+    table_at(est_ds, val_ds, truth, models, DECIMATE, None)
+}
+
+/// [`table`] on the records decimated by `q` (1: at the capture rate, undecimated). The
+/// physical models are fitted at the capture rate either way; with `reuse` (the models of
+/// another [`table`] of the same records, in the order of `models`) they are scored again
+/// instead of fitted again, and only the black boxes are fitted (their time is then 0 for
+/// the reused rows).
+///
+/// # Errors
+/// [`ExperimentError`] from preparation or a fit.
+pub fn table_at(
+    est_ds: &Dataset,
+    val_ds: &Dataset,
+    truth: &SimConfig,
+    models: &[Family],
+    q: usize,
+    reuse: Option<&TableModels>,
+) -> Result<(Table, TableModels), ExperimentError> {
+    let q = q.max(1);
+    let est_fd = prepared_both(est_ds, SETTLE_PERIODS, q)?;
+    let val_fd = prepared_both(val_ds, SETTLE_PERIODS, q)?;
     let (est, val) = (&est_fd.prepared, &val_fd.prepared);
-    let yt_est = true_output(truth, est_ds, SETTLE_PERIODS, DECIMATE)?;
-    let yt_val = true_output(truth, val_ds, SETTLE_PERIODS, DECIMATE)?;
+    let yt_est = true_output(truth, est_ds, SETTLE_PERIODS, q)?;
+    let yt_val = true_output(truth, val_ds, SETTLE_PERIODS, q)?;
     let true_fit = (
         fit_percent(&est.y, &yt_est).unwrap_or(f64::NAN),
         fit_percent(&val.y, &yt_val).unwrap_or(f64::NAN),
@@ -418,7 +440,7 @@ pub fn table(
     let analysis = analyze_dataset(est_ds, SETTLE_PERIODS).ok();
     let mut rows = Vec::new();
     let mut fitted = Vec::new();
-    for &kind in models {
+    for (i, &kind) in models.iter().enumerate() {
         let t0 = Instant::now();
         let fit_err = |source| ExperimentError::Fit {
             model: kind.name(),
@@ -434,18 +456,30 @@ pub fn table(
             ..FitOptions::default()
         };
         // as `jointid fit --domain auto`: physical models of periodic data on the FRF
-        let f = match (kind, &analysis) {
-            (Family::Physical(_), Some(a)) => {
-                fit_frequency_domain(a, est_ds.data.ts, &opts, DECIMATE)
+        let reused = reuse.and_then(|r| r.fitted.get(i)).filter(|f| {
+            kind.structure().is_some() && f.spec.family == kind && f.ts == est_ds.data.ts
+        });
+        let f = match (kind, &analysis, reused) {
+            (Family::Physical(_), _, Some(f)) => Ok(Fitted {
+                decimate: q,
+                ..f.clone()
+            }),
+            (Family::Physical(_), Some(a), None) => {
+                fit_frequency_domain(a, est_ds.data.ts, &opts, q)
             }
             _ => fit_prepared(&est_fd, &opts),
         }
         .map_err(fit_err)?;
-        let seconds = t0.elapsed().as_secs_f64();
+        // a reused fit: no time of its own, its parameters printed with the first table
+        let seconds = if reused.is_some() {
+            0.0
+        } else {
+            t0.elapsed().as_secs_f64()
+        };
         let fe = fit_percent(&est.y, &f.simulate_on(&est_fd).map_err(fit_err)?).unwrap_or(f64::NAN);
         let fv = fit_percent(&val.y, &f.simulate_on(&val_fd).map_err(fit_err)?).unwrap_or(f64::NAN);
         let res = f.resonances(default_f_min(est.len(), est.ts));
-        let parameter_errors = if Some(kind) == truth_struct {
+        let parameter_errors = if Some(kind) == truth_struct && reused.is_none() {
             f.params
                 .iter()
                 .filter_map(|p| {
@@ -481,6 +515,7 @@ pub fn table(
             truth_resonances_hz: modal.resonances_hz,
             truth_antiresonances_hz: modal.anti_resonances_hz,
             ts: est.ts,
+            decimate: q,
             samples: (est.len(), val.len()),
         },
         TableModels { fitted },
@@ -539,11 +574,16 @@ pub fn write_table(out: &mut dyn std::io::Write, t: &Table) -> std::io::Result<(
     writeln!(out, " {:>11.1}", Percent(t.true_fit.1))?;
     writeln!(
         out,
-        "  ({}, {} / {} samples at Ts = {} s after decimation by {DECIMATE})",
+        "  ({}, {} / {} samples at Ts = {} s{})",
         crate::ident::validate::FIT_NAME,
         t.samples.0,
         t.samples.1,
-        crate::data::fmt_sig(t.ts, 4)
+        crate::data::fmt_sig(t.ts, 4),
+        if t.decimate > 1 {
+            format!(" after decimation by {}", t.decimate)
+        } else {
+            ", the capture rate, undecimated".into()
+        }
     )?;
     let hz = |v: &[f64]| {
         v.iter()
@@ -560,11 +600,15 @@ pub fn write_table(out: &mut dyn std::io::Write, t: &Table) -> std::io::Result<(
     for r in &t.rows {
         writeln!(
             out,
-            "  {:<12} resonances [Hz] {}; anti-resonances [Hz] {} ({:.2} s)",
+            "  {:<12} resonances [Hz] {}; anti-resonances [Hz] {} ({})",
             name(&r.model),
             hz(&r.resonances_hz),
             hz(&r.antiresonances_hz),
-            r.seconds
+            if r.seconds > 0.0 {
+                format!("{:.2} s", r.seconds)
+            } else {
+                "the fit above, scored here".into()
+            }
         )?;
         for p in &r.parameter_errors {
             writeln!(
