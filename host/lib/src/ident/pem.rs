@@ -190,6 +190,16 @@ fn cost_of(m: &StateSpace, data: &IdData, x0: &DVector<f64>) -> f64 {
     s / data.y.len() as f64
 }
 
+/// `w ← w A` for the row `w = C A^t` (the initial state's sensitivity row), `a` row-major
+/// `n × n`; `wn` is scratch.
+fn next_observability_row(w: &mut Vec<f64>, wn: &mut Vec<f64>, a: &[f64]) {
+    let n = w.len();
+    for (col, o) in wn.iter_mut().enumerate() {
+        *o = (0..n).map(|i| w[i] * a[i * n + col]).sum();
+    }
+    std::mem::swap(w, wn);
+}
+
 /// Jacobian rows per block of the `JᵀJ` update in [`normal_equations`]
 const JTJ_BLOCK: usize = 64;
 
@@ -296,10 +306,7 @@ fn normal_equations_transposed(
         }
         if with_x0 {
             phi[nf..].copy_from_slice(&w);
-            for (col, o) in wn.iter_mut().enumerate() {
-                *o = (0..n).map(|i| w[i] * a[i * n + col]).sum();
-            }
-            std::mem::swap(&mut w, &mut wn);
+            next_observability_row(&mut w, &mut wn, &a);
         }
         acc.push(&phi, e);
         // W(t+1) = Aᵀ W(t) + Cᵀ [xᵀ u]
@@ -416,14 +423,7 @@ fn normal_equations<M: ParamModel + ?Sized>(
         }
         if with_x0 {
             phi[nf..].copy_from_slice(&w);
-            for (col, o) in wn.iter_mut().enumerate() {
-                let mut v = 0.0;
-                for (i, wi) in w.iter().enumerate() {
-                    v += wi * ar[i * n + col];
-                }
-                *o = v;
-            }
-            std::mem::swap(&mut w, &mut wn);
+            next_observability_row(&mut w, &mut wn, &ar);
         }
         acc.push(&phi, e);
         // propagate sensitivities then the state

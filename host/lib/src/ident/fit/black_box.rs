@@ -448,19 +448,23 @@ fn angle_black_box(
         );
     };
     let name = method_name(best.method);
-    let mut warnings = best.warnings;
+    // a start's notes (poles reflected into the circle) describe the model only when the
+    // refinement did not replace it
+    let start_notes = |done: bool, notes: Vec<String>| if done { Vec::new() } else { notes };
     if !best.integrator {
         let (model, done, note) = refined(&best.model, data, opts, name);
+        let mut warnings = start_notes(done, best.warnings);
         warnings.extend(note);
         let desc =
             format!(
             "{name} order {n}{}; scored against the integrator structure by the output error of \
-             the differenced angle",
+             the differenced output",
             if done { " + output-error refinement" } else { "" }
         );
         return Ok((model, desc, warnings, FitMetric::Output));
     }
     let (free, done, note) = refined(&best.model, &delta, opts, name);
+    let mut warnings = start_notes(done, best.warnings);
     warnings.extend(note);
     let fit = angle_fit(&with_integrator(&free), data);
     if fit >= DRIFT_ANGLE_FIT {
@@ -487,7 +491,7 @@ fn angle_black_box(
     let hp = highpassed(&delta);
     let (start, w) = subspace_model(&hp, n - 1, best.method, opts)?;
     let (free_hp, done_hp, note) = refined(&start, &hp, opts, name);
-    let mut warnings = w;
+    let mut warnings = start_notes(done_hp, w);
     warnings.extend(note);
     let desc = format!(
         "{name} order {} on the differenced angle through the {DEFAULT_HIGHPASS_HZ} Hz \
