@@ -65,7 +65,7 @@ use crate::ident::validate::{self, Validation};
 use crate::model::spec::{Family, ModelSpec, Structure};
 
 mod black_box;
-use black_box::{fit_black_box, integrator_part, with_integrator};
+use black_box::{fit_black_box, integrator_part};
 mod figures;
 pub use figures::{
     bode_figure, simulated_record, velocity_record, BodeFigure, CompareRecord, Compared,
@@ -542,7 +542,7 @@ pub fn fit_prepared_segments(data: &[FitData], opts: &FitOptions) -> Result<Fitt
                         let mut m = pf.model;
                         m.k = None;
                         fitted.model = if free.is_some() {
-                            with_integrator(&m)
+                            m.with_integrator()
                         } else {
                             m
                         };

@@ -68,6 +68,8 @@ pub struct FrfBlackBox {
     pub subspace_cost: f64,
     /// iterations of the refinement (0: not refined)
     pub iterations: usize,
+    /// parameters of a minimal form of the model (the similarity transform's left out)
+    pub parameters: usize,
     /// what the user must know
     pub warnings: Vec<FitWarning>,
 }
@@ -345,6 +347,71 @@ pub fn black_box_frf(
     feedthrough: bool,
     max_iter: usize,
 ) -> Result<FrfBlackBox, FrfSubspaceError> {
+    fit(frf, n, ts, feedthrough, max_iter, false)
+}
+
+/// Black box of order `n` with the rigid-body integrator exact: `n − 1` free states for the
+/// differenced output `(1 − z⁻¹) G` and the integrator `z / (z − 1)` (the structure of
+/// [`crate::ident::fit`]'s time-domain black box of an angle, [`StateSpace::with_integrator`]).
+/// The subspace start is read off the differenced FRF `(1 − e^{−jωTs}) Ĝ`, the refinement
+/// is the SML cost of the FRF itself. Strictly proper (an angle).
+///
+/// # Errors
+/// As [`black_box_frf`]; the order must be at least 2.
+pub fn black_box_frf_integrating(
+    frf: &Frf,
+    n: usize,
+    ts: f64,
+    max_iter: usize,
+) -> Result<FrfBlackBox, FrfSubspaceError> {
+    if n < 2 {
+        return Err(FrfSubspaceError::ZeroOrder);
+    }
+    fit(frf, n, ts, false, max_iter, true)
+}
+
+/// `inner` followed by the integrator `z / (z − 1)`
+struct Integrating<'a> {
+    inner: &'a BlackBoxFrf,
+}
+
+impl FrfModel for Integrating<'_> {
+    fn n_params(&self) -> usize {
+        self.inner.n_params()
+    }
+
+    fn response(&self, theta: &[f64], z: &[Complex64]) -> Option<Vec<Complex64>> {
+        let g = self.inner.response(theta, z)?;
+        let out: Vec<Complex64> = g.iter().zip(z).map(|(g, &z)| g * z / (z - 1.0)).collect();
+        out.iter().all(|v| v.is_finite()).then_some(out)
+    }
+
+    fn step(&self, i: usize, theta: &[f64]) -> f64 {
+        self.inner.step(i, theta)
+    }
+}
+
+/// `frf` times `1 − z⁻¹` at each line (the differenced output's FRF), for a start
+fn differenced(frf: &Frf, ts: f64) -> Frf {
+    let mut d = frf.clone();
+    for ((g, s), &f) in d.g.iter_mut().zip(d.sigma.iter_mut()).zip(&frf.freq_hz) {
+        let z = Complex64::from_polar(1.0, 2.0 * std::f64::consts::PI * f * ts);
+        let k = Complex64::new(1.0, 0.0) - z.inv();
+        *g *= k;
+        *s *= k.norm();
+    }
+    d
+}
+
+/// [`black_box_frf`] and [`black_box_frf_integrating`]: order `n` in all.
+fn fit(
+    frf: &Frf,
+    n: usize,
+    ts: f64,
+    feedthrough: bool,
+    max_iter: usize,
+    integrator: bool,
+) -> Result<FrfBlackBox, FrfSubspaceError> {
     if n == 0 {
         return Err(FrfSubspaceError::ZeroOrder);
     }
@@ -356,21 +423,22 @@ pub fn black_box_frf(
             lines: frf.g.len(),
         });
     }
+    // the free part's order and the FRF its start is read from
+    let (m, start_frf) = if integrator {
+        (n - 1, std::borrow::Cow::Owned(differenced(frf, ts)))
+    } else {
+        (n, std::borrow::Cow::Borrowed(frf))
+    };
     let mobius = Mobius::new(&frf.freq_hz, ts);
-    let sub = subspace(frf, n, ts, &mobius)?;
+    let sub = subspace(&start_frf, m, ts, &mobius)?;
     let lines = Lines::new(frf, ts);
     let bb = BlackBoxFrf {
-        n,
+        n: m,
         mobius,
         feedthrough,
     };
-    let p = Problem {
-        model: &bb,
-        lines: &lines,
-        cost: Cost::Sml,
-    };
+    let with_integrator = Integrating { inner: &bb };
     let th0 = BlackBoxFrf::pack(&sub.a, &sub.b, &sub.c, sub.d);
-    let subspace_cost = p.cost(&th0);
     let np = bb.n_params();
     let mut fixed = vec![false; np];
     fixed[np - 1] = !feedthrough;
@@ -380,8 +448,23 @@ pub fn black_box_frf(
         fixed,
         ..Default::default()
     };
+    let (subspace_cost, result) = if integrator {
+        let p = Problem {
+            model: &with_integrator,
+            lines: &lines,
+            cost: Cost::Sml,
+        };
+        (p.cost(&th0), lm::minimize(&p, &th0, &o))
+    } else {
+        let p = Problem {
+            model: &bb,
+            lines: &lines,
+            cost: Cost::Sml,
+        };
+        (p.cost(&th0), lm::minimize(&p, &th0, &o))
+    };
     let free = np - usize::from(!feedthrough);
-    let (theta, cost, iterations, limit) = match lm::minimize(&p, &th0, &o) {
+    let (theta, cost, iterations, limit) = match result {
         Ok(f) if f.ssr < subspace_cost => (
             f.theta.clone(),
             f.ssr,
@@ -390,14 +473,17 @@ pub fn black_box_frf(
         ),
         _ => (th0, subspace_cost, 0, false),
     };
-    let model = bb.to_z(&theta, ts).ok_or(FrfSubspaceError::Subspace(
-        "the bilinear map back to z is singular",
-    ))?;
-    // the similarity transform leaves n² directions free: count the
+    let model = bb
+        .to_z(&theta, ts)
+        .map(|f| if integrator { f.with_integrator() } else { f })
+        .ok_or(FrfSubspaceError::Subspace(
+            "the bilinear map back to z is singular",
+        ))?;
+    // the similarity transform leaves m² directions free: count the
     // parameters a minimal form would have
     let minimal = free
-        .saturating_sub(n * n)
-        .max(2 * n + usize::from(feedthrough));
+        .saturating_sub(m * m)
+        .max(2 * m + usize::from(feedthrough));
     let expected_cost = lines.expected_cost(minimal);
     let mut warnings = Vec::new();
     if limit {
@@ -418,6 +504,7 @@ pub fn black_box_frf(
         expected_cost,
         subspace_cost,
         iterations,
+        parameters: minimal,
         warnings,
     })
 }
@@ -504,6 +591,60 @@ mod tests {
         // with the paper's record no mode is left outside the lines
         let long = black_box_frf(&frf_of(&cfg, 1), 11, 5e-4, false, 40).unwrap();
         assert!(unsupported(&long).is_empty(), "{:?}", long.warnings);
+    }
+
+    /// Issue 39 item 4 on the periodic path: on that short record the free model spends its
+    /// surplus states below the lowest reliable line and validates 2.4 points below the true
+    /// model (96.14 against 98.54 % in the ident bench); with the rigid-body integrator exact
+    /// no mode is left there and it validates within a point of the three-mass model fitted
+    /// to the same lines, at the noise level.
+    #[test]
+    fn the_integrator_structure_validates_where_the_free_model_does_not() {
+        use crate::ident::sml::{fit_frf, FrfFitOptions};
+        use crate::model::spec::Structure;
+        let cfg = SimConfig::default();
+        let exc = ExcitationConfig {
+            periods: 3,
+            ramp_samples: 0,
+            ..ExcitationConfig::paper_default()
+        };
+        let est = frf_of_exc(&cfg, 1, exc);
+        let val = frf_of_exc(&cfg, 2, exc);
+        let free = black_box_frf(&est, 11, 5e-4, false, 40).unwrap();
+        let bi = black_box_frf_integrating(&est, 11, 5e-4, 40).unwrap();
+        let three = fit_frf(&est, &FrfFitOptions::new(Structure::ThreeMass, 5e-4)).unwrap();
+        let fit = |g: Vec<Complex64>| periodic_fit_percent(&val, &g);
+        let (f_free, f_bi) = (
+            fit(free.model.freq_response(&val.freq_hz)),
+            fit(bi.model.freq_response(&val.freq_hz)),
+        );
+        let f_three = fit(three.freq_response(&val.freq_hz));
+        assert!(
+            f_bi > f_three - 1.0,
+            "integrator {f_bi:.2} % vs three-mass {f_three:.2} %"
+        );
+        assert!(
+            f_free < f_three - 1.0,
+            "free {f_free:.2} % vs three-mass {f_three:.2} %"
+        );
+        assert!(bi.cost_ratio() <= COST_RATIO_WARN, "{}", bi.cost_ratio());
+        assert!(
+            !bi.warnings
+                .iter()
+                .any(|w| matches!(w, FitWarning::UnsupportedMode { .. })),
+            "{:?}",
+            bi.warnings
+        );
+        // the integrator is exact
+        let poles_at_one = bi
+            .model
+            .a
+            .clone()
+            .complex_eigenvalues()
+            .iter()
+            .filter(|p| (*p - Complex64::new(1.0, 0.0)).norm() < 1e-12)
+            .count();
+        assert_eq!(poles_at_one, 1);
     }
 
     #[test]

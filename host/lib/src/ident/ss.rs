@@ -281,6 +281,25 @@ impl StateSpace {
         self.poles().iter().map(|p| p.norm()).fold(0.0, f64::max)
     }
 
+    /// The model of `y` when `self` (no feed-through) is the model of the differenced output
+    /// `Δy(t) = y(t) − y(t − 1)`: its states and the integrator `y(t) = y(t − 1) + Δy(t)`
+    /// as the last state, which holds `y(t − 1)` (seed 000 §4: the angle's extra state).
+    pub fn with_integrator(&self) -> StateSpace {
+        let n = self.order();
+        let mut a = DMatrix::zeros(n + 1, n + 1);
+        a.view_mut((0, 0), (n, n)).copy_from(&self.a);
+        for j in 0..n {
+            a[(n, j)] = self.c[j];
+        }
+        a[(n, n)] = 1.0;
+        let mut b = DVector::zeros(n + 1);
+        b.rows_mut(0, n).copy_from(&self.b);
+        let mut c = RowDVector::zeros(n + 1);
+        c.columns_mut(0, n).copy_from(&self.c);
+        c[n] = 1.0;
+        StateSpace::new(a, b, c, 0.0, self.ts)
+    }
+
     /// true when every pole lies strictly inside the unit circle
     pub fn is_stable(&self) -> bool {
         self.spectral_radius() < 1.0

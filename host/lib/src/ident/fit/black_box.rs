@@ -12,7 +12,7 @@
 //! refinement left the unit circle. So, for an angle output without feed-through, the
 //! candidates include the *integrator structure*: `n − 1` free states for the differenced
 //! angle `Δy(t) = y(t) − y(t − 1)` (the interval-mean motor velocity times `Ts`) and the
-//! integrator that sums it ([`with_integrator`]; the pole at 1 is exact and stays there).
+//! integrator that sums it ([`StateSpace::with_integrator`]; the pole at 1 is exact and stays there).
 //!
 //! **Which structure.** The data decide, by one criterion for every start: the output
 //! error of `Δy` with its best initial state ([`delta_cost`]). It is the criterion the
@@ -256,24 +256,6 @@ fn delta_of(m: &StateSpace) -> StateSpace {
     StateSpace::new(a, b, c, 0.0, m.ts)
 }
 
-/// The angle model of a model `f` of `Δy` (no feed-through): `f`'s states and the
-/// integrator `y(t) = y(t − 1) + Δy(t)` as the last state, which holds `y(t − 1)`.
-pub(super) fn with_integrator(f: &StateSpace) -> StateSpace {
-    let n = f.order();
-    let mut a = DMatrix::zeros(n + 1, n + 1);
-    a.view_mut((0, 0), (n, n)).copy_from(&f.a);
-    for j in 0..n {
-        a[(n, j)] = f.c[j];
-    }
-    a[(n, n)] = 1.0;
-    let mut b = DVector::zeros(n + 1);
-    b.rows_mut(0, n).copy_from(&f.b);
-    let mut c = RowDVector::zeros(n + 1);
-    c.columns_mut(0, n).copy_from(&f.c);
-    c[n] = 1.0;
-    StateSpace::new(a, b, c, 0.0, f.ts)
-}
-
 /// The integrator structure as a parameterised model of the angle: `θ` is every entry of
 /// the free part's `A` (row-major), `B` and `C` ([`FullSs`] order), the integrator held.
 struct Integrating {
@@ -290,7 +272,7 @@ impl ParamModel for Integrating {
     }
 
     fn to_ss(&self, theta: &[f64]) -> StateSpace {
-        with_integrator(&self.free.to_ss(theta))
+        self.free.to_ss(theta).with_integrator()
     }
 
     /// exact: an entry of `C` also sets the integrator's input from that state
@@ -346,7 +328,7 @@ fn refined_on_angle(f: &StateSpace, data: &IdData, opts: &FitOptions) -> (StateS
     }
 }
 
-/// The free part of a model made by [`with_integrator`] (None for any other model).
+/// The free part of a model made by [`StateSpace::with_integrator`] (None for any other model).
 pub(super) fn integrator_part(m: &StateSpace) -> Option<StateSpace> {
     let n = m.order().checked_sub(1)?;
     let last_col_free = (0..n).all(|i| m.a[(i, n)] == 0.0);
@@ -466,7 +448,7 @@ fn angle_black_box(
     let (free, done, note) = refined(&best.model, &delta, opts, name);
     let mut warnings = start_notes(done, best.warnings);
     warnings.extend(note);
-    let fit = angle_fit(&with_integrator(&free), data);
+    let fit = angle_fit(&free.with_integrator(), data);
     if fit >= DRIFT_ANGLE_FIT {
         // no drift to follow: the angle's own output error, which FIT measures
         let (free, on_angle) = refined_on_angle(&free, data, opts);
@@ -485,7 +467,7 @@ fn angle_black_box(
                 ""
             }
         );
-        return Ok((with_integrator(&free), desc, warnings, FitMetric::Output));
+        return Ok((free.with_integrator(), desc, warnings, FitMetric::Output));
     }
     // a drift dominates the angle: the free part from the high-passed pair
     let hp = highpassed(&delta);
@@ -506,7 +488,7 @@ fn angle_black_box(
         }
     );
     Ok((
-        with_integrator(&free_hp),
+        free_hp.with_integrator(),
         desc,
         warnings,
         FitMetric::Velocity,
@@ -631,7 +613,7 @@ mod tests {
             0.0,
             1e-3,
         );
-        let m = with_integrator(&f);
+        let m = f.with_integrator();
         assert_eq!(integrator_part(&m), Some(f.clone()));
         // the angle is the running sum of the free part's output
         let u: Vec<f64> = (0..50).map(|t| ((t * 7) % 5) as f64 - 2.0).collect();
