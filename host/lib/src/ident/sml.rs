@@ -102,7 +102,7 @@ pub const PEAK_MATCH_REL: f64 = 0.05;
 pub const NEGLIGIBLE_MISFIT: f64 = 1e-3;
 /// a start whose SML cost is below this multiple of its expected value ends
 /// the search for starts
-const GOOD_START_RATIO: f64 = 3.0;
+pub(crate) const GOOD_START_RATIO: f64 = 3.0;
 /// relative decrease of the SML cost per step that ends its refinement: the cost is a χ²
 /// statistic of a few hundred, so this is a decrease of about 3e-5, where one σ of a
 /// parameter costs 1 (tighter, 1e-10, the refinement crept along the nearly collinear

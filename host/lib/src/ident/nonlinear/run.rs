@@ -7,7 +7,7 @@
 
 use thiserror::Error;
 
-use super::init::{automatic_start_with, RippleOrder, Step};
+use super::init::{automatic_start_with, LinearFit, RippleOrder, Step};
 use super::model::{sim_plant, NlModel, Owner};
 use super::output_error::{
     fit_output_error_segments, interval_velocity, pooled_velocity_fit, simulate_velocity,
@@ -61,6 +61,9 @@ pub struct NlRequest {
     pub start: NlStart,
     /// the structure's values from a linear fit the caller trusts (step 3 of the start)
     pub linear: Option<Vec<f64>>,
+    /// [`NlRequest::linear`] explains the FRF to within a few times its noise
+    /// ([`super::init::LinearFit::at_noise`])
+    pub linear_at_noise: bool,
     /// values held by name: a structure's parameter, `tau_c`, `offset` or an effect's key
     /// [SI]
     pub fixed: Vec<(String, f64)>,
@@ -82,6 +85,7 @@ impl NlRequest {
             held_tau_c: None,
             start: NlStart::Automatic,
             linear: None,
+            linear_at_noise: false,
             fixed: Vec::new(),
             given: Vec::new(),
             options: NlOptions::default(),
@@ -318,8 +322,11 @@ pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, Nl
     let mut start_warnings = Vec::new();
     let (steps, start_model, mut start) = match &req.start {
         NlStart::Automatic => {
-            let st =
-                automatic_start_with(data, &model, req.linear.as_deref(), ripple_order_of(req))?;
+            let linear = req.linear.as_deref().map(|values| LinearFit {
+                values,
+                at_noise: req.linear_at_noise,
+            });
+            let st = automatic_start_with(data, &model, linear, ripple_order_of(req))?;
             options.fixed.extend(st.held);
             start_warnings = st.warnings;
             (st.steps, st.model, st.values)
@@ -498,6 +505,7 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
                     req.tau_c = ls.tau_c;
                 }
                 req.linear = Some(ls.values);
+                req.linear_at_noise = ls.at_noise;
                 compensation.clone_from(&ls.compensation);
                 steps.extend(ls.compensation);
                 steps.push(ls.step);
@@ -644,6 +652,7 @@ fn grow_if_sticking(
     req.tau_c = g.tau_c;
     req.effects[ci] = g.coulomb;
     req.linear = Some(g.plant.clone());
+    req.linear_at_noise = false;
     // the friction's given keys started the growth; from here on its own values
     req.given.resize(req.effects.len(), Vec::new());
     let others = req.effects.len() > 1;
@@ -707,6 +716,9 @@ pub struct LinearStart {
     /// with Coulomb friction in the request: the friction compensation's step
     /// ([`super::compensate`]; its value `used` 1 when the start is the compensated FRF's)
     pub compensation: Option<Step>,
+    /// the fit's cost is within a few times the noise's
+    /// ([`crate::ident::sml::GOOD_START_RATIO`])
+    pub at_noise: bool,
 }
 
 /// Why [`linear_start`] gave none.
@@ -877,6 +889,7 @@ pub fn linear_start_segments(
         ),
     };
     Ok(LinearStart {
+        at_noise: ff.cost_ratio() <= crate::ident::sml::GOOD_START_RATIO,
         values: ff.values(),
         tau_c: match held {
             Some(t) => t,
