@@ -21,7 +21,10 @@
 //! log-uniform in 0.1–1.6 × their defaults instead, for effects that cost the nominal
 //! about a point; `ONLY=K` or `ONLY=K,L` runs those cases alone, numbered across rounds
 //! (round 2 is 10–19); `SPEED=0` skips the speed case, `DETAIL=1` prints every candidate,
-//! `BATTERY=0` the battery).
+//! `BATTERY=0` the battery; `HARD=1` runs every case under harder conditions of a real
+//! joint, drawn per case ([`Hard`]): a process disturbance inside the excited band, a
+//! coarser encoder, a current-loop lag of 0.5–3 samples, the inertia feedforward on in
+//! half the cases).
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -33,7 +36,7 @@ use jointid::ident::linalg::GaussRng;
 use jointid::ident::nonlinear::{identify, NlRequest};
 use jointid::model::effects::{Effect, EFFECT_NAMES};
 use jointid::model::spec::Structure;
-use jointid::sim::{ControllerConfig, JointParams, Plant, SimConfig};
+use jointid::sim::{ControllerConfig, Disturbance, JointParams, Plant, SensorConfig, SimConfig};
 use jointid::test_support::{est_val_captures, random_joint};
 
 /// One case of the battery.
@@ -41,8 +44,27 @@ struct Case {
     hidden: Vec<Effect>,
     params: JointParams,
     controller: ControllerConfig,
+    sensors: SensorConfig,
     rms: f64,
     seed: u64,
+}
+
+/// The harder conditions of `HARD=1`, drawn for case `index` from a generator of its own
+/// (the regular battery's draws are unchanged): a torque disturbance low-passed at 20–60 Hz
+/// (inside the excitation's band, not only slow drift) of 0.5–2 mN·m, an encoder of
+/// 2^14–2^17 counts per revolution, a current-loop lag of 0.25–1.5 ms, and the
+/// controller's inertia feedforward on in half the cases.
+fn hard(index: usize, controller: &mut ControllerConfig, sensors: &mut SensorConfig) {
+    let mut rng = GaussRng::new(9090 + index as u64);
+    let mut within = |lo: f64, hi: f64| lo * (hi / lo).powf(rng.uniform());
+    sensors.disturbance = Disturbance {
+        noise_std: within(5e-4, 2e-3),
+        noise_cutoff_hz: within(20.0, 60.0),
+        ..Disturbance::default()
+    };
+    sensors.counts_per_rev = Some(1 << (14 + index % 4));
+    controller.current_loop_tau = within(2.5e-4, 1.5e-3);
+    controller.feedforward = index % 2 == 1;
 }
 
 /// The effect `name` at `scale` × its default size (the size parameters only).
@@ -128,7 +150,7 @@ const ROUND: usize = 10;
 /// the same distributions (round 0 is the original battery). Case `k·ROUND + i` has the
 /// controller tuning `(k·ROUND + i) mod 3`, so each effect meets other tunings in later
 /// rounds.
-fn cases(rounds: usize, small: bool) -> Vec<Case> {
+fn cases(rounds: usize, small: bool, harder: bool) -> Vec<Case> {
     // the size's range as a multiple of the default
     let (lo, hi): (f64, f64) = if small { (0.1, 1.6) } else { (0.7, 1.6) };
     let mut hidden: Vec<Vec<&str>> = EFFECT_NAMES.iter().map(|n| vec![*n]).collect();
@@ -142,15 +164,20 @@ fn cases(rounds: usize, small: bool) -> Vec<Case> {
         let mut rng = GaussRng::new(1212 + 1000 * round as u64);
         for (i, names) in hidden.iter().enumerate() {
             let index = round * ROUND + i;
-            let (params, controller, rms) = random_joint(&mut rng, index);
+            let (params, mut controller, rms) = random_joint(&mut rng, index);
             let effects = names
                 .iter()
                 .map(|n| scaled(n, lo * (hi / lo).powf(rng.uniform())))
                 .collect();
+            let mut sensors = SensorConfig::default();
+            if harder {
+                hard(index, &mut controller, &mut sensors);
+            }
             out.push(Case {
                 hidden: effects,
                 params,
                 controller,
+                sensors,
                 rms,
                 seed: 500 + index as u64,
             });
@@ -168,6 +195,7 @@ fn config(case: &Case) -> SimConfig {
         },
         effects: case.hidden.clone(),
         controller: case.controller,
+        sensors: case.sensors,
         ..SimConfig::default()
     }
 }
@@ -238,7 +266,8 @@ fn battery() {
         .and_then(|v| v.trim().parse().ok())
         .unwrap_or(2usize);
     let small = std::env::var("SMALL").is_ok_and(|v| v == "1");
-    let all = cases(rounds, small);
+    let harder = std::env::var("HARD").is_ok_and(|v| v == "1");
+    let all = cases(rounds, small, harder);
     // band -> (cases, right answers); right: a single's top-1, a pair's both effects in
     // the top two, `none` on none
     let mut by_band: BTreeMap<String, (usize, usize)> = BTreeMap::new();
@@ -360,6 +389,19 @@ fn battery() {
             }
             println!("    verdict: {}", d.verdict);
             println!("    hidden {:?}; warnings {:?}", case.hidden, d.warnings);
+            let nominal: Vec<String> = d
+                .nominal_parameters
+                .iter()
+                .map(|(k, v)| format!("{k} {:.4e}", v.value))
+                .collect();
+            println!(
+                "    nominal {}; truth {:?}; lag {:.3e} s, feedforward {}, sensors {:?}",
+                nominal.join(", "),
+                case.params,
+                case.controller.current_loop_tau,
+                case.controller.feedforward,
+                case.sensors
+            );
         }
         let answered = d.best.clone();
         let right = match case.hidden.len() {
@@ -493,6 +535,7 @@ fn speed() {
         hidden: vec![Effect::default_by_name("nonlinear_stiffness").unwrap()],
         params: JointParams::default(),
         controller: ControllerConfig::default(),
+        sensors: SensorConfig::default(),
         rms: 0.02,
         seed: 77,
     };
