@@ -1016,9 +1016,7 @@ pub fn fit_output_error_segments(
         .collect();
     for (k, &(ja, a)) in in_layout.iter().enumerate() {
         for &(jb, b) in &in_layout[k + 1..] {
-            let den = (cov_z[(ja, ja)] * cov_z[(jb, jb)]).sqrt();
-            let rho = cov_z[(ja, jb)] / den;
-            if den > 0.0 && rho.abs() >= CORRELATED {
+            if let Some(rho) = correlation(&cov_z, ja, jb).filter(|r| r.abs() >= CORRELATED) {
                 correlated.push(Correlation {
                     a: layout[a].name,
                     b: layout[b].name,
@@ -1289,6 +1287,17 @@ fn exact_law_steps(
 /// `table`: the Jacobian already evaluated over these `free` parameters (by the exact-law
 /// correction, a step away from `z`: the covariance does not tell the two apart), else one
 /// pass of the dual numbers here.
+/// The correlation of entries `a` and `b` of the covariance `cov`; `None` when a variance
+/// is nought or the ratio lies beyond ±1: a covariance is positive semi-definite, so that
+/// is round-off on a variance at nought (a degenerate direction, which the fit's checks
+/// report), not a trade between two parameters (a nominal with `tau_c` on its bound
+/// reported correlations of −12.1 and +1.11).
+fn correlation(cov: &DMatrix<f64>, a: usize, b: usize) -> Option<f64> {
+    let den = (cov[(a, a)] * cov[(b, b)]).sqrt();
+    let rho = cov[(a, b)] / den;
+    (den > 0.0 && rho.abs() <= 1.0 + 1e-9).then(|| rho.clamp(-1.0, 1.0))
+}
+
 fn sandwich_parts(
     problem: &Problem,
     z: &[f64],
@@ -1357,6 +1366,23 @@ fn sandwich_parts(
 mod error_tests {
     use super::*;
     use crate::model::spec::Structure;
+
+    #[test]
+    fn a_correlation_is_within_one_or_not_reported() {
+        // a covariance of two parameters correlated at −0.99, and a third whose variance
+        // is round-off beside its covariances
+        let cov = DMatrix::from_row_slice(
+            3,
+            3,
+            &[4.0, -1.98, 1e-9, -1.98, 1.0, -1e-9, 1e-9, -1e-9, 1e-20],
+        );
+        let rho = correlation(&cov, 0, 1).unwrap();
+        assert!((rho + 0.99).abs() < 1e-12, "{rho}");
+        assert_eq!(correlation(&cov, 0, 2), None);
+        assert_eq!(correlation(&cov, 1, 2), None);
+        let flat = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, 0.0]);
+        assert_eq!(correlation(&flat, 0, 1), None);
+    }
 
     #[test]
     fn a_fit_that_cannot_start_says_why() {
