@@ -21,7 +21,7 @@
 //! log-uniform in 0.1–1.6 × their defaults instead, for effects that cost the nominal
 //! about a point; `ONLY=K` or `ONLY=K,L` runs those cases alone, numbered across rounds
 //! (round 2 is 10–19); `SPEED=0` skips the speed case, `DETAIL=1` prints every candidate,
-//! `BATTERY=0` the battery; `HARD=1` runs every case under harder conditions of a real
+//! `BATTERY=0` the battery, `STAGES=1` prints each stage's end with its seconds; `HARD=1` runs every case under harder conditions of a real
 //! joint, drawn per case ([`Hard`]): a process disturbance inside the excited band, a
 //! coarser encoder, a current-loop lag of 0.5–3 samples, the inertia feedforward on in
 //! half the cases).
@@ -31,7 +31,9 @@ use std::time::Instant;
 
 use jointid::data::{Dataset, ExcitationConfig};
 use jointid::diagnose::metric::{true_fit, true_fit_in_loop, CLOSED_LOOP_METRIC_NAME};
-use jointid::diagnose::{all_candidates, diagnose, DiagnoseRequest, Diagnosis};
+use jointid::diagnose::{
+    all_candidates, diagnose, DiagnoseRequest, Diagnosis, Progress, ProgressEvent,
+};
 use jointid::ident::linalg::GaussRng;
 use jointid::ident::nonlinear::{identify, NlRequest};
 use jointid::model::effects::{Effect, EFFECT_NAMES};
@@ -212,9 +214,18 @@ fn captures(case: &Case, periods: u32, rms: f64) -> (Dataset, Dataset) {
 }
 
 fn request(r: f64) -> DiagnoseRequest {
+    // `STAGES=1`: each stage's and candidate's end with its seconds, as they come
+    let progress = std::env::var("STAGES").is_ok_and(|v| v == "1").then(|| {
+        Progress::new(|e| {
+            if let ProgressEvent::Finished(what, outcome) = e {
+                println!("      {what}: {outcome}");
+            }
+        })
+    });
     DiagnoseRequest {
         r,
         candidates: all_candidates(),
+        progress,
         ..DiagnoseRequest::default()
     }
 }
