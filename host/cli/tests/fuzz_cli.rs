@@ -18,7 +18,7 @@ use proptest::test_runner::{Config, RngAlgorithm, TestCaseError, TestRng, TestRu
 
 #[allow(dead_code)] // not every helper is used here
 mod common;
-use common::{jointid, jointid_within, json_of, tmpdir};
+use common::{jointid, jointid_within, json_of, non_finite_word, tmpdir};
 
 /// Longest a case may run before it counts as a hang.
 const LIMIT: Duration = Duration::from_secs(20);
@@ -340,14 +340,6 @@ fn case(commands: &'static [&'static str], seed: u8) -> impl Strategy<Value = Ca
             data,
             picks,
         })
-}
-
-/// A number that is not finite among the words of `text`: `NaN`, `inf`, `-inf`,
-/// `Infinity` as a word of their own.
-fn non_finite_word(text: &str) -> Option<String> {
-    text.split(|c: char| !(c.is_ascii_alphanumeric() || "._+-".contains(c)))
-        .map(|w| w.trim_start_matches(['+', '-']).to_ascii_lowercase())
-        .find(|w| matches!(w.as_str(), "nan" | "inf" | "infinity" | "+inf" | "-nan"))
 }
 
 /// Exit codes 0, 1 and 2 of the cases run, in that order.
