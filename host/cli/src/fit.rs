@@ -24,7 +24,7 @@ use super::print::print_notes;
 use super::views::{Signals, VIEW_FILES};
 use super::{check_plot_files, fit_report, CmdResult, Context, Outcome};
 use jointid::data::input::path_text;
-use jointid::data::output::check_output;
+use jointid::data::output::{check_distinct, check_output};
 use jointid::data::segment::{segment_list, whole_periods};
 use jointid::data::{fmt_sig, Selected};
 use jointid::ident::fit::{
@@ -388,6 +388,12 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
             names.extend(VIEW_FILES);
         }
         check_plot_files(dir, &names, args.force)?;
+        if let Some(path) = &args.save {
+            // the model file is no figure of the plot directory
+            let mut outputs = vec![("--save".to_string(), path.clone())];
+            outputs.extend(names.iter().map(|n| (format!("--plot's {n}"), dir.join(n))));
+            check_distinct(&outputs)?;
+        }
     }
     let mut req = args.request(spec)?;
     req.check().map_err(|e| args.flagged(e.into()))?;

@@ -63,7 +63,8 @@ use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::jcap::{write_stream_with, JcapError};
 use jointid::data::input::{input_name, path_text, read_input_text};
 use jointid::data::output::{
-    check_output, check_room, io_msg, is_stream, names_standard_output, write_file, OutputError,
+    check_distinct, check_output, check_room, io_msg, is_stream, names_standard_output, write_file,
+    OutputError,
 };
 use jointid::data::{capture_csv_comments, ExcitationConfig, SignalKind, TableWriter};
 use jointid::ident::model_file::SavedModel;
@@ -345,12 +346,6 @@ pub enum SimulateError {
         samples: u64,
         /// [`OutputError::NoRoom`] with the figures
         err: OutputError,
-    },
-    /// `--out` and `--params-out` name the same file
-    #[error("{path}: is both --out and --params-out")]
-    SameOutput {
-        /// the file
-        path: PathBuf,
     },
 }
 
@@ -713,9 +708,10 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
     // cannot be
     check_output(&args.out, args.force)?;
     if let Some(p) = &args.params_out {
-        if p == &args.out {
-            return Err(SimulateError::SameOutput { path: p.clone() }.into());
-        }
+        check_distinct(&[
+            ("--out".to_string(), args.out.clone()),
+            ("--params-out".to_string(), p.clone()),
+        ])?;
         check_output(p, args.force)?;
     }
     let (cfg, exc) = configure(args)?;

@@ -91,6 +91,19 @@ pub enum OutputError {
         /// the space an unprivileged user may still fill there [bytes]
         free: u64,
     },
+    /// Two outputs of one command name the same file ([`check_distinct`]).
+    #[error(
+        "{}: is both {first} and {second}: one would replace the other; name two files",
+        path_text(path)
+    )]
+    SameFile {
+        /// the file, as the second output names it
+        path: PathBuf,
+        /// what the first output is (`--out`, `--report`)
+        first: String,
+        /// what the second output is (`--params-out`, `--plot`'s `fig-frf.svg`)
+        second: String,
+    },
     /// Writing, flushing or renaming failed.
     #[error("{}: {}", path_text(path), io_msg(err))]
     Io {
@@ -418,6 +431,47 @@ fn remove_stale_temporaries(target: &Path) {
     }
     drop(held);
     locked(&STALE_REMOVED).extend(removed);
+}
+
+/// The file `path` names as an output, told apart by the file system: the file a link
+/// leads to, or the new file's name in its directory resolved (`./x.csv` is `x.csv`);
+/// `None` for a stream (a device, a pipe, `/dev/stdout`), which may take two outputs.
+fn output_identity(path: &Path) -> Option<PathBuf> {
+    match existing(path) {
+        Ok(Existing::Special(_)) => None,
+        Ok(Existing::File(resolved)) => Some(resolved),
+        Ok(Existing::Nothing) | Err(_) => Some(
+            match (std::fs::canonicalize(dir_of(path)), path.file_name()) {
+                (Ok(dir), Some(name)) => dir.join(name),
+                _ => path.to_path_buf(),
+            },
+        ),
+    }
+}
+
+/// Checks, before any work, that no two of one command's outputs name the same file
+/// (`--out x.csv --params-out ./x.csv`, `--report` inside the `--plot` directory under a
+/// figure's name): with `--force` one would replace the other and the command would say
+/// it wrote both. Each output is `(what, path)`, `what` naming it in the message.
+///
+/// # Errors
+/// [`OutputError::SameFile`] naming the file and both outputs.
+pub fn check_distinct(outputs: &[(String, PathBuf)]) -> Result<(), OutputError> {
+    let mut seen: Vec<(&str, PathBuf)> = Vec::new();
+    for (what, path) in outputs {
+        let Some(id) = output_identity(path) else {
+            continue;
+        };
+        if let Some((first, _)) = seen.iter().find(|(_, other)| *other == id) {
+            return Err(OutputError::SameFile {
+                path: path.clone(),
+                first: (*first).to_string(),
+                second: what.clone(),
+            });
+        }
+        seen.push((what, id));
+    }
+    Ok(())
 }
 
 /// Checks, before any work, that `path` can be written under the rule of this module:
