@@ -347,7 +347,29 @@ pub enum SimulateError {
         /// [`OutputError::NoRoom`] with the figures
         err: OutputError,
     },
+    /// the run is longer than a capture can number ([`MAX_SAMPLES`])
+    #[error(
+        "--periods {periods}: {samples} samples, more than the {MAX_SAMPLES} a run may hold: \
+         a capture numbers its samples with the board's 32-bit counter (seq), {days} days at \
+         {fs_hz} Hz"
+    )]
+    TooLong {
+        /// the whole periods asked for
+        periods: u32,
+        /// the run's samples (ramps included)
+        samples: u64,
+        /// the sample rate [Hz]
+        fs_hz: u32,
+        /// [`MAX_SAMPLES`] in days at that rate, for people
+        days: String,
+    },
 }
+
+/// Most samples one run may hold: a capture numbers its samples with the board's 32-bit
+/// counter (`seq` of the wire), 24.9 days at 2 kHz. The stated maximum of a run whose
+/// size no free space bounds (a device or pipe: `--out /dev/null` ran 100,000,000
+/// periods, hours of simulation, into nothing).
+pub const MAX_SAMPLES: u64 = 1 << 32;
 
 /// Applies `NAME=VALUE` overrides to the parameters of model `model`, each within its
 /// physical range ([`param_range`]).
@@ -723,6 +745,17 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         samples,
         err,
     })?;
+    // a stream has no free space to bound it: the stated maximum does
+    if samples > MAX_SAMPLES {
+        let days = MAX_SAMPLES as f64 / f64::from(exc.fs_hz.max(1)) / 86_400.0;
+        return Err(SimulateError::TooLong {
+            periods: exc.periods,
+            samples,
+            fs_hz: exc.fs_hz,
+            days: jointid::data::fmt_sig(days, 3),
+        }
+        .into());
+    }
     let params = cfg.params_json()? + "\n";
     if stream {
         // a device or pipe cannot take back what it got: the run must complete before any
