@@ -3,7 +3,8 @@
 //! rule `capture` applies to its `.jcap`:
 //!
 //! - an existing file is refused unless overwriting was asked for (`--force`),
-//!   [`OutputError::Exists`];
+//!   [`OutputError::Exists`], and even then while a capture writes it (it holds the
+//!   file's lock), [`OutputError::Locked`];
 //! - a directory is never an output file, and the file's directory must exist and be
 //!   writable; [`check_output`] says so before any work is done;
 //! - the file appears whole or not at all: [`write_file`] writes a temporary file in the
@@ -90,6 +91,17 @@ pub enum OutputError {
         needed: u64,
         /// the space an unprivileged user may still fill there [bytes]
         free: u64,
+    },
+    /// A capture is writing the file: it holds the file's exclusive lock
+    /// (`jointid capture`); replacing it would drop what the capture writes.
+    #[error(
+        "{}: a capture is writing this file (it holds the file's lock); stop it first or \
+         choose another output",
+        path_text(path)
+    )]
+    Locked {
+        /// the file
+        path: PathBuf,
     },
     /// Two outputs of one command name the same file ([`check_distinct`]).
     #[error(
@@ -433,6 +445,21 @@ fn remove_stale_temporaries(target: &Path) {
     locked(&STALE_REMOVED).extend(removed);
 }
 
+/// Refuses to replace `file` (an existing regular file) while another process holds its
+/// exclusive lock: a capture writing its `.jcap` (`jointid capture`) keeps writing
+/// into the file a rename took away, and its samples would be lost.
+fn check_unlocked(path: &Path, file: &Path) -> Result<(), OutputError> {
+    let Ok(f) = std::fs::File::open(file) else {
+        return Ok(());
+    };
+    match f.try_lock_shared() {
+        Err(std::fs::TryLockError::WouldBlock) => Err(OutputError::Locked {
+            path: path.to_path_buf(),
+        }),
+        _ => Ok(()),
+    }
+}
+
 /// The file `path` names as an output, told apart by the file system: the file a link
 /// leads to, or the new file's name in its directory resolved (`./x.csv` is `x.csv`);
 /// `None` for a stream (a device, a pipe, `/dev/stdout`), which may take two outputs.
@@ -489,7 +516,10 @@ pub fn check_output(path: &Path, overwrite: bool) -> Result<(), OutputError> {
                 path: path.to_path_buf(),
             })
         }
-        Existing::File(resolved) => resolved,
+        Existing::File(resolved) => {
+            check_unlocked(path, &resolved)?;
+            resolved
+        }
         Existing::Nothing => path.to_path_buf(),
     };
     let dir = dir_of(&target);
@@ -565,7 +595,10 @@ pub fn write_file(
                 path: path.to_path_buf(),
             })
         }
-        Existing::File(resolved) => resolved,
+        Existing::File(resolved) => {
+            check_unlocked(path, &resolved)?;
+            resolved
+        }
         Existing::Nothing => path.to_path_buf(),
     };
     let dir = dir_of(&target);
