@@ -24,7 +24,7 @@ use clap::Args;
 use serde::Serialize;
 
 use super::args::{check_columns, ColumnArgs, DataArgs, PrepArgs, ReadArgs};
-use super::print::{print_tests, usable_segments};
+use super::print::{print_notes, print_tests, share_warning, usable_segments};
 use super::validate_simulated::{self, SimulatedColumn};
 use super::views::{
     write_views, CompareRecord, Signals, Views, PERIODIC_COMPARED, VELOCITY_COMPARED, VIEW_FILES,
@@ -173,6 +173,12 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
         .to_fitted()
         .map_err(|e| format!("{}: {e}", input_name(mpath)))?;
     let sel = data_args(&args.files[1]).select(ctx.loaders)?;
+    // a FIT on a scrap of a damaged capture says little: the share it rests on, noted
+    print_notes(
+        &share_warning(&sel, "validation")
+            .into_iter()
+            .collect::<Vec<_>>(),
+    );
     super::progress::step(format!(
         "validating on {} samples",
         sel.datasets.iter().map(|d| d.data.len()).sum::<usize>()
@@ -455,6 +461,11 @@ fn run_nonlinear(
         .map_err(|e| format!("{}: {e}", input_name(mpath)))?;
     let nl = saved.nonlinear.as_ref().expect("a nonlinear section");
     let sel = data.select(ctx.loaders)?;
+    print_notes(
+        &share_warning(&sel, "validation")
+            .into_iter()
+            .collect::<Vec<_>>(),
+    );
     let (segs, numbers) = if sel.datasets.len() > 1 {
         let name = sel.datasets[0].name.clone();
         let mut all = sel.datasets;
