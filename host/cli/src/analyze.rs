@@ -148,7 +148,8 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
             .map(|d| d.data.len())
             .sum::<usize>()
     ));
-    let a = analyze_segments(&selected.datasets, args.settle_periods)?;
+    let a = analyze_segments(&selected.datasets, args.settle_periods)
+        .map_err(|e| named(&ds.name, e))?;
     super::progress::clear();
     let notes: Vec<String> = a
         .left_out
@@ -191,7 +192,8 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
             .read
             .select_one(ctx.loaders, other, data.column_map())?;
         super::progress::step(format!("analysing {} samples", other_ds.data.len()));
-        let b = analyze_dataset(&other_ds, args.settle_periods)?;
+        let b = analyze_dataset(&other_ds, args.settle_periods)
+            .map_err(|e| named(&other_ds.name, e))?;
         same_multisine((ds, &a), (&other_ds, &b))?;
         trend.push(amplitude_trend(&a.linearity_u, &b.linearity_u));
         trend.push(amplitude_trend(&a.linearity_y, &b.linearity_y));
@@ -237,6 +239,17 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
     } else {
         Outcome::Ok
     })
+}
+
+/// The analysis's error `e` of the data `name`, the file named first (the library's
+/// errors about periods name none: "1 whole period(s) of 5000 samples: need at least 2").
+fn named(name: &str, e: impl std::fmt::Display) -> String {
+    let m = e.to_string();
+    if m.starts_with(name) {
+        m
+    } else {
+        format!("{name}: {m}")
+    }
 }
 
 /// The data check after the table: the outliers (the first [`PRINTED_OUTLIERS`], by file,

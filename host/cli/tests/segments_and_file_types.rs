@@ -14,7 +14,7 @@ use jointid::test_support::synth::{synth_stream, FrameContent, SynthOptions};
 use serde_json::Value;
 
 mod common;
-use common::{jointid, json_of, tmpdir};
+use common::{jointid, json_of, refused, simulated, tmpdir};
 
 /// 2000 samples at 200 Hz of an endless multisine (period 100, ramp 50) with the batches
 /// carrying samples 800..1104 removed: segment 1 is 0..800 (whole periods 50..750: 7),
@@ -717,6 +717,23 @@ fn fit_refuses_a_scrap_of_a_damaged_capture_and_names_the_share_it_uses() {
         stderr(&o).contains(&format!("note: {g}: the validation uses segment ")),
         "{}",
         stderr(&o)
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// An analysis refused for its periods names the file (a variant of issue 37 item 11):
+/// `analyze` of a two-period capture (one whole period after the transient), or of a
+/// gapped capture `--segment all --from 2p`, said only "1 whole period(s) of 5000 samples:
+/// need at least 2 to estimate the noise".
+#[test]
+fn an_analysis_refused_for_its_periods_names_the_file() {
+    let dir = tmpdir("analyze-periods");
+    let cap = simulated(&dir, "two.csv", &["--model", "two-mass", "--periods", "2"]);
+    refused(
+        &["analyze", &cap],
+        &[&format!(
+            "jointid: error: {cap}: 1 whole period(s) of 5000 samples: need at least 2"
+        )],
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
