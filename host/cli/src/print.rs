@@ -20,7 +20,7 @@ pub(crate) fn print_tests(out: &mut dyn Write, label: &str, v: &Validation) -> s
 fn print_test(out: &mut dyn Write, label: &str, t: &CorrelationTest) -> std::io::Result<()> {
     writeln!(
         out,
-        "    {label:<10} {:<40} {}: max |r| {:.3} vs bound {:.3} ({} of {} {} outside, {} {} allowed), χ² {:.1} {} {:.1}",
+        "    {label:<10} {:<40} {}: max |r| {:.3} vs bound {:.3} ({} of {} {} outside, {} {} allowed), χ² {} {} {}",
         t.name,
         verdict(t),
         t.max_abs,
@@ -30,10 +30,20 @@ fn print_test(out: &mut dyn Write, label: &str, t: &CorrelationTest) -> std::io:
         t.unit,
         if t.outside <= t.allowed { "≤" } else { ">" },
         t.allowed,
-        t.statistic,
+        one_decimal(t.statistic),
         if t.statistic <= t.critical { "≤" } else { ">" },
-        t.critical
+        one_decimal(t.critical)
     )
+}
+
+/// `x` with one decimal, or `—` when it is not finite (the χ² of a residual whose squares
+/// overflow prints no `NaN`).
+fn one_decimal(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.1}")
+    } else {
+        "—".into()
+    }
 }
 
 /// `pass`, `FAIL`, or `FAIL (N residual samples are NaN or infinite)`: the figures

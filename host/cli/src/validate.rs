@@ -390,7 +390,15 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
         write_segments(out, fit_name, &segments)?;
         writeln!(out, "  residual tests (99 %):")?;
         print_tests(out, "data", &v)?;
-        if !finite {
+        if !finite && v.whiteness.non_finite == 0 {
+            // each residual finite, their squares summed beyond the largest f64
+            writeln!(
+                out,
+                "  not ok: the model's simulated output on {} is too large to compute with: \
+                 its residual's sums of squares overflow",
+                ds.name
+            )?;
+        } else if !finite {
             writeln!(
                 out,
                 "  not ok: the model's simulated output is not finite on {} ({} of {} residual samples NaN or infinite)",
