@@ -245,8 +245,9 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
             .select(ctx.loaders)
             .map_err(|e| format!("{what}{}: {e}", p.display()))?;
         // a sample no fit computes with is refused before the work
-        screened
-            .extend(screen_for_fit(&sel, &data.column_map()).map_err(|e| format!("{what}{e}"))?);
+        screened.extend(
+            screen_for_fit(&sel, &data.column_map(), "fit").map_err(|e| format!("{what}{e}"))?,
+        );
         if sel.datasets.len() == 1 {
             return Ok((sel.datasets, sel.segments));
         }

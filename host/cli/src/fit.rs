@@ -406,12 +406,12 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     check_columns(&args.data.data_args(&args.data.path))?;
     let sel = args.data.data_args(&args.data.path).select(ctx.loaders)?;
     let map = args.data.data_args(&args.data.path).column_map();
-    let mut screened: Vec<String> = screen_for_fit(&sel, &map)?.into_iter().collect();
+    let mut screened: Vec<String> = screen_for_fit(&sel, &map, "fit")?.into_iter().collect();
     check_whole_periods(&sel)?;
     let val = match &args.validation {
         Some(p) => {
             let v = args.data.data_args(p).select(ctx.loaders)?;
-            screened.extend(screen_for_fit(&v, &map)?);
+            screened.extend(screen_for_fit(&v, &map, "fit")?);
             // a validation FIT on a scrap of a damaged capture says as little as a fit
             screened.extend(share_warning(&v, "validation"));
             Some(one_of(v)?)

@@ -198,3 +198,51 @@ fn the_results_of_a_spike_print_no_number_that_is_not_finite() {
     assert!(text.contains("    estimation: —"), "{text}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `validate` screens its data as `fit` does (issue 37 items 2 and 3, a variant): `u =
+/// 1e300` gave FIT `—` and "the model's simulated output is not finite (0 of 24000
+/// residual samples NaN or infinite)" without naming the sample; it is refused naming
+/// file, row and column, and a `1e6` spike is noted by its row.
+#[test]
+fn validate_refuses_a_value_near_the_largest_f64_and_notes_a_far_spike_by_its_row() {
+    let dir = tmpdir("validate");
+    let clean = simulated(&dir, "clean.csv", &["--model", "three-mass"]);
+    let m = dir.join("m.json");
+    json_of(&jointid(&[
+        "fit",
+        &clean,
+        "--model",
+        "three-mass",
+        "--save",
+        m.to_str().unwrap(),
+        "--json",
+    ]));
+    let m = m.to_str().unwrap();
+    let p = with_value(&clean, "u-1e300.csv", "u", "1e300");
+    let p = p.to_str().unwrap();
+    let o = jointid(&["validate", m, p]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.starts_with(&format!(
+            "jointid: error: {p}: data row {ROW} (t = {ROW_T} s), column `u`: value 1e300: "
+        )) && err.contains("; a validation takes no sample of magnitude ≥ 1e100"),
+        "{err}"
+    );
+    let p = with_value(&clean, "u-1e6.csv", "u", "1e6");
+    let p = p.to_str().unwrap();
+    let o = jointid(&["validate", m, p]);
+    let (out, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert!(
+        err.contains(&format!(
+            "note: {p}: data row {ROW} (t = {ROW_T} s), column `u`: value 1e6: "
+        )) && err.contains("the validation takes it as measured"),
+        "{err}"
+    );
+    assert!(!out.contains("0 of 24000 residual samples"), "{out}");
+    assert_eq!(non_finite_word(&out), None, "{out}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
