@@ -56,6 +56,10 @@ pub struct InfoArgs {
     /// how a CSV's columns are split
     #[command(flatten)]
     pub csv: DelimiterArg,
+    /// no progress line on standard error (shown only when it is a terminal, for reading
+    /// a file that lasts over 2 s)
+    #[arg(long, short)]
+    pub quiet: bool,
 }
 
 /// One session of `info --json`'s `per_session`.
@@ -96,6 +100,15 @@ pub struct InfoSummary {
 pub fn run(args: &InfoArgs, ctx: &mut Context<'_>) -> CmdResult {
     let stdin = is_stdin(&args.file);
     let name = input_name(&args.file);
+    // reading a large file takes seconds (a 532 MB CSV: 3 s): said on a terminal
+    super::progress::start(args.quiet);
+    let size = std::fs::metadata(&args.file)
+        .ok()
+        .filter(|m| m.is_file())
+        .map_or_else(String::new, |m| {
+            format!(" ({} MB)", jointid::data::fmt_sig(m.len() as f64 / 1e6, 3))
+        });
+    super::progress::step(format!("reading {name}{size}"));
     if !stdin && !starts_with_magic(&args.file).map_err(|e| format!("{name}: {}", io_msg(&e)))? {
         if let Some(head) = text_head(&args.file).map_err(|e| format!("{name}: {}", io_msg(&e)))? {
             return run_data(args, ctx, &name, head.head.as_bytes(), Some(head.rows));
@@ -133,6 +146,7 @@ pub fn run(args: &InfoArgs, ctx: &mut Context<'_>) -> CmdResult {
         segments,
         per_session,
     };
+    super::progress::finish();
     if ctx.json {
         print_json(ctx.out, "info", &summary)?;
     } else {
@@ -392,6 +406,7 @@ fn run_data(
         )),
     }
     let missing = info.missing_samples.unwrap_or(0) > 0;
+    super::progress::finish();
     if ctx.json {
         print_json(ctx.out, "info-data", &info)?;
     } else {
