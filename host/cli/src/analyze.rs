@@ -148,7 +148,8 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
             .map(|d| d.data.len())
             .sum::<usize>()
     ));
-    let a = analyze_segments(&selected.datasets, args.settle_periods)?;
+    let a = analyze_segments(&selected.datasets, args.settle_periods)
+        .map_err(|e| named(&ds.name, e))?;
     super::progress::clear();
     let notes: Vec<String> = a
         .left_out
@@ -191,7 +192,8 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
             .read
             .select_one(ctx.loaders, other, data.column_map())?;
         super::progress::step(format!("analysing {} samples", other_ds.data.len()));
-        let b = analyze_dataset(&other_ds, args.settle_periods)?;
+        let b = analyze_dataset(&other_ds, args.settle_periods)
+            .map_err(|e| named(&other_ds.name, e))?;
         same_multisine((ds, &a), (&other_ds, &b))?;
         trend.push(amplitude_trend(&a.linearity_u, &b.linearity_u));
         trend.push(amplitude_trend(&a.linearity_y, &b.linearity_y));
@@ -237,6 +239,17 @@ pub fn run(args: &AnalyzeArgs, ctx: &mut Context<'_>) -> CmdResult {
     } else {
         Outcome::Ok
     })
+}
+
+/// The analysis's error `e` of the data `name`, the file named first (the library's
+/// errors about periods name none: "1 whole period(s) of 5000 samples: need at least 2").
+fn named(name: &str, e: impl std::fmt::Display) -> String {
+    let m = e.to_string();
+    if m.starts_with(name) {
+        m
+    } else {
+        format!("{name}: {m}")
+    }
 }
 
 /// The data check after the table: the outliers (the first [`PRINTED_OUTLIERS`], by file,
@@ -446,24 +459,34 @@ fn print_table(out: &mut dyn Write, name: &str, a: &FrfAnalysis, all: bool) -> s
         let excited = a.frf.lines.len();
         writeln!(
             out,
-            "  {:<8} {:<16} {:>5} {:>11.1}",
-            lin.signal, "excited", excited, lin.excited_db
+            "  {:<8} {:<16} {:>5} {:>11}",
+            lin.signal,
+            "excited",
+            excited,
+            fixed(lin.excited_db, 1, false)
         )?;
         let row = |out: &mut dyn Write, class: &str, c: &ClassLevel| {
             if c.lines == 0 {
                 return writeln!(out, "  {:<8} {:<16} {:>5}", lin.signal, class, 0);
             }
+            // against a noise floor that is not finite, the ratio is no figure either
+            let vs_noise = if c.noise_db.is_finite() && c.level_db.is_finite() {
+                c.vs_noise_db
+            } else {
+                f64::NAN
+            };
             writeln!(
                 out,
-                "  {:<8} {:<16} {:>5} {:>11.1} {:>15.1} {:>+13.1} {:>14.1}  {}",
+                "  {:<8} {:<16} {:>5} {:>11} {:>15} {:>13} {:>14}  {}",
                 lin.signal,
                 class,
                 c.lines,
-                c.level_db,
-                c.vs_excited_db,
-                c.vs_noise_db,
-                c.threshold_db,
+                fixed(c.level_db, 1, false),
+                fixed(c.vs_excited_db, 1, false),
+                fixed(vs_noise, 1, true),
+                fixed(c.threshold_db, 1, false),
                 match (c.detected, c.significant) {
+                    _ if !class_finite(lin.excited_db, c) => "undetermined",
                     (true, true) => "DETECTED",
                     (true, false) => "detected, negligible",
                     _ => "no",
@@ -473,8 +496,22 @@ fn print_table(out: &mut dyn Write, name: &str, a: &FrfAnalysis, all: bool) -> s
         row(out, "odd non-excited", &lin.odd)?;
         row(out, "even", &lin.even)?;
     }
-    writeln!(out, "  verdict  {}", a.linearity_u.verdict)?;
-    writeln!(out, "  verdict  {}", a.linearity_y.verdict)?;
+    for lin in [&a.linearity_u, &a.linearity_y] {
+        if [&lin.odd, &lin.even]
+            .iter()
+            .all(|c| c.lines == 0 || class_finite(lin.excited_db, c))
+        {
+            writeln!(out, "  verdict  {}", lin.verdict)?;
+        } else {
+            // the library's verdict would rest on NaN levels ("not detected")
+            writeln!(
+                out,
+                "  verdict  {}: undetermined: its line levels are not finite numbers \
+                 (see the data check below)",
+                lin.signal
+            )?;
+        }
+    }
     writeln!(out)?;
     let n = a.frf.lines.len();
     let step = if all || n <= 60 { 1 } else { n.div_ceil(60) };
@@ -496,15 +533,39 @@ fn print_table(out: &mut dyn Write, name: &str, a: &FrfAnalysis, all: bool) -> s
     for i in (0..n).step_by(step) {
         writeln!(
             out,
-            "  {:>6} {:>12.4} {:>10.2} {:>11.1} {:>12.2}",
+            "  {:>6} {:>12.4} {:>10} {:>11} {:>12.2}",
             a.frf.lines[i],
             a.frf.freq_hz[i],
-            mag[i],
-            ph[i],
+            fixed(mag[i], 2, false),
+            fixed(ph[i], 1, false),
             Percent(100.0 * a.frf.sigma[i] / a.frf.g[i].norm())
         )?;
     }
     Ok(())
+}
+
+/// `x` with `prec` decimals (and its sign with `plus`), or [`jointid::data::UNDEFINED`]
+/// when it is not finite: a level of a record holding 1e300 prints no `inf` or `NaN`.
+fn fixed(x: f64, prec: usize, plus: bool) -> String {
+    match (x.is_finite(), plus) {
+        (false, _) => jointid::data::UNDEFINED.to_string(),
+        (true, true) => format!("{x:+.prec$}"),
+        (true, false) => format!("{x:.prec$}"),
+    }
+}
+
+/// Whether a class's levels, and the excited lines' level they are compared with, are
+/// finite: a distortion verdict on them means something.
+fn class_finite(excited_db: f64, c: &ClassLevel) -> bool {
+    [
+        excited_db,
+        c.level_db,
+        c.vs_excited_db,
+        c.noise_db,
+        c.vs_noise_db,
+    ]
+    .iter()
+    .all(|v| v.is_finite())
 }
 
 #[cfg(test)]

@@ -209,7 +209,7 @@ pub fn outlier_line(file: &str, map: &ColumnMap, o: &Outlier) -> String {
     )
 }
 
-/// Screens a selection for a fit ([`jointid::data::screen`]): refuses one that holds a
+/// Screens a selection for a fit or a validation (`role`) ([`jointid::data::screen`]): refuses one that holds a
 /// sample no fit can compute with (not finite, or of magnitude ≥ [`MAX_MAGNITUDE`]: sums
 /// of squares overflow and an iteration may never end), naming the first by file, row and
 /// column; a sample beyond [`OUTLIER_SIGMAS`] robust σ is a warning, not a refusal (a
@@ -219,13 +219,17 @@ pub fn outlier_line(file: &str, map: &ColumnMap, o: &Outlier) -> String {
 /// # Errors
 /// The first unusable sample in words ([`outlier_line`]), how many there are and how to
 /// leave them out.
-pub fn screen_for_fit(sel: &Selected, map: &ColumnMap) -> Result<Option<String>, String> {
+pub fn screen_for_fit(
+    sel: &Selected,
+    map: &ColumnMap,
+    role: &str,
+) -> Result<Option<String>, String> {
     let name = sel.datasets.first().map_or("", |d| d.name.as_str());
     let unusable = |o: &&Outlier| !o.value.is_finite() || o.value.abs() >= MAX_MAGNITUDE;
     let n = sel.outliers.iter().filter(unusable).count();
     if let Some(first) = sel.outliers.iter().find(unusable) {
         return Err(format!(
-            "{}; a fit takes no sample of magnitude ≥ {MAX_MAGNITUDE:e} or not finite, and the \
+            "{}; a {role} takes no sample of magnitude ≥ {MAX_MAGNITUDE:e} or not finite, and the \
              data selected hold {n}: leave {} out with --from/--to or --segment",
             outlier_line(name, map, first),
             if n == 1 { "it" } else { "them" }
@@ -234,8 +238,8 @@ pub fn screen_for_fit(sel: &Selected, map: &ColumnMap) -> Result<Option<String>,
     Ok(sel.outliers.first().map(|first| {
         let more = sel.outlier_count - 1;
         format!(
-            "{}{}; the fit takes {} as measured (beyond {OUTLIER_SIGMAS} robust σ: a glitch \
-             pulls the fit towards it; leave {} out with --from/--to or --segment)",
+            "{}{}; the {role} takes {} as measured (beyond {OUTLIER_SIGMAS} robust σ: a glitch \
+             pulls the {role} towards it; leave {} out with --from/--to or --segment)",
             outlier_line(name, map, first),
             if more > 0 {
                 format!(

@@ -15,7 +15,7 @@ use super::args::{check_same_rate, screen_for_fit, ColumnArgs, DataArgs, ReadArg
 use super::print::usable_segments;
 use super::{check_plot_files, print_json, print_written, write_svg, CmdResult, Context, Outcome};
 use jointid::data::input::path_text;
-use jointid::data::output::{check_output, write_file};
+use jointid::data::output::{check_distinct, check_output, write_file};
 use jointid::data::segment::{SegmentNotes, MIN_SEGMENT_SAMPLES};
 use jointid::data::{Dataset, Percent};
 use jointid::diagnose::{
@@ -224,6 +224,12 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
             &names.iter().map(String::as_str).collect::<Vec<_>>(),
             args.force,
         )?;
+        if let Some(path) = &args.report {
+            // the report is no figure of the plot directory
+            let mut outputs = vec![("--report".to_string(), path.clone())];
+            outputs.extend(names.iter().map(|n| (format!("--plot's {n}"), dir.join(n))));
+            check_distinct(&outputs)?;
+        }
     }
     let user = args.sim.as_deref().map(user_sim).transpose()?;
     let structure = model
@@ -239,8 +245,9 @@ pub fn run(args: &DiagnoseArgs, ctx: &mut Context<'_>) -> CmdResult {
             .select(ctx.loaders)
             .map_err(|e| format!("{what}{}: {e}", p.display()))?;
         // a sample no fit computes with is refused before the work
-        screened
-            .extend(screen_for_fit(&sel, &data.column_map()).map_err(|e| format!("{what}{e}"))?);
+        screened.extend(
+            screen_for_fit(&sel, &data.column_map(), "fit").map_err(|e| format!("{what}{e}"))?,
+        );
         if sel.datasets.len() == 1 {
             return Ok((sel.datasets, sel.segments));
         }

@@ -18,7 +18,7 @@ use super::{CmdResult, Context, Outcome};
 use jointid::capture::{export, read_jcap_session, session_ids, DamagedFrame, SeqGap};
 
 use jointid::data::input::{input_name, path_text};
-use jointid::data::output::{check_output, names_standard_output};
+use jointid::data::output::{check_distinct, check_output, names_standard_output};
 
 /// Arguments of `jointid export`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
@@ -92,6 +92,12 @@ pub fn run(args: &ExportArgs, ctx: &mut Context<'_>) -> CmdResult {
     }
     if let Some(mat) = &args.mat {
         check_output(mat, args.force)?;
+        if let Some(csv) = args.csv.as_ref().filter(|_| !to_stdout) {
+            check_distinct(&[
+                ("--csv".to_string(), csv.clone()),
+                ("--mat".to_string(), mat.clone()),
+            ])?;
+        }
     }
     let record = read_jcap_session(&args.input, args.session)?;
     if to_stdout {

@@ -20,13 +20,13 @@ use std::path::{Path, PathBuf};
 use clap::{Args, ValueEnum};
 
 use super::args::{check_columns, one_of, parse_lags, screen_for_fit, FitDataArgs, PrepArgs};
-use super::print::print_notes;
+use super::print::{pieces_phrase, print_notes, share, share_warning};
 use super::views::{Signals, VIEW_FILES};
 use super::{check_plot_files, fit_report, CmdResult, Context, Outcome};
 use jointid::data::input::path_text;
-use jointid::data::output::check_output;
-use jointid::data::segment::{segment_list, whole_periods};
-use jointid::data::{fmt_sig, Selected};
+use jointid::data::output::{check_distinct, check_output};
+use jointid::data::segment::whole_periods;
+use jointid::data::Selected;
 use jointid::ident::fit::{
     self as library, Domain, FitOptions, FitRecords, FitRequest, FitRunError, FittedModel,
     NlInputs, RequestError,
@@ -388,6 +388,12 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
             names.extend(VIEW_FILES);
         }
         check_plot_files(dir, &names, args.force)?;
+        if let Some(path) = &args.save {
+            // the model file is no figure of the plot directory
+            let mut outputs = vec![("--save".to_string(), path.clone())];
+            outputs.extend(names.iter().map(|n| (format!("--plot's {n}"), dir.join(n))));
+            check_distinct(&outputs)?;
+        }
     }
     let mut req = args.request(spec)?;
     req.check().map_err(|e| args.flagged(e.into()))?;
@@ -400,12 +406,14 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     check_columns(&args.data.data_args(&args.data.path))?;
     let sel = args.data.data_args(&args.data.path).select(ctx.loaders)?;
     let map = args.data.data_args(&args.data.path).column_map();
-    let mut screened: Vec<String> = screen_for_fit(&sel, &map)?.into_iter().collect();
+    let mut screened: Vec<String> = screen_for_fit(&sel, &map, "fit")?.into_iter().collect();
     check_whole_periods(&sel)?;
     let val = match &args.validation {
         Some(p) => {
             let v = args.data.data_args(p).select(ctx.loaders)?;
-            screened.extend(screen_for_fit(&v, &map)?);
+            screened.extend(screen_for_fit(&v, &map, "fit")?);
+            // a validation FIT on a scrap of a damaged capture says as little as a fit
+            screened.extend(share_warning(&v, "validation"));
             Some(one_of(v)?)
         }
         None => None,
@@ -422,7 +430,7 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
     ));
     let mut out = library::run(&req, records).map_err(|e| args.flagged(e))?;
     super::progress::finish();
-    out.warnings.extend(share_warning(&sel));
+    out.warnings.extend(share_warning(&sel, "fit"));
     out.warnings.extend(screened);
     print_notes(&out.notes);
     let mut files = Vec::new();
@@ -459,38 +467,6 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
 /// joint's response from noise and transient. Less is a scrap (a segment between gaps of
 /// a damaged capture) whose fit looks confident and is not.
 pub const MIN_FIT_PERIODS: usize = 2;
-
-/// The share of its file's time span below which a fit on a file with gaps warns that it
-/// uses a part only.
-pub const SHARE_WARNING: f64 = 0.5;
-
-/// `segment 45` or `segments 3, 4`: the pieces of a selection.
-fn pieces_phrase(sel: &Selected) -> String {
-    match sel.segments.as_slice() {
-        [k] => format!("segment {k}"),
-        ks => format!("segments {}", segment_list(ks)),
-    }
-}
-
-/// Samples the selection holds, and in words their share of the samples the file holds
-/// and of those its time span covers (the missing ones included).
-fn share(sel: &Selected) -> (usize, String) {
-    let used: usize = sel.datasets.iter().map(|d| d.data.len()).sum();
-    let pct = |of: usize| fmt_sig(100.0 * used as f64 / of.max(1) as f64, 2);
-    let mut words = format!(
-        "{} % of the {} samples the file holds",
-        pct(sel.record_samples),
-        sel.record_samples
-    );
-    if sel.record_span > sel.record_samples {
-        words += &format!(
-            ", {} % of the {} its time span covers",
-            pct(sel.record_span),
-            sel.record_span
-        );
-    }
-    (used, words)
-}
 
 /// Refuses a selection of periodic data (its excitation stated) that holds fewer than
 /// [`MIN_FIT_PERIODS`] whole periods, naming the file, the segments, their periods and
@@ -529,22 +505,6 @@ fn check_whole_periods(sel: &Selected) -> Result<(), String> {
          {pct}); a fit needs at least {MIN_FIT_PERIODS}{hint}",
         d.name,
         if periods == 1 { "" } else { "s" },
-    ))
-}
-
-/// The warning of a fit on less than [`SHARE_WARNING`] of the time span of a file with
-/// gaps: which segments, how many samples, what share.
-fn share_warning(sel: &Selected) -> Option<String> {
-    let (used, pct) = share(sel);
-    if sel.record_pieces < 2 || used as f64 >= SHARE_WARNING * sel.record_span as f64 {
-        return None;
-    }
-    Some(format!(
-        "{}: the fit uses {} of the file's {} gap-free segments, {used} samples: {pct}; the \
-         rest lies in gaps and the other segments (`jointid info` lists them)",
-        sel.datasets[0].name,
-        pieces_phrase(sel),
-        sel.record_pieces,
     ))
 }
 

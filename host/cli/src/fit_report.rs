@@ -21,6 +21,7 @@ use super::views::{
 };
 use super::{print_json, write_svg};
 use jointid::data::input::path_text;
+use jointid::data::Percent;
 use jointid::ident::fit::{
     param_map, Compared, FitOutcome, LinearFit, NonlinearFit, ParamJson, SegmentJson,
     VelocityFigure,
@@ -259,14 +260,14 @@ fn print_linear_text(out: &mut dyn Write, r: &FitReport) -> std::io::Result<()> 
     } else {
         ""
     };
-    writeln!(out, "    estimation: {:.2}{how}", r.fit_estimation)?;
+    writeln!(out, "    estimation: {:.2}{how}", Percent(r.fit_estimation))?;
     if pooled {
         for sg in &r.segments {
             writeln!(out, "      {sg}")?;
         }
     }
     if let Some(v) = r.fit_validation {
-        writeln!(out, "    validation: {v:.2}")?;
+        writeln!(out, "    validation: {:.2}", Percent(v))?;
     }
     if let Some(n) = &r.fit_note {
         writeln!(out, "    note: {n}")?;
@@ -277,9 +278,9 @@ fn print_linear_text(out: &mut dyn Write, r: &FitReport) -> std::io::Result<()> 
             "  {FIT_NAME} of the simulated output (the drift of the rigid-body integrator \
              dominates it):"
         )?;
-        writeln!(out, "    estimation: {e:.2}")?;
+        writeln!(out, "    estimation: {:.2}", Percent(e))?;
         if let Some(v) = r.fit_toolbox_validation {
-            writeln!(out, "    validation: {v:.2}")?;
+            writeln!(out, "    validation: {:.2}", Percent(v))?;
         }
     }
     let hz = |v: &[f64]| {
@@ -599,12 +600,12 @@ fn print_nonlinear_text(out: &mut dyn Write, r: &NlReport<'_>, fit: &NlFit) -> s
     writeln!(
         out,
         "    estimation, estimator's smooth laws (the fit's cost): {:.2}",
-        r.fit_estimation_smooth
+        Percent(r.fit_estimation_smooth)
     )?;
     writeln!(
         out,
         "    estimation, simulator's exact laws:                   {:.2}",
-        r.fit_estimation
+        Percent(r.fit_estimation)
     )?;
     if r.segments.len() > 1 {
         for sg in r.segments {
@@ -613,7 +614,7 @@ fn print_nonlinear_text(out: &mut dyn Write, r: &NlReport<'_>, fit: &NlFit) -> s
                 "      segment {} ({} samples), exact laws:             {:.2}",
                 sg.segment,
                 sg.samples,
-                sg.fit.unwrap_or(f64::NAN)
+                Percent(sg.fit.unwrap_or(f64::NAN))
             )?;
         }
     }
@@ -621,18 +622,18 @@ fn print_nonlinear_text(out: &mut dyn Write, r: &NlReport<'_>, fit: &NlFit) -> s
         writeln!(
             out,
             "    validation, simulator's exact laws:                   {:.2}",
-            v.velocity_fit_percent
+            Percent(v.velocity_fit_percent)
         )?;
         writeln!(
             out,
             "    validation, estimator's smooth laws:                  {:.2}",
-            v.velocity_fit_smooth_percent
+            Percent(v.velocity_fit_smooth_percent)
         )?;
         writeln!(
             out,
             "  motor-angle FIT [%] on the validation record (toolbox compare, exact laws, \
              unfiltered; drift of the rigid-body mode included): {:.2}",
-            v.angle_fit_percent
+            Percent(v.angle_fit_percent)
         )?;
     }
     writeln!(out, "  the fitted plant and effects in the simulator:")?;

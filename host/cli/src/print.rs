@@ -4,8 +4,8 @@
 
 use std::io::Write;
 
-use jointid::data::segment::SegmentNotes;
-use jointid::data::Dataset;
+use jointid::data::segment::{segment_list, SegmentNotes};
+use jointid::data::{fmt_sig, Dataset, Selected};
 use jointid::ident::validate::{CorrelationTest, Validation};
 
 /// The two residual tests of `v` (whiteness, input independence), one line each, under
@@ -20,7 +20,7 @@ pub(crate) fn print_tests(out: &mut dyn Write, label: &str, v: &Validation) -> s
 fn print_test(out: &mut dyn Write, label: &str, t: &CorrelationTest) -> std::io::Result<()> {
     writeln!(
         out,
-        "    {label:<10} {:<40} {}: max |r| {:.3} vs bound {:.3} ({} of {} {} outside, {} {} allowed), χ² {:.1} {} {:.1}",
+        "    {label:<10} {:<40} {}: max |r| {:.3} vs bound {:.3} ({} of {} {} outside, {} {} allowed), χ² {} {} {}",
         t.name,
         verdict(t),
         t.max_abs,
@@ -30,10 +30,20 @@ fn print_test(out: &mut dyn Write, label: &str, t: &CorrelationTest) -> std::io:
         t.unit,
         if t.outside <= t.allowed { "≤" } else { ">" },
         t.allowed,
-        t.statistic,
+        one_decimal(t.statistic),
         if t.statistic <= t.critical { "≤" } else { ">" },
-        t.critical
+        one_decimal(t.critical)
     )
+}
+
+/// `x` with one decimal, or `—` when it is not finite (the χ² of a residual whose squares
+/// overflow prints no `NaN`).
+fn one_decimal(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.1}")
+    } else {
+        "—".into()
+    }
 }
 
 /// `pass`, `FAIL`, or `FAIL (N residual samples are NaN or infinite)`: the figures
@@ -78,6 +88,54 @@ pub(crate) fn usable_segments(
     let u = jointid::data::segment::usable_segments(std::mem::take(segs), numbers, name, notes);
     print_notes(&u.notes);
     (u.datasets, u.segments)
+}
+
+/// The share of its file's time span below which a fit or a validation on a file with
+/// gaps warns that it uses a part only.
+pub(crate) const SHARE_WARNING: f64 = 0.5;
+
+/// `segment 45` or `segments 3, 4`: the pieces of a selection.
+pub(crate) fn pieces_phrase(sel: &Selected) -> String {
+    match sel.segments.as_slice() {
+        [k] => format!("segment {k}"),
+        ks => format!("segments {}", segment_list(ks)),
+    }
+}
+
+/// Samples the selection holds, and in words their share of the samples the file holds
+/// and of those its time span covers (the missing ones included).
+pub(crate) fn share(sel: &Selected) -> (usize, String) {
+    let used: usize = sel.datasets.iter().map(|d| d.data.len()).sum();
+    let pct = |of: usize| fmt_sig(100.0 * used as f64 / of.max(1) as f64, 2);
+    let mut words = format!(
+        "{} % of the {} samples the file holds",
+        pct(sel.record_samples),
+        sel.record_samples
+    );
+    if sel.record_span > sel.record_samples {
+        words += &format!(
+            ", {} % of the {} its time span covers",
+            pct(sel.record_span),
+            sel.record_span
+        );
+    }
+    (used, words)
+}
+
+/// The warning of a fit or a validation (`role`) on less than [`SHARE_WARNING`] of the time span of a file with
+/// gaps: which segments, how many samples, what share.
+pub(crate) fn share_warning(sel: &Selected, role: &str) -> Option<String> {
+    let (used, pct) = share(sel);
+    if sel.record_pieces < 2 || used as f64 >= SHARE_WARNING * sel.record_span as f64 {
+        return None;
+    }
+    Some(format!(
+        "{}: the {role} uses {} of the file's {} gap-free segments, {used} samples: {pct}; the \
+         rest lies in gaps and the other segments (`jointid info` lists them)",
+        sel.datasets[0].name,
+        pieces_phrase(sel),
+        sel.record_pieces,
+    ))
 }
 
 #[cfg(test)]

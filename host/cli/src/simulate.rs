@@ -63,7 +63,8 @@ use super::{print_json, CmdResult, Context, Outcome};
 use jointid::capture::jcap::{write_stream_with, JcapError};
 use jointid::data::input::{input_name, path_text, read_input_text};
 use jointid::data::output::{
-    check_output, check_room, io_msg, is_stream, names_standard_output, write_file, OutputError,
+    check_distinct, check_output, check_room, io_msg, is_stream, names_standard_output, write_file,
+    OutputError,
 };
 use jointid::data::{capture_csv_comments, ExcitationConfig, SignalKind, TableWriter};
 use jointid::ident::model_file::SavedModel;
@@ -346,13 +347,29 @@ pub enum SimulateError {
         /// [`OutputError::NoRoom`] with the figures
         err: OutputError,
     },
-    /// `--out` and `--params-out` name the same file
-    #[error("{path}: is both --out and --params-out")]
-    SameOutput {
-        /// the file
-        path: PathBuf,
+    /// the run is longer than a capture can number ([`MAX_SAMPLES`])
+    #[error(
+        "--periods {periods}: {samples} samples, more than the {MAX_SAMPLES} a run may hold: \
+         a capture numbers its samples with the board's 32-bit counter (seq), {days} days at \
+         {fs_hz} Hz"
+    )]
+    TooLong {
+        /// the whole periods asked for
+        periods: u32,
+        /// the run's samples (ramps included)
+        samples: u64,
+        /// the sample rate [Hz]
+        fs_hz: u32,
+        /// [`MAX_SAMPLES`] in days at that rate, for people
+        days: String,
     },
 }
+
+/// Most samples one run may hold: a capture numbers its samples with the board's 32-bit
+/// counter (`seq` of the wire), 24.9 days at 2 kHz. The stated maximum of a run whose
+/// size no free space bounds (a device or pipe: `--out /dev/null` ran 100,000,000
+/// periods, hours of simulation, into nothing).
+pub const MAX_SAMPLES: u64 = 1 << 32;
 
 /// Applies `NAME=VALUE` overrides to the parameters of model `model`, each within its
 /// physical range ([`param_range`]).
@@ -713,9 +730,10 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
     // cannot be
     check_output(&args.out, args.force)?;
     if let Some(p) = &args.params_out {
-        if p == &args.out {
-            return Err(SimulateError::SameOutput { path: p.clone() }.into());
-        }
+        check_distinct(&[
+            ("--out".to_string(), args.out.clone()),
+            ("--params-out".to_string(), p.clone()),
+        ])?;
         check_output(p, args.force)?;
     }
     let (cfg, exc) = configure(args)?;
@@ -727,6 +745,17 @@ pub fn run(args: &SimulateArgs, ctx: &mut Context<'_>) -> CmdResult {
         samples,
         err,
     })?;
+    // a stream has no free space to bound it: the stated maximum does
+    if samples > MAX_SAMPLES {
+        let days = MAX_SAMPLES as f64 / f64::from(exc.fs_hz.max(1)) / 86_400.0;
+        return Err(SimulateError::TooLong {
+            periods: exc.periods,
+            samples,
+            fs_hz: exc.fs_hz,
+            days: jointid::data::fmt_sig(days, 3),
+        }
+        .into());
+    }
     let params = cfg.params_json()? + "\n";
     if stream {
         // a device or pipe cannot take back what it got: the run must complete before any

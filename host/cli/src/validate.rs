@@ -23,8 +23,8 @@ use std::path::PathBuf;
 use clap::Args;
 use serde::Serialize;
 
-use super::args::{check_columns, ColumnArgs, DataArgs, PrepArgs, ReadArgs};
-use super::print::{print_tests, usable_segments};
+use super::args::{check_columns, screen_for_fit, ColumnArgs, DataArgs, PrepArgs, ReadArgs};
+use super::print::{print_notes, print_tests, share_warning, usable_segments};
 use super::validate_simulated::{self, SimulatedColumn};
 use super::views::{
     write_views, CompareRecord, Signals, Views, PERIODIC_COMPARED, VELOCITY_COMPARED, VIEW_FILES,
@@ -173,6 +173,15 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
         .to_fitted()
         .map_err(|e| format!("{}: {e}", input_name(mpath)))?;
     let sel = data_args(&args.files[1]).select(ctx.loaders)?;
+    // data no simulation computes with refused as fit refuses them, a far spike noted
+    let screened = screen_for_fit(&sel, &data_args(&args.files[1]).column_map(), "validation")?;
+    print_notes(&screened.into_iter().collect::<Vec<_>>());
+    // a FIT on a scrap of a damaged capture says little: the share it rests on, noted
+    print_notes(
+        &share_warning(&sel, "validation")
+            .into_iter()
+            .collect::<Vec<_>>(),
+    );
     super::progress::step(format!(
         "validating on {} samples",
         sel.datasets.iter().map(|d| d.data.len()).sum::<usize>()
@@ -384,7 +393,17 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
         write_segments(out, fit_name, &segments)?;
         writeln!(out, "  residual tests (99 %):")?;
         print_tests(out, "data", &v)?;
-        if !finite {
+        if !finite && v.whiteness.non_finite == 0 && !v.whiteness.statistic.is_finite() {
+            // each residual finite, their squares summed beyond the largest f64
+            writeln!(
+                out,
+                "  not ok: the model's simulated output on {} is too large to compute with: \
+                 its residual's sums of squares overflow",
+                ds.name
+            )?;
+        } else if !finite && v.whiteness.non_finite == 0 {
+            writeln!(out, "  not ok: {fit_name} is undefined on {}", ds.name)?;
+        } else if !finite {
             writeln!(
                 out,
                 "  not ok: the model's simulated output is not finite on {} ({} of {} residual samples NaN or infinite)",
@@ -455,6 +474,13 @@ fn run_nonlinear(
         .map_err(|e| format!("{}: {e}", input_name(mpath)))?;
     let nl = saved.nonlinear.as_ref().expect("a nonlinear section");
     let sel = data.select(ctx.loaders)?;
+    let screened = screen_for_fit(&sel, &data.column_map(), "validation")?;
+    print_notes(&screened.into_iter().collect::<Vec<_>>());
+    print_notes(
+        &share_warning(&sel, "validation")
+            .into_iter()
+            .collect::<Vec<_>>(),
+    );
     let (segs, numbers) = if sel.datasets.len() > 1 {
         let name = sel.datasets[0].name.clone();
         let mut all = sel.datasets;

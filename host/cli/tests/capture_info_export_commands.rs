@@ -1098,6 +1098,40 @@ fn a_second_capture_into_a_file_being_captured_is_refused_and_the_first_loses_no
         )
     );
     assert_eq!(file_len(&out), 8 + cut as u64, "the refused capture wrote");
+    // nor does any other writer replace it (a variant of item 1): `simulate --out c.jcap
+    // --force` renamed its file over the capture's, which wrote on into the lost file and
+    // exited 0
+    let o = out.to_str().unwrap();
+    for args in [
+        vec![
+            "simulate",
+            "--model",
+            "two-mass",
+            "--periods",
+            "1",
+            "--out",
+            o,
+            "--force",
+        ],
+        vec!["export", other.to_str().unwrap(), "--csv", o, "--force"],
+    ] {
+        let r = jointid(&args);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(2), "{args:?}: {err}");
+        assert_eq!(
+            err.trim_end(),
+            format!(
+                "jointid: error: {o}: a capture is writing this file (it holds the file's \
+                 lock); stop it first or choose another output"
+            ),
+            "{args:?}"
+        );
+        assert_eq!(
+            file_len(&out),
+            8 + cut as u64,
+            "{args:?} touched the capture"
+        );
+    }
     w.write_all(&s.bytes[cut..]).unwrap();
     drop(w);
     let v = json_of(&wait_exit(&mut first, Duration::from_secs(10)));

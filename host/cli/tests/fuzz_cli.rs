@@ -1,6 +1,7 @@
 //! The command line fuzzed (issue 37, "Deliver"): random combinations of commands, flags
 //! and values over small random files (valid captures of `jointid simulate`, truncated
-//! and garbled copies of them, random bytes, CSVs of odd numbers), a few hundred cases from
+//! and garbled copies of them, random bytes, CSVs of odd numbers, the capture CSV with a
+//! glitch of 1e6 to 1e308 in a few cells), a few hundred cases from
 //! a fixed seed, so every run of CI tries the same ones. Each run must
 //! - not panic (exit 101, or `panicked` on standard error),
 //! - end within [`LIMIT`] (else it is killed and the case fails),
@@ -18,7 +19,7 @@ use proptest::test_runner::{Config, RngAlgorithm, TestCaseError, TestRng, TestRu
 
 #[allow(dead_code)] // not every helper is used here
 mod common;
-use common::{jointid, jointid_within, json_of, tmpdir};
+use common::{jointid, jointid_within, json_of, non_finite_word, tmpdir};
 
 /// Longest a case may run before it counts as a hang.
 const LIMIT: Duration = Duration::from_secs(20);
@@ -84,6 +85,10 @@ enum File {
     Random(Vec<u8>),
     /// a CSV `t,u,y` of odd cells
     OddCsv(Vec<(String, String, String)>),
+    /// the capture CSV with cells of its data rows replaced: (share of the rows, column
+    /// 1..=3, cell): a logger's glitch in a record otherwise whole (`u = 1e300` passed
+    /// `analyze` with `inf` and `NaN` printed, where random bytes never reached)
+    Poked(Vec<(f64, usize, String)>),
 }
 
 /// Cells a logger might write and a parser might choke on.
@@ -106,6 +111,11 @@ const ODD_CELLS: [&str; 16] = [
     "  2.5  ",
 ];
 
+/// Numbers a glitch leaves in a record: far out, computable or not.
+const GLITCHES: [&str; 8] = [
+    "1e6", "-1e6", "1e99", "1e100", "1e300", "-1e300", "1e308", "-1e308",
+];
+
 fn file() -> impl Strategy<Value = File> {
     let cell = prop_oneof![
         3 => (-1e3f64..1e3).prop_map(|v| v.to_string()),
@@ -122,6 +132,15 @@ fn file() -> impl Strategy<Value = File> {
             .prop_map(|(f, b)| File::Garbled(f, b)),
         1 => proptest::collection::vec(any::<u8>(), 0..3000).prop_map(File::Random),
         2 => proptest::collection::vec((time, cell.clone(), cell), 0..300).prop_map(File::OddCsv),
+        4 => proptest::collection::vec(
+            (
+                0.0f64..1.0,
+                1usize..4,
+                proptest::sample::select(&GLITCHES[..]).prop_map(str::to_string),
+            ),
+            1..3,
+        )
+        .prop_map(File::Poked),
     ]
 }
 
@@ -150,6 +169,21 @@ impl File {
                 b
             }
             File::Random(b) => b.clone(),
+            File::Poked(edits) => {
+                let text = String::from_utf8(f.csv.clone()).unwrap();
+                let mut lines: Vec<String> = text.lines().map(String::from).collect();
+                let header = lines.iter().position(|l| l.starts_with("t,")).unwrap();
+                let rows = lines.len() - header - 1;
+                for (at, col, cell) in edits {
+                    let i = header + 1 + ((rows as f64 * at) as usize).min(rows - 1);
+                    let mut cells: Vec<String> = lines[i].split(',').map(String::from).collect();
+                    if let Some(c) = cells.get_mut(*col) {
+                        c.clone_from(cell);
+                    }
+                    lines[i] = cells.join(",");
+                }
+                (lines.join("\n") + "\n").into_bytes()
+            }
             File::OddCsv(rows) => {
                 let mut s = String::from("t,u,y\n");
                 for (t, u, y) in rows {
@@ -340,14 +374,6 @@ fn case(commands: &'static [&'static str], seed: u8) -> impl Strategy<Value = Ca
             data,
             picks,
         })
-}
-
-/// A number that is not finite among the words of `text`: `NaN`, `inf`, `-inf`,
-/// `Infinity` as a word of their own.
-fn non_finite_word(text: &str) -> Option<String> {
-    text.split(|c: char| !(c.is_ascii_alphanumeric() || "._+-".contains(c)))
-        .map(|w| w.trim_start_matches(['+', '-']).to_ascii_lowercase())
-        .find(|w| matches!(w.as_str(), "nan" | "inf" | "infinity" | "+inf" | "-nan"))
 }
 
 /// Exit codes 0, 1 and 2 of the cases run, in that order.

@@ -163,3 +163,41 @@ fn export_model_refuses_a_model_whose_numbers_overflow_naming_the_entry_and_writ
     assert!(!out.exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `validate` of a model whose output overflows (B and C scaled by 1e99, each entry below
+/// the 1e100 a model file may hold) fails its check without a number that is not finite
+/// (issue 37 item 8, a variant): it printed `χ² NaN` twice and "not finite (0 of 24000
+/// residual samples NaN or infinite)".
+#[test]
+fn validate_of_a_model_whose_output_overflows_prints_no_nan() {
+    let dir = tmpdir("validate-overflow");
+    let cap = simulated(&dir, "c.csv", &["--model", "three-mass"]);
+    let m = dir.join("m.json");
+    json_of(&jointid(&[
+        "fit",
+        &cap,
+        "--model",
+        "three-mass",
+        "--save",
+        m.to_str().unwrap(),
+        "--json",
+    ]));
+    let mut model: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&m).unwrap()).unwrap();
+    for key in ["b", "c"] {
+        for x in model[key].as_array_mut().unwrap() {
+            *x = serde_json::json!(x.as_f64().unwrap() * 1e99);
+        }
+    }
+    let big = dir.join("big.json");
+    std::fs::write(&big, model.to_string()).unwrap();
+    let o = jointid(&["validate", big.to_str().unwrap(), &cap]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(1), "{text}");
+    assert_eq!(common::non_finite_word(&text), None, "{text}");
+    assert!(
+        text.contains("is too large to compute with: its residual's sums of squares overflow"),
+        "{text}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

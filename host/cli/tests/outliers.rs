@@ -9,7 +9,7 @@ use std::time::Duration;
 
 #[allow(dead_code)] // not every helper is used here
 mod common;
-use common::{jointid, jointid_within, json_of, simulated, tmpdir};
+use common::{jointid, jointid_within, json_of, non_finite_word, simulated, tmpdir};
 
 /// The data row (from 1) the spikes go into, and its time at 2 kHz.
 const ROW: usize = 15_000;
@@ -167,5 +167,82 @@ fn diagnose_refuses_a_value_near_the_largest_f64_before_any_fit() {
         )),
         "{err}"
     );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The results of a spike print no number that is not finite (issue 37 items 2 and 8):
+/// `analyze` of `u = 1e300` without `--require-linear` exited 0 printing `inf`, `NaN`,
+/// `-3000.0 dB vs noise` and a verdict "distortion not detected" resting on them; `fit
+/// --model black-box:11` of a `1e6` spike (no reliable line left) exited 0 with
+/// `estimation: NaN`.
+#[test]
+fn the_results_of_a_spike_print_no_number_that_is_not_finite() {
+    let dir = tmpdir("non-finite-text");
+    let clean = simulated(&dir, "clean.csv", &["--model", "three-mass"]);
+    let p = with_value(&clean, "u-1e300.csv", "u", "1e300");
+    let o = jointid(&["analyze", p.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(0), "{text}");
+    assert_eq!(non_finite_word(&text), None, "{text}");
+    assert!(!text.contains("-3000.0"), "{text}");
+    assert!(
+        text.contains("verdict  u: undetermined: its line levels are not finite numbers"),
+        "{text}"
+    );
+    assert!(!text.contains("u: odd non-excited lines NaN"), "{text}");
+    let p = with_value(&clean, "u-1e6.csv", "u", "1e6");
+    let o = jointid(&["fit", p.to_str().unwrap(), "--model", "black-box:11"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(0), "{text}");
+    assert_eq!(non_finite_word(&text), None, "{text}");
+    assert!(text.contains("    estimation: —"), "{text}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `validate` screens its data as `fit` does (issue 37 items 2 and 3, a variant): `u =
+/// 1e300` gave FIT `—` and "the model's simulated output is not finite (0 of 24000
+/// residual samples NaN or infinite)" without naming the sample; it is refused naming
+/// file, row and column, and a `1e6` spike is noted by its row.
+#[test]
+fn validate_refuses_a_value_near_the_largest_f64_and_notes_a_far_spike_by_its_row() {
+    let dir = tmpdir("validate");
+    let clean = simulated(&dir, "clean.csv", &["--model", "three-mass"]);
+    let m = dir.join("m.json");
+    json_of(&jointid(&[
+        "fit",
+        &clean,
+        "--model",
+        "three-mass",
+        "--save",
+        m.to_str().unwrap(),
+        "--json",
+    ]));
+    let m = m.to_str().unwrap();
+    let p = with_value(&clean, "u-1e300.csv", "u", "1e300");
+    let p = p.to_str().unwrap();
+    let o = jointid(&["validate", m, p]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.starts_with(&format!(
+            "jointid: error: {p}: data row {ROW} (t = {ROW_T} s), column `u`: value 1e300: "
+        )) && err.contains("; a validation takes no sample of magnitude ≥ 1e100"),
+        "{err}"
+    );
+    let p = with_value(&clean, "u-1e6.csv", "u", "1e6");
+    let p = p.to_str().unwrap();
+    let o = jointid(&["validate", m, p]);
+    let (out, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert!(
+        err.contains(&format!(
+            "note: {p}: data row {ROW} (t = {ROW_T} s), column `u`: value 1e6: "
+        )) && err.contains("the validation takes it as measured"),
+        "{err}"
+    );
+    assert!(!out.contains("0 of 24000 residual samples"), "{out}");
+    assert_eq!(non_finite_word(&out), None, "{out}");
     std::fs::remove_dir_all(&dir).unwrap();
 }

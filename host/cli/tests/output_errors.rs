@@ -418,6 +418,87 @@ fn every_plot_directory_that_cannot_take_the_figures_is_refused_before_the_work(
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Two outputs of one command naming the same file are refused before the work, even with
+/// `--force` (issue 37 item 7, a variant): `simulate --out s.csv --params-out ./s.csv`
+/// exited 0 with the capture replaced by the parameters (the check compared the
+/// spellings), `export --csv x --mat ./x` kept the MAT-file only, `fit --plot d --save
+/// d/bode.svg` and `diagnose --plot d --report d/fig-frf.svg` were refused only after the
+/// work, having written one of the two, and with `--force` replaced one by the other.
+#[test]
+fn two_outputs_naming_one_file_are_refused_before_the_work() {
+    let dir = tmpdir("same-output");
+    let s = |p: &Path| p.display().to_string();
+    let jcap = capture(&dir);
+    let (j, d) = (s(&jcap), s(&dir));
+    let plots = dir.join("plots");
+    std::fs::create_dir(&plots).unwrap();
+    let p = s(&plots);
+    let cases: Vec<(Vec<String>, String, PathBuf)> = vec![
+        (
+            vec!["simulate", "--model", "two-mass", "--periods", "1"]
+                .into_iter()
+                .map(String::from)
+                .chain([
+                    "--out".into(),
+                    format!("{d}/s.csv"),
+                    "--params-out".into(),
+                    format!("{d}/./s.csv"),
+                ])
+                .collect(),
+            "s.csv: is both --out and --params-out: one would replace the other".into(),
+            dir.join("s.csv"),
+        ),
+        (
+            vec![
+                "export".into(),
+                j.clone(),
+                "--csv".into(),
+                format!("{d}/x.out"),
+                "--mat".into(),
+                format!(
+                    "{d}/../{}/x.out",
+                    dir.file_name().unwrap().to_str().unwrap()
+                ),
+            ],
+            "x.out: is both --csv and --mat".into(),
+            dir.join("x.out"),
+        ),
+        (
+            ["fit", &j, "--model", "two-mass", "--plot", &p, "--save"]
+                .into_iter()
+                .map(String::from)
+                .chain([format!("{p}/bode.svg")])
+                .collect(),
+            "bode.svg: is both --save and --plot's bode.svg".into(),
+            plots.join("bode.svg"),
+        ),
+        (
+            ["diagnose", &j, "--validation", &j, "--plot", &p, "--report"]
+                .into_iter()
+                .map(String::from)
+                .chain([format!("{p}/fig-frf.svg")])
+                .collect(),
+            "fig-frf.svg: is both --report and --plot's fig-frf.svg".into(),
+            plots.join("fig-frf.svg"),
+        ),
+    ];
+    for (args, msg, file) in cases {
+        for force in [false, true] {
+            let mut a: Vec<&str> = args.iter().map(String::as_str).collect();
+            if force {
+                a.push("--force");
+            }
+            let (code, err, took) = timed(&a);
+            assert_eq!(code, Some(2), "{a:?}: {err}");
+            assert_eq!(err.lines().count(), 1, "{a:?}: {err}");
+            assert!(err.contains(&msg), "{a:?}: {err}");
+            assert!(took.as_secs_f64() < 0.5, "{a:?}: refused after {took:?}");
+            assert!(!file.exists(), "{a:?} wrote {}", file.display());
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Starts `jointid args` and sends it `signal` (`TERM`, `INT`) as soon as the temporary
 /// file of its output `out` (`.NAME.PID.tmp`) holds data; returns its exit code (`None`:
 /// ended by the signal itself) and the names left in `dir`.

@@ -311,6 +311,24 @@ fn simulate_refuses_a_run_larger_than_the_free_space_before_simulating() {
             "a file was left"
         );
     }
+    // a device or pipe has no free space to bound the run: the stated maximum does, at
+    // once (before: `--out /dev/null` simulated 100,000,000 periods for hours)
+    for out in ["/dev/null", "/dev/stdout"] {
+        let args = ["simulate", "--periods", "100000000", "--out", out];
+        let Some(run) = jointid_within(&args, std::time::Duration::from_secs(10)) else {
+            let _ = std::fs::remove_dir_all(&dir);
+            panic!("{out}: still simulating after 10 s");
+        };
+        let err = String::from_utf8_lossy(&run.stderr).into_owned();
+        assert_eq!(run.status.code(), Some(2), "{out}: {err}");
+        assert_eq!(
+            err.trim_end(),
+            "jointid: error: --periods 100000000: 500000004000 samples, more than the \
+             4294967296 a run may hold: a capture numbers its samples with the board's 32-bit \
+             counter (seq), 24.9 days at 2000 Hz",
+        );
+        assert!(run.stdout.is_empty(), "{out}");
+    }
     // a run that fits is still written
     let out = dir.join("small.jcap");
     let run = jointid(&["simulate", "--periods", "1", "--out", out.to_str().unwrap()]);

@@ -179,3 +179,12 @@ pub fn refused(args: &[&str], msgs: &[&str]) -> String {
     assert!(o.stdout.is_empty(), "{args:?} wrote to standard output");
     err
 }
+
+/// A number that is not finite among the words of `text`: `NaN`, `inf`, `-inf`,
+/// `Infinity` as a word of their own.
+#[allow(dead_code)]
+pub fn non_finite_word(text: &str) -> Option<String> {
+    text.split(|c: char| !(c.is_ascii_alphanumeric() || "._+-".contains(c)))
+        .map(|w| w.trim_start_matches(['+', '-']).to_ascii_lowercase())
+        .find(|w| matches!(w.as_str(), "nan" | "inf" | "infinity" | "+inf" | "-nan"))
+}

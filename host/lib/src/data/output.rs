@@ -3,7 +3,8 @@
 //! rule `capture` applies to its `.jcap`:
 //!
 //! - an existing file is refused unless overwriting was asked for (`--force`),
-//!   [`OutputError::Exists`];
+//!   [`OutputError::Exists`], and even then while a capture writes it (it holds the
+//!   file's lock), [`OutputError::Locked`];
 //! - a directory is never an output file, and the file's directory must exist and be
 //!   writable; [`check_output`] says so before any work is done;
 //! - the file appears whole or not at all: [`write_file`] writes a temporary file in the
@@ -90,6 +91,30 @@ pub enum OutputError {
         needed: u64,
         /// the space an unprivileged user may still fill there [bytes]
         free: u64,
+    },
+    /// A capture is writing the file: it holds the file's exclusive lock
+    /// (`jointid capture`); replacing it would drop what the capture writes.
+    #[error(
+        "{}: a capture is writing this file (it holds the file's lock); stop it first or \
+         choose another output",
+        path_text(path)
+    )]
+    Locked {
+        /// the file
+        path: PathBuf,
+    },
+    /// Two outputs of one command name the same file ([`check_distinct`]).
+    #[error(
+        "{}: is both {first} and {second}: one would replace the other; name two files",
+        path_text(path)
+    )]
+    SameFile {
+        /// the file, as the second output names it
+        path: PathBuf,
+        /// what the first output is (`--out`, `--report`)
+        first: String,
+        /// what the second output is (`--params-out`, `--plot`'s `fig-frf.svg`)
+        second: String,
     },
     /// Writing, flushing or renaming failed.
     #[error("{}: {}", path_text(path), io_msg(err))]
@@ -420,6 +445,62 @@ fn remove_stale_temporaries(target: &Path) {
     locked(&STALE_REMOVED).extend(removed);
 }
 
+/// Refuses to replace `file` (an existing regular file) while another process holds its
+/// exclusive lock: a capture writing its `.jcap` (`jointid capture`) keeps writing
+/// into the file a rename took away, and its samples would be lost.
+fn check_unlocked(path: &Path, file: &Path) -> Result<(), OutputError> {
+    let Ok(f) = std::fs::File::open(file) else {
+        return Ok(());
+    };
+    match f.try_lock_shared() {
+        Err(std::fs::TryLockError::WouldBlock) => Err(OutputError::Locked {
+            path: path.to_path_buf(),
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// The file `path` names as an output, told apart by the file system: the file a link
+/// leads to, or the new file's name in its directory resolved (`./x.csv` is `x.csv`);
+/// `None` for a stream (a device, a pipe, `/dev/stdout`), which may take two outputs.
+fn output_identity(path: &Path) -> Option<PathBuf> {
+    match existing(path) {
+        Ok(Existing::Special(_)) => None,
+        Ok(Existing::File(resolved)) => Some(resolved),
+        Ok(Existing::Nothing) | Err(_) => Some(
+            match (std::fs::canonicalize(dir_of(path)), path.file_name()) {
+                (Ok(dir), Some(name)) => dir.join(name),
+                _ => path.to_path_buf(),
+            },
+        ),
+    }
+}
+
+/// Checks, before any work, that no two of one command's outputs name the same file
+/// (`--out x.csv --params-out ./x.csv`, `--report` inside the `--plot` directory under a
+/// figure's name): with `--force` one would replace the other and the command would say
+/// it wrote both. Each output is `(what, path)`, `what` naming it in the message.
+///
+/// # Errors
+/// [`OutputError::SameFile`] naming the file and both outputs.
+pub fn check_distinct(outputs: &[(String, PathBuf)]) -> Result<(), OutputError> {
+    let mut seen: Vec<(&str, PathBuf)> = Vec::new();
+    for (what, path) in outputs {
+        let Some(id) = output_identity(path) else {
+            continue;
+        };
+        if let Some((first, _)) = seen.iter().find(|(_, other)| *other == id) {
+            return Err(OutputError::SameFile {
+                path: path.clone(),
+                first: (*first).to_string(),
+                second: what.clone(),
+            });
+        }
+        seen.push((what, id));
+    }
+    Ok(())
+}
+
 /// Checks, before any work, that `path` can be written under the rule of this module:
 /// not a directory, its directory exists and takes a new file, and it does not exist
 /// unless `overwrite`. Stale temporary files of `path` are removed first.
@@ -435,7 +516,10 @@ pub fn check_output(path: &Path, overwrite: bool) -> Result<(), OutputError> {
                 path: path.to_path_buf(),
             })
         }
-        Existing::File(resolved) => resolved,
+        Existing::File(resolved) => {
+            check_unlocked(path, &resolved)?;
+            resolved
+        }
         Existing::Nothing => path.to_path_buf(),
     };
     let dir = dir_of(&target);
@@ -511,7 +595,10 @@ pub fn write_file(
                 path: path.to_path_buf(),
             })
         }
-        Existing::File(resolved) => resolved,
+        Existing::File(resolved) => {
+            check_unlocked(path, &resolved)?;
+            resolved
+        }
         Existing::Nothing => path.to_path_buf(),
     };
     let dir = dir_of(&target);
