@@ -188,7 +188,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
     ));
     let numbers = sel.segments.clone();
     let segs = sel.datasets;
-    let ds = longest_segment(&segs).clone();
+    let ds = longest_segment(&segs);
     // the model runs at the rate it was fitted at: the capture rate (a physical model
     // with `decimate_output` > 1) or the capture rate decimated by the model's preparation
     let capture_ts = if saved.decimate_output > 1 {
@@ -196,19 +196,19 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
     } else {
         saved.ts / saved.prep.decimate.max(1) as f64
     };
-    check_model_rate(&ds, capture_ts, mpath)?;
+    check_model_rate(ds, capture_ts, mpath)?;
     // every selected segment (one unless --segment all on a capture with gaps), each
     // simulated with its own initial state; FIT and residual tests pooled over them
     let all: Vec<FitData> = segs
         .iter()
         .map(|d| FitData::new(&d.data, saved.prep).map_err(|e| format!("{}: {e}", d.name)))
         .collect::<Result<_, _>>()?;
-    let samples: usize = all.iter().map(|d| d.prepared.len()).sum();
+    let samples: usize = all.iter().map(|d| d.prepared().len()).sum();
     check_lags(args.lags, &ds.name, samples)?;
     let (v, each) = fitted
         .evaluate_segments(&all, args.lags)
         .map_err(|e| format!("{}: {e}", ds.name))?;
-    let data = &all[0].prepared;
+    let data = &all[0].prepared();
     // a model fitted in the frequency domain is judged by the periodic
     // steady-state FIT on periodic data, as `fit` reported it; the
     // toolbox FIT (which drift and slow disturbances enter) stays beside it
@@ -301,8 +301,8 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
                         .map_err(|e| format!("{}: {e}", segs[i].name))?;
                     let r = CompareRecord {
                         title,
-                        ts: d.prepared.ts,
-                        y: d.prepared.y.clone(),
+                        ts: d.prepared().ts,
+                        y: d.prepared().y.clone(),
                         y_hat,
                         fit: each[i],
                     };

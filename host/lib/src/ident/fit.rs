@@ -428,9 +428,10 @@ pub fn fit_model(data: &IdData, opts: &FitOptions) -> Result<Fitted, FitError> {
 pub struct FitData {
     /// the record at the capture rate, detrended as asked
     pub raw: IdData,
-    /// `raw` decimated by `decimate` ([`crate::data::decimate`])
-    pub prepared: IdData,
-    /// decimation factor (1: `prepared` equals `raw`)
+    /// `raw` decimated by `decimate` ([`crate::data::decimate`]); none when `decimate`
+    /// is 1 (a copy of `raw` would double the record's memory: issue 37 item 9)
+    decimated: Option<IdData>,
+    /// decimation factor (1: [`FitData::prepared`] is `raw`)
     pub decimate: usize,
 }
 
@@ -442,12 +443,21 @@ impl FitData {
     pub fn new(raw: &IdData, prep: Prep) -> Result<Self, FitError> {
         let r = prep.detrended(raw);
         let q = prep.decimate.max(1);
-        let prepared = r.decimate(q).map_err(FitError::Prepare)?;
+        let decimated = if q > 1 {
+            Some(r.decimate(q).map_err(FitError::Prepare)?)
+        } else {
+            None
+        };
         Ok(FitData {
             raw: r,
-            prepared,
+            decimated,
             decimate: q,
         })
+    }
+
+    /// The record the fits take: `raw` decimated by `decimate`, or `raw` itself.
+    pub fn prepared(&self) -> &IdData {
+        self.decimated.as_ref().unwrap_or(&self.raw)
     }
 }
 
@@ -461,11 +471,11 @@ impl FitData {
 pub fn fit_prepared(data: &FitData, opts: &FitOptions) -> Result<Fitted, FitError> {
     let structure = match opts.spec.family.structure() {
         Some(s) if data.decimate > 1 && !opts.spec.coulomb => s,
-        _ => return fit_model(&data.prepared, opts),
+        _ => return fit_model(data.prepared(), opts),
     };
-    check(&data.prepared)?;
+    check(data.prepared())?;
     check(&data.raw)?;
-    fit_grey(&data.prepared, Some(&data.raw), structure, opts)
+    fit_grey(data.prepared(), Some(&data.raw), structure, opts)
 }
 
 /// Fits the model family of `opts` to several prepared records taken as separate
@@ -501,7 +511,7 @@ pub fn fit_prepared_segments(data: &[FitData], opts: &FitOptions) -> Result<Fitt
         return Ok(start);
     }
     for d in data {
-        check(&d.prepared)?;
+        check(d.prepared())?;
     }
     match opts.spec.family {
         Family::BlackBox(_) => {
@@ -510,8 +520,8 @@ pub fn fit_prepared_segments(data: &[FitData], opts: &FitOptions) -> Result<Fitt
             let records: Vec<IdData> = data
                 .iter()
                 .map(|d| match free {
-                    Some(_) => black_box::differenced(&d.prepared),
-                    None => d.prepared.clone(),
+                    Some(_) => black_box::differenced(d.prepared()),
+                    None => d.prepared().clone(),
                 })
                 .collect();
             let samples: usize = records.iter().map(IdData::len).sum();
@@ -596,7 +606,7 @@ pub fn fit_prepared_segments(data: &[FitData], opts: &FitOptions) -> Result<Fitt
                     "output-error search over all records stopped at the iteration limit".into(),
                 );
             }
-            let q = (longest.prepared.ts / ts).round().max(1.0) as usize;
+            let q = (longest.prepared().ts / ts).round().max(1.0) as usize;
             let method = format!(
                 "{}; then output error at the capture rate over {} records as separate \
                  experiments (each its own initial state, {} iterations)",
@@ -1025,7 +1035,7 @@ impl Fitted {
         Ok(validate::validate(&data.u, &data.y, &yh, lags)?)
     }
 
-    /// Simulated output on the decimated record `data.prepared`: a model at
+    /// Simulated output on the decimated record `data.prepared()`: a model at
     /// the coarse rate simulates it directly; a physical model at the
     /// capture rate ([`Fitted::decimate`] > 1) simulates `data.raw` (initial
     /// state estimated there) and its output is decimated by the filter the
@@ -1035,7 +1045,7 @@ impl Fitted {
     /// [`FitError::DecimationMismatch`] when the record's rates do not match the model.
     pub fn simulate_on(&self, data: &FitData) -> Result<Vec<f64>, FitError> {
         if self.decimate <= 1 {
-            return Ok(self.simulate(&data.prepared));
+            return Ok(self.simulate(data.prepared()));
         }
         if (data.raw.ts - self.ts).abs() > 1e-3 * self.ts || data.decimate != self.decimate {
             return Err(FitError::DecimationMismatch {
@@ -1057,13 +1067,13 @@ impl Fitted {
     /// unusable data,
     /// [`FitError::Validate`].
     pub fn evaluate_on(&self, data: &FitData, lags: usize) -> Result<Validation, FitError> {
-        check(&data.prepared)?;
+        check(data.prepared())?;
         if self.decimate <= 1 {
-            return self.evaluate(&data.prepared, lags);
+            return self.evaluate(data.prepared(), lags);
         }
         check(&data.raw)?;
         let yh = self.simulate_on(data)?;
-        let d = &data.prepared;
+        let d = data.prepared();
         Ok(validate::validate(&d.u, &d.y, &yh, lags)?)
     }
 
@@ -1087,11 +1097,11 @@ impl Fitted {
         }
         let (mut u, mut y, mut yh, mut each) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for d in data {
-            check(&d.prepared)?;
+            check(d.prepared())?;
             let s = self.simulate_on(d)?;
-            each.push(validate::fit_percent(&d.prepared.y, &s)?);
-            u.extend_from_slice(&d.prepared.u);
-            y.extend_from_slice(&d.prepared.y);
+            each.push(validate::fit_percent(&d.prepared().y, &s)?);
+            u.extend_from_slice(&d.prepared().u);
+            y.extend_from_slice(&d.prepared().y);
             yh.extend(s);
         }
         Ok((validate::validate(&u, &y, &yh, lags)?, each))
@@ -1137,7 +1147,7 @@ impl Fitted {
         let rec = if self.decimate > 1 {
             &d.raw
         } else {
-            &d.prepared
+            d.prepared()
         };
         check(rec)?;
         if (rec.ts - self.ts).abs() > 1e-3 * self.ts {
@@ -1403,7 +1413,7 @@ mod tests {
             detrend: Detrend::None,
         };
         let fd = FitData::new(&raw, prep).unwrap();
-        assert_eq!(fd.prepared, prep.apply(&raw).unwrap());
+        assert_eq!(fd.prepared(), &prep.apply(&raw).unwrap());
         let mut fitted = Fitted {
             spec: ModelSpec::linear(Family::Physical(Structure::ThreeMass)),
             output: Output::Angle,
@@ -1418,13 +1428,13 @@ mod tests {
             fit_metric: FitMetric::Output,
         };
         let exact =
-            validate::fit_percent(&fd.prepared.y, &fitted.simulate_on(&fd).unwrap()).unwrap();
+            validate::fit_percent(&fd.prepared().y, &fitted.simulate_on(&fd).unwrap()).unwrap();
         // the same parameters discretised at the coarse rate, fed the decimated u
         fitted.model = chain3(ts * q as f64, 0.0).to_ss(&th);
         fitted.ts = ts * q as f64;
         fitted.decimate = 1;
         let coarse =
-            validate::fit_percent(&fd.prepared.y, &fitted.simulate_on(&fd).unwrap()).unwrap();
+            validate::fit_percent(&fd.prepared().y, &fitted.simulate_on(&fd).unwrap()).unwrap();
         // white torque: the angle's FIT is dominated by the rigid-body
         // motion, so the coarse model still prints 99.5; its misfit is what
         // counts (measured 0.51 % against < 1e-6 %)

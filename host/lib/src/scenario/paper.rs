@@ -424,7 +424,7 @@ pub fn table_at(
     let q = q.max(1);
     let est_fd = prepared_both(est_ds, SETTLE_PERIODS, q)?;
     let val_fd = prepared_both(val_ds, SETTLE_PERIODS, q)?;
-    let (est, val) = (&est_fd.prepared, &val_fd.prepared);
+    let (est, val) = (est_fd.prepared(), val_fd.prepared());
     let yt_est = true_output(truth, est_ds, SETTLE_PERIODS, q)?;
     let yt_val = true_output(truth, val_ds, SETTLE_PERIODS, q)?;
     let true_fit = (

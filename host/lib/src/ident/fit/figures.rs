@@ -92,8 +92,8 @@ pub fn simulated_record(
     match fitted.simulate_on(data) {
         Ok(y_hat) => Ok(CompareRecord {
             title,
-            ts: data.prepared.ts,
-            y: data.prepared.y.clone(),
+            ts: data.prepared().ts,
+            y: data.prepared().y.clone(),
             y_hat,
             fit,
         }),

@@ -221,7 +221,7 @@ fn run_time_domain(
     } else {
         None
     };
-    let prepared = &est.prepared;
+    let prepared = est.prepared();
     let measured = Measured {
         segments: vec![SegmentJson {
             segment: number,
@@ -299,9 +299,9 @@ fn check_records_lags(
     est: &FitData,
     val: Option<Record<'_>>,
 ) -> Result<(), LagsError> {
-    check_lags(lags, name, est.prepared.len())?;
+    check_lags(lags, name, est.prepared().len())?;
     if let Some(v) = val {
-        check_lags(lags, v.name, v.data.prepared.len())?;
+        check_lags(lags, v.name, v.data.prepared().len())?;
     }
     Ok(())
 }
@@ -486,10 +486,10 @@ fn run_segments(
             })
         })
         .collect::<Result<_, _>>()?;
-    let total: usize = est.iter().map(|e| e.prepared.len()).sum();
+    let total: usize = est.iter().map(|e| e.prepared().len()).sum();
     check_lags(req.lags, &name, total)?;
     if let Some(v) = val {
-        check_lags(req.lags, v.name, v.data.prepared.len())?;
+        check_lags(req.lags, v.name, v.data.prepared().len())?;
     }
     let on = |source| FitRunError::Record {
         name: name.clone(),
@@ -508,7 +508,7 @@ fn run_segments(
     }
     let (ev, each) = fitted.evaluate_segments(&est, req.lags).map_err(on)?;
     let vv = on_validation(&fitted, val, req.lags)?;
-    let ts = est[0].prepared.ts;
+    let ts = est[0].prepared().ts;
     let mut fig = time_domain_figures(&fitted, &est, val, (&ev, vv.as_ref())).map_err(on)?;
     let compare = if req.figures {
         // the longest segment, under the toolbox FIT printed for it
