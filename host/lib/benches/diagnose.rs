@@ -21,7 +21,8 @@
 //! log-uniform in 0.1–1.6 × their defaults instead, for effects that cost the nominal
 //! about a point; `ONLY=K` or `ONLY=K,L` runs those cases alone, numbered across rounds
 //! (round 2 is 10–19); `SPEED=0` skips the speed case, `DETAIL=1` prints every candidate,
-//! `BATTERY=0` the battery, `STAGES=1` prints each stage's end with its seconds; `HARD=1` runs every case under harder conditions of a real
+//! `BATTERY=0` the battery, `STAGES=1` prints each stage's end with its seconds, `LOWPASS=0`
+//! leaves the fits' residuals unfiltered above the excited band; `HARD=1` runs every case under harder conditions of a real
 //! joint, drawn per case ([`Hard`]): a process disturbance inside the excited band, a
 //! coarser encoder, a current-loop lag of 0.5–3 samples, the inertia feedforward on in
 //! half the cases).
@@ -222,12 +223,15 @@ fn request(r: f64) -> DiagnoseRequest {
             }
         })
     });
-    DiagnoseRequest {
+    let mut req = DiagnoseRequest {
         r,
         candidates: all_candidates(),
         progress,
         ..DiagnoseRequest::default()
-    }
+    };
+    // `LOWPASS=0`: the fits' residuals not low-passed at the excited band's top
+    req.options.band_limited = !std::env::var("LOWPASS").is_ok_and(|v| v == "0");
+    req
 }
 
 /// Relative errors [%] of the answer's size parameters against the hidden effect of the

@@ -126,6 +126,17 @@ pub fn rms_about_mean(x: &[f64]) -> f64 {
     (x.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n).sqrt()
 }
 
+/// The top of the band where the excitation `c` and the joint's response to it lie [Hz]:
+/// the highest excited line `F·f0`, or three times the corner of the amplitude shape when
+/// that is higher (the power sits below the corner, and its third-order distortion, the
+/// first a nonlinear joint adds, reaches three times as high); `None` for a zero period, or
+/// when that is not below 0.4 × the sample rate `1/ts` (room for a low-pass's roll-off
+/// below Nyquist).
+pub fn excited_band_top(c: &ExcitationConfig, ts: f64) -> Option<f64> {
+    let top = (c.max_line as f64 * c.f0_hz()).max(3.0 * f64::from(c.cutoff_hz));
+    (c.f0_hz() > 0.0 && top > 0.0 && top < 0.4 / ts).then_some(top)
+}
+
 /// Whether sample intervals `a` and `b` [s] are one rate ([`SAME_RATE_TOLERANCE`]).
 pub fn same_rate(a: f64, b: f64) -> bool {
     (a - b).abs() <= SAME_RATE_TOLERANCE * a.abs().max(b.abs())

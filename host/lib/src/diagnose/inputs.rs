@@ -2,7 +2,7 @@
 //! estimation's own samples), the candidates that apply to the structure, and the measured
 //! side of every validation segment, which every later stage scores against.
 
-use crate::data::{Dataset, IdData};
+use crate::data::{excited_band_top, Dataset, IdData};
 use crate::model::effects::Effect;
 use crate::model::spec::Structure;
 
@@ -135,4 +135,21 @@ pub(super) fn prepare<'a>(
         candidates,
         ts,
     })
+}
+
+/// The request whose fits low-pass their residual at the top of the excited band of the
+/// first estimation capture ([`super::DiagnoseOptions::band_limited`]); the request as it
+/// is when that is off or the capture does not say its excitation.
+pub(super) fn fit_options(req: &DiagnoseRequest, rec: &Records<'_>) -> DiagnoseRequest {
+    let mut out = req.clone();
+    if req.options.band_limited {
+        if let Some(top) = rec.est[0]
+            .iter()
+            .find_map(|ds| ds.excitation)
+            .and_then(|c| excited_band_top(&c, rec.ts))
+        {
+            out.options.nl.lowpass_hz = top;
+        }
+    }
+    out
 }

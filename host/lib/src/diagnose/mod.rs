@@ -20,7 +20,10 @@
 //!
 //! 0. **Inputs** ([`inputs`]): the captures checked (the validation capture must not hold
 //!    the estimation's samples), the candidates that apply to the structure, the measured
-//!    side of each validation segment.
+//!    side of each validation segment; every fit's residual low-passed at the top of the
+//!    excited band ([`inputs::fit_options`]): above it the torque of a closed loop is the
+//!    controller's reaction to the encoder's quantisation and the disturbance, and a fit
+//!    from the measured torque that scores it is drawn towards the inverse controller.
 //!    **Starts** ([`starts`]): the frequency-domain linear fits the candidates start from;
 //!    where the motor sticks, the structure grown in the time domain
 //!    ([`crate::ident::nonlinear::grow`]).
@@ -134,6 +137,12 @@ pub struct DiagnoseOptions {
     pub skip_s: f64,
     /// periods dropped before the FRF analyses
     pub settle_periods: usize,
+    /// low-pass every fit's residual at the top of the excited band
+    /// ([`crate::ident::nonlinear::NlOptions::lowpass_hz`]): above it the measured torque
+    /// and angle hold only the loop's reaction to the encoder's quantisation and the
+    /// disturbance, which draws a fit from the measured torque towards the inverse
+    /// controller
+    pub band_limited: bool,
     /// options of every nonlinear fit
     pub nl: NlOptions,
 }
@@ -149,6 +158,7 @@ impl Default for DiagnoseOptions {
             pairs: true,
             skip_s: 0.5,
             settle_periods: 1,
+            band_limited: true,
             nl: NlOptions::default(),
         }
     }
@@ -678,6 +688,7 @@ pub fn diagnose_segments(
     let t0 = Instant::now();
     let mut warnings = Vec::new();
     let rec = inputs::prepare(est, val, req, &mut warnings)?;
+    let req = &inputs::fit_options(req, &rec);
     let starts = starts::linear_starts(&rec, req, &mut warnings);
     let fitter = Fitter {
         req,

@@ -111,10 +111,18 @@ pub fn automatic_start(
         values,
         at_noise: false,
     });
-    automatic_start_with(data, model, linear, RippleOrder::Given)
+    automatic_start_with(
+        data,
+        model,
+        linear,
+        RippleOrder::Given,
+        &NlOptions::default(),
+    )
 }
 
-/// As [`automatic_start`], the torque ripple's order taken from `order`.
+/// As [`automatic_start`], the torque ripple's order taken from `order`; the start's own
+/// refinements low-pass the residual at the band of `fit`, the fit's options
+/// ([`NlOptions::lowpass_hz`]).
 ///
 /// # Errors
 /// As [`automatic_start`].
@@ -123,6 +131,7 @@ pub fn automatic_start_with(
     model: &NlModel,
     linear: Option<LinearFit<'_>>,
     order: RippleOrder,
+    fit: &NlOptions,
 ) -> Result<Start, NlError> {
     let mut steps = Vec::new();
     let mut held: Vec<String> = Vec::new();
@@ -390,6 +399,7 @@ pub fn automatic_start_with(
         } else {
             Vec::new()
         },
+        lowpass_hz: fit.lowpass_hz,
         ..NlOptions::default()
     };
     let first_iter = if plants.len() > 1 {

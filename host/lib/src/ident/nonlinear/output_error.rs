@@ -16,6 +16,20 @@
 //! 2nd ed., §14.4, prefiltering). Seed 001 fits the same output, unfiltered, on data
 //! without disturbance.
 //!
+//! Band limit ([`NlOptions::lowpass_hz`]): a fourth-order Butterworth low-pass at the top of
+//! the band the excitation and the joint's response to it occupy
+//! ([`crate::data::excited_band_top`]) joins the high-pass in the prefilter. Above it a
+//! closed-loop record holds no excitation: the measured torque there is the controller's
+//! reaction to the encoder's quantisation and to the disturbance, and the angle that
+//! reaction's response plus the quantisation itself, so the fit from the measured torque is
+//! drawn there towards the inverse of the controller (the direct method's bias, Ljung,
+//! *System Identification*, 2nd ed., §13.4). Measured on the default three-mass joint at
+//! 0.015 rad RMS with a 2¹⁴-count encoder and nothing else: `J_m` −4.7 %, `k_g` −7.0 % and
+//! the lag on its bound without the low-pass; +0.2 %, +0.3 % and 0.34 ms (the truth 0.26 ms)
+//! with it at 150 Hz; the bias grows with the cut-off (−1.0 % at 240 Hz, −3.7 % at 490 Hz).
+//! The disturbance inside the band and white noise on either signal moved no parameter by
+//! more than 0.6 % on that joint, with or without it.
+//!
 //! Covariance: `H⁻¹ S H⁻¹` with `H = JᵀJ` and `S = Σ_τ w_τ r_e(τ) Σ_t J_t J_{t+τ}ᵀ` over
 //! lags `|τ| ≤ L` with Bartlett weights `w_τ = 1 − |τ|/(L + 1)` (Ljung, *System
 //! Identification*, 2nd ed., §9.3, the asymptotic covariance of a prediction-error estimate
@@ -159,6 +173,9 @@ pub struct NlOptions {
     /// stop when the Gauss–Newton step would lower the cost by less than this many
     /// residual variances ([`LmOptions::within_noise`]; [`WITHIN_NOISE`]); 0: off
     pub within_noise: f64,
+    /// cut-off of the prefilter's fourth-order Butterworth low-pass, the top of the excited
+    /// band (module documentation, band limit) [Hz]; 0: none
+    pub lowpass_hz: f64,
 }
 
 /// The default [`NlOptions::within_noise`]: a Gauss–Newton step worth less than a hundredth
@@ -210,6 +227,7 @@ impl Default for NlOptions {
             smoothing_sigma: true,
             rel_cost_tol: LmOptions::default().rel_cost_tol,
             within_noise: WITHIN_NOISE,
+            lowpass_hz: 0.0,
         }
     }
 }
@@ -761,6 +779,24 @@ impl LeastSquares for Segments<'_> {
     }
 }
 
+/// The sections of the residual's prefilter at sample interval `ts` [s]: the high-pass at
+/// `highpass_hz`, then the band's low-pass at `lowpass_hz` (module documentation), each
+/// where it is set.
+fn prefilter(opts: &NlOptions, ts: f64) -> Vec<[f64; 5]> {
+    let mut sos = Vec::new();
+    if opts.highpass_hz > 0.0 {
+        sos.extend(butter_highpass_sos(
+            opts.highpass_order,
+            opts.highpass_hz,
+            ts,
+        ));
+    }
+    if opts.lowpass_hz > 0.0 {
+        sos.extend(crate::data::dsp::butter_lowpass_sos(4, opts.lowpass_hz, ts));
+    }
+    sos
+}
+
 /// Fits `model` to `data` (input `u` [N·m], output `θ_m` [rad]) from the physical start
 /// `start` (layout order, [`NlModel::layout`]).
 ///
@@ -832,11 +868,7 @@ pub fn fit_output_error_segments(
             gradient: opts.gradient,
             ts: d.ts,
             first,
-            highpass: if opts.highpass_hz > 0.0 {
-                butter_highpass_sos(opts.highpass_order, opts.highpass_hz, d.ts)
-            } else {
-                Vec::new()
-            },
+            highpass: prefilter(opts, d.ts),
         })
         .collect();
     let v0_index = layout

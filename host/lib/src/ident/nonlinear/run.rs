@@ -326,7 +326,7 @@ pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, Nl
                 values,
                 at_noise: req.linear_at_noise,
             });
-            let st = automatic_start_with(data, &model, linear, ripple_order_of(req))?;
+            let st = automatic_start_with(data, &model, linear, ripple_order_of(req), &options)?;
             options.fixed.extend(st.held);
             start_warnings = st.warnings;
             (st.steps, st.model, st.values)
@@ -496,6 +496,18 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
     let mut warnings = Vec::new();
     // the start is the data's own: not given, and no linear fit of the caller's
     let own_start = req.start == NlStart::Automatic && req.linear.is_none();
+    // a capture that says its excitation: the residual low-passed at the band's top
+    // ([`NlOptions::lowpass_hz`]), unless the caller chose a low-pass
+    if let (Some((ds, _)), 0.0) = (data.periodic, req.options.lowpass_hz) {
+        if let Some(top) = ds
+            .iter()
+            .find_map(|d| d.excitation)
+            .zip(ds.first())
+            .and_then(|(c, d)| crate::data::excited_band_top(&c, d.data.ts))
+        {
+            req.options.lowpass_hz = top;
+        }
+    }
     let mut compensation = None;
     if let (Some((ds, settle)), NlStart::Automatic, None) = (data.periodic, &req.start, &req.linear)
     {
