@@ -80,7 +80,11 @@ pub(super) fn linear_starts(
     let grown = progress::step(
         req.progress.as_ref(),
         "the structure grown in the time domain (the motor sticks)",
-        || grow::grow(&rec.est_data, req.structure, req.r, lag, &o.nl),
+        || {
+            // the friction's fits: no band low-pass ([`super::fits::nl_options`])
+            let options = super::fits::nl_options(o, coulomb.as_slice());
+            grow::grow(&rec.est_data, req.structure, req.r, lag, &options)
+        },
         |r| match r {
             Ok(_) => "grown".to_string(),
             Err(e) => format!("failed: {e}"),

@@ -346,6 +346,12 @@ impl Effect {
         matches!(self, Effect::Backlash(_) | Effect::NonlinearStiffness(_))
     }
 
+    /// Whether the joint with the effect is still linear (a delay, a further mode): its
+    /// response to a periodic excitation stays at the excited lines.
+    pub fn is_linear(&self) -> bool {
+        matches!(self, Effect::TimeDelay(_) | Effect::ExtraMode(_))
+    }
+
     /// Spec name of the effect (`backlash`, ...).
     pub fn name(&self) -> &'static str {
         match self {
