@@ -28,7 +28,9 @@
 //! the lag on its bound without the low-pass; +0.2 %, +0.3 % and 0.34 ms (the truth 0.26 ms)
 //! with it at 150 Hz; the bias grows with the cut-off (−1.0 % at 240 Hz, −3.7 % at 490 Hz).
 //! The disturbance inside the band and white noise on either signal moved no parameter by
-//! more than 0.6 % on that joint, with or without it.
+//! more than 0.6 % on that joint, with or without it. The callers set it for models that
+//! stay linear (no effect, a delay, a further mode): a nonlinear effect puts its own
+//! distortion above the band, and its fit needs it (stick-slip, a chaotic spring).
 //!
 //! Covariance: `H⁻¹ S H⁻¹` with `H = JᵀJ` and `S = Σ_τ w_τ r_e(τ) Σ_t J_t J_{t+τ}ᵀ` over
 //! lags `|τ| ≤ L` with Bartlett weights `w_τ = 1 − |τ|/(L + 1)` (Ljung, *System

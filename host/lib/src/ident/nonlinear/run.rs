@@ -496,9 +496,14 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
     let mut warnings = Vec::new();
     // the start is the data's own: not given, and no linear fit of the caller's
     let own_start = req.start == NlStart::Automatic && req.linear.is_none();
-    // a capture that says its excitation: the residual low-passed at the band's top
-    // ([`NlOptions::lowpass_hz`]), unless the caller chose a low-pass
-    if let (Some((ds, _)), 0.0) = (data.periodic, req.options.lowpass_hz) {
+    // a capture that says its excitation, and a model that stays linear: the residual
+    // low-passed at the band's top ([`NlOptions::lowpass_hz`]), unless the caller chose a
+    // low-pass (a nonlinear effect's own distortion above the band is what its fit needs)
+    let linear = req
+        .effects
+        .iter()
+        .all(crate::model::effects::Effect::is_linear);
+    if let (Some((ds, _)), 0.0, true) = (data.periodic, req.options.lowpass_hz, linear) {
         if let Some(top) = ds
             .iter()
             .find_map(|d| d.excitation)
