@@ -81,8 +81,8 @@ pub(super) fn linear_starts(
         req.progress.as_ref(),
         "the structure grown in the time domain (the motor sticks)",
         || {
-            // the friction's fits: no band low-pass ([`super::fits::nl_options`])
-            let options = super::fits::nl_options(o, coulomb.as_slice());
+            // the friction's fits: no band low-pass ([`super::inputs::nl_options`])
+            let options = super::inputs::nl_options(o, coulomb.as_slice());
             grow::grow(&rec.est_data, req.structure, req.r, lag, &options)
         },
         |r| match r {
