@@ -30,7 +30,7 @@ use super::views::{
     write_views, CompareRecord, Signals, Views, PERIODIC_COMPARED, VELOCITY_COMPARED, VIEW_FILES,
 };
 use super::{check_plot_files, print_json, print_written, CmdResult, Context, Outcome};
-use jointid::data::segment::{longest_segment, SegmentNotes, MIN_SEGMENT_SAMPLES};
+use jointid::data::segment::{longest_index, SegmentNotes, MIN_SEGMENT_SAMPLES};
 use jointid::data::{IdData, Percent};
 use jointid::ident::fit::{
     check_lags, velocity_record, FitData, FitMetric, SegmentJson, NL_FIT_NAME, VELOCITY_FIT_NAME,
@@ -187,8 +187,9 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
         sel.datasets.iter().map(|d| d.data.len()).sum::<usize>()
     ));
     let numbers = sel.segments.clone();
-    let segs = sel.datasets;
-    let ds = longest_segment(&segs);
+    let mut segs = sel.datasets;
+    let longest = longest_index(&segs);
+    let lens: Vec<usize> = segs.iter().map(|d| d.data.len()).collect();
     // the model runs at the rate it was fitted at: the capture rate (a physical model
     // with `decimate_output` > 1) or the capture rate decimated by the model's preparation
     let capture_ts = if saved.decimate_output > 1 {
@@ -196,19 +197,10 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
     } else {
         saved.ts / saved.prep.decimate.max(1) as f64
     };
-    check_model_rate(ds, capture_ts, mpath)?;
-    // every selected segment (one unless --segment all on a capture with gaps), each
-    // simulated with its own initial state; FIT and residual tests pooled over them
-    let all: Vec<FitData> = segs
-        .iter()
-        .map(|d| FitData::new(&d.data, saved.prep).map_err(|e| format!("{}: {e}", d.name)))
-        .collect::<Result<_, _>>()?;
-    let samples: usize = all.iter().map(|d| d.prepared().len()).sum();
-    check_lags(args.lags, &ds.name, samples)?;
-    let (v, each) = fitted
-        .evaluate_segments(&all, args.lags)
-        .map_err(|e| format!("{}: {e}", ds.name))?;
-    let data = &all[0].prepared();
+    check_model_rate(&segs[longest], capture_ts, mpath)?;
+    let ds_ts = segs[longest].data.ts;
+    let periodic_model = saved.fit_name.as_deref() == Some(PERIODIC_FIT_NAME)
+        && (fitted.ts - ds_ts).abs() <= 1e-9 * ds_ts;
     // a model fitted in the frequency domain is judged by the periodic
     // steady-state FIT on periodic data, as `fit` reported it; the
     // toolbox FIT (which drift and slow disturbances enter) stays beside it
@@ -223,17 +215,39 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
             f64::NAN
         }
     };
-    let periodic_analysis = saved
-        .fit_name
-        .as_deref()
-        .filter(|n| *n == PERIODIC_FIT_NAME && (fitted.ts - ds.data.ts).abs() <= 1e-9 * ds.data.ts)
-        .and_then(|_| analyze_segments(&segs, args.settle_periods).ok());
+    let periodic_analysis = periodic_model
+        .then(|| analyze_segments(&segs, args.settle_periods).ok())
+        .flatten();
     let periodic = periodic_analysis.as_ref().map(|a| periodic_fit(&a.frf));
-    let periodic_of = |d: &jointid::data::Dataset| {
-        analyze_dataset(d, args.settle_periods)
-            .ok()
-            .map(|a| periodic_fit(&a.frf))
+    // each segment's own, for the table
+    let periodic_each: Vec<Option<f64>> = match periodic {
+        Some(_) => segs
+            .iter()
+            .map(|d| {
+                analyze_dataset(d, args.settle_periods)
+                    .ok()
+                    .map(|a| periodic_fit(&a.frf))
+            })
+            .collect(),
+        None => Vec::new(),
     };
+    // the records go into the model's prepared data (a long capture held once, not
+    // twice: issue 37 item 9); `segs` keeps their names and rates
+    // every selected segment (one unless --segment all on a capture with gaps), each
+    // simulated with its own initial state; FIT and residual tests pooled over them
+    let all: Vec<FitData> = segs
+        .iter_mut()
+        .map(|d| {
+            FitData::from_owned(take_record(d), saved.prep).map_err(|e| format!("{}: {e}", d.name))
+        })
+        .collect::<Result<_, _>>()?;
+    let ds = &segs[longest];
+    let samples: usize = all.iter().map(|d| d.prepared().len()).sum();
+    check_lags(args.lags, &ds.name, samples)?;
+    let (v, each) = fitted
+        .evaluate_segments(&all, args.lags)
+        .map_err(|e| format!("{}: {e}", ds.name))?;
+    let data = &all[0].prepared();
     // a model fitted on the motor velocity is judged by the velocity FIT, as `fit`
     // reported it (the angle's drift dominates the toolbox FIT)
     let velocity = if fitted.fit_metric == FitMetric::Velocity {
@@ -250,11 +264,11 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
         .zip(&numbers)
         .zip(&each)
         .enumerate()
-        .map(|(i, ((d, &k), &f))| SegmentJson {
+        .map(|(i, ((_, &k), &f))| SegmentJson {
             segment: k,
-            samples: d.data.len(),
+            samples: lens[i],
             fit: match (&periodic, &velocity) {
-                (Some(_), _) => periodic_of(d),
+                (Some(_), _) => periodic_each[i],
                 (None, Some((_, vel))) => vel.get(i).copied(),
                 (None, None) => Some(f),
             },
@@ -270,7 +284,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
         // the record drawn: the averaged period under the periodic FIT, else the longest
         // segment simulated under its toolbox FIT
         let i = (0..all.len())
-            .max_by_key(|&i| (segs[i].data.len(), usize::MAX - i))
+            .max_by_key(|&i| (lens[i], usize::MAX - i))
             .unwrap_or(0);
         let periodic_record = periodic_analysis.as_ref().and_then(|a| {
             let g = fitted.model.freq_response(&a.frf.freq_hz);
@@ -318,7 +332,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
             compare_rate: compared == VELOCITY_COMPARED && fitted.output == Output::Angle,
             tests: vec![("data", &v)],
             signals: Signals::new(args.linear_axis, fitted.output, args.units.as_ref()),
-            record_s: ds.data.len() as f64 * ds.data.ts,
+            record_s: lens[longest] as f64 * ds.data.ts,
             file: &ds.name,
         };
         files = write_views(dir, &views, args.force)?
@@ -438,6 +452,16 @@ struct NlReport<'a> {
     segments: Vec<SegmentJson>,
 }
 
+/// The samples of `d`, taken out of it (its name, rate and metadata stay).
+fn take_record(d: &mut jointid::data::Dataset) -> IdData {
+    IdData {
+        ts: d.data.ts,
+        u: std::mem::take(&mut d.data.u),
+        y: std::mem::take(&mut d.data.y),
+        r: d.data.r.take(),
+    }
+}
+
 /// `ds` is sampled at the rate `model_ts` [s] the model in `mpath` was fitted at.
 fn check_model_rate(
     ds: &jointid::data::Dataset,
@@ -495,13 +519,17 @@ fn run_nonlinear(
     } else {
         (sel.datasets, sel.segments)
     };
-    let ds = longest_segment(&segs);
-    check_model_rate(ds, saved.ts, mpath)?;
+    let longest = longest_index(&segs);
+    check_model_rate(&segs[longest], saved.ts, mpath)?;
     let opts = NlOptions {
         highpass_hz: nl.highpass_hz,
         ..NlOptions::default()
     };
-    let records: Vec<IdData> = segs.iter().map(|d| d.data.clone()).collect();
+    // the records taken out of the selection (a long capture held once, not twice: issue
+    // 37 item 9); `segs` keeps their names and rates
+    let mut segs = segs;
+    let records: Vec<IdData> = segs.iter_mut().map(take_record).collect();
+    let ds = &segs[longest];
     super::progress::step(format!(
         "validating on {} samples",
         records.iter().map(IdData::len).sum::<usize>()
@@ -509,12 +537,13 @@ fn run_nonlinear(
     let v = validate_segments(&fit, &records, &opts).map_err(|e| format!("{}: {e}", ds.name))?;
     let segments: Vec<SegmentJson> = if segs.len() > 1 {
         segs.iter()
+            .zip(&records)
             .zip(&numbers)
-            .map(|(d, &k)| {
-                nl_validate(&fit, &d.data, &opts)
+            .map(|((d, r), &k)| {
+                nl_validate(&fit, r, &opts)
                     .map(|each| SegmentJson {
                         segment: k,
-                        samples: d.data.len(),
+                        samples: r.len(),
                         fit: Some(each.velocity_fit_percent),
                     })
                     .map_err(|e| format!("{} segment {k}: {e}", d.name))
@@ -523,7 +552,7 @@ fn run_nonlinear(
     } else {
         vec![SegmentJson {
             segment: numbers[0],
-            samples: ds.data.len(),
+            samples: records[longest].len(),
             fit: Some(v.velocity_fit_percent),
         }]
     };

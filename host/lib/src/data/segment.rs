@@ -451,10 +451,14 @@ impl Record {
 /// # Panics
 /// When `segs` is empty (a [`Selected`] always holds one record or more).
 pub fn longest_segment(segs: &[Dataset]) -> &Dataset {
-    segs.iter()
-        .enumerate()
-        .max_by_key(|(i, d)| (d.data.len(), usize::MAX - i))
-        .map_or(&segs[0], |(_, d)| d)
+    &segs[longest_index(segs)]
+}
+
+/// Where [`longest_segment`] is in `segs` (0 for none).
+pub fn longest_index(segs: &[Dataset]) -> usize {
+    (0..segs.len())
+        .max_by_key(|&i| (segs[i].data.len(), usize::MAX - i))
+        .unwrap_or(0)
 }
 
 /// Segment numbers as `1, 3`.

@@ -441,7 +441,17 @@ impl FitData {
     /// # Errors
     /// [`FitError::Prepare`] when the record is too short to decimate.
     pub fn new(raw: &IdData, prep: Prep) -> Result<Self, FitError> {
-        let r = prep.detrended(raw);
+        Self::from_owned(raw.clone(), prep)
+    }
+
+    /// As [`FitData::new`], taking the record (detrended in place: a caller done with
+    /// it holds a long capture once, not twice).
+    ///
+    /// # Errors
+    /// As [`FitData::new`].
+    pub fn from_owned(raw: IdData, prep: Prep) -> Result<Self, FitError> {
+        let mut r = raw;
+        r.detrend(prep.detrend);
         let q = prep.decimate.max(1);
         let decimated = if q > 1 {
             Some(r.decimate(q).map_err(FitError::Prepare)?)
@@ -1120,30 +1130,21 @@ impl Fitted {
     /// [`FitError::DecimationMismatch`] for a record at another rate, [`FitError::BadData`]
     /// for an unusable one, [`FitError::Validate`].
     pub fn velocity_fit_segments(&self, data: &[FitData]) -> Result<(f64, Vec<f64>), FitError> {
-        use crate::ident::nonlinear::output_error::DEFAULT_HIGHPASS_HZ;
-        let pairs = data
-            .iter()
-            .map(|d| self.velocity_pair(d))
-            .collect::<Result<Vec<_>, _>>()?;
-        let ts = self.ts;
-        let each = pairs
-            .iter()
-            .map(|p| {
-                crate::ident::nonlinear::pooled_velocity_fit(
-                    std::slice::from_ref(p),
-                    ts,
-                    DEFAULT_HIGHPASS_HZ,
-                )
-            })
-            .collect::<Result<Vec<f64>, _>>()?;
-        let pooled = crate::ident::nonlinear::pooled_velocity_fit(&pairs, ts, DEFAULT_HIGHPASS_HZ)?;
-        Ok((pooled, each))
+        use crate::ident::nonlinear::output_error::{VelocityFitSums, DEFAULT_HIGHPASS_HZ};
+        let mut sums = VelocityFitSums::new(self.ts, DEFAULT_HIGHPASS_HZ);
+        for d in data {
+            let (rec, yh) = self.simulated_velocity_source(d)?;
+            sums.push(self.velocity_samples(rec, &yh));
+        }
+        Ok((sums.pooled()?, sums.each()?))
     }
 
-    /// The measured and simulated interval-mean velocity of one record that
-    /// [`Fitted::velocity_fit_segments`] compares (sample 0 left out), before the high-pass.
-    fn velocity_pair(&self, d: &FitData) -> Result<(Vec<f64>, Vec<f64>), FitError> {
-        use crate::ident::nonlinear::interval_velocity;
+    /// The record [`Fitted::velocity_fit_segments`] compares at the model's rate and the
+    /// model's simulated output on it.
+    fn simulated_velocity_source<'d>(
+        &self,
+        d: &'d FitData,
+    ) -> Result<(&'d IdData, Vec<f64>), FitError> {
         let rec = if self.decimate > 1 {
             &d.raw
         } else {
@@ -1162,14 +1163,26 @@ impl Fitted {
             Some(_) => self.simulate(rec),
             None => self.model.simulate(&rec.u, None),
         };
-        let (v, vh) = match self.output {
-            Output::Angle => (
-                interval_velocity(&rec.y, rec.ts),
-                interval_velocity(&yh, rec.ts),
-            ),
-            Output::Velocity => (rec.y.clone(), yh),
-        };
-        Ok((v[1..].to_vec(), vh[1..].to_vec()))
+        Ok((rec, yh))
+    }
+
+    /// `(v_k, v̂_k)` from sample 1 on: the measured and simulated interval-mean velocity
+    /// ([`crate::ident::nonlinear::interval_velocity`]) of an angle output, the output
+    /// itself for a velocity.
+    fn velocity_samples<'a>(
+        &self,
+        rec: &'a IdData,
+        yh: &'a [f64],
+    ) -> impl ExactSizeIterator<Item = (f64, f64)> + 'a {
+        let (angle, ts) = (self.output == Output::Angle, rec.ts);
+        let n = rec.y.len().min(yh.len()).saturating_sub(1);
+        (1..n + 1).map(move |k| {
+            if angle {
+                ((rec.y[k] - rec.y[k - 1]) / ts, (yh[k] - yh[k - 1]) / ts)
+            } else {
+                (rec.y[k], yh[k])
+            }
+        })
     }
 
     /// The signals behind [`VELOCITY_FIT_NAME`] on one record, `(v, v̂)` at the model's
@@ -1180,7 +1193,10 @@ impl Fitted {
     /// As [`Fitted::velocity_fit_segments`].
     pub fn velocity_fit_signals(&self, d: &FitData) -> Result<(Vec<f64>, Vec<f64>), FitError> {
         use crate::ident::nonlinear::output_error::{highpassed_pair, DEFAULT_HIGHPASS_HZ};
-        let (v, vh) = self.velocity_pair(d)?;
+        let (rec, yh) = self.simulated_velocity_source(d)?;
+        let (v, vh) = self
+            .velocity_samples(rec, &yh)
+            .unzip::<_, _, Vec<_>, Vec<_>>();
         Ok(highpassed_pair(&v, &vh, self.ts, DEFAULT_HIGHPASS_HZ))
     }
 

@@ -71,7 +71,7 @@ use crate::data::dsp::{butter_highpass_sos, SosBank};
 use crate::data::IdData;
 use crate::ident::linalg::pinv_sym;
 use crate::ident::lm::{self, LeastSquares, LmOptions, Normal, Termination};
-use crate::ident::validate::fit_percent;
+use crate::ident::validate::{centred_sum_of_squares, fit_from_sums, fit_percent};
 
 /// Why a nonlinear fit could not run.
 #[derive(Debug, Error)]
@@ -318,11 +318,16 @@ impl NlFit {
 
 /// Interval-mean velocity `(y[k] − y[k−1])/T` (sample 0 repeats sample 1).
 pub fn interval_velocity(y: &[f64], ts: f64) -> Vec<f64> {
-    let mut v: Vec<f64> = y.windows(2).map(|w| (w[1] - w[0]) / ts).collect();
-    if let Some(&first) = v.first() {
-        v.insert(0, first);
-    }
+    // sized once: an insert at the front of a full vector would double its capacity
+    let mut v = Vec::with_capacity(y.len());
+    v.extend(interval_velocities(y, ts).take(1));
+    v.extend(interval_velocities(y, ts));
     v
+}
+
+/// [`interval_velocity`] from sample 1 on, computed as it is read [rad/s].
+pub fn interval_velocities(y: &[f64], ts: f64) -> impl ExactSizeIterator<Item = f64> + '_ {
+    y.windows(2).map(move |w| (w[1] - w[0]) / ts)
 }
 
 /// Simulated interval-mean motor velocity of `model` at physical values `p` driven by `u`
@@ -1101,11 +1106,96 @@ pub fn pooled_velocity_fit(
     ts: f64,
     highpass_hz: f64,
 ) -> Result<f64, crate::ident::validate::ValidateError> {
-    let (mut a, mut b) = (Vec::new(), Vec::new());
+    let mut sums = VelocityFitSums::new(ts, highpass_hz);
     for (v, vh) in pairs {
-        highpass_pair(v, vh, ts, highpass_hz, &mut a, &mut b);
+        sums.push(v.iter().copied().zip(vh.iter().copied()));
     }
-    fit_percent(&a, &b)
+    sums.pooled()
+}
+
+/// [`pooled_velocity_fit`] and each record's FIT from records given one at a time, sample
+/// by sample: only the prefiltered measured velocity is kept (the FIT's denominator needs
+/// its mean), the squared residual is summed as it comes. The sums run in the order of
+/// [`fit_percent`] on the records laid end to end, so the FITs are its own to the last
+/// bit, and a long record costs one vector, not the five of the pairs and their
+/// prefiltered copies.
+#[derive(Clone, Debug)]
+pub struct VelocityFitSums {
+    ts: f64,
+    highpass_hz: f64,
+    /// each record's measured velocity through the prefilter [rad/s]
+    measured: Vec<Vec<f64>>,
+    /// `Σ (v − v̂)²` through the prefilter over every record so far, in sample order
+    ssr: f64,
+    /// the same per record
+    each_ssr: Vec<f64>,
+}
+
+impl VelocityFitSums {
+    /// No record yet; sample interval `ts` [s], the prefilter's high-pass at
+    /// `highpass_hz` [Hz] (0: unfiltered), started afresh on each record.
+    pub fn new(ts: f64, highpass_hz: f64) -> Self {
+        Self {
+            ts,
+            highpass_hz,
+            measured: Vec::new(),
+            ssr: 0.0,
+            each_ssr: Vec::new(),
+        }
+    }
+
+    /// Adds one record's `(v_k, v̂_k)`, measured and simulated velocity [rad/s].
+    pub fn push(&mut self, pairs: impl ExactSizeIterator<Item = (f64, f64)>) {
+        let mut a = Vec::with_capacity(pairs.len());
+        let mut bank = (self.highpass_hz > 0.0)
+            .then(|| SosBank::new(butter_highpass_sos(2, self.highpass_hz, self.ts), 2));
+        let mut own = 0.0;
+        for (x, y) in pairs {
+            let mut s = [x, y];
+            if let Some(b) = bank.as_mut() {
+                b.push(&mut s);
+            }
+            let e2 = (s[0] - s[1]).powi(2);
+            self.ssr += e2;
+            own += e2;
+            a.push(s[0]);
+        }
+        self.measured.push(a);
+        self.each_ssr.push(own);
+    }
+
+    /// The FIT of every record so far laid end to end [%].
+    ///
+    /// # Errors
+    /// [`crate::ident::validate::ValidateError::ConstantOutput`] when the measured
+    /// velocity is constant.
+    pub fn pooled(&self) -> Result<f64, crate::ident::validate::ValidateError> {
+        let n = self.measured.iter().map(Vec::len).sum::<usize>();
+        let all = || self.measured.iter().flatten();
+        let mean = all().sum::<f64>() / n.max(1) as f64;
+        let den: f64 = all().map(|v| (v - mean).powi(2)).sum();
+        fit_of(self.ssr, den)
+    }
+
+    /// Each record's FIT [%], in the order they came.
+    ///
+    /// # Errors
+    /// As [`Self::pooled`], for any record.
+    pub fn each(&self) -> Result<Vec<f64>, crate::ident::validate::ValidateError> {
+        self.measured
+            .iter()
+            .zip(&self.each_ssr)
+            .map(|(a, &ssr)| fit_of(ssr, centred_sum_of_squares(a)))
+            .collect()
+    }
+}
+
+/// [`fit_from_sums`] with [`fit_percent`]'s refusal of a constant output.
+fn fit_of(ssr: f64, den: f64) -> Result<f64, crate::ident::validate::ValidateError> {
+    if den == 0.0 {
+        return Err(crate::ident::validate::ValidateError::ConstantOutput);
+    }
+    Ok(fit_from_sums(ssr, den))
 }
 
 /// `∂v̂_k/∂z` of the unfiltered velocity at sample `k` by the dual numbers, every

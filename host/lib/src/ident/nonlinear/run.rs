@@ -10,7 +10,8 @@ use thiserror::Error;
 use super::init::{automatic_start_with, LinearFit, RippleOrder, Step};
 use super::model::{sim_plant, NlModel, Owner};
 use super::output_error::{
-    fit_output_error_segments, interval_velocity, pooled_velocity_fit, simulate_velocity,
+    fit_output_error_segments, interval_velocities, interval_velocity, simulate_velocity,
+    VelocityFitSums,
 };
 use super::{NlError, NlFit, NlOptions};
 use crate::data::{Dataset, IdData};
@@ -18,7 +19,6 @@ use crate::ident::frf::FrfError;
 use crate::ident::lm::Termination;
 use crate::ident::parallel::{machine_threads, parallel};
 use crate::ident::sml::{Drive, FrfFit, FrfFitError, FrfFitOptions};
-use crate::ident::validate::fit_percent;
 use crate::model::effects::Effect;
 use crate::model::spec::Structure;
 use crate::sim::{simulate_driven, DrivenStart};
@@ -1161,8 +1161,14 @@ pub fn validate_segments(
     if let Some(v0) = values.last_mut() {
         *v0 = 0.0;
     }
-    let (mut exact, mut smooth_pairs) = (Vec::new(), Vec::new());
-    let (mut y_all, mut yh_all) = (Vec::new(), Vec::new());
+    // the FITs' sums record by record, sample by sample (a long record is not copied into
+    // pairs: issue 37 item 9), in the order of the FITs of the records laid end to end
+    let ts = vals[0].ts;
+    let mut exact = VelocityFitSums::new(ts, opts.highpass_hz);
+    let mut smooth = VelocityFitSums::new(ts, opts.highpass_hz);
+    // `Σ (θ_m − θ̂_m)²` of the angle over every record
+    let mut angle_ssr = 0.0;
+    let mut angle_lengths_agree = true;
     for val in vals {
         val.check(20).map_err(NlError::Record)?;
         let u: Vec<f64> = val.u.iter().map(|u| u + offset).collect();
@@ -1175,20 +1181,28 @@ pub fn validate_segments(
             &DrivenStart::Rest { theta_m: val.y[0] },
         )
         .map_err(NlError::ValidationSimulation)?;
-        let v = interval_velocity(&val.y, val.ts);
-        let vh = interval_velocity(&out.theta_m, val.ts);
-        let smooth = simulate_velocity(model, &values, &val.u, val.ts, val.y[0], None)
+        drop(u);
+        exact.push(interval_velocities(&val.y, ts).zip(interval_velocities(&out.theta_m, ts)));
+        angle_lengths_agree &= out.theta_m.len() == val.y.len();
+        for (y, yh) in val.y.iter().zip(&out.theta_m) {
+            angle_ssr += (y - yh).powi(2);
+        }
+        drop(out);
+        let vh = simulate_velocity(model, &values, &val.u, val.ts, val.y[0], None)
             .ok_or(NlError::Unstable)?;
-        exact.push((v[1..].to_vec(), vh[1..].to_vec()));
-        smooth_pairs.push((v[1..].to_vec(), smooth[1..].to_vec()));
-        y_all.extend_from_slice(&val.y);
-        yh_all.extend_from_slice(&out.theta_m);
+        smooth.push(interval_velocities(&val.y, ts).zip(vh[1..].iter().copied()));
     }
-    let ts = vals[0].ts;
+    let measured = || vals.iter().flat_map(|v| v.y.iter());
+    let angle_fit_percent = if angle_lengths_agree {
+        let mean = measured().sum::<f64>() / measured().count().max(1) as f64;
+        let den: f64 = measured().map(|y| (y - mean).powi(2)).sum();
+        (den != 0.0).then(|| crate::ident::validate::fit_from_sums(angle_ssr, den))
+    } else {
+        None
+    };
     Ok(NlValidation {
-        velocity_fit_percent: pooled_velocity_fit(&exact, ts, opts.highpass_hz).unwrap_or(f64::NAN),
-        velocity_fit_smooth_percent: pooled_velocity_fit(&smooth_pairs, ts, opts.highpass_hz)
-            .unwrap_or(f64::NAN),
-        angle_fit_percent: fit_percent(&y_all, &yh_all).unwrap_or(f64::NAN),
+        velocity_fit_percent: exact.pooled().unwrap_or(f64::NAN),
+        velocity_fit_smooth_percent: smooth.pooled().unwrap_or(f64::NAN),
+        angle_fit_percent: angle_fit_percent.unwrap_or(f64::NAN),
     })
 }

@@ -346,6 +346,53 @@ fn derivatives_by_dual_numbers_agree_with_central_differences() {
     }
 }
 
+/// The velocity FIT summed record by record as it is read is the FIT of the prefiltered
+/// records laid end to end, to the last bit (pooled and each record's), with and without
+/// the high-pass; a constant measured velocity is refused as [`fit_percent`] refuses it.
+#[test]
+fn the_velocity_fit_summed_as_it_is_read_is_the_fit_of_the_stored_records() {
+    use crate::ident::linalg::GaussRng;
+    use crate::ident::nonlinear::output_error::{highpassed_pair, VelocityFitSums};
+    use crate::ident::validate::{fit_percent, ValidateError};
+    let mut rng = GaussRng::new(7);
+    let records: Vec<(Vec<f64>, Vec<f64>)> = [3000, 1700]
+        .iter()
+        .map(|&n| {
+            let v: Vec<f64> = (0..n)
+                .map(|k| (k as f64 * 0.013).sin() + 0.3 + 0.1 * rng.normal())
+                .collect();
+            let vh = v.iter().map(|x| 0.9 * x + 0.05 * rng.normal()).collect();
+            (v, vh)
+        })
+        .collect();
+    let ts = 5e-4;
+    for hz in [0.0, 5.0] {
+        let mut sums = VelocityFitSums::new(ts, hz);
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        let mut each = Vec::new();
+        for (v, vh) in &records {
+            sums.push(v.iter().copied().zip(vh.iter().copied()));
+            let (ae, be) = highpassed_pair(v, vh, ts, hz);
+            each.push(fit_percent(&ae, &be).unwrap());
+            a.extend(ae);
+            b.extend(be);
+        }
+        let pooled = fit_percent(&a, &b).unwrap();
+        assert!(pooled > 50.0 && pooled < 100.0, "{pooled}");
+        assert_eq!(
+            sums.pooled().unwrap().to_bits(),
+            pooled.to_bits(),
+            "{hz} Hz"
+        );
+        let got: Vec<u64> = sums.each().unwrap().iter().map(|f| f.to_bits()).collect();
+        let want: Vec<u64> = each.iter().map(|f| f.to_bits()).collect();
+        assert_eq!(got, want, "{hz} Hz");
+    }
+    let mut flat = VelocityFitSums::new(ts, 0.0);
+    flat.push([(1.0, 0.5); 10].into_iter());
+    assert!(matches!(flat.pooled(), Err(ValidateError::ConstantOutput)));
+}
+
 /// What cannot be run is refused before the work, each with its own error.
 #[test]
 fn a_request_that_does_not_fit_the_model_is_refused_before_the_work() {
