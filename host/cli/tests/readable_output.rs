@@ -273,3 +273,29 @@ fn commands_that_write_files_list_them_at_the_end() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A time column in steps of 1e-99 s: `info` states the rate as `1e99 Hz`, not in a hundred
+/// digits (it printed every one, and the interval with a hundred decimals).
+#[test]
+fn info_writes_a_rate_far_outside_hertz_in_scientific_notation() {
+    let dir = tmpdir("tiny-ts");
+    let data = dir.join("tiny.csv");
+    let mut csv = String::from("t,u,theta_m\n");
+    for k in 0..400 {
+        csv.push_str(&format!(
+            "{:e},{},{}\n",
+            k as f64 * 1e-99,
+            (k % 7) as f64 * 0.1,
+            k as f64 * 1e-3
+        ));
+    }
+    std::fs::write(&data, csv).unwrap();
+    let o = jointid(&["info", data.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("samples"))
+        .unwrap_or_else(|| panic!("{text}"));
+    assert!(line.contains("at 1e99 Hz (Ts = 1e-99 s)"), "{line}");
+    assert!(text.lines().all(|l| l.len() < 120), "{text}");
+}

@@ -38,15 +38,25 @@ pub mod csv;
 
 /// `x` rounded to `digits` significant digits (at least 1) and written in its shortest
 /// form: how times and rates are shown to the user (`Ts = 0.001 s` for a sample
-/// interval estimated as 0.0009999839611225525 s, `fs = 2000 Hz`, `f0 = 0.4 Hz`).
-/// Not for values written as data.
+/// interval estimated as 0.0009999839611225525 s, `fs = 2000 Hz`, `f0 = 0.4 Hz`);
+/// outside [`FMT_SIG_PLAIN`] in scientific notation (`1e99 Hz` from a time column in steps
+/// of 1e-99 s, not a hundred digits). Not for values written as data.
 pub fn fmt_sig(x: f64, digits: usize) -> String {
     if !x.is_finite() {
         return x.to_string();
     }
     let rounded: f64 = format!("{:.*e}", digits.max(1) - 1, x).parse().unwrap_or(x);
-    format!("{rounded}")
+    let (low, high) = FMT_SIG_PLAIN;
+    if rounded != 0.0 && !(low..high).contains(&rounded.abs()) {
+        format!("{rounded:e}")
+    } else {
+        format!("{rounded}")
+    }
 }
+
+/// Magnitudes [`fmt_sig`] writes in plain digits: from 1e-6 (a microsecond) up to 1e9
+/// (a gigahertz), at most 15 characters before any rounding.
+pub const FMT_SIG_PLAIN: (f64, f64) = (1e-6, 1e9);
 /// How an undefined figure is shown to the user (a 0/0 share, the FIT of a simulation that
 /// diverged): a dash, never `NaN` or `inf`.
 pub const UNDEFINED: &str = "—";
@@ -958,6 +968,13 @@ mod tests {
         assert_eq!(fmt_sig(1.0 / 3.0, 4), "0.3333");
         assert_eq!(fmt_sig(-0.126, 2), "-0.13");
         assert_eq!(fmt_sig(f64::NAN, 4), "NaN");
+        // far outside seconds and hertz: scientific, not hundreds of digits
+        assert_eq!(fmt_sig(1.0 / 1e-99, 6), "1e99");
+        assert_eq!(fmt_sig(1e308, 6), "1e308");
+        assert_eq!(fmt_sig(-2.5e-300, 4), "-2.5e-300");
+        assert_eq!(fmt_sig(1.0 / 3e-12, 4), "3.333e11");
+        assert_eq!(fmt_sig(2e-6, 4), "0.000002");
+        assert_eq!(fmt_sig(0.0, 4), "0");
     }
 
     #[test]
