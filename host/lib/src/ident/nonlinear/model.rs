@@ -706,12 +706,46 @@ impl<T: Real> Plant<T> {
     /// and returns false at the first stage whose Coulomb friction is not saturated (the
     /// state is then partly advanced; the caller restores it).
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     fn sample_steps(
         &self,
         grid: &Grid<T>,
         held: &Held<T>,
         k: usize,
         measured: Option<&[f64]>,
+        q: &mut [T; MAX_BODIES],
+        w: &mut [T; MAX_BODIES],
+        st: &mut Stages<T>,
+        only_saturated: bool,
+    ) -> bool {
+        let args = (grid, held, k, measured);
+        if T::INLINE_STEPS {
+            self.steps_inlined(args, q, w, st, only_saturated)
+        } else {
+            self.steps_outlined(args, q, w, st, only_saturated)
+        }
+    }
+
+    /// [`Self::steps_inlined`] as a call of its own ([`Real::INLINE_STEPS`]).
+    #[inline(never)]
+    #[allow(clippy::type_complexity)]
+    fn steps_outlined(
+        &self,
+        args: (&Grid<T>, &Held<T>, usize, Option<&[f64]>),
+        q: &mut [T; MAX_BODIES],
+        w: &mut [T; MAX_BODIES],
+        st: &mut Stages<T>,
+        only_saturated: bool,
+    ) -> bool {
+        self.steps_inlined(args, q, w, st, only_saturated)
+    }
+
+    /// The body of [`Self::sample_steps`].
+    #[inline(always)]
+    #[allow(clippy::type_complexity)]
+    fn steps_inlined(
+        &self,
+        (grid, held, k, measured): (&Grid<T>, &Held<T>, usize, Option<&[f64]>),
         q: &mut [T; MAX_BODIES],
         w: &mut [T; MAX_BODIES],
         st: &mut Stages<T>,
