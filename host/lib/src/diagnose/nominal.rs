@@ -293,6 +293,19 @@ mod tests {
         req
     }
 
+    /// The diagnosis of a default joint of `structure` as `structure`, estimation and
+    /// validation two-period captures of the same joint with other excitation seeds.
+    fn twin_diagnosis(structure: Structure, names: &[&str], threads: usize) -> Diagnosis {
+        let est = short_capture(Plant::new(structure), None, "est");
+        let val = short_capture(Plant::new(structure), Some(7), "val");
+        diagnose(
+            std::slice::from_ref(&est),
+            &val,
+            &request(structure, names, threads),
+        )
+        .expect("diagnosis")
+    }
+
     /// The diagnosis as JSON without its wall time.
     fn json(d: &Diagnosis) -> serde_json::Value {
         let mut v = serde_json::to_value(d).expect("a diagnosis serialises");
@@ -306,24 +319,29 @@ mod tests {
     /// for number, on one thread and on two (no wall clock or scheduling decides anything).
     #[test]
     fn a_rigid_twin_names_no_effect_on_one_thread_or_two() {
-        let est = short_capture(Plant::new(Structure::Rigid), None, "est");
-        let val = short_capture(Plant::new(Structure::Rigid), Some(7), "val");
         let names = ["time_delay", "coulomb_friction"];
-        let one = diagnose(
-            std::slice::from_ref(&est),
-            &val,
-            &request(Structure::Rigid, &names, 1),
-        )
-        .expect("diagnosis");
+        let one = twin_diagnosis(Structure::Rigid, &names, 1);
         assert_eq!(one.best, "none", "{}", one.verdict);
         assert!(one.refused.is_none(), "{:?}", one.refused);
-        let two = diagnose(
-            std::slice::from_ref(&est),
-            &val,
-            &request(Structure::Rigid, &names, 2),
-        )
-        .expect("diagnosis");
+        let two = twin_diagnosis(Structure::Rigid, &names, 2);
         assert_eq!(json(&one), json(&two));
+    }
+
+    /// A three-mass joint with no effect, captured over two periods (too few for the
+    /// frequency-domain start, so every fit starts in the time domain): the nominal carries
+    /// the drive's 0.5 ms current-loop lag and no delay is named. Without a lag in the
+    /// time-domain start the nominal had none, and `time_delay` took the lag as a delay of
+    /// about one sample (+21.8 points, a false alarm).
+    #[test]
+    fn a_nominal_started_in_the_time_domain_carries_the_current_loop_lag() {
+        let d = twin_diagnosis(Structure::ThreeMass, &["time_delay"], 2);
+        assert_eq!(d.best, "none", "{}", d.verdict);
+        let lag = d.nominal_parameters.get("tau_c").map(|p| p.value);
+        let truth = SimConfig::default().controller.current_loop_tau;
+        assert!(
+            lag.is_some_and(|l| (l - truth).abs() < 0.2 * truth),
+            "nominal lag {lag:?} s, the drive's {truth} s"
+        );
     }
 
     /// A three-mass nominal fitted on one joint and validated on the record of another (a
