@@ -67,6 +67,14 @@ pub fn odd_explained(nominal: &ClassLevel, model: &ClassLevel) -> Option<f64> {
         .then(|| 1.0 - excess(model).max(0.0) / excess(nominal))
 }
 
+/// The odd-line residual a model leaves against the noise [dB], when the nominal's stands
+/// `nominal_db` above it and the model removes `share` of the nominal's excess
+/// ([`odd_explained`]): `10 log10(1 + (1 − share)(10^(nominal_db/10) − 1))`.
+pub fn odd_left_db(nominal_db: f64, share: f64) -> f64 {
+    let excess = 10f64.powf(nominal_db / 10.0) - 1.0;
+    10.0 * (1.0 + (1.0 - share.clamp(0.0, 1.0)) * excess.max(0.0)).log10()
+}
+
 /// Below this share of the nominal's odd-line residual removed ([`odd_explained`]) an
 /// answer leaves the odd distortion of the data unexplained. The right answers of the
 /// bench's nonlinear cases remove 47 % (backlash at 0.014 rad RMS, case 21) to 100 %; a
@@ -330,5 +338,19 @@ mod tests {
         let r = regions(&res, &omega, &omega, &omega, &omega);
         assert!(r.near_zero_velocity.energy_ratio > 5.0, "{r:?}");
         assert!(r.large_deflection.energy_ratio < 0.1, "{r:?}");
+    }
+
+    /// What a model leaves of the nominal's odd distortion: all of it when it removes
+    /// nothing, the noise alone when it removes all, and about 3 dB less when it removes
+    /// half of a residual far above the noise (the loop is then still needed).
+    #[test]
+    fn the_odd_distortion_left_falls_with_the_share_removed() {
+        assert!((odd_left_db(22.3, 0.0) - 22.3).abs() < 1e-9);
+        assert!(odd_left_db(22.3, 1.0).abs() < 1e-9);
+        let half = odd_left_db(22.3, 0.5);
+        assert!((half - (22.3 - 3.0103)).abs() < 0.05, "{half}");
+        assert!(half >= ODD_RESIDUAL_ABOVE_NOISE_DB);
+        assert!(odd_left_db(12.0, 0.5) < ODD_RESIDUAL_ABOVE_NOISE_DB);
+        assert_eq!(odd_left_db(22.3, -0.4), odd_left_db(22.3, 0.0));
     }
 }

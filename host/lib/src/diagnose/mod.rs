@@ -50,10 +50,12 @@
 //! 6. **Reduction** ([`select::reduce`]): a pair's effects each refitted alone from the
 //!    pair's values; a single that does as well is the answer (and is refined in turn).
 //! 7. **In the loop** ([`loop_answer`], [`in_loop`]): an answer that leaves the odd
-//!    distortion standing above the noise, or `none` with it left, has every fitted model
-//!    scored again in the loop of the robot's controller, its law identified from the
-//!    estimation record ([`crate::ident::controller`]); the loop's answer replaces the
-//!    open-loop one when it removes the distortion.
+//!    distortion standing at least [`locate::ODD_RESIDUAL_ABOVE_NOISE_DB`] above the noise
+//!    ([`locate::odd_left_db`]), or `none` with it left, has every fitted model scored
+//!    again in the loop of the robot's controller, its law identified from the estimation
+//!    record ([`crate::ident::controller`]); every single significant there, and every pair
+//!    of the loop's best with another, is refined in the loop before they are ranked; the
+//!    loop's answer replaces the open-loop one when it removes the distortion.
 //! 8. **Verdict** ([`verdict`]): the closure of the gap in one sentence with its doubts, the
 //!    user's simulation split into parameter and structure parts, the report's series.
 //!
