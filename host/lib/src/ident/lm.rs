@@ -12,8 +12,9 @@
 //!
 //! Method: Levenberg–Marquardt with Marquardt's diagonal scaling,
 //! `(JᵀJ + λ diag JᵀJ) δ = Jᵀe` (Nocedal & Wright, *Numerical
-//! Optimization*, 2nd ed., §10.3), each step projected onto box bounds; a
-//! step is accepted only when it lowers the cost, then `λ ← λ/5`, otherwise
+//! Optimization*, 2nd ed., §10.3), each step projected onto box bounds (with
+//! [`LmOptions::active_set`], a parameter on its bound whose gradient points out of the box
+//! held for that step and the step solved without it); a step is accepted only when it lowers the cost, then `λ ← λ/5`, otherwise
 //! `λ ← 8λ` until `λ > 1e12`. Some parameters may be fixed. Trailing
 //! *nuisance* parameters (an initial state, say) are free and unbounded and
 //! take no part in the step-size test. Optionally ([`LmOptions::within_noise`]) the loop
@@ -90,6 +91,11 @@ pub struct LmOptions {
     /// distance the data resolve); parameters held on a bound by the step are left out;
     /// 0: off
     pub within_noise: f64,
+    /// hold a free parameter on its bound whose gradient points out of the box for the
+    /// step, and solve the step over the others (an active set), instead of solving over
+    /// every parameter and clamping: the fit then moves along the bound instead of
+    /// crawling against it
+    pub active_set: bool,
     /// evaluate the normal equations once more at the end for `std` and `cov` (one
     /// Jacobian); off for callers that form their own covariance: `std` and `cov` are then
     /// zero and `ssr` is the final cost (the problem's cost must be `Σ e²`)
@@ -108,6 +114,7 @@ impl Default for LmOptions {
             nuisance: 0,
             lambda0: 1e-3,
             within_noise: 0.0,
+            active_set: false,
             covariance: true,
         }
     }
@@ -210,25 +217,43 @@ pub enum LmError {
 }
 
 /// The cost decrease `gᵀ H⁻¹ g` the Gauss–Newton step (`H = JᵀJ`, `g` the step's right
-/// side) predicts, over the parameters the step does not push against their bound
-/// (`held(j, step_j)`): those are dropped one at a time and the step solved again.
-fn newton_decrement(
-    jtj: &DMatrix<f64>,
-    jte: &DVector<f64>,
-    held: impl Fn(usize, f64) -> bool,
-) -> f64 {
-    let mut keep: Vec<usize> = (0..jtj.nrows()).collect();
+/// side) predicts, over the parameters not `held` that the step does not push against
+/// their bound (`pushed(j, step_j)`): those are dropped one at a time and the step solved
+/// again.
+fn newton_decrement(ne: &Normal, held: &[bool], pushed: impl Fn(usize, f64) -> bool) -> f64 {
+    let mut keep: Vec<usize> = (0..ne.jtj.nrows()).filter(|&j| !held[j]).collect();
     loop {
-        let h = jtj.select_rows(&keep).select_columns(&keep);
-        let g = jte.select_rows(&keep);
+        let h = ne.jtj.select_rows(&keep).select_columns(&keep);
+        let g = ne.jte.select_rows(&keep);
         let step = pinv_sym(&h, 1e-12) * &g;
-        match (0..keep.len()).find(|&a| held(keep[a], step[a])) {
+        match (0..keep.len()).find(|&a| pushed(keep[a], step[a])) {
             Some(a) => {
                 keep.remove(a);
             }
             None => return g.dot(&step),
         }
     }
+}
+
+/// The Levenberg–Marquardt step `(JᵀJ + λ diag) δ = Jᵀe` with the `held` parameters'
+/// components nought, solved over the others: the active set of a projected Newton method
+/// (Bertsekas, *Nonlinear Programming*, 2nd ed., §2.3).
+fn damped_step(ne: &Normal, lambda: f64, diag: &[f64], held: &[bool]) -> DVector<f64> {
+    let keep: Vec<usize> = (0..ne.jtj.nrows()).filter(|&j| !held[j]).collect();
+    let mut a = ne.jtj.select_rows(&keep).select_columns(&keep);
+    let g = ne.jte.select_rows(&keep);
+    for (r, &j) in keep.iter().enumerate() {
+        a[(r, r)] += lambda * diag[j];
+    }
+    let sub = match a.clone().cholesky() {
+        Some(ch) => ch.solve(&g),
+        None => pinv_sym(&a, 1e-14) * &g,
+    };
+    let mut step = DVector::zeros(ne.jtj.nrows());
+    for (r, &j) in keep.iter().enumerate() {
+        step[j] = sub[r];
+    }
+    step
 }
 
 fn clamp(theta: &mut [f64], lower: &[f64], upper: &[f64]) {
@@ -296,29 +321,30 @@ pub fn minimize<P: LeastSquares + ?Sized>(
             break;
         }
         let p = ne.jtj.nrows();
+        // with `active_set`, a free parameter on its bound whose gradient points out of the
+        // box is held for this step: clamping it after the solve would leave the other
+        // components fitted to a move it cannot make
+        let at_bound = |i: usize, dir: f64| {
+            i < n_main
+                && ((dir < 0.0 && lower.get(i).is_some_and(|&l| theta[i] <= l))
+                    || (dir > 0.0 && upper.get(i).is_some_and(|&u| theta[i] >= u)))
+        };
+        let held: Vec<bool> = free
+            .iter()
+            .zip(ne.jte.iter())
+            .map(|(&i, &g)| opts.active_set && at_bound(i, g))
+            .collect();
         if opts.within_noise > 0.0 {
             let dof = (problem.n_residuals() as f64 - p as f64).max(1.0);
-            let held = |j: usize, step: f64| {
-                let i = free[j];
-                i < n_main
-                    && ((step < 0.0 && lower.get(i).is_some_and(|&l| theta[i] <= l))
-                        || (step > 0.0 && upper.get(i).is_some_and(|&u| theta[i] >= u)))
-            };
-            if newton_decrement(&ne.jtj, &ne.jte, held) < opts.within_noise * ne.ssr / dof {
+            let pushed = |j: usize, step: f64| at_bound(free[j], step);
+            if newton_decrement(&ne, &held, pushed) < opts.within_noise * ne.ssr / dof {
                 termination = Termination::WithinNoise;
                 break;
             }
         }
         let diag: Vec<f64> = (0..p).map(|i| ne.jtj[(i, i)].max(1e-300)).collect();
         loop {
-            let mut a = ne.jtj.clone();
-            for i in 0..p {
-                a[(i, i)] += lambda * diag[i];
-            }
-            let step = match a.clone().cholesky() {
-                Some(ch) => ch.solve(&ne.jte),
-                None => pinv_sym(&a, 1e-14) * &ne.jte,
-            };
+            let step = damped_step(&ne, lambda, &diag, &held);
             let mut cand = theta.clone();
             for (j, &i) in free.iter().enumerate() {
                 cand[i] += step[j];
@@ -496,10 +522,45 @@ mod tests {
         };
         let at = minimize(&p, &[2.5, 3.0], &held).unwrap().theta;
         let ne = p.normal_equations(&at, &[0, 1]);
-        let pushed = newton_decrement(&ne.jtj, &ne.jte, |j, step| j == 0 && step > 0.0);
-        let free = newton_decrement(&ne.jtj, &ne.jte, |_, _| false);
+        let none = [false, false];
+        let pushed = newton_decrement(&ne, &none, |j, step| j == 0 && step > 0.0);
+        let free = newton_decrement(&ne, &none, |_, _| false);
         assert!(pushed < 1e-6 * full.sigma2, "{pushed}");
         assert!(free > 100.0 * full.sigma2, "{free}");
+    }
+
+    /// A parameter held on its bound by the data costs no more iterations than the same
+    /// parameter fixed there: the step is solved without it, not solved with it and then
+    /// clamped, which leaves the other parameters fitted to a move the bound forbids.
+    #[test]
+    fn a_parameter_on_its_bound_is_left_out_of_the_step() {
+        let p = exponential(3.0, 0.7, &[0.0; 40]);
+        let bounded = LmOptions {
+            upper: vec![2.0, f64::INFINITY],
+            rel_cost_tol: 1e-12,
+            max_iter: 200,
+            active_set: true,
+            ..LmOptions::default()
+        };
+        let fixed = LmOptions {
+            fixed: vec![true, false],
+            ..bounded.clone()
+        };
+        let b = minimize(&p, &[2.0, 3.0], &bounded).unwrap();
+        let f = minimize(&p, &[2.0, 3.0], &fixed).unwrap();
+        assert_eq!(b.theta[0], 2.0);
+        assert!(
+            (b.theta[1] - f.theta[1]).abs() < 1e-6,
+            "{:?} {:?}",
+            b.theta,
+            f.theta
+        );
+        assert!(
+            b.iterations <= f.iterations + 1,
+            "{} iterations on the bound, {} fixed",
+            b.iterations,
+            f.iterations
+        );
     }
 
     #[test]

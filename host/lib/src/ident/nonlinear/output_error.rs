@@ -178,6 +178,8 @@ pub struct NlOptions {
     /// cut-off of the prefilter's fourth-order Butterworth low-pass, the top of the excited
     /// band (module documentation, band limit) [Hz]; 0: none
     pub lowpass_hz: f64,
+    /// the optimiser's active set ([`LmOptions::active_set`])
+    pub active_set: bool,
 }
 
 /// The default [`NlOptions::within_noise`]: a Gauss–Newton step worth less than a hundredth
@@ -230,6 +232,7 @@ impl Default for NlOptions {
             rel_cost_tol: LmOptions::default().rel_cost_tol,
             within_noise: WITHIN_NOISE,
             lowpass_hz: 0.0,
+            active_set: false,
         }
     }
 }
@@ -961,6 +964,7 @@ pub fn fit_output_error_segments(
         covariance: false,
         rel_cost_tol: opts.rel_cost_tol,
         within_noise: opts.within_noise,
+        active_set: opts.active_set,
         ..LmOptions::default()
     };
     let res = lm::minimize(&problem, &z0, &lm_opts)?;
