@@ -114,6 +114,7 @@ pub(super) fn rescore(
             |_| "done".to_string(),
         );
     }
+    judge_against_loop_answer(&l, answer, (one, measured), &judge, o);
     warnings.push(l.words.clone());
     // the answer's own doubts, which no open-loop check covers here (bench case 61: an
     // arm spring the loop's refinement leaves undetermined)
@@ -129,6 +130,41 @@ pub(super) fn rescore(
         warnings.extend(c.warnings.iter().map(|w| format!("{}: {w}", c.name)));
     }
     Some(l)
+}
+
+/// Every other fitted model's gain over the loop's answer `l.best`, scored in the loop on
+/// `val` by the same test ([`Candidate::over_answer`]): what a candidate adds to the
+/// answer where the answer was chosen. `None` for the answer and for a model that does not
+/// simulate in the loop.
+fn judge_against_loop_answer(
+    l: &in_loop::InLoop,
+    answer: &mut Answer,
+    (val, measured): (&Dataset, &Measured),
+    judge: in_loop::Judge<'_>,
+    o: &DiagnoseOptions,
+) {
+    let pair = answer.pair.as_mut().zip(answer.pair_fitted.as_ref());
+    let rows = answer
+        .singles
+        .iter_mut()
+        .filter_map(|(c, f)| f.as_ref().map(|f| (c, f)))
+        .chain(pair);
+    for (c, f) in rows {
+        c.over_answer = (c.name != l.best)
+            .then(|| {
+                l.scores.score(
+                    measured,
+                    &DrivenModel::of_fit(&f.fit),
+                    val,
+                    (o.segments, o.settle_periods),
+                )
+            })
+            .and_then(Result::ok)
+            .map(|(cs, _)| {
+                let (mean, se, _) = judge(&cs.segments, &l.best_segments);
+                (mean, se)
+            });
+    }
 }
 
 /// The loop's answer (the pair when there is one, else the best single) refined in the loop

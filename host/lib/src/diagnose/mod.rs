@@ -388,8 +388,8 @@ pub struct Candidate {
     /// passes the significance test (module documentation)
     pub significant: bool,
     /// mean and standard error of the gain of the gap metric over the answer's model
-    /// (negative: below it) [FIT points]; `None` for the answer itself, with no answer, a
-    /// failed fit, or when the answer was scored in the controller's loop
+    /// (negative: below it) [FIT points], in the controller's loop when the answer was
+    /// scored there; `None` for the answer itself, with no answer, or a failed fit
     #[serde(skip_serializing_if = "Option::is_none")]
     pub over_answer: Option<(f64, f64)>,
     /// the effects' fitted parameters, `effect.key` for pairs

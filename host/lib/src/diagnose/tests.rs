@@ -525,6 +525,22 @@ fn named_in_the_loop(
         "{}; the true model {true_fit:.2} % in the loop",
         d.verdict
     );
+    // every other candidate's gain over the answer is read in the same loop, and none
+    // passes the significance test against it
+    let others: Vec<_> = d.effects[1..]
+        .iter()
+        .filter(|c| c.score.is_finite())
+        .collect();
+    assert!(d.effects[0].over_answer.is_none());
+    for c in others {
+        let (mean, se) = c.over_answer.expect("a gain over the answer in the loop");
+        assert!(
+            mean - 2.0 * se <= DiagnoseOptions::default().min_gain,
+            "{} {mean:+.1} ± {se:.1} over the answer {}",
+            c.name,
+            d.best
+        );
+    }
     // the refined answer's doubts reach the notes
     for w in &d.effects[0].warnings {
         assert!(
