@@ -143,13 +143,7 @@ fn judge_against_loop_answer(
     judge: in_loop::Judge<'_>,
     o: &DiagnoseOptions,
 ) {
-    let pair = answer.pair.as_mut().zip(answer.pair_fitted.as_ref());
-    let rows = answer
-        .singles
-        .iter_mut()
-        .filter_map(|(c, f)| f.as_ref().map(|f| (c, f)))
-        .chain(pair);
-    for (c, f) in rows {
+    for (c, f) in answer.fitted_mut() {
         c.over_answer = (c.name != l.best)
             .then(|| {
                 l.scores.score(

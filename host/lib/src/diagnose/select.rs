@@ -57,16 +57,19 @@ impl Answer {
         else {
             return;
         };
-        let pair = self.pair.as_mut().zip(self.pair_fitted.as_ref());
-        let rows = self
-            .singles
-            .iter_mut()
-            .filter_map(|(c, f)| f.as_ref().map(|f| (c, f)))
-            .chain(pair);
-        for (c, f) in rows.filter(|(c, _)| c.name != name) {
+        for (c, f) in self.fitted_mut().filter(|(c, _)| c.name != name) {
             let (mean, se, _) = fitter.judge(&f.scored.segments, &base);
             c.over_answer = Some((mean, se));
         }
+    }
+
+    /// Every fitted model's candidate with its fit: the singles', then the pair's.
+    pub fn fitted_mut(&mut self) -> impl Iterator<Item = (&mut Candidate, &Fitted)> {
+        let pair = self.pair.as_mut().zip(self.pair_fitted.as_ref());
+        self.singles
+            .iter_mut()
+            .filter_map(|(c, f)| f.as_ref().map(|f| (c, f)))
+            .chain(pair)
     }
 
     fn sort(&mut self) {
