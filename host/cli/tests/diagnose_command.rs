@@ -448,6 +448,12 @@ fn diagnose_report_renders_in_headless_chromium_with_the_verdict_and_every_figur
     }
     assert!(at("id=\"candidates\"") > v);
     assert!(dom.contains("nonlinear_stiffness") && dom.contains("k3 ="));
+    // the runner-up's gain over the answer, beside its gain over the nominal
+    let table = &dom[at("id=\"candidates\"")..];
+    assert!(table.contains("over the answer ± SE"), "{table:.400}");
+    let second = &table[table.find("<tr><td>2</td>").expect("a second candidate")..];
+    let cells: Vec<&str> = second.split("<td>").skip(1).take(5).collect();
+    assert!(cells[4].contains(" ± "), "{cells:?}");
 
     let png = dir.join("report.png");
     let (_, log) = headless(&dir, &report, &format!("--screenshot={}", png.display()));
