@@ -148,8 +148,8 @@ pub struct DiagnoseOptions {
     /// options of every nonlinear fit; the diagnosis's default holds a parameter the data
     /// push against its bound out of the step ([`NlOptions::active_set`]): its fits sit on
     /// bounds often (a friction or a lag at nought, a range's edge), and clamped steps
-    /// crawled there (a Coulomb diagnosis: 1,358 iterations, 50.9 s of CPU; held, 546 and
-    /// 22.4 s)
+    /// crawled there (a Coulomb diagnosis of three 24,000-row captures: 50.1 s of CPU;
+    /// held, 25.5 s, the same answer)
     pub nl: NlOptions,
 }
 
