@@ -954,3 +954,38 @@ fn the_band_limit_leaves_a_noise_free_fit_at_the_truth_and_holds_under_an_in_ban
     let (errs, _) = closed_loop_fit(real, true);
     assert!(errs.iter().all(|e| e.abs() < 2.0), "{errs:?}");
 }
+
+/// No fit may run an effect's parameter beyond what the simulator accepts: the scoring
+/// would refuse the fitted model (a `k3` of −1.9e16 N·m/rad³ failed a diagnosis's
+/// candidate). The ripple's phase is periodic and left free.
+#[test]
+fn every_effect_parameter_stays_within_what_the_simulator_accepts() {
+    let model = NlModel {
+        structure: Structure::ThreeMass,
+        r: 1.0 / 118.0,
+        effects: Effect::all_defaults(),
+        tau_c: 5e-4,
+        v_eps: 0.05,
+        dz_eps: 1e-7,
+        substeps: 1,
+    };
+    let mut checked = 0;
+    for d in model.layout() {
+        let Owner::Effect(i) = d.owner else { continue };
+        let Some(&(_, lo, hi, _)) = model.effects[i].bounds().iter().find(|b| b.0 == d.name) else {
+            continue;
+        };
+        if d.name == "phase" {
+            continue;
+        }
+        assert!(
+            d.lower >= lo && d.upper <= hi,
+            "{}: [{}, {}] beyond [{lo}, {hi}]",
+            d.name,
+            d.lower,
+            d.upper
+        );
+        checked += 1;
+    }
+    assert!(checked >= 6, "only {checked} parameters checked");
+}
