@@ -22,11 +22,34 @@ use super::{progress, CandidateError, DiagnoseRequest, SENSITIVE};
 /// (`None`: the candidate's own start).
 pub(super) type Job<'f> = (Vec<Effect>, Option<&'f NlFit>);
 
-/// What every stage fits and judges with: the request, the checked records and the starts.
+/// What every stage fits and judges with: the request, the checked records, the starts and
+/// the significance test's floor.
 pub(super) struct Fitter<'a> {
     pub req: &'a DiagnoseRequest,
     pub rec: &'a Records<'a>,
     pub starts: &'a LinearStarts,
+    pub floor: Floor,
+}
+
+/// The smallest gain [FIT points] the significance test counts: the option's
+/// [`super::DiagnoseOptions::min_gain`], or the spread of the nominal's own refits when that
+/// is larger ([`super::nominal::refit_spread`]).
+#[derive(Clone, Debug, PartialEq)]
+pub(super) struct Floor {
+    /// the floor [FIT points]
+    pub gain: f64,
+    /// why it is above the option's, in words
+    pub why: Option<String>,
+}
+
+impl Floor {
+    /// The option's floor alone.
+    pub fn of(req: &DiagnoseRequest) -> Floor {
+        Floor {
+            gain: req.options.min_gain,
+            why: None,
+        }
+    }
 }
 
 impl Fitter<'_> {
@@ -70,11 +93,11 @@ impl Fitter<'_> {
     }
 
     /// The significance test: the gain `(mean, SE)` [FIT points] of the segment-wise metric
-    /// `seg` over the model it extends, `base`, and whether `mean − 2·SE` exceeds
-    /// [`super::DiagnoseOptions::min_gain`].
+    /// `seg` over the model it extends, `base`, and whether `mean − 2·SE` exceeds the floor
+    /// ([`Floor`]).
     pub fn judge(&self, seg: &[f64], base: &[f64]) -> (f64, f64, bool) {
         let (m, se) = segment_gain(seg, base);
-        (m, se, m - 2.0 * se > self.req.options.min_gain)
+        (m, se, m - 2.0 * se > self.floor.gain)
     }
 
     /// The answer's fit `f` continued ([`Fitter::continued`]), kept when its validation FIT
@@ -244,9 +267,13 @@ pub(super) fn fit_and_score(
         } else {
             nl.start = NlStart::Values(model_of(&nl, longest).values(&plant, g.offset, 0.0));
         }
-    } else if let (true, Some(i), Some((plant, mode, tau_c))) =
-        (with_coulomb, extra_at, &starts.coulomb_extra_mode)
-    {
+    } else if let (Some(i), Some((plant, mode, tau_c))) = (
+        extra_at.filter(|_| with_coulomb),
+        // asked only here: the start is fitted on its first call
+        extra_at
+            .filter(|_| with_coulomb)
+            .and_then(|_| starts.coulomb_extra_mode.get()),
+    ) {
         // Coulomb friction with an extra mode: the structure and the mode from the
         // friction-compensated FRF of the structure with one more mass, the friction's
         // level as given (a pair's: its single's fitted level)

@@ -854,6 +854,7 @@ pub fn without_effect(fit: &NlFit, index: usize) -> NlFit {
                 unit: d.unit,
                 fixed: old.is_some_and(|p| p.fixed),
                 at_bound: old.is_some_and(|p| p.at_bound),
+                at_lower: old.is_some_and(|p| p.at_lower),
             }
         })
         .collect::<Vec<NlParam>>();

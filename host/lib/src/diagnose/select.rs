@@ -146,7 +146,7 @@ pub(super) fn singles(
     ev: &Evidence,
     results: Vec<Result<Fitted, CandidateError>>,
 ) -> Answer {
-    let min_gain = fitter.req.options.min_gain;
+    let min_gain = fitter.floor.gain;
     let mut singles: Vec<(Candidate, Option<Fitted>)> = Vec::new();
     for (effect, r) in fitter.rec.candidates.iter().zip(results) {
         let c = match r {
@@ -201,7 +201,7 @@ fn pair_jobs<'s>(
     fitter: &Fitter<'_>,
     singles: &'s [(Candidate, Option<Fitted>)],
 ) -> (Vec<Job<'s>>, Vec<&'s Fitted>) {
-    let (candidates, min_gain) = (&fitter.rec.candidates, fitter.req.options.min_gain);
+    let (candidates, min_gain) = (&fitter.rec.candidates, fitter.floor.gain);
     let mut jobs: Vec<Job<'s>> = Vec::new();
     let mut led_by: Vec<&Fitted> = Vec::new();
     let Some((top, Some(_))) = singles.first().filter(|c| c.0.significant) else {

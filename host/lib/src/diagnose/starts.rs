@@ -3,8 +3,11 @@
 //! Coulomb friction), and where the motor sticks, the structure grown in the time domain
 //! ([`grow`]), since the FRF is then the friction's and not the structure's.
 
+use std::sync::OnceLock;
+
 use crate::data::Dataset;
 use crate::ident::nonlinear::{grow, linear_start_segments, NlRequest};
+use crate::ident::parallel::parallel;
 use crate::model::effects::{Attach, Effect, ExtraMode};
 use crate::model::spec::Structure;
 
@@ -32,36 +35,67 @@ pub(super) fn linear_starts(
         req.progress.as_ref(),
         "the linear starts (FRF and frequency-domain fits)",
     );
-    let (coulomb_start, level) = match coulomb {
-        Some(c) => coulomb_linear_of(est0, req, c),
-        None => (None, None),
-    };
+    // the independent frequency-domain fits on the threads, the slowest (one more mass)
+    // first; each is a pure function of the record, so the starts are the same on any
+    // number of threads
+    let backlash = rec
+        .candidates
+        .iter()
+        .any(|e| matches!(e, Effect::Backlash(_)))
+        && matches!(req.structure, Structure::TwoMass | Structure::ThreeMass);
+    let mut jobs = Vec::new();
+    if let Some(a) = extra {
+        jobs.push(StartJob::ExtraMode(a));
+    }
+    if let Some(c) = coulomb {
+        jobs.push(StartJob::Coulomb(c));
+    }
+    jobs.push(StartJob::Structure);
+    if backlash {
+        jobs.push(StartJob::TwoMass);
+    }
+    let done = parallel(&jobs, o.threads, |j| match *j {
+        StartJob::ExtraMode(a) => {
+            StartDone::ExtraMode(extra_mode_start(est0, req.structure, req.r, a, None))
+        }
+        StartJob::Coulomb(c) => StartDone::Coulomb(coulomb_linear_of(est0, req, c)),
+        StartJob::Structure => {
+            let mut said = Vec::new();
+            StartDone::Structure(linear_of(est0, req, &mut said), said)
+        }
+        StartJob::TwoMass => StartDone::TwoMass(
+            linear_start_segments(
+                est0,
+                1,
+                &NlRequest::new(Structure::TwoMass, req.r, Vec::new()),
+            )
+            .ok()
+            .map(|l| (l.values, l.tau_c)),
+        ),
+    });
     let mut starts = LinearStarts {
-        structure: linear_of(est0, req, warnings),
-        extra_mode: extra.and_then(|a| extra_mode_start(est0, req.structure, req.r, a, None)),
-        coulomb: coulomb_start,
+        structure: None,
+        extra_mode: None,
+        coulomb: None,
+        // fitted only when a pair of the friction and the mode asks for it
         coulomb_extra_mode: match (coulomb, extra) {
-            (Some(c), Some(a)) if o.pairs => {
-                extra_mode_start(est0, req.structure, req.r, a, Some(c))
-            }
-            _ => None,
+            (Some(c), Some(a)) if o.pairs => LazyStart::of(est0, req, a, c),
+            _ => LazyStart::none(),
         },
         grown: None,
         two_mass: None,
     };
-    if rec
-        .candidates
-        .iter()
-        .any(|e| matches!(e, Effect::Backlash(_)))
-        && matches!(req.structure, Structure::TwoMass | Structure::ThreeMass)
-    {
-        starts.two_mass = linear_start_segments(
-            est0,
-            1,
-            &NlRequest::new(Structure::TwoMass, req.r, Vec::new()),
-        )
-        .ok()
-        .map(|l| (l.values, l.tau_c));
+    let mut level = None;
+    for d in done {
+        match d {
+            StartDone::ExtraMode(x) => starts.extra_mode = x,
+            StartDone::Coulomb((c, l)) => (starts.coulomb, level) = (c, l),
+            StartDone::Structure(x, said) => {
+                starts.structure = x;
+                warnings.extend(said);
+            }
+            StartDone::TwoMass(x) => starts.two_mass = x,
+        }
     }
     // stick-slip: the Coulomb candidates start from the structure grown in the time domain
     let Some(level) = level else {
@@ -111,6 +145,60 @@ pub(super) fn linear_starts(
     starts
 }
 
+/// One frequency-domain fit of [`linear_starts`].
+enum StartJob {
+    ExtraMode(Attach),
+    Coulomb(Effect),
+    Structure,
+    TwoMass,
+}
+
+/// What a [`StartJob`] gave.
+#[allow(clippy::type_complexity)]
+enum StartDone {
+    ExtraMode(Option<(Vec<f64>, ExtraMode, f64)>),
+    Coulomb((Option<(Vec<f64>, f64)>, Option<f64>)),
+    Structure(Option<(Vec<f64>, f64)>, Vec<String>),
+    TwoMass(Option<(Vec<f64>, f64)>),
+}
+
+/// The start of a pair of Coulomb friction and an extra mode ([`extra_mode_start`] on the
+/// friction-compensated FRF), fitted the first time a pair asks for it: one more mass with
+/// the compensation is the slowest of the frequency-domain fits (a three-mass joint's
+/// four-mass fit, bench hard case 13: 18 of the diagnosis's 50 s of CPU), and most
+/// diagnoses never try that pair.
+pub(super) struct LazyStart {
+    /// the estimation capture's segments, the structure, the ratio, where the mode sits and
+    /// the friction; `None`: no such start
+    args: Option<(Vec<Dataset>, Structure, f64, Attach, Effect)>,
+    cell: OnceLock<Option<(Vec<f64>, ExtraMode, f64)>>,
+}
+
+impl LazyStart {
+    /// No start.
+    pub fn none() -> LazyStart {
+        LazyStart {
+            args: None,
+            cell: OnceLock::new(),
+        }
+    }
+
+    fn of(ds: &[Dataset], req: &DiagnoseRequest, a: Attach, c: Effect) -> LazyStart {
+        LazyStart {
+            args: Some((ds.to_vec(), req.structure, req.r, a, c)),
+            cell: OnceLock::new(),
+        }
+    }
+
+    /// The start: the structure's values, the mode and the lag [s]; fitted on the first call.
+    pub fn get(&self) -> Option<&(Vec<f64>, ExtraMode, f64)> {
+        let (ds, structure, r, a, c) = self.args.as_ref()?;
+        self.cell
+            .get_or_init(|| extra_mode_start(ds, *structure, *r, *a, Some(*c)))
+            .as_ref()
+    }
+}
+
 /// The linear starts the candidate fits take from the frequency-domain fits.
 pub(super) struct LinearStarts {
     /// the structure's values and current-loop lag [s]
@@ -124,7 +212,7 @@ pub(super) struct LinearStarts {
     pub coulomb: Option<(Vec<f64>, f64)>,
     /// as `extra_mode`, from the friction-compensated FRF, for pairs of Coulomb friction and
     /// an extra mode
-    pub coulomb_extra_mode: Option<(Vec<f64>, ExtraMode, f64)>,
+    pub coulomb_extra_mode: LazyStart,
     /// when the motor sticks, the start grown in the time domain ([`grow`]), which every
     /// candidate with Coulomb friction takes instead of the above
     pub grown: Option<grow::Grown>,

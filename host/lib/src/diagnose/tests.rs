@@ -5,8 +5,8 @@
 
 use super::fits::fit_and_score;
 use super::metric::Measured;
-use super::starts::{linear_of, LinearStarts};
-use super::table::vanished_effects;
+use super::starts::{linear_of, LazyStart, LinearStarts};
+use super::table::{exactly_of_no_size, vanished_effects};
 use super::*;
 use crate::ident::nonlinear::NlFit;
 use crate::model::effects::{ExtraMode, NonlinearStiffness, TimeDelay};
@@ -964,7 +964,7 @@ fn a_start_that_does_not_simulate_gives_way_to_the_automatic_start() {
         structure,
         extra_mode: Some((plant, unstable, lag)),
         coulomb: None,
-        coulomb_extra_mode: None,
+        coulomb_extra_mode: LazyStart::none(),
         grown: None,
         two_mass: None,
     };
@@ -988,8 +988,9 @@ fn a_start_that_does_not_simulate_gives_way_to_the_automatic_start() {
     );
 }
 
-/// An effect fitted within its σ of no size is not an effect (a delay of exactly 0 samples
-/// named a significant `time_delay` on a joint with none); one clearly above it is; a
+/// An effect fitted within 2σ of no size, or on its lower bound, is not an effect (a delay
+/// of exactly 0 samples named a significant `time_delay` on a joint with none); one clearly
+/// above it is; a
 /// Stribeck friction has a size when either of its levels is clear of nought.
 #[test]
 fn an_effect_fitted_to_no_size_is_never_significant() {
@@ -1003,6 +1004,7 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
         unit: "",
         fixed: false,
         at_bound: false,
+        at_lower: false,
     };
     let with = |effect: Effect, params: Vec<NlParam>| NlFit {
         model: NlModel {
@@ -1032,7 +1034,16 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
     };
     assert_eq!(vanished_effects(&fit(0.0, f64::NAN)).len(), 1);
     assert_eq!(vanished_effects(&fit(0.02, 0.05)).len(), 1);
+    assert_eq!(vanished_effects(&fit(0.08, 0.05)).len(), 1);
     assert!(vanished_effects(&fit(1.5, 0.05)).is_empty());
+    let mut on_bound = fit(2e-7, 2e-13);
+    on_bound.params[0].at_lower = true;
+    assert_eq!(vanished_effects(&on_bound).len(), 1);
+    // the nominal refitted is only a fit whose effect is exactly of no size: a delay whose
+    // deviation the current-loop lag spreads is within it of nought, but has a size
+    assert!(exactly_of_no_size(&on_bound) && exactly_of_no_size(&fit(0.0, 1e-3)));
+    assert_eq!(vanished_effects(&fit(3.49, 108.0)).len(), 1);
+    assert!(!exactly_of_no_size(&fit(3.49, 108.0)));
     let friction = |fc: (f64, f64), fs: (f64, f64)| {
         with(
             candidate("coulomb_friction").expect("a candidate"),

@@ -7,7 +7,7 @@ use std::time::Instant;
 use crate::model::params::model_params;
 
 use super::evidence::Evidence;
-use super::fits::{Fitted, Fitter};
+use super::fits::{Fitted, Fitter, Floor};
 use super::in_loop::InLoop;
 use super::metric::{self, score_segments, DrivenModel};
 use super::select::Answer;
@@ -156,7 +156,7 @@ pub(super) fn conclude(
         effects: singles.into_iter().map(|c| c.0).collect(),
         location: ev.location,
         parameter_mismatch,
-        test: test_words(rec.parts.len(), o),
+        test: test_words(rec.parts.len(), o, &fitter.floor),
         validation_segments,
         seconds: t0.elapsed().as_secs_f64(),
         warnings,
@@ -164,24 +164,30 @@ pub(super) fn conclude(
     (diagnosis, series)
 }
 
-/// The significance test in words, for `parts` validation segments.
-fn test_words(parts: usize, o: &super::DiagnoseOptions) -> String {
-    if parts == 1 {
+/// The significance test in words, for `parts` validation segments, with its floor.
+fn test_words(parts: usize, o: &super::DiagnoseOptions, floor: &Floor) -> String {
+    let floor_words = match &floor.why {
+        Some(why) => format!("{:.3} FIT point ({why})", floor.gain),
+        None => format!("{} FIT point", floor.gain),
+    };
+    let test = if parts == 1 {
         format!(
             "the validation record (after {:.2} s) is split into {} equal segments; the gain \
-             of the metric over the nominal is computed on each; score = mean gain; \
-             significant when mean − 2·(standard error over the segments) > {} FIT point",
-            o.skip_s, o.segments, o.min_gain
+             of the metric over the model extended (a single's nominal, a pair's lead) is \
+             computed on each; score = mean gain; significant when mean − 2·(standard error \
+             over the segments) > {floor_words}",
+            o.skip_s, o.segments
         )
     } else {
         format!(
             "the validation capture's {parts} gap-free segments, each scored after {:.2} s, are \
-             joined and split into {} equal parts; the gain of the metric over the nominal is \
-             computed on each; score = mean gain; significant when mean − 2·(standard error \
-             over the parts) > {} FIT point",
-            o.skip_s, o.segments, o.min_gain
+             joined and split into {} equal parts; the gain of the metric over the model \
+             extended (a single's nominal, a pair's lead) is computed on each; score = mean \
+             gain; significant when mean − 2·(standard error over the parts) > {floor_words}",
+            o.skip_s, o.segments
         )
-    }
+    };
+    format!("{test}; an effect whose size comes out on its lower bound or within two standard deviations of nought is not an effect")
 }
 
 /// The user's simulation against the nominal: its FIT, and the gap split into the
@@ -247,7 +253,7 @@ fn verdict(
     looped: bool,
     warnings: &mut Vec<String>,
 ) -> String {
-    let (req, o) = (fitter.req, &fitter.req.options);
+    let req = fitter.req;
     let (best, nom_fit, best_fit) = (&f.best, f.nom_fit, f.best_fit);
     let gap = 100.0 - nom_fit;
     let closed = if gap > 0.0 {
@@ -264,10 +270,10 @@ fn verdict(
         format!(
             "no candidate effect closes a significant part of the gap: the nominal {} reaches \
              {nom_fit:.1} % (band-passed motor-velocity FIT on the validation \
-             data{in_loop_words}) and no effect gains more than {} FIT point beyond twice its \
-             standard error",
+             data{in_loop_words}) and no effect gains more than {:.2} FIT point beyond twice \
+             its standard error",
             req.structure.label(),
-            o.min_gain
+            fitter.floor.gain
         )
     } else {
         format!(

@@ -561,6 +561,7 @@ impl SavedModel {
                     unit: d.unit,
                     fixed: false,
                     at_bound: false,
+                    at_lower: false,
                 }
             })
             .collect();
@@ -621,6 +622,7 @@ mod tests {
                 unit: d.unit,
                 fixed: false,
                 at_bound: false,
+                at_lower: false,
             })
             .collect();
         NlFit {

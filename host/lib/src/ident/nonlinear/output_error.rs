@@ -268,6 +268,8 @@ pub struct NlParam {
     pub fixed: bool,
     /// on or next to one of its bounds
     pub at_bound: bool,
+    /// on or next to its lower bound (an effect's size there is of no size)
+    pub at_lower: bool,
 }
 
 /// Result of [`fit_output_error`].
@@ -1037,9 +1039,12 @@ pub fn fit_output_error_segments(
             }
             None => 0.0,
         };
-        let at_bound = !fixed[i]
-            && ((lower[i].is_finite() && z[i] - lower[i] < 1e-6 * (1.0 + lower[i].abs()))
-                || (upper[i].is_finite() && upper[i] - z[i] < 1e-6 * (1.0 + upper[i].abs())));
+        let at_lower =
+            !fixed[i] && lower[i].is_finite() && z[i] - lower[i] < 1e-6 * (1.0 + lower[i].abs());
+        let at_bound = at_lower
+            || (!fixed[i]
+                && upper[i].is_finite()
+                && upper[i] - z[i] < 1e-6 * (1.0 + upper[i].abs()));
         params.push(NlParam {
             name: d.name,
             owner: d.owner,
@@ -1048,6 +1053,7 @@ pub fn fit_output_error_segments(
             unit: d.unit,
             fixed: fixed[i],
             at_bound,
+            at_lower,
         });
     }
     let mut correlated = Vec::new();
