@@ -231,6 +231,10 @@ fn request(r: f64) -> DiagnoseRequest {
     };
     // `LOWPASS=0`: the fits' residuals not low-passed at the excited band's top
     req.options.band_limited = !std::env::var("LOWPASS").is_ok_and(|v| v == "0");
+    // `MIN_GAIN=g`: the significance floor [FIT points] in place of the default's
+    if let Some(g) = std::env::var("MIN_GAIN").ok().and_then(|v| v.parse().ok()) {
+        req.options.min_gain = g;
+    }
     req
 }
 
@@ -395,9 +399,10 @@ fn battery() {
                     .map(|(k, v)| format!("{k} {:.4e}±{:.1e}", v.value, v.std))
                     .collect();
                 println!(
-                    "    {} {:+.1}: {} warnings {:?}",
+                    "    {} {:+.3}±{:.3}: {} warnings {:?}",
                     c.name,
                     c.score,
+                    c.score_se,
                     p.join(", "),
                     c.warnings
                 );
