@@ -2,8 +2,10 @@
 # The Python package's tests (part of the README's test command): builds the abi3 wheel
 # with maturin, installs it into a fresh virtual environment under the target directory,
 # runs pytest (python/tests: the package against the simulated truth and against the
-# release `jointid` binary's --json output) and python/examples/quickstart.py.
-# Needs python3 (≥ 3.9) with venv and pip, and PyPI for maturin, pytest, numpy, pandas.
+# release `jointid` binary's --json output; the fleet on the local engine and on a local Ray
+# instance) and python/examples/quickstart.py.
+# Needs python3 (≥ 3.9) with venv and pip, and PyPI for maturin, pytest, numpy, pandas, and
+# the fleet's pyarrow, duckdb and ray.
 set -euo pipefail
 cd "$(dirname "$0")"
 root="$(cd .. && pwd)"
@@ -22,7 +24,7 @@ rm -rf "$work"
 mkdir -p "$work"
 "$python" -m venv "$work/venv"
 "$work/venv/bin/pip" install --quiet --upgrade pip
-"$work/venv/bin/pip" install --quiet maturin pytest numpy pandas
+"$work/venv/bin/pip" install --quiet maturin pytest numpy pandas pyarrow duckdb ray
 
 echo "== python: abi3 wheel (maturin build --release)"
 start=$(date +%s)
