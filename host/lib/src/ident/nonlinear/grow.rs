@@ -67,6 +67,7 @@ use super::model::has_bump;
 use super::{identify_segments, NlFit, NlOptions, NlRequest, NlRunError};
 use crate::data::IdData;
 use crate::ident::grey_box;
+use crate::ident::parallel::{machine_threads, parallel};
 use crate::model::effects::{Attach, CoulombFriction, Effect, ExtraMode};
 use crate::model::spec::Structure;
 
@@ -699,10 +700,12 @@ pub fn fit_with_mode(
     if starts.is_empty() {
         return fit(req);
     }
+    // the screening fits are independent: on the machine's threads, judged in their order
+    // (the same choice on any number of threads)
     let mut kept: Option<NlFit> = None;
     let mut last = None;
-    for r in &starts {
-        match fit(r) {
+    for r in parallel(&starts, machine_threads(), &fit) {
+        match r {
             Ok(f) if kept.as_ref().is_none_or(|k| f.ssr < k.ssr) => kept = Some(f),
             Ok(_) => {}
             Err(e) => last = Some(e),
@@ -839,23 +842,24 @@ fn race_mode(
     let base = super::model_of(req, data);
     let dg = req.structure.param_names().iter().position(|n| *n == "d_g");
     let fit = |r: &NlRequest, on: &[IdData]| identify_segments(on, r).ok().map(|r| r.fit);
-    let mut lead: Option<NlFit> = None;
-    for f_hz in mode_frequencies() {
+    // each frequency's screening and short fit on the machine's threads, judged in the
+    // frequencies' order (the same lead on any number of threads)
+    let frequencies: Vec<f64> = mode_frequencies().collect();
+    let raced = parallel(&frequencies, machine_threads(), |&f_hz| {
         let points = DAMPER_SHARES
             .iter()
             .flat_map(|&d| MODE_SHARES.iter().map(move |&s| (d, s, f_hz)));
-        let best = best_point(&piece[0], &base, at, (plant, dg, offset), mode, points);
-        let Some((_, p, m)) = best else {
-            continue;
-        };
+        let (_, p, m) = best_point(&piece[0], &base, at, (plant, dg, offset), mode, points)?;
         let mut r = req.clone();
         r.effects[at] = Effect::ExtraMode(m);
         r.start = super::NlStart::Values(super::model_of(&r, data).values(&p, offset, 0.0));
         r.options.max_iter = RACE_ITER;
-        if let Some(f) = fit(&r, &piece) {
-            if lead.as_ref().is_none_or(|l| f.ssr < l.ssr) {
-                lead = Some(f);
-            }
+        fit(&r, &piece)
+    });
+    let mut lead: Option<NlFit> = None;
+    for f in raced.into_iter().flatten() {
+        if lead.as_ref().is_none_or(|l| f.ssr < l.ssr) {
+            lead = Some(f);
         }
     }
     let lead = lead?;
