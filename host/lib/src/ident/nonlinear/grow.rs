@@ -704,7 +704,7 @@ pub fn fit_with_mode(
     // (the same choice on any number of threads)
     let mut kept: Option<NlFit> = None;
     let mut last = None;
-    for r in parallel(&starts, machine_threads(), &fit) {
+    for r in parallel(&starts, machine_threads(), fit) {
         match r {
             Ok(f) if kept.as_ref().is_none_or(|k| f.ssr < k.ssr) => kept = Some(f),
             Ok(_) => {}
