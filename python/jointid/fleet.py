@@ -34,7 +34,7 @@ import os
 import shutil
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator
@@ -414,8 +414,6 @@ def _execute(jobs, diagnose, engine, ray_address, workers) -> Iterator[dict]:
         # a script that runs the fleet needs no `if __name__ == "__main__"` guard
         with ProcessPoolExecutor(max_workers=n) as pool:
             futures = [pool.submit(process, j, diagnose) for j in jobs]
-            from concurrent.futures import as_completed
-
             for f in as_completed(futures):
                 yield f.result()
         return

@@ -220,6 +220,13 @@ pub(super) fn fit_and_score(
         .effects
         .iter()
         .position(|e| matches!(e, Effect::CoulombFriction(_)));
+    // the friction-compensated start with one more mass, fitted on its first call: asked
+    // only when the job holds both effects and the motor does not stick
+    let coulomb_mode = || {
+        extra_at
+            .filter(|_| with_coulomb)
+            .and_then(|i| starts.coulomb_extra_mode.get().map(|s| (i, s)))
+    };
     if let (Some(ci), Some(g)) = (coulomb_at, &starts.grown) {
         // the motor sticks: the structure grown in the time domain ([`grow`]); with an
         // extra mode, the mode from the start's grid on it and the friction as given (a
@@ -267,13 +274,7 @@ pub(super) fn fit_and_score(
         } else {
             nl.start = NlStart::Values(model_of(&nl, longest).values(&plant, g.offset, 0.0));
         }
-    } else if let (Some(i), Some((plant, mode, tau_c))) = (
-        extra_at.filter(|_| with_coulomb),
-        // asked only here: the start is fitted on its first call
-        extra_at
-            .filter(|_| with_coulomb)
-            .and_then(|_| starts.coulomb_extra_mode.get()),
-    ) {
+    } else if let Some((i, (plant, mode, tau_c))) = coulomb_mode() {
         // Coulomb friction with an extra mode: the structure and the mode from the
         // friction-compensated FRF of the structure with one more mass, the friction's
         // level as given (a pair's: its single's fitted level)

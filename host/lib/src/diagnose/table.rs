@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 
 use crate::data::IdData;
-use crate::ident::nonlinear::{ripple, NlFit, Owner};
+use crate::ident::nonlinear::{ripple, NlFit, NlParam, Owner};
 use crate::model::effects::Effect;
 
 use super::fits::Fitted;
@@ -78,7 +78,7 @@ fn size_parameters(e: &Effect) -> &'static [&'static str] {
 /// sticks 56 % of the time: `fc` 2.1e-2 ± 4.2e-2 N·m, `fs` 3.9e-2 ± 1.3e-3 N·m, +25.6
 /// points).
 pub(super) fn vanished_effects(fit: &NlFit) -> Vec<String> {
-    let nought = |p: &crate::ident::nonlinear::NlParam| {
+    let nought = |p: &NlParam| {
         if p.at_lower {
             true
         } else if p.std.is_finite() && p.std > 0.0 {
@@ -92,11 +92,7 @@ pub(super) fn vanished_effects(fit: &NlFit) -> Vec<String> {
         .iter()
         .enumerate()
         .filter_map(|(i, e)| {
-            let sizes: Vec<_> = fit
-                .params
-                .iter()
-                .filter(|p| p.owner == Owner::Effect(i) && size_parameters(e).contains(&p.name))
-                .collect();
+            let sizes = sizes_of(fit, i, e);
             (!sizes.is_empty() && sizes.iter().all(|p| nought(p))).then(|| {
                 let said: Vec<String> = sizes
                     .iter()
@@ -115,13 +111,17 @@ pub(super) fn vanished_effects(fit: &NlFit) -> Vec<String> {
 /// against, gained 1.4 real points).
 pub(super) fn exactly_of_no_size(fit: &NlFit) -> bool {
     fit.model.effects.iter().enumerate().all(|(i, e)| {
-        let sizes: Vec<_> = fit
-            .params
-            .iter()
-            .filter(|p| p.owner == Owner::Effect(i) && size_parameters(e).contains(&p.name))
-            .collect();
+        let sizes = sizes_of(fit, i, e);
         !sizes.is_empty() && sizes.iter().all(|p| p.at_lower || p.value == 0.0)
     })
+}
+
+/// The fitted size parameters ([`size_parameters`]) of effect `i`, `e`, of `fit`.
+fn sizes_of<'f>(fit: &'f NlFit, i: usize, e: &Effect) -> Vec<&'f NlParam> {
+    fit.params
+        .iter()
+        .filter(|p| p.owner == Owner::Effect(i) && size_parameters(e).contains(&p.name))
+        .collect()
 }
 
 /// How a fitted transport delay was told apart from the drive's current-loop lag, in words
