@@ -76,8 +76,8 @@ pub use checks::{
     periodic_fit_signals, periodic_steady_state, top_slope_db_per_decade, unsupported_modes,
     SteadyState, PERIODIC_FIT_NAME,
 };
-use sampled::{drive_model, Sampled};
-pub(crate) use sampled::{solve_hessenberg, unit_circle};
+use sampled::{drive_model, Discrete, Sampled, Tangent};
+pub(crate) use sampled::{solve_hessenberg, solve_pair, unit_circle};
 use search::{
     augmented_candidates, canonical_four_mass, features, grounded_start, is_loss, rigid_power,
     structure_name, subsets, Candidate,
@@ -509,26 +509,49 @@ impl Lines {
     /// model's response `gn` at the noise lines of `s`: the output-error noise pooled over
     /// the line's window, each line with its own model response (see [`FrfSpectra`]),
     /// plus the odd distortion on the line with the model at the line.
-    fn sml_residuals(&self, s: &FrfSpectra, gn: &[Complex64]) -> Vec<Complex64> {
+    ///
+    /// With `dgn`, a change of the model response, each line also gives the residual's
+    /// derivative along it: `d(e/σ_e) = de/σ_e − e dσ²_e/(2σ³_e)`, `de = −dG Ū`,
+    /// `d|G|² = 2 Re(G* dG)`, `d Re(G* c) = Re(dG* c)` (nought where the floor holds).
+    fn sml_residuals(
+        &self,
+        s: &FrfSpectra,
+        gn: &[Complex64],
+        dgn: Option<&[Complex64]>,
+    ) -> Vec<(Complex64, Complex64)> {
+        let zero = Complex64::new(0.0, 0.0);
+        let dg_at = |j: usize| dgn.map_or(zero, |d| d[j]);
         self.exc_in_noise
             .iter()
             .enumerate()
             .map(|(k, &kn)| {
-                let gm = gn[kn];
+                let (gm, dgm) = (gn[kn], dg_at(kn));
                 let e = s.y[k] - gm * s.u[k];
                 let pool = s.pool[k].clone();
                 let n = pool.len().max(1) as f64;
-                let var = pool
-                    .map(|j| {
-                        s.var_y[j] + gn[j].norm_sqr() * s.var_u[j]
-                            - 2.0 * (gn[j].conj() * s.cov_yu[j]).re
-                    })
-                    .sum::<f64>()
-                    / n;
+                let (var, dvar) = pool.fold((0.0, 0.0), |(v, dv), j| {
+                    let (g, dg) = (gn[j], dg_at(j));
+                    (
+                        v + s.var_y[j] + g.norm_sqr() * s.var_u[j]
+                            - 2.0 * (g.conj() * s.cov_yu[j]).re,
+                        dv + 2.0 * (g.conj() * dg).re * s.var_u[j]
+                            - 2.0 * (dg.conj() * s.cov_yu[j]).re,
+                    )
+                });
                 let d = &s.distortion[k];
-                let var = var + d.var_y + gm.norm_sqr() * d.var_u - 2.0 * (gm.conj() * d.cov_yu).re;
+                let var =
+                    var / n + d.var_y + gm.norm_sqr() * d.var_u - 2.0 * (gm.conj() * d.cov_yu).re;
+                let dvar = dvar / n + 2.0 * (gm.conj() * dgm).re * d.var_u
+                    - 2.0 * (dgm.conj() * d.cov_yu).re;
                 let floor = (1e-4 * s.y[k].norm()).powi(2);
-                e / var.max(floor).sqrt()
+                let (var, dvar) = if var > floor {
+                    (var, dvar)
+                } else {
+                    (floor, 0.0)
+                };
+                let sd = var.sqrt();
+                let de = -dgm * s.u[k];
+                (e / sd, de / sd - e * (dvar / (2.0 * var * sd)))
             })
             .collect()
     }
@@ -564,6 +587,32 @@ pub(crate) trait FrfModel {
     fn response(&self, theta: &[f64], z: &[Complex64]) -> Option<Vec<Complex64>>;
     /// signed difference step for parameter `i` at `theta`
     fn step(&self, i: usize, theta: &[f64]) -> f64;
+
+    /// `G(z)` at each `z` and, for each parameter of `free`, its derivative (a column of
+    /// nought where the stepped parameter cannot be evaluated); None when `theta`
+    /// cannot be evaluated. By forward differences of [`Self::response`] unless a model
+    /// has a cheaper way.
+    fn response_jacobian(
+        &self,
+        theta: &[f64],
+        z: &[Complex64],
+        free: &[usize],
+    ) -> Option<(Vec<Complex64>, Vec<Vec<Complex64>>)> {
+        let g = self.response(theta, z)?;
+        let cols = free
+            .iter()
+            .map(|&i| {
+                let h = self.step(i, theta);
+                let mut th = theta.to_vec();
+                th[i] += h;
+                self.response(&th, z).map_or_else(
+                    || vec![Complex64::new(0.0, 0.0); z.len()],
+                    |g1| g1.iter().zip(&g).map(|(a, b)| (a - b) / h).collect(),
+                )
+            })
+            .collect();
+        Some((g, cols))
+    }
 }
 
 /// The physical model: log-parameters, then lag and delay [samples].
@@ -573,6 +622,17 @@ impl PhysicalFrf {
     fn n_mech(&self) -> usize {
         self.0.structure.param_names().len()
     }
+
+    /// the model sampled at `theta`; None when a parameter is not positive and finite
+    fn discrete(&self, theta: &[f64]) -> Option<Discrete> {
+        let nm = self.n_mech();
+        let p: Vec<f64> = theta[..nm].iter().map(|t| t.exp()).collect();
+        if p.iter().any(|v| !v.is_finite() || *v <= 0.0) {
+            return None;
+        }
+        let c = drive_model(&self.0, theta[nm]).continuous(&p);
+        Some(Discrete::new(&c, self.0.ts, theta[nm + 1]))
+    }
 }
 
 impl FrfModel for PhysicalFrf {
@@ -581,15 +641,59 @@ impl FrfModel for PhysicalFrf {
     }
 
     fn response(&self, theta: &[f64], z: &[Complex64]) -> Option<Vec<Complex64>> {
-        let nm = self.n_mech();
-        let p: Vec<f64> = theta[..nm].iter().map(|t| t.exp()).collect();
-        if p.iter().any(|v| !v.is_finite() || *v <= 0.0) {
-            return None;
-        }
-        let c = drive_model(&self.0, theta[nm]).continuous(&p);
-        let s = Sampled::new(&c, self.0.ts, theta[nm + 1]);
+        let s = Sampled::from_discrete(self.discrete(theta)?, self.0.ts);
         let g = s.response(z);
         g.iter().all(|v| v.is_finite()).then_some(g)
+    }
+
+    /// The sampled model is differenced, not its response: `dG` then follows from the
+    /// matrices' differences with two Hessenberg solves per line in all
+    /// ([`Sampled::response_and_tangents`]), where differencing `G` costs one per line and
+    /// parameter. A step across a whole sample of delay is differenced in `G`.
+    fn response_jacobian(
+        &self,
+        theta: &[f64],
+        z: &[Complex64],
+        free: &[usize],
+    ) -> Option<(Vec<Complex64>, Vec<Vec<Complex64>>)> {
+        let s = Sampled::from_discrete(self.discrete(theta)?, self.0.ts);
+        let stepped: Vec<(f64, Option<Discrete>)> = free
+            .iter()
+            .map(|&i| {
+                let h = self.step(i, theta);
+                let mut th = theta.to_vec();
+                th[i] += h;
+                (h, self.discrete(&th))
+            })
+            .collect();
+        let tangents: Vec<Option<Tangent>> = stepped
+            .iter()
+            .map(|(h, d)| d.as_ref().and_then(|d| s.tangent(d, *h)))
+            .collect();
+        let along: Vec<&Tangent> = tangents.iter().flatten().collect();
+        let (g, mut dg_along) = s.response_and_tangents(z, &along)?;
+        if !g.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let mut dg_along = dg_along.drain(..);
+        let cols = stepped
+            .into_iter()
+            .zip(&tangents)
+            .map(|((h, d), t)| match (t, d) {
+                (Some(_), _) => dg_along.next().expect("one column per tangent"),
+                (None, Some(d)) => {
+                    let g1 = Sampled::from_discrete(d, self.0.ts).response(z);
+                    let col: Vec<Complex64> = g1.iter().zip(&g).map(|(a, b)| (a - b) / h).collect();
+                    if col.iter().all(|v| v.is_finite()) {
+                        col
+                    } else {
+                        vec![Complex64::new(0.0, 0.0); z.len()]
+                    }
+                }
+                (None, None) => vec![Complex64::new(0.0, 0.0); z.len()],
+            })
+            .collect();
+        Some((g, cols))
     }
 
     fn step(&self, i: usize, theta: &[f64]) -> f64 {
@@ -615,12 +719,25 @@ impl<M: FrfModel> Problem<'_, M> {
         self.model.response(theta, z)
     }
 
+    /// the lines the cost reads the model at: the noise lines for the SML cost with
+    /// spectra, else the excited lines
+    fn cost_lines(&self) -> &[Complex64] {
+        match (self.cost, &self.lines.spectra) {
+            (Cost::Sml, Some(_)) => &self.lines.z_noise,
+            _ => &self.lines.z,
+        }
+    }
+
     fn residuals(&self, theta: &[f64]) -> Option<Vec<f64>> {
+        self.residuals_from(&self.response(theta, self.cost_lines())?)
+    }
+
+    /// the residuals of the model response `g` at [`Self::cost_lines`]
+    fn residuals_from(&self, g: &[Complex64]) -> Option<Vec<f64>> {
         let l = self.lines;
         let mut r = Vec::with_capacity(2 * l.z.len());
         match (self.cost, &l.spectra) {
             (Cost::Log, _) => {
-                let g = self.response(theta, &l.z)?;
                 for ((gm, gh), w) in g.iter().zip(&l.g).zip(&l.w_log) {
                     let q = gm / gh;
                     r.push(w * q.norm().ln());
@@ -628,23 +745,57 @@ impl<M: FrfModel> Problem<'_, M> {
                 }
             }
             (Cost::Sml, Some(s)) => {
-                let gn = self.response(theta, &l.z_noise)?;
-                for e in l.sml_residuals(s, &gn) {
+                for (e, _) in l.sml_residuals(s, g, None) {
                     // real and imaginary part, each of unit variance
                     r.push(e.re * std::f64::consts::SQRT_2);
                     r.push(e.im * std::f64::consts::SQRT_2);
                 }
             }
             (Cost::Sml, None) => {
-                let g = self.response(theta, &l.z)?;
                 for ((gm, gh), sg) in g.iter().zip(&l.g).zip(&l.sigma) {
-                    let sd = (sg.max(1e-4 * gh.norm()) / 2f64.sqrt()).max(1e-300);
+                    let sd = Self::sd_of(*sg, *gh);
                     r.push((gh - gm).re / sd);
                     r.push((gh - gm).im / sd);
                 }
             }
         }
         r.iter().all(|v| v.is_finite()).then_some(r)
+    }
+
+    /// σ of one real part of the residual on a line without spectra
+    fn sd_of(sigma: f64, gh: Complex64) -> f64 {
+        (sigma.max(1e-4 * gh.norm()) / 2f64.sqrt()).max(1e-300)
+    }
+
+    /// The residuals' derivative along a change `dg` of the response `g` (the chain rule
+    /// through [`Self::residuals_from`], exact).
+    fn residual_derivative(&self, g: &[Complex64], dg: &[Complex64]) -> Vec<f64> {
+        let l = self.lines;
+        let mut d = Vec::with_capacity(2 * l.z.len());
+        match (self.cost, &l.spectra) {
+            (Cost::Log, _) => {
+                // ln|q| and arg q are the real and imaginary parts of ln q, q = G/Ĝ
+                for ((gm, dgm), w) in g.iter().zip(dg).zip(&l.w_log) {
+                    let dl = dgm / gm;
+                    d.push(w * dl.re);
+                    d.push(w * dl.im);
+                }
+            }
+            (Cost::Sml, Some(s)) => {
+                for (_, de) in l.sml_residuals(s, g, Some(dg)) {
+                    d.push(de.re * std::f64::consts::SQRT_2);
+                    d.push(de.im * std::f64::consts::SQRT_2);
+                }
+            }
+            (Cost::Sml, None) => {
+                for ((dgm, gh), sg) in dg.iter().zip(&l.g).zip(&l.sigma) {
+                    let sd = Self::sd_of(*sg, *gh);
+                    d.push(-dgm.re / sd);
+                    d.push(-dgm.im / sd);
+                }
+            }
+        }
+        d
     }
 }
 
@@ -662,9 +813,16 @@ impl<M: FrfModel> LeastSquares for Problem<'_, M> {
             .map_or(f64::INFINITY, |r| r.iter().map(|v| v * v).sum())
     }
 
+    /// The Jacobian is the residuals' exact derivative with respect to the response
+    /// times the response's derivative ([`FrfModel::response_jacobian`]); a column that
+    /// is not finite is nought, as a parameter the residuals do not see.
     fn normal_equations(&self, theta: &[f64], free: &[usize]) -> Normal {
         let p = free.len();
-        let Some(r0) = self.residuals(theta) else {
+        let at = self
+            .model
+            .response_jacobian(theta, self.cost_lines(), free)
+            .and_then(|(g, dg)| Some((self.residuals_from(&g)?, g, dg)));
+        let Some((r0, g, dg)) = at else {
             return Normal {
                 jtj: DMatrix::identity(p, p),
                 jte: DVector::zeros(p),
@@ -673,13 +831,11 @@ impl<M: FrfModel> LeastSquares for Problem<'_, M> {
         };
         let nr = r0.len();
         let mut jac = DMatrix::zeros(nr, p);
-        for (col, &i) in free.iter().enumerate() {
-            let h = self.model.step(i, theta);
-            let mut th = theta.to_vec();
-            th[i] += h;
-            if let Some(r1) = self.residuals(&th) {
-                for k in 0..nr {
-                    jac[(k, col)] = (r1[k] - r0[k]) / h;
+        for (col, dgc) in dg.iter().enumerate() {
+            let dr = self.residual_derivative(&g, dgc);
+            if dr.iter().all(|v| v.is_finite()) {
+                for (k, v) in dr.into_iter().enumerate() {
+                    jac[(k, col)] = v;
                 }
             }
         }

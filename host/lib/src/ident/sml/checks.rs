@@ -233,7 +233,14 @@ pub fn line_residuals(
     // z is not used: the noise lines are evaluated by `respond`
     let lines = Lines::new(frf, 1.0);
     match &lines.spectra {
-        Some(s) => (lines.sml_residuals(s, &respond(&s.noise_freq_hz)), s.dof()),
+        Some(s) => (
+            lines
+                .sml_residuals(s, &respond(&s.noise_freq_hz), None)
+                .into_iter()
+                .map(|(e, _)| e)
+                .collect(),
+            s.dof(),
+        ),
         None => {
             let g = respond(&frf.freq_hz);
             let e = frf

@@ -37,6 +37,7 @@ pub(super) struct Sampled {
     n: usize,
     ts: f64,
     /// Hessenberg form `Qᵀ A Q` and the vectors in its basis
+    qt: DMatrix<f64>,
     h: DMatrix<f64>,
     hb_new: DVector<f64>,
     hb_old: DVector<f64>,
@@ -59,32 +60,146 @@ fn hold_pair(f: &DMatrix<f64>, g: &DVector<f64>, h: f64) -> (DMatrix<f64>, DVect
     )
 }
 
-impl Sampled {
-    pub(super) fn new(c: &ContinuousSs, ts: f64, delay_samples: f64) -> Sampled {
+/// The sampled model's matrices in the state basis, before the Hessenberg reduction.
+pub(super) struct Discrete {
+    a: DMatrix<f64>,
+    b_new: DVector<f64>,
+    b_old: DVector<f64>,
+    c: DVector<f64>,
+    d: f64,
+    /// whole samples of delay
+    n: usize,
+}
+
+impl Discrete {
+    /// `c` sampled at `ts` [s] with a held input delayed by `delay_samples`
+    pub(super) fn new(c: &ContinuousSs, ts: f64, delay_samples: f64) -> Discrete {
         let d = delay_samples.max(0.0);
         let n = d.floor() as usize;
         let phi = d - n as f64;
         let (e1, g1) = hold_pair(&c.f, &c.g, (1.0 - phi) * ts);
         let (e2, g2) = hold_pair(&c.f, &c.g, phi * ts);
-        let a = &e1 * &e2;
-        let b_old = &e1 * g2;
+        Discrete {
+            a: &e1 * &e2,
+            b_old: &e1 * g2,
+            b_new: g1,
+            c: c.h.transpose(),
+            d: c.d,
+            n,
+        }
+    }
+}
+
+/// A direction of change of the sampled model, `(M(θ + h e_i) − M(θ))/h`, in the
+/// Hessenberg basis of `M(θ)` ([`Sampled::tangent`]).
+pub(super) struct Tangent {
+    h: DMatrix<f64>,
+    b_new: DVector<f64>,
+    b_old: DVector<f64>,
+    c: DVector<f64>,
+    d: f64,
+}
+
+impl Sampled {
+    pub(super) fn new(c: &ContinuousSs, ts: f64, delay_samples: f64) -> Sampled {
+        Sampled::from_discrete(Discrete::new(c, ts, delay_samples), ts)
+    }
+
+    pub(super) fn from_discrete(m: Discrete, ts: f64) -> Sampled {
+        let Discrete {
+            a,
+            b_new,
+            b_old,
+            c,
+            d,
+            n,
+        } = m;
         let hess = a.clone().hessenberg();
         let (q, h) = hess.unpack();
         let qt = q.transpose();
-        let cv: DVector<f64> = c.h.transpose();
         Sampled {
-            hb_new: &qt * &g1,
+            hb_new: &qt * &b_new,
             hb_old: &qt * &b_old,
-            hc: &qt * &cv,
+            hc: &qt * &c,
+            qt,
             h,
             a,
-            b_new: g1,
+            b_new,
             b_old,
-            c: cv,
-            d: c.d,
+            c,
+            d,
             n,
             ts,
         }
+    }
+
+    /// The forward difference `(other − self)/step` in this model's Hessenberg basis;
+    /// None when `other` has another whole delay or another number of states (a lag
+    /// stepped from nought): its matrices then describe another input history or state,
+    /// and only the responses compare.
+    pub(super) fn tangent(&self, other: &Discrete, step: f64) -> Option<Tangent> {
+        if other.n != self.n || other.a.nrows() != self.a.nrows() {
+            return None;
+        }
+        let q = self.qt.transpose();
+        let inv = 1.0 / step;
+        Some(Tangent {
+            h: &self.qt * (&other.a - &self.a) * q * inv,
+            b_new: &self.qt * (&other.b_new - &self.b_new) * inv,
+            b_old: &self.qt * (&other.b_old - &self.b_old) * inv,
+            c: &self.qt * (&other.c - &self.c) * inv,
+            d: (other.d - self.d) * inv,
+        })
+    }
+
+    /// `G(z)` at each `z` and its change along each of `tangents`,
+    /// `dG = z^{−n}(dd + dcᵀx + vᵀ(dA x + db_new + z^{−1} db_old))` with
+    /// `x = (zI − A)^{−1}(b_new + z^{−1} b_old)` and `vᵀ = cᵀ(zI − A)^{−1}`: two Hessenberg
+    /// solves per line for any number of directions. None where `zI − A` is singular.
+    pub(super) fn response_and_tangents(
+        &self,
+        z: &[Complex64],
+        tangents: &[&Tangent],
+    ) -> Option<(Vec<Complex64>, Vec<Vec<Complex64>>)> {
+        let nx = self.h.nrows();
+        let zero = Complex64::new(0.0, 0.0);
+        let mut m = vec![zero; nx * nx];
+        let mut x = vec![zero; nx];
+        let mut v = vec![zero; nx];
+        let mut t = vec![zero; nx];
+        let mut g = Vec::with_capacity(z.len());
+        let mut dg = vec![Vec::with_capacity(z.len()); tangents.len()];
+        for &zk in z {
+            let zi = zk.inv();
+            for i in 0..nx {
+                x[i] = self.hb_new[i] + zi * self.hb_old[i];
+                v[i] = Complex64::new(self.hc[i], 0.0);
+            }
+            if !solve_pair(&self.h, zk, &mut m, &mut x, &mut v) {
+                return None;
+            }
+            let shift = zi.powi(self.n as i32);
+            let cx = x
+                .iter()
+                .zip(self.hc.iter())
+                .fold(Complex64::new(self.d, 0.0), |s, (x, c)| s + x * c);
+            g.push(cx * shift);
+            for (tg, out) in tangents.iter().zip(dg.iter_mut()) {
+                for (i, ti) in t.iter_mut().enumerate() {
+                    let mut s = tg.b_new[i] + zi * tg.b_old[i];
+                    for (j, xj) in x.iter().enumerate() {
+                        s += xj * tg.h[(i, j)];
+                    }
+                    *ti = s;
+                }
+                let mut d = Complex64::new(tg.d, 0.0);
+                for i in 0..nx {
+                    d += v[i] * t[i] + x[i] * tg.c[i];
+                }
+                out.push(d * shift);
+            }
+        }
+        Some((g, dg))
     }
 
     /// `G(z)` at each `z` on the unit circle; NaN where `zI − A` is singular
@@ -158,6 +273,40 @@ impl Sampled {
         }
         StateSpace::new(a, b, c, self.d, self.ts)
     }
+}
+
+/// `x ← (zI − H)^{−1} x` and `v ← (zI − H)^{−T} v` for an upper Hessenberg `H`, with
+/// `m` (`n²`) as workspace: the two solves a response's derivatives need (`x` the state's
+/// response to the input, `vᵀ = cᵀ(zI − H)^{−1}` the output's to the state). The
+/// transposed system is lower Hessenberg; reversed in rows and columns it is upper
+/// Hessenberg again. False when singular.
+pub(crate) fn solve_pair(
+    h: &DMatrix<f64>,
+    z: Complex64,
+    m: &mut [Complex64],
+    x: &mut [Complex64],
+    v: &mut [Complex64],
+) -> bool {
+    let n = h.nrows();
+    for i in 0..n {
+        for j in 0..n {
+            m[i * n + j] = Complex64::new(-h[(i, j)], 0.0);
+        }
+        m[i * n + i] += z;
+    }
+    if !solve_hessenberg(m, x, n) {
+        return false;
+    }
+    for i in 0..n {
+        for j in 0..n {
+            m[i * n + j] = Complex64::new(-h[(n - 1 - j, n - 1 - i)], 0.0);
+        }
+        m[i * n + i] += z;
+    }
+    v.reverse();
+    let ok = solve_hessenberg(m, v, n);
+    v.reverse();
+    ok
 }
 
 /// Solves an upper Hessenberg system in place (row-major `m`, `n × n`) by

@@ -562,3 +562,73 @@ fn an_estimate_at_the_noise_level_ends_the_search_after_its_first_pass() {
     }
     assert!(failed.is_empty(), "{failed:#?}");
 }
+
+#[test]
+fn jacobian_from_the_sampled_matrices_matches_central_differences_of_the_residuals() {
+    // a noisy three-mass joint with a lag and a fractional delay; both costs, every
+    // parameter free, 5 % off the truth: the gradient Jᵀe and the diagonal of JᵀJ from
+    // the differenced matrices equal central differences of the residuals themselves
+    let mut cfg = SimConfig {
+        effects: parse_effects(&["time_delay:samples=1.4"]).unwrap(),
+        ..SimConfig::default()
+    };
+    cfg.controller.current_loop_tau = 4e-4;
+    let frf = frf_of(&cfg, &excitation(3, 0.02));
+    let model = GreyBoxModel {
+        structure: Structure::ThreeMass,
+        output: Output::Angle,
+        r: cfg.plant.params.r,
+        ts: 5e-4,
+    };
+    let lines = Lines::new(&frf, 5e-4);
+    assert!(
+        lines.spectra.is_some(),
+        "the SML cost with spectra is tested"
+    );
+    let phys = PhysicalFrf(model);
+    let mut theta: Vec<f64> = truth(&cfg.plant.params, Structure::ThreeMass)
+        .iter()
+        .enumerate()
+        .map(|(i, v)| (v * if i % 2 == 0 { 1.05 } else { 0.95 }).ln())
+        .collect();
+    theta.extend([0.8, 1.3]);
+    let free: Vec<usize> = (0..theta.len()).collect();
+    for cost in [Cost::Log, Cost::Sml] {
+        let prob = Problem {
+            model: &phys,
+            lines: &lines,
+            cost,
+        };
+        let ne = prob.normal_equations(&theta, &free);
+        let r0 = prob.residuals(&theta).unwrap();
+        for &i in &free {
+            let h = if i < theta.len() - 2 { 1e-5 } else { 1e-4 };
+            let at = |s: f64| {
+                let mut th = theta.clone();
+                th[i] += s;
+                prob.residuals(&th).unwrap()
+            };
+            let (rp, rm) = (at(h), at(-h));
+            let col: Vec<f64> = rp
+                .iter()
+                .zip(&rm)
+                .map(|(a, b)| (a - b) / (2.0 * h))
+                .collect();
+            let jte = -col.iter().zip(&r0).map(|(j, e)| j * e).sum::<f64>();
+            let jtj = col.iter().map(|j| j * j).sum::<f64>();
+            let scale = jtj.sqrt() * r0.iter().map(|e| e * e).sum::<f64>().sqrt();
+            assert!(
+                (ne.jte[i] - jte).abs() <= 1e-3 * scale,
+                "{cost:?} parameter {i}: Jᵀe {} against {jte}",
+                ne.jte[i]
+            );
+            // the lag and delay are stepped by 1e-4 samples forward, as before
+            let tol = if i < theta.len() - 2 { 1e-4 } else { 1e-3 };
+            assert!(
+                (ne.jtj[(i, i)] - jtj).abs() <= tol * jtj,
+                "{cost:?} parameter {i}: (JᵀJ)ii {} against {jtj}",
+                ne.jtj[(i, i)]
+            );
+        }
+    }
+}
