@@ -20,7 +20,9 @@
 //! Refinement: Levenberg–Marquardt ([`crate::ident::lm`]) on every entry of
 //! `A, B, C, D` (over-parameterised by the similarity transform; the
 //! damping of the loop and the pseudo-inverse keep the steps finite) with
-//! the SML cost. No parameter covariance is reported for a black box.
+//! the SML cost, its Jacobian exact: `∂G/∂A_ij = v_i x_j` from two Hessenberg solves per
+//! line for all `n² + 2n + 1` entries (order 11 on 15,000 samples: 0.25 → 0.03 s against
+//! differences). No parameter covariance is reported for a black box.
 
 use nalgebra::{DMatrix, DVector, RowDVector};
 use rustfft::num_complex::Complex64;
