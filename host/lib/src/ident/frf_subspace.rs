@@ -32,7 +32,7 @@ use crate::ident::frf::Frf;
 use crate::ident::lm::{self, LeastSquares, LmOptions, Termination};
 use crate::ident::sml::{
     output_kind_check, solve_hessenberg, solve_pair, unit_circle, unsupported_modes, Cost,
-    FitWarning, FrfModel, Lines, Problem, COST_RATIO_WARN,
+    FitWarning, FrfModel, Jacobian, Lines, Problem, COST_RATIO_WARN,
 };
 use crate::ident::ss::StateSpace;
 
@@ -250,7 +250,7 @@ impl FrfModel for BlackBoxFrf {
         theta: &[f64],
         z: &[Complex64],
         free: &[usize],
-    ) -> Option<(Vec<Complex64>, Vec<Vec<Complex64>>)> {
+    ) -> Option<Jacobian> {
         let n = self.n;
         let (a, b, c, d) = self.unpack(theta);
         if !d.is_finite() {
@@ -475,7 +475,7 @@ impl FrfModel for Integrating<'_> {
         theta: &[f64],
         z: &[Complex64],
         free: &[usize],
-    ) -> Option<(Vec<Complex64>, Vec<Vec<Complex64>>)> {
+    ) -> Option<Jacobian> {
         let (mut g, mut cols) = self.inner.response_jacobian(theta, z, free)?;
         for (k, &zk) in z.iter().enumerate() {
             let f = zk / (zk - 1.0);

@@ -588,6 +588,10 @@ pub(crate) enum Cost {
     Sml,
 }
 
+/// `G(z)` at each line and its derivative with respect to each free parameter
+/// ([`FrfModel::response_jacobian`]).
+pub(crate) type Jacobian = (Vec<Complex64>, Vec<Vec<Complex64>>);
+
 /// A model whose sampled frequency response a parameter vector gives.
 pub(crate) trait FrfModel {
     /// number of parameters
@@ -606,7 +610,7 @@ pub(crate) trait FrfModel {
         theta: &[f64],
         z: &[Complex64],
         free: &[usize],
-    ) -> Option<(Vec<Complex64>, Vec<Vec<Complex64>>)> {
+    ) -> Option<Jacobian> {
         let g = self.response(theta, z)?;
         let cols = free
             .iter()
@@ -664,7 +668,7 @@ impl FrfModel for PhysicalFrf {
         theta: &[f64],
         z: &[Complex64],
         free: &[usize],
-    ) -> Option<(Vec<Complex64>, Vec<Vec<Complex64>>)> {
+    ) -> Option<Jacobian> {
         let s = Sampled::from_discrete(self.discrete(theta)?, self.0.ts);
         let stepped: Vec<(f64, Option<Discrete>)> = free
             .iter()

@@ -27,14 +27,8 @@ pub(crate) fn unit_circle(f_hz: &[f64], ts: f64) -> Vec<Complex64> {
 /// The continuous model sampled with a held, delayed input, in Hessenberg
 /// form for cheap evaluation at many frequencies.
 pub(super) struct Sampled {
-    /// `e^{FT}`, `Γ((1−φ)T)`, `e^{F(1−φ)T}Γ(φT)`, `H`
-    a: DMatrix<f64>,
-    b_new: DVector<f64>,
-    b_old: DVector<f64>,
-    c: DVector<f64>,
-    d: f64,
-    /// whole samples of delay
-    n: usize,
+    /// the matrices in the state basis
+    m: Discrete,
     ts: f64,
     /// Hessenberg form `Qᵀ A Q` and the vectors in its basis
     qt: DMatrix<f64>,
@@ -60,7 +54,8 @@ fn hold_pair(f: &DMatrix<f64>, g: &DVector<f64>, h: f64) -> (DMatrix<f64>, DVect
     )
 }
 
-/// The sampled model's matrices in the state basis, before the Hessenberg reduction.
+/// The sampled model's matrices in the state basis, before the Hessenberg reduction:
+/// `e^{FT}`, `Γ((1−φ)T)`, `e^{F(1−φ)T}Γ(φT)`, `H`, `D`.
 pub(super) struct Discrete {
     a: DMatrix<f64>,
     b_new: DVector<f64>,
@@ -106,29 +101,16 @@ impl Sampled {
     }
 
     pub(super) fn from_discrete(m: Discrete, ts: f64) -> Sampled {
-        let Discrete {
-            a,
-            b_new,
-            b_old,
-            c,
-            d,
-            n,
-        } = m;
-        let hess = a.clone().hessenberg();
+        let hess = m.a.clone().hessenberg();
         let (q, h) = hess.unpack();
         let qt = q.transpose();
         Sampled {
-            hb_new: &qt * &b_new,
-            hb_old: &qt * &b_old,
-            hc: &qt * &c,
+            hb_new: &qt * &m.b_new,
+            hb_old: &qt * &m.b_old,
+            hc: &qt * &m.c,
             qt,
             h,
-            a,
-            b_new,
-            b_old,
-            c,
-            d,
-            n,
+            m,
             ts,
         }
     }
@@ -138,17 +120,18 @@ impl Sampled {
     /// stepped from nought): its matrices then describe another input history or state,
     /// and only the responses compare.
     pub(super) fn tangent(&self, other: &Discrete, step: f64) -> Option<Tangent> {
-        if other.n != self.n || other.a.nrows() != self.a.nrows() {
+        let m = &self.m;
+        if other.n != m.n || other.a.nrows() != m.a.nrows() {
             return None;
         }
         let q = self.qt.transpose();
         let inv = 1.0 / step;
         Some(Tangent {
-            h: &self.qt * (&other.a - &self.a) * q * inv,
-            b_new: &self.qt * (&other.b_new - &self.b_new) * inv,
-            b_old: &self.qt * (&other.b_old - &self.b_old) * inv,
-            c: &self.qt * (&other.c - &self.c) * inv,
-            d: (other.d - self.d) * inv,
+            h: &self.qt * (&other.a - &m.a) * q * inv,
+            b_new: &self.qt * (&other.b_new - &m.b_new) * inv,
+            b_old: &self.qt * (&other.b_old - &m.b_old) * inv,
+            c: &self.qt * (&other.c - &m.c) * inv,
+            d: (other.d - m.d) * inv,
         })
     }
 
@@ -160,7 +143,7 @@ impl Sampled {
         &self,
         z: &[Complex64],
         tangents: &[&Tangent],
-    ) -> Option<(Vec<Complex64>, Vec<Vec<Complex64>>)> {
+    ) -> Option<Jacobian> {
         let nx = self.h.nrows();
         let zero = Complex64::new(0.0, 0.0);
         let mut m = vec![zero; nx * nx];
@@ -178,11 +161,11 @@ impl Sampled {
             if !solve_pair(&self.h, zk, &mut m, &mut x, &mut v) {
                 return None;
             }
-            let shift = zi.powi(self.n as i32);
+            let shift = zi.powi(self.m.n as i32);
             let cx = x
                 .iter()
                 .zip(self.hc.iter())
-                .fold(Complex64::new(self.d, 0.0), |s, (x, c)| s + x * c);
+                .fold(Complex64::new(self.m.d, 0.0), |s, (x, c)| s + x * c);
             g.push(cx * shift);
             for (tg, out) in tangents.iter().zip(dg.iter_mut()) {
                 for (i, ti) in t.iter_mut().enumerate() {
@@ -223,8 +206,8 @@ impl Sampled {
                         let g = rhs
                             .iter()
                             .zip(self.hc.iter())
-                            .fold(Complex64::new(self.d, 0.0), |g, (x, c)| g + x * c);
-                        g * zi.powi(self.n as i32)
+                            .fold(Complex64::new(self.m.d, 0.0), |g, (x, c)| g + x * c);
+                        g * zi.powi(self.m.n as i32)
                     }
                     false => Complex64::new(f64::NAN, f64::NAN),
                 }
@@ -234,16 +217,13 @@ impl Sampled {
 
     /// state space with the delay as input-history states
     pub(super) fn state_space(&self) -> StateSpace {
-        let nx = self.a.nrows();
-        let has_old = self.b_old.iter().any(|v| *v != 0.0);
-        let hist = if self.n == 0 && !has_old {
-            0
-        } else {
-            self.n + 1
-        };
+        let m = &self.m;
+        let nx = m.a.nrows();
+        let has_old = m.b_old.iter().any(|v| *v != 0.0);
+        let hist = if m.n == 0 && !has_old { 0 } else { m.n + 1 };
         let nt = nx + hist;
         let mut a = DMatrix::zeros(nt, nt);
-        a.view_mut((0, 0), (nx, nx)).copy_from(&self.a);
+        a.view_mut((0, 0), (nx, nx)).copy_from(&m.a);
         let mut b = DVector::zeros(nt);
         // history s_i(k) = u(k − i), i = 1 … hist
         if hist > 0 {
@@ -253,25 +233,25 @@ impl Sampled {
             }
         }
         // v(k) = u(k − n), v(k − 1) = u(k − n − 1)
-        if self.n == 0 {
+        if m.n == 0 {
             for r in 0..nx {
-                b[r] += self.b_new[r];
+                b[r] += m.b_new[r];
             }
         } else {
             for r in 0..nx {
-                a[(r, nx + self.n - 1)] += self.b_new[r];
+                a[(r, nx + m.n - 1)] += m.b_new[r];
             }
         }
         if hist > 0 {
             for r in 0..nx {
-                a[(r, nx + self.n)] += self.b_old[r];
+                a[(r, nx + m.n)] += m.b_old[r];
             }
         }
         let mut c = nalgebra::RowDVector::zeros(nt);
         for i in 0..nx {
-            c[i] = self.c[i];
+            c[i] = m.c[i];
         }
-        StateSpace::new(a, b, c, self.d, self.ts)
+        StateSpace::new(a, b, c, m.d, self.ts)
     }
 }
 

@@ -20,6 +20,27 @@ fn frf_of(cfg: &SimConfig, exc: &ExcitationConfig) -> Frf {
     analyze_dataset(&ds, 1).expect("frf").frf
 }
 
+/// the default joint and sensors behind a drive with the `delay` effect and the current-loop
+/// lag `tau` [s]
+fn driven_by(delay: &str, tau: f64) -> SimConfig {
+    let mut cfg = SimConfig {
+        effects: parse_effects(&[delay]).unwrap(),
+        ..SimConfig::default()
+    };
+    cfg.controller.current_loop_tau = tau;
+    cfg
+}
+
+/// the three-mass model family of `cfg`'s joint, angle output, at 2 kHz
+fn three_mass_at_2khz(cfg: &SimConfig) -> GreyBoxModel {
+    GreyBoxModel {
+        structure: Structure::ThreeMass,
+        output: Output::Angle,
+        r: cfg.plant.params.r,
+        ts: 5e-4,
+    }
+}
+
 /// resonances [Hz] of the true linear model, computed as the fit's are
 fn true_modes(p: &JointParams, s: Structure) -> Vec<f64> {
     let model = GreyBoxModel {
@@ -57,19 +78,12 @@ fn misses(fit: &FrfFit, truth: &[f64], rel: f64, k_sigma: f64) -> Vec<String> {
 fn sampled_model_matches_the_simulator_frf_with_lag_and_fractional_delay() {
     // noise-free linear joint with a 0.4 ms lag and a 1.4-sample delay: the
     // sampled model at the true values is the FRF to rounding
-    let mut cfg = SimConfig {
+    let cfg = SimConfig {
         sensors: SensorConfig::ideal(),
-        effects: parse_effects(&["time_delay:samples=1.4"]).unwrap(),
-        ..SimConfig::default()
+        ..driven_by("time_delay:samples=1.4", 4e-4)
     };
-    cfg.controller.current_loop_tau = 4e-4;
     let frf = frf_of(&cfg, &excitation(3, 0.02));
-    let model = GreyBoxModel {
-        structure: Structure::ThreeMass,
-        output: Output::Angle,
-        r: cfg.plant.params.r,
-        ts: 5e-4,
-    };
+    let model = three_mass_at_2khz(&cfg);
     let p = truth(&cfg.plant.params, Structure::ThreeMass);
     let c = drive_model(&model, 0.8).continuous(&p);
     let g = Sampled::new(&c, 5e-4, 1.4).response(&unit_circle(&frf.freq_hz, 5e-4));
@@ -311,11 +325,7 @@ fn an_acceleration_output_is_recognised_by_the_slope_of_the_frf() {
 #[test]
 fn a_drive_with_a_delay_and_no_current_loop_is_told_from_one_with_a_lag() {
     // another drive: no current-loop lag, a one-sample transport delay
-    let mut cfg = SimConfig {
-        effects: parse_effects(&["time_delay:samples=1"]).unwrap(),
-        ..SimConfig::default()
-    };
-    cfg.controller.current_loop_tau = 1e-7;
+    let cfg = driven_by("time_delay:samples=1", 1e-7);
     let frf = frf_of(&cfg, &excitation(4, 0.05));
     let fit = fit_frf(&frf, &FrfFitOptions::new(Structure::ThreeMass, 5e-4)).unwrap();
     let bad = misses(
@@ -568,18 +578,9 @@ fn jacobian_from_the_sampled_matrices_matches_central_differences_of_the_residua
     // a noisy three-mass joint with a lag and a fractional delay; both costs, every
     // parameter free, 5 % off the truth: the gradient Jᵀe and the diagonal of JᵀJ from
     // the differenced matrices equal central differences of the residuals themselves
-    let mut cfg = SimConfig {
-        effects: parse_effects(&["time_delay:samples=1.4"]).unwrap(),
-        ..SimConfig::default()
-    };
-    cfg.controller.current_loop_tau = 4e-4;
+    let cfg = driven_by("time_delay:samples=1.4", 4e-4);
     let frf = frf_of(&cfg, &excitation(3, 0.02));
-    let model = GreyBoxModel {
-        structure: Structure::ThreeMass,
-        output: Output::Angle,
-        r: cfg.plant.params.r,
-        ts: 5e-4,
-    };
+    let model = three_mass_at_2khz(&cfg);
     let lines = Lines::new(&frf, 5e-4);
     assert!(
         lines.spectra.is_some(),
