@@ -517,50 +517,63 @@ impl Lines {
     /// The SML residual of each excited line, `(Ȳ − G Ū)/σ_e` with `E|·|² = 1`, from the
     /// model's response `gn` at the noise lines of `s`: the output-error noise pooled over
     /// the line's window, each line with its own model response (see [`FrfSpectra`]),
-    /// plus the odd distortion on the line with the model at the line.
-    ///
-    /// With `dgn`, a change of the model response, each line also gives the residual's
-    /// derivative along it: `d(e/σ_e) = de/σ_e − e dσ²_e/(2σ³_e)`, `de = −dG Ū`,
-    /// `d|G|² = 2 Re(G* dG)`, `d Re(G* c) = Re(dG* c)` (nought where the floor holds).
-    fn sml_residuals(
-        &self,
-        s: &FrfSpectra,
-        gn: &[Complex64],
-        dgn: Option<&[Complex64]>,
-    ) -> Vec<(Complex64, Complex64)> {
-        let zero = Complex64::new(0.0, 0.0);
-        let dg_at = |j: usize| dgn.map_or(zero, |d| d[j]);
+    /// plus the odd distortion on the line with the model at the line. Each line's error
+    /// and variance ([`SmlLine`]), which its derivatives reuse.
+    fn sml_lines(&self, s: &FrfSpectra, gn: &[Complex64]) -> Vec<SmlLine> {
         self.exc_in_noise
             .iter()
             .enumerate()
             .map(|(k, &kn)| {
-                let (gm, dgm) = (gn[kn], dg_at(kn));
-                let e = s.y[k] - gm * s.u[k];
+                let gm = gn[kn];
                 let pool = s.pool[k].clone();
                 let n = pool.len().max(1) as f64;
-                let (var, dvar) = pool.fold((0.0, 0.0), |(v, dv), j| {
-                    let (g, dg) = (gn[j], dg_at(j));
-                    (
-                        v + s.var_y[j] + g.norm_sqr() * s.var_u[j]
-                            - 2.0 * (g.conj() * s.cov_yu[j]).re,
-                        dv + 2.0 * (g.conj() * dg).re * s.var_u[j]
-                            - 2.0 * (dg.conj() * s.cov_yu[j]).re,
-                    )
-                });
+                let var = pool.fold(0.0, |v, j| {
+                    v + s.var_y[j] + gn[j].norm_sqr() * s.var_u[j]
+                        - 2.0 * (gn[j].conj() * s.cov_yu[j]).re
+                }) / n;
                 let d = &s.distortion[k];
-                let var =
-                    var / n + d.var_y + gm.norm_sqr() * d.var_u - 2.0 * (gm.conj() * d.cov_yu).re;
-                let dvar = dvar / n + 2.0 * (gm.conj() * dgm).re * d.var_u
-                    - 2.0 * (dgm.conj() * d.cov_yu).re;
+                let var = var + d.var_y + gm.norm_sqr() * d.var_u - 2.0 * (gm.conj() * d.cov_yu).re;
                 let floor = (1e-4 * s.y[k].norm()).powi(2);
-                let (var, dvar) = if var > floor {
-                    (var, dvar)
+                SmlLine {
+                    e: s.y[k] - gm * s.u[k],
+                    var: var.max(floor),
+                    floored: var.is_nan() || var <= floor,
+                }
+            })
+            .collect()
+    }
+
+    /// The derivative of each line's SML residual along a change `dgn` of the model
+    /// response `gn` ([`Self::sml_lines`] of `gn` in `at`):
+    /// `d(e/σ_e) = de/σ_e − e dσ²_e/(2σ³_e)`, `de = −dG Ū`, `d|G|² = 2 Re(G* dG)`,
+    /// `d Re(G* c) = Re(dG* c)`; `dσ²_e` nought where the floor holds.
+    fn sml_derivatives(
+        &self,
+        s: &FrfSpectra,
+        (gn, dgn): (&[Complex64], &[Complex64]),
+        at: &[SmlLine],
+    ) -> Vec<Complex64> {
+        self.exc_in_noise
+            .iter()
+            .zip(at)
+            .enumerate()
+            .map(|(k, (&kn, line))| {
+                let (gm, dgm) = (gn[kn], dgn[kn]);
+                let dvar = if line.floored {
+                    0.0
                 } else {
-                    (floor, 0.0)
+                    let pool = s.pool[k].clone();
+                    let n = pool.len().max(1) as f64;
+                    let d = &s.distortion[k];
+                    pool.fold(0.0, |dv, j| {
+                        dv + 2.0 * (gn[j].conj() * dgn[j]).re * s.var_u[j]
+                            - 2.0 * (dgn[j].conj() * s.cov_yu[j]).re
+                    }) / n
+                        + 2.0 * (gm.conj() * dgm).re * d.var_u
+                        - 2.0 * (dgm.conj() * d.cov_yu).re
                 };
-                let sd = var.sqrt();
-                let de = -dgm * s.u[k];
-                (e / sd, de / sd - e * (dvar / (2.0 * var * sd)))
+                let sd = line.var.sqrt();
+                -dgm * s.u[k] / sd - line.e * (dvar / (2.0 * line.var * sd))
             })
             .collect()
     }
@@ -570,6 +583,16 @@ impl Lines {
         let nu = self.spectra.as_ref().map_or(0.0, FrfSpectra::dof);
         expected_sml_cost((2 * self.z.len()).saturating_sub(p), nu)
     }
+}
+
+/// One excited line of the SML cost ([`Lines::sml_lines`]).
+struct SmlLine {
+    /// `Ȳ − G Ū`
+    e: Complex64,
+    /// `σ²_e`, at least its floor
+    var: f64,
+    /// the floor holds (`σ²_e` then does not move with `G`)
+    floored: bool,
 }
 
 /// SML cost expected at the true model with `dof` real residuals left after
@@ -742,14 +765,24 @@ impl<M: FrfModel> Problem<'_, M> {
     }
 
     fn residuals(&self, theta: &[f64]) -> Option<Vec<f64>> {
-        self.residuals_from(&self.response(theta, self.cost_lines())?)
+        let g = self.response(theta, self.cost_lines())?;
+        self.residuals_from(&g, self.sml_lines(&g).as_deref())
     }
 
-    /// the residuals of the model response `g` at [`Self::cost_lines`]
-    fn residuals_from(&self, g: &[Complex64]) -> Option<Vec<f64>> {
+    /// the SML lines of the response `g` when the cost is SML with spectra
+    fn sml_lines(&self, g: &[Complex64]) -> Option<Vec<SmlLine>> {
+        match (self.cost, &self.lines.spectra) {
+            (Cost::Sml, Some(s)) => Some(self.lines.sml_lines(s, g)),
+            _ => None,
+        }
+    }
+
+    /// the residuals of the model response `g` at [`Self::cost_lines`] (`sml` its
+    /// [`Self::sml_lines`])
+    fn residuals_from(&self, g: &[Complex64], sml: Option<&[SmlLine]>) -> Option<Vec<f64>> {
         let l = self.lines;
         let mut r = Vec::with_capacity(2 * l.z.len());
-        match (self.cost, &l.spectra) {
+        match (self.cost, sml) {
             (Cost::Log, _) => {
                 for ((gm, gh), w) in g.iter().zip(&l.g).zip(&l.w_log) {
                     let q = gm / gh;
@@ -757,11 +790,12 @@ impl<M: FrfModel> Problem<'_, M> {
                     r.push(w * q.arg());
                 }
             }
-            (Cost::Sml, Some(s)) => {
-                for (e, _) in l.sml_residuals(s, g, None) {
+            (Cost::Sml, Some(lines)) => {
+                for line in lines {
                     // real and imaginary part, each of unit variance
-                    r.push(e.re * std::f64::consts::SQRT_2);
-                    r.push(e.im * std::f64::consts::SQRT_2);
+                    let e = line.e / line.var.sqrt() * std::f64::consts::SQRT_2;
+                    r.push(e.re);
+                    r.push(e.im);
                 }
             }
             (Cost::Sml, None) => {
@@ -781,12 +815,17 @@ impl<M: FrfModel> Problem<'_, M> {
     }
 
     /// The residuals' derivative along a change `dg` of the response `g` (the chain rule
-    /// through [`Self::residuals_from`], exact).
-    fn residual_derivative(&self, g: &[Complex64], dg: &[Complex64]) -> Vec<f64> {
+    /// through [`Self::residuals_from`], exact; `sml` as there).
+    fn residual_derivative(
+        &self,
+        g: &[Complex64],
+        dg: &[Complex64],
+        sml: Option<&[SmlLine]>,
+    ) -> Vec<f64> {
         let l = self.lines;
         let mut d = Vec::with_capacity(2 * l.z.len());
-        match (self.cost, &l.spectra) {
-            (Cost::Log, _) => {
+        match (self.cost, &l.spectra, sml) {
+            (Cost::Log, _, _) => {
                 // ln|q| and arg q are the real and imaginary parts of ln q, q = G/Ĝ
                 for ((gm, dgm), w) in g.iter().zip(dg).zip(&l.w_log) {
                     let dl = dgm / gm;
@@ -794,13 +833,13 @@ impl<M: FrfModel> Problem<'_, M> {
                     d.push(w * dl.im);
                 }
             }
-            (Cost::Sml, Some(s)) => {
-                for (_, de) in l.sml_residuals(s, g, Some(dg)) {
+            (Cost::Sml, Some(s), Some(lines)) => {
+                for de in l.sml_derivatives(s, (g, dg), lines) {
                     d.push(de.re * std::f64::consts::SQRT_2);
                     d.push(de.im * std::f64::consts::SQRT_2);
                 }
             }
-            (Cost::Sml, None) => {
+            (Cost::Sml, _, _) => {
                 for ((dgm, gh), sg) in dg.iter().zip(&l.g).zip(&l.sigma) {
                     let sd = Self::sd_of(*sg, *gh);
                     d.push(-dgm.re / sd);
@@ -834,8 +873,11 @@ impl<M: FrfModel> LeastSquares for Problem<'_, M> {
         let at = self
             .model
             .response_jacobian(theta, self.cost_lines(), free)
-            .and_then(|(g, dg)| Some((self.residuals_from(&g)?, g, dg)));
-        let Some((r0, g, dg)) = at else {
+            .and_then(|(g, dg)| {
+                let sml = self.sml_lines(&g);
+                Some((self.residuals_from(&g, sml.as_deref())?, g, dg, sml))
+            });
+        let Some((r0, g, dg, sml)) = at else {
             return Normal {
                 jtj: DMatrix::identity(p, p),
                 jte: DVector::zeros(p),
@@ -845,7 +887,7 @@ impl<M: FrfModel> LeastSquares for Problem<'_, M> {
         let nr = r0.len();
         let mut jac = DMatrix::zeros(nr, p);
         for (col, dgc) in dg.iter().enumerate() {
-            let dr = self.residual_derivative(&g, dgc);
+            let dr = self.residual_derivative(&g, dgc, sml.as_deref());
             if dr.iter().all(|v| v.is_finite()) {
                 for (k, v) in dr.into_iter().enumerate() {
                     jac[(k, col)] = v;

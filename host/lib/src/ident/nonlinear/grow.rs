@@ -731,13 +731,7 @@ pub fn fit_with_mode(
     match (kept, last) {
         (Some((_, f)), _) if f.termination != Termination::MaxIterations => Ok(f),
         (Some((i, f)), _) => {
-            let mut r = starts[i].clone();
-            r.effects.clone_from(&f.model.effects);
-            r.tau_c = f.model.tau_c;
-            // the runner's own values, its friction among them
-            r.given = Vec::new();
-            r.start = super::NlStart::Values(f.values.clone());
-            r.options.max_iter = SCREEN_ITER - RACE_ITER;
+            let r = continued(&starts[i], &f, SCREEN_ITER - RACE_ITER);
             Ok(fit(&r).ok().filter(|g| g.ssr <= f.ssr).unwrap_or(f))
         }
         (None, Some(e)) => Err(e),
@@ -898,14 +892,19 @@ fn race_mode(
             return None;
         }
     }
+    fit(&continued(req, &lead, SCREEN_ITER), est)
+}
+
+/// `req` continued from a race's runner `fit` for `max_iter` iterations: its effects,
+/// lag and values (its friction among them), nothing given.
+fn continued(req: &NlRequest, fit: &NlFit, max_iter: usize) -> NlRequest {
     let mut r = req.clone();
-    r.effects.clone_from(&lead.model.effects);
-    r.tau_c = lead.model.tau_c;
-    // the race's own values, its friction among them
+    r.effects.clone_from(&fit.model.effects);
+    r.tau_c = fit.model.tau_c;
     r.given = Vec::new();
-    r.start = super::NlStart::Values(lead.values.clone());
-    r.options.max_iter = SCREEN_ITER;
-    fit(&r, est)
+    r.start = super::NlStart::Values(fit.values.clone());
+    r.options.max_iter = max_iter;
+    r
 }
 
 #[cfg(test)]

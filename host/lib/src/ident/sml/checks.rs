@@ -235,9 +235,9 @@ pub fn line_residuals(
     match &lines.spectra {
         Some(s) => (
             lines
-                .sml_residuals(s, &respond(&s.noise_freq_hz), None)
+                .sml_lines(s, &respond(&s.noise_freq_hz))
                 .into_iter()
-                .map(|(e, _)| e)
+                .map(|l| l.e / l.var.sqrt())
                 .collect(),
             s.dof(),
         ),
