@@ -30,65 +30,15 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use jointid::data::{Dataset, ExcitationConfig};
 use jointid::diagnose::metric::{true_fit, true_fit_in_loop, CLOSED_LOOP_METRIC_NAME};
 use jointid::diagnose::{
     all_candidates, diagnose, DiagnoseRequest, Diagnosis, Progress, ProgressEvent,
 };
-use jointid::ident::linalg::GaussRng;
 use jointid::ident::nonlinear::{identify, NlRequest};
-use jointid::model::effects::{Effect, EFFECT_NAMES};
+use jointid::model::effects::Effect;
 use jointid::model::spec::Structure;
-use jointid::sim::{ControllerConfig, Disturbance, JointParams, Plant, SensorConfig, SimConfig};
-use jointid::test_support::{est_val_captures, random_joint};
-
-/// One case of the battery.
-struct Case {
-    hidden: Vec<Effect>,
-    params: JointParams,
-    controller: ControllerConfig,
-    sensors: SensorConfig,
-    rms: f64,
-    seed: u64,
-}
-
-/// The harder conditions of `HARD=1`, drawn for case `index` from a generator of its own
-/// (the regular battery's draws are unchanged): a torque disturbance low-passed at 20–60 Hz
-/// (inside the excitation's band, not only slow drift) of 0.5–2 mN·m, an encoder of
-/// 2^14–2^17 counts per revolution, a current-loop lag of 0.25–1.5 ms, and the
-/// controller's inertia feedforward on in half the cases.
-fn hard(index: usize, controller: &mut ControllerConfig, sensors: &mut SensorConfig) {
-    let mut rng = GaussRng::new(9090 + index as u64);
-    let mut within = |lo: f64, hi: f64| lo * (hi / lo).powf(rng.uniform());
-    sensors.disturbance = Disturbance {
-        noise_std: within(5e-4, 2e-3),
-        noise_cutoff_hz: within(20.0, 60.0),
-        ..Disturbance::default()
-    };
-    sensors.counts_per_rev = Some(1 << (14 + index % 4));
-    controller.current_loop_tau = within(2.5e-4, 1.5e-3);
-    controller.feedforward = index % 2 == 1;
-}
-
-/// The effect `name` at `scale` × its default size (the size parameters only).
-fn scaled(name: &str, scale: f64) -> Effect {
-    let mut e = Effect::default_by_name(name).expect("an effect name");
-    match &mut e {
-        Effect::CoulombFriction(c) => {
-            c.fc *= scale;
-            c.fs *= scale;
-        }
-        Effect::Backlash(b) => b.width *= scale,
-        Effect::NonlinearStiffness(s) => s.k3 *= scale,
-        Effect::ExtraMode(m) => {
-            m.j *= scale;
-            m.k *= scale;
-        }
-        Effect::TimeDelay(d) => d.samples *= scale,
-        Effect::TorqueRipple(r) => r.amplitude *= scale,
-    }
-    e
-}
+use jointid::sim::{ControllerConfig, JointParams, SensorConfig};
+use jointid::test_support::battery::{captures, cases, config, Case};
 
 /// The parameters of `e` a user reads its size from, by key.
 fn size_keys(e: &Effect) -> Vec<(&'static str, f64)> {
@@ -144,74 +94,6 @@ fn cpu_seconds() -> f64 {
         (Some(u), Some(s)) => (u + s) / 100.0,
         _ => f64::NAN,
     }
-}
-
-/// Cases per round: each of the six effects alone, two pairs, two `none`.
-const ROUND: usize = 10;
-
-/// The battery: `rounds` rounds of [`ROUND`] cases, round `k` drawn with its own seed from
-/// the same distributions (round 0 is the original battery). Case `k·ROUND + i` has the
-/// controller tuning `(k·ROUND + i) mod 3`, so each effect meets other tunings in later
-/// rounds.
-fn cases(rounds: usize, small: bool, harder: bool) -> Vec<Case> {
-    // the size's range as a multiple of the default
-    let (lo, hi): (f64, f64) = if small { (0.1, 1.6) } else { (0.7, 1.6) };
-    let mut hidden: Vec<Vec<&str>> = EFFECT_NAMES.iter().map(|n| vec![*n]).collect();
-    hidden.push(vec!["nonlinear_stiffness", "time_delay"]);
-    hidden.push(vec!["extra_mode", "coulomb_friction"]);
-    hidden.push(vec![]);
-    hidden.push(vec![]);
-    assert_eq!(hidden.len(), ROUND);
-    let mut out = Vec::new();
-    for round in 0..rounds {
-        let mut rng = GaussRng::new(1212 + 1000 * round as u64);
-        for (i, names) in hidden.iter().enumerate() {
-            let index = round * ROUND + i;
-            let (params, mut controller, rms) = random_joint(&mut rng, index);
-            let effects = names
-                .iter()
-                .map(|n| scaled(n, lo * (hi / lo).powf(rng.uniform())))
-                .collect();
-            let mut sensors = SensorConfig::default();
-            if harder {
-                hard(index, &mut controller, &mut sensors);
-            }
-            out.push(Case {
-                hidden: effects,
-                params,
-                controller,
-                sensors,
-                rms,
-                seed: 500 + index as u64,
-            });
-        }
-    }
-    out
-}
-
-/// The simulation of `case`.
-fn config(case: &Case) -> SimConfig {
-    SimConfig {
-        plant: Plant {
-            kind: Structure::ThreeMass,
-            params: case.params,
-        },
-        effects: case.hidden.clone(),
-        controller: case.controller,
-        sensors: case.sensors,
-        ..SimConfig::default()
-    }
-}
-
-/// Estimation and validation captures of `case` with `periods` periods each (validation:
-/// other phases and noise).
-fn captures(case: &Case, periods: u32, rms: f64) -> (Dataset, Dataset) {
-    let exc = ExcitationConfig {
-        periods,
-        rms_rad: rms as f32,
-        ..ExcitationConfig::paper_default()
-    };
-    est_val_captures(&config(case), &exc, case.seed)
 }
 
 fn request(r: f64) -> DiagnoseRequest {

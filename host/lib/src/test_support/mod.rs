@@ -13,6 +13,7 @@ use rustfft::num_complex::Complex64;
 
 use crate::data::IdData;
 
+pub mod battery;
 pub mod grounded;
 pub mod sigma;
 pub mod synth;
