@@ -144,6 +144,26 @@ impl Fitter<'_> {
         scored_fit(res, &r.val_data, &r.parts, req).ok()
     }
 
+    /// The nominal `base` with `effect` added, fitted from the nominal's values (structure,
+    /// lag, offset; the effect at the size it carries) on the nominal's own cost: the
+    /// residual band-limited as the nominal's, whatever the effect
+    /// ([`super::select::nested_refits`]).
+    pub fn nested(&self, base: &NlFit, effect: Effect) -> Result<Fitted, CandidateError> {
+        let req = self.req;
+        let r = self.rec;
+        let longest = longest(&r.est_data).ok_or(CandidateError::NoRecord)?;
+        let mut nl = NlRequest {
+            tau_c: base.model.tau_c,
+            linear: Some(base.plant.clone()),
+            options: req.options.nl.clone(),
+            ..NlRequest::new(req.structure, req.r, vec![effect])
+        };
+        let offset = base.get("offset").unwrap_or(0.0);
+        nl.start = NlStart::Values(model_of(&nl, longest).values(&base.plant, offset, 0.0));
+        let res = identify_segments(&r.est_data, &nl).map_err(CandidateError::Fit)?;
+        scored_fit(res, &r.val_data, &r.parts, req)
+    }
+
     /// The gap metric [%] of `model` on the estimation records themselves (in-sample),
     /// scored as on validation; `None` when it does not simulate.
     pub fn in_sample(&self, model: &DrivenModel) -> Option<f64> {
@@ -162,6 +182,10 @@ pub(super) struct Fitted {
     pub fit: NlFit,
     pub scored: Scored,
     pub warnings: Vec<String>,
+    /// the single's fit from its own start, when its refit from the nominal's values
+    /// replaced it ([`super::select::nested_refits`]); the pairs take it as they take a
+    /// single below its nominal
+    pub own_start: Option<NlFit>,
 }
 
 /// Fits `effects` on the records `est` (one, or the gap-free segments of one capture as
@@ -202,12 +226,7 @@ pub(super) fn fit_and_score(
     };
     let automatic = nl.clone();
     // an extra mode starts where the linear fit with one more mass put it
-    let longest = est
-        .iter()
-        .enumerate()
-        .max_by_key(|(i, d)| (d.len(), usize::MAX - i))
-        .map(|(_, d)| d)
-        .ok_or(CandidateError::NoRecord)?;
+    let longest = longest(est).ok_or(CandidateError::NoRecord)?;
     let extra_at = nl
         .effects
         .iter()
@@ -346,7 +365,16 @@ pub(super) fn scored_fit(
         fit: res.fit,
         scored,
         warnings,
+        own_start: None,
     })
+}
+
+/// The first of the longest records, the one a start's values are laid out for.
+fn longest(est: &[IdData]) -> Option<&IdData> {
+    est.iter()
+        .enumerate()
+        .max_by_key(|(i, d)| (d.len(), usize::MAX - i))
+        .map(|(_, d)| d)
 }
 
 /// Most further iterations of a fit that stopped at its iteration limit

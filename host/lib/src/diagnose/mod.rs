@@ -41,9 +41,12 @@
 //!    with amplitude; the nominal's residual at the odd lines each model's share is read
 //!    against ([`locate::odd_explained`]).
 //! 3. **Singles** ([`select::singles`]): each candidate effect added to the nominal, the
-//!    structure refitted jointly, judged against the nominal. Every scored model is also
-//!    simulated from a start angle 1 nrad away ([`metric::Measured::start_sensitivity`]): a
-//!    chaotic open-loop response is flagged, since no simulation metric can score it.
+//!    structure refitted jointly, judged against the nominal. A single significantly below
+//!    the nominal it contains is refitted from the nominal's values on the nominal's cost
+//!    ([`select::nested_refits`]) and replaced when that scores higher on the estimation
+//!    records. Every scored model is also simulated from a start angle 1 nrad away
+//!    ([`metric::Measured::start_sensitivity`]): a chaotic open-loop response is flagged,
+//!    since no simulation metric can score it.
 //! 4. **Pairs** ([`select::pairs`]): the best single (and the second when they tie) with
 //!    each other significant single, started from the singles' fits, judged against its
 //!    lead alone (nested).
@@ -720,6 +723,7 @@ pub fn diagnose_segments(
     let first = results.next().expect("the nominal job");
     let results: Vec<_> = results.collect();
     let nominal = nominal::settle(&fitter, first, &results, &mut warnings)?;
+    let results = select::nested_refits(&fitter, &nominal, results);
     let fitter = Fitter {
         floor: nominal::refit_spread(&fitter, &nominal, &results),
         ..fitter

@@ -225,6 +225,7 @@ fn nominal_at_start(
             fit: res.fit,
             scored,
             warnings,
+            own_start: None,
         },
         at_start,
         after,
