@@ -121,6 +121,9 @@ impl Fitter<'_> {
         }
         let req = self.req;
         let mut options = nl_options(&req.options, &f.fit.model.effects);
+        // on the cost the fit ended on, which its `ssr` is of (a nested refit's is the
+        // nominal's band-limited one, [`super::select::nested_refits`])
+        options.lowpass_hz = f.fit.lowpass_hz;
         options.max_iter = POLISH_ITER;
         options.fixed = f
             .fit

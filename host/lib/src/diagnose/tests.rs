@@ -1062,6 +1062,7 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
         values: params.iter().map(|p| p.value).collect(),
         params,
         ssr: 1.0,
+        lowpass_hz: 0.0,
         n_residuals: 100,
         iterations: 3,
         termination: Termination::CostConverged,

@@ -285,6 +285,9 @@ pub struct NlFit {
     pub values: Vec<f64>,
     /// `Σ e²` of the prefiltered residual [rad² or (rad/s)²]
     pub ssr: f64,
+    /// the band's low-pass in that prefilter [Hz] ([`NlOptions::lowpass_hz`]; 0: none): the
+    /// cost `ssr` is of, which a continuation of the fit must keep to compare with it
+    pub lowpass_hz: f64,
     /// residuals in the cost
     pub n_residuals: usize,
     /// iterations used
@@ -1090,6 +1093,7 @@ pub fn fit_output_error_segments(
         params,
         values,
         ssr: res.ssr,
+        lowpass_hz: opts.lowpass_hz,
         n_residuals: problem.n_residuals(),
         iterations: res.iterations,
         termination: res.termination,
