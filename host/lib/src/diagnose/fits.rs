@@ -156,13 +156,10 @@ impl Fitter<'_> {
         let r = self.rec;
         let longest = longest(&r.est_data).ok_or(CandidateError::NoRecord)?;
         let mut nl = NlRequest {
-            tau_c: base.model.tau_c,
-            linear: Some(base.plant.clone()),
             options: req.options.nl.clone(),
             ..NlRequest::new(req.structure, req.r, vec![effect])
         };
-        let offset = base.get("offset").unwrap_or(0.0);
-        nl.start = NlStart::Values(model_of(&nl, longest).values(&base.plant, offset, 0.0));
+        start_from(&mut nl, base, longest);
         let res = identify_segments(&r.est_data, &nl).map_err(CandidateError::Fit)?;
         scored_fit(res, &r.val_data, &r.parts, req)
     }
@@ -306,10 +303,7 @@ pub(super) fn fit_and_score(
         let offset = from.and_then(|b| b.get("offset")).unwrap_or(0.0);
         nl.start = NlStart::Values(model_of(&nl, longest).values(plant, offset, 0.0));
     } else if let Some(base) = from {
-        nl.tau_c = base.model.tau_c;
-        nl.linear = Some(base.plant.clone());
-        let offset = base.get("offset").unwrap_or(0.0);
-        nl.start = NlStart::Values(model_of(&nl, longest).values(&base.plant, offset, 0.0));
+        start_from(&mut nl, base, longest);
     } else if let (Some(i), Some((plant, mode, tau_c))) = (extra_at, &starts.extra_mode) {
         nl.effects[i] = Effect::ExtraMode(*mode);
         nl.tau_c = *tau_c;
@@ -370,6 +364,15 @@ pub(super) fn scored_fit(
         warnings,
         own_start: None,
     })
+}
+
+/// `nl` started from the fit `base`: its structure's values, lag and offset, the effects at
+/// the values `nl` carries (laid out for the record `longest`).
+fn start_from(nl: &mut NlRequest, base: &NlFit, longest: &IdData) {
+    nl.tau_c = base.model.tau_c;
+    nl.linear = Some(base.plant.clone());
+    let offset = base.get("offset").unwrap_or(0.0);
+    nl.start = NlStart::Values(model_of(nl, longest).values(&base.plant, offset, 0.0));
 }
 
 /// The first of the longest records, the one a start's values are laid out for.
