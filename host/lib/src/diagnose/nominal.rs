@@ -98,7 +98,11 @@ pub(super) fn refit_spread(
 ) -> Floor {
     let mut floor = Floor::of(fitter.req);
     for f in singles.iter().flatten() {
-        if !exactly_of_no_size(&f.fit) || f.fit.ssr > nominal.fit.ssr {
+        // the same cost as the nominal's (a nonlinear single is fitted over the whole band,
+        // [`super::inputs::nl_options`], unless refitted on the nominal's): else it is the
+        // nominal fitted on another cost, and its ssr and its FIT say nothing of the spread
+        let same_cost = f.fit.lowpass_hz == nominal.fit.lowpass_hz;
+        if !same_cost || !exactly_of_no_size(&f.fit) || f.fit.ssr > nominal.fit.ssr {
             continue;
         }
         let vanished = vanished_effects(&f.fit);
