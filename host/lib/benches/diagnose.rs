@@ -21,8 +21,9 @@
 //! log-uniform in 0.1–1.6 × their defaults instead, for effects that cost the nominal
 //! about a point; `ONLY=K` or `ONLY=K,L` runs those cases alone, numbered across rounds
 //! (round 2 is 10–19); `SPEED=0` skips the speed case, `DETAIL=1` prints every candidate,
-//! `BATTERY=0` the battery, `STAGES=1` prints each stage's end with its seconds, `LOWPASS=0`
-//! leaves the fits' residuals unfiltered above the excited band; `HARD=1` runs every case under harder conditions of a real
+//! `BATTERY=0` the battery, `STAGES=1` prints each stage's start and end as they come, at
+//! their seconds from the case's start, `LOWPASS=0` leaves the fits' residuals unfiltered
+//! above the excited band; `HARD=1` runs every case under harder conditions of a real
 //! joint, drawn per case ([`Hard`]): a process disturbance inside the excited band, a
 //! coarser encoder, a current-loop lag of 0.5–3 samples, the inertia feedforward on in
 //! half the cases).
@@ -97,11 +98,16 @@ fn cpu_seconds() -> f64 {
 }
 
 fn request(r: f64) -> DiagnoseRequest {
-    // `STAGES=1`: each stage's and candidate's end with its seconds, as they come
+    // `STAGES=1`: each stage's and candidate's start and end, as they come, at their seconds
     let progress = std::env::var("STAGES").is_ok_and(|v| v == "1").then(|| {
-        Progress::new(|e| {
-            if let ProgressEvent::Finished(what, outcome) = e {
-                println!("      {what}: {outcome}");
+        let began = std::time::Instant::now();
+        Progress::new(move |e| {
+            let at = began.elapsed().as_secs_f64();
+            match e {
+                ProgressEvent::Started(what) => println!("      {at:6.1} s  {what} …"),
+                ProgressEvent::Finished(what, outcome) => {
+                    println!("      {at:6.1} s  {what}: {outcome}")
+                }
             }
         })
     });

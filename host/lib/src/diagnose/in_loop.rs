@@ -618,9 +618,12 @@ impl LeastSquares for LoopProblem<'_> {
 /// offset (the law's constant takes a constant torque, and what is left of it the metric's
 /// band leaves out: free, it came out correlated ±1 with every other parameter), the Jacobian by
 /// forward differences on `threads` threads. It starts from `fit`'s values and from each of
-/// `spring_starts` (within [`REFINE_TOTAL_SIMULATIONS`]) and keeps the lowest cost. Returns
-/// the refined fit (values, standard deviations from the loop's covariance), its in-sample
-/// gap metric before and after [%], and the spring its winning start moved.
+/// `spring_starts` (within [`REFINE_TOTAL_SIMULATIONS`]) and keeps the lowest cost; the
+/// search ends early when a start reaches the in-sample gap metric `enough` [%] (the noise's
+/// floor, [`super::metric::Measured::noise_fit`], less the significance floor): no other
+/// start could then lower the cost by what the data tell apart. Returns the refined fit
+/// (values, standard deviations from the loop's covariance), its in-sample gap metric
+/// before and after [%], the spring its winning start moved and the starts run.
 ///
 /// Why: the answer's fit was made open loop, on a cost the chaotic simulation makes rough
 /// (bench case 72: `k3` −13 % and `k_g` +24 % against the truth, 93.5 % in the loop where
@@ -632,6 +635,7 @@ pub fn refine(
     fit: &NlFit,
     law: &LinearController,
     (data, measured): (&IdData, &Measured),
+    enough: Option<f64>,
     threads: usize,
 ) -> Result<Refined, RefineError> {
     let layout = fit.model.layout();
@@ -672,11 +676,19 @@ pub fn refine(
     // cost in the loop wins
     let mut total = 0;
     let mut best: Option<(crate::ident::lm::LmFit, Option<Moved>)> = None;
-    for (z, moved) in spring_starts(&layout, &opts.fixed, &z0) {
+    let all = spring_starts(&layout, &opts.fixed, &z0);
+    let mut starts = (0, all.len());
+    for (z, moved) in all {
         total += problem.runs.swap(0, Ordering::Relaxed);
         if best.is_some() && total >= REFINE_TOTAL_SIMULATIONS {
             break;
         }
+        let done =
+            |(b, _): &(crate::ident::lm::LmFit, _)| enough.is_some_and(|e| fit_of(b.ssr) >= e);
+        if best.as_ref().is_some_and(done) {
+            break;
+        }
+        starts.0 += 1;
         let Ok(lm) = minimize(&problem, &z, &opts) else {
             continue;
         };
@@ -741,6 +753,7 @@ pub fn refine(
         before: fit_of(before),
         moved,
         after: fit_of(lm.ssr),
+        starts,
     })
 }
 
@@ -766,6 +779,9 @@ pub struct Refined {
     pub moved: Option<Moved>,
     /// the gap metric after the refinement [%]
     pub after: f64,
+    /// the starts run, of those there were (fewer when one reached the noise's floor or the
+    /// simulations' bound)
+    pub starts: (usize, usize),
 }
 
 /// A spring moved by a start of [`refine`]: its name, the factor and the gap metric in the

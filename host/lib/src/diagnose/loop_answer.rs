@@ -5,7 +5,10 @@
 //! read ([`refine_contenders`]); the loop's best may take a partner significant there, the
 //! pair refined alike ([`pair_in_loop`]); an answer not refined yet (an open-loop pair the
 //! loop keeps) is refined last ([`refine_answer`]), its partner dropped when it no longer
-//! adds ([`drop_partner`]).
+//! adds ([`drop_partner`]). The noise's floor ends the search early: a refinement stops
+//! trying further starts, and the stage further contenders and pairs, once a fit reaches in
+//! sample what the noise from period to period leaves ([`metric::Measured::noise_fit`]),
+//! less the significance floor.
 
 use crate::data::Dataset;
 use crate::ident::nonlinear::{NlFit, Owner};
@@ -66,18 +69,27 @@ pub(super) fn rescore(
     };
     // the singles the loop ranks, refined there before the ranking is read
     let mut refined = Vec::new();
+    let mut at_floor = None;
     if answer.pair.is_none() {
         let ctx = (&rec.est[0][0], one, measured);
-        refined = progress::step(
+        (refined, at_floor) = progress::step(
             fitter.req.progress.as_ref(),
             "the singles significant in the loop refined there",
             || refine_contenders(&mut l, &mut answer.singles, ctx, &judge, o),
-            |r| format!("{} refined", r.len()),
+            |r| format!("{} refined", r.0.len()),
         );
     }
     // the loop's best single with each other single significant there (the open-loop
-    // pair search was led by a single the loop does not keep)
-    let found = if o.pairs && answer.pair.is_none() {
+    // pair search was led by a single the loop does not keep); not when that single
+    // reached the noise's floor in-sample, where no partner can add significantly
+    let at_floor = at_floor.is_some_and(|n| n == l.best);
+    if at_floor && o.pairs && answer.pair.is_none() {
+        l.words.push_str(&format!(
+            "; no pair tried in the loop: {} alone reached the noise's floor in-sample",
+            l.best
+        ));
+    }
+    let found = if o.pairs && answer.pair.is_none() && !at_floor {
         pair_in_loop(fitter, &answer.singles, &l, (&rec.est[0][0], one, measured))
     } else {
         None
@@ -183,15 +195,20 @@ fn refine_answer(
     else {
         return;
     };
-    let (refined, cs, odd, before) =
-        match refine_in_loop(&l.scores, &start, (est, val, measured), o) {
-            Ok(r) => r,
-            Err(e) => {
-                l.words
-                    .push_str(&format!("; refining the answer in the loop failed: {e}"));
-                return;
-            }
-        };
+    let LoopRefit {
+        fit: refined,
+        cs,
+        odd,
+        course: before,
+        ..
+    } = match refine_in_loop(&l.scores, &start, (est, val, measured), o) {
+        Ok(r) => r,
+        Err(e) => {
+            l.words
+                .push_str(&format!("; refining the answer in the loop failed: {e}"));
+            return;
+        }
+    };
     if cs.fit <= l.best_fit {
         l.words.push_str(&format!(
             "; refined in the loop on the estimation record (in-sample {before}), the answer \
@@ -248,16 +265,21 @@ fn refine_in_loop(
     start: &NlFit,
     (est, val, measured): (&Dataset, &Dataset, &Measured),
     o: &DiagnoseOptions,
-) -> Result<(NlFit, metric::ClosedScored, Option<f64>, String), String> {
+) -> Result<LoopRefit, String> {
     let m_est = Measured::new(&est.data, o.band_hz, o.skip_of(&est.data));
+    // what the noise leaves, less what the significance test tells apart: a start that
+    // reaches it leaves no other start anything to find
+    let floor = m_est.noise_fit(est, o.settle_periods);
+    let enough = floor.map(|f| f - o.min_gain);
     let in_loop::Refined {
         fit,
         before,
         moved,
         after,
-    } = in_loop::refine(start, &scores.law, (&est.data, &m_est), o.threads)
+        starts,
+    } = in_loop::refine(start, &scores.law, (&est.data, &m_est), enough, o.threads)
         .map_err(|e| e.to_string())?;
-    let words = match moved {
+    let mut words = match moved {
         Some((name, factor, at)) => format!(
             "{before:.1} %; the lowest cost came from a start with {name} ×{factor} ({at:.1} \
              %; each spring was moved up and down to let the refinement leave a mode on a \
@@ -265,6 +287,14 @@ fn refine_in_loop(
         ),
         None => format!("{before:.1} → {after:.1} %"),
     };
+    let at_floor = enough.is_some_and(|e| after >= e);
+    if let (Some(f), true) = (floor, at_floor && starts.0 < starts.1) {
+        words.push_str(&format!(
+            "; {} of {} starts run: the noise from period to period leaves {f:.1} %, which \
+             the fit reached",
+            starts.0, starts.1
+        ));
+    }
     let (cs, odd) = scores
         .score(
             measured,
@@ -273,7 +303,29 @@ fn refine_in_loop(
             (o.segments, o.settle_periods),
         )
         .map_err(|e| e.to_string())?;
-    Ok((fit, cs, odd, words))
+    Ok(LoopRefit {
+        fit,
+        cs,
+        odd,
+        course: words,
+        at_floor,
+    })
+}
+
+/// What [`refine_in_loop`] returns.
+struct LoopRefit {
+    /// the refined fit
+    fit: NlFit,
+    /// its scores in the loop on validation
+    cs: metric::ClosedScored,
+    /// its share of the odd-line residual
+    odd: Option<f64>,
+    /// the in-sample course, in words
+    course: String,
+    /// whether it reached the noise's floor in-sample less the significance floor
+    /// ([`super::metric::Measured::noise_fit`]): no model can then gain significantly on it
+    /// in-sample
+    at_floor: bool,
 }
 
 /// A candidate and its fit take the refined fit `refined` scored `cs` (odd share `odd`) in
@@ -319,35 +371,52 @@ fn adopt(
 /// answer. The open-loop fits sit at values the loop did not choose, and refinement gains
 /// one effect more than another (bench case 61, a backlash: in the loop +7.4 points against
 /// a stiffening spring's +7.8 before refinement, 96.7 against 88.7 % after). A single keeps
-/// its refined fit when it scores higher on validation. Returns the singles refined.
+/// its refined fit when it scores higher on validation. The singles are taken in the
+/// loop's order, and once one reaches the noise's floor in-sample
+/// ([`LoopRefit::at_floor`]) those after it are left as they are: any of them could only
+/// tie with it there. Returns the singles refined and the one at the floor.
 fn refine_contenders(
     l: &mut in_loop::InLoop,
     singles: &mut [(Candidate, Option<Fitted>)],
     (est, val, measured): (&Dataset, &Dataset, &Measured),
     judge: in_loop::Judge<'_>,
     o: &DiagnoseOptions,
-) -> Vec<String> {
+) -> (Vec<String>, Option<String>) {
     let mut done = Vec::new();
     let mut words = Vec::new();
+    // the first refined to the noise's floor: the contenders after it, which could only tie
+    // with it in-sample, are not refined
+    let mut at_floor: Option<String> = None;
     for (c, f) in singles.iter_mut() {
         let Some(f) = f.as_mut().filter(|_| c.significant) else {
             continue;
         };
         let was = c.fit_val;
+        if let Some(first) = &at_floor {
+            words.push(format!(
+                "{} {was:.1} % not refined ({first} reached the noise's floor in-sample)",
+                c.name
+            ));
+            continue;
+        }
         words.push(
             match refine_in_loop(&l.scores, &f.fit, (est, val, measured), o) {
-                Ok((refined, cs, odd, course)) if cs.fit > was => {
+                Ok(r) if r.cs.fit > was => {
+                    if r.at_floor {
+                        at_floor = Some(c.name.clone());
+                    }
+                    let (fit, course) = (r.cs.fit, r.course);
                     adopt(
                         (c, f),
-                        (refined, &cs, odd),
+                        (r.fit, &r.cs, r.odd),
                         &l.scores.nominal.segments,
                         judge,
                     );
-                    format!("{} {was:.1} → {:.1} % (in-sample {course})", c.name, cs.fit)
+                    format!("{} {was:.1} → {fit:.1} % (in-sample {course})", c.name)
                 }
-                Ok((_, cs, _, _)) => format!(
+                Ok(r) => format!(
                     "{} {was:.1} % kept (refined: {:.1} %, no higher)",
-                    c.name, cs.fit
+                    c.name, r.cs.fit
                 ),
                 Err(e) => format!("{} {was:.1} % kept (refining failed: {e})", c.name),
             },
@@ -363,7 +432,7 @@ fn refine_contenders(
     }
     singles.sort_by(|a, b| by_score(&b.0).total_cmp(&by_score(&a.0)));
     let Some((top, Some(f))) = singles.first().filter(|s| s.0.significant) else {
-        return done;
+        return (done, at_floor);
     };
     if top.name != l.best || done.contains(&top.name) {
         if let Ok((cs, odd)) = l.scores.score(
@@ -385,7 +454,7 @@ fn refine_contenders(
             l.velocities.1 = metric::velocity_band(&cs.theta_m, val.data.ts, measured.band);
         }
     }
-    done
+    (done, at_floor)
 }
 
 /// A refined pair `(fit, its scores in the loop, odd share)` without its partner: the lead
@@ -468,9 +537,9 @@ fn pair_in_loop(
             continue;
         };
         // refined in the loop as its lead was, so that the two are compared alike
-        if let Ok((rf, rcs, rodd, _)) = refine_in_loop(&l.scores, &f.fit, (est, val, measured), o) {
-            if rcs.fit > cs.fit {
-                (f.fit, cs, odd) = (rf, rcs, rodd);
+        if let Ok(r) = refine_in_loop(&l.scores, &f.fit, (est, val, measured), o) {
+            if r.cs.fit > cs.fit {
+                (f.fit, cs, odd) = (r.fit, r.cs, r.odd);
             }
         }
         let (gain, se, significant) = fitter.judge(&cs.segments, &l.best_segments);

@@ -389,6 +389,36 @@ impl Measured {
             .collect()
     }
 
+    /// The gap metric [%] the noise alone leaves a model on the scored range of `ds` (the
+    /// record `self` was made from): the measured velocity's sample variance from period to
+    /// period, over the whole periods after `settle_periods`, taken as the residual of a
+    /// model that follows every periodic part of the response. `None` without at least two
+    /// whole periods. What varies from period to period is what no model driven by the
+    /// reference can follow: the sensors' noise and the process disturbance (a joint in
+    /// periodic steady state repeats the rest).
+    pub fn noise_fit(&self, ds: &crate::data::Dataset, settle_periods: usize) -> Option<f64> {
+        let l = ds.period_layout(settle_periods).ok()?;
+        let v = &self.velocity;
+        if l.count < 2 || l.start + l.count * l.period > v.len() || self.skip >= v.len() {
+            return None;
+        }
+        let p = l.count as f64;
+        let per_sample = (0..l.period)
+            .map(|j| {
+                let at = |c: usize| v[l.start + c * l.period + j];
+                let mean = (0..l.count).map(at).sum::<f64>() / p;
+                (0..l.count).map(|c| (at(c) - mean).powi(2)).sum::<f64>() / (p - 1.0)
+            })
+            .sum::<f64>()
+            / l.period as f64;
+        let scored = &v[self.skip..];
+        let ssr = per_sample * scored.len() as f64;
+        Some(crate::ident::validate::fit_from_sums(
+            ssr,
+            crate::ident::validate::centred_sum_of_squares(scored),
+        ))
+    }
+
     /// Scores `model` on `data` (the record `self` was made from).
     ///
     /// # Errors
@@ -723,6 +753,65 @@ fn true_model(cfg: &crate::sim::SimConfig) -> DrivenModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The noise's floor read from the periods of one capture is what a model that followed
+    /// the joint exactly would score: the joint simulated again with ideal sensors and no
+    /// disturbance, scored against the capture. A disturbance inside the excited band (30 Hz,
+    /// 2 mN·m) and a coarse encoder, in the simulator's closed loop.
+    #[test]
+    fn the_noise_floor_from_the_periods_is_the_fit_of_the_noise_free_joint() {
+        use crate::sim::{simulate_excitation, SensorConfig, SimConfig};
+        use jointid_core::excitation::ExcitationConfig;
+        let exc = ExcitationConfig {
+            periods: 5,
+            rms_rad: 0.02,
+            ..ExcitationConfig::paper_default()
+        };
+        let noisy_cfg = SimConfig {
+            sensors: SensorConfig {
+                counts_per_rev: Some(1 << 14),
+                disturbance: crate::sim::Disturbance {
+                    noise_std: 2e-3,
+                    noise_cutoff_hz: 30.0,
+                    ..crate::sim::Disturbance::default()
+                },
+                ..SensorConfig::default()
+            },
+            ..SimConfig::default()
+        };
+        let clean_cfg = SimConfig {
+            sensors: SensorConfig::ideal(),
+            ..noisy_cfg.clone()
+        };
+        let run = |cfg: &SimConfig| {
+            simulate_excitation(cfg, &exc)
+                .expect("simulation")
+                .to_id_data()
+        };
+        let (noisy, clean) = (run(&noisy_cfg), run(&clean_cfg));
+        let ds = crate::data::Dataset {
+            name: "noisy".into(),
+            data: noisy.clone(),
+            t0: 0.0,
+            excitation: Some(exc),
+            meta: Default::default(),
+        };
+        let skip = exc.period_samples as usize;
+        let m = Measured::new(&noisy, DEFAULT_BAND_HZ, skip);
+        let floor = m.noise_fit(&ds, 1).expect("four whole periods");
+        let clean_v = velocity_band(&clean.y, clean.ts, DEFAULT_BAND_HZ);
+        let exact = fit_percent(&m.velocity[skip..], &clean_v[skip..]).expect("fit");
+        assert!(
+            (floor - exact).abs() < 1.0 && exact < 99.0,
+            "floor {floor:.2} %, the noise-free joint {exact:.2} %"
+        );
+        // one whole period after the settling one: no floor
+        let short = crate::data::Dataset {
+            excitation: Some(ExcitationConfig { periods: 2, ..exc }),
+            ..ds.clone()
+        };
+        assert_eq!(m.noise_fit(&short, 1), None);
+    }
 
     #[test]
     fn a_record_that_cannot_be_scored_says_why() {

@@ -429,6 +429,11 @@ fn a_partner_that_refines_to_nothing_in_the_loop_is_dropped() {
         (0.141_276_85, 502),
     );
     assert!(d.pair.is_none(), "{}: {:?}", d.verdict, d.warnings);
+    // refined in the loop from its own values, the spring reached what the noise from
+    // period to period leaves: no further start, contender or partner was refined there
+    assert_noted(&d, "starts run: the noise from period to period leaves");
+    assert_noted(&d, "backlash 62.6 % not refined");
+    assert_noted(&d, "no pair tried in the loop");
     let best = &d.effects[0];
     assert!(
         !best
