@@ -60,8 +60,10 @@
 //!    ([`locate::odd_left_db`]), or `none` with it left, has every fitted model scored
 //!    again in the loop of the robot's controller, its law identified from the estimation
 //!    record ([`crate::ident::controller`]); every single significant there, and every pair
-//!    of the loop's best with another, is refined in the loop before they are ranked; the
-//!    loop's answer replaces the open-loop one when it removes the distortion.
+//!    of the loop's best with another, is refined in the loop before they are ranked, until
+//!    one reaches in-sample what the noise from period to period leaves
+//!    ([`metric::Measured::noise_fit`]); the loop's answer replaces the open-loop one when it
+//!    removes the distortion.
 //! 8. **Verdict** ([`verdict`]): the closure of the gap in one sentence with its doubts, the
 //!    user's simulation split into parameter and structure parts, the report's series.
 //!
