@@ -401,7 +401,8 @@ impl LoopAnswer<'_> {
                         odd_words(*odd),
                         c.reason
                     );
-                    (c.score, c.score_se, c.significant) = (*score, *se, *significant);
+                    let supported = f.as_ref().is_none_or(|f| f.unsupported.is_none());
+                    (c.score, c.score_se, c.significant) = (*score, *se, *significant && supported);
                     c.fit_val = cs.fit;
                     c.fit_angle_val = cs.angle_fit;
                     c.odd_explained = *odd;
@@ -426,7 +427,11 @@ impl LoopAnswer<'_> {
                     odd_words(odd),
                     p.reason
                 );
-                (p.score, p.score_se, p.significant) = (score, se, significant);
+                let supported = self
+                    .pair_fitted
+                    .as_ref()
+                    .is_none_or(|f| f.unsupported.is_none());
+                (p.score, p.score_se, p.significant) = (score, se, significant && supported);
                 p.fit_val = cs.fit;
                 p.fit_angle_val = cs.angle_fit;
                 p.odd_explained = odd;

@@ -148,6 +148,7 @@ fn recover_nominal(
         coulomb_extra_mode: LazyStart::none(),
         grown: None,
         two_mass: None,
+        delay_lines: None,
     };
     let mut why = vec![(NominalStart::FrequencyDomain, failed)];
     match fit_and_score(est, val, parts, req, Vec::new(), &none, None) {
@@ -230,6 +231,7 @@ fn nominal_at_start(
             scored,
             warnings,
             own_start: None,
+            unsupported: None,
         },
         at_start,
         after,

@@ -6,7 +6,7 @@
 use std::sync::OnceLock;
 
 use crate::data::Dataset;
-use crate::ident::nonlinear::{grow, linear_start_segments, NlRequest};
+use crate::ident::nonlinear::{grow, linear_start_segments, DelayLines, NlRequest};
 use crate::ident::parallel::parallel;
 use crate::model::effects::{Attach, Effect, ExtraMode};
 use crate::model::spec::Structure;
@@ -61,7 +61,8 @@ pub(super) fn linear_starts(
         StartJob::Coulomb(c) => StartDone::Coulomb(coulomb_linear_of(est0, req, c)),
         StartJob::Structure => {
             let mut said = Vec::new();
-            StartDone::Structure(linear_of(est0, req, &mut said), said)
+            let (start, lines) = structure_start(est0, req, &mut said);
+            StartDone::Structure(start, lines, said)
         }
         StartJob::TwoMass => StartDone::TwoMass(
             linear_start_segments(
@@ -84,14 +85,16 @@ pub(super) fn linear_starts(
         },
         grown: None,
         two_mass: None,
+        delay_lines: None,
     };
     let mut level = None;
     for d in done {
         match d {
             StartDone::ExtraMode(x) => starts.extra_mode = x,
             StartDone::Coulomb((c, l)) => (starts.coulomb, level) = (c, l),
-            StartDone::Structure(x, said) => {
+            StartDone::Structure(x, lines, said) => {
                 starts.structure = x;
+                starts.delay_lines = lines;
                 warnings.extend(said);
             }
             StartDone::TwoMass(x) => starts.two_mass = x,
@@ -158,7 +161,7 @@ enum StartJob {
 enum StartDone {
     ExtraMode(Option<(Vec<f64>, ExtraMode, f64)>),
     Coulomb((Option<(Vec<f64>, f64)>, Option<f64>)),
-    Structure(Option<(Vec<f64>, f64)>, Vec<String>),
+    Structure(Option<(Vec<f64>, f64)>, Option<DelayLines>, Vec<String>),
     TwoMass(Option<(Vec<f64>, f64)>),
 }
 
@@ -219,6 +222,9 @@ pub(super) struct LinearStarts {
     /// the linear two-mass's values and lag [s] from the frequency-domain fit, from which
     /// the backlash candidate is also grown ([`grow::grow_backlash`])
     pub two_mass: Option<(Vec<f64>, f64)>,
+    /// the excited lines' evidence of a transport delay beside the lag, from the structure's
+    /// frequency-domain fits ([`DelayLines`])
+    pub delay_lines: Option<DelayLines>,
 }
 
 /// The start of `structure` with an extra mode attached as `attach` says, from the
@@ -287,13 +293,15 @@ fn coulomb_linear_of(
     (start, level)
 }
 
-pub(super) fn linear_of(
+/// The structure's frequency-domain start (values and lag [s]), with the excited lines'
+/// evidence of a transport delay beside the lag ([`DelayLines`]).
+pub(super) fn structure_start(
     ds: &[Dataset],
     req: &DiagnoseRequest,
     warnings: &mut Vec<String>,
-) -> Option<(Vec<f64>, f64)> {
+) -> (Option<(Vec<f64>, f64)>, Option<DelayLines>) {
     match linear_start_segments(ds, 1, &NlRequest::new(req.structure, req.r, Vec::new())) {
-        Ok(l) => Some((l.values, l.tau_c)),
+        Ok(l) => (Some((l.values, l.tau_c)), l.delay_lines),
         Err(e) => {
             if ds.first().is_some_and(|d| d.excitation.is_some()) {
                 warnings.push(format!(
@@ -302,7 +310,7 @@ pub(super) fn linear_of(
                     ds[0].name
                 ));
             }
-            None
+            (None, None)
         }
     }
 }

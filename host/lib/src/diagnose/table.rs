@@ -36,6 +36,11 @@ pub(super) fn scored_candidate(
             ),
         )
     };
+    // an effect the data do not support otherwise ([`super::fits::delay_unsupported`])
+    let (significant, reason) = match &f.unsupported {
+        Some(why) => (false, format!("{reason}; not counted: {why}")),
+        None => (significant, reason),
+    };
     Candidate {
         name: name.into(),
         specs: f.fit.model.effects.iter().map(|e| e.to_string()).collect(),

@@ -5,7 +5,7 @@
 
 use super::fits::fit_and_score;
 use super::metric::Measured;
-use super::starts::{linear_of, LazyStart, LinearStarts};
+use super::starts::{structure_start, LazyStart, LinearStarts};
 use super::table::{exactly_of_no_size, vanished_effects};
 use super::*;
 use crate::ident::nonlinear::NlFit;
@@ -615,8 +615,11 @@ fn a_nominal_with_no_start_names_every_start_tried() {
 /// 1.1-sample delay at 0.015 rad RMS with a disturbance inside the band. Each nonlinear
 /// single, fitted over the whole band, scored 4.4–5.5 points below the nominal it contains
 /// on validation, and each was tried as the delay's partner from two starts. Refitted from
-/// the nominal's values on its band-limited cost, none is below it, and the answer is the
-/// delay.
+/// the nominal's values on its band-limited cost, none is below it. The delay itself (the
+/// drive's lag is 0.5 samples) is not told from a longer lag on the excited lines (their
+/// cost drops by 1.5 with it), and at this disturbance a delay's gain on the records is no
+/// evidence ([`no_delay_is_named_where_the_loop_feeds_the_disturbance_back`]): it is not
+/// counted.
 #[test]
 fn a_single_below_the_nominal_it_contains_is_refitted_from_the_nominal() {
     use crate::test_support::battery::{captures, cases};
@@ -630,7 +633,13 @@ fn a_single_below_the_nominal_it_contains_is_refitted_from_the_nominal() {
         ..DiagnoseRequest::default()
     };
     let d = diagnose(&[est], &val, &req).unwrap();
-    assert_eq!(d.best, "time_delay", "{}", d.verdict);
+    assert_eq!(d.best, "none", "{}", d.verdict);
+    let delay = d.effects.iter().find(|c| c.name == "time_delay").unwrap();
+    assert!(
+        !delay.significant && delay.reason.contains("show no transport delay"),
+        "{}",
+        delay.reason
+    );
     let refitted: Vec<&str> = d
         .effects
         .iter()
@@ -651,6 +660,33 @@ fn a_single_below_the_nominal_it_contains_is_refitted_from_the_nominal() {
             c.score_se
         );
     }
+}
+
+/// Hard bench case 28 (`HARD=1 SMALL=1 ROUNDS=3`): a joint with no effect at 0.017 rad RMS,
+/// a disturbance of 1.5 mN·m inside the band, and a 2-sample current-loop lag; the nominal
+/// reaches 51.6 % on validation, what the noise from period to period leaves. A delay of
+/// 2.2 samples scored +0.65 ± 0.06 points there, more than the true model, by following the
+/// disturbance the loop feeds back into the measured torque. The excited lines, consistent
+/// in the loop, show no delay beside the lag: no effect may be named.
+#[test]
+fn no_delay_is_named_where_the_loop_feeds_the_disturbance_back() {
+    use crate::test_support::battery::{captures, cases};
+    let case = &cases(3, true, true)[28];
+    assert!(case.hidden.is_empty());
+    let (est, val) = captures(case, 4, case.rms);
+    let req = DiagnoseRequest {
+        r: case.params.r,
+        candidates: all_candidates(),
+        ..DiagnoseRequest::default()
+    };
+    let d = diagnose(&[est], &val, &req).unwrap();
+    assert_eq!(d.best, "none", "{}", d.verdict);
+    let delay = d.effects.iter().find(|c| c.name == "time_delay").unwrap();
+    assert!(
+        !delay.significant && delay.reason.contains("show no transport delay"),
+        "{}",
+        delay.reason
+    );
 }
 
 /// The estimation capture given again as the validation capture is refused before any fit:
@@ -1004,7 +1040,7 @@ fn a_start_that_does_not_simulate_gives_way_to_the_automatic_start() {
     let o = &req.options;
     let parts =
         [Measured::new(&val.data, o.band_hz, o.skip_of(&val.data)).with_tracking(o.tracking_hz)];
-    let structure = linear_of(std::slice::from_ref(&est), &req, &mut Vec::new());
+    let structure = structure_start(std::slice::from_ref(&est), &req, &mut Vec::new()).0;
     let (plant, lag) = structure.clone().expect("the linear start");
     let unstable = ExtraMode { k: -1e9, ..mode };
     let starts = LinearStarts {
@@ -1014,6 +1050,7 @@ fn a_start_that_does_not_simulate_gives_way_to_the_automatic_start() {
         coulomb_extra_mode: LazyStart::none(),
         grown: None,
         two_mass: None,
+        delay_lines: None,
     };
     let (est, val) = ([est.data], [val.data]);
     let fitted = |effects: Vec<Effect>| {

@@ -26,8 +26,8 @@ pub use output_error::{
 };
 pub use run::{
     identify, identify_segments, linear_start, linear_start_segments, model_name, model_of, run,
-    validate, validate_segments, LinearStart, LinearStartError, NlData, NlRequest, NlResult, NlRun,
-    NlRunError, NlStart, NlValidation,
+    validate, validate_segments, DelayLines, LinearStart, LinearStartError, NlData, NlRequest,
+    NlResult, NlRun, NlRunError, NlStart, NlValidation,
 };
 
 #[cfg(test)]

@@ -736,6 +736,35 @@ pub struct LinearStart {
     /// the fit's cost is within a few times the noise's
     /// ([`crate::ident::sml::GOOD_START_RATIO`])
     pub at_noise: bool,
+    /// with lag and delay both estimated: the likelihood-ratio evidence of a transport delay
+    /// on the excited lines ([`DelayLines`]); `None` when either was held or a fit failed
+    pub delay_lines: Option<DelayLines>,
+}
+
+/// How much a transport delay beside the current-loop lag lowers the SML cost of the
+/// structure's frequency-domain fit: the lag-only fit's cost less the free fit's. The SML
+/// cost is a chi-squared sum over the excited lines with the per-line noise variances of
+/// the periods, consistent in a closed loop since the FRF is read through the periodic
+/// reference; one parameter more lowers it, when the delay is not there, by a chi-squared
+/// of one degree of freedom scaled by `ν/(ν − 2)` for the estimated variances.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DelayLines {
+    /// the drop of the SML cost [-]
+    pub drop: f64,
+    /// the delay the free fit found [samples]
+    pub delay: f64,
+    /// the drop a delay that is not there stays below with 99 % probability [-]
+    pub threshold: f64,
+}
+
+/// The 99 % point of a chi-squared of one degree of freedom.
+const CHI2_1_99: f64 = 6.635;
+
+impl DelayLines {
+    /// Whether the lines show a delay beside the lag.
+    pub fn shown(&self) -> bool {
+        self.drop > self.threshold
+    }
 }
 
 /// Why [`linear_start`] gave none.
@@ -817,7 +846,21 @@ pub fn linear_start_segments(
     })
     .into_iter();
     let mut raw = raws.next().expect("the free fit is the first job");
+    let mut delay_lines = None;
     if let Some(Ok(l)) = raws.next() {
+        if let Ok(free) = &raw {
+            let nu = free.noise_dof;
+            delay_lines = Some(DelayLines {
+                drop: l.cost - free.cost,
+                delay: free.delay.value,
+                threshold: CHI2_1_99
+                    * if nu > 2.0 {
+                        nu / (nu - 2.0)
+                    } else {
+                        f64::INFINITY
+                    },
+            });
+        }
         raw = match raw {
             Ok(free) if free.cost_ratio() < l.cost_ratio() => Ok(free),
             _ => Ok(l),
@@ -906,6 +949,7 @@ pub fn linear_start_segments(
         },
         step,
         compensation,
+        delay_lines,
     })
 }
 
