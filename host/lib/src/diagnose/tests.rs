@@ -622,24 +622,7 @@ fn a_nominal_with_no_start_names_every_start_tried() {
 /// counted.
 #[test]
 fn a_single_below_the_nominal_it_contains_is_refitted_from_the_nominal() {
-    use crate::test_support::battery::{captures, cases};
-    let case = &cases(1, true, true)[4];
-    assert_eq!(case.hidden.len(), 1);
-    assert_eq!(case.hidden[0].name(), "time_delay");
-    let (est, val) = captures(case, 4, case.rms);
-    let req = DiagnoseRequest {
-        r: case.params.r,
-        candidates: all_candidates(),
-        ..DiagnoseRequest::default()
-    };
-    let d = diagnose(&[est], &val, &req).unwrap();
-    assert_eq!(d.best, "none", "{}", d.verdict);
-    let delay = d.effects.iter().find(|c| c.name == "time_delay").unwrap();
-    assert!(
-        !delay.significant && delay.reason.contains("show no transport delay"),
-        "{}",
-        delay.reason
-    );
+    let (d, req) = hard_case_without_a_delay_counted(4, &["time_delay"]);
     let refitted: Vec<&str> = d
         .effects
         .iter()
@@ -670,9 +653,21 @@ fn a_single_below_the_nominal_it_contains_is_refitted_from_the_nominal() {
 /// in the loop, show no delay beside the lag: no effect may be named.
 #[test]
 fn no_delay_is_named_where_the_loop_feeds_the_disturbance_back() {
-    use crate::test_support::battery::{captures, cases};
-    let case = &cases(3, true, true)[28];
-    assert!(case.hidden.is_empty());
+    hard_case_without_a_delay_counted(28, &[]);
+}
+
+/// The hard battery's case `index` (`HARD=1 SMALL=1`, drawn by
+/// [`crate::test_support::battery`]), whose hidden effects are `hidden`, diagnosed among
+/// all candidates: the answer must be `none`, its `time_delay` not counted for want of a
+/// delay on the excited lines. The diagnosis and its request.
+fn hard_case_without_a_delay_counted(
+    index: usize,
+    hidden: &[&str],
+) -> (Diagnosis, DiagnoseRequest) {
+    use crate::test_support::battery::{captures, cases, ROUND};
+    let case = &cases(index / ROUND + 1, true, true)[index];
+    let names: Vec<&str> = case.hidden.iter().map(|e| e.name()).collect();
+    assert_eq!(names, hidden);
     let (est, val) = captures(case, 4, case.rms);
     let req = DiagnoseRequest {
         r: case.params.r,
@@ -687,6 +682,7 @@ fn no_delay_is_named_where_the_loop_feeds_the_disturbance_back() {
         "{}",
         delay.reason
     );
+    (d, req)
 }
 
 /// The estimation capture given again as the validation capture is refused before any fit:
