@@ -91,8 +91,18 @@ pub(super) fn single_of(
     let judged = fitter.judge(&f.scored.segments, &nominal.scored.segments);
     let (score, score_se, significant) = judged;
     let odd = ev.odd_of(&fitter.rec.val, f);
-    let lag = lag_and_delay(&f.fit, nominal.fit.model.tau_c, fitter.rec.ts)
+    let mut lag = lag_and_delay(&f.fit, nominal.fit.model.tau_c, fitter.rec.ts)
         .map_or(String::new(), |w| format!("; {w}"));
+    // the excited lines' own word on the delay (when they do not show it, the row says so
+    // where it is not counted, [`super::fits::delay_unsupported`])
+    if let (Effect::TimeDelay(_), Some(l)) = (effect, fitter.starts.delay_lines) {
+        if l.shown() {
+            lag.push_str(&format!(
+                "; the excited lines show it: beside the lag, a delay of {:.2} samples lowers                  the SML cost of the structure's frequency-domain fit by {:.1}, above the 99 %                  point {:.1} of a delay that is not there",
+                l.delay, l.drop, l.threshold
+            ));
+        }
+    }
     let reason = format!(
         "{}; validation FIT {:+.1} ± {:.1} points{}{}{lag}",
         evidence(

@@ -100,6 +100,14 @@ fn check_delay(samples: f64) -> Diagnosis {
     assert!(d.best.starts_with("time_delay"), "{}", d.verdict);
     let v = param(&d, "samples");
     assert!(within(v, samples, 0.2), "samples = {v}, truth {samples}");
+    // how lag and delay were told apart, on the records and on the excited lines
+    let row = d.effects.iter().find(|c| c.name == "time_delay").unwrap();
+    assert!(
+        row.reason.contains("lag and delay told apart")
+            && row.reason.contains("the excited lines show it"),
+        "{}",
+        row.reason
+    );
     d
 }
 
