@@ -191,6 +191,14 @@ pub(super) struct Fitted {
     pub unsupported: Option<String>,
 }
 
+impl Fitted {
+    /// Whether a gain judged `significant` counts for this model: not when the data do not
+    /// support one of its effects ([`Fitted::unsupported`]).
+    pub fn counts(&self, significant: bool) -> bool {
+        significant && self.unsupported.is_none()
+    }
+}
+
 /// Why a model with a transport delay is not supported by the excited lines, when they
 /// hold no evidence of a delay beside the lag ([`crate::ident::nonlinear::DelayLines`]).
 /// The gap metric simulates from the measured torque, which in a closed loop holds the
@@ -206,7 +214,9 @@ pub(super) fn delay_unsupported(effects: &[Effect], starts: &LinearStarts) -> Op
     let l = starts.delay_lines.filter(|l| !l.shown())?;
     Some(format!(
         "the excited lines show no transport delay beside the current-loop lag: fitted with          one ({:.2} samples), the structure's frequency-domain fit lowers its SML cost by          {:.1}, where {:.1} is the 99 % point for a delay that is not there; what the delay          gains on the records follows the disturbance the loop feeds back into the torque,          and it is not counted",
-        l.delay, l.drop, l.threshold
+        l.delay,
+        l.drop,
+        l.threshold()
     ))
 }
 

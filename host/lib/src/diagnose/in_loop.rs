@@ -401,8 +401,8 @@ impl LoopAnswer<'_> {
                         odd_words(*odd),
                         c.reason
                     );
-                    let supported = f.as_ref().is_none_or(|f| f.unsupported.is_none());
-                    (c.score, c.score_se, c.significant) = (*score, *se, *significant && supported);
+                    let counts = f.as_ref().map_or(*significant, |f| f.counts(*significant));
+                    (c.score, c.score_se, c.significant) = (*score, *se, counts);
                     c.fit_val = cs.fit;
                     c.fit_angle_val = cs.angle_fit;
                     c.odd_explained = *odd;
@@ -427,11 +427,11 @@ impl LoopAnswer<'_> {
                     odd_words(odd),
                     p.reason
                 );
-                let supported = self
+                let counts = self
                     .pair_fitted
                     .as_ref()
-                    .is_none_or(|f| f.unsupported.is_none());
-                (p.score, p.score_se, p.significant) = (score, se, significant && supported);
+                    .map_or(significant, |f| f.counts(significant));
+                (p.score, p.score_se, p.significant) = (score, se, counts);
                 p.fit_val = cs.fit;
                 p.fit_angle_val = cs.angle_fit;
                 p.odd_explained = odd;

@@ -340,8 +340,7 @@ fn adopt(
     let is_pair = refined.model.effects.len() > 1;
     if !is_pair {
         let (score, se, significant) = judge(&cs.segments, base);
-        let supported = fitted.unsupported.is_none();
-        (cand.score, cand.score_se, cand.significant) = (score, se, significant && supported);
+        (cand.score, cand.score_se, cand.significant) = (score, se, fitted.counts(significant));
     }
     cand.reason = format!(
         "refined in the controller's loop on the estimation record: validation FIT {:.1} % in \
@@ -544,8 +543,7 @@ fn pair_in_loop(
             }
         }
         let (gain, se, significant) = fitter.judge(&cs.segments, &l.best_segments);
-        if !significant
-            || f.unsupported.is_some()
+        if !f.counts(significant)
             || cs.fit <= l.best_fit
             || best.as_ref().is_some_and(|b| b.0.fit_val >= cs.fit)
         {

@@ -99,7 +99,9 @@ pub(super) fn single_of(
         if l.shown() {
             lag.push_str(&format!(
                 "; the excited lines show it: beside the lag, a delay of {:.2} samples lowers                  the SML cost of the structure's frequency-domain fit by {:.1}, above the 99 %                  point {:.1} of a delay that is not there",
-                l.delay, l.drop, l.threshold
+                l.delay,
+                l.drop,
+                l.threshold()
             ));
         }
     }

@@ -753,17 +753,27 @@ pub struct DelayLines {
     pub drop: f64,
     /// the delay the free fit found [samples]
     pub delay: f64,
-    /// the drop a delay that is not there stays below with 99 % probability [-]
-    pub threshold: f64,
+    /// degrees of freedom ν of the per-line noise variances
+    pub noise_dof: f64,
 }
 
 /// The 99 % point of a chi-squared of one degree of freedom.
 const CHI2_1_99: f64 = 6.635;
 
 impl DelayLines {
+    /// The drop a delay that is not there stays below with 99 % probability [-].
+    pub fn threshold(&self) -> f64 {
+        let nu = self.noise_dof;
+        if nu > 2.0 {
+            CHI2_1_99 * nu / (nu - 2.0)
+        } else {
+            f64::INFINITY
+        }
+    }
+
     /// Whether the lines show a delay beside the lag.
     pub fn shown(&self) -> bool {
-        self.drop > self.threshold
+        self.drop > self.threshold()
     }
 }
 
@@ -849,16 +859,10 @@ pub fn linear_start_segments(
     let mut delay_lines = None;
     if let Some(Ok(l)) = raws.next() {
         if let Ok(free) = &raw {
-            let nu = free.noise_dof;
             delay_lines = Some(DelayLines {
                 drop: l.cost - free.cost,
                 delay: free.delay.value,
-                threshold: CHI2_1_99
-                    * if nu > 2.0 {
-                        nu / (nu - 2.0)
-                    } else {
-                        f64::INFINITY
-                    },
+                noise_dof: free.noise_dof,
             });
         }
         raw = match raw {
