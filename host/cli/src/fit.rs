@@ -404,13 +404,26 @@ pub fn run(args: &FitArgs, ctx: &mut Context<'_>) -> CmdResult {
         req.nonlinear.start = Some(read_start(path)?);
     }
     check_columns(&args.data.data_args(&args.data.path))?;
-    let sel = args.data.data_args(&args.data.path).select(ctx.loaders)?;
+    // the estimation and validation files read side by side
+    let loaders = ctx.loaders;
+    let (sel, val) = std::thread::scope(|s| {
+        let val = args
+            .validation
+            .as_ref()
+            .map(|p| s.spawn(move || args.data.data_args(p).select(loaders)));
+        let sel = args.data.data_args(&args.data.path).select(loaders);
+        (
+            sel,
+            val.map(|h| h.join().expect("reading a file does not panic")),
+        )
+    });
+    let sel = sel?;
     let map = args.data.data_args(&args.data.path).column_map();
     let mut screened: Vec<String> = screen_for_fit(&sel, &map, "fit")?.into_iter().collect();
     check_whole_periods(&sel)?;
-    let val = match &args.validation {
-        Some(p) => {
-            let v = args.data.data_args(p).select(ctx.loaders)?;
+    let val = match val {
+        Some(v) => {
+            let v = v?;
             screened.extend(screen_for_fit(&v, &map, "fit")?);
             // a validation FIT on a scrap of a damaged capture says as little as a fit
             screened.extend(share_warning(&v, "validation"));

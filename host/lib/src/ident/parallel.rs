@@ -33,6 +33,23 @@ pub fn parallel<T: Send, J: Sync>(
         .collect()
 }
 
+/// Runs `a` and `b`, side by side when `threads` is above one (`b` on a thread of its own),
+/// one after the other otherwise; their results as a pair.
+pub fn join<A: Send, B: Send>(
+    threads: usize,
+    a: impl FnOnce() -> A + Send,
+    b: impl FnOnce() -> B + Send,
+) -> (A, B) {
+    if threads < 2 {
+        return (a(), b());
+    }
+    std::thread::scope(|s| {
+        let other = s.spawn(b);
+        let first = a();
+        (first, other.join().expect("the job does not panic"))
+    })
+}
+
 /// The threads this machine offers (at least one).
 pub fn machine_threads() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
@@ -50,5 +67,13 @@ mod tests {
             assert_eq!(parallel(&jobs, threads, |j| j * j), one);
         }
         assert!(parallel(&[] as &[u64], 4, |j| *j).is_empty());
+    }
+
+    #[test]
+    fn join_gives_both_results_in_their_places_on_any_number_of_threads() {
+        for threads in [1, 2, 8] {
+            let (a, b) = join(threads, || "left", || 2 + 3);
+            assert_eq!((a, b), ("left", 5));
+        }
     }
 }

@@ -71,6 +71,7 @@ use crate::data::dsp::{butter_highpass_sos, SosBank};
 use crate::data::IdData;
 use crate::ident::linalg::pinv_sym;
 use crate::ident::lm::{self, LeastSquares, LmOptions, Normal, Termination};
+use crate::ident::parallel::{join, machine_threads};
 use crate::ident::validate::{centred_sum_of_squares, fit_from_sums, fit_percent};
 
 /// Why a nonlinear fit could not run.
@@ -979,45 +980,41 @@ pub fn fit_output_error_segments(
     // one record; with several segments the smooth law's estimate and σ stand as they are
     let single = (problem.parts.len() == 1).then(|| (&problem.parts[0], &data[0]));
     let mut smoothing = vec![0.0; layout.len()];
-    let mut exact_residual = None;
+    let mut exact_e = None;
     let mut table = None;
     if let Some((part, record)) = single {
-        // the estimate's move with v_ε doubled, by one Gauss–Newton step of that fit from
-        // this estimate (one pass of the dual numbers)
-        if opts.smoothing_sigma && opts.max_iter > 0 && has_coulomb(model) && !free.is_empty() {
-            let wide = NlModel {
-                v_eps: 2.0 * model.v_eps,
-                ..model.clone()
-            };
-            let wide_problem = Problem {
-                model: &wide,
-                highpass: part.highpass.clone(),
-                ..*part
-            };
-            let ne = wide_problem.normal_equations(&z, &free);
-            if ne.ssr.is_finite() {
-                let dz = pinv_sym(&ne.jtj, 1e-14) * &ne.jte;
-                let mut zw = z.clone();
-                for (j, &i) in free.iter().enumerate() {
-                    zw[i] += dz[j];
-                }
-                let (here, there) = (part.physical(&z), part.physical(&zw));
-                for &i in &free {
-                    smoothing[i] = SMOOTHING_BIAS_FACTOR * (there[i] - here[i]).abs();
-                }
-            }
-        }
-        // (no iteration asked: the caller evaluates the start as it is)
-        if opts.exact_correction
+        // (no iteration asked: the caller evaluates the start as it is, neither of these)
+        let wants_smoothing =
+            opts.smoothing_sigma && opts.max_iter > 0 && has_coulomb(model) && !free.is_empty();
+        let corrects = opts.exact_correction
             && opts.max_iter > 0
             && opts.residual == Residual::Velocity
-            && corrects(model)
-        {
-            let t = JacobianTable::at(part, &z, &free);
-            if let Some((zc, e)) = exact_law_steps(part, record, &z, (&free, &t), (&lower, &upper))
-            {
+            && corrects(model);
+        // three passes that need only this estimate, side by side: the smoothing term's
+        // Gauss–Newton step and the exact law's residual here on one thread, the smooth
+        // law's Jacobian table the correction steps take on the other
+        let ((moved, exact_here), t) = join(
+            machine_threads(),
+            || {
+                let moved = wants_smoothing
+                    .then(|| smoothing_move(part, model, &z, &free))
+                    .flatten();
+                let here = corrects.then(|| exact_residual(part, record, &z)).flatten();
+                (moved, here)
+            },
+            || corrects.then(|| JacobianTable::at(part, &z, &free)),
+        );
+        if let Some(moved) = moved {
+            for &i in &free {
+                smoothing[i] = SMOOTHING_BIAS_FACTOR * moved[i];
+            }
+        }
+        if let Some(t) = t {
+            if let Some((zc, e)) = exact_here.and_then(|here| {
+                exact_law_steps(part, record, (&z, here), (&free, &t), (&lower, &upper))
+            }) {
                 z = zc;
-                exact_residual = Some(e);
+                exact_e = Some(e);
             }
             table = Some(t);
         }
@@ -1027,7 +1024,7 @@ pub fn fit_output_error_segments(
         &z,
         &free,
         opts.cov_lags,
-        (exact_residual.as_deref(), table.as_ref()),
+        (exact_e.as_deref(), table.as_ref()),
     );
     let mut params = Vec::with_capacity(layout.len());
     for (i, d) in layout.iter().enumerate() {
@@ -1263,6 +1260,37 @@ fn corrects(model: &NlModel) -> bool {
 /// Most Gauss–Newton steps of the exact-law correction.
 const EXACT_STEPS: usize = 8;
 
+/// How far each physical value (layout order) of the fit at `z` moves with the smooth law's
+/// `v_ε` doubled, by one Gauss–Newton step of that fit from `z` over `free` (one pass of
+/// the dual numbers); `None` when that fit's residual is not finite.
+fn smoothing_move(part: &Problem, model: &NlModel, z: &[f64], free: &[usize]) -> Option<Vec<f64>> {
+    let wide = NlModel {
+        v_eps: 2.0 * model.v_eps,
+        ..model.clone()
+    };
+    let wide_problem = Problem {
+        model: &wide,
+        highpass: part.highpass.clone(),
+        ..*part
+    };
+    let ne = wide_problem.normal_equations(z, free);
+    if !ne.ssr.is_finite() {
+        return None;
+    }
+    let dz = pinv_sym(&ne.jtj, 1e-14) * &ne.jte;
+    let mut zw = z.to_vec();
+    for (j, &i) in free.iter().enumerate() {
+        zw[i] += dz[j];
+    }
+    let (here, there) = (part.physical(z), part.physical(&zw));
+    Some(
+        here.iter()
+            .zip(&there)
+            .map(|(a, b)| (b - a).abs())
+            .collect(),
+    )
+}
+
 /// The interval-mean motor velocity (sample 0 repeats sample 1) of the problem's model at
 /// optimiser coordinates `z`, simulated with the simulator's exact laws
 /// ([`crate::sim::simulate_driven`]) from the estimator's initial state: the motor at the
@@ -1342,13 +1370,15 @@ impl JacobianTable {
     }
 }
 
-/// Gauss–Newton steps on the exact law's cost from the smooth fit's `z` with the smooth
-/// law's Jacobian there (module documentation), inside the bounds `(lower, upper)`; the
-/// last accepted point and its exact-law residual, `None` when no step lowered the cost.
+/// Gauss–Newton steps on the exact law's cost from the smooth fit's `z` (`here`: the exact
+/// law's residual and its `Σ e²` there) with the smooth law's Jacobian there (module
+/// documentation), inside the bounds `(lower, upper)`; the last accepted point and its
+/// exact-law residual, `None` when no step lowered the cost. Each trial point's exact and
+/// smooth simulations run side by side.
 fn exact_law_steps(
     problem: &Problem,
     data: &IdData,
-    z: &[f64],
+    (z, here): (&[f64], (Vec<f64>, f64)),
     (free, table): (&[usize], &JacobianTable),
     (lower, upper): (&[f64], &[f64]),
 ) -> Option<(Vec<f64>, Vec<f64>)> {
@@ -1367,7 +1397,7 @@ fn exact_law_steps(
             }
         }
     }
-    let (mut e, mut cost) = exact_residual(problem, data, z)?;
+    let (mut e, mut cost) = here;
     let mut best: Option<Vec<f64>> = None;
     let mut zc = z.to_vec();
     for _ in 0..EXACT_STEPS {
@@ -1398,9 +1428,12 @@ fn exact_law_steps(
             // the smooth law must still simulate there: the fit's figures and covariance
             // are the smooth law's (bench case 60 of `benches/diagnose.rs`, a stick-slip
             // joint: a step that lowered the exact cost left the smooth simulation unstable)
-            if let Some((en, cn)) = exact_residual(problem, data, &zn)
-                .filter(|(_, c)| *c < cost && problem.cost(&zn).is_finite())
-            {
+            let (exact, smooth) = join(
+                machine_threads(),
+                || exact_residual(problem, data, &zn),
+                || problem.cost(&zn),
+            );
+            if let Some((en, cn)) = exact.filter(|(_, c)| *c < cost && smooth.is_finite()) {
                 accepted = Some((zn, en, cn));
                 break;
             }
@@ -1479,25 +1512,31 @@ fn sandwich_parts(
             re * (1.0 - tau as f64 / (lags + 1) as f64)
         })
         .collect();
-    let mut s = DMatrix::zeros(nf, nf);
-    let mut y = vec![0.0; nf];
-    for t in 0..n {
-        y.iter_mut().for_each(|v| *v = 0.0);
-        let lo = t.saturating_sub(lags);
-        let hi = (t + lags).min(n - 1);
-        for (tt, w) in (lo..=hi).map(|tt| (tt, wr[tt.abs_diff(t)])) {
-            for (yv, r) in y.iter_mut().zip(row(tt)) {
-                *yv += w * r;
+    // the rows' share of S, two halves side by side, added in a fixed order (the same bits
+    // on any number of threads)
+    let share = |rows_t: std::ops::Range<usize>| {
+        let mut s = DMatrix::zeros(nf, nf);
+        let mut y = vec![0.0; nf];
+        for t in rows_t {
+            y.iter_mut().for_each(|v| *v = 0.0);
+            let lo = t.saturating_sub(lags);
+            let hi = (t + lags).min(n - 1);
+            for (tt, w) in (lo..=hi).map(|tt| (tt, wr[tt.abs_diff(t)])) {
+                for (yv, r) in y.iter_mut().zip(row(tt)) {
+                    *yv += w * r;
+                }
+            }
+            let r = row(t);
+            for a in 0..nf {
+                for b in 0..nf {
+                    s[(a, b)] += r[a] * y[b];
+                }
             }
         }
-        let r = row(t);
-        for a in 0..nf {
-            for b in 0..nf {
-                s[(a, b)] += r[a] * y[b];
-            }
-        }
-    }
-    (h, s)
+        s
+    };
+    let (first, second) = join(machine_threads(), || share(0..n / 2), || share(n / 2..n));
+    (h, first + second)
 }
 
 #[cfg(test)]
