@@ -146,6 +146,11 @@ pub struct FrfFitOptions {
     pub delay: Drive,
     /// iterations of the final (SML) refinement
     pub max_iter: usize,
+    /// the optimiser's coordinates of a fit of the same structure to a nearby FRF (its
+    /// `lm.theta`: the log parameters, then lag and delay [samples]), tried first; when the
+    /// SML cost there is within [`GOOD_START_RATIO`] of the noise's, no search from the
+    /// FRF's peaks is made (a friction-compensated FRF starts from the raw one's fit)
+    pub start: Option<Vec<f64>>,
 }
 
 impl FrfFitOptions {
@@ -160,6 +165,7 @@ impl FrfFitOptions {
             lag: Drive::Estimate,
             delay: Drive::Estimate,
             max_iter: 200,
+            start: None,
         }
     }
 }
@@ -1004,7 +1010,43 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
     // sets that keep more of the shown peaks first. A start whose SML cost is already
     // within a few times the noise level ends the search: it is in the basin of the
     // estimate (a wrong mode costs orders of magnitude).
+    // a start from a nearby FRF's fit, at its SML cost here (the refinement below takes it
+    // from there); in the basin of the estimate, it ends the search before it starts
+    let mut searching = true;
+    if let Some(th) = opts.start.as_ref().filter(|t| t.len() == nm + 2) {
+        let mut th0 = th.clone();
+        for (i, d) in [opts.lag, opts.delay].into_iter().enumerate() {
+            if let Drive::Fixed(v) = d {
+                th0[nm + i] = v;
+            }
+        }
+        let (lower, upper) = bounds(&th0);
+        let mut fixed = vec![false; nm];
+        fixed.extend(fixed_drive);
+        let o = LmOptions {
+            max_iter: 0,
+            lower,
+            upper,
+            fixed,
+            ..Default::default()
+        };
+        let c = sml_p.cost(&th0);
+        if let (Ok(f), true) = (lm::minimize(&log_p, &th0, &o), c.is_finite()) {
+            starts += 1;
+            searching = c >= GOOD_START_RATIO * expected;
+            pool.push(Candidate {
+                theta: th0.clone(),
+                start: th0,
+                fit: f,
+                cost: c,
+                opts: o,
+            });
+        }
+    }
     'search: for pass in 0..2 {
+        if !searching {
+            break;
+        }
         let cand = if pass == 0 {
             let mut c: Vec<f64> = peaks.iter().take(n_res + 2).map(|p| p.freq_hz).collect();
             c.sort_by(f64::total_cmp);

@@ -633,3 +633,70 @@ fn jacobian_from_the_sampled_matrices_matches_central_differences_of_the_residua
         }
     }
 }
+
+#[test]
+fn a_start_from_a_nearby_frfs_fit_skips_the_search_and_ends_at_its_estimate() {
+    // two noise realisations of the default joint: the second FRF fitted by the search
+    // from its peaks, and from the first FRF's fit (as a friction-compensated FRF starts
+    // from the raw one's); a start far from the estimate still searches
+    let frf_a = frf_of(&SimConfig::default(), &excitation(4, 0.02));
+    let frf_b = frf_of(
+        &SimConfig {
+            seed: 7,
+            ..SimConfig::default()
+        },
+        &excitation(4, 0.02),
+    );
+    let o = FrfFitOptions::new(Structure::ThreeMass, 5e-4);
+    let a = fit_frf(&frf_a, &o).unwrap();
+    let searched = fit_frf(&frf_b, &o).unwrap();
+    let started = fit_frf(
+        &frf_b,
+        &FrfFitOptions {
+            start: Some(a.lm.theta.clone()),
+            ..o.clone()
+        },
+    )
+    .unwrap();
+    assert_eq!(started.starts, 1, "the search was made");
+    assert!(searched.starts > 1);
+    assert!(
+        (started.cost / searched.cost - 1.0).abs() < 1e-6,
+        "cost {} from the start, {} from the search",
+        started.cost,
+        searched.cost
+    );
+    for (p, q) in started.params.iter().zip(&searched.params) {
+        assert!(
+            (p.value - q.value).abs() < 0.01 * q.std,
+            "{}: {} from the start, {} from the search (σ {})",
+            q.name,
+            p.value,
+            q.value,
+            q.std
+        );
+    }
+    // ten times every value: far outside the basin, so the search runs and finds it
+    let far: Vec<f64> =
+        a.lm.theta
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
+                if i < a.params.len() {
+                    t + 10f64.ln()
+                } else {
+                    *t
+                }
+            })
+            .collect();
+    let rescued = fit_frf(
+        &frf_b,
+        &FrfFitOptions {
+            start: Some(far),
+            ..o
+        },
+    )
+    .unwrap();
+    assert!(rescued.starts > 1, "no search from a start far off");
+    assert!((rescued.cost / searched.cost - 1.0).abs() < 1e-6);
+}
