@@ -86,6 +86,7 @@ fn seed001_nonlinear_two_mass_reaches_the_truth_and_its_validation_fit() {
         "friction",
         "flexibility",
         "nonlinear_stiffness",
+        "whole model, head of the record",
     ] {
         assert!(names.contains(&step), "step `{step}` missing: {names:?}");
     }

@@ -382,7 +382,8 @@ mod tests {
         let truth = SimConfig::default().controller.current_loop_tau;
         assert!(
             lag.is_some_and(|l| (l - truth).abs() < 0.2 * truth),
-            "nominal lag {lag:?} s, the drive's {truth} s"
+            "nominal lag {lag:?} s ± {:?}, the drive's {truth} s",
+            d.nominal_parameters.get("tau_c").map(|p| p.std)
         );
     }
 

@@ -7,7 +7,7 @@
 
 use thiserror::Error;
 
-use super::init::{automatic_start_with, LinearFit, RippleOrder, Step};
+use super::init::{automatic_start_with, start_head, LinearFit, RippleOrder, Step};
 use super::model::{sim_plant, NlModel, Owner};
 use super::output_error::{
     fit_output_error_segments, interval_velocities, interval_velocity, simulate_velocity,
@@ -17,7 +17,7 @@ use super::{NlError, NlFit, NlOptions};
 use crate::data::{Dataset, IdData};
 use crate::ident::frf::FrfError;
 use crate::ident::lm::Termination;
-use crate::ident::parallel::{machine_threads, parallel};
+use crate::ident::parallel::{join, machine_threads, parallel};
 use crate::ident::sml::{Drive, FrfFit, FrfFitError, FrfFitOptions};
 use crate::model::effects::Effect;
 use crate::model::spec::Structure;
@@ -320,7 +320,7 @@ pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, Nl
     }
     let mut options = req.options.clone().for_structure(req.structure);
     let mut start_warnings = Vec::new();
-    let (steps, start_model, mut start) = match &req.start {
+    let (mut steps, start_model, mut start) = match &req.start {
         NlStart::Automatic => {
             let linear = req.linear.as_deref().map(|values| LinearFit {
                 values,
@@ -397,6 +397,45 @@ pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, Nl
     }
     let (fit_model, _) = start_model.with_values(&start);
     let fit_model = fit_model.refined_for(&start, velocity_rms(data), data.ts);
+    // a start found by the data on the record's head ([`start_head`]): the whole model
+    // fitted there first, and the fit on every record goes on from that estimate when it
+    // explains the whole record better than the start (within the bounds of the start's
+    // values)
+    let mut options = options;
+    if let (NlStart::Automatic, Some(part)) = (&req.start, start_head(data)) {
+        let head = NlOptions {
+            cov_lags: 0,
+            exact_correction: false,
+            smoothing_sigma: false,
+            rel_cost_tol: 1.0 / part.len() as f64,
+            ..options.clone()
+        };
+        let on_head = super::output_error::fit_output_error(&part, &fit_model, &start, &head);
+        if let Ok(f) = on_head {
+            let whole = |v: &[f64]| {
+                super::output_error::cost_at(data, &fit_model, v).unwrap_or(f64::INFINITY)
+            };
+            let (there, here) = join(machine_threads(), || whole(&f.values), || whole(&start));
+            if there < here {
+                steps.push(Step {
+                    name: "whole model, head of the record".into(),
+                    values: Step::values_of(&f),
+                    detail: format!(
+                        "output error on the first {} of {} samples: {} iterations, FIT \
+                         {:.2} %; the fit on every sample starts here",
+                        part.len(),
+                        data.len(),
+                        f.iterations,
+                        f.fit_velocity_percent
+                    ),
+                });
+                if options.range_from.is_none() {
+                    options.range_from = Some(start.clone());
+                }
+                start = f.values;
+            }
+        }
+    }
     let fit = fit_output_error_segments(all, &fit_model, &start, &options)?;
     let mut warnings = start_warnings;
     warnings.extend(checks(&fit));
@@ -546,7 +585,16 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
         }
     }
     let mut result = identify_segments(data.estimation, &req)?;
-    let estimation = validate_segments(&result.fit, data.estimation, &result.options)?;
+    // the estimation and validation records simulated side by side
+    let (estimation, validation) = crate::ident::parallel::join(
+        machine_threads(),
+        || validate_segments(&result.fit, data.estimation, &result.options),
+        || {
+            data.validation
+                .map(|v| validate(&result.fit, v, &result.options))
+        },
+    );
+    let estimation = estimation?;
     let estimation_segments = if data.estimation.len() > 1 {
         data.estimation
             .iter()
@@ -555,10 +603,7 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
     } else {
         vec![estimation]
     };
-    let validation = match data.validation {
-        Some(v) => Some(validate(&result.fit, v, &result.options).map_err(NlRunError::Validation)?),
-        None => None,
-    };
+    let validation = validation.transpose().map_err(NlRunError::Validation)?;
     steps.append(&mut result.steps);
     result.steps = steps;
     warnings.append(&mut result.warnings);
@@ -870,12 +915,20 @@ pub fn linear_start_segments(
             _ => Ok(l),
         };
     }
-    // then the compensated FRFs, one per lead, on threads
+    // then the compensated FRFs, one per lead, on threads, each fit started from the raw
+    // FRF's
+    let from_raw = FrfFitOptions {
+        start: raw.as_ref().ok().map(|f| f.lm.theta.clone()),
+        ..o.clone()
+    };
     let leads: Vec<Lead> = match law {
         Some(law) => parallel(
             &compensation_leads(segments, req, raw.as_ref().ok()),
             machine_threads(),
-            |&lead| compensated_fit(segments, settle, req, &o, law, lead),
+            |&lead| {
+                let o = (&from_raw, analysis.layout.period);
+                compensated_fit(segments, settle, req, o, law, lead)
+            },
         ),
         None => Vec::new(),
     };
@@ -1047,12 +1100,13 @@ fn compensation_leads(segments: &[Dataset], req: &NlRequest, raw: Option<&FrfFit
 
 /// The frequency-domain fit of the FRF with Coulomb friction of the shape `law` taken off
 /// the torque `lead` samples ahead ([`super::compensate`]): the level held in the request,
-/// else the regression's when significant (above 3 σ).
+/// else the regression's when significant (above 3 σ). `o`: the raw FRF's fit options, its
+/// fit as the start; `period`: the raw FRF's period [samples].
 fn compensated_fit(
     segments: &[Dataset],
     settle: usize,
     req: &NlRequest,
-    o: &FrfFitOptions,
+    (o, period): (&FrfFitOptions, usize),
     law: crate::model::effects::CoulombFriction,
     lead: usize,
 ) -> Lead {
@@ -1084,9 +1138,17 @@ fn compensated_fit(
             (compensate::SHARE * l.fc, Some(l))
         }
     };
+    // the torque changed, not the reference: the period the raw FRF found holds (stated,
+    // so that it is not detected again)
     let comp: Vec<Dataset> = segments
         .iter()
-        .map(|d| compensate::compensated(d, fc, lead, &law))
+        .map(|d| {
+            let mut c = compensate::compensated(d, fc, lead, &law);
+            if c.stated_period().is_none() {
+                c.meta.insert("period_samples".into(), period.to_string());
+            }
+            c
+        })
         .collect();
     let Ok(a) = crate::ident::frf::analyze_segments(&comp, settle) else {
         return Lead::Failed;

@@ -98,6 +98,58 @@ fn seed001_from_the_automatic_start_reaches_the_truth_and_its_validation_fit() {
     );
 }
 
+/// A record longer than the start's head ([`super::init::START_SAMPLES`]): the start's
+/// output-error steps and the whole model's first fit run on the head, the fit on every
+/// sample goes on from there. It must end where the same fit started at the truth ends: the
+/// head may change the path, not the estimate (within a hundredth of its σ; 5·10⁻⁴ σ here).
+#[test]
+fn seed001_fitted_from_the_records_head_ends_where_the_fit_from_the_truth_does() {
+    let (est, _) = seed001_records();
+    assert!(est.len() > super::init::START_SAMPLES);
+    let req = NlRequest::new(Structure::TwoMass, 1.0 / 118.0, seed001_model().effects);
+    let res = identify(&est, &req).unwrap();
+    let head = res
+        .steps
+        .iter()
+        .find(|s| s.name == "whole model, head of the record")
+        .expect("the head's step is reported");
+    assert!(
+        head.detail.contains("on the first 16384 of 60000 samples"),
+        "{}",
+        head.detail
+    );
+    // the truth in the fitted model's layout (README: J_m, J_a, k1, d, F_v, k3, F_c)
+    let m = &res.fit.model;
+    let mut truth = m.values(&[1e-3, 14.6, 1.3e5, 80.0, 2e-3], 0.0, 0.0);
+    for (d, t) in m.layout().iter().zip(truth.iter_mut()) {
+        match d.name {
+            "k3" => *t = 1.6e11,
+            "fc" => *t = 0.1,
+            _ => {}
+        }
+    }
+    let from_truth = fit_output_error(
+        &est,
+        m,
+        &truth,
+        &NlOptions {
+            range_from: None,
+            ..res.options.clone()
+        },
+    )
+    .unwrap();
+    for p in res.fit.params.iter().filter(|p| !p.fixed && p.name != "v0") {
+        let other = from_truth.get(p.name).unwrap();
+        assert!(
+            (p.value - other).abs() < 0.01 * p.std,
+            "{}: {} from the head, {other} from the truth (σ {})",
+            p.name,
+            p.value,
+            p.std
+        );
+    }
+}
+
 /// Closed-loop run of the default three-mass joint with `effect` and the default sensors.
 fn three_mass_run(effect: Effect, seed: u64) -> (IdData, SimConfig) {
     three_mass_run_under(effect, seed, crate::sim::ControllerConfig::default())
