@@ -401,7 +401,6 @@ pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, Nl
     // fitted there first, and the fit on every record goes on from that estimate when it
     // explains the whole record better than the start (within the bounds of the start's
     // values)
-    let mut options = options;
     if let (NlStart::Automatic, Some(part)) = (&req.start, start_head(data)) {
         let head = NlOptions {
             cov_lags: 0,
