@@ -1001,15 +1001,6 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
     let mut tried: Vec<Vec<f64>> = Vec::new();
     // the estimate from pass 0's starts, when it ended the search
     let mut refined: Option<Candidate> = None;
-    // pass 0: the strongest peaks; pass 1, when the SML refinement of pass 0's best starts
-    // is not within a few times the noise level (two modes close together, one a
-    // shoulder of the other; or every peak shown but the modes assigned to the wrong
-    // springs: a Welch FRF of a drift-free noise record, three-mass, ended at 4 times the
-    // noise level with `k_g` 20 times too soft, which a ten-times allowance for FRFs
-    // showing every peak had accepted): modes also placed around the strongest peaks,
-    // sets that keep more of the shown peaks first. A start whose SML cost is already
-    // within a few times the noise level ends the search: it is in the basin of the
-    // estimate (a wrong mode costs orders of magnitude).
     // a start from a nearby FRF's fit, at its SML cost here (the refinement below takes it
     // from there); in the basin of the estimate, it ends the search before it starts
     let mut searching = true;
@@ -1043,6 +1034,15 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
             });
         }
     }
+    // pass 0: the strongest peaks; pass 1, when the SML refinement of pass 0's best starts
+    // is not within a few times the noise level (two modes close together, one a
+    // shoulder of the other; or every peak shown but the modes assigned to the wrong
+    // springs: a Welch FRF of a drift-free noise record, three-mass, ended at 4 times the
+    // noise level with `k_g` 20 times too soft, which a ten-times allowance for FRFs
+    // showing every peak had accepted): modes also placed around the strongest peaks,
+    // sets that keep more of the shown peaks first. A start whose SML cost is already
+    // within a few times the noise level ends the search: it is in the basin of the
+    // estimate (a wrong mode costs orders of magnitude).
     'search: for pass in 0..2 {
         if !searching {
             break;

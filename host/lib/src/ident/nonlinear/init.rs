@@ -945,7 +945,7 @@ const RACE_ITER: usize = 6;
 /// than one standard deviation, which the final fit from it makes up in one iteration.
 /// (Seed 001: the linear starts gain 10⁻⁵–10⁻⁶ of the cost an iteration after their
 /// sixth and stop at 30 without it, 1.2 s of the fit's 2.8 s.)
-fn start_tolerance(data: &IdData) -> f64 {
+pub(crate) fn start_tolerance(data: &IdData) -> f64 {
     1.0 / data.u.len().max(1) as f64
 }
 

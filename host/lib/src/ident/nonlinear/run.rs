@@ -406,7 +406,7 @@ pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, Nl
             cov_lags: 0,
             exact_correction: false,
             smoothing_sigma: false,
-            rel_cost_tol: 1.0 / part.len() as f64,
+            rel_cost_tol: super::init::start_tolerance(&part),
             ..options.clone()
         };
         let on_head = super::output_error::fit_output_error(&part, &fit_model, &start, &head);
@@ -585,7 +585,7 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
     }
     let mut result = identify_segments(data.estimation, &req)?;
     // the estimation and validation records simulated side by side
-    let (estimation, validation) = crate::ident::parallel::join(
+    let (estimation, validation) = join(
         machine_threads(),
         || validate_segments(&result.fit, data.estimation, &result.options),
         || {
