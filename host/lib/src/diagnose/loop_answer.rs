@@ -17,7 +17,9 @@ use super::evidence::Evidence;
 use super::fits::{Fitted, Fitter, Job};
 use super::metric::{self, DrivenModel, Measured};
 use super::select::Answer;
-use super::table::{by_score, effect_parameters, linear_parameters, odd_words, scored_candidate};
+use super::table::{
+    self, by_score, effect_parameters, linear_parameters, odd_words, scored_candidate,
+};
 use super::{in_loop, locate, progress, Candidate, DiagnoseOptions};
 
 /// The models scored in the loop when the answer leaves the odd distortion
@@ -224,7 +226,8 @@ fn refine_answer(
     ));
     let mut refined = (refined, cs, odd);
     if is_pair {
-        if let Some(lead) = drop_partner(l, &refined, (val, measured), judge, o) {
+        let shown = answer.pair_fitted.as_ref().is_some_and(|f| f.delay_shown);
+        if let Some(lead) = drop_partner(l, (&refined, shown), (val, measured), judge, o) {
             *answer.pair = None;
             *answer.pair_fitted = None;
             refined = lead;
@@ -338,15 +341,20 @@ fn adopt(
     judge: in_loop::Judge<'_>,
 ) {
     let is_pair = refined.model.effects.len() > 1;
-    if !is_pair {
-        let (score, se, significant) = judge(&cs.segments, base);
-        (cand.score, cand.score_se, cand.significant) = (score, se, fitted.counts(significant));
-    }
+    let vanished = table::vanished_effects(&refined, fitted.delay_shown);
     cand.reason = format!(
         "refined in the controller's loop on the estimation record: validation FIT {:.1} % in \
-         the loop{}; before: {}",
+         the loop{}{}; before: {}",
         cs.fit,
         odd_words(odd),
+        if vanished.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; not an effect: {} refined on its lower bound or within 2σ of nought",
+                vanished.join(", ")
+            )
+        },
         cand.reason
     );
     cand.fit_val = cs.fit;
@@ -364,6 +372,11 @@ fn adopt(
         .map(|e| e.to_string())
         .collect();
     fitted.fit = refined;
+    // judged with the refined fit's sizes and deviations
+    if !is_pair {
+        let (score, se, significant) = judge(&cs.segments, base);
+        (cand.score, cand.score_se, cand.significant) = (score, se, fitted.counts(significant));
+    }
 }
 
 /// Every single significant in the loop refined there on the estimation record and scored
@@ -464,7 +477,7 @@ fn refine_contenders(
 /// before its refinement.
 fn drop_partner(
     l: &mut in_loop::InLoop,
-    (pair, pair_cs, _): &(NlFit, metric::ClosedScored, Option<f64>),
+    ((pair, pair_cs, _), delay_shown): (&(NlFit, metric::ClosedScored, Option<f64>), bool),
     (val, measured): (&Dataset, &Measured),
     judge: in_loop::Judge<'_>,
     o: &DiagnoseOptions,
@@ -480,7 +493,8 @@ fn drop_partner(
         )
         .ok()?;
     let (gain, se, significant) = judge(&pair_cs.segments, &cs.segments);
-    if significant && pair_cs.fit > cs.fit {
+    // a partner refined to no size is no partner, whatever the pair scores
+    if significant && pair_cs.fit > cs.fit && !table::vanished(pair, delay_shown).contains(&1) {
         return None;
     }
     let partner: Vec<String> = pair

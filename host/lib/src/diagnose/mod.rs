@@ -17,7 +17,10 @@
 //! [`DiagnoseOptions::min_gain`] (0.3 FIT point), or, when larger, the spread of the
 //! nominal's own refits ([`nominal::refit_spread`]): how far a single whose effect came out
 //! of no size moved the validation FIT at the nominal's in-sample cost. An effect whose
-//! size comes out on its lower bound or within 2σ of nought is never significant, nor a
+//! size comes out on its lower bound or within 2σ of nought is never significant, in any
+//! stage, open loop or in the loop ([`fits::Fitted::counts`]; a transport delay, whose
+//! deviation the lag it trades with spreads, is judged there by the excited lines when
+//! they show one, [`table::vanished_effects`]), nor a
 //! transport delay the excited lines do not show beside the lag
 //! ([`fits::delay_unsupported`]: the gap metric, simulated from a closed loop's measured
 //! torque, lets a delay follow the disturbance the loop feeds back).

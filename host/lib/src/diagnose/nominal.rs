@@ -105,7 +105,7 @@ pub(super) fn refit_spread(
         if !same_cost || !exactly_of_no_size(&f.fit) || f.fit.ssr > nominal.fit.ssr {
             continue;
         }
-        let vanished = vanished_effects(&f.fit);
+        let vanished = vanished_effects(&f.fit, f.delay_shown);
         let (gain, se) = segment_gain(&f.scored.segments, &nominal.scored.segments);
         if gain.abs() > floor.gain {
             floor = Floor {
@@ -232,6 +232,7 @@ fn nominal_at_start(
             warnings,
             own_start: None,
             unsupported: None,
+            delay_shown: false,
         },
         at_start,
         after,
