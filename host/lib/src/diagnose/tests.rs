@@ -1265,3 +1265,30 @@ fn a_grounded_mass_on_a_hardening_spring_is_diagnosed_as_nonlinear_stiffness() {
     let d = diagnose(std::slice::from_ref(&est), &val, &req).expect("diagnosis");
     assert_eq!(d.best, "none", "{}: {:?}", d.verdict, d.warnings);
 }
+
+/// The lines' evidence of a delay compares nested fits: the free one (lag and delay) holds
+/// the lag-only one, so it can never cost more. Hard bench case 17, an extra mode with no
+/// delay (with Coulomb friction), whose free search ended in a worse basin than the lag-only
+/// one (the drop was −12.4): made again from the lag-only fit, the drop is no longer
+/// negative beyond the two points of the free fit's own choice of its drive by AIC, and
+/// shows no delay. Case 16, a delay beside a lag (with a stiffening spring), still shows it.
+#[test]
+fn the_free_fit_of_the_lines_never_costs_more_than_the_lag_only_fit_it_holds() {
+    use crate::test_support::battery::{captures, cases, ROUND};
+    let all = cases(2, true, true);
+    let lines = |index: usize| {
+        let case = &all[index];
+        assert!(index < 2 * ROUND);
+        let (est, _) = captures(case, 4, case.rms);
+        let mut warnings = Vec::new();
+        let (_, lines) = structure_start(&[est], &DiagnoseRequest::default(), &mut warnings);
+        (case.hidden.clone(), lines.expect("both fits of the lines"))
+    };
+    let (hidden, mode) = lines(17);
+    let delayed = |h: &[Effect]| h.iter().any(|e| matches!(e, Effect::TimeDelay(_)));
+    assert!(!delayed(&hidden), "{hidden:?}");
+    assert!(mode.drop > -2.0 && !mode.shown(), "{mode:?}");
+    let (hidden, delay) = lines(16);
+    assert!(delayed(&hidden), "{hidden:?}");
+    assert!(delay.shown(), "{delay:?}");
+}
