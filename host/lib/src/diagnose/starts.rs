@@ -6,7 +6,9 @@
 use std::sync::OnceLock;
 
 use crate::data::Dataset;
-use crate::ident::nonlinear::{grow, linear_start_segments, DelayLines, NlRequest};
+use crate::ident::nonlinear::{
+    grow, linear_start_segments, linear_start_shared, DelayLines, NlRequest, RawFrfFits,
+};
 use crate::ident::parallel::parallel;
 use crate::model::effects::{Attach, Effect, ExtraMode};
 use crate::model::spec::Structure;
@@ -54,14 +56,22 @@ pub(super) fn linear_starts(
     if backlash {
         jobs.push(StartJob::TwoMass);
     }
+    // the raw fits of the structure's FRF, and of the structure with one more mass, each
+    // made once for the starts that begin with them ([`RawFrfFits`]); the same values
+    // whichever start makes them
+    let (raw, bigger) = (RawFrfFits::default(), RawFrfFits::default());
     let done = parallel(&jobs, o.threads, |j| match *j {
-        StartJob::ExtraMode(a) => {
-            StartDone::ExtraMode(extra_mode_start(est0, req.structure, req.r, a, None))
-        }
-        StartJob::Coulomb(c) => StartDone::Coulomb(coulomb_linear_of(est0, req, c)),
+        StartJob::ExtraMode(a) => StartDone::ExtraMode(extra_mode_start(
+            est0,
+            (req.structure, req.r),
+            a,
+            None,
+            &bigger,
+        )),
+        StartJob::Coulomb(c) => StartDone::Coulomb(coulomb_linear_of(est0, req, c, &raw)),
         StartJob::Structure => {
             let mut said = Vec::new();
-            let (start, lines) = structure_start(est0, req, &mut said);
+            let (start, lines) = structure_start(est0, req, &mut said, &raw);
             StartDone::Structure(start, lines, said)
         }
         StartJob::TwoMass => StartDone::TwoMass(
@@ -80,7 +90,7 @@ pub(super) fn linear_starts(
         coulomb: None,
         // fitted only when a pair of the friction and the mode asks for it
         coulomb_extra_mode: match (coulomb, extra) {
-            (Some(c), Some(a)) if o.pairs => LazyStart::of(est0, req, a, c),
+            (Some(c), Some(a)) if o.pairs => LazyStart::of(est0, req, (a, c), bigger),
             _ => LazyStart::none(),
         },
         grown: None,
@@ -175,6 +185,8 @@ pub(super) struct LazyStart {
     /// the friction; `None`: no such start
     args: Option<(Vec<Dataset>, Structure, f64, Attach, Effect)>,
     cell: OnceLock<Option<(Vec<f64>, ExtraMode, f64)>>,
+    /// the raw fits of the bigger structure's FRF, shared with the extra mode's start
+    raw: RawFrfFits,
 }
 
 impl LazyStart {
@@ -183,13 +195,20 @@ impl LazyStart {
         LazyStart {
             args: None,
             cell: OnceLock::new(),
+            raw: RawFrfFits::default(),
         }
     }
 
-    fn of(ds: &[Dataset], req: &DiagnoseRequest, a: Attach, c: Effect) -> LazyStart {
+    fn of(
+        ds: &[Dataset],
+        req: &DiagnoseRequest,
+        (a, c): (Attach, Effect),
+        raw: RawFrfFits,
+    ) -> LazyStart {
         LazyStart {
             args: Some((ds.to_vec(), req.structure, req.r, a, c)),
             cell: OnceLock::new(),
+            raw,
         }
     }
 
@@ -197,7 +216,7 @@ impl LazyStart {
     pub fn get(&self) -> Option<&(Vec<f64>, ExtraMode, f64)> {
         let (ds, structure, r, a, c) = self.args.as_ref()?;
         self.cell
-            .get_or_init(|| extra_mode_start(ds, *structure, *r, *a, Some(*c)))
+            .get_or_init(|| extra_mode_start(ds, (*structure, *r), *a, Some(*c), &self.raw))
             .as_ref()
     }
 }
@@ -235,10 +254,10 @@ pub(super) struct LinearStarts {
 /// it when the structure's own fit took the extra resonance for one of its modes.
 fn extra_mode_start(
     ds: &[Dataset],
-    structure: Structure,
-    r: f64,
+    (structure, r): (Structure, f64),
     attach: Attach,
     coulomb: Option<Effect>,
+    raw: &RawFrfFits,
 ) -> Option<(Vec<f64>, ExtraMode, f64)> {
     // the bigger structure, and where its extra body's inertia, spring and damper sit
     let (bigger, keep, extra): (Structure, &[usize], [usize; 3]) = match (structure, attach) {
@@ -250,10 +269,11 @@ fn extra_mode_start(
         }
         _ => return None,
     };
-    let l = linear_start_segments(
+    let l = linear_start_shared(
         ds,
         1,
         &NlRequest::new(bigger, r, coulomb.into_iter().collect()),
+        raw,
     )
     .ok()?;
     if coulomb.is_some() && !compensation_used(&l) {
@@ -279,9 +299,10 @@ fn coulomb_linear_of(
     ds: &[Dataset],
     req: &DiagnoseRequest,
     coulomb: Effect,
+    raw: &RawFrfFits,
 ) -> (Option<(Vec<f64>, f64)>, Option<f64>) {
-    let Ok(l) = linear_start_segments(ds, 1, &NlRequest::new(req.structure, req.r, vec![coulomb]))
-    else {
+    let req_c = NlRequest::new(req.structure, req.r, vec![coulomb]);
+    let Ok(l) = linear_start_shared(ds, 1, &req_c, raw) else {
         return (None, None);
     };
     let level = l.compensation.as_ref().and_then(|c| {
@@ -299,8 +320,14 @@ pub(super) fn structure_start(
     ds: &[Dataset],
     req: &DiagnoseRequest,
     warnings: &mut Vec<String>,
+    raw: &RawFrfFits,
 ) -> (Option<(Vec<f64>, f64)>, Option<DelayLines>) {
-    match linear_start_segments(ds, 1, &NlRequest::new(req.structure, req.r, Vec::new())) {
+    match linear_start_shared(
+        ds,
+        1,
+        &NlRequest::new(req.structure, req.r, Vec::new()),
+        raw,
+    ) {
         Ok(l) => (Some((l.values, l.tau_c)), l.delay_lines),
         Err(e) => {
             if ds.first().is_some_and(|d| d.excitation.is_some()) {

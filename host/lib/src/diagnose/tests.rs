@@ -8,7 +8,7 @@ use super::metric::Measured;
 use super::starts::{structure_start, LazyStart, LinearStarts};
 use super::table::{exactly_of_no_size, vanished_effects};
 use super::*;
-use crate::ident::nonlinear::NlFit;
+use crate::ident::nonlinear::{NlFit, RawFrfFits};
 use crate::model::effects::{ExtraMode, NonlinearStiffness, TimeDelay};
 use crate::sim::SimConfig;
 use jointid_core::excitation::ExcitationConfig;
@@ -1044,7 +1044,13 @@ fn a_start_that_does_not_simulate_gives_way_to_the_automatic_start() {
     let o = &req.options;
     let parts =
         [Measured::new(&val.data, o.band_hz, o.skip_of(&val.data)).with_tracking(o.tracking_hz)];
-    let structure = structure_start(std::slice::from_ref(&est), &req, &mut Vec::new()).0;
+    let structure = structure_start(
+        std::slice::from_ref(&est),
+        &req,
+        &mut Vec::new(),
+        &RawFrfFits::default(),
+    )
+    .0;
     let (plant, lag) = structure.clone().expect("the linear start");
     let unstable = ExtraMode { k: -1e9, ..mode };
     let starts = LinearStarts {
@@ -1281,7 +1287,12 @@ fn the_free_fit_of_the_lines_never_costs_more_than_the_lag_only_fit_it_holds() {
         assert!(index < 2 * ROUND);
         let (est, _) = captures(case, 4, case.rms);
         let mut warnings = Vec::new();
-        let (_, lines) = structure_start(&[est], &DiagnoseRequest::default(), &mut warnings);
+        let (_, lines) = structure_start(
+            &[est],
+            &DiagnoseRequest::default(),
+            &mut warnings,
+            &RawFrfFits::default(),
+        );
         (case.hidden.clone(), lines.expect("both fits of the lines"))
     };
     let (hidden, mode) = lines(17);

@@ -171,7 +171,7 @@ impl FrfFitOptions {
 }
 
 /// Why a frequency-domain fit could not be made.
-#[derive(Debug, Error, PartialEq)]
+#[derive(Clone, Debug, Error, PartialEq)]
 pub enum FrfFitError {
     /// too few lines for the parameters
     #[error("the FRF has {lines} excited lines; a {structure} fit needs at least {needed}")]
