@@ -192,20 +192,20 @@ pub(super) struct Fitted {
     /// whether the excited lines show a transport delay beside the lag
     /// ([`crate::ident::nonlinear::DelayLines::shown`]): a delay's size is then judged by
     /// them, not by its deviation, which the lag it trades with spreads
-    /// ([`super::table::vanished_effects`])
+    /// ([`super::size::vanished_effects`])
     pub delay_shown: bool,
 }
 
 impl Fitted {
     /// Whether a gain judged `significant` counts for this model: not when the data do not
     /// support one of its effects ([`Fitted::unsupported`]), nor when one of its effects
-    /// came out of no size ([`super::table::vanished_effects`]). Every stage that judges a
+    /// came out of no size ([`super::size::vanished_effects`]). Every stage that judges a
     /// gain, open loop and in the controller's loop, asks here, so that a refit (in the
     /// loop, with its own deviations) is held to the same test as the first fit.
     pub fn counts(&self, significant: bool) -> bool {
         significant
             && self.unsupported.is_none()
-            && super::table::vanished(&self.fit, self.delay_shown).is_empty()
+            && super::size::vanished(&self.fit, self.delay_shown).is_empty()
     }
 }
 

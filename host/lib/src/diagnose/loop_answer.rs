@@ -17,10 +17,8 @@ use super::evidence::Evidence;
 use super::fits::{Fitted, Fitter, Job};
 use super::metric::{self, DrivenModel, Measured};
 use super::select::Answer;
-use super::table::{
-    self, by_score, effect_parameters, linear_parameters, odd_words, scored_candidate,
-};
-use super::{in_loop, locate, progress, Candidate, DiagnoseOptions};
+use super::table::{by_score, effect_parameters, linear_parameters, odd_words, scored_candidate};
+use super::{in_loop, locate, progress, size, Candidate, DiagnoseOptions};
 
 /// The models scored in the loop when the answer leaves the odd distortion
 /// ([`Evidence::odd_left_db`]) on one periodic validation record; `None` when the loop was
@@ -341,7 +339,7 @@ fn adopt(
     judge: in_loop::Judge<'_>,
 ) {
     let is_pair = refined.model.effects.len() > 1;
-    let vanished = table::vanished_effects(&refined, fitted.delay_shown);
+    let vanished = size::vanished_effects(&refined, fitted.delay_shown);
     cand.reason = format!(
         "refined in the controller's loop on the estimation record: validation FIT {:.1} % in \
          the loop{}{}; before: {}",
@@ -494,7 +492,7 @@ fn drop_partner(
         .ok()?;
     let (gain, se, significant) = judge(&pair_cs.segments, &cs.segments);
     // a partner refined to no size is no partner, whatever the pair scores
-    if significant && pair_cs.fit > cs.fit && !table::vanished(pair, delay_shown).contains(&1) {
+    if significant && pair_cs.fit > cs.fit && !size::vanished(pair, delay_shown).contains(&1) {
         return None;
     }
     let partner: Vec<String> = pair

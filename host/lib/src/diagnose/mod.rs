@@ -20,7 +20,7 @@
 //! size comes out on its lower bound or within 2σ of nought is never significant, in any
 //! stage, open loop or in the loop ([`fits::Fitted::counts`]; a transport delay, whose
 //! deviation the lag it trades with spreads, is judged there by the excited lines when
-//! they show one, [`table::vanished_effects`]), nor a
+//! they show one, [`size::vanished_effects`]), nor a
 //! transport delay the excited lines do not show beside the lag
 //! ([`fits::delay_unsupported`]: the gap metric, simulated from a closed loop's measured
 //! torque, lets a delay follow the disturbance the loop feeds back).
@@ -93,6 +93,7 @@ mod nominal;
 pub mod progress;
 mod select;
 pub mod series;
+mod size;
 mod starts;
 mod table;
 mod units;

@@ -11,8 +11,8 @@ use crate::ident::nonlinear::{identify_segments, model_of, NlFit, NlRequest, NlS
 
 use super::fits::{fit_and_score, Fitted, Fitter, Floor};
 use super::metric::{score_segments, segment_gain, DrivenModel, Measured};
+use super::size::{exactly_of_no_size, vanished_effects};
 use super::starts::{LazyStart, LinearStarts};
-use super::table::{exactly_of_no_size, vanished_effects};
 use super::{CandidateError, DiagnoseError, DiagnoseRequest, NominalError, NominalStart};
 
 /// The nominal of the diagnosis from its fit `first` (the singles' fits `singles` are the

@@ -5,8 +5,8 @@
 
 use super::fits::fit_and_score;
 use super::metric::Measured;
+use super::size::{exactly_of_no_size, vanished_effects};
 use super::starts::{structure_start, LazyStart, LinearStarts};
-use super::table::{exactly_of_no_size, vanished_effects};
 use super::*;
 use crate::ident::nonlinear::{NlFit, RawFrfFits};
 use crate::model::effects::{ExtraMode, NonlinearStiffness, TimeDelay};
@@ -1171,7 +1171,7 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
         owner: Owner::Effect(1),
         ..param("samples", (0.4, 0.3))
     });
-    assert_eq!(super::table::vanished(&pair, false), vec![1]);
+    assert_eq!(super::size::vanished(&pair, false), vec![1]);
     let fitted_shown = |fit: NlFit, delay_shown: bool| super::fits::Fitted {
         fit,
         scored: metric::Scored {
