@@ -925,7 +925,7 @@ pub fn linear_start_segments(
 /// ([`linear_start_shared`]): made once, by whichever start asks first; a start whose
 /// options or record differ makes its own. (The diagnosis's starts: the structure's and
 /// the friction-compensated one's, and the extra mode's with and without friction, each
-/// pair on the same fits, which were a fifth of a diagnosis's CPU.)
+/// pair on the same fits: made twice, they were about a tenth of hard bench case 8's CPU.)
 #[derive(Debug, Default)]
 pub struct RawFrfFits {
     cell: OnceLock<(RawKey, RawFits)>,
