@@ -16,7 +16,7 @@ use super::locate;
 use super::metric::{
     simulate_closed, velocity_band, ClosedScored, DrivenModel, Measured, MetricError,
 };
-use super::table::{by_score, odd_words};
+use super::table::{odd_words, ranked};
 use super::{Candidate, DiagnoseOptions};
 use crate::data::{Dataset, IdData};
 use crate::ident::controller::{identify, ControllerError, LinearController};
@@ -257,8 +257,10 @@ pub(super) enum LoopNote {
     },
 }
 
-/// A segment judge: `(segments, base segments)` → `(mean gain, its SE, significant)`.
-pub(super) type Judge<'j> = &'j dyn Fn(&[f64], &[f64]) -> (f64, f64, bool);
+/// A segment judge: `(segments, base segments, the single's fit when a single is judged
+/// against the nominal)` → `(mean gain, its SE, significant)`
+/// ([`super::fits::Fitter::judge_model`]).
+pub(super) type Judge<'j> = &'j dyn Fn(&[f64], &[f64], Option<&Fitted>) -> (f64, f64, bool);
 
 /// The diagnosis's answer as [`LoopAnswer::rescore`] changes it.
 pub(super) struct LoopAnswer<'a> {
@@ -336,7 +338,10 @@ impl LoopAnswer<'_> {
         for (m, a) in scores.models.iter().zip(&at) {
             let Some((cs, odd)) = m else { continue };
             match a {
-                Some(i) => single[*i] = Some((judge(&cs.segments, base), cs, *odd)),
+                Some(i) => {
+                    let f = self.singles[*i].1.as_ref();
+                    single[*i] = Some((judge(&cs.segments, base, f), cs, *odd));
+                }
                 None => pair_scores = Some((cs, *odd)),
             }
         }
@@ -354,7 +359,7 @@ impl LoopAnswer<'_> {
         };
         let top_cs = single[ti].as_ref().map(|s| s.1).expect("the top single");
         let pair_judged =
-            pair_scores.map(|(cs, odd)| (judge(&cs.segments, &top_cs.segments), cs, odd));
+            pair_scores.map(|(cs, odd)| (judge(&cs.segments, &top_cs.segments, None), cs, odd));
         let pair_wins = pair_judged
             .as_ref()
             .is_some_and(|(j, cs, _)| j.2 && cs.fit > top_fit);
@@ -417,8 +422,7 @@ impl LoopAnswer<'_> {
                 None => {}
             }
         }
-        self.singles
-            .sort_by(|a, b| by_score(&b.0).total_cmp(&by_score(&a.0)));
+        self.singles.sort_by(|a, b| ranked(&a.0, &b.0));
         match (pair_judged, pair_wins, self.pair.as_mut()) {
             (Some(((score, se, significant), cs, odd)), true, Some(p)) => {
                 p.reason = format!(

@@ -17,7 +17,7 @@ use super::evidence::Evidence;
 use super::fits::{Fitted, Fitter, Job};
 use super::metric::{self, DrivenModel, Measured};
 use super::select::Answer;
-use super::table::{by_score, effect_parameters, linear_parameters, odd_words, scored_candidate};
+use super::table::{effect_parameters, linear_parameters, odd_words, ranked, scored_candidate};
 use super::{in_loop, locate, progress, size, Candidate, DiagnoseOptions};
 
 /// The models scored in the loop when the answer leaves the odd distortion
@@ -48,7 +48,7 @@ pub(super) fn rescore(
     if left < locate::ODD_RESIDUAL_ABOVE_NOISE_DB {
         return None;
     }
-    let judge = |a: &[f64], b: &[f64]| fitter.judge(a, b);
+    let judge = |a: &[f64], b: &[f64], f: Option<&Fitted>| fitter.judge_model(a, b, f);
     let measured = &rec.parts[0];
     let loop_answer = in_loop::LoopAnswer {
         singles: &mut answer.singles,
@@ -167,7 +167,7 @@ fn judge_against_loop_answer(
             })
             .and_then(Result::ok)
             .map(|(cs, _)| {
-                let (mean, se, _) = judge(&cs.segments, &l.best_segments);
+                let (mean, se, _) = judge(&cs.segments, &l.best_segments, None);
                 (mean, se)
             });
     }
@@ -253,9 +253,7 @@ fn refine_answer(
     l.best_segments.clone_from(&cs.segments);
     l.best_odd = odd;
     l.velocities.1 = metric::velocity_band(&cs.theta_m, val.data.ts, measured.band);
-    answer
-        .singles
-        .sort_by(|a, b| by_score(&b.0).total_cmp(&by_score(&a.0)));
+    answer.singles.sort_by(|a, b| ranked(&a.0, &b.0));
 }
 
 /// `start` refined in the loop of `scores.law` on the estimation record `est`
@@ -372,7 +370,7 @@ fn adopt(
     fitted.fit = refined;
     // judged with the refined fit's sizes and deviations
     if !is_pair {
-        let (score, se, significant) = judge(&cs.segments, base);
+        let (score, se, significant) = judge(&cs.segments, base, Some(fitted));
         (cand.score, cand.score_se, cand.significant) = (score, se, fitted.counts(significant));
     }
 }
@@ -441,7 +439,7 @@ fn refine_contenders(
             words.join(", ")
         ));
     }
-    singles.sort_by(|a, b| by_score(&b.0).total_cmp(&by_score(&a.0)));
+    singles.sort_by(|a, b| ranked(&a.0, &b.0));
     let Some((top, Some(f))) = singles.first().filter(|s| s.0.significant) else {
         return (done, at_floor);
     };
@@ -490,7 +488,7 @@ fn drop_partner(
             (o.segments, o.settle_periods),
         )
         .ok()?;
-    let (gain, se, significant) = judge(&pair_cs.segments, &cs.segments);
+    let (gain, se, significant) = judge(&pair_cs.segments, &cs.segments, None);
     // a partner refined to no size is no partner, whatever the pair scores
     if significant && pair_cs.fit > cs.fit && !size::vanished(pair, delay_shown).contains(&1) {
         return None;

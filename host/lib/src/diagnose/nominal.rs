@@ -107,8 +107,10 @@ pub(super) fn refit_spread(
         }
         let vanished = vanished_effects(&f.fit, f.delay_shown);
         let (gain, se) = segment_gain(&f.scored.segments, &nominal.scored.segments);
+        floor.spread = floor.spread.max(gain.abs());
         if gain.abs() > floor.gain {
             floor = Floor {
+                spread: floor.spread,
                 gain: gain.abs(),
                 why: Some(format!(
                     "the spread of the nominal's own refits: {} scores {gain:+.3} ± {se:.3} \

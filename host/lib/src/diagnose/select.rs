@@ -15,7 +15,7 @@ use crate::model::spec::Structure;
 use super::evidence::Evidence;
 use super::fits::{Fitted, Fitter, Job};
 use super::metric::DrivenModel;
-use super::table::{by_score, evidence, lag_and_delay, odd_words, ripple_travel, scored_candidate};
+use super::table::{evidence, lag_and_delay, odd_words, ranked, ripple_travel, scored_candidate};
 use super::{Candidate, CandidateError};
 use crate::ident::parallel::parallel;
 
@@ -75,8 +75,7 @@ impl Answer {
     }
 
     fn sort(&mut self) {
-        self.singles
-            .sort_by(|a, b| by_score(&b.0).total_cmp(&by_score(&a.0)));
+        self.singles.sort_by(|a, b| ranked(&a.0, &b.0));
     }
 }
 
@@ -88,7 +87,7 @@ pub(super) fn single_of(
     effect: &Effect,
     f: &Fitted,
 ) -> Candidate {
-    let judged = fitter.judge(&f.scored.segments, &nominal.scored.segments);
+    let judged = fitter.judge_model(&f.scored.segments, &nominal.scored.segments, Some(f));
     let (score, score_se, significant) = judged;
     let odd = ev.odd_of(&fitter.rec.val, f);
     let mut lag = lag_and_delay(&f.fit, nominal.fit.model.tau_c, fitter.rec.ts)
@@ -97,8 +96,17 @@ pub(super) fn single_of(
     // where it is not counted, [`super::fits::delay_unsupported`])
     if let (Effect::TimeDelay(_), Some(l)) = (effect, fitter.starts.delay_lines) {
         if l.shown() {
+            if f.lines_establish() {
+                lag.push_str(&format!(
+                    "; counted above the spread of the nominal's own refits ({:.3} points), \
+                     not the {:.2}-point floor, since",
+                    fitter.floor.spread, fitter.floor.gain
+                ));
+            }
             lag.push_str(&format!(
-                "; the excited lines show it: beside the lag, a delay of {:.2} samples lowers                  the SML cost of the structure's frequency-domain fit by {:.1}, above the 99 %                  point {:.1} of a delay that is not there",
+                "; the excited lines show it: beside the lag, a delay of {:.2} samples lowers \
+                 the SML cost of the structure's frequency-domain fit by {:.1}, above the 99 % \
+                 point {:.1} of a delay that is not there",
                 l.delay,
                 l.drop,
                 l.threshold()
@@ -520,7 +528,8 @@ pub(super) fn reduce(
     let Some((effect, f, gain, se)) = kept else {
         return;
     };
-    let (score, score_se, significant) = fitter.judge(&f.scored.segments, &nominal.scored.segments);
+    let (score, score_se, significant) =
+        fitter.judge_model(&f.scored.segments, &nominal.scored.segments, Some(&f));
     let at = answer
         .singles
         .iter()

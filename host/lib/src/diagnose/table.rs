@@ -2,6 +2,7 @@
 //! evidence in words and its doubts. An effect fitted to no size is never significant
 //! ([`super::size::vanished_effects`]).
 
+use std::cmp::Ordering;
 use std::collections::BTreeMap;
 
 use crate::data::IdData;
@@ -95,7 +96,19 @@ pub(super) fn odd_words(share: Option<f64>) -> String {
     }
 }
 
-/// A candidate's place in the ranking: its score, a failed fit last.
+/// The ranking of the candidates, `a` before `b` when [`Ordering::Less`]: the significant
+/// first, each group by score. The answer is the first when significant; a candidate that
+/// scores higher but not significantly (a wide spread over the segments, or an effect the
+/// data do not support) does not hide one that passed the test (hard bench, a delay of 0.37
+/// samples the excited lines show: +0.032 ± 0.010 points, significant, under an extra mode
+/// at +0.04 that is not).
+pub(super) fn ranked(a: &Candidate, b: &Candidate) -> Ordering {
+    b.significant
+        .cmp(&a.significant)
+        .then(by_score(b).total_cmp(&by_score(a)))
+}
+
+/// A candidate's place in its group of the ranking: its score, a failed fit last.
 pub(super) fn by_score(c: &Candidate) -> f64 {
     if c.score.is_finite() {
         c.score

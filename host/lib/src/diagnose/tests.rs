@@ -1197,8 +1197,65 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
     assert!(fitted_shown(pair.clone(), true).counts(true));
     assert!(!fitted(pair.clone()).counts(true));
     pair.params[3].value = 1.4;
-    assert!(fitted(pair.clone()).counts(true) && !fitted(pair).counts(false));
+    assert!(fitted(pair.clone()).counts(true) && !fitted(pair.clone()).counts(false));
     assert!(!fitted(fit(0.0, f64::NAN)).counts(true));
+    // the floor: a single delay the excited lines show needs only the spread of the
+    // nominal's refits; the same delay unshown, a pair with it, and any other single, the
+    // option's floor
+    let floor = super::fits::Floor {
+        gain: 0.3,
+        why: None,
+        spread: 0.02,
+    };
+    assert_eq!(
+        floor.of_model(Some(&fitted_shown(fit(0.4, 0.01), true))),
+        0.02
+    );
+    assert_eq!(floor.of_model(Some(&fitted(fit(0.4, 0.01)))), 0.3);
+    assert_eq!(floor.of_model(Some(&fitted_shown(pair, true))), 0.3);
+    let coulomb = friction((2.1e-2, 1e-3), (3.9e-2, 1.3e-3));
+    assert_eq!(floor.of_model(Some(&fitted_shown(coulomb, true))), 0.3);
+    assert_eq!(floor.of_model(None), 0.3);
+}
+
+/// The ranking: a significant candidate comes before any that is not, whatever their
+/// scores; within each group the higher score first, a failed fit last.
+#[test]
+fn a_significant_candidate_is_ranked_before_a_higher_score_that_is_not() {
+    let c = |name: &str, score: f64, significant: bool| Candidate {
+        name: name.into(),
+        specs: Vec::new(),
+        score,
+        score_se: 0.01,
+        fit_val: 90.0,
+        fit_angle_val: 90.0,
+        significant,
+        over_answer: None,
+        parameters: BTreeMap::new(),
+        odd_explained: None,
+        structure_parameters: BTreeMap::new(),
+        reason: String::new(),
+        warnings: Vec::new(),
+    };
+    let mut all = [
+        c("failed", f64::NAN, false),
+        c("extra_mode", 0.04, false),
+        c("time_delay", 0.032, true),
+        c("backlash", 0.5, true),
+        c("torque_ripple", -0.1, false),
+    ];
+    all.sort_by(super::table::ranked);
+    let names: Vec<&str> = all.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "backlash",
+            "time_delay",
+            "extra_mode",
+            "torque_ripple",
+            "failed"
+        ]
+    );
 }
 
 /// The amplitude sentence: a gap that grows while the distortion falls is said with a
@@ -1281,10 +1338,10 @@ fn a_grounded_mass_on_a_hardening_spring_is_diagnosed_as_nonlinear_stiffness() {
 #[test]
 fn the_free_fit_of_the_lines_never_costs_more_than_the_lag_only_fit_it_holds() {
     use crate::test_support::battery::{captures, cases, ROUND};
-    let all = cases(2, true, true);
+    let all = cases(3, true, true);
     let lines = |index: usize| {
         let case = &all[index];
-        assert!(index < 2 * ROUND);
+        assert!(index < 3 * ROUND);
         let (est, _) = captures(case, 4, case.rms);
         let mut warnings = Vec::new();
         let (_, lines) = structure_start(
@@ -1302,4 +1359,13 @@ fn the_free_fit_of_the_lines_never_costs_more_than_the_lag_only_fit_it_holds() {
     let (hidden, delay) = lines(16);
     assert!(delayed(&hidden), "{hidden:?}");
     assert!(delay.shown(), "{delay:?}");
+    // and the other way: an extra mode with no delay, whose free fit ended at a delay of
+    // nought 4000 below the lag-only fit (which holds it), is no delay
+    let (hidden, mode) = lines(23);
+    assert!(!delayed(&hidden), "{hidden:?}");
+    assert!(!mode.shown(), "{mode:?}");
+    // a delay of a fifth of a sample beside a lag of 1.2 samples is shown
+    let (hidden, small) = lines(14);
+    assert!(delayed(&hidden), "{hidden:?}");
+    assert!(small.shown() && small.delay < 0.5, "{small:?}");
 }

@@ -271,9 +271,17 @@ fn verdict(
             "no candidate effect closes a significant part of the gap: the nominal {} reaches \
              {nom_fit:.1} % (band-passed motor-velocity FIT on the validation \
              data{in_loop_words}) and no effect gains more than {:.2} FIT point beyond twice \
-             its standard error",
+             its standard error{}",
             req.structure.label(),
-            fitter.floor.gain
+            fitter.floor.gain,
+            if fitter.starts.delay_lines.is_some_and(|l| l.shown()) {
+                format!(
+                    " ({:.3} for the transport delay the excited lines show)",
+                    fitter.floor.spread
+                )
+            } else {
+                String::new()
+            }
         )
     } else {
         format!(
