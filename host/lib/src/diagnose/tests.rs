@@ -440,7 +440,12 @@ fn a_partner_that_refines_to_nothing_in_the_loop_is_dropped() {
     // refined in the loop from its own values, the spring reached what the noise from
     // period to period leaves: no further start, contender or partner was refined there
     assert_noted(&d, "starts run: the noise from period to period leaves");
-    assert_noted(&d, "backlash 62.6 % not refined");
+    // (the backlash's FIT in the loop depends on its frequency-domain start; that it is
+    // not refined does not)
+    assert_noted(
+        &d,
+        "% not refined (nonlinear_stiffness reached the noise's floor in-sample)",
+    );
     assert_noted(&d, "no pair tried in the loop");
     let best = &d.effects[0];
     assert!(

@@ -85,6 +85,21 @@ impl Discrete {
     }
 }
 
+impl Discrete {
+    /// The continuous model itself in the same form (`F`, `G`, `H`, `D`, no delay), for
+    /// evaluation at `s = jω` instead of `z` ([`super::HeldFrf`]).
+    pub(super) fn continuous(c: &ContinuousSs) -> Discrete {
+        Discrete {
+            a: c.f.clone(),
+            b_old: DVector::zeros(c.g.len()),
+            b_new: c.g.clone(),
+            c: c.h.transpose(),
+            d: c.d,
+            n: 0,
+        }
+    }
+}
+
 /// A direction of change of the sampled model, `(M(θ + h e_i) − M(θ))/h`, in the
 /// Hessenberg basis of `M(θ)` ([`Sampled::tangent`]).
 pub(super) struct Tangent {
