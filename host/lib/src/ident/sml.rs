@@ -675,12 +675,7 @@ impl HeldFrf {
     /// the continuous model at `theta` in evaluation form; None when a parameter is not
     /// positive and finite
     fn continuous(&self, theta: &[f64]) -> Option<Discrete> {
-        let nm = self.0.structure.param_names().len();
-        let p: Vec<f64> = theta[..nm].iter().map(|t| t.exp()).collect();
-        if p.iter().any(|v| !v.is_finite() || *v <= 0.0) {
-            return None;
-        }
-        let c = drive_model(&self.0, theta[nm]).continuous(&p);
+        let c = PhysicalFrf(self.0).continuous(theta)?;
         Some(Discrete::continuous(&c))
     }
 
@@ -707,7 +702,7 @@ impl HeldFrf {
 
 impl FrfModel for HeldFrf {
     fn n_params(&self) -> usize {
-        self.0.structure.param_names().len() + 2
+        PhysicalFrf(self.0).n_params()
     }
 
     fn response(&self, theta: &[f64], z: &[Complex64]) -> Option<Vec<Complex64>> {
@@ -798,15 +793,21 @@ impl PhysicalFrf {
         self.0.structure.param_names().len()
     }
 
-    /// the model sampled at `theta`; None when a parameter is not positive and finite
-    fn discrete(&self, theta: &[f64]) -> Option<Discrete> {
+    /// the continuous model (mechanics and lag) at `theta`; None when a parameter is not
+    /// positive and finite
+    fn continuous(&self, theta: &[f64]) -> Option<ContinuousSs> {
         let nm = self.n_mech();
         let p: Vec<f64> = theta[..nm].iter().map(|t| t.exp()).collect();
         if p.iter().any(|v| !v.is_finite() || *v <= 0.0) {
             return None;
         }
-        let c = drive_model(&self.0, theta[nm]).continuous(&p);
-        Some(Discrete::new(&c, self.0.ts, theta[nm + 1]))
+        Some(drive_model(&self.0, theta[nm]).continuous(&p))
+    }
+
+    /// the model sampled at `theta`; None when a parameter is not positive and finite
+    fn discrete(&self, theta: &[f64]) -> Option<Discrete> {
+        let c = self.continuous(theta)?;
+        Some(Discrete::new(&c, self.0.ts, theta[self.n_mech() + 1]))
     }
 }
 
