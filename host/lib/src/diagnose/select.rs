@@ -96,21 +96,26 @@ pub(super) fn single_of(
     // where it is not counted, [`super::fits::delay_unsupported`])
     if let (Effect::TimeDelay(_), Some(l)) = (effect, fitter.starts.delay_lines) {
         if l.shown() {
-            if f.lines_establish() {
-                lag.push_str(&format!(
-                    "; counted above the spread of the nominal's own refits ({:.3} points), \
-                     not the {:.2}-point floor, since",
-                    fitter.floor.spread, fitter.floor.gain
-                ));
-            }
-            lag.push_str(&format!(
-                "; the excited lines show it: beside the lag, a delay of {:.2} samples lowers \
-                 the SML cost of the structure's frequency-domain fit by {:.1}, above the 99 % \
-                 point {:.1} of a delay that is not there",
+            let shown = format!(
+                "the excited lines show it: beside the lag, a delay of {:.2} samples lowers the \
+                 SML cost of the structure's frequency-domain fit by {:.1}, above the 99 % point \
+                 {:.1} of a delay that is not there",
                 l.delay,
                 l.drop,
                 l.threshold()
-            ));
+            );
+            let floor = fitter.floor.gain;
+            lag.push_str(&match (f.lines_establish(), fitter.floor.spread) {
+                (true, spread) if spread > 0.0 => format!(
+                    "; counted above the spread of the nominal's own refits ({spread:.3} \
+                     points), not the {floor:.2}-point floor, because {shown}"
+                ),
+                (true, _) => format!(
+                    "; counted beyond twice its standard error, not the {floor:.2}-point floor \
+                     (no refit of the nominal measured the metric's spread), because {shown}"
+                ),
+                (false, _) => format!("; {shown}"),
+            });
         }
     }
     let reason = format!(
