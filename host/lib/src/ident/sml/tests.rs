@@ -578,20 +578,11 @@ fn jacobian_from_the_sampled_matrices_matches_central_differences_of_the_residua
     // a noisy three-mass joint with a lag and a fractional delay; both costs, every
     // parameter free, 5 % off the truth: the gradient Jᵀe and the diagonal of JᵀJ from
     // the differenced matrices equal central differences of the residuals themselves
-    let cfg = driven_by("time_delay:samples=1.4", 4e-4);
-    let frf = frf_of(&cfg, &excitation(3, 0.02));
-    let model = three_mass_at_2khz(&cfg);
-    let lines = Lines::new(&frf, 5e-4);
+    let (model, lines, theta) = delayed_three_mass(|i| if i % 2 == 0 { 1.05 } else { 0.95 });
     assert!(
         lines.spectra.is_some(),
         "the SML cost with spectra is tested"
     );
-    let mut theta: Vec<f64> = truth(&cfg.plant.params, Structure::ThreeMass)
-        .iter()
-        .enumerate()
-        .map(|(i, v)| (v * if i % 2 == 0 { 1.05 } else { 0.95 }).ln())
-        .collect();
-    theta.extend([0.8, 1.3]);
     jacobian_matches_central_differences(&PhysicalFrf(model), &lines, &theta);
     // and the search's model without exponentials, whose delay column is analytic
     jacobian_matches_central_differences(&HeldFrf(model), &lines, &theta);
@@ -602,15 +593,7 @@ fn jacobian_from_the_sampled_matrices_matches_central_differences_of_the_residua
 /// a fractional delay: the alias terms it leaves out are far below the lines' noise.
 #[test]
 fn the_held_continuous_model_matches_the_sampled_one_at_the_lines() {
-    let cfg = driven_by("time_delay:samples=1.4", 4e-4);
-    let frf = frf_of(&cfg, &excitation(3, 0.02));
-    let model = three_mass_at_2khz(&cfg);
-    let lines = Lines::new(&frf, 5e-4);
-    let mut theta: Vec<f64> = truth(&cfg.plant.params, Structure::ThreeMass)
-        .iter()
-        .map(|v| v.ln())
-        .collect();
-    theta.extend([0.8, 1.3]);
+    let (model, lines, theta) = delayed_three_mass(|_| 1.0);
     let exact = PhysicalFrf(model).response(&theta, &lines.z).unwrap();
     let held = HeldFrf(model).response(&theta, &lines.z).unwrap();
     let worst = exact
@@ -621,6 +604,21 @@ fn the_held_continuous_model_matches_the_sampled_one_at_the_lines() {
     assert!(worst < 1e-3, "worst relative difference {worst:e}");
     // and it is not the same model: the alias terms are there, just small
     assert!(worst > 1e-9, "worst relative difference {worst:e}");
+}
+
+/// A noisy three-mass joint with a lag and a 1.4-sample delay, three periods: its model at
+/// 2 kHz, its FRF's lines, and the optimiser's coordinates at the truth, each value scaled
+/// by `scale(i)`, with a lag of 0.8 and a delay of 1.3 samples.
+fn delayed_three_mass(scale: impl Fn(usize) -> f64) -> (GreyBoxModel, Lines, Vec<f64>) {
+    let cfg = driven_by("time_delay:samples=1.4", 4e-4);
+    let frf = frf_of(&cfg, &excitation(3, 0.02));
+    let mut theta: Vec<f64> = truth(&cfg.plant.params, Structure::ThreeMass)
+        .iter()
+        .enumerate()
+        .map(|(i, v)| (v * scale(i)).ln())
+        .collect();
+    theta.extend([0.8, 1.3]);
+    (three_mass_at_2khz(&cfg), Lines::new(&frf, 5e-4), theta)
 }
 
 /// `model`'s gradient `Jᵀe` and the diagonal of `JᵀJ`, both costs, every parameter free at
