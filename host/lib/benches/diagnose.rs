@@ -22,7 +22,7 @@
 //! about a point; `ONLY=K` or `ONLY=K,L` runs those cases alone, numbered across rounds
 //! (round 2 is 10–19); `SPEED=0` skips the speed case, `DETAIL=1` prints every candidate,
 //! `BATTERY=0` the battery, `STAGES=1` prints each stage's start and end as they come, at
-//! their seconds from the case's start, `LOWPASS=0` leaves the fits' residuals unfiltered
+//! their seconds from the case's start, `SAVE=dir` writes each case's captures there as CSV, `LOWPASS=0` leaves the fits' residuals unfiltered
 //! above the excited band; `HARD=1` runs every case under harder conditions of a real
 //! joint, drawn per case ([`Hard`]): a process disturbance inside the excited band, a
 //! coarser encoder, a current-loop lag of 0.5–3 samples, the inertia feedforward on in
@@ -82,6 +82,19 @@ fn band_of(gain: f64) -> String {
 }
 
 /// CPU time of this process so far [s] (user + system, `/proc/self/stat`; NaN elsewhere).
+/// `SAVE=dir`: writes case `i`'s captures to `dir/case{i}-est.csv` and `-val.csv`, to
+/// look at a case with `jointid diagnose` itself.
+fn save(i: usize, est: &jointid::data::Dataset, val: &jointid::data::Dataset) {
+    let Ok(dir) = std::env::var("SAVE") else {
+        return;
+    };
+    for (part, ds) in [("est", est), ("val", val)] {
+        let path = std::path::Path::new(&dir).join(format!("case{i}-{part}.csv"));
+        let mut f = std::fs::File::create(&path).expect("SAVE names a writable folder");
+        jointid::data::csv::write_capture_csv(&mut f, ds).expect("the capture is written");
+    }
+}
+
 fn cpu_seconds() -> f64 {
     let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
         return f64::NAN;
@@ -205,6 +218,7 @@ fn battery() {
             continue;
         }
         let (est, val) = captures(case, 4, case.rms);
+        save(i, &est, &val);
         let label = if case.hidden.is_empty() {
             "none".to_string()
         } else {

@@ -224,16 +224,13 @@ pub fn measured_ripple(ripples: &[Effect], theta: &[f64]) -> Vec<f64> {
             ripples
                 .iter()
                 .map(|e| match e {
-                    Effect::TorqueRipple(r) => {
-                        let (a0, a1) = (r.order * t0 + r.phase, r.order * t1 + r.phase);
-                        let d = a1 - a0;
-                        let mean = if d.abs() < 1e-6 {
-                            (0.5 * (a0 + a1)).sin()
-                        } else {
-                            (a0.cos() - a1.cos()) / d
-                        };
-                        r.amplitude * mean
-                    }
+                    Effect::TorqueRipple(r) => crate::model::laws::ripple_interval_mean(
+                        r.amplitude,
+                        r.order,
+                        r.phase,
+                        t0,
+                        t1,
+                    ),
                     _ => 0.0,
                 })
                 .sum()

@@ -16,11 +16,13 @@
 //! standard error of the mean over the segments. The floor ([`fits::Floor`]) is
 //! [`DiagnoseOptions::min_gain`] (0.3 FIT point), or, when larger, the spread of the
 //! nominal's own refits ([`nominal::refit_spread`]): how far a single whose effect came out
-//! of no size moved the validation FIT at the nominal's in-sample cost. A single transport
-//! delay that the excited lines show beside the lag (their likelihood-ratio test at 99 %,
-//! [`crate::ident::nonlinear::DelayLines`]) needs only that spread
-//! ([`fits::Fitter::judge_model`]): the lines, exact for a linear effect, have already
-//! rejected the nominal, and the metric has only to confirm the gain. The candidates are
+//! of no size moved the validation FIT at the nominal's in-sample cost. A single whose
+//! effect the data show by its own signature needs only that spread
+//! ([`fits::Fitted::shown_apart`], [`fits::Fitter::judge_model`]): a transport delay that
+//! the excited lines show beside the lag (their likelihood-ratio test at 99 %,
+//! [`crate::ident::nonlinear::DelayLines`]), a torque ripple whose order stands out of the
+//! search against the motor angle ([`crate::ident::nonlinear::ripple::search_order`]).
+//! That test has already rejected the nominal, and the metric has only to confirm the gain. The candidates are
 //! ranked significant first, each group by score ([`table::ranked`]); the answer is the
 //! first when significant. An effect whose
 //! size comes out on its lower bound or within 2σ of nought is never significant, in any

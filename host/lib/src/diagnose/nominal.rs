@@ -235,6 +235,7 @@ fn nominal_at_start(
             own_start: None,
             unsupported: None,
             delay_shown: false,
+            ripple_shown: None,
         },
         at_start,
         after,

@@ -92,31 +92,39 @@ pub(super) fn single_of(
     let odd = ev.odd_of(&fitter.rec.val, f);
     let mut lag = lag_and_delay(&f.fit, nominal.fit.model.tau_c, fitter.rec.ts)
         .map_or(String::new(), |w| format!("; {w}"));
-    // the excited lines' own word on the delay (when they do not show it, the row says so
-    // where it is not counted, [`super::fits::delay_unsupported`])
-    if let (Effect::TimeDelay(_), Some(l)) = (effect, fitter.starts.delay_lines) {
-        if l.shown() {
-            let shown = format!(
-                "the excited lines show it: beside the lag, a delay of {:.2} samples lowers the \
-                 SML cost of the structure's frequency-domain fit by {:.1}, above the 99 % point \
-                 {:.1} of a delay that is not there",
-                l.delay,
-                l.drop,
-                l.threshold()
-            );
-            let floor = fitter.floor.gain;
-            lag.push_str(&match (f.lines_establish(), fitter.floor.spread) {
-                (true, spread) if spread > 0.0 => format!(
-                    "; counted above the spread of the nominal's own refits ({spread:.3} \
-                     points), not the {floor:.2}-point floor, because {shown}"
-                ),
-                (true, _) => format!(
-                    "; counted beyond twice its standard error, not the {floor:.2}-point floor \
-                     (no refit of the nominal measured the metric's spread), because {shown}"
-                ),
-                (false, _) => format!("; {shown}"),
-            });
-        }
+    // the data's own word on the effect, apart from the metric: the excited lines' on a
+    // delay (when they do not show it, the row says so where it is not counted,
+    // [`super::fits::delay_unsupported`]), the order search's on a ripple
+    let shown = match (effect, fitter.starts.delay_lines, f.ripple_shown) {
+        (Effect::TimeDelay(_), Some(l), _) if l.shown() => Some(format!(
+            "the excited lines show it: beside the lag, a delay of {:.2} samples lowers the SML \
+             cost of the structure's frequency-domain fit by {:.1}, above the 99 % point {:.1} \
+             of a delay that is not there",
+            l.delay,
+            l.drop,
+            l.threshold()
+        )),
+        (Effect::TorqueRipple(_), _, Some((n, z))) => Some(format!(
+            "the order search shows it: the ripple of order {n} lowers the estimation cost at a \
+             robust z-score of {z:.1} against the orders a period or more apart over the \
+             travel (significant from {}), with the same ripple along the record",
+            crate::ident::nonlinear::ripple::SIGNIFICANT_Z
+        )),
+        _ => None,
+    };
+    if let Some(shown) = shown {
+        let floor = fitter.floor.gain;
+        lag.push_str(&match (f.shown_apart(), fitter.floor.spread) {
+            (true, spread) if spread > 0.0 => format!(
+                "; counted above the spread of the nominal's own refits ({spread:.3} points), \
+                 not the {floor:.2}-point floor, because {shown}"
+            ),
+            (true, _) => format!(
+                "; counted beyond twice its standard error, not the {floor:.2}-point floor (no \
+                 refit of the nominal measured the metric's spread), because {shown}"
+            ),
+            (false, _) => format!("; {shown}"),
+        });
     }
     let reason = format!(
         "{}; validation FIT {:+.1} ± {:.1} points{}{}{lag}",
@@ -269,6 +277,8 @@ pub(super) fn nested_refits(
             continue;
         };
         new.own_start = Some(old.fit.clone());
+        // the refit keeps the ripple's order, and the search that found it holds
+        new.ripple_shown = old.ripple_shown;
         new.warnings.insert(
             0,
             format!(

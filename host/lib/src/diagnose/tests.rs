@@ -9,7 +9,7 @@ use super::size::{exactly_of_no_size, vanished_effects};
 use super::starts::{structure_start, LazyStart, LinearStarts};
 use super::*;
 use crate::ident::nonlinear::{NlFit, RawFrfFits};
-use crate::model::effects::{ExtraMode, NonlinearStiffness, TimeDelay};
+use crate::model::effects::{ExtraMode, NonlinearStiffness, TimeDelay, TorqueRipple};
 use crate::sim::SimConfig;
 use jointid_core::excitation::ExcitationConfig;
 
@@ -1197,6 +1197,7 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
         own_start: None,
         unsupported: None,
         delay_shown,
+        ripple_shown: None,
     };
     let fitted = |fit: NlFit| fitted_shown(fit, false);
     assert!(fitted_shown(pair.clone(), true).counts(true));
@@ -1219,8 +1220,31 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
     assert_eq!(floor.of_model(Some(&fitted(fit(0.4, 0.01)))), 0.3);
     assert_eq!(floor.of_model(Some(&fitted_shown(pair, true))), 0.3);
     let coulomb = friction((2.1e-2, 1e-3), (3.9e-2, 1.3e-3));
-    assert_eq!(floor.of_model(Some(&fitted_shown(coulomb, true))), 0.3);
+    assert_eq!(
+        floor.of_model(Some(&fitted_shown(coulomb.clone(), true))),
+        0.3
+    );
     assert_eq!(floor.of_model(None), 0.3);
+    // a ripple at the order the search against the angle found needs only the spread; at
+    // another order, with no order found, or the order found beside another effect, the
+    // option's floor
+    let ripple = with(
+        Effect::TorqueRipple(TorqueRipple {
+            order: 72.0,
+            ..TorqueRipple::default()
+        }),
+        vec![param("amplitude", (0.02, 1e-3))],
+    );
+    let found = |fit: NlFit, order: Option<u32>| super::fits::Fitted {
+        ripple_shown: order.map(|n| (n, 9.5)),
+        ..fitted(fit)
+    };
+    assert_eq!(floor.of_model(Some(&found(ripple.clone(), Some(72)))), 0.02);
+    assert_eq!(floor.of_model(Some(&found(ripple.clone(), Some(36)))), 0.3);
+    assert_eq!(floor.of_model(Some(&found(ripple.clone(), None))), 0.3);
+    let mut both = ripple;
+    both.model.effects.extend(coulomb.model.effects);
+    assert_eq!(floor.of_model(Some(&found(both, Some(72)))), 0.3);
 }
 
 /// The ranking: a significant candidate comes before any that is not, whatever their

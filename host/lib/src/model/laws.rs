@@ -187,6 +187,37 @@ pub fn ripple_torque<T: Float>(amplitude: T, order: T, phase: T, theta: T) -> T 
     amplitude * (order * theta + phase).sin()
 }
 
+/// Mean over a sample interval of the unit phasor `e^{i n θ}` of a ripple of order `order`,
+/// the motor angle moving linearly from `theta0` to `theta1` [rad]: `(e^{i n θ₁} − e^{i n
+/// θ₀}) / (i n (θ₁ − θ₀))`, its real part the mean of `cos(n θ)`, its imaginary part that
+/// of `sin(n θ)`. Its magnitude `sin(δ/2)/(δ/2)` at the phase step `δ = n |θ₁ − θ₀|` is
+/// what a sample keeps of the ripple's torque: 2/π at a step of π, nought at 2π.
+pub fn ripple_phasor_mean(order: f64, theta0: f64, theta1: f64) -> (f64, f64) {
+    let (a0, a1) = (order * theta0, order * theta1);
+    let d = a1 - a0;
+    if d.abs() < 1e-6 {
+        let (s, c) = (0.5 * (a0 + a1)).sin_cos();
+        (c, s)
+    } else {
+        ((a1.sin() - a0.sin()) / d, (a0.cos() - a1.cos()) / d)
+    }
+}
+
+/// Mean of the ripple `A sin(n θ + φ)` [N·m] over a sample interval, the motor angle moving
+/// linearly from `theta0` to `theta1` [rad] ([`ripple_phasor_mean`]).
+pub fn ripple_interval_mean(
+    amplitude: f64,
+    order: f64,
+    phase: f64,
+    theta0: f64,
+    theta1: f64,
+) -> f64 {
+    let (c, s) = ripple_phasor_mean(order, theta0, theta1);
+    let (sp, cp) = phase.sin_cos();
+    // sin(nθ + φ) = sin(nθ) cos φ + cos(nθ) sin φ
+    amplitude * (s * cp + c * sp)
+}
+
 /// Output of the current loop (first-order lag with time constant `tc` [s]) after `t` [s]
 /// with its input held at `target` from the value `start` [N·m]: `target + (start −
 /// target) e^{−t/tc}`; `tc = 0` is no lag (the target at once).

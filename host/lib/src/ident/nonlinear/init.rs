@@ -71,6 +71,9 @@ pub struct Start {
     pub held: Vec<String>,
     /// what the start could not find, in words
     pub warnings: Vec<String>,
+    /// the last search of the torque ripple's order in the data (none with the order given
+    /// or without a ripple)
+    pub ripple_search: Option<super::ripple::OrderSearch>,
 }
 
 /// Where the torque ripple's order comes from.
@@ -577,6 +580,7 @@ pub fn automatic_start_with(
                 }
             }
             steps.push(order_step(Some(&f), "again on the linear fit"));
+            searched = Some(f);
         }
     }
     // the gearbox stiffness by name: its index differs between the structures
@@ -675,6 +679,7 @@ pub fn automatic_start_with(
         steps,
         held,
         warnings,
+        ripple_search: searched,
     })
 }
 

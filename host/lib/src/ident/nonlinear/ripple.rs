@@ -14,9 +14,16 @@
 //!
 //! Candidates: the orders whose angular period `2π/n` the motor's travel (the 1st to 99th
 //! percentile of `θ_m`) covers at least [`MIN_PERIODS`] times (over less, `sin(n θ)` is a
-//! smooth function of the angle and catches any position-dependent error), and whose torque
-//! frequency `n |ω|` at the 99th percentile of the speed stays below [`NYQUIST_SHARE`] of
-//! the Nyquist frequency (the sampled angle resolves the period), at most [`MAX_ORDER`].
+//! smooth function of the angle and catches any position-dependent error), and whose phase
+//! `n θ_m` turns at most [`MAX_PHASE_STEP`] per sample at the 99th percentile of the speed,
+//! at most [`MAX_ORDER`]. The phase is the measured angle times the order, so a fast ripple
+//! is not aliased; but over a sample the torque a ripple exerts is its mean along the
+//! motion, `sin(δ/2)/(δ/2)` of its amplitude at a phase step `δ`, nought at `2π`, so
+//! beyond a step of `π` the fast samples no longer hold it. Bench case 35 of
+//! `benches/diagnose.rs` with `HARD=1 SMALL=1` (order 72, the phase turning 1.6 rad per
+//! sample at the 99th percentile): a limit of a quarter of that (the ripple's frequency
+//! below a quarter of the Nyquist frequency) stopped the search at order 36, whose fit
+//! gained 0.08 FIT point; the true order fitted gains 0.57.
 //!
 //! Short travel: the search also runs down to the orders whose period the travel covers
 //! [`MIN_SHORT_PERIODS`] times. A small motion of a joint with a ripple feels a torque that
@@ -43,13 +50,14 @@ use super::output_error::{interval_velocity, simulate_velocity, NlError};
 use crate::data::dsp::{butter_highpass_sos, SosBank};
 use crate::data::IdData;
 use crate::model::effects::TorqueRipple;
+use crate::model::laws::{ripple_interval_mean, ripple_phasor_mean};
 
 /// Periods of the ripple the motor's travel must cover for its order to be a candidate.
 pub const MIN_PERIODS: f64 = 2.0;
 
-/// Share of the Nyquist frequency the ripple's torque frequency may reach at the 99th
-/// percentile of the motor speed.
-pub const NYQUIST_SHARE: f64 = 0.25;
+/// Phase the ripple of the highest order searched may turn per sample at the 99th
+/// percentile of the motor speed [rad] (module documentation).
+pub const MAX_PHASE_STEP: f64 = std::f64::consts::PI;
 
 /// Highest order searched (periods per motor revolution).
 pub const MAX_ORDER: u32 = 240;
@@ -122,14 +130,14 @@ impl OrderSearch {
     }
 }
 
-/// The candidate orders for `data` ([`MIN_PERIODS`], [`NYQUIST_SHARE`], [`MAX_ORDER`]);
+/// The candidate orders for `data` ([`MIN_PERIODS`], [`MAX_PHASE_STEP`], [`MAX_ORDER`]);
 /// `None` when no order qualifies.
 pub fn order_range(data: &IdData) -> Option<(u32, u32)> {
     orders_covering(data, MIN_PERIODS)
 }
 
 /// The orders from those whose period the motor's travel covers `periods` times to the
-/// speed's limit ([`NYQUIST_SHARE`], [`MAX_ORDER`]), when at least [`MIN_CANDIDATES`].
+/// speed's limit ([`MAX_PHASE_STEP`], [`MAX_ORDER`]), when at least [`MIN_CANDIDATES`].
 fn orders_covering(data: &IdData, periods: f64) -> Option<(u32, u32)> {
     let span = span(data);
     let v: Vec<f64> = interval_velocity(&data.y, data.ts)
@@ -141,8 +149,7 @@ fn orders_covering(data: &IdData, periods: f64) -> Option<(u32, u32)> {
         return None;
     }
     let lo = (periods * std::f64::consts::TAU / span).ceil().max(1.0);
-    let nyquist = std::f64::consts::PI / data.ts;
-    let hi = (NYQUIST_SHARE * nyquist / w_hi)
+    let hi = (MAX_PHASE_STEP / (w_hi * data.ts))
         .floor()
         .min(MAX_ORDER as f64);
     (hi >= lo + MIN_CANDIDATES as f64 - 1.0).then_some((lo as u32, hi as u32))
@@ -176,7 +183,9 @@ fn percentile(x: &[f64], q: f64) -> f64 {
 /// The responses `g_s`, `g_c` are those of the linear structure without effects or current
 /// loop (the ripple acts on the motor after the current loop, and its frequencies lie far
 /// below the loop's bandwidth), one convolution each by FFT with the pulse response of the
-/// simulation, the ripple held over each sample interval at the mean of its two ends.
+/// simulation, the ripple held over each sample interval at its mean along the motion
+/// ([`ripple_phasor_mean`], the angle linear between samples, as the model's simulation
+/// takes it).
 ///
 /// # Errors
 /// [`NlError::Unstable`] when the model does not simulate to finite values.
@@ -229,15 +238,14 @@ pub fn search_order(
     hf.resize(size, Complex64::new(0.0, 0.0));
     fwd.process(&mut hf);
     // the prefiltered responses `[g_s, g_c]` to `sin(nθ)`, `cos(nθ)`, by one complex
-    // convolution of `e^{i n θ}` held over interval k at the mean of its ends
+    // convolution of `e^{i n θ}` held over interval k at its mean along the motion
     let mut buf = vec![Complex64::new(0.0, 0.0); size];
     let mut responses = |n: u32| -> [Vec<f64>; 2] {
         let nf = n as f64;
         for (k, b) in buf.iter_mut().enumerate() {
             *b = if k < len {
-                let a = data.y[k];
-                let c = data.y[(k + 1).min(len - 1)];
-                (Complex64::from_polar(1.0, nf * a) + Complex64::from_polar(1.0, nf * c)) * 0.5
+                let (c, s) = ripple_phasor_mean(nf, data.y[k], data.y[(k + 1).min(len - 1)]);
+                Complex64::new(c, s)
             } else {
                 Complex64::new(0.0, 0.0)
             };
@@ -336,20 +344,17 @@ pub fn search_order(
 }
 
 /// `data` with the ripple `A sin(n θ_m + φ)` at the measured angle taken off the motor:
-/// its torque added to the torque reference, held over each sample interval at the mean of
-/// its two ends (as the search's responses hold it), so that what moves the motor from the
+/// its torque added to the torque reference, held over each sample interval at its mean
+/// along the motion (as the search's responses hold it), so that what moves the motor from the
 /// compensated torque is the linear structure (the ripple is a torque the reference does
 /// not command; at a short travel, a stiffness to the ground that a linear fit otherwise
 /// bends the structure to explain).
 pub fn compensated(data: &IdData, ripple: &TorqueRipple) -> IdData {
-    let torque = |theta: f64| {
-        crate::model::laws::ripple_torque(ripple.amplitude, ripple.order, ripple.phase, theta)
-    };
     let y = &data.y;
     let mut out = data.clone();
     for (k, u) in out.u.iter_mut().enumerate() {
         let next = y[(k + 1).min(y.len() - 1)];
-        *u += 0.5 * (torque(y[k]) + torque(next));
+        *u += ripple_interval_mean(ripple.amplitude, ripple.order, ripple.phase, y[k], next);
     }
     out
 }

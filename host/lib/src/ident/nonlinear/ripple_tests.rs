@@ -180,3 +180,30 @@ fn a_ripple_the_travel_covers_less_than_a_period_of_is_fitted_as_a_torque_agains
         "{r:?}"
     );
 }
+
+#[test]
+fn a_ripple_whose_phase_turns_over_a_radian_per_sample_at_the_fastest_samples_is_found() {
+    // order 180 at 0.4 rad RMS: 18 periods over the travel, the phase turning 1.2 rad per
+    // sample at the 99th percentile of the speed. The search's responses take the ripple's
+    // mean along each sample's motion, as the model's simulation does, so the order is
+    // searched up to a step of π; a limit at a quarter of that (the ripple's frequency
+    // under a quarter of the Nyquist frequency) stopped the search at order 113
+    let truth = TorqueRipple {
+        order: 180.0,
+        ..TorqueRipple::default()
+    };
+    let ds = capture(vec![Effect::TorqueRipple(truth)], 0.4, 51);
+    let (_, hi) = ripple::order_range(&ds.data).unwrap();
+    assert!(hi >= 180, "searched up to {hi}");
+    let out = fit_without_order(&ds);
+    let step = order_step(&out);
+    assert!(step.detail.starts_with("found"), "{}", step.detail);
+    let Effect::TorqueRipple(r) = out.result.fit.model.effects[0] else {
+        panic!("{:?}", out.result.fit.model.effects)
+    };
+    assert_eq!(r.order, 180.0, "{}", step.detail);
+    assert!(
+        (r.amplitude / truth.amplitude - 1.0).abs() < 0.1,
+        "{r:?} against {truth:?}"
+    );
+}

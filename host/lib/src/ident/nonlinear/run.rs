@@ -213,6 +213,9 @@ pub struct NlResult {
     pub options: NlOptions,
     /// the method, in words
     pub method: String,
+    /// the last search of the torque ripple's order in the data
+    /// ([`super::init::Start::ripple_search`]; none with a given start)
+    pub ripple_search: Option<super::ripple::OrderSearch>,
 }
 
 /// Validation of a fitted model on data that played no part in the fit (the `validation`
@@ -322,6 +325,7 @@ pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, Nl
     }
     let mut options = req.options.clone().for_structure(req.structure);
     let mut start_warnings = Vec::new();
+    let mut ripple_search = None;
     let (mut steps, start_model, mut start) = match &req.start {
         NlStart::Automatic => {
             let linear = req.linear.as_deref().map(|values| LinearFit {
@@ -331,6 +335,7 @@ pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, Nl
             let st = automatic_start_with(data, &model, linear, ripple_order_of(req), &options)?;
             options.fixed.extend(st.held);
             start_warnings = st.warnings;
+            ripple_search = st.ripple_search;
             (st.steps, st.model, st.values)
         }
         NlStart::Values(v) => (Vec::new(), model.clone(), v.clone()),
@@ -447,6 +452,7 @@ pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, Nl
         warnings,
         options,
         method,
+        ripple_search,
     })
 }
 
