@@ -15,6 +15,7 @@ use crate::ident::nonlinear::{NlFit, Owner};
 
 use super::evidence::Evidence;
 use super::fits::{Fitted, Fitter, Job};
+use super::in_loop::RefineStarts::Springs;
 use super::metric::{self, DrivenModel, Measured};
 use super::select::Answer;
 use super::table::{effect_parameters, linear_parameters, odd_words, ranked, scored_candidate};
@@ -90,7 +91,15 @@ pub(super) fn rescore(
         ));
     }
     let found = if o.pairs && answer.pair.is_none() && !at_floor {
-        pair_in_loop(fitter, &answer.singles, &l, (&rec.est[0][0], one, measured))
+        progress::step(
+            fitter.req.progress.as_ref(),
+            "the loop's best single with each other, refined in the loop",
+            || pair_in_loop(fitter, &answer.singles, &l, (&rec.est[0][0], one, measured)),
+            |r| match r {
+                Some((c, _, _)) => format!("{} adds significantly", c.name),
+                None => "no pair adds significantly".to_string(),
+            },
+        )
     } else {
         None
     };
@@ -201,7 +210,7 @@ fn refine_answer(
         odd,
         course: before,
         ..
-    } = match refine_in_loop(&l.scores, &start, (est, val, measured), o) {
+    } = match refine_in_loop(&l.scores, (&start, Springs), (est, val, measured), o) {
         Ok(r) => r,
         Err(e) => {
             l.words
@@ -261,7 +270,7 @@ fn refine_answer(
 /// its scores in the loop, its odd share and the in-sample course in words.
 fn refine_in_loop(
     scores: &in_loop::LoopScores,
-    start: &NlFit,
+    (start, from): (&NlFit, in_loop::RefineStarts<'_>),
     (est, val, measured): (&Dataset, &Dataset, &Measured),
     o: &DiagnoseOptions,
 ) -> Result<LoopRefit, String> {
@@ -276,8 +285,14 @@ fn refine_in_loop(
         moved,
         after,
         starts,
-    } = in_loop::refine(start, &scores.law, (&est.data, &m_est), enough, o.threads)
-        .map_err(|e| e.to_string())?;
+    } = in_loop::refine(
+        start,
+        &scores.law,
+        (&est.data, &m_est),
+        (enough, from),
+        o.threads,
+    )
+    .map_err(|e| e.to_string())?;
     let mut words = match moved {
         Some((name, factor, at)) => format!(
             "{before:.1} %; the lowest cost came from a start with {name} ×{factor} ({at:.1} \
@@ -409,7 +424,7 @@ fn refine_contenders(
             continue;
         }
         words.push(
-            match refine_in_loop(&l.scores, &f.fit, (est, val, measured), o) {
+            match refine_in_loop(&l.scores, (&f.fit, Springs), (est, val, measured), o) {
                 Ok(r) if r.cs.fit > was => {
                     if r.at_floor {
                         at_floor = Some(c.name.clone());
@@ -546,8 +561,10 @@ fn pair_in_loop(
         else {
             continue;
         };
-        // refined in the loop as its lead was, so that the two are compared alike
-        if let Ok(r) = refine_in_loop(&l.scores, &f.fit, (est, val, measured), o) {
+        // refined in the loop as its lead was, so that the two are compared alike; the
+        // lead's springs were searched there already
+        let from = (&f.fit, in_loop::RefineStarts::Lead(&lead.fit));
+        if let Ok(r) = refine_in_loop(&l.scores, from, (est, val, measured), o) {
             if r.cs.fit > cs.fit {
                 (f.fit, cs, odd) = (r.fit, r.cs, r.odd);
             }
