@@ -5,8 +5,8 @@
 use crate::data::IdData;
 use crate::ident::lm::Termination;
 use crate::ident::nonlinear::{
-    grow, identify_segments, model_of, NlError, NlFit, NlRequest, NlResult, NlRunError, NlStart,
-    Owner,
+    grow, identify_segments, model_of, DelayLines, NlError, NlFit, NlRequest, NlResult, NlRunError,
+    NlStart, Owner,
 };
 use crate::ident::parallel::parallel;
 use crate::model::effects::Effect;
@@ -226,11 +226,11 @@ pub(super) struct Fitted {
     /// why the data do not support an effect of the model however it scores: it is then
     /// never significant ([`delay_unsupported`])
     pub unsupported: Option<String>,
-    /// whether the excited lines show a transport delay beside the lag
-    /// ([`crate::ident::nonlinear::DelayLines::shown`]): a delay's size is then judged by
-    /// them, not by its deviation, which the lag it trades with spreads
+    /// the excited lines' likelihood-ratio evidence of a transport delay beside the lag
+    /// ([`crate::ident::nonlinear::DelayLines`]); when they show one, a delay's size is
+    /// judged by them, not by its deviation, which the lag it trades with spreads
     /// ([`super::size::vanished_effects`])
-    pub delay_shown: bool,
+    pub delay_lines: Option<DelayLines>,
     /// the torque ripple's order the data show: the order search on the estimation data
     /// found it among the candidates the travel tells apart, coherent along the record
     /// ([`crate::ident::nonlinear::ripple::search_order`]), with its robust z-score; none
@@ -241,7 +241,8 @@ pub(super) struct Fitted {
 impl Fitted {
     /// Whether the data show this model's one effect by its own signature, apart from the
     /// validation metric: a transport delay the excited lines show beside the lag (a
-    /// likelihood-ratio test at 99 %, [`crate::ident::nonlinear::DelayLines`]), or a torque
+    /// likelihood-ratio test at 99 %, [`crate::ident::nonlinear::DelayLines`]) at the size
+    /// fitted (within [`crate::ident::nonlinear::DelayLines::interval`]), or a torque
     /// ripple at the order the search against the motor angle found (its cost drop a
     /// robust z-score of [`crate::ident::nonlinear::ripple::SIGNIFICANT_Z`] above those of
     /// the orders a period or more apart over the travel, the same ripple on each part of
@@ -250,12 +251,18 @@ impl Fitted {
     /// structure the lines' fit of more masses would need.
     pub fn shown_apart(&self) -> bool {
         match self.fit.model.effects[..] {
-            [Effect::TimeDelay(_)] => self.delay_shown,
+            [Effect::TimeDelay(d)] => self.delay_lines.is_some_and(|l| l.holds(d.samples)),
             [Effect::TorqueRipple(r)] => self
                 .ripple_shown
                 .is_some_and(|(n, _)| f64::from(n) == r.order),
             _ => false,
         }
+    }
+
+    /// Whether the excited lines show a transport delay beside the lag
+    /// ([`crate::ident::nonlinear::DelayLines::shown`]).
+    pub fn delay_shown(&self) -> bool {
+        self.delay_lines.is_some_and(|l| l.shown())
     }
 
     /// Whether a gain judged `significant` counts for this model: not when the data do not
@@ -266,7 +273,7 @@ impl Fitted {
     pub fn counts(&self, significant: bool) -> bool {
         significant
             && self.unsupported.is_none()
-            && super::size::vanished(&self.fit, self.delay_shown).is_empty()
+            && super::size::vanished(&self.fit, self.delay_shown()).is_empty()
     }
 }
 
@@ -473,7 +480,7 @@ pub(super) fn scored_fit(
         warnings,
         own_start: None,
         unsupported,
-        delay_shown: starts.delay_lines.is_some_and(|l| l.shown()),
+        delay_lines: starts.delay_lines,
         ripple_shown: res
             .ripple_search
             .as_ref()

@@ -233,7 +233,7 @@ fn refine_answer(
     ));
     let mut refined = (refined, cs, odd);
     if is_pair {
-        let shown = answer.pair_fitted.as_ref().is_some_and(|f| f.delay_shown);
+        let shown = answer.pair_fitted.as_ref().is_some_and(|f| f.delay_shown());
         if let Some(lead) = drop_partner(l, (&refined, shown), (val, measured), judge, o) {
             *answer.pair = None;
             *answer.pair_fitted = None;
@@ -352,7 +352,7 @@ fn adopt(
     judge: in_loop::Judge<'_>,
 ) {
     let is_pair = refined.model.effects.len() > 1;
-    let vanished = size::vanished_effects(&refined, fitted.delay_shown);
+    let vanished = size::vanished_effects(&refined, fitted.delay_shown());
     cand.reason = format!(
         "refined in the controller's loop on the estimation record: validation FIT {:.1} % in \
          the loop{}{}; before: {}",

@@ -105,7 +105,7 @@ pub(super) fn refit_spread(
         if !same_cost || !exactly_of_no_size(&f.fit) || f.fit.ssr > nominal.fit.ssr {
             continue;
         }
-        let vanished = vanished_effects(&f.fit, f.delay_shown);
+        let vanished = vanished_effects(&f.fit, f.delay_shown());
         let (gain, se) = segment_gain(&f.scored.segments, &nominal.scored.segments);
         floor.spread = floor.spread.max(gain.abs());
         if gain.abs() > floor.gain {
@@ -234,7 +234,7 @@ fn nominal_at_start(
             warnings,
             own_start: None,
             unsupported: None,
-            delay_shown: false,
+            delay_lines: None,
             ripple_shown: None,
         },
         at_start,

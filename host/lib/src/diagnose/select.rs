@@ -97,10 +97,12 @@ pub(super) fn single_of(
     // [`super::fits::delay_unsupported`]), the order search's on a ripple
     let shown = match (effect, fitter.starts.delay_lines, f.ripple_shown) {
         (Effect::TimeDelay(_), Some(l), _) if l.shown() => Some(format!(
-            "the excited lines show it: beside the lag, a delay of {:.2} samples lowers the SML \
-             cost of the structure's frequency-domain fit by {:.1}, above the 99 % point {:.1} \
-             of a delay that is not there",
+            "the excited lines show a delay: beside the lag, a delay of {:.2} samples (99 % \
+             interval {:.2}–{:.2}) lowers the SML cost of the structure's frequency-domain fit \
+             by {:.1}, above the 99 % point {:.1} of a delay that is not there",
             l.delay,
+            l.interval().0,
+            l.interval().1,
             l.drop,
             l.threshold()
         )),
@@ -123,7 +125,10 @@ pub(super) fn single_of(
                 "; counted beyond twice its standard error, not the {floor:.2}-point floor (no \
                  refit of the nominal measured the metric's spread), because {shown}"
             ),
-            (false, _) => format!("; {shown}"),
+            (false, _) => format!(
+                "; {shown}, but not at the size fitted here: judged against the {floor:.2}-point \
+                 floor"
+            ),
         });
     }
     let reason = format!(

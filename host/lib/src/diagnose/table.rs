@@ -26,7 +26,7 @@ pub(super) fn scored_candidate(
     let (score, score_se, significant) = judged;
     // an effect fitted to no size is the nominal again: whatever it gained came from the
     // refitted structure, not from the effect
-    let vanished = vanished_effects(&f.fit, f.delay_shown);
+    let vanished = vanished_effects(&f.fit, f.delay_shown());
     let (significant, reason) = if vanished.is_empty() {
         (significant, reason)
     } else {

@@ -104,7 +104,7 @@ fn check_delay(samples: f64) -> Diagnosis {
     let row = d.effects.iter().find(|c| c.name == "time_delay").unwrap();
     assert!(
         row.reason.contains("lag and delay told apart")
-            && row.reason.contains("the excited lines show it"),
+            && row.reason.contains("the excited lines show a delay"),
         "{}",
         row.reason
     );
@@ -1196,7 +1196,13 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
         warnings: Vec::new(),
         own_start: None,
         unsupported: None,
-        delay_shown,
+        // lines that show a delay of 0.4 samples, at a drop of 1000 (a 99 % interval of
+        // ±0.04 samples)
+        delay_lines: delay_shown.then_some(crate::ident::nonlinear::DelayLines {
+            drop: 1000.0,
+            delay: 0.4,
+            noise_dof: 100.0,
+        }),
         ripple_shown: None,
     };
     let fitted = |fit: NlFit| fitted_shown(fit, false);
@@ -1218,6 +1224,11 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
         0.02
     );
     assert_eq!(floor.of_model(Some(&fitted(fit(0.4, 0.01)))), 0.3);
+    // a delay fitted outside the lines' interval is not the one they show
+    assert_eq!(
+        floor.of_model(Some(&fitted_shown(fit(0.6, 0.01), true))),
+        0.3
+    );
     assert_eq!(floor.of_model(Some(&fitted_shown(pair, true))), 0.3);
     let coulomb = friction((2.1e-2, 1e-3), (3.9e-2, 1.3e-3));
     assert_eq!(

@@ -274,9 +274,11 @@ fn verdict(
              its standard error{}",
             req.structure.label(),
             fitter.floor.gain,
-            if fitter.starts.delay_lines.is_some_and(|l| l.shown()) {
+            if let Some(l) = fitter.starts.delay_lines.filter(|l| l.shown()) {
+                let (lo, hi) = l.interval();
                 format!(
-                    " ({:.3} for the transport delay the excited lines show)",
+                    " ({:.3} for a transport delay of the size the excited lines show, \
+                     {lo:.2}–{hi:.2} samples)",
                     fitter.floor.spread
                 )
             } else {
