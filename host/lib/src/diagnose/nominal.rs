@@ -236,6 +236,7 @@ fn nominal_at_start(
             unsupported: None,
             delay_lines: None,
             ripple_shown: None,
+            at_lines: None,
         },
         at_start,
         after,

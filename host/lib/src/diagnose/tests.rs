@@ -1204,6 +1204,7 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
             noise_dof: 100.0,
         }),
         ripple_shown: None,
+        at_lines: None,
     };
     let fitted = |fit: NlFit| fitted_shown(fit, false);
     assert!(fitted_shown(pair.clone(), true).counts(true));

@@ -722,7 +722,7 @@ fn order_step(found: Option<&super::ripple::OrderSearch>, on: &str) -> Step {
             detail: format!(
                 "{}: the ripple of order {} removes {:.1} % of the velocity cost {on}, robust \
                  z-score {:.1} against the orders of {} a period or more apart from it \
-                 over the travel (significant from {})",
+                 over the travel (significant from {}){}",
                 if f.order.is_some() {
                     "found".to_string()
                 } else if f.range.is_none() {
@@ -748,7 +748,13 @@ fn order_step(found: Option<&super::ripple::OrderSearch>, on: &str) -> Step {
                 100.0 * f.share,
                 f.z,
                 orders_text(f),
-                super::ripple::SIGNIFICANT_Z
+                super::ripple::SIGNIFICANT_Z,
+                if f.range.is_some_and(|r| r.1 == f.best) {
+                    "; it is the highest order the motor's speed lets the search reach, and the \
+                     ripple's order may lie above it"
+                } else {
+                    ""
+                }
             ),
         },
         None => Step {
