@@ -492,7 +492,9 @@ fn at_lines_delay(
         return None;
     };
     // a delay the user held stays where it is
-    if !l.shown() || l.holds(d.samples) || nl.fixed.iter().any(|(n, _)| n == "samples") {
+    // only where the lines' delay explains them: elsewhere the held delay would be judged
+    // against the floor like the free one ([`Fitted::shown_apart`])
+    if !l.explains() || l.holds(d.samples) || nl.fixed.iter().any(|(n, _)| n == "samples") {
         return None;
     }
     let held = NlRequest {

@@ -148,10 +148,20 @@ pub(super) fn single_of(
                 "; counted beyond twice its standard error, not the {floor:.2}-point floor (no \
                  refit of the nominal measured the metric's spread), because {shown}"
             ),
-            (false, _) => format!(
-                "; {shown}, but not at the size fitted here: judged against the {floor:.2}-point \
-                 floor"
-            ),
+            (false, _) => match fitter.starts.delay_lines {
+                Some(l) if matches!(effect, Effect::TimeDelay(_)) && !l.explains() => format!(
+                    "; {shown}, but it removes only {:.0} % of the lines' misfit above the noise \
+                     (a transport delay that explains them removes at least {:.0} %; a phase \
+                     that another effect puts on the lines does not): judged against the \
+                     {floor:.2}-point floor",
+                    100.0 * l.share(),
+                    100.0 * crate::ident::nonlinear::run::DELAY_MIN_SHARE
+                ),
+                _ => format!(
+                    "; {shown}, but not at the size fitted here: judged against the \
+                     {floor:.2}-point floor"
+                ),
+            },
         });
     }
     let reason = format!(

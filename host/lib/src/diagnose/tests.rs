@@ -1202,6 +1202,7 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
             drop: 1000.0,
             delay: 0.4,
             noise_dof: 100.0,
+            misfit: 1000.0,
         }),
         ripple_shown: None,
         at_lines: None,
@@ -1230,6 +1231,12 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
         floor.of_model(Some(&fitted_shown(fit(0.6, 0.01), true))),
         0.3
     );
+    // nor one that removes a small share of the lines' misfit above the noise
+    let mut unexplained = fitted_shown(fit(0.4, 0.01), true);
+    if let Some(l) = unexplained.delay_lines.as_mut() {
+        l.misfit = 5000.0;
+    }
+    assert_eq!(floor.of_model(Some(&unexplained)), 0.3);
     assert_eq!(floor.of_model(Some(&fitted_shown(pair, true))), 0.3);
     let coulomb = friction((2.1e-2, 1e-3), (3.9e-2, 1.3e-3));
     assert_eq!(
@@ -1409,4 +1416,33 @@ fn the_free_fit_of_the_lines_never_costs_more_than_the_lag_only_fit_it_holds() {
     let (hidden, small) = lines(14);
     assert!(delayed(&hidden), "{hidden:?}");
     assert!(small.shown() && small.delay < 0.5, "{small:?}");
+}
+
+/// A delay the excited lines show is taken for a transport delay only when it removes a good
+/// part of their misfit ([`crate::ident::nonlinear::DelayLines::explains`]): the default
+/// joint with a torque ripple and no delay, whose describing function turns the lines'
+/// phase, shows a delay beside the lag that removes a small share of the misfit; the same
+/// joint with a delay of 0.15 samples and no ripple shows one that explains them.
+#[test]
+fn a_ripple_that_turns_the_lines_phase_is_not_taken_for_a_delay() {
+    let lines = |effects: &[Effect]| {
+        let (est, _) = captures(effects, 21);
+        let mut warnings = Vec::new();
+        let (_, lines) = structure_start(
+            &[est],
+            &battery_request(),
+            &mut warnings,
+            &RawFrfFits::default(),
+        );
+        lines.expect("both fits of the lines")
+    };
+    let ripple = lines(&[Effect::TorqueRipple(TorqueRipple {
+        amplitude: 0.005,
+        ..TorqueRipple::default()
+    })]);
+    assert!(ripple.shown() && !ripple.explains(), "{ripple:?}");
+    assert!(!ripple.holds(ripple.delay), "{ripple:?}");
+    let delay = lines(&[Effect::TimeDelay(TimeDelay { samples: 0.15 })]);
+    assert!(delay.explains() && delay.holds(0.15), "{delay:?}");
+    assert!(delay.share() > 2.0 * ripple.share(), "{delay:?} {ripple:?}");
 }

@@ -274,7 +274,7 @@ fn verdict(
              its standard error{}",
             req.structure.label(),
             fitter.floor.gain,
-            if let Some(l) = fitter.starts.delay_lines.filter(|l| l.shown()) {
+            if let Some(l) = fitter.starts.delay_lines.filter(|l| l.explains()) {
                 let (lo, hi) = l.interval();
                 format!(
                     " ({:.3} for a transport delay of the size the excited lines show, \
