@@ -20,7 +20,9 @@
 //! effect the data show by its own signature needs only that spread
 //! ([`fits::Fitted::shown_apart`], [`fits::Fitter::judge_model`]): a transport delay that
 //! the excited lines show beside the lag (their likelihood-ratio test at 99 %,
-//! [`crate::ident::nonlinear::DelayLines`]), a torque ripple whose order stands out of the
+//! [`crate::ident::nonlinear::DelayLines`]) and that explains them (it removes at least a
+//! third of their misfit above the noise, [`crate::ident::nonlinear::DelayLines::explains`]:
+//! another effect's phase on the lines removes little of it), a torque ripple whose order stands out of the
 //! search against the motor angle ([`crate::ident::nonlinear::ripple::search_order`]).
 //! That test has already rejected the nominal, and the metric has only to confirm the gain. The candidates are
 //! ranked significant first, each group by score ([`table::ranked`]); the answer is the
