@@ -7,7 +7,8 @@ use std::sync::OnceLock;
 
 use crate::data::Dataset;
 use crate::ident::nonlinear::{
-    grow, linear_start_segments, linear_start_shared, DelayLines, NlRequest, RawFrfFits,
+    grow, linear_start_lag_only, linear_start_segments, linear_start_shared, DelayLines, NlRequest,
+    RawFrfFits,
 };
 use crate::ident::parallel::parallel;
 use crate::model::effects::{Attach, Effect, ExtraMode};
@@ -270,7 +271,9 @@ fn extra_mode_start(
 ) -> Option<(Vec<f64>, ExtraMode, f64)> {
     // the bigger structure, and where its extra body's inertia, spring and damper sit
     let (bigger, keep, extra) = bigger_structure(structure, attach)?;
-    let l = linear_start_shared(
+    // the lag alone: the structure's start reads the lines' delay, and the candidates'
+    // fits take the FRF's delay on the lag
+    let l = linear_start_lag_only(
         ds,
         1,
         &NlRequest::new(bigger, r, coulomb.into_iter().collect()),
