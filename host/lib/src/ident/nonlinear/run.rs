@@ -819,11 +819,14 @@ pub struct DelayLines {
 /// Why: anything that turns the phase of the excited lines a little more with frequency
 /// than the first-order lag does gives a delay a drop above the test's threshold; a
 /// transport delay is the cause only when it accounts for a good part of the misfit. Joints
-/// from `jointid simulate` (`ident::nonlinear` tests and the diagnose bench): true delays of
-/// 0.15–1.4 samples remove 46 % (the simulator's fractional delay interpolates, which also
-/// lowers the magnitude at the top of the band; the model's delay does not) to 100 %; a torque
-/// ripple of 2, 5 and 20 mN·m on a joint with no delay, whose describing function puts a
-/// phase on the lines (drops 16, 166 and 578), 12–17 %.
+/// from `jointid simulate` and the diagnose bench: true delays of 0.15–1.4 samples remove
+/// 46 % (the simulator's fractional delay interpolates, which also lowers the magnitude at
+/// the top of the band; the model's delay does not) to 100 %; a torque ripple of 2, 5 and
+/// 20 mN·m on the default joint with no delay, whose describing function puts a phase on the
+/// lines (drops 16, 166 and 578), 11–17 %. The test:
+/// `diagnose::tests::a_ripple_that_turns_the_lines_phase_is_not_taken_for_a_delay`. The
+/// margin on the side of the delays is thin (46 % against 33 %), and a drive with more
+/// dynamics than a first-order lag is not covered: its phase looks like a delay's.
 pub const DELAY_MIN_SHARE: f64 = 1.0 / 3.0;
 
 /// The 99 % point of a chi-squared of one degree of freedom.
