@@ -26,7 +26,9 @@
 //! above the excited band; `HARD=1` runs every case under harder conditions of a real
 //! joint, drawn per case ([`Hard`]): a process disturbance inside the excited band, a
 //! coarser encoder, a current-loop lag of 0.5–3 samples, the inertia feedforward on in
-//! half the cases).
+//! half the cases); `LAWS=1` moves the hidden effects off the estimators' own laws
+//! (`other_laws`: asymmetric friction with another Stribeck bump, a ripple with a second
+//! harmonic, an extra mode at the chain's end, whole-sample delays).
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -39,7 +41,7 @@ use jointid::ident::nonlinear::{identify, NlRequest};
 use jointid::model::effects::Effect;
 use jointid::model::spec::Structure;
 use jointid::sim::{ControllerConfig, JointParams, SensorConfig};
-use jointid::test_support::battery::{captures, cases, config, Case};
+use jointid::test_support::battery::{captures, cases, config, other_laws, Case};
 
 /// The parameters of `e` a user reads its size from, by key.
 fn size_keys(e: &Effect) -> Vec<(&'static str, f64)> {
@@ -187,7 +189,12 @@ fn battery() {
         .unwrap_or(2usize);
     let small = std::env::var("SMALL").is_ok_and(|v| v == "1");
     let harder = std::env::var("HARD").is_ok_and(|v| v == "1");
-    let all = cases(rounds, small, harder);
+    let mut all = cases(rounds, small, harder);
+    if std::env::var("LAWS").is_ok_and(|v| v == "1") {
+        for (i, case) in all.iter_mut().enumerate() {
+            other_laws(i, &mut case.hidden);
+        }
+    }
     // band -> (cases, right answers); right: a single's top-1, a pair's both effects in
     // the top two, `none` on none
     let mut by_band: BTreeMap<String, (usize, usize)> = BTreeMap::new();
@@ -219,14 +226,17 @@ fn battery() {
         }
         let (est, val) = captures(case, 4, case.rms);
         save(i, &est, &val);
-        let label = if case.hidden.is_empty() {
+        // the effects by name (a ripple with a second harmonic is one effect)
+        let mut kinds: Vec<&str> = Vec::new();
+        for e in &case.hidden {
+            if !kinds.contains(&e.name()) {
+                kinds.push(e.name());
+            }
+        }
+        let label = if kinds.is_empty() {
             "none".to_string()
         } else {
-            case.hidden
-                .iter()
-                .map(|e| e.name())
-                .collect::<Vec<_>>()
-                .join("+")
+            kinds.join("+")
         };
         let truth = true_fit(&config(case), &val);
         let t = Instant::now();
@@ -241,7 +251,7 @@ fn battery() {
                     .or_default()
                     .entry("failed".into())
                     .or_default() += 1;
-                match case.hidden.len() {
+                match kinds.len() {
                     0 => {
                         nones += 1;
                         false_alarms += 1;
@@ -326,9 +336,9 @@ fn battery() {
             );
         }
         let answered = d.best.clone();
-        let right = match case.hidden.len() {
+        let right = match kinds.len() {
             0 => answered == "none",
-            1 => answered.split('+').next() == Some(case.hidden[0].name()),
+            1 => answered.split('+').next() == Some(kinds[0]),
             _ => {
                 let top2: Vec<&str> = ranked.iter().take(2).copied().collect();
                 case.hidden
@@ -349,7 +359,7 @@ fn battery() {
             .or_default()
             .entry(answered.clone())
             .or_default() += 1;
-        match case.hidden.len() {
+        match kinds.len() {
             0 => {
                 nones += 1;
                 if answered != "none" {
@@ -358,7 +368,7 @@ fn battery() {
             }
             1 => {
                 singles += 1;
-                let right = answered.split('+').next() == Some(case.hidden[0].name());
+                let right = answered.split('+').next() == Some(kinds[0]);
                 if right {
                     singles_right += 1;
                 }

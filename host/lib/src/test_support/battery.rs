@@ -45,6 +45,47 @@ pub fn hard(index: usize, controller: &mut ControllerConfig, sensors: &mut Senso
     controller.feedforward = index % 2 == 1;
 }
 
+/// The hidden effects of case `index` moved off the estimators' own forms (`LAWS=1`), drawn
+/// from a generator of their own, so that the bench tells whether the diagnosis is right
+/// for the physics rather than for the laws it fits:
+/// - Coulomb friction: a backward level `F_c−` of 0.6–1.4 × `F_c` (the candidate's law is
+///   symmetric), a breakaway `F_s/F_c` of 1.0–2.0 (default 4/3) and a Stribeck velocity of
+///   0.3–3 × its default;
+/// - torque ripple: a second harmonic (order `2n`, 0.3–0.8 × the amplitude, its own phase)
+///   beside the first, whose phase is drawn too (the candidate fits one order);
+/// - extra mode: on the chain's end (`Attach::Serial`) instead of beside the first arm mass;
+/// - time delay: whole samples (at least one), as a controller's cycle gives it, instead of
+///   a fraction.
+///
+/// The backlash's dead zone and the cubic spring keep the estimators' laws (the simulator
+/// has no other).
+pub fn other_laws(index: usize, effects: &mut Vec<Effect>) {
+    let mut rng = GaussRng::new(7070 + index as u64);
+    let mut within = |lo: f64, hi: f64| lo * (hi / lo).powf(rng.uniform());
+    let mut added = Vec::new();
+    for e in effects.iter_mut() {
+        match e {
+            Effect::CoulombFriction(c) => {
+                c.fc_neg = Some(c.fc * within(0.6, 1.4));
+                c.fs = c.fc * within(1.0, 2.0);
+                c.v_stribeck *= within(0.3, 3.0);
+            }
+            Effect::TorqueRipple(r) => {
+                r.phase = within(0.1, 6.2);
+                added.push(Effect::TorqueRipple(crate::model::effects::TorqueRipple {
+                    amplitude: r.amplitude * within(0.3, 0.8),
+                    order: 2.0 * r.order,
+                    phase: within(0.1, 6.2),
+                }));
+            }
+            Effect::ExtraMode(m) => m.attach = crate::model::effects::Attach::Serial,
+            Effect::TimeDelay(d) => d.samples = d.samples.round().max(1.0),
+            Effect::Backlash(_) | Effect::NonlinearStiffness(_) => {}
+        }
+    }
+    effects.extend(added);
+}
+
 /// The effect `name` at `scale` × its default size (the size parameters only).
 pub fn scaled(name: &str, scale: f64) -> Effect {
     let mut e = Effect::default_by_name(name).expect("an effect name");
