@@ -727,3 +727,41 @@ fn a_start_from_a_nearby_frfs_fit_skips_the_search_and_ends_at_its_estimate() {
     assert!(rescued.starts > 1, "no search from a start far off");
     assert!((rescued.cost / searched.cost - 1.0).abs() < 1e-6);
 }
+
+#[test]
+fn the_pair_of_hessenberg_solves_agrees_with_a_dense_solve_both_ways() {
+    // an upper Hessenberg H whose elimination swaps rows at some steps (a subdiagonal
+    // larger than the diagonal) and not at others
+    let n = 7;
+    let mut rng = GaussRng::new(5);
+    let h = DMatrix::from_fn(n, n, |i, j| {
+        if i > j + 1 {
+            0.0
+        } else if i == j + 1 {
+            if i % 2 == 0 {
+                3.0
+            } else {
+                0.01
+            }
+        } else {
+            rng.normal()
+        }
+    });
+    let z = Complex64::from_polar(1.0, 0.7);
+    // zI − H
+    let dense = DMatrix::from_fn(n, n, |i, j| {
+        let diag = if i == j { z } else { Complex64::new(0.0, 0.0) };
+        diag - h[(i, j)]
+    });
+    let b = DVector::from_fn(n, |i, _| Complex64::new(1.0 + i as f64, -0.5 * i as f64));
+    let c = DVector::from_fn(n, |i, _| Complex64::new(0.3 * i as f64 - 1.0, 0.2));
+    let x_ref = dense.clone().lu().solve(&b).unwrap();
+    let v_ref = dense.transpose().lu().solve(&c).unwrap();
+    let mut m = vec![Complex64::new(0.0, 0.0); n * n];
+    let (mut x, mut v) = (b.as_slice().to_vec(), c.as_slice().to_vec());
+    assert!(solve_pair(&h, z, &mut m, &mut x, &mut v));
+    for i in 0..n {
+        assert!((x[i] - x_ref[i]).norm() < 1e-10 * x_ref.norm(), "x[{i}]");
+        assert!((v[i] - v_ref[i]).norm() < 1e-10 * v_ref.norm(), "v[{i}]");
+    }
+}
