@@ -687,7 +687,8 @@ pub fn refine(
     let mut best: Option<(crate::ident::lm::LmFit, Option<Moved>)> = None;
     let all = match from {
         RefineStarts::Springs => spring_starts(&layout, &opts.fixed, &z0),
-        RefineStarts::Lead(lead) => lead_starts(&layout, &z0, lead),
+        RefineStarts::Lead(lead, partner) => lead_starts(&layout, &z0, (lead, partner)),
+        RefineStarts::Own => vec![(z0.clone(), None)],
     };
     let mut starts = (0, all.len());
     for (z, moved) in all {
@@ -857,36 +858,72 @@ pub enum RefineStarts<'a> {
     /// loop, whose modes may sit on wrong frequencies
     Springs,
     /// the fit's own values and the fit with the structure's values of this lead, already
-    /// refined in the loop from [`RefineStarts::Springs`] ([`lead_starts`]): a pair whose
-    /// lead's modes the loop has placed
-    Lead(&'a NlFit),
+    /// refined in the loop from [`RefineStarts::Springs`] ([`lead_starts`]), and the
+    /// partner's single as the loop left it: a pair whose lead's modes and whose effects'
+    /// sizes the loop has placed
+    Lead(&'a NlFit, &'a NlFit),
+    /// the fit's own values alone: a model placed by a refinement in the loop already (a
+    /// pair's lead at the refined pair's values, [`super::loop_answer`])
+    Own,
 }
 
-/// The starts of [`refine`] for a pair whose lead `lead` was refined in the loop: `z0`, and
+/// The starts of [`refine`] for a pair whose lead `lead` was refined in the loop: `z0`;
 /// `z0` with the structure's values (the inertias, springs, dampers and the lag) of the
-/// lead. The spring search of [`spring_starts`] ran on the lead, whose structure the pair
-/// shares; the pair's open-loop fit from the lead may have moved a mode again, and the
-/// lead's values bring it back (bench, `HARD=1 SMALL=1` case 36: seventeen starts for each
-/// of two pairs in the loop took 11 s of its 37 s).
-fn lead_starts(layout: &[ParamDef], z0: &[f64], lead: &NlFit) -> Vec<SpringStart> {
-    let mut z = z0.to_vec();
-    let lead_layout = lead.model.layout();
-    for (i, d) in layout.iter().enumerate() {
-        if !matches!(d.owner, Owner::Plant | Owner::CurrentLoop) {
-            continue;
+/// lead; and that with each effect at its own single's value in the loop (the lead's effect
+/// at `lead`'s, the partner's at `partner`'s), a delay with the lag of its own single.
+///
+/// Why the lead's structure: the spring search of [`spring_starts`] ran on the lead, whose
+/// structure the pair shares; the pair's open-loop fit from the lead may have moved a mode
+/// again, and the lead's values bring it back (bench, `HARD=1 SMALL=1` case 36: seventeen
+/// starts for each of two pairs in the loop took 11 s of its 37 s). Why the singles' sizes,
+/// and a delay's own lag: a single without a delay takes the delay's phase into its lag,
+/// and the delay added to that lag puts twice the phase into the loop (bench, `HARD=1
+/// LAWS=1` case 26, a stiffening spring with a delay of two whole samples: the pair from the
+/// lead's values scored −2017 % in the loop, and its refinement from the first two starts
+/// −1758 %; the delay's single held 2.29 samples beside its own lag and scored 80.8 %; the
+/// pair from the third start refined to 98.1 %, the true model's 98.2 %).
+fn lead_starts(
+    layout: &[ParamDef],
+    z0: &[f64],
+    (lead, partner): (&NlFit, &NlFit),
+) -> Vec<SpringStart> {
+    // `z` with the values of `from`'s parameters of owner `of` put into those of owner `to`
+    let take = |z: &mut Vec<f64>, from: &NlFit, of: Owner, to: Owner| {
+        let from_layout = from.model.layout();
+        for (i, d) in layout.iter().enumerate() {
+            if d.owner != to {
+                continue;
+            }
+            if let Some(j) = from_layout
+                .iter()
+                .position(|e| e.owner == of && e.name == d.name)
+            {
+                z[i] = d.to_z(from.values[j]);
+            }
         }
-        if let Some(j) = lead_layout
-            .iter()
-            .position(|e| e.owner == d.owner && e.name == d.name)
-        {
-            z[i] = d.to_z(lead.values[j]);
+    };
+    let mut structure = z0.to_vec();
+    for owner in [Owner::Plant, Owner::CurrentLoop] {
+        take(&mut structure, lead, owner, owner);
+    }
+    let mut sizes = structure.clone();
+    take(&mut sizes, lead, Owner::Effect(0), Owner::Effect(0));
+    take(&mut sizes, partner, Owner::Effect(0), Owner::Effect(1));
+    // the lag that goes with the delay: a single without one may have taken the delay's
+    // phase into its lag
+    if matches!(
+        partner.model.effects[..],
+        [crate::model::effects::Effect::TimeDelay(_)]
+    ) {
+        take(&mut sizes, partner, Owner::CurrentLoop, Owner::CurrentLoop);
+    }
+    let mut starts: Vec<SpringStart> = vec![(z0.to_vec(), None)];
+    for z in [structure, sizes] {
+        if !starts.iter().any(|s| s.0 == z) {
+            starts.push((z, None));
         }
     }
-    if z == z0 {
-        vec![(z, None)]
-    } else {
-        vec![(z0.to_vec(), None), (z, None)]
-    }
+    starts
 }
 
 /// `fit` without its effect at `index`, every other value, deviation and hold kept: a
@@ -979,6 +1016,88 @@ mod tests {
     }
     use crate::ident::nonlinear::NlModel;
     use crate::model::spec::Structure;
+
+    /// A fit of `effects` on the default three-mass at physical `values` (layout order):
+    /// all [`lead_starts`] reads of a fit.
+    fn fit_at(effects: Vec<crate::model::effects::Effect>, values: &[f64]) -> NlFit {
+        let model = NlModel {
+            structure: Structure::ThreeMass,
+            r: 1.0 / 118.0,
+            effects,
+            tau_c: 5e-4,
+            v_eps: 0.05,
+            dz_eps: 1e-6,
+            substeps: 1,
+        };
+        assert_eq!(model.layout().len(), values.len());
+        NlFit {
+            model,
+            plant: values[..8].to_vec(),
+            params: Vec::new(),
+            values: values.to_vec(),
+            ssr: 1.0,
+            lowpass_hz: 0.0,
+            n_residuals: 100,
+            iterations: 1,
+            termination: crate::ident::lm::Termination::CostConverged,
+            fit_velocity_percent: 90.0,
+            correlated: Vec::new(),
+        }
+    }
+
+    /// A pair in the loop starts from its own values, from them with the lead's structure
+    /// and lag, and from those with each effect at its single's size; a delay partner brings
+    /// the lag of its own single, which a single without the delay took the delay's phase
+    /// into. Another partner leaves the lead's lag.
+    #[test]
+    fn a_pair_in_the_loop_starts_from_its_singles_sizes_and_a_delay_from_its_own_lag() {
+        use crate::model::effects::{Backlash, Effect, NonlinearStiffness, TimeDelay};
+        let stiff = Effect::NonlinearStiffness(NonlinearStiffness::default());
+        let delay = Effect::TimeDelay(TimeDelay::default());
+        // J_m, J_a1, J_a2, k_g, k_a, d_g, d_a, f_m, tau_c, offset, [effects], v0
+        let mech = |k_g: f64| [1e-3, 12.0, 0.6, k_g, 9e3, 65.0, 4.0, 2e-3];
+        let with = |k_g: f64, tau_c: f64, sizes: &[f64]| {
+            let mut v = mech(k_g).to_vec();
+            v.extend([tau_c, 1e-3]);
+            v.extend(sizes);
+            v.push(0.0);
+            v
+        };
+        let lead = fit_at(vec![stiff], &with(2e5, 2.5e-3, &[3e13]));
+        let partner = fit_at(vec![delay], &with(1.4e5, 3e-4, &[2.29]));
+        let pair = fit_at(vec![stiff, delay], &with(1e5, 1e-3, &[1e13, 4.7]));
+        let layout = pair.model.layout();
+        let z = |v: &[f64]| -> Vec<f64> { layout.iter().zip(v).map(|(d, x)| d.to_z(*x)).collect() };
+        let z0 = z(&pair.values);
+        let starts = lead_starts(&layout, &z0, (&lead, &partner));
+        let expect = [
+            pair.values.clone(),
+            with(2e5, 2.5e-3, &[1e13, 4.7]),
+            with(2e5, 3e-4, &[3e13, 2.29]),
+        ];
+        assert_eq!(starts.len(), expect.len());
+        for ((got, moved), want) in starts.iter().zip(&expect) {
+            assert!(moved.is_none());
+            let want = z(want);
+            assert!(
+                got.iter().zip(&want).all(|(a, b)| (a - b).abs() < 1e-12),
+                "{got:?} against {want:?}"
+            );
+        }
+        // a backlash partner: the third start keeps the lead's lag
+        let gap = Effect::Backlash(Backlash::default());
+        let partner = fit_at(vec![gap], &with(1.4e5, 3e-4, &[3e-5]));
+        let pair = fit_at(vec![stiff, gap], &with(1e5, 1e-3, &[1e13, 1e-5]));
+        let layout = pair.model.layout();
+        let z = |v: &[f64]| -> Vec<f64> { layout.iter().zip(v).map(|(d, x)| d.to_z(*x)).collect() };
+        let starts = lead_starts(&layout, &z(&pair.values), (&lead, &partner));
+        let third = z(&with(2e5, 2.5e-3, &[3e13, 3e-5]));
+        assert!(starts[2]
+            .0
+            .iter()
+            .zip(&third)
+            .all(|(a, b)| (a - b).abs() < 1e-12));
+    }
 
     /// The starts of the loop's refinement: the values given first, then each free spring
     /// by each factor with its damper by the factor's square root, everything else as given;
