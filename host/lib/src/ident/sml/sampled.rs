@@ -272,9 +272,9 @@ impl Sampled {
 
 /// `x ← (zI − H)^{−1} x` and `v ← (zI − H)^{−T} v` for an upper Hessenberg `H`, with
 /// `m` (`n²`) as workspace: the two solves a response's derivatives need (`x` the state's
-/// response to the input, `vᵀ = cᵀ(zI − H)^{−1}` the output's to the state). One
-/// elimination serves both: it leaves `E (zI − H) = U` with `E` the neighbouring-row swaps
-/// and multipliers, so `x = U^{−1} E x` and `v = Eᵀ U^{−T} v`. False when singular.
+/// response to the input, `vᵀ = cᵀ(zI − H)^{−1}` the output's to the state). The
+/// transposed system is lower Hessenberg; reversed in rows and columns it is upper
+/// Hessenberg again. False when singular.
 pub(crate) fn solve_pair(
     h: &DMatrix<f64>,
     z: Complex64,
@@ -289,83 +289,47 @@ pub(crate) fn solve_pair(
         }
         m[i * n + i] += z;
     }
-    // step j's swap, as bit j (a list beyond 128 steps, which allocates); its multiplier is
-    // kept where it eliminated, below U's diagonal
-    let mut bits = 0u128;
-    let mut more = vec![false; n.saturating_sub(128)];
-    if !eliminate_hessenberg(m, x, n, |j, s| match j.checked_sub(128) {
-        None => bits |= u128::from(s) << j,
-        Some(i) => more[i] = s,
-    }) {
+    if !solve_hessenberg(m, x, n) {
         return false;
     }
-    let swapped = |j: usize| match j.checked_sub(128) {
-        None => bits >> j & 1 == 1,
-        Some(i) => more[i],
-    };
-    if !back_substitute(m, x, n) {
-        return false;
-    }
-    // Uᵀ w = v, forward
     for i in 0..n {
-        let mut s = v[i];
-        for r in 0..i {
-            s -= m[r * n + i] * v[r];
+        for j in 0..n {
+            m[i * n + j] = Complex64::new(-h[(n - 1 - j, n - 1 - i)], 0.0);
         }
-        v[i] = s / m[i * n + i];
+        m[i * n + i] += z;
     }
-    // v ← Eᵀ w: the steps' transposes, the last step first
-    for j in (0..n.saturating_sub(1)).rev() {
-        let l = m[(j + 1) * n + j];
-        let t = v[j + 1];
-        v[j] -= l * t;
-        if swapped(j) {
-            v.swap(j, j + 1);
-        }
-    }
-    true
+    v.reverse();
+    let ok = solve_hessenberg(m, v, n);
+    v.reverse();
+    ok
 }
 
-/// The elimination of [`solve_hessenberg`] on `m` and `rhs`: afterwards `m` holds `U` on
-/// and above its diagonal and each step's multiplier just below it (row `j + 1`, column
-/// `j`); `swapped(j, s)` tells whether step `j` swapped rows `j` and `j + 1`. False when
-/// singular.
-fn eliminate_hessenberg(
-    m: &mut [Complex64],
-    rhs: &mut [Complex64],
-    n: usize,
-    mut swapped: impl FnMut(usize, bool),
-) -> bool {
+/// Solves an upper Hessenberg system in place (row-major `m`, `n × n`) by
+/// Gaussian elimination with pivoting between neighbouring rows; the
+/// solution replaces `rhs`. False when singular.
+pub(crate) fn solve_hessenberg(m: &mut [Complex64], rhs: &mut [Complex64], n: usize) -> bool {
     for j in 0..n.saturating_sub(1) {
         let (p, q) = (j * n, (j + 1) * n);
-        let swap = m[q + j].norm_sqr() > m[p + j].norm_sqr();
-        if swap {
+        if m[q + j].norm_sqr() > m[p + j].norm_sqr() {
             for c in j..n {
                 m.swap(p + c, q + c);
             }
             rhs.swap(j, j + 1);
         }
-        swapped(j, swap);
         let piv = m[p + j];
         if piv.norm_sqr() == 0.0 {
             return false;
         }
         let l = m[q + j] / piv;
         if l.norm_sqr() != 0.0 {
-            for c in j + 1..n {
+            for c in j..n {
                 let v = m[p + c];
                 m[q + c] -= l * v;
             }
             let v = rhs[j];
             rhs[j + 1] -= l * v;
         }
-        m[q + j] = l;
     }
-    true
-}
-
-/// `rhs ← U^{−1} rhs` for the upper triangle of `m`; false when singular.
-fn back_substitute(m: &[Complex64], rhs: &mut [Complex64], n: usize) -> bool {
     for i in (0..n).rev() {
         let mut s = rhs[i];
         for c in i + 1..n {
@@ -378,11 +342,4 @@ fn back_substitute(m: &[Complex64], rhs: &mut [Complex64], n: usize) -> bool {
         rhs[i] = s / piv;
     }
     true
-}
-
-/// Solves an upper Hessenberg system in place (row-major `m`, `n × n`) by
-/// Gaussian elimination with pivoting between neighbouring rows; the
-/// solution replaces `rhs`. False when singular.
-pub(crate) fn solve_hessenberg(m: &mut [Complex64], rhs: &mut [Complex64], n: usize) -> bool {
-    eliminate_hessenberg(m, rhs, n, |_, _| {}) && back_substitute(m, rhs, n)
 }
