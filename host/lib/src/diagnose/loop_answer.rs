@@ -489,9 +489,10 @@ fn refine_contenders(
 /// and when the partner still gains there, against that lead refined in the loop from them
 /// (on the estimation record `est`) as the pair was: the pair's other values have moved
 /// with the partner, and the lead without it is no nested fit until it has moved back
-/// (bench, `HARD=1 SMALL=1` case 32: a stiffening spring alone, the open-loop answer a
-/// pair with a backlash of 4 µrad, refined in the loop to 99.4 %, the noise's floor, which
-/// the spring alone reaches there too).
+/// (bench, `HARD=1 SMALL=1` case 32: a stiffening spring alone, whose open-loop answer a
+/// change of the frequency-domain fits in the last bits made a pair with a backlash of
+/// 4 µrad; refined in the loop it reached 99.4 %, the noise's floor, which the spring alone
+/// refined from the pair's values reaches too).
 fn drop_partner(
     l: &mut in_loop::InLoop,
     ((pair, pair_cs, _), delay_shown): (&(NlFit, metric::ClosedScored, Option<f64>), bool),

@@ -669,6 +669,22 @@ fn no_delay_is_named_where_the_loop_feeds_the_disturbance_back() {
     hard_case_without_a_delay_counted(28, &[]);
 }
 
+/// A battery case (`crate::test_support::battery`) diagnosed among all candidates from its
+/// captures of four periods: the diagnosis, its request and the estimation and validation
+/// captures.
+fn diagnosed_case(
+    case: &crate::test_support::battery::Case,
+) -> (Diagnosis, DiagnoseRequest, [crate::data::Dataset; 2]) {
+    let (est, val) = crate::test_support::battery::captures(case, 4, case.rms);
+    let req = DiagnoseRequest {
+        r: case.params.r,
+        candidates: all_candidates(),
+        ..DiagnoseRequest::default()
+    };
+    let d = diagnose(std::slice::from_ref(&est), &val, &req).unwrap();
+    (d, req, [est, val])
+}
+
 /// Hard bench case 30 with the hidden friction moved off the candidate's law (`HARD=1
 /// SMALL=1 LAWS=1`, [`crate::test_support::battery::other_laws`]): a backward Coulomb level
 /// 0.71 × the forward one and a breakaway 1.7 × it, which the candidate's symmetric Stribeck
@@ -677,7 +693,7 @@ fn no_delay_is_named_where_the_loop_feeds_the_disturbance_back() {
 /// and it closes the gap to within two points of the true model's (93.7 % against 94.1 %).
 #[test]
 fn an_asymmetric_friction_outside_the_candidates_law_is_still_named() {
-    use crate::test_support::battery::{captures, cases, config, other_laws, ROUND};
+    use crate::test_support::battery::{cases, config, other_laws, ROUND};
     let index = 30;
     let mut case = cases(index / ROUND + 1, true, true).swap_remove(index);
     other_laws(index, &mut case.hidden);
@@ -686,13 +702,7 @@ fn an_asymmetric_friction_outside_the_candidates_law_is_still_named() {
     };
     let backward = truth.fc_backward();
     assert!(backward < 0.8 * truth.fc, "{truth:?}");
-    let (est, val) = captures(&case, 4, case.rms);
-    let req = DiagnoseRequest {
-        r: case.params.r,
-        candidates: all_candidates(),
-        ..DiagnoseRequest::default()
-    };
-    let d = diagnose(&[est], &val, &req).unwrap();
+    let (d, _, [_, val]) = diagnosed_case(&case);
     assert_eq!(d.best, "coulomb_friction", "{}", d.verdict);
     let fc = d.effects[0].parameters["fc"].value;
     assert!(
@@ -710,22 +720,17 @@ fn an_asymmetric_friction_outside_the_candidates_law_is_still_named() {
 
 /// Hard bench case 32 (`HARD=1 SMALL=1`): a stiffening spring alone at 0.34 rad RMS,
 /// chaotic from the measured torque. Where the open-loop answer is the spring with a
-/// backlash of a few µrad, that pair refined in the loop reaches the noise's floor; the
+/// backlash of a few µrad (as a change of the frequency-domain fits in the last bits made
+/// it), that pair refined in the loop reaches the noise's floor; the
 /// spring alone at the pair's values, its other values moved with the partner, scores less,
 /// but refined in the loop from there it reaches the floor too. The answer is the spring
 /// alone, at the true model's closure.
 #[test]
 fn a_partner_is_judged_against_its_lead_refined_alike() {
-    use crate::test_support::battery::{captures, cases, config, ROUND};
+    use crate::test_support::battery::{cases, config, ROUND};
     let index = 32;
     let case = cases(index / ROUND + 1, true, true).swap_remove(index);
-    let (est, val) = captures(&case, 4, case.rms);
-    let req = DiagnoseRequest {
-        r: case.params.r,
-        candidates: all_candidates(),
-        ..DiagnoseRequest::default()
-    };
-    let d = diagnose(std::slice::from_ref(&est), &val, &req).unwrap();
+    let (d, _, [est, val]) = diagnosed_case(&case);
     assert_eq!(
         d.best, "nonlinear_stiffness",
         "{}: {:?}",
@@ -747,17 +752,11 @@ fn hard_case_without_a_delay_counted(
     index: usize,
     hidden: &[&str],
 ) -> (Diagnosis, DiagnoseRequest) {
-    use crate::test_support::battery::{captures, cases, ROUND};
+    use crate::test_support::battery::{cases, ROUND};
     let case = &cases(index / ROUND + 1, true, true)[index];
     let names: Vec<&str> = case.hidden.iter().map(|e| e.name()).collect();
     assert_eq!(names, hidden);
-    let (est, val) = captures(case, 4, case.rms);
-    let req = DiagnoseRequest {
-        r: case.params.r,
-        candidates: all_candidates(),
-        ..DiagnoseRequest::default()
-    };
-    let d = diagnose(&[est], &val, &req).unwrap();
+    let (d, req, _) = diagnosed_case(case);
     assert_eq!(d.best, "none", "{}", d.verdict);
     let delay = d.effects.iter().find(|c| c.name == "time_delay").unwrap();
     assert!(
