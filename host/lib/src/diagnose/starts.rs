@@ -7,8 +7,7 @@ use std::sync::OnceLock;
 
 use crate::data::Dataset;
 use crate::ident::nonlinear::{
-    grow, linear_start_lag_only, linear_start_segments, linear_start_shared, DelayLines, NlRequest,
-    RawFrfFits,
+    grow, linear_start_segments, linear_start_shared, DelayLines, NlRequest, RawFrfFits, StartDrive,
 };
 use crate::ident::parallel::parallel;
 use crate::model::effects::{Attach, Effect, ExtraMode};
@@ -273,11 +272,12 @@ fn extra_mode_start(
     let (bigger, keep, extra) = bigger_structure(structure, attach)?;
     // the lag alone: the structure's start reads the lines' delay, and the candidates'
     // fits take the FRF's delay on the lag
-    let l = linear_start_lag_only(
+    let l = linear_start_shared(
         ds,
         1,
         &NlRequest::new(bigger, r, coulomb.into_iter().collect()),
         raw,
+        StartDrive::LagOnly,
     )
     .ok()?;
     if coulomb.is_some() && !compensation_used(&l) {
@@ -328,6 +328,7 @@ fn quiet_mode_start(
         1,
         &NlRequest::new(structure, r, Vec::new()),
         (raw, None),
+        StartDrive::LagAndDelay,
     )
     .ok()
     .filter(|l| l.at_noise)?;
@@ -377,7 +378,7 @@ fn coulomb_linear_of(
     raw: &RawFrfFits,
 ) -> (Option<(Vec<f64>, f64)>, Option<f64>) {
     let req_c = NlRequest::new(req.structure, req.r, vec![coulomb]);
-    let Ok(l) = linear_start_shared(ds, 1, &req_c, (raw, None)) else {
+    let Ok(l) = linear_start_shared(ds, 1, &req_c, (raw, None), StartDrive::LagAndDelay) else {
         return (None, None);
     };
     let level = l.compensation.as_ref().and_then(|c| {
@@ -402,6 +403,7 @@ pub(super) fn structure_start(
         1,
         &NlRequest::new(req.structure, req.r, Vec::new()),
         (raw, None),
+        StartDrive::LagAndDelay,
     ) {
         Ok(l) => (Some((l.values, l.tau_c)), l.delay_lines),
         Err(e) => {

@@ -25,10 +25,10 @@ pub use output_error::{
     simulate_velocity, Correlation, Gradient, NlError, NlFit, NlOptions, NlParam,
 };
 pub use run::{
-    identify, identify_segments, linear_start, linear_start_lag_only, linear_start_segments,
-    linear_start_shared, model_name, model_of, run, validate, validate_segments, DelayLines,
-    LinearStart, LinearStartError, NlData, NlRequest, NlResult, NlRun, NlRunError, NlStart,
-    NlValidation, RawFrfFits,
+    identify, identify_segments, linear_start, linear_start_segments, linear_start_shared,
+    model_name, model_of, run, validate, validate_segments, DelayLines, LinearStart,
+    LinearStartError, NlData, NlRequest, NlResult, NlRun, NlRunError, NlStart, NlValidation,
+    RawFrfFits, StartDrive,
 };
 
 #[cfg(test)]

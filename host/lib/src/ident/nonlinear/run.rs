@@ -1000,7 +1000,13 @@ pub fn linear_start_segments(
     settle: usize,
     req: &NlRequest,
 ) -> Result<LinearStart, LinearStartError> {
-    linear_start_shared(segments, settle, req, (&RawFrfFits::default(), None))
+    linear_start_shared(
+        segments,
+        settle,
+        req,
+        (&RawFrfFits::default(), None),
+        StartDrive::LagAndDelay,
+    )
 }
 
 /// The two fits of a structure's measured FRF that every linear start of it begins with:
@@ -1035,10 +1041,25 @@ impl RawFrfFits {
     }
 }
 
+/// How [`linear_start_shared`] fits the FRF's drive.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StartDrive {
+    /// the lag alone and the lag with the delay free, the cheaper by AIC kept, with the
+    /// lines' evidence of a delay ([`LinearStart::delay_lines`])
+    LagAndDelay,
+    /// the lag alone (its delay held at nought), one search instead of two and no evidence
+    /// of a delay ([`LinearStart::delay_lines`] `None`): for a start whose delay evidence
+    /// nobody reads, since the nonlinear fit takes the FRF's delay on its lag anyway.
+    /// Diagnose's extra mode starts from the structure with one more mass, whose search (242
+    /// starts on the speed bench's joint) took 3.9 s of CPU with the lag alone and 4.2 s
+    /// more with the delay free.
+    LagOnly,
+}
+
 /// As [`linear_start_segments`], the raw fits of the FRF taken from `shared` when it holds
 /// them for the same options and record ([`RawFrfFits`]); `start`, when given, the
 /// optimiser's coordinates of a nearby fit of the structure that the raw fits try first
-/// ([`FrfFitOptions::start`]).
+/// ([`FrfFitOptions::start`]); `drive`, how the FRF's lag and delay are fitted.
 ///
 /// # Errors
 /// [`LinearStartError`].
@@ -1046,36 +1067,8 @@ pub fn linear_start_shared(
     segments: &[Dataset],
     settle: usize,
     req: &NlRequest,
-    shared: (&RawFrfFits, Option<Vec<f64>>),
-) -> Result<LinearStart, LinearStartError> {
-    linear_start_drive(segments, settle, req, shared, true)
-}
-
-/// As [`linear_start_shared`], the FRF fitted with the lag alone (its delay held at
-/// nought), one search instead of two, and no evidence of a delay
-/// ([`LinearStart::delay_lines`] `None`). For a start whose delay evidence nobody reads: the
-/// nonlinear fit takes the FRF's delay on its lag anyway. Diagnose's extra mode starts from
-/// the structure with one more mass, whose search (242 starts on the speed bench's joint)
-/// took 3.9 s of CPU with the lag alone and 4.2 s more with the delay free.
-///
-/// # Errors
-/// [`LinearStartError`].
-pub fn linear_start_lag_only(
-    segments: &[Dataset],
-    settle: usize,
-    req: &NlRequest,
-    shared: (&RawFrfFits, Option<Vec<f64>>),
-) -> Result<LinearStart, LinearStartError> {
-    linear_start_drive(segments, settle, req, shared, false)
-}
-
-/// [`linear_start_shared`] (`delay_free`) or [`linear_start_lag_only`].
-fn linear_start_drive(
-    segments: &[Dataset],
-    settle: usize,
-    req: &NlRequest,
     (shared, start): (&RawFrfFits, Option<Vec<f64>>),
-    delay_free: bool,
+    drive: StartDrive,
 ) -> Result<LinearStart, LinearStartError> {
     let analysis = crate::ident::frf::analyze_segments(segments, settle)?;
     let ts = analysis_ts(segments);
@@ -1086,7 +1079,7 @@ fn linear_start_drive(
     if let Some(t) = held {
         o.lag = Drive::Fixed(t / ts);
     }
-    if !delay_free
+    if drive == StartDrive::LagOnly
         || req
             .effects
             .iter()
