@@ -10,6 +10,7 @@ use crate::ident::nonlinear::{
     grow, linear_start_segments, linear_start_shared, DelayLines, NlRequest, RawFrfFits, StartDrive,
 };
 use crate::ident::parallel::parallel;
+use crate::ident::sml::{FrfStart, GOOD_START_RATIO};
 use crate::model::effects::{Attach, Effect, ExtraMode};
 use crate::model::spec::Structure;
 
@@ -174,7 +175,7 @@ enum StartJob {
 /// What a [`StartJob`] gave.
 #[allow(clippy::type_complexity)]
 enum StartDone {
-    ExtraMode(Option<(Vec<f64>, ExtraMode, f64)>, Option<Vec<f64>>),
+    ExtraMode(Option<(Vec<f64>, ExtraMode, f64)>, Option<FrfStart>),
     Coulomb((Option<(Vec<f64>, f64)>, Option<f64>)),
     Structure(Option<(Vec<f64>, f64)>, Option<DelayLines>, Vec<String>),
     TwoMass(Option<(Vec<f64>, f64)>),
@@ -192,7 +193,7 @@ pub(super) struct LazyStart {
     cell: OnceLock<Option<(Vec<f64>, ExtraMode, f64)>>,
     /// the raw fits of the bigger structure's FRF, shared with the extra mode's start, and
     /// the start they were made from ([`quiet_mode_start`])
-    raw: (RawFrfFits, Option<Vec<f64>>),
+    raw: (RawFrfFits, Option<FrfStart>),
 }
 
 impl LazyStart {
@@ -209,7 +210,7 @@ impl LazyStart {
         ds: &[Dataset],
         req: &DiagnoseRequest,
         (a, c): (Attach, Effect),
-        raw: (RawFrfFits, Option<Vec<f64>>),
+        raw: (RawFrfFits, Option<FrfStart>),
     ) -> LazyStart {
         LazyStart {
             args: Some((ds.to_vec(), req.structure, req.r, a, c)),
@@ -266,7 +267,7 @@ fn extra_mode_start(
     (structure, r): (Structure, f64),
     attach: Attach,
     coulomb: Option<Effect>,
-    raw: (&RawFrfFits, Option<Vec<f64>>),
+    raw: (&RawFrfFits, Option<FrfStart>),
 ) -> Option<(Vec<f64>, ExtraMode, f64)> {
     // the bigger structure, and where its extra body's inertia, spring and damper sit
     let (bigger, keep, extra) = bigger_structure(structure, attach)?;
@@ -321,7 +322,7 @@ fn quiet_mode_start(
     (structure, r): (Structure, f64),
     attach: Attach,
     raw: &RawFrfFits,
-) -> Option<Vec<f64>> {
+) -> Option<FrfStart> {
     let (bigger, keep, extra) = bigger_structure(structure, attach)?;
     let l = linear_start_shared(
         ds,
@@ -357,7 +358,12 @@ fn quiet_mode_start(
     }
     debug_assert_eq!(bigger.param_names().len(), theta.len());
     theta.extend([l.tau_c / ts, 0.0]);
-    theta.iter().all(|t| t.is_finite()).then_some(theta)
+    // the structure's fit reached the noise's cost (at most `GOOD_START_RATIO` times it),
+    // and the bigger structure's from here reaches it too
+    theta.iter().all(|t| t.is_finite()).then_some(FrfStart {
+        theta,
+        reached: GOOD_START_RATIO,
+    })
 }
 
 /// Whether a linear start is the friction-compensated FRF's.

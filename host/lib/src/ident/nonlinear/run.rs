@@ -20,7 +20,7 @@ use crate::data::{Dataset, IdData};
 use crate::ident::frf::FrfError;
 use crate::ident::lm::Termination;
 use crate::ident::parallel::{join, machine_threads, parallel};
-use crate::ident::sml::{Drive, FrfFit, FrfFitError, FrfFitOptions};
+use crate::ident::sml::{Drive, FrfFit, FrfFitError, FrfFitOptions, FrfStart};
 use crate::model::effects::Effect;
 use crate::model::spec::Structure;
 use crate::sim::{simulate_driven, DrivenStart};
@@ -915,7 +915,7 @@ fn raw_fits(
             let mut nested = (free.cost, free.delay.value);
             if free.cost > l.cost + 1.0 {
                 let again = FrfFitOptions {
-                    start: Some(l.lm.theta.clone()),
+                    start: Some(l.as_start()),
                     ..o.clone()
                 };
                 if let Ok(f) = crate::ident::sml::fit_frf(frf, &again) {
@@ -943,7 +943,10 @@ fn raw_fits(
                 theta[n - 2] += theta[n - 1];
                 theta[n - 1] = 0.0;
                 let again = FrfFitOptions {
-                    start: Some(theta),
+                    start: Some(FrfStart {
+                        theta,
+                        reached: free.cost_ratio(),
+                    }),
                     ..lo.clone()
                 };
                 if let Ok(f) = crate::ident::sml::fit_frf(frf, &again) {
@@ -1067,7 +1070,7 @@ pub fn linear_start_shared(
     segments: &[Dataset],
     settle: usize,
     req: &NlRequest,
-    (shared, start): (&RawFrfFits, Option<Vec<f64>>),
+    (shared, start): (&RawFrfFits, Option<FrfStart>),
     drive: StartDrive,
 ) -> Result<LinearStart, LinearStartError> {
     let analysis = crate::ident::frf::analyze_segments(segments, settle)?;
@@ -1113,7 +1116,7 @@ pub fn linear_start_shared(
     // then the compensated FRFs, one per lead, on threads, each fit started from the raw
     // FRF's
     let from_raw = FrfFitOptions {
-        start: raw.as_ref().ok().map(|f| f.lm.theta.clone()),
+        start: raw.as_ref().ok().map(FrfFit::as_start),
         ..o.clone()
     };
     let leads: Vec<Lead> = match law {

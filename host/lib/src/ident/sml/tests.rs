@@ -680,7 +680,7 @@ fn a_start_from_a_nearby_frfs_fit_skips_the_search_and_ends_at_its_estimate() {
     let started = fit_frf(
         &frf_b,
         &FrfFitOptions {
-            start: Some(a.lm.theta.clone()),
+            start: Some(a.as_start()),
             ..o.clone()
         },
     )
@@ -719,11 +719,54 @@ fn a_start_from_a_nearby_frfs_fit_skips_the_search_and_ends_at_its_estimate() {
     let rescued = fit_frf(
         &frf_b,
         &FrfFitOptions {
-            start: Some(far),
+            start: Some(FrfStart {
+                theta: far,
+                reached: a.cost_ratio(),
+            }),
             ..o
         },
     )
     .unwrap();
     assert!(rescued.starts > 1, "no search from a start far off");
     assert!((rescued.cost / searched.cost - 1.0).abs() < 1e-6);
+}
+
+#[test]
+fn a_start_from_a_fit_whose_search_ended_above_the_noise_is_not_searched_from_again() {
+    // a two-mass fitted to a three-mass joint's FRF ends well above the noise's cost, in
+    // the basin its search finds; on a second noise realisation, the start from the first
+    // fit costs no more than that fit reached, and the refinement from it alone ends where
+    // the full search does
+    let frf_a = frf_of(&SimConfig::default(), &excitation(4, 0.02));
+    let frf_b = frf_of(
+        &SimConfig {
+            seed: 7,
+            ..SimConfig::default()
+        },
+        &excitation(4, 0.02),
+    );
+    let o = FrfFitOptions::new(Structure::TwoMass, 5e-4);
+    let a = fit_frf(&frf_a, &o).unwrap();
+    assert!(
+        a.cost_ratio() > 2.0 * GOOD_START_RATIO,
+        "the two-mass reaches the noise: {}",
+        a.cost_ratio()
+    );
+    let searched = fit_frf(&frf_b, &o).unwrap();
+    let started = fit_frf(
+        &frf_b,
+        &FrfFitOptions {
+            start: Some(a.as_start()),
+            ..o.clone()
+        },
+    )
+    .unwrap();
+    assert!(searched.starts > 1);
+    assert_eq!(started.starts, 1, "the search was made");
+    assert!(
+        (started.cost / searched.cost - 1.0).abs() < 1e-4,
+        "cost {} from the start, {} from the search",
+        started.cost,
+        searched.cost
+    );
 }
