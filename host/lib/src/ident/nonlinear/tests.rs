@@ -1041,3 +1041,47 @@ fn every_effect_parameter_stays_within_what_the_simulator_accepts() {
     }
     assert!(checked >= 6, "only {checked} parameters checked");
 }
+
+#[test]
+fn a_breakaway_level_fitted_below_the_sliding_level_is_the_pure_coulomb_law() {
+    // a Stribeck law whose `fs` wandered below `fc` during a fit: the model built from those
+    // values holds a law the exact simulator accepts, and simulates as with `fs` at `fc`
+    let model = NlModel {
+        structure: Structure::TwoMass,
+        r: 1.0 / 118.0,
+        effects: vec![Effect::CoulombFriction(CoulombFriction {
+            fc: 0.03,
+            fs: 0.04,
+            v_stribeck: 0.1,
+            ..CoulombFriction::default()
+        })],
+        tau_c: 0.0,
+        v_eps: 0.01,
+        dz_eps: 1e-7,
+        substeps: 1,
+    };
+    let plant = [1e-3, 14.6, 1.3e5, 80.0, 2e-3];
+    let bumped = model.values(&plant, 0.0, 0.0);
+    // [structure, offset, fc, fs, v_stribeck, …]
+    let fs = plant.len() + 2;
+    assert_eq!(bumped[fs], 0.04);
+    let mut dip = bumped.clone();
+    dip[fs] = 0.004;
+    let mut flat = bumped.clone();
+    flat[fs] = 0.03;
+    let (m, _) = model.with_values(&dip);
+    let Effect::CoulombFriction(f) = m.effects[0] else {
+        panic!("the friction is gone: {:?}", m.effects)
+    };
+    assert!(f.fs >= f.fc && f.fs <= f.fc * (1.0 + 1e-6), "{f:?}");
+    m.effects[0].check().unwrap();
+    let ts = 5e-4;
+    let u: Vec<f64> = (0..4000)
+        .map(|k| 0.05 * (2.0 * std::f64::consts::PI * 1.3 * k as f64 * ts).sin())
+        .collect();
+    let v_dip = simulate_velocity(&model, &dip, &u, ts, 0.0, None).unwrap();
+    let v_flat = simulate_velocity(&model, &flat, &u, ts, 0.0, None).unwrap();
+    let v_bump = simulate_velocity(&model, &bumped, &u, ts, 0.0, None).unwrap();
+    assert_eq!(v_dip, v_flat);
+    assert_ne!(v_dip, v_bump, "the torque does not reach the friction");
+}
