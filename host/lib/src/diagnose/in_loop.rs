@@ -289,6 +289,10 @@ pub(super) struct InLoop {
     pub velocities: (Vec<f64>, Vec<f64>),
     /// what was done, in words
     pub words: String,
+    /// the answer's in-sample gap metric in the loop and what the noise from period to period
+    /// leaves there [%], when the first stops short of the second by more than the
+    /// significance floor ([`super::loop_answer::short_of_noise`])
+    pub short_of_noise: Option<(f64, f64)>,
 }
 
 /// One model's judgement in the loop: `(gain, SE, significant)`, its scores, its odd share.
@@ -472,6 +476,7 @@ impl LoopAnswer<'_> {
             best_odd,
             velocities,
             words,
+            short_of_noise: None,
         })
     }
 }

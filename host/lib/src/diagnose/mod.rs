@@ -80,7 +80,9 @@
 //!    one reaches in-sample what the noise from period to period leaves
 //!    ([`metric::Measured::noise_fit`]); the loop's answer replaces the open-loop one when it
 //!    removes the distortion.
-//! 8. **Verdict** ([`verdict`]): the closure of the gap in one sentence with its doubts, the
+//! 8. **Verdict** ([`verdict`]): the closure of the gap in one sentence with its doubts (an
+//!    answer in the loop that stops short in sample of what the noise leaves closes at least
+//!    what it says, [`loop_answer::short_of_noise`]), the
 //!    user's simulation split into parameter and structure parts, the report's series.
 //!
 //! The second estimation capture serves the amplitude analysis only; the fits use the

@@ -67,7 +67,7 @@ pub(super) fn conclude(
         parameter_mismatch(fitter, &nominal, &f, in_loop.as_ref(), &mut warnings);
     let verdict = match &refused {
         Some(why) => format!("not diagnosed: {why}"),
-        None => verdict(fitter, &ev, &answer, &f, in_loop.is_some(), &mut warnings),
+        None => verdict(fitter, &ev, &answer, &f, in_loop.as_ref(), &mut warnings),
     };
     let nominal_parameters = linear_parameters(&nominal.fit);
     // the answer's fit, none when refused
@@ -250,9 +250,10 @@ fn verdict(
     ev: &Evidence,
     answer: &Answer,
     f: &Figures,
-    looped: bool,
+    in_loop: Option<&InLoop>,
     warnings: &mut Vec<String>,
 ) -> String {
+    let looped = in_loop.is_some();
     let req = fitter.req;
     let (best, nom_fit, best_fit) = (&f.best, f.nom_fit, f.best_fit);
     let gap = 100.0 - nom_fit;
@@ -293,6 +294,13 @@ fn verdict(
             best_fit - nom_fit
         )
     };
+    // an answer that stops short of the noise in sample closes at least what it says
+    if let Some((fit, floor)) = in_loop.and_then(|l| l.short_of_noise) {
+        verdict = format!(
+            "{verdict}; a lower bound: {best} reaches {fit:.1} % in sample where the noise \
+             leaves {floor:.1} % (see the notes)"
+        );
+    }
     // in the loop, the open-loop sensitivity of the answer no longer matters
     if let (false, Some(c)) = (looped, answer.best()) {
         if let Some(w) = c.warnings.iter().find(|w| w.starts_with(SENSITIVE)) {
