@@ -198,22 +198,6 @@ pub fn has_bump(f: &crate::model::effects::CoulombFriction) -> bool {
     f.fs > f.fc
 }
 
-/// The breakaway level a fitted Stribeck law uses [N·m]: `fs`, at least a hair
-/// ([`MIN_BUMP`]) above the sliding level `fc`. A breakaway level below the sliding one is
-/// no Stribeck law (a dip instead of a bump, which the simulator's exact law refuses), and
-/// a fit whose `fs` wanders there holds the pure Coulomb law, its `fs` then not seen by the
-/// data. Without this a fit could end there and its candidate could not be scored
-/// (regular bench case 37, an extra mode with Coulomb friction while the motor sticks on
-/// half the samples: `fc` 0.235, `fs` 0.0038 N·m, the candidate lost).
-pub fn breakaway<T: Float>(fc: T, fs: T) -> T {
-    fs.max(fc * c(1.0 + MIN_BUMP))
-}
-
-/// The least relative bump `F_s/F_c − 1` a fitted Stribeck law keeps ([`breakaway`]): the
-/// law stays one with a bump, so the model keeps its parameters, and the bump is far
-/// below anything the data show.
-pub const MIN_BUMP: f64 = 1e-9;
-
 /// Structure parameters, their unit, and bounds relative to a typical value.
 fn plant_defs(structure: Structure) -> Vec<ParamDef> {
     structure
@@ -379,7 +363,7 @@ impl NlModel {
             match e {
                 Effect::CoulombFriction(f) => {
                     if has_bump(f) {
-                        (f.fc, f.fs, f.v_stribeck) = (p[i], breakaway(p[i], p[i + 1]), p[i + 2]);
+                        (f.fc, f.fs, f.v_stribeck) = (p[i], p[i + 1], p[i + 2]);
                         i += 3;
                     } else {
                         (f.fc, f.fs) = (p[i], p[i]);
@@ -523,7 +507,7 @@ impl<T: Real> Plant<T> {
                 Effect::CoulombFriction(f) => {
                     fc = Some(p[i]);
                     if has_bump(f) {
-                        bump = Some((breakaway(p[i], p[i + 1]), p[i + 2]));
+                        bump = Some((p[i + 1], p[i + 2]));
                         i += 3;
                     } else {
                         i += 1;
