@@ -666,25 +666,8 @@ fn a_start_from_a_nearby_frfs_fit_skips_the_search_and_ends_at_its_estimate() {
     // two noise realisations of the default joint: the second FRF fitted by the search
     // from its peaks, and from the first FRF's fit (as a friction-compensated FRF starts
     // from the raw one's); a start far from the estimate still searches
-    let frf_a = frf_of(&SimConfig::default(), &excitation(4, 0.02));
-    let frf_b = frf_of(
-        &SimConfig {
-            seed: 7,
-            ..SimConfig::default()
-        },
-        &excitation(4, 0.02),
-    );
     let o = FrfFitOptions::new(Structure::ThreeMass, 5e-4);
-    let a = fit_frf(&frf_a, &o).unwrap();
-    let searched = fit_frf(&frf_b, &o).unwrap();
-    let started = fit_frf(
-        &frf_b,
-        &FrfFitOptions {
-            start: Some(a.as_start()),
-            ..o.clone()
-        },
-    )
-    .unwrap();
+    let (frf_b, a, searched, started) = searched_and_started(&o);
     assert_eq!(started.starts, 1, "the search was made");
     assert!(searched.starts > 1);
     assert!(
@@ -737,30 +720,13 @@ fn a_start_from_a_fit_whose_search_ended_above_the_noise_is_not_searched_from_ag
     // the basin its search finds; on a second noise realisation, the start from the first
     // fit costs no more than that fit reached, and the refinement from it alone ends where
     // the full search does
-    let frf_a = frf_of(&SimConfig::default(), &excitation(4, 0.02));
-    let frf_b = frf_of(
-        &SimConfig {
-            seed: 7,
-            ..SimConfig::default()
-        },
-        &excitation(4, 0.02),
-    );
     let o = FrfFitOptions::new(Structure::TwoMass, 5e-4);
-    let a = fit_frf(&frf_a, &o).unwrap();
+    let (_, a, searched, started) = searched_and_started(&o);
     assert!(
         a.cost_ratio() > 2.0 * GOOD_START_RATIO,
         "the two-mass reaches the noise: {}",
         a.cost_ratio()
     );
-    let searched = fit_frf(&frf_b, &o).unwrap();
-    let started = fit_frf(
-        &frf_b,
-        &FrfFitOptions {
-            start: Some(a.as_start()),
-            ..o.clone()
-        },
-    )
-    .unwrap();
     assert!(searched.starts > 1);
     assert_eq!(started.starts, 1, "the search was made");
     assert!(
@@ -769,4 +735,29 @@ fn a_start_from_a_fit_whose_search_ended_above_the_noise_is_not_searched_from_ag
         started.cost,
         searched.cost
     );
+}
+
+/// Two noise realisations of the default joint, fitted with `o`: the second FRF, the first
+/// FRF's fit, the second's fit by the search from its peaks, and its fit from the first's
+/// (as a friction-compensated FRF starts from the raw one's).
+fn searched_and_started(o: &FrfFitOptions) -> (Frf, FrfFit, FrfFit, FrfFit) {
+    let frf_a = frf_of(&SimConfig::default(), &excitation(4, 0.02));
+    let frf_b = frf_of(
+        &SimConfig {
+            seed: 7,
+            ..SimConfig::default()
+        },
+        &excitation(4, 0.02),
+    );
+    let a = fit_frf(&frf_a, o).unwrap();
+    let searched = fit_frf(&frf_b, o).unwrap();
+    let started = fit_frf(
+        &frf_b,
+        &FrfFitOptions {
+            start: Some(a.as_start()),
+            ..o.clone()
+        },
+    )
+    .unwrap();
+    (frf_b, a, searched, started)
 }
