@@ -270,6 +270,61 @@ fn coulomb_friction_at_the_default_size_is_found_with_the_refined_smoothing() {
     }
 }
 
+/// A Coulomb law whose breakaway ends below its sliding level is no friction law (the
+/// simulator's exact law refuses it): such a fit is refitted with the level alone
+/// ([`run::identify_segments`]). The data here come from the estimator's own smooth law
+/// with a dip at rest (`F_s` = 0.3 `F_c`), which the law with a bump follows below `F_c`.
+#[test]
+fn a_fit_whose_breakaway_ends_below_its_sliding_level_is_refitted_with_the_level_alone() {
+    let (est, _) = seed001_records();
+    let plant = [1e-3, 14.6, 1.3e5, 80.0, 2e-3];
+    // the law with a bump (F_s 1.3 F_c, where the fit starts), its F_s written below F_c
+    let bump = CoulombFriction {
+        fc: 0.1,
+        fs: 0.13,
+        ..CoulombFriction::default()
+    };
+    let model = NlModel {
+        effects: vec![Effect::CoulombFriction(bump)],
+        v_eps: 0.01,
+        substeps: 4,
+        ..seed001_model()
+    };
+    let mut truth = model.values(&plant, 0.0, 0.0);
+    let fs_at = model.layout().iter().position(|d| d.name == "fs").unwrap();
+    truth[fs_at] = 0.03;
+    let mut y = vec![0.0; est.u.len()];
+    let simulated = model::Plant::<f64>::new(&model, &truth).simulate(
+        &est.u,
+        est.ts,
+        0.0,
+        None,
+        model.substeps,
+        |k, theta, _| y[k] = theta,
+    );
+    assert!(simulated);
+    let data = IdData { y, ..est };
+    let mut req = NlRequest::new(
+        Structure::TwoMass,
+        model.r,
+        vec![Effect::CoulombFriction(bump)],
+    );
+    req.start = NlStart::Values(model_of(&req, &data).values(&plant, 0.0, 0.0));
+    let res = identify_segments(std::slice::from_ref(&data), &req).unwrap();
+    let Effect::CoulombFriction(f) = res.fit.model.effects[0] else {
+        panic!("{:?}", res.fit.model.effects);
+    };
+    assert!(f.fs >= f.fc, "{f:?}");
+    assert!(
+        res.warnings
+            .iter()
+            .any(|w| w.contains("refitted from the same start with the level alone")),
+        "{:?}",
+        res.warnings
+    );
+    assert!(simulate_exact(&res.fit, &data).is_ok());
+}
+
 #[test]
 fn a_delay_fit_started_on_a_whole_sample_leaves_it() {
     // without a current loop the delay enters through the held input's share before the
