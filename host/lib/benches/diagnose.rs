@@ -28,7 +28,9 @@
 //! coarser encoder, a current-loop lag of 0.5–3 samples, the inertia feedforward on in
 //! half the cases); `LAWS=1` moves the hidden effects off the estimators' own laws
 //! (`other_laws`: asymmetric friction with another Stribeck bump, a ripple with a second
-//! harmonic, an extra mode at the chain's end, whole-sample delays).
+//! harmonic, an extra mode at the chain's end, whole-sample delays); `FRICTION=1` gives
+//! every joint whose hidden effects hold no Coulomb friction a weak one of its own
+//! (`weak_friction`: 0.3–1.2 mN·m), which is no effect to name.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -41,7 +43,7 @@ use jointid::ident::nonlinear::{identify, NlRequest};
 use jointid::model::effects::Effect;
 use jointid::model::spec::Structure;
 use jointid::sim::{ControllerConfig, JointParams, SensorConfig};
-use jointid::test_support::battery::{captures, cases, config, other_laws, Case};
+use jointid::test_support::battery::{captures, cases, config, other_laws, weak_friction, Case};
 
 /// The parameters of `e` a user reads its size from, by key.
 fn size_keys(e: &Effect) -> Vec<(&'static str, f64)> {
@@ -195,6 +197,11 @@ fn battery() {
             other_laws(i, &mut case.hidden);
         }
     }
+    if std::env::var("FRICTION").is_ok_and(|v| v == "1") {
+        for (i, case) in all.iter_mut().enumerate() {
+            case.background = weak_friction(i, &case.hidden);
+        }
+    }
     // band -> (cases, right answers); right: a single's top-1, a pair's both effects in
     // the top two, `none` on none
     let mut by_band: BTreeMap<String, (usize, usize)> = BTreeMap::new();
@@ -320,7 +327,10 @@ fn battery() {
                 );
             }
             println!("    verdict: {}", d.verdict);
-            println!("    hidden {:?}; warnings {:?}", case.hidden, d.warnings);
+            println!(
+                "    hidden {:?}; background {:?}; warnings {:?}",
+                case.hidden, case.background, d.warnings
+            );
             let nominal: Vec<String> = d
                 .nominal_parameters
                 .iter()
@@ -470,6 +480,7 @@ fn speed() {
         sensors: SensorConfig::default(),
         rms: 0.02,
         seed: 77,
+        background: Vec::new(),
     };
     let (small, val) = captures(&case, 3, 0.02);
     let (large, _) = captures(&case, 3, 0.04);

@@ -25,6 +25,9 @@ pub struct Case {
     pub rms: f64,
     /// the noise seed of the estimation capture (the validation's is `seed + 1000`)
     pub seed: u64,
+    /// what the joint has besides the hidden effects and is no effect to name (weak
+    /// friction, [`weak_friction`]); empty unless the bench asks for it
+    pub background: Vec<Effect>,
 }
 
 /// The harder conditions of `HARD=1`, drawn for case `index` from a generator of its own
@@ -86,6 +89,24 @@ pub fn other_laws(index: usize, effects: &mut Vec<Effect>) {
     effects.extend(added);
 }
 
+/// Weak Coulomb friction on the motor of case `index` (`FRICTION=1`), drawn from a
+/// generator of its own: a sliding level `F_c` of 1–4 % of the default's (0.3–1.2 mN·m,
+/// below the smallest hidden friction of `SMALL=1`, 3 mN·m), the default breakaway ratio.
+/// Every real joint has some; the diagnosis is to name the effects beside it, and `none`
+/// where there are none. A joint whose hidden effect is Coulomb friction has that one
+/// alone (none is returned).
+pub fn weak_friction(index: usize, hidden: &[Effect]) -> Vec<Effect> {
+    if hidden
+        .iter()
+        .any(|e| matches!(e, Effect::CoulombFriction(_)))
+    {
+        return Vec::new();
+    }
+    let mut rng = GaussRng::new(6060 + index as u64);
+    let share = 0.01 * 4f64.powf(rng.uniform());
+    vec![scaled("coulomb_friction", share)]
+}
+
 /// The effect `name` at `scale` × its default size (the size parameters only).
 pub fn scaled(name: &str, scale: f64) -> Effect {
     let mut e = Effect::default_by_name(name).expect("an effect name");
@@ -143,6 +164,7 @@ pub fn cases(rounds: usize, small: bool, harder: bool) -> Vec<Case> {
                 sensors,
                 rms,
                 seed: 500 + index as u64,
+                background: Vec::new(),
             });
         }
     }
@@ -156,7 +178,12 @@ pub fn config(case: &Case) -> SimConfig {
             kind: Structure::ThreeMass,
             params: case.params,
         },
-        effects: case.hidden.clone(),
+        effects: case
+            .hidden
+            .iter()
+            .chain(&case.background)
+            .copied()
+            .collect(),
         controller: case.controller,
         sensors: case.sensors,
         ..SimConfig::default()
