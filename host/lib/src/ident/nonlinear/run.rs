@@ -2,7 +2,8 @@
 //! `diagnose`: on periodic data the frequency-domain linear start ([`linear_start`]), or
 //! when the motor sticks the start grown in the time domain ([`super::grow`]), the
 //! automatic start (or a given one), the values the user holds or gives, the output-error
-//! fit, the checks that turn a doubtful result into warnings, and the validation with the
+//! fit (refitted with the friction's level alone when its breakaway ends below it), the
+//! checks that turn a doubtful result into warnings, and the validation with the
 //! simulator's exact laws ([`crate::sim::simulate_driven`]).
 
 use std::sync::OnceLock;
