@@ -519,7 +519,7 @@ pub fn automatic_start_with(
     });
 
     // the remaining effects, one at a time, on the linear fit
-    let lin_plant = lin.plant.clone();
+    let mut lin_plant = lin.plant.clone();
     let lin_offset = lin.get("offset").unwrap_or(offset);
     let lin_fc = lin.get("fc").unwrap_or(fc_used);
     let mut current: Vec<Effect> = Vec::with_capacity(model.effects.len());
@@ -583,12 +583,14 @@ pub fn automatic_start_with(
             searched = Some(f);
         }
     }
-    // the gearbox stiffness by name: its index differs between the structures
-    let kg = model
+    // the spring a cubic term stiffens, by name: the gearbox's (its index differs between
+    // the structures), or the grounded mass's spring
+    let spring_at = model
         .structure
         .param_names()
         .iter()
-        .position(|n| *n == "k_g")
+        .position(|n| *n == "k_g" || *n == "k_0");
+    let kg = spring_at
         .and_then(|i| lin_plant.get(i))
         .copied()
         .unwrap_or(0.0);
@@ -611,8 +613,12 @@ pub fn automatic_start_with(
         if grid.is_empty() {
             continue;
         }
-        let mut best: Option<(f64, Effect, f64)> = None;
-        for cand in grid {
+        let mut best: Option<(f64, Effect, f64, Vec<f64>)> = None;
+        let at_spring = |cand: &Effect| split_spring(cand, &lin_plant, spring_at);
+        for (cand, plant) in grid.iter().flat_map(|c| {
+            std::iter::once((*c, lin_plant.clone()))
+                .chain(at_spring(c).into_iter().map(|p| (*c, p)))
+        }) {
             let mut effects = current.clone();
             effects[i] = cand;
             // below the resonances a delay and the lag shift the phase alike, and the
@@ -633,16 +639,17 @@ pub fn automatic_start_with(
                 tau_c: lag,
                 ..model.clone()
             };
-            let values = m.values(&lin_plant, lin_offset, 0.0);
+            let values = m.values(&plant, lin_offset, 0.0);
             if let Some(cost) = super::output_error::cost_at(part, &m, &values) {
-                if best.as_ref().is_none_or(|(c, _, _)| cost < *c) {
-                    best = Some((cost, cand, lag));
+                if best.as_ref().is_none_or(|(c, ..)| cost < *c) {
+                    best = Some((cost, cand, lag, plant));
                 }
             }
         }
-        if let Some((cost, cand, lag)) = best {
+        if let Some((cost, cand, lag, plant)) = best {
             current[i] = cand;
             tau_c = lag;
+            lin_plant = plant;
             let m = NlModel {
                 effects: vec![cand],
                 tau_c: lag,
@@ -1097,6 +1104,43 @@ fn neutral(e: Effect) -> Effect {
         }
         e => e,
     }
+}
+
+/// Shares of the linear fit's spring that [`split_spring`] leaves to the linear term: from
+/// a half to a sixteenth, in steps of two.
+const SPRING_SHARES: [f64; 4] = [0.5, 0.25, 0.125, 0.0625];
+
+/// The linear fit's structure `plant` with the spring at `spring_at` at each of
+/// [`SPRING_SHARES`] of its value, for a stiffening cubic `cand` (none for another
+/// effect).
+///
+/// Why: a linear fit sees a stiffening spring at its equivalent stiffness, `k + 3 k3 σ²`
+/// for a deflection of RMS `σ` (statistical linearisation of a cubic restoring force), so a
+/// cubic started on top of the fitted spring counts its stiffness twice. How the two terms
+/// share it depends on `σ`, which the quasi-static level `δ` of the grid misses by the
+/// modes' amplification (by a factor of two on seed 001's two-mass with its cubic 30 times
+/// stronger), so the shares are searched with the cubic's sizes rather than set from `δ`.
+/// Regular bench case 32 (a stiffening spring at 0.34 rad RMS): the linear fit put the
+/// gearbox at 1.96·10⁶ N·m/rad against the true 1.29·10⁵, the cubic's fit and its
+/// refinement in the loop kept it there, and the answer ended 9.1 points below the true
+/// model (`diagnose::tests`); the share set from `δ` closed that case but left hard case 12
+/// under weak friction (`HARD=1 SMALL=1 FRICTION=1`) 10.4 points short, the shares close
+/// both.
+fn split_spring(cand: &Effect, plant: &[f64], spring_at: Option<usize>) -> Vec<Vec<f64>> {
+    let (Effect::NonlinearStiffness(s), Some(i)) = (cand, spring_at) else {
+        return Vec::new();
+    };
+    if s.k3 <= 0.0 || i >= plant.len() {
+        return Vec::new();
+    }
+    SPRING_SHARES
+        .iter()
+        .map(|share| {
+            let mut p = plant.to_vec();
+            p[i] *= share;
+            p
+        })
+        .collect()
 }
 
 /// The grid of one effect's sizes to search, scaled by the linear fit and the deflection
