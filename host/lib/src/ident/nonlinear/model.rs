@@ -198,6 +198,18 @@ pub fn has_bump(f: &crate::model::effects::CoulombFriction) -> bool {
     f.fs > f.fc
 }
 
+/// The torque offset [N·m] and the initial motor velocity [rad/s] among `values`, laid out
+/// as `layout` ([`NlModel::layout`]); 0 for either the layout lacks.
+pub fn offset_and_v0(layout: &[ParamDef], values: &[f64]) -> (f64, f64) {
+    let at = |o: Owner| {
+        layout
+            .iter()
+            .position(|d| d.owner == o)
+            .map_or(0.0, |i| values[i])
+    };
+    (at(Owner::Offset), at(Owner::InitialVelocity))
+}
+
 /// Structure parameters, their unit, and bounds relative to a typical value.
 fn plant_defs(structure: Structure) -> Vec<ParamDef> {
     structure

@@ -1299,9 +1299,7 @@ fn smoothing_move(part: &Problem, model: &NlModel, z: &[f64], free: &[usize]) ->
 fn exact_velocity(problem: &Problem, data: &IdData, z: &[f64]) -> Option<Vec<f64>> {
     let values = problem.physical(z);
     let (m, plant_values) = problem.model.with_values(&values);
-    let at = |o: Owner| problem.layout.iter().position(|d| d.owner == o);
-    let offset = at(Owner::Offset).map_or(0.0, |i| values[i]);
-    let v0 = at(Owner::InitialVelocity).map_or(0.0, |i| values[i]);
+    let (offset, v0) = super::model::offset_and_v0(problem.layout, &values);
     let plant = super::model::sim_plant(&m, &plant_values);
     let mech = crate::model::plant::Mechanism::new(&plant, &m.effects);
     let n = mech.n_bodies();

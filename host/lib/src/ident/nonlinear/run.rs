@@ -454,14 +454,23 @@ pub fn identify_segments(all: &[IdData], req: &NlRequest) -> Result<NlResult, Nl
             range_from: (options.range_from.as_deref()).map(|r| level_alone(&fit_model, r).1),
             ..options.clone()
         };
-        if let Ok(f) = fit_output_error_segments(all, &nested, &from, &nested_options) {
-            warnings.push(format!(
-                "the friction's breakaway level F_s ended at {fs:.3e} N·m, below its sliding \
-                 level F_c = {fc:.3e} N·m, which no friction law has (the simulator's exact \
-                 law refuses it): refitted from the same start with the level alone (F_s = \
-                 F_c, no Stribeck bump)"
-            ));
-            (fit, fit_model, options) = (f, nested, nested_options);
+        let below = format!(
+            "the friction's breakaway level F_s ended at {fs:.3e} N·m, below its sliding \
+             level F_c = {fc:.3e} N·m, which no friction law has (the simulator's exact law \
+             refuses it)"
+        );
+        match fit_output_error_segments(all, &nested, &from, &nested_options) {
+            Ok(f) => {
+                warnings.push(format!(
+                    "{below}: refitted from the same start with the level alone (F_s = F_c, \
+                     no Stribeck bump)"
+                ));
+                (fit, fit_model, options) = (f, nested, nested_options);
+            }
+            Err(e) => warnings.push(format!(
+                "{below}, and its refit with the level alone failed ({e}): the fit cannot be \
+                 validated with the exact law"
+            )),
         }
     }
     warnings.extend(checks(&fit));
@@ -502,20 +511,14 @@ fn breakaway_below_level(fit: &NlFit, options: &NlOptions) -> Option<(f64, f64)>
 /// `model` with every Coulomb law's Stribeck bump taken away (`F_s = F_c`, the law nested
 /// in it), and `values` (in `model`'s layout) laid out for it.
 fn level_alone(model: &NlModel, values: &[f64]) -> (NlModel, Vec<f64>) {
-    let layout = model.layout();
-    let at = |o: Owner| {
-        layout
-            .iter()
-            .position(|d| d.owner == o)
-            .map_or(0.0, |i| values[i])
-    };
+    let (offset, v0) = super::model::offset_and_v0(&model.layout(), values);
     let (mut nested, plant) = model.with_values(values);
     for e in &mut nested.effects {
         if let Effect::CoulombFriction(f) = e {
             f.fs = f.fc;
         }
     }
-    let laid = nested.values(&plant, at(Owner::Offset), at(Owner::InitialVelocity));
+    let laid = nested.values(&plant, offset, v0);
     (nested, laid)
 }
 
