@@ -389,14 +389,18 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
     writeln!(
         out,
         "  {} on {val}: nominal {} {:.2} % (in-sample {:.2} %), best {} {:.2} % ({:.0} % of \
-         the gap closed)",
+         the gap closed){}",
         metric_name(&d.metric),
         d.structure,
         Percent(d.fit_nominal_val),
         Percent(d.fit_nominal_est),
         d.best,
         Percent(d.fit_augmented_val),
-        Percent(100.0 * d.gap_closed_share)
+        Percent(100.0 * d.gap_closed_share),
+        d.fit_noise_val.map_or(String::new(), |n| format!(
+            "; the noise from period to period leaves {:.2} %",
+            Percent(n)
+        ))
     )?;
     if !d.validation_segments.is_empty() {
         writeln!(

@@ -601,6 +601,12 @@ pub struct Diagnosis {
     pub fit_augmented_val: f64,
     /// share of the gap `100 − fit_nominal_val` the best closes [-]
     pub gap_closed_share: f64,
+    /// the gap metric the noise alone leaves a model on the validation capture [%]: the
+    /// measured velocity's variance from period to period (the sensors' noise and the
+    /// process disturbance, which no model driven by the reference repeats;
+    /// [`metric::Measured::noise_fit`]); `None` without two whole periods
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit_noise_val: Option<f64>,
     /// the best effect, `a+b` for a pair, or `none`
     pub best: String,
     /// the pair tried with the best single effect that passed the test, if any
