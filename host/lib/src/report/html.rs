@@ -463,7 +463,7 @@ pub fn diagnosis_html(
         h,
         "<table id=\"summary\">\n<tr><th>gap metric</th><td>{}</td></tr>\n\
          <tr><th>nominal ({})</th><td>{:.2} %</td></tr>\n\
-         <tr><th>best: {}</th><td>{:.2} %, {:.0} % of the gap closed</td></tr>\n\
+         <tr><th>best: {}</th><td>{:.2} %, {:.0} % of the gap closed</td></tr>\n{}\
          <tr><th>significance test</th><td>{}</td></tr>\n\
          <tr><th>for reference: the nominal's toolbox FIT of θ_m</th><td>{:.2} %: {}</td></tr>\n\
          <tr><th>time</th><td>{:.1} s</td></tr>\n</table>\n",
@@ -473,6 +473,10 @@ pub fn diagnosis_html(
         escape(&d.best),
         Percent(d.fit_augmented_val),
         Percent(100.0 * d.gap_closed_share),
+        d.fit_noise_val.map_or(String::new(), |n| format!(
+            "<tr><th>what the noise from period to period leaves</th><td>{:.2} %</td></tr>\n",
+            Percent(n)
+        )),
         escape(&d.test),
         Percent(d.fit_nominal_angle_val),
         ANGLE_FIT_NOTE,
