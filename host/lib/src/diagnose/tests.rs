@@ -166,15 +166,16 @@ fn battery_nonlinear_stiffness_default_and_larger() {
     check_stiffness(4.5e13);
 }
 
-/// Also: the same captures give the same diagnosis on one thread, with both cores kept
-/// busy by other work, as on two threads of an idle machine. No result may hang on the
+/// Also: the same captures give the same diagnosis on one thread, with a spinning thread
+/// keeping the other core busy (the test harness runs other tests beside it too), as on two
+/// threads. No result may hang on the
 /// clock or on how the threads are scheduled (budgets count iterations and simulations,
 /// `in_loop::refine` among them).
 #[test]
 fn battery_time_delay_default_and_larger() {
     let two_threads = check_delay(1.5);
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let load: Vec<_> = (0..2)
+    let load: Vec<_> = (0..1)
         .map(|_| {
             let stop = stop.clone();
             std::thread::spawn(move || {
