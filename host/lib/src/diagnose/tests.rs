@@ -168,9 +168,8 @@ fn battery_nonlinear_stiffness_default_and_larger() {
 
 /// Also: the same captures give the same diagnosis on one thread, with a spinning thread
 /// keeping the other core busy (the test harness runs other tests beside it too), as on two
-/// threads. No result may hang on the
-/// clock or on how the threads are scheduled (budgets count iterations and simulations,
-/// `in_loop::refine` among them).
+/// threads. No result may hang on the clock or on how the threads are scheduled (budgets
+/// count iterations and simulations, `in_loop::refine` among them).
 #[test]
 fn battery_time_delay_default_and_larger() {
     let two_threads = check_delay(1.5);

@@ -326,13 +326,16 @@ fn verdict(
          {db:.1} dB above the noise: odd nonlinear distortion (friction, backlash, a stiffening \
          spring) that a linear model cannot follow"
     );
-    let sized = answer.singles.iter().map(|(c, fitted)| {
-        let sized = fitted
-            .as_ref()
-            .is_some_and(|f| super::size::vanished(&f.fit, false).is_empty());
-        (c, sized)
+    // a single whose effect can make odd distortion: a nonlinear one (a linear joint's
+    // response to a periodic excitation stays at the excited lines) of a size
+    let makes_lines = answer.singles.iter().map(|(c, fitted)| {
+        let makes = fitted.as_ref().is_some_and(|f| {
+            f.fit.model.effects.iter().all(|e| !e.is_linear())
+                && super::size::vanished(&f.fit, f.delay_shown()).is_empty()
+        });
+        (c, makes)
     });
-    let explainer = odd_explainer(sized, best);
+    let explainer = odd_explainer(makes_lines, best);
     // what the candidate that explains the distortion gains, below the floor
     let shown_by = |c: &Candidate, share: f64| {
         format!(
@@ -425,7 +428,8 @@ pub const ODD_EXPLAINED_MOST: f64 = 0.5;
 
 /// The single, none of the answer's effects, that removes the most of the odd distortion
 /// the nominal leaves, with its share, when that is most of it ([`ODD_EXPLAINED_MOST`]) and
-/// its effect has a size (`sized`, [`super::size::vanished`]). Odd distortion is what friction,
+/// its effect can make such distortion (`makes_lines`: a nonlinear effect whose size did not
+/// vanish, [`super::size::vanished`]). Odd distortion is what friction,
 /// backlash and a stiffening spring make; a candidate that removes it while the metric
 /// barely sees it is the joint's effect at a size the simulated motion hardly shows (hard
 /// bench, `HARD=1 SMALL=1` case 7: a parallel mode with a 34 mN·m Coulomb friction at
@@ -437,9 +441,9 @@ fn odd_explainer<'a>(
 ) -> Option<(&'a Candidate, f64)> {
     singles
         .filter(|(c, _)| !best.split('+').any(|b| b == c.name))
-        .filter_map(|(c, sized)| {
+        .filter_map(|(c, makes_lines)| {
             let share = c.odd_explained?;
-            (sized && share >= ODD_EXPLAINED_MOST).then_some((c, share))
+            (makes_lines && share >= ODD_EXPLAINED_MOST).then_some((c, share))
         })
         .max_by(|a, b| a.1.total_cmp(&b.1))
 }
@@ -469,11 +473,6 @@ mod tests {
         }
     }
 
-    /// Hard bench case 7 (`HARD=1 SMALL=1`): the answer, a parallel mode, removes 11 % of
-    /// the odd distortion and the Coulomb friction beside it 98 %; the report names the
-    /// friction as its cause, not an effect missing from the candidates. A friction fitted
-    /// of no size, or one that removes less than half, explains nothing; nor does the
-    /// answer's own effect.
     /// A nominal within the floor of what the noise leaves is said to be; one that falls
     /// short of it by more is not, nor is a record without two periods to tell the noise.
     #[test]
@@ -484,6 +483,11 @@ mod tests {
         assert_eq!(within_noise(48.35, None, 0.3), "");
     }
 
+    /// Hard bench case 7 (`HARD=1 SMALL=1`): the answer, a parallel mode, removes 11 % of
+    /// the odd distortion and the Coulomb friction beside it 98 %; the report names the
+    /// friction as its cause, not an effect missing from the candidates. A friction fitted
+    /// of no size, or one that removes less than half, explains nothing; nor does the
+    /// answer's own effect.
     #[test]
     fn the_candidate_that_removes_the_odd_distortion_the_answer_leaves_is_named() {
         let mode = removing("extra_mode", Some(0.11));
