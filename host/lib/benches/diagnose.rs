@@ -30,7 +30,9 @@
 //! (`other_laws`: asymmetric friction with another Stribeck bump, a ripple with a second
 //! harmonic, an extra mode at the chain's end, whole-sample delays); `FRICTION=1` gives
 //! every joint whose hidden effects hold no Coulomb friction a weak one of its own
-//! (`weak_friction`: 0.3–1.2 mN·m), which is no effect to name.
+//! (`weak_friction`: 0.3–1.2 mN·m), which is no effect to name; `JOINTS=1` moves every
+//! joint off the default's scale (`other_joint`: torques × 0.03–30, resonances × 0.6–1.6;
+//! `JOINTS=torque` the torques alone, the same motion in other units).
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -43,7 +45,9 @@ use jointid::ident::nonlinear::{identify, NlRequest};
 use jointid::model::effects::Effect;
 use jointid::model::spec::Structure;
 use jointid::sim::{ControllerConfig, JointParams, SensorConfig};
-use jointid::test_support::battery::{captures, cases, config, other_laws, weak_friction, Case};
+use jointid::test_support::battery::{
+    captures, cases, config, other_joint, other_laws, weak_friction, Case,
+};
 
 /// The parameters of `e` a user reads its size from, by key.
 fn size_keys(e: &Effect) -> Vec<(&'static str, f64)> {
@@ -200,6 +204,11 @@ fn battery() {
     if std::env::var("FRICTION").is_ok_and(|v| v == "1") {
         for (i, case) in all.iter_mut().enumerate() {
             case.background = weak_friction(i, &case.hidden);
+        }
+    }
+    if let Ok(joints @ ("1" | "torque")) = std::env::var("JOINTS").as_deref() {
+        for (i, case) in all.iter_mut().enumerate() {
+            other_joint(i, case, joints == "1");
         }
     }
     // band -> (cases, right answers); right: a single's top-1, a pair's both effects in

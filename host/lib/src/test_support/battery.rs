@@ -107,6 +107,69 @@ pub fn weak_friction(index: usize, hidden: &[Effect]) -> Vec<Effect> {
     vec![scaled("coulomb_friction", share)]
 }
 
+/// Case `index`'s joint moved off the default's scale (`JOINTS=1`), drawn from a generator
+/// of its own, so that the bench tells whether the diagnosis holds for other joints than
+/// the one it was developed on:
+/// - a torque scale `s`, log-uniform in 0.03–30: every inertia, stiffness, damping and
+///   friction, the controller's torque gain, limit and feedforward inertia, the torque
+///   noise and disturbance, and every effect's torque (friction levels, ripple amplitude,
+///   cubic coefficient, extra mode) times `s`. The motion is the default-scale joint's: a
+///   method with no torque constant of its own gives the same answer on it;
+/// - a frequency scale `f`, log-uniform in 0.6–1.6: every stiffness (the cubic one and
+///   the extra mode's too) times `f²`, every damping times `f`, so that the resonances move
+///   by `f` at the same damping ratios against the same controller (a stiffer or a softer
+///   joint under the same tuning).
+///
+/// Angles (the backlash's gap, the amplitude), times (the delay, the current loop) and
+/// speeds (the Stribeck and smoothing velocities) keep their values.
+///
+/// With `resonances` false, `f` is 1: the joint is the default-scale joint in other torque
+/// units, and every answer and FIT should be the default-scale case's.
+pub fn other_joint(index: usize, case: &mut Case, resonances: bool) {
+    let mut rng = GaussRng::new(8080 + index as u64);
+    let mut within = |lo: f64, hi: f64| lo * (hi / lo).powf(rng.uniform());
+    let (s, f) = (within(0.03, 30.0), within(0.6, 1.6));
+    let f = if resonances { f } else { 1.0 };
+    let p = &mut case.params;
+    for j in [&mut p.j_m, &mut p.j_a1, &mut p.j_a2, &mut p.j_p] {
+        *j *= s;
+    }
+    for k in [&mut p.k_g, &mut p.k_a, &mut p.k_p, &mut p.k_0, &mut p.k3] {
+        *k *= s * f * f;
+    }
+    for d in [&mut p.d_g, &mut p.d_a, &mut p.d_p] {
+        *d *= s * f;
+    }
+    p.f_m *= s;
+    p.f_c *= s;
+    let c = &mut case.controller;
+    c.kv *= s;
+    c.u_max *= s;
+    c.ff_inertia *= s;
+    let n = &mut case.sensors;
+    n.u_noise_std *= s;
+    n.disturbance.noise_std *= s;
+    n.disturbance.sine_amplitude *= s;
+    for e in case.hidden.iter_mut().chain(case.background.iter_mut()) {
+        match e {
+            Effect::CoulombFriction(c) => {
+                c.fc *= s;
+                c.fs *= s;
+                c.fc_neg = c.fc_neg.map(|v| v * s);
+                c.fv_neg_extra = c.fv_neg_extra.map(|v| v * s);
+            }
+            Effect::TorqueRipple(r) => r.amplitude *= s,
+            Effect::NonlinearStiffness(k) => k.k3 *= s * f * f,
+            Effect::ExtraMode(m) => {
+                m.j *= s;
+                m.k *= s * f * f;
+                m.d *= s * f;
+            }
+            Effect::Backlash(_) | Effect::TimeDelay(_) => {}
+        }
+    }
+}
+
 /// The effect `name` at `scale` × its default size (the size parameters only).
 pub fn scaled(name: &str, scale: f64) -> Effect {
     let mut e = Effect::default_by_name(name).expect("an effect name");
