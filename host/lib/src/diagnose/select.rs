@@ -129,12 +129,41 @@ pub(super) fn single_of(
             l.drop,
             l.threshold()
         )),
-        (Effect::TorqueRipple(_), _, Some((n, z))) => Some(format!(
-            "the order search shows it: the ripple of order {n} lowers the estimation cost at a \
-             robust z-score of {z:.1} against the orders a period or more apart over the \
-             travel (significant from {}), with the same ripple along the record",
-            crate::ident::nonlinear::ripple::SIGNIFICANT_Z
-        )),
+        (Effect::TorqueRipple(_), _, Some(r)) => {
+            let z = crate::ident::nonlinear::ripple::SIGNIFICANT_Z;
+            let found = format!(
+                "the order search shows it: the ripple of order {} lowers the estimation cost \
+                 at a robust z-score of {:.1} against the orders a period or more apart over \
+                 the travel ({}), with the same ripple along the record",
+                r.order,
+                r.z,
+                if r.z >= z {
+                    format!("significant from {z}")
+                } else {
+                    format!("the best order, short of {z}")
+                }
+            );
+            let p = crate::ident::nonlinear::ripple::REPLICATED_P;
+            Some(match r.chance_val {
+                Some(c) if r.replicated() => format!(
+                    "{found}, and again on the validation record (chance {c:.1e}, shown from \
+                     {p})"
+                ),
+                Some(c) => format!(
+                    "{found}, but the validation record, along another trajectory, does not \
+                     show it again (chance {c:.2}, shown below {p}): what it follows repeats \
+                     with the excitation, not with the angle"
+                ),
+                None if r.repeats => format!(
+                    "{found}, but the validation record repeats the estimation record's \
+                     trajectory (the same excitation phases), so it cannot show the order \
+                     again: capture validation with another excitation seed"
+                ),
+                None => format!(
+                    "{found}, but the validation record's travel does not tell the order apart"
+                ),
+            })
+        }
         _ => None,
     };
     if let Some(shown) = shown {

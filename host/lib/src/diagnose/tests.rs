@@ -1337,9 +1337,10 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
         0.3
     );
     assert_eq!(floor.of_model(None), 0.3);
-    // a ripple at the order the search against the angle found needs only the spread; at
-    // another order, with no order found, or the order found beside another effect, the
-    // option's floor
+    // a ripple at the order the search against the angle found, and the validation record
+    // showed again, needs only the spread; at another order, with no order found, the order
+    // not shown again on validation, or the order found beside another effect, the option's
+    // floor
     let ripple = with(
         Effect::TorqueRipple(TorqueRipple {
             order: 72.0,
@@ -1347,11 +1348,26 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
         }),
         vec![param("amplitude", (0.02, 1e-3))],
     );
-    let found = |fit: NlFit, order: Option<u32>| super::fits::Fitted {
-        ripple_shown: order.map(|n| (n, 9.5)),
-        ..fitted(fit)
-    };
+    let shown_again =
+        |fit: NlFit, order: Option<u32>, chance_val: Option<f64>| super::fits::Fitted {
+            ripple_shown: order.map(|order| super::fits::RippleShown {
+                order,
+                z: 9.5,
+                chance_val,
+                repeats: false,
+            }),
+            ..fitted(fit)
+        };
+    let found = |fit: NlFit, order: Option<u32>| shown_again(fit, order, Some(1e-4));
     assert_eq!(floor.of_model(Some(&found(ripple.clone(), Some(72)))), 0.02);
+    for chance in [None, Some(0.3), Some(0.011)] {
+        let f = shown_again(ripple.clone(), Some(72), chance);
+        assert_eq!(
+            floor.of_model(Some(&f)),
+            0.3,
+            "chance on validation {chance:?}"
+        );
+    }
     assert_eq!(floor.of_model(Some(&found(ripple.clone(), Some(36)))), 0.3);
     assert_eq!(floor.of_model(Some(&found(ripple.clone(), None))), 0.3);
     let mut both = ripple;

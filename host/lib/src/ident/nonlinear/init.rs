@@ -85,6 +85,9 @@ pub enum RippleOrder {
     /// searched in the data ([`super::ripple::search_order`]) on the linear start, and again
     /// on the linear fit with the ripple
     FromData,
+    /// searched as [`RippleOrder::FromData`], the best candidate taken even short of its
+    /// z-score when it is coherent along the record ([`super::ripple::OrderSearch::best_taken`])
+    BestFromData,
 }
 
 /// A linear fit the automatic start builds on (step 3).
@@ -350,7 +353,12 @@ pub fn automatic_start_with(
     // where the warning of an order below the candidates is (the search again on the
     // linear fit rewrites it)
     let mut short_warning: Option<usize> = None;
-    if let (Some(r), RippleOrder::FromData) = (ripple.as_mut(), order) {
+    let from_data = matches!(order, RippleOrder::FromData | RippleOrder::BestFromData);
+    let taken = |f: Option<super::ripple::OrderSearch>| match order {
+        RippleOrder::BestFromData => f.map(super::ripple::OrderSearch::best_taken),
+        _ => f,
+    };
+    if let (Some(r), true) = (ripple.as_mut(), from_data) {
         let m = NlModel {
             effects: with_fc(fc_used),
             ..model.clone()
@@ -362,10 +370,10 @@ pub fn automatic_start_with(
                 super::output_error::cost_at(data, &m, &v).map(|c| (c, v))
             })
             .min_by(|a, b| a.0.total_cmp(&b.0));
-        let found = match best_plant {
+        let found = taken(match best_plant {
             Some((_, v)) => super::ripple::search_order(data, &m, &v)?,
             None => None,
-        };
+        });
         match &found {
             Some(f) if f.order.is_some() => {
                 r.order = f.order.map_or(0.0, f64::from);
@@ -544,7 +552,7 @@ pub fn automatic_start_with(
     }
     // the order again on the linear fit with the ripple (a better residual than the linear
     // start's): the travel tells neighbouring orders apart only where the model is good
-    if let (true, RippleOrder::FromData) = (ripple_found, order) {
+    if ripple_found && from_data {
         let m = NlModel {
             effects: lin
                 .model
@@ -556,7 +564,7 @@ pub fn automatic_start_with(
             ..lin.model.clone()
         };
         let v = m.values(&lin_plant, lin_offset, lin.get("v0").unwrap_or(0.0));
-        if let Some(f) = super::ripple::search_order(data, &m, &v)? {
+        if let Some(f) = taken(super::ripple::search_order(data, &m, &v)?) {
             if let Some(n) = f.order {
                 let text = f.short().then(|| short_order_warning(&f));
                 match (short_warning, text) {

@@ -82,6 +82,10 @@ pub const MIN_COHERENCE: f64 = 0.6;
 /// Fewest candidate orders for the spread to mean anything.
 const MIN_CANDIDATES: usize = 8;
 
+/// Chance level below which the order found on one record counts as shown again on
+/// another ([`replication`]): one order named in advance, a one-sided test at 1 %.
+pub const REPLICATED_P: f64 = 0.01;
+
 /// What the order search found.
 #[derive(Clone, Debug, PartialEq)]
 pub struct OrderSearch {
@@ -122,6 +126,19 @@ pub struct OrderSearch {
 }
 
 impl OrderSearch {
+    /// This search with its best candidate taken as the order found when it found none and
+    /// that candidate's ripple is alike along the record ([`MIN_COHERENCE`]): for a caller
+    /// that tests the order on another record ([`replication`]).
+    pub fn best_taken(self) -> OrderSearch {
+        if self.order.is_some() || self.range.is_none() || self.coherence < MIN_COHERENCE {
+            return self;
+        }
+        OrderSearch {
+            order: Some(self.best),
+            ..self
+        }
+    }
+
     /// Whether the order found lies below the candidates: the travel covers fewer than
     /// [`MIN_PERIODS`] of its periods, so it stands for a torque against the angle over the
     /// travel rather than a measured order (module documentation, short travel).
@@ -272,16 +289,12 @@ pub fn search_order(
     // robust z-score of order `best`'s drop against the chance level: the candidates the
     // travel tells apart from it (their ripples differ by a period or more over it), whose
     // drops are what a ripple-free residual gives
+    let pairs: Vec<(u32, f64)> = drops.iter().map(|d| (d.0, d.1)).collect();
     let z_of = |best: u32, drop: f64| {
-        let mut sorted: Vec<f64> = drops
-            .iter()
-            .filter(|d| d.0 >= lo && (d.0.abs_diff(best) as f64) * travel >= std::f64::consts::TAU)
-            .map(|d| d.1)
-            .collect();
+        let sorted = told_apart(&pairs, lo, travel, best);
         if sorted.len() < MIN_CANDIDATES {
             return 0.0;
         }
-        sorted.sort_by(f64::total_cmp);
         let median = sorted[sorted.len() / 2];
         let mut dev: Vec<f64> = sorted.iter().map(|d| (d - median).abs()).collect();
         dev.sort_by(f64::total_cmp);
@@ -339,8 +352,139 @@ pub fn search_order(
         searched: (floor, hi),
         periods: travel_periods(data, f64::from(order.unwrap_or(best))),
         below: below_best.map(|(n, z, _, _)| (n, z)),
-        drops: drops.iter().map(|d| (d.0, d.1)).collect(),
+        drops: pairs,
     }))
+}
+
+/// How likely a residual with no ripple of order `order` is to lower the cost of `data`
+/// (another record than the one the order was found on: the validation record, whose
+/// excitation has other phases) as much as that order does: `exp(−d_n ln 2 / median d)`,
+/// with `d` the cost drops of the candidate orders the travel tells apart from it. A
+/// ripple is a torque of the angle, so the order found on the estimation record lowers
+/// the cost of any record that moves the motor over the angle. A record under a periodic
+/// excitation repeats its angle against time from period to period, so a residual that
+/// is periodic in time (the odd distortion of a gap or of friction) correlates with some
+/// order alike on every part of it; on a record with another trajectory it falls on
+/// other orders. For a residual with no ripple at the order, its drop is a least-squares
+/// fit of two regressors, whose share of the cost is exponentially distributed over the
+/// orders (a periodogram ordinate, Schuster's test), scaled by the median drop. `None` when
+/// `data` does not move the motor over enough periods of the order to tell it apart
+/// ([`MIN_PERIODS`]) or has too few candidates.
+///
+/// # Errors
+/// [`NlError::Unstable`] when the model does not simulate to finite values on `data`.
+pub fn replication(
+    data: &IdData,
+    model: &NlModel,
+    values: &[f64],
+    order: u32,
+) -> Result<Option<f64>, NlError> {
+    Ok(search_order(data, model, values)?.and_then(|found| chance_of(&found, data, order)))
+}
+
+/// The chance level of `order` in the search `found` made on `data` ([`replication`]).
+pub fn chance_of(found: &OrderSearch, data: &IdData, order: u32) -> Option<f64> {
+    let (lo, hi) = found.range?;
+    let &(_, drop) = found.drops.iter().find(|d| d.0 == order)?;
+    if !(lo..=hi).contains(&order) {
+        return None;
+    }
+    let null = told_apart(&found.drops, lo, span(data), order);
+    if null.len() < MIN_CANDIDATES {
+        return None;
+    }
+    let median = null[null.len() / 2];
+    Some(if median > 0.0 {
+        (-drop * std::f64::consts::LN_2 / median).exp()
+    } else {
+        0.0
+    })
+}
+
+/// Peak of the normalised cross-correlation of two records' motor velocities from which the
+/// second repeats the first's trajectory ([`repeats_trajectory`]) [-].
+pub const SAME_TRAJECTORY: f64 = 0.7;
+
+/// Whether `b` moves the motor along the trajectory `a` moves it along, up to a shift in
+/// time: the peak over the shifts of the cross-correlation of their motor velocities (the
+/// first samples both records have, means taken off), over the square root of their
+/// energies, at least [`SAME_TRAJECTORY`]. Two captures of the same multisine with the same
+/// phases (the same excitation seed) give nearly 1 (1.000 in the test), less only by the noise and the part
+/// of a period the shift leaves out of the overlap; with other phases, the lines' cosines
+/// add at random phases at every shift and the peak stays a few tenths (0.32 in the test, a
+/// record that shares only the start ramp). A record that
+/// repeats the other's trajectory repeats its correlations with the angle too, so it
+/// shows again whatever the other showed ([`replication`] is no test on it).
+pub fn repeats_trajectory(a: &IdData, b: &IdData) -> bool {
+    trajectory_likeness(a, b) >= SAME_TRAJECTORY
+}
+
+/// The peak of the normalised cross-correlation of the motor velocities of `a` and `b`
+/// ([`repeats_trajectory`]), 0 for records too short or at rest [-].
+pub fn trajectory_likeness(a: &IdData, b: &IdData) -> f64 {
+    let n = a.len().min(b.len());
+    if n < 3 {
+        return 0.0;
+    }
+    let centred = |d: &IdData| {
+        let v = interval_velocity(&d.y[..n], d.ts);
+        let mean = v.iter().sum::<f64>() / n as f64;
+        v.into_iter().map(|x| x - mean).collect::<Vec<_>>()
+    };
+    let (va, vb) = (centred(a), centred(b));
+    let energy =
+        (va.iter().map(|x| x * x).sum::<f64>() * vb.iter().map(|x| x * x).sum::<f64>()).sqrt();
+    if energy <= 0.0 {
+        return 0.0;
+    }
+    let size = (2 * n).next_power_of_two();
+    let mut planner = FftPlanner::<f64>::new();
+    let fwd = planner.plan_fft_forward(size);
+    let inv = planner.plan_fft_inverse(size);
+    let spectrum = |v: &[f64]| {
+        let mut z: Vec<Complex64> = v.iter().map(|&x| Complex64::new(x, 0.0)).collect();
+        z.resize(size, Complex64::new(0.0, 0.0));
+        fwd.process(&mut z);
+        z
+    };
+    let (fa, fb) = (spectrum(&va), spectrum(&vb));
+    let mut r: Vec<Complex64> = fa.iter().zip(&fb).map(|(x, y)| x * y.conj()).collect();
+    inv.process(&mut r);
+    let peak = r.iter().map(|z| z.re.abs()).fold(0.0, f64::max) / size as f64;
+    peak / energy
+}
+
+/// The model of the ripple fit `fit` with its ripple taken out (its structure, lag, offset
+/// and other effects), laid out to simulate `data` from that record's own initial
+/// velocity (the search's prefilter takes the start's transient off): the residual
+/// [`replication`] searches on another record than the fit's.
+pub fn without_ripple(fit: &super::NlFit, data: &IdData) -> (NlModel, Vec<f64>) {
+    let model = NlModel {
+        effects: fit
+            .model
+            .effects
+            .iter()
+            .filter(|e| !matches!(e, crate::model::effects::Effect::TorqueRipple(_)))
+            .copied()
+            .collect(),
+        ..fit.model.clone()
+    };
+    let v0 = data.y.get(1).map_or(0.0, |y1| (y1 - data.y[0]) / data.ts);
+    let values = model.values(&fit.plant, fit.get("offset").unwrap_or(0.0), v0);
+    (model, values)
+}
+
+/// The cost drops of the candidate orders (from `lo`) the travel tells apart from `order`
+/// (their ripples differ by a period or more over it), sorted: what a residual with no
+/// ripple at `order` gives.
+fn told_apart(drops: &[(u32, f64)], lo: u32, travel: f64, order: u32) -> Vec<f64> {
+    let mut sorted: Vec<f64> = drops
+        .iter()
+        .filter(|d| d.0 >= lo && (d.0.abs_diff(order) as f64) * travel >= std::f64::consts::TAU)
+        .map(|d| d.1)
+        .collect();
+    sorted.sort_by(f64::total_cmp);
+    sorted
 }
 
 /// `data` with the ripple `A sin(n θ_m + φ)` at the measured angle taken off the motor:

@@ -207,3 +207,68 @@ fn a_ripple_whose_phase_turns_over_a_radian_per_sample_at_the_fastest_samples_is
         "{r:?} against {truth:?}"
     );
 }
+
+/// The order found on the estimation record is shown again on a validation record (other
+/// excitation phases, so another trajectory of the angle) when the joint has the ripple;
+/// on the same joint without it, an order shows at the 1 % level on about 1 % of the
+/// candidates, as a test at that level should.
+#[test]
+fn an_order_is_shown_again_along_another_trajectory_only_where_the_joint_has_the_ripple() {
+    use super::ripple::{
+        chance_of, replication, search_order, trajectory_likeness, without_ripple, REPLICATED_P,
+    };
+    let truth = TorqueRipple {
+        amplitude: 0.005,
+        order: 40.0,
+        phase: 0.3,
+    };
+    let exc = ExcitationConfig {
+        rms_rad: 0.5,
+        ..ExcitationConfig::paper_default()
+    };
+    let records = |effects: Vec<Effect>| {
+        let cfg = SimConfig {
+            effects,
+            ..SimConfig::default()
+        };
+        crate::test_support::est_val_captures(&cfg, &exc, 31)
+    };
+    let (est, val) = records(vec![Effect::TorqueRipple(truth)]);
+    // the validation record moves along another trajectory; a capture of the same phases
+    // (another noise seed) along the same
+    let cfg = SimConfig {
+        effects: vec![Effect::TorqueRipple(truth)],
+        ..SimConfig::default()
+    };
+    let again = crate::test_support::est_val_captures(&cfg, &exc, 32).0;
+    let (other, same) = (
+        trajectory_likeness(&est.data, &val.data),
+        trajectory_likeness(&est.data, &again.data),
+    );
+    eprintln!("trajectory likeness: other phases {other:.3}, the same phases {same:.3}");
+    assert!(other < 0.5 && same > 0.9, "{other}, {same}");
+    let out = fit_without_order(&est);
+    let (model, values) = without_ripple(&out.result.fit, &val.data);
+    let chance = replication(&val.data, &model, &values, 40).unwrap();
+    eprintln!("chance of the true order on validation: {chance:?}");
+    assert!(
+        chance.is_some_and(|p| p <= REPLICATED_P * 1e-3),
+        "chance of the true order on validation {chance:?}"
+    );
+    let (_, clean) = records(Vec::new());
+    let (model, values) = without_ripple(&out.result.fit, &clean.data);
+    let found = search_order(&clean.data, &model, &values).unwrap().unwrap();
+    let (lo, hi) = found.range.unwrap();
+    let chances: Vec<f64> = (lo..=hi)
+        .filter_map(|n| chance_of(&found, &clean.data, n))
+        .collect();
+    let shown = chances.iter().filter(|p| **p <= REPLICATED_P).count();
+    eprintln!("without ripple: {shown} of {} orders at 1 %", chances.len());
+    assert!(chances.len() >= 20, "{} orders told apart", chances.len());
+    assert!(
+        shown * 20 <= chances.len(),
+        "{shown} of {} orders shown at 1 % on a joint without ripple",
+        chances.len()
+    );
+    assert!(chance_of(&found, &clean.data, 40).is_some_and(|p| p > REPLICATED_P));
+}

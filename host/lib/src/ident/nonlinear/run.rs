@@ -74,6 +74,11 @@ pub struct NlRequest {
     pub given: Vec<Vec<(String, f64)>>,
     /// options of the fit (fixed parameters by name among them)
     pub options: NlOptions,
+    /// the torque ripple's order searched in the data is the search's best candidate even
+    /// when it falls short of [`super::ripple::SIGNIFICANT_Z`], when it is coherent along
+    /// the record: for a caller that has shown that order apart on another record
+    /// (`diagnose` on the validation record, [`super::ripple::replication`])
+    pub ripple_best_order: bool,
 }
 
 impl NlRequest {
@@ -92,6 +97,7 @@ impl NlRequest {
             fixed: Vec::new(),
             given: Vec::new(),
             options: NlOptions::default(),
+            ripple_best_order: false,
         }
     }
 
@@ -297,6 +303,8 @@ fn ripple_order_of(req: &NlRequest) -> RippleOrder {
     });
     if given {
         RippleOrder::Given
+    } else if req.ripple_best_order {
+        RippleOrder::BestFromData
     } else {
         RippleOrder::FromData
     }
