@@ -23,7 +23,9 @@
 //! [`crate::ident::nonlinear::DelayLines`]) and that explains them (it removes at least a
 //! third of their misfit above the noise, [`crate::ident::nonlinear::DelayLines::explains`]:
 //! another effect's phase on the lines removes little of it), a torque ripple whose order stands out of the
-//! search against the motor angle ([`crate::ident::nonlinear::ripple::search_order`]).
+//! search against the motor angle ([`crate::ident::nonlinear::ripple::search_order`]) and
+//! that the validation record, along another trajectory, shows again
+//! ([`crate::ident::nonlinear::ripple::replication`], [`fits::RippleShown`]).
 //! That test has already rejected the nominal, and the metric has only to confirm the gain. The candidates are
 //! ranked significant first, each group by score ([`table::ranked`]); the answer is the
 //! first when significant. An effect whose

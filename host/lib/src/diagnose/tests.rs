@@ -166,31 +166,21 @@ fn battery_nonlinear_stiffness_default_and_larger() {
     check_stiffness(4.5e13);
 }
 
-/// Also: the same captures give the same diagnosis on one thread, with a spinning thread
-/// keeping the other core busy (the test harness runs other tests beside it too), as on two
-/// threads. No result may hang on the clock or on how the threads are scheduled (budgets
-/// count iterations and simulations, `in_loop::refine` among them).
+/// Also: the same captures give the same diagnosis on one thread as on two, the two
+/// diagnoses running at the same time so that each loads the machine for the other (and the
+/// test harness runs other tests beside them). No result may hang on the clock or on how
+/// the threads are scheduled (budgets count iterations and simulations, `in_loop::refine`
+/// among them).
 #[test]
 fn battery_time_delay_default_and_larger() {
+    let loaded = std::thread::spawn(|| {
+        let mut req = battery_request();
+        req.options.threads = 1;
+        let e = Effect::TimeDelay(TimeDelay { samples: 1.5 });
+        run_case_with("time_delay 1.5, one thread, loaded", Some(e), 12, &req)
+    });
     let two_threads = check_delay(1.5);
-    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let load: Vec<_> = (0..1)
-        .map(|_| {
-            let stop = stop.clone();
-            std::thread::spawn(move || {
-                let mut x = 1.0_f64;
-                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-                    x = std::hint::black_box(x.sin() + 1.0);
-                }
-            })
-        })
-        .collect();
-    let mut req = battery_request();
-    req.options.threads = 1;
-    let e = Effect::TimeDelay(TimeDelay { samples: 1.5 });
-    let one_thread = run_case_with("time_delay 1.5, one thread, loaded", Some(e), 12, &req);
-    stop.store(true, std::sync::atomic::Ordering::Relaxed);
-    load.into_iter().for_each(|t| t.join().unwrap());
+    let one_thread = loaded.join().expect("the one-thread diagnosis");
     assert_eq!(
         without_timing(&one_thread),
         without_timing(&two_threads),
