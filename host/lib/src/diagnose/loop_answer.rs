@@ -598,7 +598,8 @@ fn drop_partner(
 
 /// The pair of the loop's best single `singles[0]` with the other single that gains most
 /// over it in the loop ([`in_loop`]), each other single significant there tried as its
-/// partner from the best's fit, refined in the loop on the estimation record `est` as the
+/// partner from the best's fit and from the data's own start, refined in the loop on the
+/// estimation record `est` as the
 /// singles were ([`refine_contenders`]) and judged on the segments in the loop on `val`;
 /// with its scores in the loop, `None` when no pair gains significantly.
 fn pair_in_loop(
@@ -617,10 +618,18 @@ fn pair_in_loop(
         .filter(|c| c.0.significant)
         .filter_map(|c| c.1.as_ref())
         .collect();
-    let jobs: Vec<Job<'_>> = partners
+    // each pair from the lead's fit and from the data's own start, as the open-loop pairs
+    // ([`super::select::pairs`]: a single bends its structure to take its partner's part)
+    let (jobs, partners): (Vec<Job<'_>>, Vec<&Fitted>) = partners
         .iter()
-        .map(|p| (vec![first, p.fit.model.effects[0]], Some(&lead.fit)))
-        .collect();
+        .flat_map(|p| {
+            let effects = vec![first, p.fit.model.effects[0]];
+            [
+                ((effects.clone(), Some(&lead.fit)), *p),
+                ((effects, None), *p),
+            ]
+        })
+        .unzip();
     if jobs.is_empty() {
         return None;
     }

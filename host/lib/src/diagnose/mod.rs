@@ -66,8 +66,10 @@
 //!    ([`metric::Measured::start_sensitivity`]): a chaotic open-loop response is flagged,
 //!    since no simulation metric can score it.
 //! 4. **Pairs** ([`select::pairs`]): the best single (and the second when they tie) with
-//!    each other significant single, started from the singles' fits, judged against its
-//!    lead alone (nested).
+//!    each other significant single, started from the singles' fits and, for two
+//!    significant singles, from the data's own start too (seed 001's three steps: a single
+//!    bends its structure to take its partner's part), judged against its lead alone
+//!    (nested).
 //! 5. **Refinement** ([`select::polish_answer`]): the answer's fit continued when it
 //!    stopped at its iteration limit; a pair's before its reduction, since a pair stopped
 //!    short of its minimum is no measure of what its second effect adds.
@@ -78,7 +80,8 @@
 //!    ([`locate::odd_left_db`]), or `none` with it left, has every fitted model scored
 //!    again in the loop of the robot's controller, its law identified from the estimation
 //!    record ([`crate::ident::controller`]); every single significant there, and every pair
-//!    of the loop's best with another, is refined in the loop before they are ranked, until
+//!    of the loop's best with another (from the best's fit and from the data's own start),
+//!    is refined in the loop before they are ranked, until
 //!    one reaches in-sample what the noise from period to period leaves
 //!    ([`metric::Measured::noise_fit`]); the loop's answer replaces the open-loop one when it
 //!    removes the distortion.
