@@ -160,10 +160,11 @@ fn check_none(seed: u64) {
     assert_eq!(d.best, "none", "{}", d.verdict);
 }
 
+// The fixed small battery: each effect once at its default size (the bench's batteries
+// vary the sizes, the joints and the controllers).
 #[test]
-fn battery_nonlinear_stiffness_default_and_larger() {
+fn battery_nonlinear_stiffness() {
     check_stiffness(3.0e13);
-    check_stiffness(4.5e13);
 }
 
 /// Also: the same captures give the same diagnosis on one thread as on two, the two
@@ -172,7 +173,7 @@ fn battery_nonlinear_stiffness_default_and_larger() {
 /// the threads are scheduled (budgets count iterations and simulations, `in_loop::refine`
 /// among them).
 #[test]
-fn battery_time_delay_default_and_larger() {
+fn battery_time_delay() {
     let loaded = std::thread::spawn(|| {
         let mut req = battery_request();
         req.options.threads = 1;
@@ -186,13 +187,11 @@ fn battery_time_delay_default_and_larger() {
         without_timing(&two_threads),
         "the diagnosis differs between one thread under load and two threads"
     );
-    check_delay(2.25);
 }
 
 #[test]
-fn battery_extra_mode_default_and_larger() {
+fn battery_extra_mode() {
     check_extra_mode(1.0);
-    check_extra_mode(1.5);
 }
 
 /// The bench's soft tuning (`kp` 10, `kv` 0.1, `ti` 0.1), no torque limit.
