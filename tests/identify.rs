@@ -176,16 +176,7 @@ fn three_mass_automatic_start_reaches_global_optimum_on_95_of_100_joints() {
     let joints: Vec<(u64, sim::JointParams)> = (0..100u64)
         .map(|j| {
             let mut p = sim::JointParams::default();
-            for v in [
-                &mut p.j_m,
-                &mut p.j_a1,
-                &mut p.j_a2,
-                &mut p.k_g,
-                &mut p.k_a,
-                &mut p.d_g,
-                &mut p.d_a,
-                &mut p.f_m,
-            ] {
+            for v in p.three_mass_values_mut() {
                 *v *= 0.7 + 0.6 * rng.uniform();
             }
             (j, p)

@@ -169,6 +169,21 @@ fn default_k_0() -> f64 {
 }
 
 impl JointParams {
+    /// The eight values of the three-mass model (seed 000 Table 1: `J_m`, `J_a1`, `J_a2`,
+    /// `k_g`, `k_a`, `d_g`, `d_a`, `f_m`), for a caller that draws or scales them together.
+    pub fn three_mass_values_mut(&mut self) -> [&mut f64; 8] {
+        [
+            &mut self.j_m,
+            &mut self.j_a1,
+            &mut self.j_a2,
+            &mut self.k_g,
+            &mut self.k_a,
+            &mut self.d_g,
+            &mut self.d_a,
+            &mut self.f_m,
+        ]
+    }
+
     /// Total inertia seen at the motor when the joint is rigid,
     /// `J_m + r²(J_a1 + J_a2)` [kg·m²] (the parallel mass is not included).
     pub fn rigid_inertia(&self) -> f64 {

@@ -168,16 +168,7 @@ pub fn random_joint(
     use crate::sim::JointParams;
     let tunings = bench_tunings();
     let mut p = JointParams::default();
-    for v in [
-        &mut p.j_m,
-        &mut p.j_a1,
-        &mut p.j_a2,
-        &mut p.k_g,
-        &mut p.k_a,
-        &mut p.d_g,
-        &mut p.d_a,
-        &mut p.f_m,
-    ] {
+    for v in p.three_mass_values_mut() {
         *v *= 1.0 + 0.3 * (2.0 * rng.uniform() - 1.0);
     }
     let rms = 0.01 * 40f64.powf(rng.uniform());
