@@ -103,6 +103,16 @@ impl Fitter<'_> {
         )
     }
 
+    /// Whether a pair led by `lead`'s effect starts from the structure grown in the time
+    /// domain ([`super::starts::LinearStarts::grown`]): a Coulomb friction where the motor
+    /// sticks. Such a pair is fitted from its lead's values only: the data's own start of a
+    /// pair with the friction is the grown structure the lead started from already, and
+    /// the frequency-domain fits of its partner started from the FRF the sticking motor
+    /// spoils.
+    pub fn grown_lead(&self, lead: &Effect) -> bool {
+        self.starts.grown.is_some() && matches!(lead, Effect::CoulombFriction(_))
+    }
+
     /// Every job of `jobs`, on the request's threads, the results in order.
     pub fn fit_all(&self, jobs: &[Job<'_>]) -> Vec<Result<Fitted, CandidateError>> {
         parallel(jobs, self.req.options.threads, |j| self.fit(j))

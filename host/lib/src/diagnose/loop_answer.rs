@@ -618,16 +618,16 @@ fn pair_in_loop(
         .filter(|c| c.0.significant)
         .filter_map(|c| c.1.as_ref())
         .collect();
-    // each pair from the lead's fit and from the data's own start, as the open-loop pairs
+    // each pair from the lead's fit and, unless the lead was grown where the motor sticks
+    // ([`Fitter::grown_lead`]), from the data's own start, as the open-loop pairs
     // ([`super::select::pairs`]: a single bends its structure to take its partner's part)
+    let own_start = !fitter.grown_lead(&first);
     let (jobs, partners): (Vec<Job<'_>>, Vec<&Fitted>) = partners
         .iter()
         .flat_map(|p| {
             let effects = vec![first, p.fit.model.effects[0]];
-            [
-                ((effects.clone(), Some(&lead.fit)), *p),
-                ((effects, None), *p),
-            ]
+            let own = own_start.then(|| ((effects.clone(), None), *p));
+            std::iter::once(((effects, Some(&lead.fit)), *p)).chain(own)
         })
         .unzip();
     if jobs.is_empty() {

@@ -437,8 +437,7 @@ fn pair_jobs<'s>(
         // a Coulomb friction fitted from the grown start ([`grow`]) takes the extra mode
         // whatever the mode's single scored: that single started from the FRF the
         // sticking motor spoils
-        let grown_lead =
-            fitter.starts.grown.is_some() && matches!(first, Effect::CoulombFriction(_));
+        let grown_lead = fitter.grown_lead(&first);
         for (j, c) in singles.iter().enumerate() {
             if j == l || leaders.contains(&j) && j < l {
                 continue;
