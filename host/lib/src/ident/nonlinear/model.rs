@@ -731,9 +731,10 @@ impl<T: Real> Plant<T> {
     /// The RK4 steps of sample `k` on `grid` from `(q, w)`. With `only_saturated`, stops
     /// and returns false at the first stage whose Coulomb friction is not saturated (the
     /// state is then partly advanced; the caller restores it).
+    /// `WIDE`: called from [`Self::simulate_wide`], the steps compiled as it is.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn sample_steps(
+    fn sample_steps<const WIDE: bool>(
         &self,
         grid: &Grid<T>,
         held: &Held<T>,
@@ -746,10 +747,31 @@ impl<T: Real> Plant<T> {
     ) -> bool {
         let args = (grid, held, k, measured);
         if T::INLINE_STEPS {
-            self.steps_inlined(args, q, w, st, only_saturated)
-        } else {
-            self.steps_outlined(args, q, w, st, only_saturated)
+            return self.steps_inlined(args, q, w, st, only_saturated);
         }
+        #[cfg(target_arch = "x86_64")]
+        if WIDE {
+            // SAFETY: `WIDE` is set only by `simulate_wide`, which runs only after
+            // `wide_vectors` found AVX2 on this CPU
+            return unsafe { self.steps_wide(args, q, w, st, only_saturated) };
+        }
+        self.steps_outlined(args, q, w, st, only_saturated)
+    }
+
+    /// [`Self::steps_outlined`] compiled for AVX2 ([`Self::simulate_wide`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline(never)]
+    #[allow(clippy::type_complexity)]
+    fn steps_wide(
+        &self,
+        args: (&Grid<T>, &Held<T>, usize, Option<&[f64]>),
+        q: &mut [T; MAX_BODIES],
+        w: &mut [T; MAX_BODIES],
+        st: &mut Stages<T>,
+        only_saturated: bool,
+    ) -> bool {
+        self.steps_inlined(args, q, w, st, only_saturated)
     }
 
     /// [`Self::steps_inlined`] as a call of its own ([`Real::INLINE_STEPS`]).
@@ -883,7 +905,46 @@ impl<T: Real> Plant<T> {
     /// of steps, as a model without friction is; the others in `substeps`. The choice
     /// follows the state, not the clock, and is the same for the value and its dual-number
     /// derivatives.
+    ///
+    /// The dual numbers' simulation runs compiled for AVX2 where the CPU has it
+    /// ([`wide_vectors`]): their slots are added and multiplied four to a register instead
+    /// of two. Each slot's arithmetic is the same IEEE operation either way (Rust neither
+    /// fuses nor reorders floating-point operations), so both give the same bits.
     pub(crate) fn simulate(
+        &self,
+        u: &[f64],
+        ts: f64,
+        theta0: f64,
+        measured: Option<&[f64]>,
+        substeps: usize,
+        emit: impl FnMut(usize, T, T),
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if !T::INLINE_STEPS && wide_vectors() {
+            // SAFETY: the CPU has AVX2, checked just above
+            return unsafe { self.simulate_wide(u, ts, theta0, measured, substeps, emit) };
+        }
+        self.simulate_on::<false>(u, ts, theta0, measured, substeps, emit)
+    }
+
+    /// [`Self::simulate`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn simulate_wide(
+        &self,
+        u: &[f64],
+        ts: f64,
+        theta0: f64,
+        measured: Option<&[f64]>,
+        substeps: usize,
+        emit: impl FnMut(usize, T, T),
+    ) -> bool {
+        self.simulate_on::<true>(u, ts, theta0, measured, substeps, emit)
+    }
+
+    /// The body of [`Self::simulate`]; `WIDE` as [`Self::sample_steps`].
+    #[inline(always)]
+    fn simulate_on<const WIDE: bool>(
         &self,
         u: &[f64],
         ts: f64,
@@ -970,14 +1031,17 @@ impl<T: Real> Plant<T> {
             let theta_prev = q[0];
             let coarse_done = coarse.as_ref().is_some_and(|g| {
                 let (q0, w0) = (q, w);
-                let done = self.sample_steps(g, &held, k, measured, &mut q, &mut w, &mut st, true);
+                let done =
+                    self.sample_steps::<WIDE>(g, &held, k, measured, &mut q, &mut w, &mut st, true);
                 if !done {
                     (q, w) = (q0, w0);
                 }
                 done
             });
             if !coarse_done {
-                self.sample_steps(&fine, &held, k, measured, &mut q, &mut w, &mut st, false);
+                self.sample_steps::<WIDE>(
+                    &fine, &held, k, measured, &mut q, &mut w, &mut st, false,
+                );
             }
             tau = self.torque_at(&fine, 3 * m, &held);
             if !w[0].is_finite() || !q[0].is_finite() {
@@ -990,6 +1054,13 @@ impl<T: Real> Plant<T> {
         }
         true
     }
+}
+
+/// Whether this CPU has AVX2 ([`Plant::simulate`]); the standard library reads it once
+/// and keeps it.
+#[cfg(target_arch = "x86_64")]
+fn wide_vectors() -> bool {
+    std::arch::is_x86_feature_detected!("avx2")
 }
 
 /// The RK4 grid of one sample ([`Plant::grid`]).
@@ -1056,4 +1127,63 @@ pub fn sim_plant(model: &NlModel, plant: &[f64]) -> SimPlant {
         }
     }
     SimPlant { kind, params: p }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ident::nonlinear::dual::Dual;
+    use crate::model::effects::{CoulombFriction, TimeDelay};
+
+    /// The motor angles and their derivatives simulated by `run`, every slot's bits.
+    fn bits(run: impl FnOnce(&mut dyn FnMut(usize, Dual<14>, Dual<14>)) -> bool) -> Vec<u64> {
+        let mut out = Vec::new();
+        assert!(run(
+            &mut |_, th, v| out.extend(th.0.iter().chain(&v.0).map(|x| x.to_bits()))
+        ));
+        out
+    }
+
+    /// The dual numbers' simulation compiled for AVX2 ([`Plant::simulate`] on a CPU that
+    /// has it) gives the bits of the plain one: the fits, and so the diagnosis, do not
+    /// depend on the machine's vector width. A joint that sticks (the coarse and fine RK4
+    /// grids both taken), behind a fractional delay and the current loop's lag.
+    #[test]
+    fn the_wide_simulation_gives_the_bits_of_the_plain_one() {
+        let cfg = crate::sim::SimConfig::default();
+        let friction = Effect::CoulombFriction(CoulombFriction {
+            fc: 0.04,
+            ..CoulombFriction::default()
+        });
+        let (mut model, values) = crate::test_support::three_mass_truth(&cfg, friction, 4);
+        model
+            .effects
+            .push(Effect::TimeDelay(TimeDelay { samples: 1.3 }));
+        let values = model.values(&values[..8], 1e-3, 0.0);
+        // every parameter seeds a slot (the layout holds fewer than 14)
+        let p: Vec<Dual<14>> = values
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| {
+                let mut d = Dual::from_real(v);
+                d[1 + i % 13] = 1.0;
+                d
+            })
+            .collect();
+        let plant = Plant::new(&model, &p);
+        let ts = 5e-4;
+        let u: Vec<f64> = (0..3000)
+            .map(|k| {
+                let t = k as f64 * ts;
+                0.06 * (2.0 * std::f64::consts::PI * 2.0 * t).sin()
+                    + 0.02 * (2.0 * std::f64::consts::PI * 37.0 * t).sin()
+            })
+            .collect();
+        let args = (u.as_slice(), ts, 0.1);
+        let wide = bits(|emit| plant.simulate(args.0, args.1, args.2, None, 4, emit));
+        let plain = bits(|emit| plant.simulate_on::<false>(args.0, args.1, args.2, None, 4, emit));
+        assert_eq!(wide.len(), plain.len());
+        let differ = wide.iter().zip(&plain).filter(|(a, b)| a != b).count();
+        assert_eq!(differ, 0, "{differ} of {} slots differ", wide.len());
+    }
 }
