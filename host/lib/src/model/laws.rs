@@ -78,10 +78,16 @@ pub fn dead_zone<T: Float>(delta: T, half: T) -> T {
 #[inline(always)]
 pub fn dead_zone_smooth<T: Float>(delta: T, half: T, eps: T) -> T {
     let half_t: T = c(0.5);
-    let s = |x: T| (x * x + eps * eps).sqrt();
     let p = delta - half;
     let n = delta + half;
-    half_t * (p + s(p)) + half_t * (n - s(n))
+    half_t * (p + smooth_abs(p, eps)) + half_t * (n - smooth_abs(n, eps))
+}
+
+/// `√(x² + ε²)`, the smooth `|x|` of [`dead_zone_smooth`] (inlined into the simulation's
+/// steps, which a closure was not).
+#[inline(always)]
+fn smooth_abs<T: Float>(x: T, eps: T) -> T {
+    (x * x + eps * eps).sqrt()
 }
 
 /// Slope `d/dδ` of [`dead_zone_smooth`]: 0 deep in the gap, 1 in contact; it scales the
@@ -89,10 +95,9 @@ pub fn dead_zone_smooth<T: Float>(delta: T, half: T, eps: T) -> T {
 #[inline(always)]
 pub fn dead_zone_smooth_slope<T: Float>(delta: T, half: T, eps: T) -> T {
     let half_t: T = c(0.5);
-    let s = |x: T| (x * x + eps * eps).sqrt();
     let p = delta - half;
     let n = delta + half;
-    half_t * (T::one() + p / s(p)) + half_t * (T::one() - n / s(n))
+    half_t * (T::one() + p / smooth_abs(p, eps)) + half_t * (T::one() - n / smooth_abs(n, eps))
 }
 
 /// Smooth Coulomb friction for the estimator, `F_c tanh(ω/v_ε)` [N·m], opposing the motor

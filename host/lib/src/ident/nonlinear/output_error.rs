@@ -663,8 +663,13 @@ impl LeastSquares for Problem<'_> {
             ssr += e * e;
             for a in 0..nf {
                 jte[a] += row[a] * e;
-                for b in a..nf {
-                    jtj[(a, b)] += row[a] * row[b];
+            }
+            // the upper triangle column by column: a column is contiguous (nalgebra stores
+            // by columns), so its products are taken a vector register at a time
+            for (b, col) in jtj.as_mut_slice().chunks_exact_mut(nf).enumerate() {
+                let rb = row[b];
+                for (j, ra) in col[..=b].iter_mut().zip(&row[..=b]) {
+                    *j += ra * rb;
                 }
             }
         });
