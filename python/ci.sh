@@ -6,19 +6,7 @@
 # instance) and python/examples/quickstart.py.
 # Needs python3 (≥ 3.9) with venv and pip, and PyPI for maturin, pytest, numpy, pandas, and
 # the fleet's pyarrow, duckdb and ray.
-#
-# `python/ci.sh venv` only makes the environment (downloads and installs, no cargo: .ci/run
-# runs it beside the Rust build); `python/ci.sh test` does the rest in an environment made
-# so; no argument does both.
 set -euo pipefail
-stage="${1:-all}"
-case "$stage" in
-    all | venv | test) ;;
-    *)
-        echo "python/ci.sh: unknown stage '$stage' (expected venv, test or nothing)" >&2
-        exit 2
-        ;;
-esac
 cd "$(dirname "$0")"
 root="$(cd .. && pwd)"
 target="${CARGO_TARGET_DIR:-$root/target}"
@@ -31,18 +19,12 @@ if ! "$python" -c 'import sys, venv; assert sys.version_info >= (3, 9)' 2>/dev/n
     exit 2
 fi
 
-if [ "$stage" != test ]; then
-    echo "== python: fresh virtual environment $work/venv"
-    rm -rf "$work"
-    mkdir -p "$work"
-    "$python" -m venv "$work/venv"
-    "$work/venv/bin/pip" install --quiet --upgrade pip
-    "$work/venv/bin/pip" install --quiet maturin pytest numpy pandas pyarrow duckdb ray
-    [ "$stage" = venv ] && exit 0
-elif [ ! -x "$work/venv/bin/maturin" ]; then
-    echo "python/ci.sh test: no environment at $work/venv (run python/ci.sh venv first)" >&2
-    exit 2
-fi
+echo "== python: fresh virtual environment $work/venv"
+rm -rf "$work"
+mkdir -p "$work"
+"$python" -m venv "$work/venv"
+"$work/venv/bin/pip" install --quiet --upgrade pip
+"$work/venv/bin/pip" install --quiet maturin pytest numpy pandas pyarrow duckdb ray
 
 echo "== python: abi3 wheel (maturin build --release)"
 start=$(date +%s)
