@@ -438,9 +438,11 @@ struct Problem<'a> {
     highpass: Vec<[f64; 5]>,
 }
 
-/// Runs `$body` with `$d` the narrowest [`Dual`] that holds `$n` derivatives: the
-/// simulation's cost grows with the slots, so a fit of 8 parameters pays for 9, not 12
-/// (seed 001's final fit: 0.18 → 0.155 s).
+/// Runs `$body` with `$d` a [`Dual`] that holds `$n` derivatives, its slots a multiple of
+/// four: the simulation's cost grows with the registers its slots fill, four to an AVX2
+/// register ([`super::model::Plant::simulate`]), so a fit of 8 parameters pays for 12
+/// slots either way, and each width is compiled twice (plain and AVX2). Slots beyond the
+/// parameters stay nought and never touch the others.
 macro_rules! with_dual {
     ($n:expr, $d:ident => $body:expr) => {
         match $n {
@@ -448,31 +450,15 @@ macro_rules! with_dual {
                 type $d = Dual<4>;
                 $body
             }
-            4..=5 => {
-                type $d = Dual<6>;
-                $body
-            }
-            6..=7 => {
+            4..=7 => {
                 type $d = Dual<8>;
                 $body
             }
-            8 => {
-                type $d = Dual<9>;
-                $body
-            }
-            9 => {
-                type $d = Dual<10>;
-                $body
-            }
-            10..=11 => {
+            8..=11 => {
                 type $d = Dual<12>;
                 $body
             }
-            12..=13 => {
-                type $d = Dual<14>;
-                $body
-            }
-            14..=15 => {
+            12..=15 => {
                 type $d = Dual<16>;
                 $body
             }
