@@ -394,16 +394,15 @@ pub(super) fn fit_and_score(
             given[ci].extend(keys);
             nl.given = given;
             if let Some(b) = from {
-                // a pair: the lead's fitted friction, and the mode from the best point of
-                // the growth's grid over it on the lead's structure (the automatic start's
-                // grid keeps the lead's gearbox damper, which stood in for the mode: bench
-                // case 17, a parallel mode at 10 Hz under friction that sticks 23 % of the
-                // time, answered Coulomb friction alone, 20 points short of the truth), or
-                // from the race over its frequency when that ends lower (case 67, a
-                // parallel mode at 10 Hz, the motor stuck on 81 % of the samples: from the
-                // grid the mode went to 50 Hz and the pair gained +0.4 ± 0.1 points over
-                // the friction alone, 75.2 % against the true model's 92.3 %; from the race
-                // it reached 92.7 %)
+                // a pair: the lead's fitted friction, and the mode from the growth's race
+                // over its grid on the lead's structure (the automatic start's grid keeps
+                // the lead's gearbox damper, which stood in for the mode: bench case 17, a
+                // parallel mode at 10 Hz under friction that sticks 23 % of the time,
+                // answered Coulomb friction alone, 20 points short of the truth; and the
+                // grid's best point alone puts the mode out of the way: case 67, a parallel
+                // mode at 10 Hz, the motor stuck on 81 % of the samples, the mode went to
+                // 50 Hz and the pair gained +0.4 ± 0.1 points over the friction alone, 75.2
+                // % against the true model's 92.3 %; from the race it reached 92.7 %)
                 if let Some(c) = b
                     .model
                     .effects

@@ -22,9 +22,10 @@
 //! the three-mass chain; for the four-mass the parallel mass `J_p` as an extra mode in
 //! parallel on that three-mass's first arm mass (seed 000 eq. (7)). Each stage starts from
 //! the previous one's plant, lag and friction, the mode from a grid over its mass, its
-//! frequency and the gearbox damping, screened by short fits (`fit_with_mode`), or from a
-//! race over its frequency where that grid, judging its points before any fit, keeps a mode
-//! that changes nothing (`race_mode`; bench case 10 of `benches/diagnose.rs`). On the
+//! frequency and the gearbox damping: its best point of each frequency and of each damper
+//! share fitted briefly on a piece of the record, the lowest on to the stage's fit
+//! (`fit_with_mode_raced`; judged before any fit, the grid keeps a mode that changes
+//! nothing, bench case 10 of `benches/diagnose.rs`). On the
 //! three-mass with `F_c` = 0.06 N·m (`jointid simulate --model three-mass --effect
 //! coulomb_friction:fc=0.06,fs=0.06 --seed 4`, the torque below the level on 79 % of the
 //! samples) the fit from the grown start reaches the truth (validation FIT 72.15 %, the
@@ -740,23 +741,125 @@ pub fn fit_with_mode(
     }
 }
 
-/// [`fit_with_mode`], and a race over the mode's frequency (`race_mode`) kept when it
-/// ends lower: the grid judges its points unfitted.
+/// The fit of `req` (one of its effects an extra mode, attached as it says, on the
+/// structure's values `plant`, with `offset` [N·m]) from a race over the grid of
+/// [`fit_with_mode`]: every point of the grid costed on a piece of the longest record (its
+/// first quarter, at least [`RACE_MIN_SAMPLES`]); its runners, the point of lowest cost of
+/// each frequency and of each damper share (twelve at most), each fitted for [`RACE_ITER`]
+/// iterations on the piece (on the machine's threads, judged in their order: the same
+/// lead on any number of threads); the lead fitted for [`SCREEN_ITER`] iterations on all
+/// records. A start, as [`fit_with_mode`]'s: the smooth law's minimum without covariance.
+///
+/// **Why the frequencies.** Before any fit, a mode in the band where it acts costs more
+/// than one out of the way: the smaller structure has bent its values to stand in for the
+/// mode it lacks. Bench case 10 of `benches/diagnose.rs` (the arm's second mass 4.3 % of
+/// the arm, 22.7 Hz with the arm held still, the motor stuck on 93 % of the samples): on
+/// the grown two-mass (`k_g` −14 %, `f_m` 14×, `F_c` −30 %) the grid's cost is 32.53 for a
+/// mode at 60 Hz, 32.74 at 28 Hz, 36.1 at 19.5 Hz, so each damper share's best point is a
+/// mode that changes nothing, and the fit from it ends with `F_c` −32 %. Fitted for five
+/// iterations on a quarter of the record, the points at 19.5 and 28 Hz lead (7.44 against ≥
+/// 7.56 for the others), and from either the fit reaches the truth's basin (`F_c` +1 %, the
+/// mode at 22.8 Hz, the cost 31.23 against 32.0).
+///
+/// **Why one race on a piece.** The damper shares' points and the frequencies' points ran
+/// as two races before, the first on all records, each with its own continuation, and the
+/// loser's continuation was work thrown away. Judged alike, on the same piece after the
+/// same iterations, one continuation serves: the `HARD=1 SMALL=1` bench of
+/// `benches/diagnose.rs` gives the same answers, and the growth tests take a quarter less
+/// time (`a_sticking_three_mass_joint_starts_from_the_structure_grown_in_the_time_domain`
+/// 16.2 and 14.9 s before, 12.0 and 11.1 s after, runs alternated).
 ///
 /// # Errors
-/// As [`fit_with_mode`].
+/// As [`identify_segments`], when no runner could be fitted and `req` from its own start
+/// fails too.
 pub fn fit_with_mode_raced(
     est: &[IdData],
     req: &NlRequest,
     plant: &[f64],
     offset: f64,
 ) -> Result<NlFit, NlRunError> {
-    let f = fit_with_mode(est, req, plant, offset)?;
-    Ok(match race_mode(est, req, plant, offset, &f) {
-        Some(g) if g.ssr < f.ssr => g,
-        _ => f,
-    })
+    let fit = |r: &NlRequest, on: &[IdData]| identify_segments(on, r).map(|r| r.fit);
+    let at = req
+        .effects
+        .iter()
+        .position(|e| matches!(e, Effect::ExtraMode(_)));
+    let (Some(data), Some(at)) = (est.iter().max_by_key(|d| d.len()), at) else {
+        return fit(req, est);
+    };
+    let Effect::ExtraMode(mode) = req.effects[at] else {
+        return fit(req, est);
+    };
+    let n = (data.len() / 4).max(RACE_MIN_SAMPLES).min(data.len());
+    let piece = [data.slice(0..n)];
+    let base = super::model_of(req, data);
+    let dg = req.structure.param_names().iter().position(|n| *n == "d_g");
+    // the grid costed on the piece: for each frequency, each damper share's best mass
+    let frequencies: Vec<f64> = mode_frequencies().collect();
+    let grid = parallel(&frequencies, machine_threads(), |&f_hz| {
+        DAMPER_SHARES.map(|d| {
+            let points = MODE_SHARES.iter().map(move |&s| (d, s, f_hz));
+            best_point(&piece[0], &base, at, (plant, dg, offset), mode, points)
+        })
+    });
+    let lowest = |points: &mut dyn Iterator<Item = &Option<Point>>| {
+        points
+            .flatten()
+            .fold(None::<&Point>, |m, p| match m {
+                Some(m) if m.0 <= p.0 => Some(m),
+                _ => Some(p),
+            })
+            .cloned()
+    };
+    let mut runners: Vec<Point> = Vec::new();
+    let by_frequency = grid.iter().map(|row| lowest(&mut row.iter()));
+    let by_damper = (0..DAMPER_SHARES.len()).map(|i| lowest(&mut grid.iter().map(|row| &row[i])));
+    for p in by_frequency.chain(by_damper).flatten() {
+        if !runners.iter().any(|r| r.1 == p.1 && r.2 == p.2) {
+            runners.push(p);
+        }
+    }
+    let screening = NlOptions {
+        cov_lags: 0,
+        exact_correction: false,
+        smoothing_sigma: false,
+        ..req.options.clone()
+    };
+    let short: Vec<NlRequest> = runners
+        .iter()
+        .map(|(_, p, m)| {
+            let mut r = req.clone();
+            r.effects[at] = Effect::ExtraMode(*m);
+            r.start = super::NlStart::Values(super::model_of(&r, data).values(p, offset, 0.0));
+            r.options = NlOptions {
+                max_iter: RACE_ITER,
+                ..screening.clone()
+            };
+            r
+        })
+        .collect();
+    let mut lead: Option<NlFit> = None;
+    for f in parallel(&short, machine_threads(), |r| fit(r, &piece))
+        .into_iter()
+        .flatten()
+    {
+        if lead.as_ref().is_none_or(|l| f.ssr < l.ssr) {
+            lead = Some(f);
+        }
+    }
+    let Some(lead) = lead else {
+        return fit(req, est);
+    };
+    let mut r = continued(req, &lead, SCREEN_ITER);
+    r.options = NlOptions {
+        max_iter: SCREEN_ITER,
+        ..screening
+    };
+    fit(&r, est)
 }
+
+/// A point of the grid over an added mode ([`best_point`]): its output-error cost, the
+/// structure's values and the mode.
+type Point = (f64, Vec<f64>, ExtraMode);
 
 /// Frequencies of the grid over an added mode (the arm held still) [Hz]: 3 to 60 Hz, 9
 /// steps.
@@ -789,8 +892,8 @@ fn best_point(
     (plant, dg, offset): (&[f64], Option<usize>, f64),
     mode: ExtraMode,
     points: impl Iterator<Item = (f64, (f64, bool), f64)>,
-) -> Option<(f64, Vec<f64>, ExtraMode)> {
-    let mut best: Option<(f64, Vec<f64>, ExtraMode)> = None;
+) -> Option<Point> {
+    let mut best: Option<Point> = None;
     for (dg_share, (share, split), f_hz) in points {
         let j = share * plant[1];
         let mut p = plant.to_vec();
@@ -820,80 +923,11 @@ fn best_point(
     best
 }
 
-/// Iterations of each runner of the race ([`race_mode`]).
+/// Iterations of each runner of the race ([`fit_with_mode_raced`]).
 const RACE_ITER: usize = 5;
 
 /// Fewest samples of the piece the race runs on (2 s at 2 kHz).
 const RACE_MIN_SAMPLES: usize = 4000;
-
-/// The mode (the extra mode among `req`'s effects) added by a race over its frequency: at
-/// each frequency the grid's point of lowest cost (mass share, damper share, the grid's),
-/// each fitted for [`RACE_ITER`] iterations on the first quarter of the longest record (at
-/// least [`RACE_MIN_SAMPLES`]), the one that ends lowest fitted for [`SCREEN_ITER`]
-/// iterations on all records; `None` when it ends no lower on the piece than `kept` (the
-/// grid's fit), nothing could be fitted, or `req` has no extra mode.
-///
-/// **Why.** Before any fit, a mode in the band where it acts costs more than one out of
-/// the way: the smaller structure has bent its values to stand in for the mode it lacks.
-/// Bench case 10 of `benches/diagnose.rs` (the arm's second mass 4.3 % of the arm, 22.7 Hz
-/// with the arm held still, the motor stuck on 93 % of the samples): on the grown two-mass
-/// (`k_g` −14 %, `f_m` 14×, `F_c` −30 %) the grid's cost is 32.53 for a mode at 60 Hz,
-/// 32.74 at 28 Hz, 36.1 at 19.5 Hz, so each damper share screens a mode that changes
-/// nothing, and the final fit ends with `F_c` −32 %. Fitted for five iterations on a
-/// quarter of the record, the points at 19.5 and 28 Hz lead (7.44 against ≥ 7.56 for the
-/// others), and from either the fit reaches the truth's basin (`F_c` +1 %, the mode at
-/// 22.8 Hz, the cost 31.23 against 32.0).
-fn race_mode(
-    est: &[IdData],
-    req: &NlRequest,
-    plant: &[f64],
-    offset: f64,
-    kept: &NlFit,
-) -> Option<NlFit> {
-    let data = est.iter().max_by_key(|d| d.len())?;
-    let at = req
-        .effects
-        .iter()
-        .position(|e| matches!(e, Effect::ExtraMode(_)))?;
-    let Effect::ExtraMode(mode) = req.effects[at] else {
-        return None;
-    };
-    let n = (data.len() / 4).max(RACE_MIN_SAMPLES).min(data.len());
-    let piece = [data.slice(0..n)];
-    let base = super::model_of(req, data);
-    let dg = req.structure.param_names().iter().position(|n| *n == "d_g");
-    let fit = |r: &NlRequest, on: &[IdData]| identify_segments(on, r).ok().map(|r| r.fit);
-    // each frequency's screening and short fit on the machine's threads, judged in the
-    // frequencies' order (the same lead on any number of threads)
-    let frequencies: Vec<f64> = mode_frequencies().collect();
-    let raced = parallel(&frequencies, machine_threads(), |&f_hz| {
-        let points = DAMPER_SHARES
-            .iter()
-            .flat_map(|&d| MODE_SHARES.iter().map(move |&s| (d, s, f_hz)));
-        let (_, p, m) = best_point(&piece[0], &base, at, (plant, dg, offset), mode, points)?;
-        let mut r = req.clone();
-        r.effects[at] = Effect::ExtraMode(m);
-        r.start = super::NlStart::Values(super::model_of(&r, data).values(&p, offset, 0.0));
-        r.options.max_iter = RACE_ITER;
-        fit(&r, &piece)
-    });
-    let mut lead: Option<NlFit> = None;
-    for f in raced.into_iter().flatten() {
-        if lead.as_ref().is_none_or(|l| f.ssr < l.ssr) {
-            lead = Some(f);
-        }
-    }
-    let lead = lead?;
-    // the grid's fit on the same piece, both with its smoothing: the race's lead must end
-    // lower there
-    let on_piece = |f: &NlFit| super::cost_at(&piece[0], &kept.model, &f.values);
-    if let (Some(a), Some(b)) = (on_piece(&lead), on_piece(kept)) {
-        if a >= b {
-            return None;
-        }
-    }
-    fit(&continued(req, &lead, SCREEN_ITER), est)
-}
 
 /// `req` continued from a race's runner `fit` for `max_iter` iterations: its effects,
 /// lag and values (its friction among them), nothing given.
