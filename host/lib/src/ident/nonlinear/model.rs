@@ -762,10 +762,9 @@ impl<T: Real> Plant<T> {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     #[inline(never)]
-    #[allow(clippy::type_complexity)]
     fn steps_wide(
         &self,
-        args: (&Grid<T>, &Held<T>, usize, Option<&[f64]>),
+        args: StepArgs<'_, T>,
         q: &mut [T; MAX_BODIES],
         w: &mut [T; MAX_BODIES],
         st: &mut Stages<T>,
@@ -776,10 +775,9 @@ impl<T: Real> Plant<T> {
 
     /// [`Self::steps_inlined`] as a call of its own ([`Real::INLINE_STEPS`]).
     #[inline(never)]
-    #[allow(clippy::type_complexity)]
     fn steps_outlined(
         &self,
-        args: (&Grid<T>, &Held<T>, usize, Option<&[f64]>),
+        args: StepArgs<'_, T>,
         q: &mut [T; MAX_BODIES],
         w: &mut [T; MAX_BODIES],
         st: &mut Stages<T>,
@@ -790,10 +788,9 @@ impl<T: Real> Plant<T> {
 
     /// The body of [`Self::sample_steps`].
     #[inline(always)]
-    #[allow(clippy::type_complexity)]
     fn steps_inlined(
         &self,
-        (grid, held, k, measured): (&Grid<T>, &Held<T>, usize, Option<&[f64]>),
+        (grid, held, k, measured): StepArgs<'_, T>,
         q: &mut [T; MAX_BODIES],
         w: &mut [T; MAX_BODIES],
         st: &mut Stages<T>,
@@ -1062,6 +1059,10 @@ impl<T: Real> Plant<T> {
 fn wide_vectors() -> bool {
     std::arch::is_x86_feature_detected!("avx2")
 }
+
+/// What the steps of a sample read: the RK4 grid, the held input, the sample's index and
+/// the measured motor angle [rad] a ripple reads, if any ([`Plant::sample_steps`]).
+type StepArgs<'a, T> = (&'a Grid<T>, &'a Held<T>, usize, Option<&'a [f64]>);
 
 /// The RK4 grid of one sample ([`Plant::grid`]).
 struct Grid<T> {
