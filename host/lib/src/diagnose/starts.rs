@@ -7,7 +7,8 @@ use std::sync::OnceLock;
 
 use crate::data::Dataset;
 use crate::ident::nonlinear::{
-    grow, linear_start_segments, linear_start_shared, DelayLines, NlRequest, RawFrfFits, StartDrive,
+    grow, linear_start_segments, linear_start_shared, DelayLines, NlRequest, RawFrfFits,
+    StartSearch,
 };
 use crate::ident::parallel::parallel;
 use crate::ident::sml::{FrfStart, GOOD_START_RATIO};
@@ -278,7 +279,7 @@ fn extra_mode_start(
         1,
         &NlRequest::new(bigger, r, coulomb.into_iter().collect()),
         raw,
-        StartDrive::LagOnly,
+        StartSearch::Candidate,
     )
     .ok()?;
     if coulomb.is_some() && !compensation_used(&l) {
@@ -329,7 +330,7 @@ fn quiet_mode_start(
         1,
         &NlRequest::new(structure, r, Vec::new()),
         (raw, None),
-        StartDrive::LagAndDelay,
+        StartSearch::Full,
     )
     .ok()
     .filter(|l| l.at_noise)?;
@@ -384,7 +385,7 @@ fn coulomb_linear_of(
     raw: &RawFrfFits,
 ) -> (Option<(Vec<f64>, f64)>, Option<f64>) {
     let req_c = NlRequest::new(req.structure, req.r, vec![coulomb]);
-    let Ok(l) = linear_start_shared(ds, 1, &req_c, (raw, None), StartDrive::LagAndDelay) else {
+    let Ok(l) = linear_start_shared(ds, 1, &req_c, (raw, None), StartSearch::Full) else {
         return (None, None);
     };
     let level = l.compensation.as_ref().and_then(|c| {
@@ -409,7 +410,7 @@ pub(super) fn structure_start(
         1,
         &NlRequest::new(req.structure, req.r, Vec::new()),
         (raw, None),
-        StartDrive::LagAndDelay,
+        StartSearch::Full,
     ) {
         Ok(l) => (Some((l.values, l.tau_c)), l.delay_lines),
         Err(e) => {

@@ -117,6 +117,10 @@ pub(crate) const GOOD_START_RATIO: f64 = 2.0;
 /// parameter costs 1 (tighter, 1e-10, the refinement crept along the nearly collinear
 /// lag and delay for its 200 iterations: 0.39 s of a 0.40 s fit at 15,000 samples)
 const SML_REL_COST_TOL: f64 = 1e-7;
+/// lowering of the best SML cost that counts as progress of the search for starts
+/// ([`FrfFitOptions::patience`]): the cost is a negative log-likelihood, so one unit is
+/// the likelihood ratio of e, below what tells two basins apart
+pub const STALL_COST: f64 = 1.0;
 /// relative standard deviation above which a parameter is "poorly determined"
 pub const POORLY_DETERMINED_REL: f64 = 0.5;
 
@@ -149,6 +153,10 @@ pub struct FrfFitOptions {
     /// a fit of the same structure to a nearby FRF, tried first ([`FrfStart`]): a
     /// friction-compensated FRF starts from the raw one's fit
     pub start: Option<FrfStart>,
+    /// starts in a row that may fail to lower the search's best SML cost by more than
+    /// [`STALL_COST`] before the search ends (`None`: every start of the search is made).
+    /// For a start that a time-domain fit refines, which needs the basin, not the minimum
+    pub patience: Option<usize>,
 }
 
 impl FrfFitOptions {
@@ -164,6 +172,7 @@ impl FrfFitOptions {
             delay: Drive::Estimate,
             max_iter: 200,
             start: None,
+            patience: None,
         }
     }
 }
@@ -1244,6 +1253,8 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
                 .count()
         };
         choices.sort_by_key(|c| std::cmp::Reverse(shown(c)));
+        // the pass's best SML cost of a start, and the starts made since it last fell
+        let mut stall = (f64::INFINITY, 0usize);
         for choice in choices {
             let res_hz: Vec<f64> = choice.iter().map(|&i| cand[i]).collect();
             if tried.contains(&res_hz) {
@@ -1266,6 +1277,11 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
                 };
                 let mut th0: Vec<f64> = p0.iter().map(|v| v.max(1e-300).ln()).collect();
                 th0.extend([lag0, delay0]);
+                // a search that has stalled for its patience ends
+                if opts.patience.is_some_and(|p| stall.1 >= p) {
+                    break 'search;
+                }
+                stall.1 += 1;
                 let (lower, upper) = bounds(&th0);
                 starts += 1;
                 // stage 1: losses and drive; stage 2: everything (log cost)
@@ -1289,6 +1305,9 @@ pub fn fit_frf(frf: &Frf, opts: &FrfFitOptions) -> Result<FrfFit, FrfFitError> {
                     continue;
                 };
                 let c = sml_p.cost(&f2.theta);
+                if c < stall.0 - STALL_COST {
+                    stall = (c, 0);
+                }
                 if c.is_finite() {
                     pool.push(Candidate {
                         theta: f2.theta.clone(),
