@@ -507,7 +507,8 @@ pub fn dead_zone_gain(h: f64, a: f64) -> f64 {
 /// contact stiffness whose describing gain at the deflection `√2 δ` gives the linear
 /// one, [`dead_zone_gain`], at most `MAX_CONTACT_GAIN`×), for each share
 /// `BACKLASH_DAMPER_SHARES` of the linear gearbox damper (it held the impacts' losses),
-/// each fitted, the lower cost kept; for the three-mass the arm's second mass then added
+/// the shares' points raced ([`race`]: five iterations each, the lower cost on to
+/// `BACKLASH_ITER`); for the three-mass the arm's second mass then added
 /// as an extra mode in series ([`fit_with_mode`]), as the stick-slip growth does. Case 21
 /// with its joint rounded to five digits: from the damper as it is the two-mass ends at
 /// 3.9 µrad and a cost of 126.7, from a third of it at 17.5 µrad and 115.0; the diagnosis
@@ -538,7 +539,6 @@ pub fn grow_backlash(
         smoothing_sigma: false,
         ..options.clone()
     };
-    let fit = |req: &NlRequest| identify_segments(est, req).map(|r| r.fit);
     let backlash = Effect::Backlash(crate::model::effects::Backlash::default());
     let req = NlRequest {
         tau_c,
@@ -553,8 +553,8 @@ pub fn grow_backlash(
     if !(delta > 0.0 && delta.is_finite()) {
         return Err(GrowError::NoDeflection(delta));
     }
-    // the grid's best point at each damper share, each fitted, the lowest cost kept
-    let mut a: Option<NlFit> = None;
+    // the grid's best point at each damper share, the shares' fits raced ([`race`])
+    let mut starts: Vec<NlRequest> = Vec::new();
     for dg_share in BACKLASH_DAMPER_SHARES {
         let mut best: Option<(f64, Vec<f64>)> = None;
         for share in BACKLASH_SHARES {
@@ -575,24 +575,17 @@ pub fn grow_backlash(
                 }
             }
         }
-        let Some((_, start)) = best else {
-            continue;
-        };
-        let f = fit(&NlRequest {
-            start: super::NlStart::Values(start),
-            options: NlOptions {
-                max_iter: BACKLASH_ITER,
-                ..options.clone()
-            },
-            ..req.clone()
-        });
-        if let Ok(f) = f {
-            if a.as_ref().is_none_or(|k| f.ssr < k.ssr) {
-                a = Some(f);
-            }
+        if let Some((_, start)) = best {
+            starts.push(NlRequest {
+                start: super::NlStart::Values(start),
+                ..req.clone()
+            });
         }
     }
-    let a = a.ok_or(GrowError::NoGridPoint)?;
+    if starts.is_empty() {
+        return Err(GrowError::NoGridPoint);
+    }
+    let a = race(est, &starts, BACKLASH_ITER)?;
     let width_of = |f: &NlFit| {
         f.model
             .effects
@@ -705,10 +698,15 @@ pub fn fit_with_mode(
     if starts.is_empty() {
         return fit(req);
     }
-    // a race, as the automatic start runs its linear starts: each screening fit for
-    // [`RACE_ITER`] iterations (independent: on the machine's threads, judged in their
-    // order, the same choice on any number of threads), the lowest then on to
-    // [`SCREEN_ITER`]
+    race(est, &starts, SCREEN_ITER)
+}
+
+/// A race, as the automatic start runs its linear starts: each of `starts` (not empty)
+/// fitted for [`RACE_ITER`] iterations (independent: on the machine's threads, judged in
+/// their order, the same choice on any number of threads), the lowest cost then on to
+/// `total` iterations; the first failure when none fits.
+fn race(est: &[IdData], starts: &[NlRequest], total: usize) -> Result<NlFit, NlRunError> {
+    let fit = |req: &NlRequest| identify_segments(est, req).map(|r| r.fit);
     let short: Vec<NlRequest> = starts
         .iter()
         .map(|r| {
@@ -718,7 +716,7 @@ pub fn fit_with_mode(
         })
         .collect();
     let mut kept: Option<(usize, NlFit)> = None;
-    let mut last = None;
+    let mut first = None;
     for (i, r) in parallel(&short, machine_threads(), fit)
         .into_iter()
         .enumerate()
@@ -726,18 +724,19 @@ pub fn fit_with_mode(
         match r {
             Ok(f) if kept.as_ref().is_none_or(|(_, k)| f.ssr < k.ssr) => kept = Some((i, f)),
             Ok(_) => {}
-            Err(e) => last = Some(e),
+            Err(e) => {
+                first.get_or_insert(e);
+            }
         }
     }
-    match (kept, last) {
+    match (kept, first) {
         (Some((_, f)), _) if f.termination != Termination::MaxIterations => Ok(f),
         (Some((i, f)), _) => {
-            let r = continued(&starts[i], &f, SCREEN_ITER - RACE_ITER);
+            let r = continued(&starts[i], &f, total.saturating_sub(RACE_ITER));
             Ok(fit(&r).ok().filter(|g| g.ssr <= f.ssr).unwrap_or(f))
         }
         (None, Some(e)) => Err(e),
-        // `starts` is not empty: no fit and no failure does not happen
-        (None, None) => fit(req),
+        (None, None) => Err(NlRunError::Estimation(super::NlError::NoRecord)),
     }
 }
 
