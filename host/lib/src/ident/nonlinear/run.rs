@@ -1130,9 +1130,9 @@ pub enum StartSearch {
     /// delay on its lag anyway; and the search over the FRF's peaks ends after
     /// [`CANDIDATE_PATIENCE`] starts in a row that did not lower its best cost
     /// ([`FrfFitOptions::patience`]). Diagnose's extra mode starts from the structure with
-    /// one more mass, whose search (242 starts on the speed bench's joint) took 3.9 s of
-    /// CPU with the lag alone and 4.2 s more with the delay free; its best cost came at
-    /// the 13th start, 1.6 above the lowest of all 242
+    /// one more mass, whose search took 242 starts on the speed bench's joint (3.6–4.0 s;
+    /// 4.2 s more with the delay free); with the patience, 81 starts (1.3 s) and the same
+    /// best start
     Candidate,
 }
 
