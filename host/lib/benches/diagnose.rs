@@ -327,10 +327,12 @@ fn battery() {
                     .map(|(k, v)| format!("{k} {:.4e}±{:.1e}", v.value, v.std))
                     .collect();
                 println!(
-                    "    {} {:+.3}±{:.3}: {} warnings {:?}",
+                    "    {} {:+.3}±{:.3} odd {}: {} warnings {:?}",
                     c.name,
                     c.score,
                     c.score_se,
+                    c.odd_explained
+                        .map_or("-".into(), |s| format!("{:.0} %", 100.0 * s)),
                     p.join(", "),
                     c.warnings
                 );

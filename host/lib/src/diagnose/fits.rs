@@ -191,7 +191,10 @@ impl Fitter<'_> {
         if res.fit.ssr >= f.fit.ssr {
             return None;
         }
-        scored_fit(res, (&r.est_data, &r.val_data, &r.parts), req, self.starts).ok()
+        let mut g = scored_fit(res, (&r.est_data, &r.val_data, &r.parts), req, self.starts).ok()?;
+        // the same model further down its cost: what the odd lines showed of it holds
+        g.odd_shown = f.odd_shown;
+        Some(g)
     }
 
     /// The nominal `base` with `effect` added, fitted from the nominal's values (structure,
@@ -251,6 +254,10 @@ pub(super) struct Fitted {
     /// is this one when the free fit is not significant and this one is
     /// ([`super::select::lines_sized`])
     pub at_lines: Option<Box<Fitted>>,
+    /// the single's effect makes odd distortion and the model removes more of the
+    /// nominal's odd-line residual than any other single, and most of it
+    /// ([`super::select::odd_shown`])
+    pub odd_shown: bool,
 }
 
 impl Fitted {
@@ -261,15 +268,21 @@ impl Fitted {
     /// ripple at the order the search against the motor angle found (its cost drop a
     /// robust z-score of [`crate::ident::nonlinear::ripple::SIGNIFICANT_Z`] above those of
     /// the orders a period or more apart over the travel, the same ripple on each part of
-    /// the record). No other effect has such a test: friction, a gap and a stiffening
-    /// spring are odd distortions any of them partly follows, and an extra mode is a linear
-    /// structure the lines' fit of more masses would need.
+    /// the record), or a friction, a gap or a stiffening spring that removes most of the
+    /// odd distortion the nominal leaves on the validation capture's non-excited odd lines
+    /// (standing at least [`super::locate::ODD_RESIDUAL_ABOVE_NOISE_DB`] above the noise),
+    /// more than any other single does ([`super::select::odd_shown`]). Any of those three
+    /// follows part of such distortion, so only the one that explains the most is shown by
+    /// it. An extra mode is a linear structure the lines' fit of more masses would need.
     pub fn shown_apart(&self) -> bool {
         match self.fit.model.effects[..] {
             [Effect::TimeDelay(d)] => self.delay_lines.is_some_and(|l| l.holds(d.samples)),
             [Effect::TorqueRipple(r)] => self
                 .ripple_shown
                 .is_some_and(|s| s.replicated() && f64::from(s.order) == r.order),
+            [Effect::CoulombFriction(_) | Effect::Backlash(_) | Effect::NonlinearStiffness(_)] => {
+                self.odd_shown
+            }
             _ => false,
         }
     }
@@ -576,6 +589,7 @@ pub(super) fn scored_fit(
         unsupported,
         delay_lines: starts.delay_lines,
         at_lines: None,
+        odd_shown: false,
         ripple_shown,
     })
 }

@@ -82,6 +82,10 @@ pub fn odd_left_db(nominal_db: f64, share: f64) -> f64 {
 /// (case 72).
 pub const ODD_EXPLAINED_DOUBT: f64 = 0.25;
 
+/// From this share of the nominal's odd-line residual removed ([`odd_explained`]) a single
+/// explains the odd distortion of the data: most of it.
+pub const ODD_EXPLAINED_MOST: f64 = 0.5;
+
 /// The residual's energy in one region.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Region {

@@ -25,7 +25,11 @@
 //! another effect's phase on the lines removes little of it), a torque ripple whose order stands out of the
 //! search against the motor angle ([`crate::ident::nonlinear::ripple::search_order`]) and
 //! that the validation record, along another trajectory, shows again
-//! ([`crate::ident::nonlinear::ripple::replication`], [`fits::RippleShown`]).
+//! ([`crate::ident::nonlinear::ripple::replication`], [`fits::RippleShown`]), and a
+//! friction, a gap or a stiffening spring that removes most of the odd distortion the
+//! nominal leaves at the validation capture's non-excited odd lines (standing
+//! [`locate::ODD_RESIDUAL_ABOVE_NOISE_DB`] above the noise), more than any other single
+//! ([`select::odd_shown`]).
 //! That test has already rejected the nominal, and the metric has only to confirm the gain. The candidates are
 //! ranked significant first, each group by score ([`table::ranked`]); the answer is the
 //! first when significant. An effect whose

@@ -237,6 +237,7 @@ fn nominal_at_start(
             delay_lines: None,
             ripple_shown: None,
             at_lines: None,
+            odd_shown: false,
         },
         at_start,
         after,

@@ -1288,6 +1288,7 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
         }),
         ripple_shown: None,
         at_lines: None,
+        odd_shown: false,
     };
     let fitted = |fit: NlFit| fitted_shown(fit, false);
     assert!(fitted_shown(pair.clone(), true).counts(true));
@@ -1326,6 +1327,21 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
         0.3
     );
     assert_eq!(floor.of_model(None), 0.3);
+    // a friction (a gap, a stiffening spring) the odd lines show, removing more of the
+    // nominal's odd distortion than any other single and most of it, needs only the
+    // spread; a delay does not make odd distortion, and the lines do not show it
+    let mut odd_friction = fitted(coulomb.clone());
+    odd_friction.odd_shown = true;
+    assert_eq!(floor.of_model(Some(&odd_friction)), 0.02);
+    let mut odd_delay = fitted(fit(0.4, 0.01));
+    odd_delay.odd_shown = true;
+    assert_eq!(floor.of_model(Some(&odd_delay)), 0.3);
+    // which single the lines show: the one with the largest share, when that is most of
+    // the residual (a share below nought: the model leaves more than the nominal)
+    let shown = super::select::odd_shown;
+    assert_eq!(shown(&[Some(0.75), None, Some(0.99), Some(-3.0)]), Some(2));
+    assert_eq!(shown(&[Some(0.45), None, Some(0.2)]), None);
+    assert_eq!(shown(&[None, None]), None);
     // a ripple at the order the search against the angle found, and the validation record
     // showed again, needs only the spread; at another order, with no order found, the order
     // not shown again on validation, or the order found beside another effect, the option's

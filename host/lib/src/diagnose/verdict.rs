@@ -422,12 +422,8 @@ fn within_noise(nom_fit: f64, noise: Option<f64>, floor: f64) -> String {
     }
 }
 
-/// From this share of the nominal's odd-line residual removed ([`locate::odd_explained`])
-/// a single explains the odd distortion of the data: most of it.
-pub const ODD_EXPLAINED_MOST: f64 = 0.5;
-
 /// The single, none of the answer's effects, that removes the most of the odd distortion
-/// the nominal leaves, with its share, when that is most of it ([`ODD_EXPLAINED_MOST`]) and
+/// the nominal leaves, with its share, when that is most of it ([`locate::ODD_EXPLAINED_MOST`]) and
 /// its effect can make such distortion (`makes_lines`: a nonlinear effect whose size did not
 /// vanish, [`super::size::vanished`]). Odd distortion is what friction,
 /// backlash and a stiffening spring make; a candidate that removes it while the metric
@@ -443,7 +439,7 @@ fn odd_explainer<'a>(
         .filter(|(c, _)| !best.split('+').any(|b| b == c.name))
         .filter_map(|(c, makes_lines)| {
             let share = c.odd_explained?;
-            (makes_lines && share >= ODD_EXPLAINED_MOST).then_some((c, share))
+            (makes_lines && share >= locate::ODD_EXPLAINED_MOST).then_some((c, share))
         })
         .max_by(|a, b| a.1.total_cmp(&b.1))
 }
@@ -511,7 +507,7 @@ mod tests {
         // of no size, it is no cause
         let no_size = [(&mode, true), (&friction, false)];
         assert!(odd_explainer(no_size.into_iter(), "extra_mode").is_none());
-        let less = removing("coulomb_friction", Some(ODD_EXPLAINED_MOST - 0.01));
+        let less = removing("coulomb_friction", Some(locate::ODD_EXPLAINED_MOST - 0.01));
         assert!(odd_explainer([(&mode, true), (&less, true)].into_iter(), "none").is_none());
     }
 }
