@@ -549,14 +549,10 @@ fn pair_jobs<'s>(
             if !partner_anyway(c, min_gain) {
                 continue;
             }
-            // from its candidate's size on the lead's fit, as above, and from its own
-            // fit with the lead's effect (case 36: from the delay's fit the stiffness
-            // stayed at its default size, 47.8 %; from the stiffness's own fit the pair
-            // ended at 73.5 %, above backlash with the delay)
-            if let Some(e) = candidates.iter().find(|e| e.name() == c.0.name) {
-                jobs.push((vec![first, *e], Some(&lead.fit)));
-                led_by.push(lead);
-            }
+            // from its own fit with the lead's effect, not from its candidate's size on
+            // the lead's fit as the leaders' pairs start (case 36: from the delay's fit the
+            // stiffness stayed at its default size, 47.8 %; from the stiffness's own fit
+            // the pair ended at 73.5 %, above backlash with the delay)
             let own = own.own_start.as_ref().unwrap_or(&own.fit);
             jobs.push((vec![first, own.model.effects[0]], Some(own)));
             led_by.push(lead);
