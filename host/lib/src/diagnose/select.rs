@@ -103,17 +103,17 @@ pub(super) fn lines_sized(fitter: &Fitter<'_>, nominal: &Fitted, mut f: Fitted) 
     }
 }
 
-/// A single's candidate, judged against the nominal.
+/// A single's candidate, judged against the nominal; `odd`: the share of the nominal's
+/// odd-line residual it removes ([`Evidence::odd_of`]).
 pub(super) fn single_of(
     fitter: &Fitter<'_>,
     ev: &Evidence,
     nominal: &Fitted,
-    effect: &Effect,
+    (effect, odd): (&Effect, Option<f64>),
     f: &Fitted,
 ) -> Candidate {
     let judged = fitter.judge_model(&f.scored.segments, &nominal.scored.segments, Some(f));
     let (score, score_se, significant) = judged;
-    let odd = ev.odd_of(&fitter.rec.val, f);
     let mut lag = lag_and_delay(&f.fit, nominal.fit.model.tau_c, fitter.rec.ts)
         .map_or(String::new(), |w| format!("; {w}"));
     // the data's own word on the effect, apart from the metric: the excited lines' on a
@@ -269,7 +269,7 @@ pub(super) fn singles(
         }
     }
     let mut singles: Vec<(Candidate, Option<Fitted>)> = Vec::new();
-    for (effect, r) in fitter.rec.candidates.iter().zip(results) {
+    for ((effect, r), odd) in fitter.rec.candidates.iter().zip(results).zip(shares) {
         let c = match r {
             Ok(mut f) => {
                 let (score, score_se, _) =
@@ -288,7 +288,7 @@ pub(super) fn singles(
                         ),
                     );
                 }
-                (single_of(fitter, ev, nominal, effect, &f), Some(f))
+                (single_of(fitter, ev, nominal, (effect, odd), &f), Some(f))
             }
             Err(e) => (
                 Candidate {
@@ -747,7 +747,8 @@ pub(super) fn polish_answer(
         }
     } else {
         let effect = g.fit.model.effects[0];
-        answer.singles[0] = (single_of(fitter, ev, nominal, &effect, &g), Some(g));
+        let odd = ev.odd_of(&fitter.rec.val, &g);
+        answer.singles[0] = (single_of(fitter, ev, nominal, (&effect, odd), &g), Some(g));
     }
 }
 
