@@ -73,7 +73,8 @@
 //!    each other significant single, started from the singles' fits and, for two
 //!    significant singles, from the data's own start too (seed 001's three steps: a single
 //!    bends its structure to take its partner's part), judged against its lead alone
-//!    (nested).
+//!    (nested); a significant single that leads no pair with each single below its nominal
+//!    ([`select::beside_the_leaders`]), since the leader may stand in for the pair.
 //! 5. **Refinement** ([`select::polish_answer`]): the answer's fit continued when it
 //!    stopped at its iteration limit; a pair's before its reduction, since a pair stopped
 //!    short of its minimum is no measure of what its second effect adds.

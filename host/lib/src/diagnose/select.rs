@@ -275,16 +275,21 @@ pub(super) fn singles(
                 let (score, score_se, _) =
                     fitter.judge(&f.scored.segments, &nominal.scored.segments);
                 if below_its_nominal((score, score_se), min_gain) {
+                    // the refit from the nominal's values replaced it or scored lower
+                    let refit = if f.own_start.is_some() {
+                        "even refitted from the nominal's values"
+                    } else {
+                        "and its refit from the nominal's values scored no higher on the \
+                         estimation records"
+                    };
                     f.warnings.insert(
                         0,
                         format!(
                             "it scores below the nominal it contains ({score:+.1} ± \
                              {score_se:.1} points), which the effect at nought would match, \
-                             and its refit from the nominal's values scored no higher on the \
-                             estimation records: it follows something of the estimation \
-                             record the validation record does not share, and is not to be \
-                             trusted; the effect is still tried as a partner of the \
-                             significant singles"
+                             {refit}: it follows something of the estimation record the \
+                             validation record does not share, and is not to be trusted; the \
+                             effect is still tried as a partner of the significant singles"
                         ),
                     );
                 }
@@ -528,37 +533,60 @@ fn pair_jobs<'s>(
             }
         }
     }
-    // a single below its nominal is also the partner of every other significant single,
-    // from its candidate's size on that single's fit: the leader may be an effect that
-    // stood in for the pair (bench case 36, a stiffening spring behind a 2.2-sample
-    // delay at 0.059 rad RMS: backlash alone +1.9 ± 0.1 led, the delay +1.3 ± 0.0 came
-    // second, the stiffness alone scored −4.0 with `k3` −14 %; the answer was backlash
-    // with the delay, 12 points below the true model)
-    for (l, lead) in singles.iter().enumerate() {
-        let (Some(lead), true) = (lead.1.as_ref(), lead.0.significant) else {
+    for (l, _, start) in beside_the_leaders(singles, &leaders, min_gain) {
+        let Some(lead) = singles[l].1.as_ref() else {
             continue;
         };
-        if leaders.contains(&l) {
-            continue;
-        }
-        let first = lead.fit.model.effects[0];
-        for c in singles {
-            let (Some(own), false) = (c.1.as_ref(), c.0.significant) else {
-                continue;
-            };
-            if !partner_anyway(c, min_gain) {
-                continue;
-            }
-            // from its own fit with the lead's effect, not from its candidate's size on
-            // the lead's fit as the leaders' pairs start (case 36: from the delay's fit the
-            // stiffness stayed at its default size, 47.8 %; from the stiffness's own fit
-            // the pair ended at 73.5 %, above backlash with the delay)
-            let own = own.own_start.as_ref().unwrap_or(&own.fit);
-            jobs.push((vec![first, own.model.effects[0]], Some(own)));
-            led_by.push(lead);
-        }
+        jobs.push((
+            vec![lead.fit.model.effects[0], start.model.effects[0]],
+            Some(start),
+        ));
+        led_by.push(lead);
     }
     (jobs, led_by)
+}
+
+/// The pairs [`pair_jobs`] adds beside the leaders' as `(lead, partner, start)`: `lead`
+/// and `partner` indices into `singles`, `start` the partner's own fit, to which the pair
+/// adds the lead's effect. Each significant single that leads no pair is paired with each
+/// single that still scores below the nominal it contains ([`below_its_nominal`]), refitted
+/// from the nominal's values ([`nested_refits`]) or not; the start is the fit from its own
+/// start either way.
+///
+/// Why: the leader may be an effect that stood in for the pair, and a single that falls
+/// below its nominal may hold its effect's size beside another effect (bench case 36, a
+/// stiffening spring behind a 2.2-sample delay at 0.059 rad RMS: backlash alone +1.9 ± 0.1
+/// led, the delay +1.3 ± 0.0 came second, the stiffness alone scored −4.0 with `k3` −14 %;
+/// tried only with the leader, the answer was backlash with the delay, 12 points below the
+/// true model). From the partner's own fit, not from its candidate's size on the lead's fit
+/// as the leaders' pairs start: from the delay's fit the stiffness stayed at its default
+/// size, 47.8 %; from the stiffness's own fit the pair ended at 73.5 %, above backlash with
+/// the delay. A single whose refit from the nominal's values scores as the nominal does is
+/// left out: on the nominal's basin its effect came to nothing, and its own fit is a basin
+/// that its own cost ranked below that refit (the speed case of `benches/diagnose.rs`: the
+/// extra mode and Coulomb friction, refitted to +0.0 points, each paired with the backlash
+/// beside the leading stiffening spring, four fits and about 6 s of CPU that changed no
+/// answer in any battery).
+pub(super) fn beside_the_leaders<'s>(
+    singles: &'s [(Candidate, Option<Fitted>)],
+    leaders: &[usize],
+    min_gain: f64,
+) -> Vec<(usize, usize, &'s NlFit)> {
+    let partners: Vec<(usize, &NlFit)> = singles
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| !c.0.significant && below_its_nominal((c.0.score, c.0.score_se), min_gain))
+        .filter_map(|(p, c)| {
+            let f = c.1.as_ref()?;
+            Some((p, f.own_start.as_ref().unwrap_or(&f.fit)))
+        })
+        .collect();
+    singles
+        .iter()
+        .enumerate()
+        .filter(|(l, c)| c.0.significant && c.1.is_some() && !leaders.contains(l))
+        .flat_map(|(l, _)| partners.iter().map(move |&(p, start)| (l, p, start)))
+        .collect()
 }
 
 /// Stage 4: when the best single is significant, the pairs of [`pair_jobs`] fitted; the
