@@ -160,6 +160,13 @@ fn rms(x: &[f64]) -> f64 {
 }
 
 impl Evidence {
+    /// The residual the model `f` leaves at the non-excited odd lines of `val` (the
+    /// validation record), when the capture is periodic and read as the nominal's is.
+    pub fn odd_level(&self, val: &Dataset, f: &Fitted) -> Option<ClassLevel> {
+        self.odd_nominal.as_ref()?;
+        locate::odd_residual(val, &f.scored.driven.theta_m, self.settle_periods)
+    }
+
     /// The nominal's residual at the non-excited odd lines against the noise [dB], when it
     /// stands at least [`locate::ODD_RESIDUAL_ABOVE_NOISE_DB`] above it: odd distortion a
     /// linear model cannot follow.

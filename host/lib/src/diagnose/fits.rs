@@ -256,7 +256,8 @@ pub(super) struct Fitted {
     pub at_lines: Option<Box<Fitted>>,
     /// the single's effect makes odd distortion and the model removes more of the
     /// nominal's odd-line residual than any other single, and most of it
-    /// ([`super::select::odd_shown`])
+    /// ([`super::select::odd_shown`]); for a pair, its partner's, of what its lead leaves,
+    /// more than any other partner of that lead ([`super::select::pairs`])
     pub odd_shown: bool,
 }
 
@@ -273,7 +274,9 @@ impl Fitted {
     /// (standing at least [`super::locate::ODD_RESIDUAL_ABOVE_NOISE_DB`] above the noise),
     /// more than any other single does ([`super::select::odd_shown`]). Any of those three
     /// follows part of such distortion, so only the one that explains the most is shown by
-    /// it. An extra mode is a linear structure the lines' fit of more masses would need.
+    /// it. An extra mode is a linear structure the lines' fit of more masses would need. A
+    /// pair whose partner is such an effect is shown when the partner removes most of what
+    /// its lead leaves, more than any other partner of that lead.
     pub fn shown_apart(&self) -> bool {
         match self.fit.model.effects[..] {
             [Effect::TimeDelay(d)] => self.delay_lines.is_some_and(|l| l.holds(d.samples)),
@@ -281,6 +284,9 @@ impl Fitted {
                 .ripple_shown
                 .is_some_and(|s| s.replicated() && f64::from(s.order) == r.order),
             [Effect::CoulombFriction(_) | Effect::Backlash(_) | Effect::NonlinearStiffness(_)] => {
+                self.odd_shown
+            }
+            [_, Effect::CoulombFriction(_) | Effect::Backlash(_) | Effect::NonlinearStiffness(_)] => {
                 self.odd_shown
             }
             _ => false,

@@ -74,7 +74,11 @@
 //!    significant singles, from the data's own start too (seed 001's three steps: a single
 //!    bends its structure to take its partner's part), judged against its lead alone
 //!    (nested); a significant single that leads no pair with each single below its nominal
-//!    ([`select::beside_the_leaders`]), since the leader may stand in for the pair.
+//!    ([`select::beside_the_leaders`]), since the leader may stand in for the pair. When
+//!    the best single leaves the odd distortion standing above the noise, it is also paired
+//!    with each effect that makes such distortion ([`select::makes_odd`]); the partner that
+//!    removes most of what it leaves, more than any other, is shown by the odd lines and
+//!    judged as a single they show ([`fits::Fitted::shown_apart`]).
 //! 5. **Refinement** ([`select::polish_answer`]): the answer's fit continued when it
 //!    stopped at its iteration limit; a pair's before its reduction, since a pair stopped
 //!    short of its minimum is no measure of what its second effect adds.
