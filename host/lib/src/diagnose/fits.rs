@@ -214,6 +214,23 @@ impl Fitter<'_> {
         scored_fit(res, (&r.est_data, &r.val_data, &r.parts), req, self.starts)
     }
 
+    /// As [`Fitter::nested`], the effect placed by the automatic start's third step (seed
+    /// 001: a grid on the output-error cost over the effect's parameters, for an extra mode
+    /// its frequency) on the nominal's structure, lag and cost, instead of at the size and
+    /// shape it carries.
+    pub fn nested_grid(&self, base: &NlFit, effect: Effect) -> Result<Fitted, CandidateError> {
+        let req = self.req;
+        let r = self.rec;
+        let nl = NlRequest {
+            tau_c: base.model.tau_c,
+            linear: Some(base.plant.clone()),
+            options: req.options.nl.clone(),
+            ..NlRequest::new(req.structure, req.r, vec![effect])
+        };
+        let res = identify_segments(&r.est_data, &nl).map_err(CandidateError::Fit)?;
+        scored_fit(res, (&r.est_data, &r.val_data, &r.parts), req, self.starts)
+    }
+
     /// The gap metric [%] of `model` on the estimation records themselves (in-sample),
     /// scored as on validation; `None` when it does not simulate.
     pub fn in_sample(&self, model: &DrivenModel) -> Option<f64> {
