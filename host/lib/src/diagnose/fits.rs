@@ -300,12 +300,8 @@ impl Fitted {
             [Effect::TorqueRipple(r)] => self
                 .ripple_shown
                 .is_some_and(|s| s.replicated() && f64::from(s.order) == r.order),
-            [Effect::CoulombFriction(_) | Effect::Backlash(_) | Effect::NonlinearStiffness(_)] => {
-                self.odd_shown
-            }
-            [_, Effect::CoulombFriction(_) | Effect::Backlash(_) | Effect::NonlinearStiffness(_)] => {
-                self.odd_shown
-            }
+            // a single, or a pair's partner, whose law makes odd distortion
+            [e] | [_, e] if makes_odd(&e) => self.odd_shown,
             _ => false,
         }
     }
@@ -326,6 +322,16 @@ impl Fitted {
             && self.unsupported.is_none()
             && super::size::vanished(&self.fit, self.delay_shown()).is_empty()
     }
+}
+
+/// Whether `e`'s law makes odd distortion at the non-excited odd lines of a periodic
+/// capture (seed 000 §3): friction, a gap and a stiffening spring do; a mode, a delay and a
+/// ripple against the angle do not.
+pub(super) fn makes_odd(e: &Effect) -> bool {
+    matches!(
+        e,
+        Effect::CoulombFriction(_) | Effect::Backlash(_) | Effect::NonlinearStiffness(_)
+    )
 }
 
 /// Why a model with a transport delay is not supported by the excited lines, when they

@@ -76,7 +76,7 @@
 //!    (nested); a significant single that leads no pair with each single below its nominal
 //!    ([`select::beside_the_leaders`]), since the leader may stand in for the pair. When
 //!    the best single leaves the odd distortion standing above the noise, it is also paired
-//!    with each effect that makes such distortion ([`select::makes_odd`]); the partner that
+//!    with each effect that makes such distortion ([`fits::makes_odd`]); the partner that
 //!    removes most of what it leaves, more than any other, is shown by the odd lines and
 //!    judged as a single they show ([`fits::Fitted::shown_apart`]).
 //! 5. **Refinement** ([`select::polish_answer`]): the answer's fit continued when it

@@ -13,7 +13,7 @@ use crate::model::effects::{Attach, Effect, ExtraMode};
 use crate::model::spec::Structure;
 
 use super::evidence::Evidence;
-use super::fits::{Fitted, Fitter, Job};
+use super::fits::{makes_odd, Fitted, Fitter, Job};
 use super::locate;
 use super::metric::DrivenModel;
 use super::table::{evidence, lag_and_delay, odd_words, ranked, ripple_travel, scored_candidate};
@@ -417,6 +417,7 @@ pub(super) fn nested_refits(
         let (Some((mut new, was, now)), Ok(old)) = (refit, &results[i]) else {
             continue;
         };
+        let below = below_its_nominal((mean, se), min_gain);
         let placed = match effect {
             Effect::ExtraMode(_) => {
                 "the mode placed by the automatic start's grid over its frequency".to_string()
@@ -426,12 +427,12 @@ pub(super) fn nested_refits(
         // the own fit is kept where it fell below the nominal: the pairs take it
         // ([`partner_anyway`], [`beside_the_leaders`]); a mode the grid placed better
         // while its own fit scored above the nominal is no such partner
-        if below_its_nominal((mean, se), min_gain) {
+        if below {
             new.own_start = Some(old.fit.clone());
         }
         // the refit keeps the ripple's order, and the search that found it holds
         new.ripple_shown = old.ripple_shown;
-        let scored = if below_its_nominal((mean, se), min_gain) {
+        let scored = if below {
             "it scored below the nominal it contains"
         } else {
             "it scored"
@@ -632,16 +633,6 @@ pub(super) fn beside_the_leaders<'s>(
         .filter(|(l, c)| c.0.significant && c.1.is_some() && !leaders.contains(l))
         .flat_map(|(l, _)| partners.iter().map(move |&(p, start)| (l, p, start)))
         .collect()
-}
-
-/// Whether `e`'s law makes odd distortion at the non-excited odd lines of a periodic
-/// capture (seed 000 §3): friction, a gap and a stiffening spring do; a mode, a delay and a
-/// ripple against the angle do not.
-pub(super) fn makes_odd(e: &Effect) -> bool {
-    matches!(
-        e,
-        Effect::CoulombFriction(_) | Effect::Backlash(_) | Effect::NonlinearStiffness(_)
-    )
 }
 
 /// The pairs of stage 4 the odd lines ask for, when the best single leaves the odd
