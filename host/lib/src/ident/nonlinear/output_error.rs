@@ -1030,12 +1030,11 @@ pub fn fit_output_error_segments(
             }
             None => 0.0,
         };
-        let at_lower =
-            !fixed[i] && lower[i].is_finite() && z[i] - lower[i] < 1e-6 * (1.0 + lower[i].abs());
-        let at_bound = at_lower
-            || (!fixed[i]
-                && upper[i].is_finite()
-                && upper[i] - z[i] < 1e-6 * (1.0 + upper[i].abs()));
+        let (at_lower, at_bound) = if fixed[i] {
+            (false, false)
+        } else {
+            on_bounds(z[i], (lower[i], upper[i]))
+        };
         params.push(NlParam {
             name: d.name,
             owner: d.owner,
@@ -1528,10 +1527,37 @@ fn sandwich_parts(
     (h, first + second)
 }
 
+/// Whether an estimated value at optimiser coordinate `z` sits on its lower bound, and
+/// on either bound, of the search `(lower, upper)` (within a millionth of the bound's
+/// scale): what [`NlParam::at_lower`] and [`NlParam::at_bound`] say, for every fit that
+/// reports them (the output-error fit, and the diagnosis's refinement in the loop).
+pub fn on_bounds(z: f64, (lower, upper): (f64, f64)) -> (bool, bool) {
+    let at_lower = lower.is_finite() && z - lower < 1e-6 * (1.0 + lower.abs());
+    let at_upper = upper.is_finite() && upper - z < 1e-6 * (1.0 + upper.abs());
+    (at_lower, at_lower || at_upper)
+}
+
 #[cfg(test)]
 mod error_tests {
     use super::*;
     use crate::model::spec::Structure;
+
+    /// A size fitted on a log scale (a backlash's width, bounded below at 1e-9 rad) that
+    /// ends on its bound is flagged there, so that the diagnosis counts the effect of no
+    /// size; a ten-thousandth above it, or inside the range, it is not; an infinite bound
+    /// is never reached.
+    #[test]
+    fn a_value_on_its_bound_is_flagged_and_one_inside_is_not() {
+        let (lo, hi) = (1e-9_f64.ln(), 1e-1_f64.ln());
+        assert_eq!(on_bounds(lo, (lo, hi)), (true, true));
+        assert_eq!(on_bounds(1.0001e-9_f64.ln(), (lo, hi)), (false, false));
+        assert_eq!(on_bounds(1e-5_f64.ln(), (lo, hi)), (false, false));
+        assert_eq!(on_bounds(hi, (lo, hi)), (false, true));
+        assert_eq!(
+            on_bounds(-1e300, (f64::NEG_INFINITY, f64::INFINITY)),
+            (false, false)
+        );
+    }
 
     #[test]
     fn a_correlation_is_within_one_or_not_reported() {
