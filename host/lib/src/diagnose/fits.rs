@@ -167,7 +167,7 @@ impl Fitter<'_> {
             return None;
         }
         let req = self.req;
-        let mut options = nl_options(&req.options, &f.fit.model.effects);
+        let mut options = nl_options(&req.options, &f.fit.model.effects, self.starts.sticks);
         // on the cost the fit ended on, which its `ssr` is of (a nested refit's is the
         // nominal's band-limited one, [`super::select::nested_refits`])
         options.lowpass_hz = f.fit.lowpass_hz;
@@ -392,7 +392,7 @@ pub(super) fn fit_and_score(
         tau_c: linear.as_ref().map_or(ts, |l| l.1),
         linear: linear.as_ref().map(|l| l.0.clone()),
         given,
-        options: nl_options(&req.options, &effects),
+        options: nl_options(&req.options, &effects, starts.sticks),
         ..NlRequest::new(req.structure, req.r, effects)
     };
     let automatic = nl.clone();
@@ -756,8 +756,8 @@ fn backlash_grown(
     (plant, lag): &(Vec<f64>, f64),
     (longest, beat): (&IdData, Option<f64>),
 ) -> Option<NlResult> {
-    let options = nl_options(&req.options, &nl.effects);
-    let g = grow::grow_backlash(est, req.structure, req.r, (plant, *lag), &options).ok()?;
+    // on the candidate's own cost ([`nl_options`])
+    let g = grow::grow_backlash(est, req.structure, req.r, (plant, *lag), &nl.options).ok()?;
     if beat.is_some_and(|b| g.ssr >= b) {
         return None;
     }

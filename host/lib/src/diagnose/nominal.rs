@@ -98,8 +98,9 @@ pub(super) fn refit_spread(
 ) -> Floor {
     let mut floor = Floor::of(fitter.req);
     for f in singles.iter().flatten() {
-        // the same cost as the nominal's (a nonlinear single is fitted over the whole band,
-        // [`super::inputs::nl_options`], unless refitted on the nominal's): else it is the
+        // the same cost as the nominal's (a nonlinear single is fitted over the whole band
+        // unless the motor sticks, [`super::inputs::nl_options`], or refitted on the
+        // nominal's): else it is the
         // nominal fitted on another cost, and its ssr and its FIT say nothing of the spread
         let same_cost = f.fit.lowpass_hz == nominal.fit.lowpass_hz;
         if !same_cost || !exactly_of_no_size(&f.fit) || f.fit.ssr > nominal.fit.ssr {
@@ -151,6 +152,7 @@ fn recover_nominal(
         grown: None,
         two_mass: None,
         delay_lines: None,
+        sticks: None,
     };
     let mut why = vec![(NominalStart::FrequencyDomain, failed)];
     match fit_and_score(est, val, parts, req, Vec::new(), &none, None) {

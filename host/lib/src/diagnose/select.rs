@@ -372,7 +372,7 @@ pub(super) fn odd_shown(shares: &[Option<f64>]) -> Option<usize> {
 /// above the nominal as well as below it (the same bench, case 7: that mode with a Coulomb
 /// friction, the mode alone +0.03 points at 34 Hz, an arm-side spring 25 times the truth's).
 /// A nonlinear effect's fit
-/// takes the whole band ([`super::inputs::nl_options`]), where a closed loop's torque holds
+/// takes the whole band unless the motor sticks ([`super::inputs::nl_options`]), where a closed loop's torque holds
 /// the controller's reaction to the encoder and the disturbance; at a small amplitude that
 /// draws the fit away from the joint (hard bench, a 1.1-sample delay at 0.015 rad RMS:
 /// every nonlinear single 4.4–5.5 points below the nominal on validation, each at an

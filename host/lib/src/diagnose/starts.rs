@@ -98,6 +98,7 @@ pub(super) fn linear_starts(
         grown: None,
         two_mass: None,
         delay_lines: None,
+        sticks: None,
     };
     let mut level = None;
     let mut quiet = None;
@@ -122,9 +123,11 @@ pub(super) fn linear_starts(
         return starts;
     };
     let share = grow::stick_share(&rec.est_data, level);
-    if share <= grow::STICK_SHARE
-        || !matches!(req.structure, Structure::TwoMass | Structure::ThreeMass)
-    {
+    if share <= grow::STICK_SHARE {
+        return starts;
+    }
+    starts.sticks = Some(share);
+    if !matches!(req.structure, Structure::TwoMass | Structure::ThreeMass) {
         return starts;
     }
     let lag = match &starts.structure {
@@ -135,8 +138,8 @@ pub(super) fn linear_starts(
         req.progress.as_ref(),
         "the structure grown in the time domain (the motor sticks)",
         || {
-            // the friction's fits: no band low-pass ([`super::inputs::nl_options`])
-            let options = super::inputs::nl_options(o, coulomb.as_slice());
+            // band-limited: the motor sticks ([`super::inputs::nl_options`])
+            let options = super::inputs::nl_options(o, coulomb.as_slice(), Some(share));
             grow::grow(&rec.est_data, req.structure, req.r, lag, &options)
         },
         |r| match r {
@@ -255,6 +258,10 @@ pub(super) struct LinearStarts {
     /// the excited lines' evidence of a transport delay beside the lag, from the structure's
     /// frequency-domain fits ([`DelayLines`])
     pub delay_lines: Option<DelayLines>,
+    /// the share of the estimation samples on which the motor sticks (the torque below the
+    /// friction level, [`grow::stick_share`]) when above [`grow::STICK_SHARE`]: every fit
+    /// is then band-limited ([`super::inputs::nl_options`])
+    pub sticks: Option<f64>,
 }
 
 /// The start of `structure` with an extra mode attached as `attach` says, from the

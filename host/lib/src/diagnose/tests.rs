@@ -1031,6 +1031,63 @@ mod pairs {
     }
 }
 
+/// Hard bench case 20 (`HARD=1 SMALL=1`, `ROUNDS=4`, drawn by
+/// [`crate::test_support::battery`]): Stribeck friction at 0.011 rad RMS on a 16384-count
+/// encoder, the motor stuck on 63 % of the samples, a current-loop lag of 0.43 ms. Fitted
+/// over the whole band, the friction's fit drove the lag onto its bound, the model left it
+/// out and closed to 76.0 % against the true model's 81.7 %. Where the motor sticks every
+/// fit is band-limited ([`super::inputs::nl_options`]): the lag is kept and fitted, and the
+/// friction closes to the true model's metric. The Coulomb candidate alone, as the
+/// diagnosis's answer was.
+#[test]
+fn a_motor_that_sticks_on_a_coarse_encoder_keeps_its_lag_and_closes_the_gap() {
+    use crate::diagnose::metric::true_fit;
+    use crate::test_support::battery::{captures, cases, config, ROUND};
+    let case = &cases(20 / ROUND + 1, true, true)[20];
+    let [Effect::CoulombFriction(truth)] = case.hidden[..] else {
+        panic!("{:?}", case.hidden)
+    };
+    let (est, val) = captures(case, 4, case.rms);
+    let req = DiagnoseRequest {
+        r: case.params.r,
+        candidates: all_candidates()
+            .into_iter()
+            .filter(|e| matches!(e, Effect::CoulombFriction(_)))
+            .collect(),
+        ..DiagnoseRequest::default()
+    };
+    let d = diagnose(std::slice::from_ref(&est), &val, &req).unwrap();
+    assert_eq!(d.best, "coulomb_friction", "{}", d.verdict);
+    assert!(
+        d.warnings.iter().any(|w| w.contains("the motor sticks")),
+        "{:?}",
+        d.warnings
+    );
+    let c = &d.effects[0];
+    let lag = c
+        .structure_parameters
+        .get("tau_c")
+        .map(|p| p.value)
+        .expect("the friction's model keeps a current-loop lag");
+    let true_lag = config(case).controller.current_loop_tau;
+    assert!(
+        (lag / true_lag - 1.0).abs() < 0.5,
+        "lag {lag:e} s, truth {true_lag:e} s"
+    );
+    let fc = c.parameters["fc"].value;
+    assert!(
+        (fc / truth.fc - 1.0).abs() < 0.1,
+        "F_c = {fc:e}, truth {:e}",
+        truth.fc
+    );
+    let true_model = true_fit(&config(case), &val);
+    assert!(
+        (d.fit_augmented_val - true_model).abs() < 1.0,
+        "{} against the true model's {true_model}",
+        d.fit_augmented_val
+    );
+}
+
 /// Bench case 60 (`benches/diagnose.rs`, the values as drawn): Stribeck friction of `F_c`
 /// 0.022 N·m at 0.021 rad RMS under the default tuning, the motor at rest on 40 % of the
 /// samples. The growth's two-mass with the bump free ended at `k_g` 1 % of the truth, and
@@ -1200,6 +1257,7 @@ fn a_start_that_does_not_simulate_gives_way_to_the_automatic_start() {
         grown: None,
         two_mass: None,
         delay_lines: None,
+        sticks: None,
     };
     let (est, val) = ([est.data], [val.data]);
     let fitted = |effects: Vec<Effect>| {
