@@ -618,20 +618,22 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
     let own_start = req.start == NlStart::Automatic && req.linear.is_none();
     // a capture that says its excitation, and a model that stays linear: the residual
     // low-passed at the band's top ([`NlOptions::lowpass_hz`]), unless the caller chose a
-    // low-pass (a nonlinear effect's own distortion above the band is what its fit needs)
+    // low-pass (a nonlinear effect's own distortion above the band is what its fit needs,
+    // unless the motor sticks, [`grow_if_sticking`])
     let linear = req
         .effects
         .iter()
         .all(crate::model::effects::Effect::is_linear);
-    if let (Some((ds, _)), 0.0, true) = (data.periodic, req.options.lowpass_hz, linear) {
-        if let Some(top) = ds
+    let band_top = match (data.periodic, req.options.lowpass_hz) {
+        (Some((ds, _)), 0.0) => ds
             .iter()
             .find_map(|d| d.excitation)
             .zip(ds.first())
-            .and_then(|(c, d)| crate::data::excited_band_top(&c, d.data.ts))
-        {
-            req.options.lowpass_hz = top;
-        }
+            .and_then(|(c, d)| crate::data::excited_band_top(&c, d.data.ts)),
+        _ => None,
+    };
+    if let (Some(top), true) = (band_top, linear) {
+        req.options.lowpass_hz = top;
     }
     let mut compensation = None;
     if let (Some((ds, settle)), NlStart::Automatic, None) = (data.periodic, &req.start, &req.linear)
@@ -655,7 +657,9 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
         }
     }
     if own_start {
-        if let Some(note) = grow_if_sticking(data.estimation, compensation.as_ref(), &mut req) {
+        if let Some(note) =
+            grow_if_sticking(data.estimation, compensation.as_ref(), band_top, &mut req)
+        {
             match note {
                 Growth::Grown { steps: grown, note } => {
                     steps.extend(grown);
@@ -739,12 +743,15 @@ fn friction_level(data: &[IdData], req: &NlRequest, compensation: Option<&Step>)
 /// samples), the start grown in the time domain ([`super::grow`]) put into `req`: with the
 /// friction alone, the whole start (plant, lag, offset and friction); with other effects,
 /// the plant, the lag and the friction's keys, the others from their own automatic start
-/// on that plant. `None` when the motor does not stick (`req` untouched); else the grown
-/// stages' steps and the note that says so, or the note of a growth that failed (`req`
-/// untouched).
+/// on that plant. Where it sticks, the residual is low-passed at `band_top` (the excited
+/// band's top, when the capture says its excitation and the caller chose no low-pass).
+/// `None` when the motor does not stick (`req` untouched); else the grown stages' steps
+/// and the note that says so, or the note of a growth that failed (`req` untouched but
+/// for its low-pass).
 fn grow_if_sticking(
     data: &[IdData],
     compensation: Option<&Step>,
+    band_top: Option<f64>,
     req: &mut NlRequest,
 ) -> Option<Growth> {
     use super::grow::{grow_with, stick_share, Seed, STICK_SHARE};
@@ -760,6 +767,13 @@ fn grow_if_sticking(
     let share = stick_share(data, level);
     if share <= STICK_SHARE {
         return None;
+    }
+    // the angle rests within an encoder count for long stretches: its quantisation error
+    // is coloured, and the loop's reaction to it above the band draws the fit away from
+    // the joint; the growth and the fit are band-limited as a linear model's are (the
+    // diagnosis does the same, `diagnose::inputs::nl_options`)
+    if let Some(top) = band_top {
+        req.options.lowpass_hz = top;
     }
     let longest = longest(data)?;
     let ts = longest.ts;
@@ -778,8 +792,16 @@ fn grow_if_sticking(
     let sticks = format!(
         "the motor sticks: the torque stays below the friction level {level:.3e} N·m on \
          {:.0} % of the estimation samples, so the FRF is the friction's and not the \
-         structure's",
-        100.0 * share
+         structure's{}",
+        100.0 * share,
+        match band_top {
+            Some(top) => format!(
+                ", and the residual is low-passed at the excited band's top ({top:.0} Hz): \
+                 above it the measured torque holds the loop's reaction to the encoder's \
+                 quantisation, coloured while the motor rests"
+            ),
+            None => String::new(),
+        }
     );
     let g = match grow_with(data, &seed) {
         Ok(g) => g,
