@@ -1042,22 +1042,10 @@ mod pairs {
     }
 }
 
-/// Hard bench case 20 (`HARD=1 SMALL=1`, `ROUNDS=4`, drawn by
-/// [`crate::test_support::battery`]): Stribeck friction at 0.011 rad RMS on a 16384-count
-/// encoder, the motor stuck on 63 % of the samples, a current-loop lag of 0.43 ms. Fitted
-/// over the whole band, the friction's fit drove the lag onto its bound, the model left it
-/// out and closed to 76.0 % against the true model's 81.7 %. Where the motor sticks every
-/// fit is band-limited ([`super::inputs::nl_options`]): the lag is kept and fitted, and the
-/// friction closes to the true model's metric. The Coulomb candidate alone, as the
-/// diagnosis's answer was.
-#[test]
-fn a_motor_that_sticks_on_a_coarse_encoder_keeps_its_lag_and_closes_the_gap() {
-    use crate::test_support::battery::{captures, cases, config, ROUND};
-    let case = &cases(20 / ROUND + 1, true, true)[20];
-    let [Effect::CoulombFriction(truth)] = case.hidden[..] else {
-        panic!("{:?}", case.hidden)
-    };
-    let (est, val) = captures(case, 4, case.rms);
+/// Battery `case` diagnosed from its captures of four periods with the Coulomb candidate
+/// alone, which must be the answer: the diagnosis and the validation capture.
+fn coulomb_alone(case: &crate::test_support::battery::Case) -> (Diagnosis, crate::data::Dataset) {
+    let (est, val) = crate::test_support::battery::captures(case, 4, case.rms);
     let req = DiagnoseRequest {
         r: case.params.r,
         candidates: all_candidates()
@@ -1068,6 +1056,25 @@ fn a_motor_that_sticks_on_a_coarse_encoder_keeps_its_lag_and_closes_the_gap() {
     };
     let d = diagnose(std::slice::from_ref(&est), &val, &req).unwrap();
     assert_eq!(d.best, "coulomb_friction", "{}", d.verdict);
+    (d, val)
+}
+
+/// Hard bench case 20 (`HARD=1 SMALL=1`, `ROUNDS=4`, drawn by
+/// [`crate::test_support::battery`]): Stribeck friction at 0.011 rad RMS on a 16384-count
+/// encoder, the motor stuck on 63 % of the samples, a current-loop lag of 0.43 ms. Fitted
+/// over the whole band, the friction's fit drove the lag onto its bound, the model left it
+/// out and closed to 76.0 % against the true model's 81.7 %. Where the motor sticks every
+/// fit is band-limited ([`super::inputs::nl_options`]): the lag is kept and fitted, and the
+/// friction closes to the true model's metric. The Coulomb candidate alone, as the
+/// diagnosis's answer was.
+#[test]
+fn a_motor_that_sticks_on_a_coarse_encoder_keeps_its_lag_and_closes_the_gap() {
+    use crate::test_support::battery::{cases, config, ROUND};
+    let case = &cases(20 / ROUND + 1, true, true)[20];
+    let [Effect::CoulombFriction(truth)] = case.hidden[..] else {
+        panic!("{:?}", case.hidden)
+    };
+    let (d, val) = coulomb_alone(case);
     assert!(
         d.warnings.iter().any(|w| w.contains("the motor sticks")),
         "{:?}",
@@ -1096,22 +1103,12 @@ fn a_motor_that_sticks_on_a_coarse_encoder_keeps_its_lag_and_closes_the_gap() {
 /// and the candidate's fit finds the breakaway. The Coulomb candidate alone.
 #[test]
 fn a_breakaway_the_growth_lost_is_fitted_again() {
-    use crate::test_support::battery::{captures, cases, ROUND};
+    use crate::test_support::battery::{cases, ROUND};
     let case = &cases(37 / ROUND + 1, false, false)[37];
     let [Effect::ExtraMode(_), Effect::CoulombFriction(truth)] = case.hidden[..] else {
         panic!("{:?}", case.hidden)
     };
-    let (est, val) = captures(case, 4, case.rms);
-    let req = DiagnoseRequest {
-        r: case.params.r,
-        candidates: all_candidates()
-            .into_iter()
-            .filter(|e| matches!(e, Effect::CoulombFriction(_)))
-            .collect(),
-        ..DiagnoseRequest::default()
-    };
-    let d = diagnose(std::slice::from_ref(&est), &val, &req).unwrap();
-    assert_eq!(d.best, "coulomb_friction", "{}", d.verdict);
+    let (d, _) = coulomb_alone(case);
     let p = &d.effects[0].parameters;
     let (fc, fs) = (p["fc"].value, p.get("fs").map_or(f64::NAN, |f| f.value));
     let ratio = fs / fc;
