@@ -308,8 +308,11 @@ pub fn grow_with(est: &[IdData], seed: &Seed) -> Result<Grown, GrowError> {
         .iter()
         .chain(&seed.given)
         .any(|(n, _)| n == "fs" || n == "v_stribeck");
+    // the seed's bump is the growth's to set aside and give back (its shape `F_s/F_c`
+    // needs a level): not where the caller holds or gives the shape
+    let bump_free = has_bump(&seed.law) && seed.law.fc > 0.0 && !shape_held;
     let mut level_alone = false;
-    if has_bump(&seed.law) && seed.law.fc > 0.0 && !shape_held {
+    if bump_free {
         let pure = CoulombFriction {
             fs: seed.law.fc,
             ..seed.law
@@ -348,7 +351,6 @@ pub fn grow_with(est: &[IdData], seed: &Seed) -> Result<Grown, GrowError> {
     // case 37, Stribeck friction with `F_s` 1.33 `F_c` beside a parallel mode, the motor
     // stuck on 51 % of the samples: the growth ended at `F_s` = `F_c`, and the candidate,
     // fitting the level alone, closed 3.7 points short of the true model)
-    let bump_free = has_bump(&seed.law) && !shape_held;
     let bumped = |e: Effect| match e {
         Effect::CoulombFriction(c) if level_alone || (bump_free && !has_bump(&c)) => {
             Effect::CoulombFriction(CoulombFriction {
