@@ -407,13 +407,20 @@ impl NlModel {
                     i += 1;
                 }
                 Effect::TorqueRipple(r) => {
-                    (r.amplitude, r.phase) = (p[i], p[i + 1]);
+                    (r.amplitude, r.phase) = (p[i], within_a_turn(p[i + 1]));
                     i += 2;
                 }
             }
         }
         (m, p[..np].to_vec())
     }
+}
+
+/// The ripple's phase `phase` [rad] within one turn, `[−π, π)`: the estimator leaves it free
+/// ([`NlModel::layout`]), the law is periodic in it, and the simulator takes it so.
+pub fn within_a_turn(phase: f64) -> f64 {
+    let turn = std::f64::consts::TAU;
+    (phase + 0.5 * turn).rem_euclid(turn) - 0.5 * turn
 }
 
 /// A spring–damper between two bodies, deflection `g_a θ_a − g_b θ_b`.
@@ -1186,5 +1193,43 @@ mod tests {
         assert_eq!(wide.len(), plain.len());
         let differ = wide.iter().zip(&plain).filter(|(a, b)| a != b).count();
         assert_eq!(differ, 0, "{differ} of {} slots differ", wide.len());
+    }
+
+    /// The estimator's ripple phase is free; the model it writes takes it within one turn,
+    /// as the simulator does, the same law (Silverbox: a fit ended at 9.41 rad, and the
+    /// candidate failed when simulated with the exact laws).
+    #[test]
+    fn a_ripple_phase_beyond_a_turn_is_written_within_one() {
+        use crate::model::effects::TorqueRipple;
+        let data = crate::data::IdData {
+            ts: 5e-4,
+            u: vec![0.0; 8],
+            y: vec![0.0; 8],
+            r: None,
+        };
+        let ripple = Effect::TorqueRipple(TorqueRipple::default());
+        let req = super::super::NlRequest::new(Structure::Rigid, 1.0, vec![ripple]);
+        let m = super::super::model_of(&req, &data);
+        let layout = m.layout();
+        let at = layout
+            .iter()
+            .position(|d| d.name == "phase")
+            .expect("a phase");
+        for phase in [9.408, -9.408, 0.5, std::f64::consts::PI] {
+            let mut p: Vec<f64> = layout.iter().map(|d| d.lower.max(1e-3)).collect();
+            p[at] = phase;
+            let (w, _) = m.with_values(&p);
+            let Effect::TorqueRipple(r) = w.effects[0] else {
+                panic!("{:?}", w.effects)
+            };
+            let turns = (phase - r.phase) / std::f64::consts::TAU;
+            assert!(
+                (-std::f64::consts::PI..std::f64::consts::PI).contains(&r.phase)
+                    && (turns - turns.round()).abs() < 1e-12,
+                "{phase} -> {}",
+                r.phase
+            );
+            assert!(w.effects[0].check().is_ok(), "{:?}", w.effects[0]);
+        }
     }
 }

@@ -1010,7 +1010,13 @@ pub fn fit_output_error_segments(
             table = Some(t);
         }
     }
-    let values = problem.parts[0].physical(&z[..layout.len()]);
+    let mut values = problem.parts[0].physical(&z[..layout.len()]);
+    // a ripple's phase reported within one turn, as its model takes it
+    for (v, d) in values.iter_mut().zip(&layout) {
+        if d.name == "phase" {
+            *v = super::model::within_a_turn(*v);
+        }
+    }
     let cov_z = problem.sandwich(
         &z,
         &free,
