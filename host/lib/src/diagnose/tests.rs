@@ -1416,6 +1416,19 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
     assert!(vanished_effects(&fit(3.49, 108.0), true).is_empty());
     assert_eq!(vanished_effects(&fit(0.0, 1e-3), true).len(), 1);
     assert_eq!(vanished_effects(&on_bound, true).len(), 1);
+    // a ripple's amplitude is signed: on its lower bound it is the largest ripple the search
+    // allows, not none (Silverbox: such a ripple, 19.9 points below the nominal, was taken
+    // for the nominal refitted and raised the floor to 19.9 points)
+    let mut ripple = effect_fit(
+        Effect::TorqueRipple(TorqueRipple {
+            amplitude: -0.1,
+            ..TorqueRipple::default()
+        }),
+        vec![effect_param("amplitude", (-0.1, 1e-3))],
+    );
+    ripple.params[0].at_lower = true;
+    assert!(vanished_effects_of(&ripple).is_empty());
+    assert!(!exactly_of_no_size(&ripple));
     let friction = |fc: (f64, f64), fs: (f64, f64)| {
         effect_fit(
             candidate("coulomb_friction").expect("a candidate"),
