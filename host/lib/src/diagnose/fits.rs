@@ -389,7 +389,9 @@ pub(super) fn fit_and_score(
     // delay candidate to take the 0.5 ms lag for a delay of a sample, +21.8 points)
     let ts = est.first().map_or(0.0, |d| d.ts);
     let mut nl = NlRequest {
-        tau_c: linear.as_ref().map_or(ts, |l| l.1),
+        tau_c: linear
+            .as_ref()
+            .map_or(starts.lag_start.unwrap_or(ts), |l| l.1),
         linear: linear.as_ref().map(|l| l.0.clone()),
         given,
         options: nl_options(&req.options, &effects, starts.sticks),

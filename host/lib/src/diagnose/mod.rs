@@ -49,6 +49,11 @@
 //!    excited band ([`inputs::fit_options`]): above it the torque of a closed loop is the
 //!    controller's reaction to the encoder's quantisation and the disturbance, and a fit
 //!    from the measured torque that scores it is drawn towards the inverse controller.
+//!    The input is taken as held over each sample interval (a drive's torque reference);
+//!    when the nominal's current-loop lag comes out nought, the whole diagnosis is made
+//!    again with the input taken as samples of a signal that moves between them
+//!    ([`inputs::SampledInput`], a measured analog input), and kept when its nominal
+//!    scores higher in-sample.
 //!    **Starts** ([`starts`]): the frequency-domain linear fits the candidates start from;
 //!    where the motor sticks, the structure grown in the time domain
 //!    ([`crate::ident::nonlinear::grow`]).
@@ -747,10 +752,41 @@ pub fn diagnose_segments(
     req: &DiagnoseRequest,
 ) -> Result<(Diagnosis, DiagnosisSeries), DiagnoseError> {
     let t0 = Instant::now();
+    let (held, leads) = diagnose_as_given(est, val, req, (t0, false))?;
+    if !leads {
+        return Ok(held);
+    }
+    let sampled = inputs::SampledInput::of(est, val);
+    let est_s: Vec<&[Dataset]> = sampled.est.iter().map(Vec::as_slice).collect();
+    let r = diagnose_as_given(&est_s, &sampled.val, req, (t0, true));
+    Ok(match r {
+        Ok((mut s, _)) if s.0.fit_nominal_est > held.0.fit_nominal_est => {
+            s.0.warnings.insert(
+                0,
+                inputs::SampledInput::note(held.0.fit_nominal_est, s.0.fit_nominal_est),
+            );
+            s
+        }
+        _ => held,
+    })
+}
+
+/// [`diagnose_segments`] on the records as given, and whether the nominal's current-loop lag
+/// came out nought (left out, or on its lower bound): the data then ask for less delay than
+/// holding each input sample over its interval adds ([`inputs::SampledInput`]).
+fn diagnose_as_given(
+    est: &[&[Dataset]],
+    val: &[Dataset],
+    req: &DiagnoseRequest,
+    (t0, sampled): (Instant, bool),
+) -> Result<((Diagnosis, DiagnosisSeries), bool), DiagnoseError> {
     let mut warnings = Vec::new();
     let rec = inputs::prepare(est, val, req, &mut warnings)?;
     let req = &inputs::fit_options(req, &rec);
-    let starts = starts::linear_starts(&rec, req, &mut warnings);
+    let mut starts = starts::linear_starts(&rec, req, &mut warnings);
+    if sampled {
+        starts.lag_start = Some(0.0);
+    }
     let fitter = Fitter {
         req,
         rec: &rec,
@@ -764,6 +800,7 @@ pub fn diagnose_segments(
     let first = results.next().expect("the nominal job");
     let results: Vec<_> = results.collect();
     let nominal = nominal::settle(&fitter, first, &results, &mut warnings)?;
+    let leads = nominal::no_lag(&nominal.fit);
     let results = select::nested_refits(&fitter, &nominal, results);
     let fitter = Fitter {
         floor: nominal::refit_spread(&fitter, &nominal, &results),
@@ -789,7 +826,8 @@ pub fn diagnose_segments(
     } else {
         None
     };
-    Ok(verdict::conclude(
-        &fitter, nominal, trust, ev, answer, in_loop, warnings, t0,
+    Ok((
+        verdict::conclude(&fitter, nominal, trust, ev, answer, in_loop, warnings, t0),
+        leads,
     ))
 }

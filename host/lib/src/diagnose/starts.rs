@@ -99,6 +99,7 @@ pub(super) fn linear_starts(
         two_mass: None,
         delay_lines: None,
         sticks: None,
+        lag_start: None,
     };
     let mut level = None;
     let mut quiet = None;
@@ -262,6 +263,10 @@ pub(super) struct LinearStarts {
     /// friction level, [`grow::stick_share`]) when above [`grow::STICK_SHARE`]: every fit
     /// is then band-limited ([`super::inputs::nl_options`])
     pub sticks: Option<f64>,
+    /// where the current-loop lag starts when no frequency-domain fit gives it [s]: `None`,
+    /// one sample; nought (left out) when the input is taken as sampled
+    /// ([`super::inputs::SampledInput`]), whose trigger is a nominal with no lag
+    pub lag_start: Option<f64>,
 }
 
 /// The start of `structure` with an extra mode attached as `attach` says, from the

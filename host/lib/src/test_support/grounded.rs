@@ -41,6 +41,14 @@ pub fn plant() -> Plant {
 /// validation record (as long, smoothed white noise at 1.2 times that RMS) of the grounded
 /// mass with a cubic spring `k3` [N·m/rad³], the position's noise 0.1 % of its RMS.
 pub fn records(k3: f64, seed: u64) -> (Dataset, Dataset) {
+    records_driven(k3, seed, 1)
+}
+
+/// [`records`] with a force that moves between its samples as a measured analog input
+/// does: linear between them, the mass simulated on `sub` steps per sample interval and
+/// its position sampled at [`FS_HZ`] (`sub` = 1: the force held over each interval, as
+/// [`records`]).
+pub fn records_driven(k3: f64, seed: u64, sub: usize) -> (Dataset, Dataset) {
     let mut g = Gauss::new(seed);
     let lines: Vec<usize> = (1..(200.0 * PERIOD as f64 / FS_HZ) as usize)
         .filter(|l| l % 2 == 1)
@@ -70,15 +78,27 @@ pub fn records(k3: f64, seed: u64) -> (Dataset, Dataset) {
     normalise(&mut val_u, 1.2);
     let effects = [Effect::NonlinearStiffness(NonlinearStiffness { k3 })];
     let ts = 1.0 / FS_HZ;
+    let sub = sub.max(1);
     let mut run = |name: &str, u: Vec<f64>| {
-        let out = simulate_driven(&plant(), &effects, 1e-6, ts, &u, &DrivenStart::default())
-            .expect("the grounded mass simulates");
-        let rms = (out.theta_m.iter().map(|y| y * y).sum::<f64>() / u.len() as f64).sqrt();
-        let y: Vec<f64> = out
-            .theta_m
-            .iter()
-            .map(|y| y + 1e-3 * rms * g.next())
+        let fine: Vec<f64> = (0..u.len() * sub)
+            .map(|i| {
+                let (k, f) = (i / sub, (i % sub) as f64 / sub as f64);
+                u[k] + f * (u.get(k + 1).unwrap_or(&u[k]) - u[k])
+            })
             .collect();
+        let step = ts / sub as f64;
+        let out = simulate_driven(
+            &plant(),
+            &effects,
+            1e-6,
+            step,
+            &fine,
+            &DrivenStart::default(),
+        )
+        .expect("the grounded mass simulates");
+        let theta: Vec<f64> = out.theta_m.iter().step_by(sub).copied().collect();
+        let rms = (theta.iter().map(|y| y * y).sum::<f64>() / u.len() as f64).sqrt();
+        let y: Vec<f64> = theta.iter().map(|y| y + 1e-3 * rms * g.next()).collect();
         Dataset {
             name: name.to_string(),
             data: IdData { ts, u, y, r: None },
