@@ -165,6 +165,17 @@ pub fn run(req: &FitRequest, data: FitRecords<'_>) -> Result<FitOutcome, FitRunE
         };
         return run_frequency_domain(req, frequency);
     }
+    // a grounded mass has no free body for the grey-box start to read its inertia from
+    // (the low-frequency response of a free mass): in the time domain it is fitted by the
+    // nonlinear engine with no effect, as `--effect none` asks (Silverbox, measured: the
+    // grey-box start refused it with "no positive rigid-body inertia")
+    if spec.family == Family::Physical(crate::model::spec::Structure::Grounded) {
+        let mut engine = req.clone();
+        engine.options.spec.effects = Some(Vec::new());
+        if let Ok(Some(nl)) = engine.nl_request() {
+            return run_nonlinear(&engine, nl, data);
+        }
+    }
     check_records_lags(req.lags, &ds.name, &est, val)?;
     run_time_domain(req, ds, data.numbers[0], &est, val)
 }

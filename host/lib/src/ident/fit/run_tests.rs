@@ -278,3 +278,42 @@ fn run_refuses_what_it_cannot_fit_before_the_work() {
         "{e}"
     );
 }
+
+/// A grounded mass has no free body for the grey-box start to read: in the time domain it is
+/// fitted by the nonlinear engine with no effect, its spring and inertia found (the linear
+/// grounded mass of `test_support::grounded`, the record forced to the time domain).
+#[test]
+fn a_grounded_mass_is_fitted_in_the_time_domain() {
+    use crate::test_support::grounded;
+    let (est, val) = grounded::records(0.0, 2);
+    let req = FitRequest {
+        domain: Domain::Time,
+        ..FitRequest::new(FitOptions {
+            spec: ModelSpec::linear(Family::Physical(Structure::Grounded)),
+            r: 1.0,
+            ..FitOptions::default()
+        })
+    };
+    let out = run(
+        &req,
+        FitRecords {
+            estimation: std::slice::from_ref(&est),
+            numbers: &[1],
+            validation: Some(&val),
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let FittedModel::Nonlinear(f) = &out.model else {
+        panic!("{:?}", out.model)
+    };
+    let truth = grounded::plant().params;
+    for (name, value) in [("J", truth.j_m), ("k_0", truth.k_0)] {
+        let got = f.run.result.fit.get(name).expect(name);
+        assert!((got / value - 1.0).abs() < 0.02, "{name} {got} vs {value}");
+    }
+    assert!(
+        out.fit.validation.is_some_and(|v| v > 95.0),
+        "{:?}",
+        out.fit
+    );
+}
