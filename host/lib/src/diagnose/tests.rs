@@ -1692,26 +1692,7 @@ fn amplitude_summary_says_both_trends_with_a_but_when_they_part() {
 /// effect is named.
 #[test]
 fn a_grounded_mass_on_a_hardening_spring_is_diagnosed_as_nonlinear_stiffness() {
-    use crate::test_support::grounded;
-    let req = DiagnoseRequest {
-        structure: Structure::Grounded,
-        // the robot's default gear ratio: the gearless grounded mass does not use it
-        candidates: Effect::all_defaults(),
-        ..DiagnoseRequest::default()
-    };
-    let k3 = grounded::k3_at(0.03);
-    let (est, val) = grounded::records(k3, 3);
-    let d = diagnose(std::slice::from_ref(&est), &val, &req).expect("diagnosis");
-    assert_eq!(
-        d.best, "nonlinear_stiffness",
-        "{}: {:?}",
-        d.verdict, d.warnings
-    );
-    assert!(
-        within(param(&d, "k3"), k3, 0.1),
-        "k3 {} vs {k3}",
-        param(&d, "k3")
-    );
+    let d = grounded_hardening(1);
     assert!(d.refused.is_none(), "{:?}", d.refused);
     // a force held over each sample interval, as simulated, is kept as held
     assert!(
@@ -1719,8 +1700,8 @@ fn a_grounded_mass_on_a_hardening_spring_is_diagnosed_as_nonlinear_stiffness() {
         "{:?}",
         d.warnings
     );
-    let (est, val) = grounded::records(0.0, 4);
-    let d = diagnose(std::slice::from_ref(&est), &val, &req).expect("diagnosis");
+    let (est, val) = crate::test_support::grounded::records(0.0, 4);
+    let d = diagnose(std::slice::from_ref(&est), &val, &grounded_request()).expect("diagnosis");
     assert_eq!(d.best, "none", "{}: {:?}", d.verdict, d.warnings);
 }
 
@@ -1731,15 +1712,29 @@ fn a_grounded_mass_on_a_hardening_spring_is_diagnosed_as_nonlinear_stiffness() {
 /// taken as sampled, and the nominal scores higher so than held.
 #[test]
 fn a_force_that_moves_between_its_samples_is_taken_as_sampled() {
-    use crate::test_support::grounded;
-    let req = DiagnoseRequest {
+    let d = grounded_hardening(8);
+    assert_noted(&d, "the input is taken as samples of a signal");
+}
+
+/// The grounded structure with all six candidates; the robot's default gear ratio, which
+/// the gearless grounded mass does not use.
+fn grounded_request() -> DiagnoseRequest {
+    DiagnoseRequest {
         structure: Structure::Grounded,
         candidates: Effect::all_defaults(),
         ..DiagnoseRequest::default()
-    };
+    }
+}
+
+/// The diagnosis of the grounded mass whose spring hardens by 3 % at three position RMS,
+/// its force simulated on `sub` steps per sample interval
+/// ([`crate::test_support::grounded::records_driven`]), checked to be `nonlinear_stiffness`
+/// with its `k3` within 10 %.
+fn grounded_hardening(sub: usize) -> Diagnosis {
+    use crate::test_support::grounded;
     let k3 = grounded::k3_at(0.03);
-    let (est, val) = grounded::records_driven(k3, 3, 8);
-    let d = diagnose(std::slice::from_ref(&est), &val, &req).expect("diagnosis");
+    let (est, val) = grounded::records_driven(k3, 3, sub);
+    let d = diagnose(std::slice::from_ref(&est), &val, &grounded_request()).expect("diagnosis");
     assert_eq!(
         d.best, "nonlinear_stiffness",
         "{}: {:?}",
@@ -1750,7 +1745,7 @@ fn a_force_that_moves_between_its_samples_is_taken_as_sampled() {
         "k3 {} vs {k3}",
         param(&d, "k3")
     );
-    assert_noted(&d, "the input is taken as samples of a signal");
+    d
 }
 
 /// The lines' evidence of a delay compares nested fits: the free one (lag and delay) holds

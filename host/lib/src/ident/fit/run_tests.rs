@@ -43,6 +43,18 @@ fn three_mass_request() -> FitRequest {
     })
 }
 
+/// [`run`] on the one estimation record `est` with the validation record `val`.
+fn fit_on(req: &FitRequest, est: &Dataset, val: &Dataset) -> Result<FitOutcome, FitRunError> {
+    run(
+        req,
+        FitRecords {
+            estimation: std::slice::from_ref(est),
+            numbers: &[1],
+            validation: Some(val),
+        },
+    )
+}
+
 /// Tolerance on the seven parameters [-]: the command-line tests' 3 % on 3 periods
 /// (2 after the settling one) with the default sensors.
 const TOL: f64 = 0.03;
@@ -59,15 +71,7 @@ fn run_fits_the_three_mass_joint_on_periodic_data_in_the_frequency_domain() {
         figures: true,
         ..three_mass_request()
     };
-    let out = run(
-        &req,
-        FitRecords {
-            estimation: std::slice::from_ref(&est),
-            numbers: &[1],
-            validation: Some(&val),
-        },
-    )
-    .unwrap();
+    let out = fit_on(&req, &est, &val).unwrap();
     let FittedModel::Linear(l) = &out.model else {
         panic!("a linear model")
     };
@@ -294,15 +298,7 @@ fn a_grounded_mass_is_fitted_in_the_time_domain() {
             ..FitOptions::default()
         })
     };
-    let out = run(
-        &req,
-        FitRecords {
-            estimation: std::slice::from_ref(&est),
-            numbers: &[1],
-            validation: Some(&val),
-        },
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    let out = fit_on(&req, &est, &val).unwrap_or_else(|e| panic!("{e}"));
     let FittedModel::Nonlinear(f) = &out.model else {
         panic!("{:?}", out.model)
     };
