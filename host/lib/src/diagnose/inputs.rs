@@ -197,8 +197,8 @@ pub(super) fn nl_options(
 /// between its samples, and holding it delays it by half a sample, a phase lag no lag of
 /// the model can take back. A nominal whose current-loop lag comes out nought (left out or
 /// on its lower bound) shows that the data ask for less delay than holding adds; the
-/// diagnosis is then made again on these captures, and kept when its nominal scores higher
-/// on the estimation record ([`super::diagnose_segments`]). Silverbox (measured, an
+/// nominal is then fitted again on these captures, and the diagnosis goes on from it when
+/// it scores higher on the estimation record ([`super::diagnose_segments`]). Silverbox (measured, an
 /// electronic mass–spring–damper with a hardening spring, 610 Hz, excited to 200 Hz):
 /// the linear grounded structure's velocity FIT on a validation realisation 70.4 % with
 /// the input held, 85.1 % with it so, 85.8 % with the input interpolated linearly.

@@ -50,10 +50,10 @@
 //!    controller's reaction to the encoder's quantisation and the disturbance, and a fit
 //!    from the measured torque that scores it is drawn towards the inverse controller.
 //!    The input is taken as held over each sample interval (a drive's torque reference);
-//!    when the nominal's current-loop lag comes out nought, the whole diagnosis is made
-//!    again with the input taken as samples of a signal that moves between them
-//!    ([`inputs::SampledInput`], a measured analog input), and kept when its nominal
-//!    scores higher in-sample.
+//!    when the nominal's current-loop lag comes out nought, the nominal is fitted again
+//!    with the input taken as samples of a signal that moves between them
+//!    ([`inputs::SampledInput`], a measured analog input), and when it scores higher
+//!    in-sample the diagnosis goes on from it, its singles fitted on that input.
 //!    **Starts** ([`starts`]): the frequency-domain linear fits the candidates start from;
 //!    where the motor sticks, the structure grown in the time domain
 //!    ([`crate::ident::nonlinear::grow`]).
@@ -752,59 +752,102 @@ pub fn diagnose_segments(
     req: &DiagnoseRequest,
 ) -> Result<(Diagnosis, DiagnosisSeries), DiagnoseError> {
     let t0 = Instant::now();
-    let (held, leads) = diagnose_as_given(est, val, req, (t0, false))?;
-    if !leads {
-        return Ok(held);
-    }
-    let sampled = inputs::SampledInput::of(est, val);
-    let est_s: Vec<&[Dataset]> = sampled.est.iter().map(Vec::as_slice).collect();
-    let r = diagnose_as_given(&est_s, &sampled.val, req, (t0, true));
-    Ok(match r {
-        Ok((mut s, _)) if s.0.fit_nominal_est > held.0.fit_nominal_est => {
-            s.0.warnings.insert(
-                0,
-                inputs::SampledInput::note(held.0.fit_nominal_est, s.0.fit_nominal_est),
-            );
-            s
-        }
-        _ => held,
-    })
-}
-
-/// [`diagnose_segments`] on the records as given, and whether the nominal's current-loop lag
-/// came out nought (left out, or on its lower bound): the data then ask for less delay than
-/// holding each input sample over its interval adds ([`inputs::SampledInput`]).
-fn diagnose_as_given(
-    est: &[&[Dataset]],
-    val: &[Dataset],
-    req: &DiagnoseRequest,
-    (t0, sampled): (Instant, bool),
-) -> Result<((Diagnosis, DiagnosisSeries), bool), DiagnoseError> {
-    let mut warnings = Vec::new();
-    let rec = inputs::prepare(est, val, req, &mut warnings)?;
-    let req = &inputs::fit_options(req, &rec);
-    let mut starts = starts::linear_starts(&rec, req, &mut warnings);
-    if sampled {
-        starts.lag_start = Some(0.0);
-    }
-    let fitter = Fitter {
-        req,
-        rec: &rec,
-        starts: &starts,
-        floor: fits::Floor::of(req),
-    };
+    let held = Prepared::of(est, val, req, false)?;
+    let fitter = held.fitter();
     // the nominal and the singles, fitted together on the threads
     let mut jobs: Vec<Job<'_>> = vec![(Vec::new(), None)];
-    jobs.extend(rec.candidates.iter().map(|e| (vec![*e], None)));
+    jobs.extend(held.rec.candidates.iter().map(|e| (vec![*e], None)));
     let mut results = fitter.fit_all(&jobs).into_iter();
     let first = results.next().expect("the nominal job");
     let results: Vec<_> = results.collect();
+    let mut warnings = held.warnings.clone();
     let nominal = nominal::settle(&fitter, first, &results, &mut warnings)?;
-    let leads = nominal::no_lag(&nominal.fit);
-    let results = select::nested_refits(&fitter, &nominal, results);
+    if !nominal::no_lag(&nominal.fit) {
+        return Ok(answer(&fitter, nominal, results, warnings, t0));
+    }
+    // the data ask for less delay than holding the input adds: its nominal again, on the
+    // input taken as sampled, and the singles refitted on it when that scores higher
+    let s = inputs::SampledInput::of(est, val);
+    let est_s: Vec<&[Dataset]> = s.est.iter().map(Vec::as_slice).collect();
+    let Ok(sampled) = Prepared::of(&est_s, &s.val, req, true) else {
+        return Ok(answer(&fitter, nominal, results, warnings, t0));
+    };
+    let s_fitter = sampled.fitter();
+    let mut s_warnings = sampled.warnings.clone();
+    let in_sample = |f: &Fitter<'_>, n: &fits::Fitted| {
+        f.in_sample(&metric::DrivenModel::of_fit(&n.fit))
+            .unwrap_or(f64::NAN)
+    };
+    let s_nominal = nominal::settle(&s_fitter, s_fitter.fit(&jobs[0]), &[], &mut s_warnings);
+    let (held_est, s_nominal) = (in_sample(&fitter, &nominal), s_nominal.ok());
+    match s_nominal.map(|n| (in_sample(&s_fitter, &n), n)) {
+        Some((s_est, s_nominal)) if s_est > held_est => {
+            s_warnings.insert(0, inputs::SampledInput::note(held_est, s_est));
+            let results = s_fitter.fit_all(&jobs[1..]);
+            Ok(answer(&s_fitter, s_nominal, results, s_warnings, t0))
+        }
+        _ => Ok(answer(&fitter, nominal, results, warnings, t0)),
+    }
+}
+
+/// Stage 0 on the records as given or with their input taken as sampled
+/// ([`inputs::SampledInput`]): the checked records, the fits' options, the linear starts
+/// and the notes so far.
+struct Prepared<'a> {
+    rec: inputs::Records<'a>,
+    req: DiagnoseRequest,
+    starts: starts::LinearStarts,
+    warnings: Vec<String>,
+}
+
+impl<'a> Prepared<'a> {
+    /// Stage 0 on `est` and `val` (`sampled`: their input taken as samples of a signal,
+    /// whose nominal starts with no current-loop lag).
+    fn of(
+        est: &'a [&'a [Dataset]],
+        val: &'a [Dataset],
+        req: &DiagnoseRequest,
+        sampled: bool,
+    ) -> Result<Prepared<'a>, DiagnoseError> {
+        let mut warnings = Vec::new();
+        let rec = inputs::prepare(est, val, req, &mut warnings)?;
+        let req = inputs::fit_options(req, &rec);
+        let mut starts = starts::linear_starts(&rec, &req, &mut warnings);
+        if sampled {
+            starts.lag_start = Some(0.0);
+        }
+        Ok(Prepared {
+            rec,
+            req,
+            starts,
+            warnings,
+        })
+    }
+
+    /// The fitter of these records, at the option's floor.
+    fn fitter(&self) -> Fitter<'_> {
+        Fitter {
+            req: &self.req,
+            rec: &self.rec,
+            starts: &self.starts,
+            floor: fits::Floor::of(&self.req),
+        }
+    }
+}
+
+/// Stages 3 to 7 from the settled `nominal` and the singles' fits `results`: the answer and
+/// its verdict; `t0` the diagnosis's start.
+fn answer(
+    fitter: &Fitter<'_>,
+    nominal: fits::Fitted,
+    results: Vec<Result<fits::Fitted, CandidateError>>,
+    mut warnings: Vec<String>,
+    t0: Instant,
+) -> (Diagnosis, DiagnosisSeries) {
+    let results = select::nested_refits(fitter, &nominal, results);
     let fitter = Fitter {
-        floor: nominal::refit_spread(&fitter, &nominal, &results),
-        ..fitter
+        floor: nominal::refit_spread(fitter, &nominal, &results),
+        ..*fitter
     };
     let ev = evidence::gather(&fitter, &nominal);
     let mut answer = select::singles(&fitter, &nominal, &ev, results);
@@ -826,8 +869,5 @@ fn diagnose_as_given(
     } else {
         None
     };
-    Ok((
-        verdict::conclude(&fitter, nominal, trust, ev, answer, in_loop, warnings, t0),
-        leads,
-    ))
+    verdict::conclude(&fitter, nominal, trust, ev, answer, in_loop, warnings, t0)
 }

@@ -29,12 +29,14 @@ pub(super) fn settle(
         Ok(n) => n,
         Err(e) => {
             let usual = e.to_string();
-            let (n, how) = recover_nominal(e, est, val, parts, req, singles).map_err(|source| {
-                DiagnoseError::Nominal {
-                    capture: rec.est[0][0].name.clone(),
-                    source,
-                }
-            })?;
+            let lag = fitter.starts.lag_start;
+            let (n, how) =
+                recover_nominal(e, (est, val, parts), req, lag, singles).map_err(|source| {
+                    DiagnoseError::Nominal {
+                        capture: rec.est[0][0].name.clone(),
+                        source,
+                    }
+                })?;
             warnings.push(format!(
                 "nominal: the fit from its usual start failed ({usual}); {how}, so the nominal \
                  is that fit's and not the one from the frequency-domain start"
@@ -144,14 +146,14 @@ const NOMINAL_START_MARGIN: f64 = 5.0;
 /// The nominal when its fit from the usual start (`failed` says why) fails: first started
 /// automatically in the time domain (no frequency-domain start), then from the structure
 /// of each candidate's fit (`singles`, the best in-sample velocity FIT first) with the
-/// effect left out. The fit, and in words where it started; the reasons of every failure
-/// when all fail.
+/// effect left out; the current-loop lag started at `lag_start` when given (the diagnosis's
+/// own, [`LinearStarts::lag_start`]). The fit, and in words where it started; the reasons
+/// of every failure when all fail.
 fn recover_nominal(
     failed: CandidateError,
-    est: &[IdData],
-    val: &[IdData],
-    parts: &[Measured],
+    (est, val, parts): (&[IdData], &[IdData], &[Measured]),
     req: &DiagnoseRequest,
+    lag_start: Option<f64>,
     singles: &[Result<Fitted, CandidateError>],
 ) -> Result<(Fitted, String), NominalError> {
     let none = LinearStarts {
@@ -163,7 +165,7 @@ fn recover_nominal(
         two_mass: None,
         delay_lines: None,
         sticks: None,
-        lag_start: None,
+        lag_start,
     };
     let mut why = vec![(NominalStart::FrequencyDomain, failed)];
     match fit_and_score(est, val, parts, req, Vec::new(), &none, None) {
