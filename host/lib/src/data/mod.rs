@@ -214,6 +214,27 @@ impl IdData {
         }
     }
 
+    /// The record with its input taken as samples of a band-limited signal that moves
+    /// between them, for models that hold each input sample over its interval (as a drive
+    /// holds its torque reference): each sample replaced by the value whose hold over the
+    /// interval passes the signal's components with unit gain and no delay to second order
+    /// in `x = ω·Ts/2`, `(7·(u[k] + u[k+1]) − (u[k−1] + u[k+2])) / 12`, the ends repeated
+    /// and the last sample kept. A measured analog input (a voltage, a force sensor) held as
+    /// it is lags the model by half a sample; held at the interval mean `(u[k] + u[k+1])/2`
+    /// it has no lag but a gain `cos x · sin x / x` (0.94 at a tenth of the sample rate,
+    /// which a fitted grounded mass took as `J` and `k` 3.6 % low), this one 0.996.
+    pub fn input_as_sampled(&self) -> IdData {
+        let u = &self.u;
+        let n = u.len();
+        let at = |k: isize| u[k.clamp(0, n as isize - 1) as usize];
+        let mut d = self.clone();
+        for k in 0..n.saturating_sub(1) {
+            let k = k as isize;
+            d.u[k as usize] = (7.0 * (at(k) + at(k + 1)) - (at(k - 1) + at(k + 2))) / 12.0;
+        }
+        d
+    }
+
     /// estimation / validation split: the first `fraction` of the samples
     /// (rounded down) and the rest
     pub fn split(&self, fraction: f64) -> (IdData, IdData) {
@@ -959,6 +980,40 @@ const FORMAT_HEAD: u64 = 520;
 
 #[cfg(test)]
 mod tests {
+    /// An input taken as sampled: a ramp is held at its intervals' midpoints (no lag); a
+    /// sine at a tenth of the sample rate, held so, has the unit gain of the signal to
+    /// within 1 % (the interval mean would leave 0.94); the output and the rest as they were.
+    #[test]
+    fn an_input_taken_as_sampled_is_held_without_lag_or_loss() {
+        let ramp = super::IdData {
+            ts: 0.5,
+            u: (0..6).map(f64::from).collect(),
+            y: vec![1.0; 6],
+            r: None,
+        };
+        let s = ramp.input_as_sampled();
+        assert_eq!(s.u[1..4], [1.5, 2.5, 3.5]);
+        assert_eq!((s.u[5], &s.y, s.ts), (5.0, &ramp.y, ramp.ts));
+        let w = 2.0 * std::f64::consts::PI / 10.0;
+        let sine = super::IdData {
+            u: (0..40).map(|k| (w * f64::from(k)).cos()).collect(),
+            ..ramp
+        };
+        // the hold over an interval passes a sine with the gain sin(x)/x, x = ω·Ts/2
+        let hold = (w / 2.0).sin() / (w / 2.0);
+        for (k, h) in sine
+            .input_as_sampled()
+            .u
+            .iter()
+            .enumerate()
+            .take(38)
+            .skip(1)
+        {
+            let mid = (w * (k as f64 + 0.5)).cos();
+            assert!((h * hold - mid).abs() < 0.01, "sample {k}: {h} vs {mid}");
+        }
+    }
+
     #[test]
     fn fmt_sig_rounds_times_and_rates_for_the_user() {
         use super::fmt_sig;

@@ -762,7 +762,7 @@ pub fn diagnose_segments(
     let results: Vec<_> = results.collect();
     let mut warnings = held.warnings.clone();
     let nominal = nominal::settle(&fitter, first, &results, &mut warnings)?;
-    if !nominal::no_lag(&nominal.fit) {
+    if !nominal.fit.holds_no_lag() {
         return Ok(answer(&fitter, nominal, results, warnings, t0));
     }
     // the data ask for less delay than holding the input adds: its nominal again, on the

@@ -85,16 +85,6 @@ pub(super) fn settle(
     Ok(nominal)
 }
 
-/// Whether the fit `f` holds no current-loop lag: none fitted (a lag to start from below
-/// [`crate::ident::nonlinear::UNRESOLVED_LAG`] of a sample is left out), or one on its
-/// lower bound.
-pub(super) fn no_lag(f: &NlFit) -> bool {
-    f.params
-        .iter()
-        .find(|p| p.name == "tau_c")
-        .is_none_or(|p| !p.fixed && p.at_lower)
-}
-
 /// The floor of the significance test ([`Floor`]): the option's, or the spread of the
 /// nominal's own refits when larger. A single whose effect came out exactly of no size
 /// ([`exactly_of_no_size`]) at an in-sample cost no higher than the nominal's is the nominal

@@ -45,47 +45,72 @@ pub fn records(k3: f64, seed: u64) -> (Dataset, Dataset) {
 }
 
 /// [`records`] with a force that moves between its samples as a measured analog input
-/// does: linear between them, the mass simulated on `sub` steps per sample interval and
-/// its position sampled at [`FS_HZ`] (`sub` = 1: the force held over each interval, as
-/// [`records`]).
+/// does (`sub` > 1): a band-limited signal, the mass simulated on `sub` steps per sample
+/// interval and its position sampled at [`FS_HZ`]; the validation force then another
+/// realisation of the estimation multisine (random phases, 1.2 times its RMS), each
+/// evaluated between the samples as the sum of its sines. `sub` = 1: the force held over
+/// each interval, as [`records`].
 pub fn records_driven(k3: f64, seed: u64, sub: usize) -> (Dataset, Dataset) {
     let mut g = Gauss::new(seed);
     let lines: Vec<usize> = (1..(200.0 * PERIOD as f64 / FS_HZ) as usize)
         .filter(|l| l % 2 == 1)
         .collect();
-    let phases: Vec<f64> = lines
-        .iter()
-        .map(|_| 2.0 * std::f64::consts::PI * g.uniform())
-        .collect();
-    let mut period: Vec<f64> = (0..PERIOD)
-        .map(|n| {
+    let mut phases = || -> Vec<f64> {
+        lines
+            .iter()
+            .map(|_| 2.0 * std::f64::consts::PI * g.uniform())
+            .collect()
+    };
+    let est_phases = phases();
+    let sub = sub.max(1);
+    // four periods of the multisine of `phases`, scaled to `rms` on its samples: the
+    // samples, and the force the simulation holds over each fine step (1/`sub` sample),
+    // the signal at the step's midpoint (no delay; `sub` = 1: the samples, held)
+    let multisine = |phases: &[f64], rms: f64| -> (Vec<f64>, Vec<f64>) {
+        let at = |t: f64| -> f64 {
             lines
                 .iter()
-                .zip(&phases)
-                .map(|(&l, p)| {
-                    (2.0 * std::f64::consts::PI * (l * n) as f64 / PERIOD as f64 + p).cos()
-                })
+                .zip(phases)
+                .map(|(&l, p)| (2.0 * std::f64::consts::PI * l as f64 * t + p).cos())
                 .sum()
-        })
-        .collect();
-    normalise(&mut period, 1.0);
-    let est_u: Vec<f64> = period.iter().cycle().take(4 * PERIOD).copied().collect();
-    let white: Vec<f64> = (0..4 * PERIOD + 2).map(|_| g.next()).collect();
-    let mut val_u: Vec<f64> = white
-        .windows(3)
-        .map(|w| w.iter().sum::<f64>() / 3.0)
-        .collect();
-    normalise(&mut val_u, 1.2);
+        };
+        let samples: Vec<f64> = (0..PERIOD).map(|k| at(k as f64 / PERIOD as f64)).collect();
+        let (mean, scale) = (
+            samples.iter().sum::<f64>() / PERIOD as f64,
+            rms / rms_about_mean(&samples),
+        );
+        let fine: Vec<f64> = if sub == 1 {
+            samples.clone()
+        } else {
+            (0..sub * PERIOD)
+                .map(|i| at((i as f64 + 0.5) / (sub * PERIOD) as f64))
+                .collect()
+        };
+        let four = |x: Vec<f64>, n: usize| -> Vec<f64> {
+            x.iter()
+                .cycle()
+                .take(4 * n)
+                .map(|v| (v - mean) * scale)
+                .collect()
+        };
+        (four(samples, PERIOD), four(fine, sub * PERIOD))
+    };
+    let est = multisine(&est_phases, 1.0);
+    let val = if sub > 1 {
+        let p = phases();
+        multisine(&p, 1.2)
+    } else {
+        let white: Vec<f64> = (0..4 * PERIOD + 2).map(|_| g.next()).collect();
+        let mut v: Vec<f64> = white
+            .windows(3)
+            .map(|w| w.iter().sum::<f64>() / 3.0)
+            .collect();
+        normalise(&mut v, 1.2);
+        (v.clone(), v)
+    };
     let effects = [Effect::NonlinearStiffness(NonlinearStiffness { k3 })];
     let ts = 1.0 / FS_HZ;
-    let sub = sub.max(1);
-    let mut run = |name: &str, u: Vec<f64>| {
-        let fine: Vec<f64> = (0..u.len() * sub)
-            .map(|i| {
-                let (k, f) = (i / sub, (i % sub) as f64 / sub as f64);
-                u[k] + f * (u.get(k + 1).unwrap_or(&u[k]) - u[k])
-            })
-            .collect();
+    let mut run = |name: &str, (u, fine): (Vec<f64>, Vec<f64>)| {
         let step = ts / sub as f64;
         let out = simulate_driven(
             &plant(),
@@ -107,8 +132,8 @@ pub fn records_driven(k3: f64, seed: u64, sub: usize) -> (Dataset, Dataset) {
             meta: Default::default(),
         }
     };
-    let est = run("grounded-est", est_u);
-    let val = run("grounded-val", val_u);
+    let est = run("grounded-est", est);
+    let val = run("grounded-val", val);
     (est, val)
 }
 

@@ -824,19 +824,52 @@ fn run_nonlinear(
         e => FitRunError::Nonlinear(Box::new(e)),
     };
     let t0 = Instant::now();
-    let done = nonlinear::run(
-        NlData {
-            estimation: &est_all,
-            // whole periods of the record: the frequency-domain fit gives the linear start
-            periodic: req
-                .estimation_fraction
-                .is_none()
-                .then_some((&segs[..], req.settle_periods)),
-            validation: val.as_ref().map(|(v, _)| v),
-        },
-        &nl,
-    )
-    .map_err(why)?;
+    let run_on = |est_all: &[IdData], segs: &[Dataset], val: Option<&IdData>| {
+        nonlinear::run(
+            NlData {
+                estimation: est_all,
+                // whole periods of the record: the frequency-domain fit gives the linear start
+                periodic: req
+                    .estimation_fraction
+                    .is_none()
+                    .then_some((segs, req.settle_periods)),
+                validation: val,
+            },
+            &nl,
+        )
+    };
+    let mut done = run_on(&est_all, &segs, val.as_ref().map(|(v, _)| v)).map_err(why)?;
+    // no lag where one was free: the input is tried as sampled, as `diagnose` does, and
+    // kept when the fit scores higher on the estimation records
+    let (mut val, mut est) = (val, est);
+    if nl.held().is_none() && done.result.fit.holds_no_lag() {
+        let segs_s: Vec<Dataset> = segs
+            .iter()
+            .map(|d| Dataset {
+                data: d.data.input_as_sampled(),
+                ..d.clone()
+            })
+            .collect();
+        let est_s: Vec<IdData> = est_all.iter().map(IdData::input_as_sampled).collect();
+        let val_s = val.as_ref().map(|(v, n)| (v.input_as_sampled(), n.clone()));
+        let (held, s) = (
+            done.estimation.velocity_fit_percent,
+            run_on(&est_s, &segs_s, val_s.as_ref().map(|(v, _)| v)),
+        );
+        match s {
+            Ok(mut s) if s.estimation.velocity_fit_percent > held => {
+                let sampled = s.estimation.velocity_fit_percent;
+                let note = nonlinear::sampled_input_note(
+                    "the fit's velocity FIT on the estimation record",
+                    held,
+                    sampled,
+                );
+                s.result.warnings.insert(0, note);
+                (done, val, est) = (s, val_s, est.input_as_sampled());
+            }
+            _ => {}
+        }
+    }
     let seconds = t0.elapsed().as_secs_f64();
     let segments = segs
         .iter()

@@ -26,9 +26,9 @@ pub use output_error::{
 };
 pub use run::{
     identify, identify_segments, linear_start, linear_start_segments, linear_start_shared,
-    model_name, model_of, run, validate, validate_segments, DelayLines, LinearStart,
-    LinearStartError, NlData, NlRequest, NlResult, NlRun, NlRunError, NlStart, NlValidation,
-    RawFrfFits, StartSearch, CANDIDATE_PATIENCE,
+    model_name, model_of, run, sampled_input_note, validate, validate_segments, DelayLines,
+    LinearStart, LinearStartError, NlData, NlRequest, NlResult, NlRun, NlRunError, NlStart,
+    NlValidation, RawFrfFits, StartSearch, CANDIDATE_PATIENCE,
 };
 
 #[cfg(test)]

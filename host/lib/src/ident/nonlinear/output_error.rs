@@ -323,6 +323,17 @@ impl NlFit {
     pub fn get(&self, name: &str) -> Option<f64> {
         self.params.iter().find(|p| p.name == name).map(|p| p.value)
     }
+
+    /// Whether the fit holds no current-loop lag it estimated: none fitted (a lag to start
+    /// from below [`super::UNRESOLVED_LAG`] of a sample is left out), or one on its lower
+    /// bound. The data then ask for no more delay than holding each input sample over its
+    /// interval adds, or less ([`crate::data::IdData::input_as_sampled`]).
+    pub fn holds_no_lag(&self) -> bool {
+        self.params
+            .iter()
+            .find(|p| p.name == "tau_c")
+            .is_none_or(|p| !p.fixed && p.at_lower)
+    }
 }
 
 /// Interval-mean velocity `(y[k] − y[k−1])/T` (sample 0 repeats sample 1).

@@ -107,7 +107,7 @@ impl NlRequest {
     }
 
     /// The lag held: `tau_c` among [`NlRequest::fixed`], else [`NlRequest::held_tau_c`].
-    fn held(&self) -> Option<f64> {
+    pub fn held(&self) -> Option<f64> {
         self.fixed
             .iter()
             .find(|(n, _)| n == "tau_c")
@@ -237,6 +237,19 @@ pub struct NlValidation {
     /// toolbox FIT of the motor angle, exact laws, unfiltered [%] (the rigid-body mode and
     /// any drift dominate it)
     pub angle_fit_percent: f64,
+}
+
+/// The note that says a fit took its input as sampled ([`crate::data::IdData::input_as_sampled`]):
+/// with the input held the lag came out nought; `what` (held `held`, so `sampled` [%]) is
+/// the figure that chose.
+pub fn sampled_input_note(what: &str, held: f64, sampled: f64) -> String {
+    format!(
+        "the input is taken as samples of a signal that moves between them, not as values \
+         held over each sample interval (a drive's torque reference): with the input held, \
+         the current-loop lag came out nought, less delay than holding adds; driven by the \
+         input taken as a band-limited signal (each sample replaced by the value whose hold \
+         passes it with no delay), {what} is {sampled:.1} % against {held:.1} % held"
+    )
 }
 
 /// A lag to start from below this share of the sample interval is left out of the model
