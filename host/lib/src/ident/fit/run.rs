@@ -775,7 +775,10 @@ fn run_frequency_domain(req: &FitRequest, f: Frequency<'_>) -> Result<FitOutcome
 
 /// The nonlinear path: the segments of [`MIN_SEGMENT_SAMPLES`] or more as separate
 /// experiments, [`crate::ident::nonlinear::run`] with the frequency-domain linear start
-/// on periodic data (not on a split record), the validation with the exact laws.
+/// on periodic data (not on a split record), the validation with the exact laws. When the
+/// fit's current-loop lag comes out nought where it was free, the run is made again on the
+/// records with their input taken as sampled ([`IdData::input_as_sampled`], a measured
+/// analog input) and kept when it scores higher on the estimation records.
 fn run_nonlinear(
     req: &FitRequest,
     nl: NlRequest,
