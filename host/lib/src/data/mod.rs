@@ -221,8 +221,9 @@ impl IdData {
     /// in `x = ω·Ts/2`, `(7·(u[k] + u[k+1]) − (u[k−1] + u[k+2])) / 12`, the ends repeated
     /// and the last sample kept. A measured analog input (a voltage, a force sensor) held as
     /// it is lags the model by half a sample; held at the interval mean `(u[k] + u[k+1])/2`
-    /// it has no lag but a gain `cos x · sin x / x` (0.94 at a tenth of the sample rate,
-    /// which a fitted grounded mass took as `J` and `k` 3.6 % low), this one 0.996.
+    /// it has no lag but a gain `cos x · sin x / x` (0.94 at a tenth of the sample rate:
+    /// a grounded mass driven by a band-limited force was fitted with `J` and `k` 6.8 and
+    /// 7.0 % low), this one 0.996 (0.6 and 0.8 %).
     pub fn input_as_sampled(&self) -> IdData {
         let u = &self.u;
         let n = u.len();
@@ -431,6 +432,14 @@ impl PeriodLayout {
 }
 
 impl Dataset {
+    /// The capture with its input taken as sampled ([`IdData::input_as_sampled`]).
+    pub fn input_as_sampled(&self) -> Dataset {
+        Dataset {
+            data: self.data.input_as_sampled(),
+            ..self.clone()
+        }
+    }
+
     /// Excitation sample index of the first sample: `t0 / ts` rounded (the time column
     /// counts from the first sample of the ramp-in, so a record that starts later, such as
     /// a segment after a gap, starts at `t0 = k Ts`); 0 when `t0` is not positive.

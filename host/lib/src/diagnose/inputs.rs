@@ -210,7 +210,7 @@ pub(super) struct SampledInput {
 impl SampledInput {
     /// `est` and `val` with their inputs so.
     pub fn of(est: &[&[Dataset]], val: &[Dataset]) -> SampledInput {
-        let each = |c: &[Dataset]| c.iter().map(sampled).collect::<Vec<_>>();
+        let each = |c: &[Dataset]| c.iter().map(Dataset::input_as_sampled).collect::<Vec<_>>();
         SampledInput {
             est: est.iter().map(|c| each(c)).collect(),
             val: each(val),
@@ -225,14 +225,6 @@ impl SampledInput {
             held,
             sampled,
         )
-    }
-}
-
-/// `d` with its input taken as samples of a continuous signal ([`IdData::input_as_sampled`]).
-fn sampled(d: &Dataset) -> Dataset {
-    Dataset {
-        data: d.data.input_as_sampled(),
-        ..d.clone()
     }
 }
 

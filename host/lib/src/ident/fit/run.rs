@@ -846,13 +846,7 @@ fn run_nonlinear(
     // kept when the fit scores higher on the estimation records
     let (mut val, mut est) = (val, est);
     if nl.held().is_none() && done.result.fit.holds_no_lag() {
-        let segs_s: Vec<Dataset> = segs
-            .iter()
-            .map(|d| Dataset {
-                data: d.data.input_as_sampled(),
-                ..d.clone()
-            })
-            .collect();
+        let segs_s: Vec<Dataset> = segs.iter().map(Dataset::input_as_sampled).collect();
         let est_s: Vec<IdData> = est_all.iter().map(IdData::input_as_sampled).collect();
         let val_s = val.as_ref().map(|(v, n)| (v.input_as_sampled(), n.clone()));
         let (held, s) = (
