@@ -359,6 +359,9 @@ struct NlReport<'a> {
     /// the structure's parameters, `tau_c` (when there is a lag) and `offset`
     parameters: BTreeMap<String, ParamJson>,
     effects: Vec<EffectJson>,
+    /// how the records' input samples were read (`sampled`: a signal that moves between
+    /// them); the model file records it and `validate` reads its data so
+    input: jointid::data::InputTaken,
     /// the start: its steps (empty with --start)
     start: String,
     steps: Vec<StepJson>,
@@ -439,6 +442,7 @@ pub(crate) fn print_nonlinear(
                     .collect(),
             })
             .collect(),
+        input: nl.input,
         start: match start {
             Some(p) => format!("from {}", p.display()),
             None => "automatic (seed 001's three steps)".into(),

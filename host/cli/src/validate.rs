@@ -31,7 +31,7 @@ use super::views::{
 };
 use super::{check_plot_files, print_json, print_written, CmdResult, Context, Outcome};
 use jointid::data::segment::{longest_index, SegmentNotes, MIN_SEGMENT_SAMPLES};
-use jointid::data::{IdData, Percent};
+use jointid::data::{IdData, InputTaken, Percent};
 use jointid::ident::fit::{
     check_lags, velocity_record, FitData, FitMetric, SegmentJson, NL_FIT_NAME, VELOCITY_FIT_NAME,
 };
@@ -440,6 +440,8 @@ struct NlReport<'a> {
     samples: usize,
     ts: f64,
     fit_name: &'a str,
+    /// how the records' input was read, as the model was fitted
+    input: InputTaken,
     /// velocity FIT with the simulator's exact laws [%]
     fit: f64,
     fit_estimation: f64,
@@ -528,7 +530,16 @@ fn run_nonlinear(
     // the records taken out of the selection (a long capture held once, not twice: issue
     // 37 item 9); `segs` keeps their names and rates
     let mut segs = segs;
-    let records: Vec<IdData> = segs.iter_mut().map(take_record).collect();
+    // read as the model was fitted: a model fitted on its input taken as sampled lags by
+    // half a sample on the input held as it is
+    let records: Vec<IdData> = segs
+        .iter_mut()
+        .map(take_record)
+        .map(|r| match nl.input {
+            InputTaken::Held => r,
+            InputTaken::Sampled => r.input_as_sampled(),
+        })
+        .collect();
     let ds = &segs[longest];
     super::progress::step(format!(
         "validating on {} samples",
@@ -573,6 +584,7 @@ fn run_nonlinear(
                 samples,
                 ts: ds.data.ts,
                 fit_name,
+                input: nl.input,
                 fit: fit_pct,
                 fit_estimation: saved.fit_estimation,
                 require_fit: args.require_fit,
@@ -590,6 +602,13 @@ fn run_nonlinear(
             samples,
             jointid::data::fmt_sig(ds.data.ts, 4)
         )?;
+        if nl.input == InputTaken::Sampled {
+            writeln!(
+                out,
+                "  the input taken as sampled (a signal that moves between its samples), as the \
+                 model was fitted"
+            )?;
+        }
         writeln!(
             out,
             "  {fit_name}: {:.2} (estimation: {:.2})",

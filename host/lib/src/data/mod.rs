@@ -431,6 +431,35 @@ impl PeriodLayout {
     }
 }
 
+/// How a model reads the input samples of its records: held over each interval as they
+/// are (a drive holds its torque reference), or taken as samples of a signal that moves
+/// between them ([`IdData::input_as_sampled`]: a measured analog input). A model fitted on
+/// one reading is validated and simulated on the same one; `fit --save` records it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InputTaken {
+    /// each sample held over its interval
+    #[default]
+    Held,
+    /// samples of a band-limited signal ([`IdData::input_as_sampled`])
+    Sampled,
+}
+
+impl InputTaken {
+    /// Whether the input is held as it is (the default, which model files leave out).
+    pub fn is_held(&self) -> bool {
+        *self == InputTaken::Held
+    }
+
+    /// The record `d` with its input read so.
+    pub fn record(self, d: &IdData) -> IdData {
+        match self {
+            InputTaken::Held => d.clone(),
+            InputTaken::Sampled => d.input_as_sampled(),
+        }
+    }
+}
+
 impl Dataset {
     /// The capture with its input taken as sampled ([`IdData::input_as_sampled`]).
     pub fn input_as_sampled(&self) -> Dataset {

@@ -21,6 +21,7 @@ use nalgebra::{DMatrix, DVector, RowDVector};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use crate::data::InputTaken;
 use crate::data::Prep;
 use crate::ident::fit::{
     output_name, param_map, FitMetric, FitOutcome, Fitted, FittedModel, ParamJson, RigidFriction,
@@ -51,7 +52,7 @@ impl FitOutcome {
             }
             FittedModel::Nonlinear(n) => {
                 let r = &n.run.result;
-                SavedModel::from_nonlinear(
+                let mut saved = SavedModel::from_nonlinear(
                     &r.fit,
                     self.ts,
                     &r.method,
@@ -59,7 +60,11 @@ impl FitOutcome {
                     self.fit.estimation,
                     NL_FIT_NAME,
                     r.options.highpass_hz,
-                )
+                );
+                if let Some(nl) = saved.nonlinear.as_mut() {
+                    nl.input = n.input;
+                }
+                saved
             }
         }
     }
@@ -404,6 +409,10 @@ pub struct SavedNonlinear {
     pub highpass_hz: f64,
     /// the `jointid simulate` arguments that rebuild the plant and effects
     pub simulate_args: Vec<String>,
+    /// how the model reads its input samples; `validate` reads the records so (absent:
+    /// held, as every file before it)
+    #[serde(default, skip_serializing_if = "InputTaken::is_held")]
+    pub input: InputTaken,
 }
 
 /// The structure named `label` in a nonlinear section.
@@ -487,6 +496,7 @@ impl SavedModel {
                 substeps: m.substeps,
                 highpass_hz,
                 simulate_args: simulate_args(fit),
+                input: InputTaken::Held,
             }),
             spec: Some(spec),
         }

@@ -13,6 +13,7 @@ use super::figures::{BodeFigure, CompareRecord, Compared, FigureError, VelocityF
 use super::request::{LagsError, RequestError, SampleRateDiffers};
 use super::{FitError, Fitted};
 use crate::data::segment::MIN_SEGMENT_SAMPLES;
+use crate::data::InputTaken;
 use crate::ident::frf::FrfError;
 use crate::ident::nonlinear::{NlError, NlRun, NlRunError};
 use crate::ident::ss::Resonances;
@@ -108,6 +109,9 @@ pub struct NonlinearFit {
     /// the motor velocity measured against the model's on the validation record, else
     /// the estimation record (with [`super::FitRequest::figures`])
     pub velocity: Option<VelocityFigure>,
+    /// how the fit read its input samples: as sampled when its lag came out nought and
+    /// that scored higher ([`super::run`]'s nonlinear path)
+    pub input: InputTaken,
 }
 
 /// The fitted model, linear or with effects.

@@ -37,7 +37,7 @@ use super::{
     fit_prepared_segments, FitData, FitError, FitMetric, Fitted, VELOCITY_FIT_NAME,
 };
 use crate::data::segment::{longest_segment, segment_list, usable_segments, FITTING_NOTES};
-use crate::data::{Dataset, IdData};
+use crate::data::{Dataset, IdData, InputTaken};
 use crate::ident::frf::{analyze_dataset, analyze_segments, FrfAnalysis, FrfError};
 use crate::ident::nonlinear::{self, NlData, NlRequest, NlRunError};
 use crate::ident::sml::{self, PERIODIC_FIT_NAME};
@@ -845,6 +845,7 @@ fn run_nonlinear(
     // no lag where one was free: the input is tried as sampled, as `diagnose` does, and
     // kept when the fit scores higher on the estimation records
     let (mut val, mut est) = (val, est);
+    let mut input = InputTaken::Held;
     if nl.held().is_none() && done.result.fit.holds_no_lag() {
         let segs_s: Vec<Dataset> = segs.iter().map(Dataset::input_as_sampled).collect();
         let est_s: Vec<IdData> = est_all.iter().map(IdData::input_as_sampled).collect();
@@ -863,6 +864,7 @@ fn run_nonlinear(
                 );
                 s.result.warnings.insert(0, note);
                 (done, val, est) = (s, val_s, est.input_as_sampled());
+                input = InputTaken::Sampled;
             }
             _ => {}
         }
@@ -911,6 +913,7 @@ fn run_nonlinear(
             structure,
             run: done,
             velocity,
+            input,
         })),
     })
 }

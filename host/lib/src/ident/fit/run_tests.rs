@@ -4,7 +4,7 @@
 //! the refusals before the work.
 
 use super::*;
-use crate::data::{Dataset, IdData, SegmentChoice, Selection};
+use crate::data::{Dataset, IdData, InputTaken, Prep, SegmentChoice, Selection};
 use crate::sim::SimConfig;
 use crate::test_support::{est_val_captures, with_gap};
 use jointid_core::excitation::ExcitationConfig;
@@ -290,6 +290,10 @@ fn run_refuses_what_it_cannot_fit_before_the_work() {
 #[test]
 fn a_grounded_mass_is_fitted_in_the_time_domain() {
     let out = grounded_fit(1);
+    let FittedModel::Nonlinear(f) = &out.model else {
+        unreachable!()
+    };
+    assert_eq!(f.input, InputTaken::Held);
     assert!(
         !out.warnings
             .iter()
@@ -306,6 +310,10 @@ fn a_grounded_mass_is_fitted_in_the_time_domain() {
 #[test]
 fn a_force_that_moves_between_its_samples_is_fitted_as_sampled() {
     let out = grounded_fit(8);
+    let FittedModel::Nonlinear(f) = &out.model else {
+        unreachable!()
+    };
+    assert_eq!(f.input, InputTaken::Sampled);
     assert!(
         out.warnings
             .iter()
@@ -343,6 +351,26 @@ fn grounded_fit(sub: usize) -> FitOutcome {
         out.fit.validation.is_some_and(|v| v > 95.0),
         "{:?}",
         out.fit
+    );
+    // the model file says how the fit read its input, and the model read back and
+    // validated on the record read so scores what the fit reported (`jointid validate`)
+    let text = serde_json::to_string(&out.to_saved(Prep::default())).expect("serialises");
+    let saved: crate::ident::model_file::SavedModel =
+        serde_json::from_str(&text).expect("reads back");
+    let nl = saved.nonlinear.as_ref().expect("a nonlinear section");
+    assert_eq!(nl.input, f.input, "{text}");
+    let opts = crate::ident::nonlinear::NlOptions {
+        highpass_hz: nl.highpass_hz,
+        ..Default::default()
+    };
+    let back = saved.to_nonlinear().expect("a nonlinear model");
+    let v = crate::ident::nonlinear::validate(&back, &nl.input.record(&val.data), &opts)
+        .expect("validates");
+    let reported = out.fit.validation.expect("a validation FIT");
+    assert!(
+        (v.velocity_fit_percent - reported).abs() < 1e-3,
+        "the model file's validation {} % against the fit's {reported} %",
+        v.velocity_fit_percent
     );
     out
 }
