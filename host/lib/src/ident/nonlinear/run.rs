@@ -13,7 +13,7 @@ use thiserror::Error;
 use super::init::{automatic_start_with, start_head, LinearFit, RippleOrder, Step};
 use super::model::{sim_plant, NlModel, Owner};
 use super::output_error::{
-    fit_output_error_segments, interval_velocities, interval_velocity, simulate_velocity,
+    fit_output_error_segments, interval_velocities, interval_velocity, simulate_velocity, NlParam,
     VelocityFitSums,
 };
 use super::{NlError, NlFit, NlOptions};
@@ -1507,10 +1507,18 @@ pub fn checks(fit: &NlFit) -> Vec<String> {
             ));
         }
         if p.owner != Owner::Offset && p.std > 0.5 * p.value.abs() {
-            w.push(format!(
-                "`{}` = {:.4e} ± {:.1e} {} is poorly determined by these data",
-                p.name, p.value, p.std, p.unit
-            ));
+            w.push(if unbounded(p.std, p.value) {
+                format!(
+                    "`{}` = {:.4e} {} is not determined by these data at all (its standard \
+                     deviation is unbounded: the simulation does not depend on it here)",
+                    p.name, p.value, p.unit
+                )
+            } else {
+                format!(
+                    "`{}` = {:.4e} ± {:.1e} {} is poorly determined by these data",
+                    p.name, p.value, p.std, p.unit
+                )
+            });
         }
     }
     // a Jacobian of rank one or nought (a simulation gone flat or unstable on the way)
@@ -1528,28 +1536,48 @@ pub fn checks(fit: &NlFit) -> Vec<String> {
                 .to_string(),
         );
     }
-    let relative_std = |name: &str| {
-        fit.params
-            .iter()
-            .find(|p| p.name == name)
-            .map_or(0.0, |p| p.std / p.value.abs())
-    };
+    let param = |name: &str| fit.params.iter().find(|p| p.name == name);
+    let relative_std = |name: &str| param(name).map_or(0.0, |p| p.std / p.value.abs());
     for c in fit.correlated.iter().filter(|c| c.rho.abs() >= 0.98) {
         let (sa, sb) = (relative_std(c.a), relative_std(c.b));
+        // NaN (a σ of nought at a value of nought) is no spread
         if sa.max(sb) > 0.05 {
+            let alone = |name: &str| param(name).map_or(String::new(), spread);
             w.push(format!(
                 "`{}` and `{}` trade against each other (correlation {:+.3}): the data fix a \
-                 combination of them, each alone only to ±{:.0} % and ±{:.0} %; fix one \
-                 (`--fix`) if it is known",
+                 combination of them, each alone only to {} and {}; fix one (`--fix`) if it \
+                 is known",
                 c.a,
                 c.b,
                 c.rho,
-                100.0 * sa,
-                100.0 * sb
+                alone(c.a),
+                alone(c.b)
             ));
         }
     }
     w
+}
+
+/// Whether a standard deviation `std` says nothing of the value `value` it belongs to: not
+/// finite, or beyond [`UNBOUNDED_STD`] times the value (a parameter the simulation does not
+/// depend on gives a σ of 1e183 from a nearly singular information matrix, not a figure).
+fn unbounded(std: f64, value: f64) -> bool {
+    !std.is_finite() || std > UNBOUNDED_STD * value.abs().max(f64::MIN_POSITIVE)
+}
+
+/// The ratio of a standard deviation to its value beyond which [`unbounded`] holds.
+const UNBOUNDED_STD: f64 = 1e6;
+
+/// How far the data fix parameter `p` alone: its standard deviation relative to its value
+/// (`±12 %`), in its unit when the value is nought, or `not at all` when [`unbounded`].
+fn spread(p: &NlParam) -> String {
+    if p.value == 0.0 && p.std.is_finite() {
+        format!("±{:.1e} {}", p.std, p.unit)
+    } else if unbounded(p.std, p.value) {
+        "not at all".to_string()
+    } else {
+        format!("±{:.0} %", 100.0 * p.std / p.value.abs())
+    }
 }
 
 /// Validates `fit` on `val` (module documentation): the model simulated from the measured
@@ -1631,4 +1659,33 @@ pub fn validate_segments(
         velocity_fit_smooth_percent: smooth.pooled().unwrap_or(f64::NAN),
         angle_fit_percent: angle_fit_percent.unwrap_or(f64::NAN),
     })
+}
+
+#[cfg(test)]
+mod spread_tests {
+    use super::{spread, NlParam, Owner};
+
+    fn param(value: f64, std: f64) -> NlParam {
+        NlParam {
+            name: "f_m",
+            owner: Owner::Plant,
+            value,
+            std,
+            unit: "N·m·s/rad",
+            fixed: false,
+            at_bound: false,
+            at_lower: false,
+        }
+    }
+
+    /// A parameter's spread is read as a share of its value; a σ of 1e183 on a value of
+    /// 1e-5 (a nearly singular information matrix) is no figure, and a value of nought has
+    /// its σ in its unit, not as ±inf %.
+    #[test]
+    fn a_spread_is_a_share_of_the_value_unless_it_is_unbounded() {
+        assert_eq!(spread(&param(2.0, 0.5)), "±25 %");
+        assert_eq!(spread(&param(1.2e-5, 3.8e183)), "not at all");
+        assert_eq!(spread(&param(1.2e-5, f64::NAN)), "not at all");
+        assert_eq!(spread(&param(0.0, 3.7e-2)), "±3.7e-2 N·m·s/rad");
+    }
 }
