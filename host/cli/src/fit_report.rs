@@ -51,6 +51,9 @@ pub struct FitReport {
     pub segments: Vec<SegmentJson>,
     /// parameters by name (empty for a black box)
     pub parameters: std::collections::BTreeMap<String, ParamJson>,
+    /// how the records' input samples were read (`sampled`: a signal that moves between
+    /// them); the model file records it and `validate` reads its data so
+    pub input: jointid::data::InputTaken,
     /// name of the FIT definition
     pub fit_name: String,
     /// which FIT `fit_estimation` and `fit_validation` are: `toolbox` (the output's),
@@ -186,6 +189,7 @@ fn linear_report(
         samples: out.samples,
         segments: out.segments.clone(),
         parameters,
+        input: out.input,
         fit_name: out.fit.name.into(),
         fit_metric: out.fit.metric,
         fit_estimation: out.fit.estimation,
@@ -442,7 +446,7 @@ pub(crate) fn print_nonlinear(
                     .collect(),
             })
             .collect(),
-        input: nl.input,
+        input: out.input,
         start: match start {
             Some(p) => format!("from {}", p.display()),
             None => "automatic (seed 001's three steps)".into(),

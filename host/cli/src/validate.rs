@@ -92,6 +92,10 @@ pub struct ValidateArgs {
     pub units: Option<(String, String)>,
 }
 
+/// The report's line for a model that reads its input as sampled ([`InputTaken`]).
+const SAMPLED_LINE: &str =
+    "the input taken as sampled (a signal that moves between its samples), as the model was fitted";
+
 #[derive(Serialize)]
 struct Report<'a> {
     model_file: String,
@@ -100,6 +104,8 @@ struct Report<'a> {
     samples: usize,
     ts: f64,
     fit_name: &'a str,
+    /// how the data's input was read, as the model file says the model was fitted
+    input: InputTaken,
     /// `toolbox`, `periodic` or `velocity` (as `fit --json`)
     fit_metric: &'a str,
     fit: f64,
@@ -187,7 +193,11 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
         sel.datasets.iter().map(|d| d.data.len()).sum::<usize>()
     ));
     let numbers = sel.segments.clone();
-    let mut segs = sel.datasets;
+    // read as the model was fitted ([`InputTaken`])
+    let mut segs: Vec<jointid::data::Dataset> = match saved.input {
+        InputTaken::Held => sel.datasets,
+        InputTaken::Sampled => sel.datasets.iter().map(|d| d.input_as_sampled()).collect(),
+    };
     let longest = longest_index(&segs);
     let lens: Vec<usize> = segs.iter().map(|d| d.data.len()).collect();
     // the model runs at the rate it was fitted at: the capture rate (a physical model
@@ -355,6 +365,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
                 samples,
                 ts: data.ts,
                 fit_name,
+                input: saved.input,
                 fit_metric: match (periodic, &velocity) {
                     (Some(_), _) => "periodic",
                     (None, Some(_)) => "velocity",
@@ -380,6 +391,9 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
             jointid::data::fmt_sig(data.ts, 4),
             saved.prep.decimate
         )?;
+        if saved.input == InputTaken::Sampled {
+            writeln!(out, "  {SAMPLED_LINE}")?;
+        }
         writeln!(
             out,
             "  {fit_name}: {:.2} (estimation: {:.2})",
@@ -535,7 +549,7 @@ fn run_nonlinear(
     let records: Vec<IdData> = segs
         .iter_mut()
         .map(take_record)
-        .map(|r| match nl.input {
+        .map(|r| match saved.input {
             InputTaken::Held => r,
             InputTaken::Sampled => r.input_as_sampled(),
         })
@@ -584,7 +598,7 @@ fn run_nonlinear(
                 samples,
                 ts: ds.data.ts,
                 fit_name,
-                input: nl.input,
+                input: saved.input,
                 fit: fit_pct,
                 fit_estimation: saved.fit_estimation,
                 require_fit: args.require_fit,
@@ -602,12 +616,8 @@ fn run_nonlinear(
             samples,
             jointid::data::fmt_sig(ds.data.ts, 4)
         )?;
-        if nl.input == InputTaken::Sampled {
-            writeln!(
-                out,
-                "  the input taken as sampled (a signal that moves between its samples), as the \
-                 model was fitted"
-            )?;
+        if saved.input == InputTaken::Sampled {
+            writeln!(out, "  {SAMPLED_LINE}")?;
         }
         writeln!(
             out,

@@ -42,7 +42,7 @@ impl FitOutcome {
     /// when it is the one reported, so that `validate` reports it too), or the model with
     /// effects with its velocity FIT ([`NL_FIT_NAME`]).
     pub fn to_saved(&self, prep: Prep) -> SavedModel {
-        match &self.model {
+        let mut saved = match &self.model {
             FittedModel::Linear(l) => {
                 let mut saved = l.fitted.to_saved(prep, &self.name, self.fit.estimation);
                 if self.fit.name == PERIODIC_FIT_NAME {
@@ -52,7 +52,7 @@ impl FitOutcome {
             }
             FittedModel::Nonlinear(n) => {
                 let r = &n.run.result;
-                let mut saved = SavedModel::from_nonlinear(
+                SavedModel::from_nonlinear(
                     &r.fit,
                     self.ts,
                     &r.method,
@@ -60,13 +60,11 @@ impl FitOutcome {
                     self.fit.estimation,
                     NL_FIT_NAME,
                     r.options.highpass_hz,
-                );
-                if let Some(nl) = saved.nonlinear.as_mut() {
-                    nl.input = n.input;
-                }
-                saved
+                )
             }
-        }
+        };
+        saved.input = self.input;
+        saved
     }
 }
 
@@ -94,6 +92,7 @@ impl Fitted {
             fit_estimation,
             fit_name: (self.fit_metric == FitMetric::Velocity).then(|| VELOCITY_FIT_NAME.into()),
             source: source.into(),
+            input: InputTaken::Held,
             nonlinear: None,
             spec: Some(self.spec.clone()),
         }
@@ -167,6 +166,10 @@ pub struct SavedModel {
     pub fit_name: Option<String>,
     /// estimation data file
     pub source: String,
+    /// how the model reads its input samples ([`InputTaken`]): `validate` reads its data
+    /// so (absent: held, as every file before it)
+    #[serde(default, skip_serializing_if = "InputTaken::is_held")]
+    pub input: InputTaken,
     /// format 3: a physical model with effects ([`crate::ident::nonlinear`]), simulated
     /// with the simulator's exact laws instead of `A, B, C, D`
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -409,10 +412,6 @@ pub struct SavedNonlinear {
     pub highpass_hz: f64,
     /// the `jointid simulate` arguments that rebuild the plant and effects
     pub simulate_args: Vec<String>,
-    /// how the model reads its input samples; `validate` reads the records so (absent:
-    /// held, as every file before it)
-    #[serde(default, skip_serializing_if = "InputTaken::is_held")]
-    pub input: InputTaken,
 }
 
 /// The structure named `label` in a nonlinear section.
@@ -483,6 +482,7 @@ impl SavedModel {
             fit_estimation,
             fit_name: Some(fit_name.into()),
             source: source.into(),
+            input: InputTaken::Held,
             nonlinear: Some(SavedNonlinear {
                 structure: m.structure.label().into(),
                 r: m.r,
@@ -496,7 +496,6 @@ impl SavedModel {
                 substeps: m.substeps,
                 highpass_hz,
                 simulate_args: simulate_args(fit),
-                input: InputTaken::Held,
             }),
             spec: Some(spec),
         }

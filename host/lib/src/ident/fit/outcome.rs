@@ -109,9 +109,6 @@ pub struct NonlinearFit {
     /// the motor velocity measured against the model's on the validation record, else
     /// the estimation record (with [`super::FitRequest::figures`])
     pub velocity: Option<VelocityFigure>,
-    /// how the fit read its input samples: as sampled when its lag came out nought and
-    /// that scored higher ([`super::run`]'s nonlinear path)
-    pub input: InputTaken,
 }
 
 /// The fitted model, linear or with effects.
@@ -147,6 +144,9 @@ pub struct FitOutcome {
     pub notes: Vec<String>,
     /// wall time of the fit alone [s]
     pub seconds: f64,
+    /// how the records' input samples were read: held as they are, or taken as sampled
+    /// (a measured analog input) when the fit with no lag and no delay scored higher so
+    pub input: InputTaken,
 }
 
 /// Why [`super::run`] failed.
