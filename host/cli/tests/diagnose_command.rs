@@ -4,7 +4,7 @@
 //! refusals.
 
 mod common;
-use common::{jointid, json_of, shared, simulated, stiffening_capture, tmpdir};
+use common::{jointid, json_of, open_loop_csv, shared, simulated, stiffening_capture, tmpdir};
 
 /// `simulate --effect nonlinear_stiffness`, then `diagnose` with three candidates: the
 /// cubic spring ranks first among the single effects, significant, with `k3` near the
@@ -487,16 +487,10 @@ fn diagnose_takes_a_mass_on_a_spring_to_ground_and_names_its_hardening() {
     let dir = tmpdir("grounded");
     let k3 = grounded::k3_at(0.1);
     let (est, val) = grounded::records(k3, 11);
-    let write = |name: &str, ds: &jointid::data::Dataset| {
-        let mut s = String::from("time,force,position\n");
-        for (k, (u, y)) in ds.data.u.iter().zip(&ds.data.y).enumerate() {
-            s.push_str(&format!("{},{u:e},{y:e}\n", k as f64 * ds.data.ts));
-        }
-        let p = dir.join(name);
-        std::fs::write(&p, s).unwrap();
-        p.display().to_string()
-    };
-    let (est, val) = (write("est.csv", &est), write("val.csv", &val));
+    let (est, val) = (
+        open_loop_csv(&dir, "est.csv", &est),
+        open_loop_csv(&dir, "val.csv", &val),
+    );
     let cols = ["--time", "time", "--input", "force", "--output", "position"];
     let mut args = vec!["diagnose", &est, "--validation", &val];
     args.extend(cols);

@@ -14,7 +14,7 @@ use jointid::ident::nonlinear::{validate, NlOptions};
 use serde_json::Value;
 
 mod common;
-use common::{jointid, json_of, shared, tmpdir};
+use common::{jointid, json_of, open_loop_csv, shared, tmpdir};
 
 fn num(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
@@ -474,16 +474,10 @@ fn a_model_fitted_on_its_input_taken_as_sampled_is_validated_so() {
     use jointid::test_support::grounded;
     let dir = tmpdir("sampled-input");
     let (est, val) = grounded::records_driven(0.0, 2, 8);
-    let write = |name: &str, ds: &jointid::data::Dataset| {
-        let mut s = String::from("time,force,position\n");
-        for (k, (u, y)) in ds.data.u.iter().zip(&ds.data.y).enumerate() {
-            s.push_str(&format!("{:e},{u:e},{y:e}\n", k as f64 * ds.data.ts));
-        }
-        let p = dir.join(name);
-        std::fs::write(&p, s).unwrap();
-        p.display().to_string()
-    };
-    let (est, val) = (write("est.csv", &est), write("val.csv", &val));
+    let (est, val) = (
+        open_loop_csv(&dir, "est.csv", &est),
+        open_loop_csv(&dir, "val.csv", &val),
+    );
     let cols = ["--time", "time", "--input", "force", "--output", "position"];
     for domain in ["time", "frequency"] {
         let model = dir.join(format!("{domain}.json")).display().to_string();

@@ -10,6 +10,19 @@ use serde_json::Value;
 /// path of the `jointid` binary built for these tests
 pub const BIN: &str = env!("CARGO_BIN_EXE_jointid");
 
+/// Writes the record of `ds` into `dir/name` as any measured CSV: columns `time` [s],
+/// `force` and `position`, no reference and no excitation header. The file's path.
+#[allow(dead_code)]
+pub fn open_loop_csv(dir: &std::path::Path, name: &str, ds: &jointid::data::Dataset) -> String {
+    let mut s = String::from("time,force,position\n");
+    for (k, (u, y)) in ds.data.u.iter().zip(&ds.data.y).enumerate() {
+        s.push_str(&format!("{:e},{u:e},{y:e}\n", k as f64 * ds.data.ts));
+    }
+    let p = dir.join(name);
+    std::fs::write(&p, s).unwrap();
+    p.display().to_string()
+}
+
 /// empty scratch directory for one test, unique per test binary, process and `name`
 pub fn tmpdir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!(

@@ -357,7 +357,7 @@ mod tests {
     use super::came_apart;
     use crate::data::Dataset;
     use crate::ident::lm::Termination;
-    use crate::ident::nonlinear::{NlFit, NlModel, NlParam};
+    use crate::ident::nonlinear::{NlFit, NlModel};
     use crate::model::params::Plant;
     use crate::model::spec::Structure;
     use crate::sim::SimConfig;
@@ -426,35 +426,12 @@ mod tests {
         };
         let plant =
             crate::test_support::sigma::truth(&Plant::default().params, Structure::ThreeMass);
-        let values = model.values(&plant, 0.0, 0.0);
-        let params = model
-            .layout()
-            .iter()
-            .zip(&values)
-            .map(|(d, &value)| NlParam {
-                name: d.name,
-                owner: d.owner,
-                value,
-                std: 0.01 * value.abs(),
-                unit: d.unit,
-                fixed: false,
-                at_bound: d.name == on_lower,
-                at_lower: d.name == on_lower,
-            })
-            .collect();
-        NlFit {
-            model,
-            plant,
-            params,
-            values,
-            ssr: 1.0,
-            lowpass_hz: 0.0,
-            n_residuals: 10,
-            iterations: 140,
-            termination,
-            fit_velocity_percent: 95.0,
-            correlated: Vec::new(),
+        let mut fit = crate::test_support::nl_fit(model, plant);
+        for p in fit.params.iter_mut().filter(|p| p.name == on_lower) {
+            (p.at_bound, p.at_lower) = (true, true);
         }
+        (fit.iterations, fit.termination) = (140, termination);
+        fit
     }
 
     /// A nominal whose fit is no minimum and whose gear spring ran to the lower bound of its

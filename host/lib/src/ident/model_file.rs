@@ -593,7 +593,7 @@ impl SavedModel {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ident::nonlinear::{NlModel, NlParam};
+    use crate::ident::nonlinear::NlModel;
     use crate::model::effects::{CoulombFriction, NonlinearStiffness};
 
     /// a nonlinear fit as the engine returns it (values by hand)
@@ -619,35 +619,7 @@ mod tests {
             dz_eps: 1e-7,
             substeps: 1,
         };
-        let values = model.values(&plant, 1e-3, 0.0);
-        let params = model
-            .layout()
-            .iter()
-            .zip(&values)
-            .map(|(d, &value)| NlParam {
-                name: d.name,
-                owner: d.owner,
-                value,
-                std: 0.01 * value.abs(),
-                unit: d.unit,
-                fixed: false,
-                at_bound: false,
-                at_lower: false,
-            })
-            .collect();
-        NlFit {
-            model,
-            plant,
-            params,
-            values,
-            ssr: 1.0,
-            lowpass_hz: 0.0,
-            n_residuals: 10,
-            iterations: 3,
-            termination: Termination::CostConverged,
-            fit_velocity_percent: 96.0,
-            correlated: Vec::new(),
-        }
+        crate::test_support::nl_fit(model, plant)
     }
 
     #[test]
