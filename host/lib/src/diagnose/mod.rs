@@ -62,8 +62,9 @@
 //!    ([`crate::ident::nonlinear::identify`]) together with the singles ([`fits`], on
 //!    [`DiagnoseOptions::threads`] threads); restarted elsewhere when it fails; its
 //!    frequency-domain start kept when the fit ends far below it in-sample. No base for
-//!    an answer ([`nominal::trust`]) when it came apart (no minimum, a spring on the lower
-//!    bound of its search) or describes the validation data far worse than its own.
+//!    an answer ([`nominal::trust`]) when it came apart where the motor does not stick (no
+//!    minimum, a spring on the lower bound of its search) or describes the validation data
+//!    far worse than its own.
 //! 2. **Evidence** ([`evidence`]): where the nominal's residual lies (operating regions,
 //!    bands, [`locate`]); the odd/even non-excited lines of periodic captures
 //!    ([`crate::ident::frf`]); with two estimation captures, how distortion and gap change
