@@ -83,7 +83,7 @@ pub fn run(req: &FitRequest, data: FitRecords<'_>) -> Result<FitOutcome, FitRunE
                 && s.fit.estimation > held.fit.estimation =>
         {
             let note = nonlinear::sampled_input_note(
-                "the periodic FIT on the estimation record",
+                "the FIT on the estimation record",
                 held.fit.estimation,
                 s.fit.estimation,
             );
@@ -97,9 +97,10 @@ pub fn run(req: &FitRequest, data: FitRecords<'_>) -> Result<FitOutcome, FitRunE
 
 /// Whether `out` is a linear physical model fitted in the frequency domain that holds
 /// neither a current-loop lag nor a transport delay (left out, or under
-/// [`nonlinear::UNRESOLVED_LAG`] of a sample) where the request left both free. Its input held over each sample interval then asks for no
-/// more delay than the hold adds, or less: a measured analog input that moves between
-/// its samples, which the hold delays by half a sample ([`IdData::input_as_sampled`]).
+/// [`nonlinear::UNRESOLVED_LAG`] of a sample) where the request left both free. Its input
+/// held over each sample interval then asks for no more delay than the hold adds, or
+/// less: a measured analog input that moves between its samples, which the hold delays by
+/// half a sample ([`IdData::input_as_sampled`]).
 /// Bench: a grounded mass driven by a band-limited force at 610 Hz, lines to 200 Hz:
 /// held, a periodic FIT of 78.3 % at 338,000 times the noise's cost; taken as sampled,
 /// 96.1 % with a delay of 0.002 samples; the same mass driven by a held force, 99.9 % held
