@@ -35,6 +35,7 @@ use serde::Serialize;
 
 use crate::data::mat::{MatOut, MatWriter};
 use crate::data::screen::MAX_MAGNITUDE;
+use crate::data::InputTaken;
 use crate::ident::fit::ParamJson;
 use crate::ident::model_file::{ModelFileError, SavedModel};
 use crate::ident::ss::{eigenvalues, siso_zeros, ContinuousSs, StateSpace};
@@ -291,6 +292,10 @@ pub struct ModelExport {
     /// which FIT that is (the toolbox's when absent)
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fit_name: Option<String>,
+    /// how the model reads its input samples (absent: held, as the discrete model's
+    /// zero-order hold has them)
+    #[serde(skip_serializing_if = "InputTaken::is_held")]
+    pub input_taken: InputTaken,
 }
 
 /// Why a model file cannot be exported ([`ModelExport::of`]).
@@ -460,6 +465,7 @@ impl ModelExport {
             parameters,
             fit_estimation: saved.fit_estimation,
             fit_name: saved.fit_name.clone(),
+            input_taken: saved.input,
         };
         let derived = ex
             .continuous
@@ -541,12 +547,19 @@ impl ModelExport {
             .map(|(k, p)| format!("{k} [{}]", p.unit))
             .collect();
         format!(
-            "jointid model {} ({}), {}; discrete Ad,Bd,Cd,Dd at Ts = {} s (zero-order hold){}; \
+            "jointid model {} ({}), {}; discrete Ad,Bd,Cd,Dd at Ts = {} s (zero-order hold){}{}; \
              FIT {} % on the estimation data {}{}",
             self.model,
             self.method,
             self.signals(),
             self.ts,
+            match self.input_taken {
+                InputTaken::Held => "",
+                InputTaken::Sampled => {
+                    ", fitted on its input taken as sampled: hold (7(u[k]+u[k+1]) - \
+                     (u[k-1]+u[k+2]))/12, not u[k], over each interval"
+                }
+            },
             if self.continuous.is_some() {
                 "; continuous A,B,C,D"
             } else {
@@ -596,10 +609,14 @@ pub fn nonlinear_mat(saved: &SavedModel) -> Vec<u8> {
     w.var(
         "description",
         &MatOut::Text(format!(
-            "jointid model {} ({}): simulated with its nonlinear laws, no state space; \
+            "jointid model {} ({}): simulated with its nonlinear laws, no state space{}; \
              parameters {}; FIT {} % on {}",
             saved.model,
             saved.method,
+            match saved.input {
+                InputTaken::Held => "",
+                InputTaken::Sampled => ", its input taken as sampled",
+            },
             saved
                 .parameters
                 .iter()
@@ -702,6 +719,21 @@ mod tests {
         // (JSON holds no NaN)
         m.a[0][0] = a;
         m
+    }
+
+    /// The description of a model fitted on its input taken as sampled says how to drive
+    /// its zero-order-hold matrices; a held model's says nothing of it.
+    #[test]
+    fn a_sampled_input_model_says_how_to_drive_its_matrices() {
+        let mut saved = one_state(0.5);
+        let held = ModelExport::of(&saved, false).unwrap().description();
+        assert!(!held.contains("taken as sampled"), "{held}");
+        saved.input = InputTaken::Sampled;
+        let sampled = ModelExport::of(&saved, false).unwrap().description();
+        assert!(
+            sampled.contains("taken as sampled: hold (7(u[k]+u[k+1])"),
+            "{sampled}"
+        );
     }
 
     #[test]
