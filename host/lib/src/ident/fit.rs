@@ -1011,6 +1011,11 @@ fn rigid_linear(j: f64, fv: f64, ts: f64, output: Output) -> StateSpace {
 }
 
 impl Fitted {
+    /// Whether the model was fitted on the FRF at the excited lines ([`frequency`]).
+    pub fn in_frequency_domain(&self) -> bool {
+        self.method.starts_with(frequency::FREQUENCY_DOMAIN)
+    }
+
     /// Simulated output on `data` (same sample interval as the model), with
     /// the initial state that best explains the record (as the toolbox's
     /// `compare` estimates it).

@@ -16,6 +16,10 @@ use crate::model::spec::{Family, Structure};
 
 use super::{FitError, FitMetric, FitOptions, Fitted};
 
+/// How the method of a fit made here begins ([`Fitted::method`]), which
+/// [`Fitted::in_frequency_domain`] reads.
+pub(super) const FREQUENCY_DOMAIN: &str = "frequency domain";
+
 /// Iterations of the black box's refinement by sample maximum likelihood.
 const BLACK_BOX_ITERATIONS: usize = 40;
 
@@ -77,7 +81,7 @@ pub fn fit_frequency_domain(
                 output: opts.output,
                 ts,
                 method: format!(
-                    "frequency domain: subspace on {} excited lines of {} periods (McKelvey et al. 1996, \
+                    "{FREQUENCY_DOMAIN}: subspace on {} excited lines of {} periods (McKelvey et al. 1996, \
                      bilinear map), {structure}, refined by sample maximum likelihood ({} \
                      iterations); cost {:.1} = {:.2} × its noise level",
                     analysis.frf.g.len(),
@@ -147,7 +151,7 @@ fn fitted_of(opts: &FitOptions, ff: &FrfFit, analysis: &FrfAnalysis, decimate: u
         friction: None,
         warnings: ff.warnings.iter().map(|w| w.to_string()).collect(),
         method: format!(
-            "frequency domain: sample maximum likelihood on {} excited lines of {} periods \
+            "{FREQUENCY_DOMAIN}: sample maximum likelihood on {} excited lines of {} periods \
              ({:.1} to {:.1} Hz), current-loop lag {}, delay {}; cost {:.1} = {:.2} × its noise level; \
              best of {} starts from the FRF's resonances",
             ff.lines,

@@ -117,10 +117,9 @@ fn drive_free_in_frequency(req: &FitRequest, out: &FitOutcome) -> bool {
             .find(|p| p.name == name)
             .is_none_or(|p| p.value < nonlinear::UNRESOLVED_LAG * l.fitted.ts)
     };
-    // the frequency-domain paths name themselves so ([`super::frequency`]); the
-    // time-domain grey box neglects the lag by design
+    // the time-domain grey box neglects the lag by design
     matches!(spec.family, Family::Physical(_))
-        && l.fitted.method.starts_with("frequency domain")
+        && l.fitted.in_frequency_domain()
         && spec.current_loop_tau.is_none()
         && spec.delay.is_none()
         && nought("tau_c")
