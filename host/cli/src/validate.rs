@@ -194,10 +194,11 @@ pub fn run(args: &ValidateArgs, ctx: &mut Context<'_>) -> CmdResult {
     ));
     let numbers = sel.segments.clone();
     // read as the model was fitted ([`InputTaken`])
-    let mut segs: Vec<jointid::data::Dataset> = match saved.input {
-        InputTaken::Held => sel.datasets,
-        InputTaken::Sampled => sel.datasets.iter().map(|d| d.input_as_sampled()).collect(),
-    };
+    let mut segs: Vec<jointid::data::Dataset> = sel
+        .datasets
+        .into_iter()
+        .map(|d| saved.input.capture(d))
+        .collect();
     let longest = longest_index(&segs);
     let lens: Vec<usize> = segs.iter().map(|d| d.data.len()).collect();
     // the model runs at the rate it was fitted at: the capture rate (a physical model
@@ -549,10 +550,7 @@ fn run_nonlinear(
     let records: Vec<IdData> = segs
         .iter_mut()
         .map(take_record)
-        .map(|r| match saved.input {
-            InputTaken::Held => r,
-            InputTaken::Sampled => r.input_as_sampled(),
-        })
+        .map(|r| saved.input.record(r))
         .collect();
     let ds = &segs[longest];
     super::progress::step(format!(

@@ -452,9 +452,17 @@ impl InputTaken {
     }
 
     /// The record `d` with its input read so.
-    pub fn record(self, d: &IdData) -> IdData {
+    pub fn record(self, d: IdData) -> IdData {
         match self {
-            InputTaken::Held => d.clone(),
+            InputTaken::Held => d,
+            InputTaken::Sampled => d.input_as_sampled(),
+        }
+    }
+
+    /// The capture `d` with its input read so.
+    pub fn capture(self, d: Dataset) -> Dataset {
+        match self {
+            InputTaken::Held => d,
             InputTaken::Sampled => d.input_as_sampled(),
         }
     }
