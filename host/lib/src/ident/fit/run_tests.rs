@@ -292,9 +292,7 @@ fn a_grounded_mass_is_fitted_in_the_time_domain() {
     let out = grounded_fit(1);
     assert_eq!(out.input, InputTaken::Held);
     assert!(
-        !out.warnings
-            .iter()
-            .any(|w| w.contains("the input is taken as samples")),
+        !noted_as_sampled(&out),
         "a held force is held: {:?}",
         out.warnings
     );
@@ -308,13 +306,7 @@ fn a_grounded_mass_is_fitted_in_the_time_domain() {
 fn a_force_that_moves_between_its_samples_is_fitted_as_sampled() {
     let out = grounded_fit(8);
     assert_eq!(out.input, InputTaken::Sampled);
-    assert!(
-        out.warnings
-            .iter()
-            .any(|w| w.contains("the input is taken as samples")),
-        "{:?}",
-        out.warnings
-    );
+    assert!(noted_as_sampled(&out), "{:?}", out.warnings);
 }
 
 /// The same grounded masses fitted in the frequency domain (their records are periodic):
@@ -324,37 +316,46 @@ fn a_force_that_moves_between_its_samples_is_fitted_as_sampled() {
 #[test]
 fn a_force_that_moves_between_its_samples_is_taken_as_sampled_in_the_frequency_domain() {
     use crate::test_support::grounded;
-    let req = FitRequest {
-        domain: Domain::Frequency,
-        ..FitRequest::new(FitOptions {
-            spec: ModelSpec::linear(Family::Physical(Structure::Grounded)),
-            r: 1.0,
-            ..FitOptions::default()
-        })
-    };
+    let req = grounded_request(Domain::Frequency);
     for (sub, input) in [(1, InputTaken::Held), (8, InputTaken::Sampled)] {
         let (est, val) = grounded::records_driven(0.0, 2, sub);
         let out = fit_on(&req, &est, &val).unwrap_or_else(|e| panic!("{e}"));
         let FittedModel::Linear(l) = &out.model else {
             panic!("{:?}", out.model)
         };
-        assert!(
-            l.fitted.method.starts_with("frequency domain"),
-            "{}",
-            l.fitted.method
-        );
+        assert!(l.fitted.in_frequency_domain(), "{}", l.fitted.method);
         assert_eq!(out.input, input, "sub {sub}: {:?}", out.fit);
         assert!(
             out.fit.validation.is_some_and(|v| v > 95.0),
             "sub {sub}: {:?}",
             out.fit
         );
-        let noted = out
-            .warnings
-            .iter()
-            .any(|w| w.contains("the input is taken as samples"));
-        assert_eq!(noted, input == InputTaken::Sampled, "{:?}", out.warnings);
+        assert_eq!(
+            noted_as_sampled(&out),
+            input == InputTaken::Sampled,
+            "{:?}",
+            out.warnings
+        );
     }
+}
+
+/// `fit --model grounded` in `domain` (gearless: `r` = 1).
+fn grounded_request(domain: Domain) -> FitRequest {
+    FitRequest {
+        domain,
+        ..FitRequest::new(FitOptions {
+            spec: ModelSpec::linear(Family::Physical(Structure::Grounded)),
+            r: 1.0,
+            ..FitOptions::default()
+        })
+    }
+}
+
+/// Whether the fit's warnings say it took its input as sampled.
+fn noted_as_sampled(out: &FitOutcome) -> bool {
+    out.warnings
+        .iter()
+        .any(|w| w.contains("the input is taken as samples"))
 }
 
 /// `fit --model grounded` in the time domain on the grounded mass of
@@ -364,14 +365,7 @@ fn a_force_that_moves_between_its_samples_is_taken_as_sampled_in_the_frequency_d
 fn grounded_fit(sub: usize) -> FitOutcome {
     use crate::test_support::grounded;
     let (est, val) = grounded::records_driven(0.0, 2, sub);
-    let req = FitRequest {
-        domain: Domain::Time,
-        ..FitRequest::new(FitOptions {
-            spec: ModelSpec::linear(Family::Physical(Structure::Grounded)),
-            r: 1.0,
-            ..FitOptions::default()
-        })
-    };
+    let req = grounded_request(Domain::Time);
     let out = fit_on(&req, &est, &val).unwrap_or_else(|e| panic!("{e}"));
     let FittedModel::Nonlinear(f) = &out.model else {
         panic!("{:?}", out.model)
@@ -398,7 +392,7 @@ fn grounded_fit(sub: usize) -> FitOutcome {
         ..Default::default()
     };
     let back = saved.to_nonlinear().expect("a nonlinear model");
-    let v = crate::ident::nonlinear::validate(&back, &saved.input.record(&val.data), &opts)
+    let v = crate::ident::nonlinear::validate(&back, &saved.input.record(val.data.clone()), &opts)
         .expect("validates");
     let reported = out.fit.validation.expect("a validation FIT");
     assert!(
