@@ -91,11 +91,18 @@ fn band_of(gain: f64) -> String {
 
 /// CPU time of this process so far [s] (user + system, `/proc/self/stat`; NaN elsewhere).
 /// `SAVE=dir`: writes case `i`'s captures to `dir/case{i}-est.csv` and `-val.csv`, to
-/// look at a case with `jointid diagnose` itself.
-fn save(i: usize, est: &jointid::data::Dataset, val: &jointid::data::Dataset) {
+/// look at a case with `jointid diagnose` itself, and its hidden joint, controller and
+/// effects to `dir/case{i}-truth.txt`.
+fn save(i: usize, case: &Case, est: &jointid::data::Dataset, val: &jointid::data::Dataset) {
     let Ok(dir) = std::env::var("SAVE") else {
         return;
     };
+    let truth = std::path::Path::new(&dir).join(format!("case{i}-truth.txt"));
+    let text = format!(
+        "{:#?}\n{:#?}\nhidden {:#?}\nbackground {:#?}\n",
+        case.params, case.controller, case.hidden, case.background
+    );
+    std::fs::write(&truth, text).expect("SAVE names a writable folder");
     for (part, ds) in [("est", est), ("val", val)] {
         let path = std::path::Path::new(&dir).join(format!("case{i}-{part}.csv"));
         let mut f = std::fs::File::create(&path).expect("SAVE names a writable folder");
@@ -241,7 +248,7 @@ fn battery() {
             continue;
         }
         let (est, val) = captures(case, 4, case.rms);
-        save(i, &est, &val);
+        save(i, case, &est, &val);
         // the effects by name (a ripple with a second harmonic is one effect)
         let mut kinds: Vec<&str> = Vec::new();
         for e in &case.hidden {
