@@ -363,7 +363,8 @@ pub(super) fn odd_shown(shares: &[Option<f64>]) -> Option<usize> {
 /// ([`below_its_nominal`]) fitted again on the nominal's own cost ([`Fitter::nested`]: the
 /// residual band-limited as the nominal's) from the nominal's values with its own fitted
 /// effect shrunk to [`NESTED_SHARE`] of its size ([`shrunk`]); an extra mode placed by the
-/// automatic start's grid instead ([`Fitter::nested_grid`]), since shrinking keeps the
+/// automatic start's grid and at the nominal's residual peaks instead
+/// ([`Fitter::nested_grid`]), since shrinking keeps the
 /// frequency that is its basin (other-laws bench, `LAWS=1 HARD=1 SMALL=1 FRICTION=1` case
 /// 13: a 10 Hz mode at the chain's end, which the candidate's mode in parallel on the first
 /// arm mass stands for at other values; from the four-mass start the single scored −1.3
@@ -420,7 +421,9 @@ pub(super) fn nested_refits(
         let below = below_its_nominal((mean, se), min_gain);
         let placed = match effect {
             Effect::ExtraMode(_) => {
-                "the mode placed by the automatic start's grid over its frequency".to_string()
+                "the mode placed by the automatic start's grid over its frequency and at each peak \
+                 of the nominal's residual, the lowest cost kept"
+                    .to_string()
             }
             _ => format!("the effect at {NESTED_SHARE:e} of that fit's size"),
         };

@@ -1096,3 +1096,46 @@ fn every_effect_parameter_stays_within_what_the_simulator_accepts() {
     }
     assert!(checked >= 6, "only {checked} parameters checked");
 }
+
+/// A light arm body on a spring that a fit lacks (0.5 kg·m² at 15 Hz on the default
+/// joint's first arm mass, 3 % damping) leaves its resonance in that fit's residual: one
+/// of the mode's starts sits within a band (a sixth of an octave) of 15 Hz, its inertia
+/// taken from the mass it hangs on, so that the start keeps the fit's rigid-body inertia.
+#[test]
+fn a_mode_a_fit_lacks_starts_at_the_peak_it_leaves_in_the_residual() {
+    use crate::model::effects::{Attach, ExtraMode};
+    let (j, f_hz) = (0.5, 15.0);
+    let k = j * (2.0 * std::f64::consts::PI * f_hz).powi(2);
+    let mode = ExtraMode {
+        j,
+        k,
+        d: 2.0 * 0.03 * (k * j).sqrt(),
+        attach: Attach::Parallel,
+    };
+    let (data, cfg) = three_mass_run(Effect::ExtraMode(mode), 5);
+    // the fit without the mode: the joint's structure, the mode's inertia in the first
+    // arm mass that carries it below its resonance
+    let p = cfg.plant.params;
+    let model = NlModel {
+        effects: Vec::new(),
+        ..truth_of(&cfg, Effect::ExtraMode(mode), 1).0
+    };
+    let plant = vec![p.j_m, p.j_a1 + j, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m];
+    let base = crate::test_support::nl_fit(model, plant.clone());
+    let starts = modes_at_residual_peaks(&data, &base, ExtraMode::default());
+    assert!(!starts.is_empty() && starts.len() <= 2, "{starts:?}");
+    let band = 2f64.powf(1.0 / 6.0);
+    let near = starts.iter().find(|(m, _)| {
+        let f = (m.k / m.j).sqrt() / (2.0 * std::f64::consts::PI);
+        f / f_hz < band && f_hz / f < band
+    });
+    let Some((m, split)) = near else {
+        panic!("no start near {f_hz} Hz: {starts:?}");
+    };
+    assert_eq!(m.attach, Attach::Parallel);
+    assert!(
+        (split[1] + m.j - plant[1]).abs() < 1e-9 * plant[1],
+        "{split:?}"
+    );
+    assert_eq!(split[2..], plant[2..]);
+}
