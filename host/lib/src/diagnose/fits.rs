@@ -5,8 +5,8 @@
 use crate::data::IdData;
 use crate::ident::lm::Termination;
 use crate::ident::nonlinear::{
-    grow, identify_segments, model_of, modes_at_residual_peaks, DelayLines, NlError, NlFit,
-    NlRequest, NlResult, NlRunError, NlStart, Owner,
+    grow, identify_segments, model_of, DelayLines, NlError, NlFit, NlRequest, NlResult, NlRunError,
+    NlStart, Owner,
 };
 use crate::ident::parallel::parallel;
 use crate::model::effects::Effect;
@@ -217,10 +217,8 @@ impl Fitter<'_> {
     /// As [`Fitter::nested`], the effect placed by the automatic start's third step (seed
     /// 001: a grid on the output-error cost over the effect's parameters, for an extra mode
     /// its frequency) on the nominal's structure, lag and cost, instead of at the size and
-    /// shape it carries. A mode is also fitted from each of the nominal's residual peaks
-    /// ([`modes_at_residual_peaks`]), and the lowest cost of those fits is kept: the grid
-    /// ranks its points at the start, where a mode the nominal made up for costs more than
-    /// none.
+    /// shape it carries; a mode is also fitted from each peak of the nominal's residual,
+    /// the lowest cost kept ([`crate::ident::nonlinear::Start::at_peaks`]).
     pub fn nested_grid(&self, base: &NlFit, effect: Effect) -> Result<Fitted, CandidateError> {
         let req = self.req;
         let r = self.rec;
@@ -230,23 +228,7 @@ impl Fitter<'_> {
             options: req.options.nl.clone(),
             ..NlRequest::new(req.structure, req.r, vec![effect])
         };
-        let mut res = identify_segments(&r.est_data, &nl).map_err(CandidateError::Fit)?;
-        if let (Effect::ExtraMode(mode), Some(longest)) = (effect, longest(&r.est_data)) {
-            let offset = base.get("offset").unwrap_or(0.0);
-            for (at, plant) in modes_at_residual_peaks(longest, base, mode) {
-                let mut peak = NlRequest {
-                    effects: vec![Effect::ExtraMode(at)],
-                    linear: Some(plant.clone()),
-                    ..nl.clone()
-                };
-                peak.start = NlStart::Values(model_of(&peak, longest).values(&plant, offset, 0.0));
-                if let Ok(p) = identify_segments(&r.est_data, &peak) {
-                    if p.fit.ssr < res.fit.ssr {
-                        res = p;
-                    }
-                }
-            }
-        }
+        let res = identify_segments(&r.est_data, &nl).map_err(CandidateError::Fit)?;
         scored_fit(res, (&r.est_data, &r.val_data, &r.parts), req, self.starts)
     }
 

@@ -11,7 +11,9 @@
 //!    remaining effect's size from a one-dimensional search of the output-error cost over a
 //!    grid scaled by the data (cubic term against the deflection level, backlash width
 //!    against it, delay in samples with its time taken from the lag of the linear fit, the
-//!    extra mode's frequency against the first resonance). A linear start with a mode or
+//!    extra mode's frequency against the first resonance; a single extra mode is also
+//!    started at each peak of the linear fit's residual, [`Start::at_peaks`], and the fit
+//!    keeps the lower cost). A linear start with a mode or
 //!    damper faster than the RK4 step integrates is brought to the fastest it holds
 //!    ([`resolvable`]) first: as it came, it would not simulate.
 //!
@@ -74,6 +76,10 @@ pub struct Start {
     /// the last search of the torque ripple's order in the data (none with the order given
     /// or without a ripple)
     pub ripple_search: Option<super::ripple::OrderSearch>,
+    /// for a model whose one effect is an extra mode, the start again with the mode at each
+    /// peak of the linear fit's residual ([`modes_at_residual_peaks`]): the mode, its peak
+    /// [Hz] and the values, for the fit to weigh against the grid's start
+    pub at_peaks: Vec<(ExtraMode, f64, Vec<f64>)>,
 }
 
 /// Where the torque ripple's order comes from.
@@ -687,7 +693,24 @@ pub fn automatic_start_with(
         tau_c,
         ..model.clone()
     };
-    let values = start_model.values(&lin_plant, lin_offset, lin.get("v0").unwrap_or(0.0));
+    let v0 = lin.get("v0").unwrap_or(0.0);
+    let values = start_model.values(&lin_plant, lin_offset, v0);
+    // a single extra mode: the grid ranks its frequencies by the cost at the start, which a
+    // fit without the mode has already lowered, so the mode is also started where the
+    // linear fit leaves its residual peaks, for the fit to weigh
+    let at_peaks = match start_model.effects[..] {
+        [Effect::ExtraMode(x)] => modes_at_residual_peaks(part, &lin, x)
+            .into_iter()
+            .map(|(at, f_hz, plant)| {
+                let m = NlModel {
+                    effects: vec![Effect::ExtraMode(at)],
+                    ..start_model.clone()
+                };
+                (at, f_hz, m.values(&plant, lin_offset, v0))
+            })
+            .collect(),
+        _ => Vec::new(),
+    };
     Ok(Start {
         values,
         model: start_model,
@@ -695,6 +718,7 @@ pub fn automatic_start_with(
         held,
         warnings,
         ripple_search: searched,
+        at_peaks,
     })
 }
 
@@ -1276,9 +1300,9 @@ fn residual_peaks(
 }
 
 /// An extra mode like `mode` at each of `base`'s residual peaks on `data`
-/// ([`residual_peaks`] over the span of the mode's grid), each with the structure it hangs
-/// on: `base`'s, the mode's inertia ([`LIGHT_MODE_SHARE`] of the first arm mass, or of the
-/// grounded mass) taken from the mass it hangs on ([`split_mass`]), 5 % damping.
+/// ([`residual_peaks`] over the span of the mode's grid), the peak [Hz], and the structure
+/// it hangs on: `base`'s, the mode's inertia ([`LIGHT_MODE_SHARE`] of the first arm mass,
+/// or of the grounded mass) taken from the mass it hangs on ([`split_mass`]), 5 % damping.
 ///
 /// Why: the automatic start's grid over the mode's frequency (a step of 50 %) ranks its
 /// points by the cost at the start, and a fit that lacks a mode has moved its other values
@@ -1291,11 +1315,11 @@ fn residual_peaks(
 /// and the answer was `none` (the true model +1.86 points). The residual peaked at 15 Hz;
 /// fitted from there, the mode reached the true structure (+1.8 points, `j` and `k` within
 /// 2.5 %).
-pub fn modes_at_residual_peaks(
+pub(super) fn modes_at_residual_peaks(
     data: &IdData,
     base: &NlFit,
     mode: ExtraMode,
-) -> Vec<(ExtraMode, Vec<f64>)> {
+) -> Vec<(ExtraMode, f64, Vec<f64>)> {
     let structure = base.model.structure;
     let arm_at = usize::from(structure != Structure::Grounded);
     let Some(&arm) = base.plant.get(arm_at) else {
@@ -1320,7 +1344,7 @@ pub fn modes_at_residual_peaks(
             ..mode
         };
         let plant = split_mass(&Effect::ExtraMode(at), &base.plant, structure)?;
-        Some((at, plant))
+        Some((at, f_hz, plant))
     })
     .collect()
 }

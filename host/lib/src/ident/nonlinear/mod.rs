@@ -18,10 +18,7 @@ pub mod run;
 
 pub use export::{simulate_args, simulate_exact};
 pub use grow::{grow_with, stick_share, Grown, Seed, STICK_SHARE};
-pub use init::{
-    automatic_start, automatic_start_with, modes_at_residual_peaks, LinearFit, RippleOrder, Start,
-    Step,
-};
+pub use init::{automatic_start, automatic_start_with, LinearFit, RippleOrder, Start, Step};
 pub use model::{sim_plant, NlModel, Owner, ParamDef, Scale};
 pub use output_error::{
     cost_at, fit_output_error, fit_output_error_segments, interval_velocity, pooled_velocity_fit,
