@@ -738,7 +738,7 @@ fn start_from(nl: &mut NlRequest, base: &NlFit, longest: &IdData) {
 }
 
 /// The first of the longest records, the one a start's values are laid out for.
-fn longest(est: &[IdData]) -> Option<&IdData> {
+pub(super) fn longest(est: &[IdData]) -> Option<&IdData> {
     est.iter()
         .enumerate()
         .max_by_key(|(i, d)| (d.len(), usize::MAX - i))

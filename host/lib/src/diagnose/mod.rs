@@ -61,10 +61,12 @@
 //!    fitted on the (first) estimation capture by the nonlinear engine
 //!    ([`crate::ident::nonlinear::identify`]) together with the singles ([`fits`], on
 //!    [`DiagnoseOptions::threads`] threads); restarted elsewhere when it fails; its
-//!    frequency-domain start kept when the fit ends far below it in-sample. No base for
-//!    an answer ([`nominal::trust`]) when it came apart where the motor does not stick (no
-//!    minimum, a spring on the lower bound of its search) or describes the validation data
-//!    far worse than its own.
+//!    frequency-domain start kept when the fit ends far below it in-sample. When it came
+//!    apart where the motor does not stick (no minimum, a spring on the lower bound of its
+//!    search, [`nominal::came_apart`]), it and every single are fitted again from the
+//!    structure fitted to the record's own Welch FRF ([`nominal::restarted`]). No base for
+//!    an answer ([`nominal::trust`]) when it came apart from there too, or describes the
+//!    validation data far worse than its own.
 //! 2. **Evidence** ([`evidence`]): where the nominal's residual lies (operating regions,
 //!    bands, [`locate`]); the odd/even non-excited lines of periodic captures
 //!    ([`crate::ident::frf`]); with two estimation captures, how distortion and gap change
@@ -767,6 +769,33 @@ pub fn diagnose_segments(
     let results: Vec<_> = results.collect();
     let mut warnings = held.warnings.clone();
     let nominal = nominal::settle(&fitter, first, &results, &mut warnings)?;
+    // a nominal that came apart: every fit again from the structure fitted to the record's
+    // own FRF instead of the frequency-domain start
+    let welch;
+    let (fitter, nominal, results, warnings) =
+        match nominal::came_apart(&nominal.fit, held.starts.sticks)
+            .and_then(|why| Some((why, fits::longest(&held.rec.est_data)?)))
+            .and_then(|(why, d)| {
+                Some((
+                    why,
+                    crate::ident::fit::welch_structure(d, req.structure, req.r)?,
+                ))
+            }) {
+            Some((why, structure)) => {
+                welch = held.starts.with_structure(structure);
+                let again = Fitter {
+                    req: fitter.req,
+                    rec: fitter.rec,
+                    starts: &welch,
+                    floor: fitter.floor.clone(),
+                };
+                match nominal::restarted(&again, &jobs, &held.warnings, &why) {
+                    Some((n, r, w)) => (again, n, r, w),
+                    None => (fitter, nominal, results, warnings),
+                }
+            }
+            None => (fitter, nominal, results, warnings),
+        };
     if !nominal.fit.holds_no_lag() {
         return Ok(answer(&fitter, nominal, results, warnings, t0));
     }

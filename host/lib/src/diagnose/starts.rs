@@ -236,6 +236,25 @@ impl LazyStart {
     }
 }
 
+impl LinearStarts {
+    /// These starts with `structure` (values and lag [s]) in place of the structure's
+    /// frequency-domain start, and no start of a pair of the friction and the mode (it is
+    /// the frequency domain's too).
+    pub(super) fn with_structure(&self, structure: (Vec<f64>, f64)) -> LinearStarts {
+        LinearStarts {
+            structure: Some(structure),
+            extra_mode: self.extra_mode.clone(),
+            coulomb: self.coulomb.clone(),
+            coulomb_extra_mode: LazyStart::none(),
+            grown: self.grown.clone(),
+            two_mass: self.two_mass.clone(),
+            delay_lines: self.delay_lines,
+            sticks: self.sticks,
+            lag_start: self.lag_start,
+        }
+    }
+}
+
 /// The linear starts the candidate fits take from the frequency-domain fits.
 pub(super) struct LinearStarts {
     /// the structure's values and current-loop lag [s]

@@ -86,6 +86,7 @@ pub use request::{
 mod run;
 pub use run::run;
 mod spectral;
+pub(crate) use spectral::welch_structure;
 pub use spectral::DRIFT_COST_RATIO;
 
 #[cfg(test)]

@@ -156,6 +156,23 @@ pub(super) fn welch_start(
     })
 }
 
+/// The values of `structure` ([`Structure::param_names`] order) and its lag [s] fitted to
+/// the Welch FRF of `raw` (the record's own FRF, the reference as instrument where
+/// recorded): the start `fit --domain time` refines; `None` when that fit fails.
+pub(crate) fn welch_structure(
+    raw: &IdData,
+    structure: Structure,
+    r: f64,
+) -> Option<(Vec<f64>, f64)> {
+    let opts = FitOptions {
+        r,
+        ..FitOptions::default()
+    };
+    let w = welch_start(raw, structure, &opts).ok()?;
+    let lag = (w.fit.lag.value + w.fit.delay.value) * raw.ts;
+    Some((w.fit.values(), lag))
+}
+
 /// The velocity refinement of a Welch start ([`velocity_refined`]).
 pub(super) struct Refined {
     /// the refined model, its FIT the velocity's ([`super::FitMetric::Velocity`])
