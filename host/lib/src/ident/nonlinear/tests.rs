@@ -5,7 +5,7 @@
 
 use super::*;
 use crate::data::{load_csv, ColumnMap, IdData};
-use crate::model::effects::{CoulombFriction, Effect, NonlinearStiffness};
+use crate::model::effects::{Attach, CoulombFriction, Effect, ExtraMode, NonlinearStiffness};
 use crate::model::spec::Structure;
 use crate::sim::{simulate_excitation, SimConfig};
 use jointid_core::excitation::ExcitationConfig;
@@ -1097,15 +1097,13 @@ fn every_effect_parameter_stays_within_what_the_simulator_accepts() {
     assert!(checked >= 6, "only {checked} parameters checked");
 }
 
-/// A light arm body on a spring that a fit lacks (0.5 kg·m² at 15 Hz on the default
-/// joint's first arm mass, 3 % damping) leaves its resonance in that fit's residual: one
-/// of the mode's starts sits within a band (a sixth of an octave) of 15 Hz, its inertia
-/// taken from the mass it hangs on, so that the start keeps the fit's rigid-body inertia.
-#[test]
-fn a_mode_a_fit_lacks_starts_at_the_peak_it_leaves_in_the_residual() {
-    use crate::model::effects::{Attach, ExtraMode};
-    let (j, f_hz) = (0.5, 15.0);
-    let k = j * (2.0 * std::f64::consts::PI * f_hz).powi(2);
+/// A light arm body on a spring (0.5 kg·m² at 15 Hz on the default joint's first arm mass,
+/// 3 % damping): the body, the closed-loop run of the joint with it, the run's settings and
+/// the structure of a linear fit that lacks it (the joint's, the body's inertia in the first
+/// arm mass that carries it below its resonance).
+fn light_mode_run() -> (ExtraMode, IdData, SimConfig, Vec<f64>) {
+    let j = 0.5;
+    let k = j * (2.0 * std::f64::consts::PI * LIGHT_MODE_HZ).powi(2);
     let mode = ExtraMode {
         j,
         k,
@@ -1113,24 +1111,35 @@ fn a_mode_a_fit_lacks_starts_at_the_peak_it_leaves_in_the_residual() {
         attach: Attach::Parallel,
     };
     let (data, cfg) = three_mass_run(Effect::ExtraMode(mode), 5);
-    // the fit without the mode: the joint's structure, the mode's inertia in the first
-    // arm mass that carries it below its resonance
     let p = cfg.plant.params;
+    let lumped = vec![p.j_m, p.j_a1 + j, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m];
+    (mode, data, cfg, lumped)
+}
+
+/// The frequency of [`light_mode_run`]'s body with the arm mass held still [Hz].
+const LIGHT_MODE_HZ: f64 = 15.0;
+
+/// The body of [`light_mode_run`] leaves its resonance in the residual of a fit that lacks
+/// it: one of the mode's starts sits within a band (a sixth of an octave) of its
+/// frequency, its inertia taken from the mass it hangs on, so that the start keeps the
+/// fit's rigid-body inertia.
+#[test]
+fn a_mode_a_fit_lacks_starts_at_the_peak_it_leaves_in_the_residual() {
+    let (mode, data, cfg, plant) = light_mode_run();
     let model = NlModel {
         effects: Vec::new(),
         ..truth_of(&cfg, Effect::ExtraMode(mode), 1).0
     };
-    let plant = vec![p.j_m, p.j_a1 + j, p.j_a2, p.k_g, p.k_a, p.d_g, p.d_a, p.f_m];
     let base = crate::test_support::nl_fit(model, plant.clone());
     let starts = init::modes_at_residual_peaks(&data, &base, ExtraMode::default());
     assert!(!starts.is_empty() && starts.len() <= 2, "{starts:?}");
     let band = 2f64.powf(1.0 / 6.0);
     let near = starts.iter().find(|(m, peak, _)| {
         let f = (m.k / m.j).sqrt() / (2.0 * std::f64::consts::PI);
-        (f - peak).abs() < 1e-9 * f && f / f_hz < band && f_hz / f < band
+        (f - peak).abs() < 1e-9 * f && f / LIGHT_MODE_HZ < band && LIGHT_MODE_HZ / f < band
     });
     let Some((m, _, split)) = near else {
-        panic!("no start near {f_hz} Hz: {starts:?}");
+        panic!("no start near {LIGHT_MODE_HZ} Hz: {starts:?}");
     };
     assert_eq!(m.attach, Attach::Parallel);
     assert!(
@@ -1140,44 +1149,24 @@ fn a_mode_a_fit_lacks_starts_at_the_peak_it_leaves_in_the_residual() {
     assert_eq!(split[2..], plant[2..]);
 }
 
-/// A light arm body (0.5 kg·m² at 15 Hz on the first arm mass, 3 % damping) fitted from the
-/// automatic start on a linear fit that lacks it (the joint's structure, the body's inertia
-/// in the first arm mass), as `diagnose` refits a mode on its nominal: the fit reaches the
-/// body's inertia and stiffness within 5 %.
+/// The body of [`light_mode_run`] fitted from the automatic start on a linear fit that
+/// lacks it, as `diagnose` refits a mode on its nominal: the fit reaches the body's inertia
+/// and stiffness within 5 %.
 #[test]
 fn a_light_mode_is_fitted_from_the_automatic_start_on_a_linear_fit_without_it() {
-    use crate::model::effects::{Attach, ExtraMode};
-    let (j, f_hz) = (0.5, 15.0);
-    let k = j * (2.0 * std::f64::consts::PI * f_hz).powi(2);
-    let mode = ExtraMode {
-        j,
-        k,
-        d: 2.0 * 0.03 * (k * j).sqrt(),
-        attach: Attach::Parallel,
-    };
-    let (data, cfg) = three_mass_run(Effect::ExtraMode(mode), 5);
-    let p = cfg.plant.params;
+    let (mode, data, cfg, plant) = light_mode_run();
     let req = NlRequest {
         tau_c: cfg.controller.current_loop_tau,
-        linear: Some(vec![
-            p.j_m,
-            p.j_a1 + j,
-            p.j_a2,
-            p.k_g,
-            p.k_a,
-            p.d_g,
-            p.d_a,
-            p.f_m,
-        ]),
+        linear: Some(plant),
         ..NlRequest::new(
             Structure::ThreeMass,
-            p.r,
+            cfg.plant.params.r,
             vec![Effect::ExtraMode(ExtraMode::default())],
         )
     };
     let r = identify(&data, &req).unwrap();
     let steps: Vec<&str> = r.steps.iter().map(|s| s.name.as_str()).collect();
-    for (name, truth) in [("j", j), ("k", k)] {
+    for (name, truth) in [("j", mode.j), ("k", mode.k)] {
         let v = r.fit.get(name).unwrap();
         assert!(
             (v / truth - 1.0).abs() < 0.05,
