@@ -78,8 +78,9 @@
 //!    ([`select::nested_refits`]) and replaced when that scores higher on the estimation
 //!    records; an extra mode is so refitted whatever it scored, placed by the automatic
 //!    start's grid and at each peak of the nominal's residual
-//!    ([`crate::ident::nonlinear::modes_at_residual_peaks`]). Every scored model is also simulated from a start angle 1 nrad away
-//!    ([`metric::Measured::start_sensitivity`]): a chaotic open-loop response is flagged,
+//!    ([`crate::ident::nonlinear::Start::at_peaks`]). Every scored model is also simulated
+//!    from a start angle 1 nrad away ([`metric::Measured::start_sensitivity`]): a chaotic
+//!    open-loop response is flagged,
 //!    since no simulation metric can score it.
 //! 4. **Pairs** ([`select::pairs`]): the best single (and the second when they tie) with
 //!    each other significant single, started from the singles' fits and, for two

@@ -308,22 +308,24 @@ pub(super) fn restarted(
 }
 
 /// The springs that ran to their bound (each `name at value unit`), when the nominal `fit`
-/// is no model of the joint because its structure came apart: its fit is no minimum (stopped at its iteration limit, continued by [`Fitter::continued`] and
-/// stopped there again) with a spring of the structure run to the lower bound of its
-/// search, a joint whose bodies no spring holds together. Every candidate extends it, and
-/// what one gains on it is the structure's repair, not the effect's: other-joints bench
-/// (`JOINTS=1 HARD=1`, case 35), a torque ripple of 4.7 points on a joint whose gear and
-/// arm modes lie at 34 and 26 Hz: the nominal's `k_g` ran six decades down to its bound
-/// in 200 iterations and `extra_mode` was named (+1.2 points, the closure 3.5 points short
-/// of the true model's); the diagnosis then starts again elsewhere ([`restarted`]). A nominal stopped at its limit with its springs in place is still
-/// a base: a linear model converges slowly on a joint a large Coulomb friction dominates,
-/// and the friction's single is right there (six such joints on the held-out rounds). So
-/// is one that came apart where the motor sticks (`sticks`, the share of the samples it
-/// sticks on, [`super::starts::LinearStarts::sticks`]): no linear structure follows
-/// stick-slip, and the friction's candidates start from the structure grown in the time
-/// domain, not from the nominal (default bench case 30, the motor stuck on 67 % of the
-/// samples: the nominal's `k_a` ran to its bound and the Coulomb friction, +46.9 points,
-/// is the answer).
+/// is no model of the joint because its structure came apart: its fit is no minimum
+/// (stopped at its iteration limit, continued by [`Fitter::continued`] and stopped there
+/// again) with a spring of the structure run to the lower bound of its search, a joint
+/// whose bodies no spring holds together. Every candidate extends it, and what one gains
+/// on it is the structure's repair, not the effect's: other-joints bench (`JOINTS=1
+/// HARD=1`, case 35), a torque ripple on a joint whose gear and arm modes lie at 34 and
+/// 26 Hz: the nominal's `k_g` ran six decades down to its bound in 200 iterations, the true
+/// model stood 4.7 points above it, and `extra_mode` was named (+1.2 points); the diagnosis
+/// now starts again elsewhere ([`restarted`]), where the joint's own linear model scores
+/// 99.5 % and the ripple adds 0.5 points. A nominal stopped at its limit with its springs
+/// in place is still a base: a linear model converges slowly on a joint a large Coulomb
+/// friction dominates, and the friction's single is right there (six such joints on the
+/// held-out rounds). So is one that came apart where the motor sticks (`sticks`, the share
+/// of the samples it sticks on, [`super::starts::LinearStarts::sticks`]): no linear
+/// structure follows stick-slip, and the friction's candidates start from the structure
+/// grown in the time domain, not from the nominal (default bench case 30, the motor stuck
+/// on 67 % of the samples: the nominal's `k_a` ran to its bound and the Coulomb friction,
+/// +46.9 points, is the answer).
 pub(super) fn came_apart(fit: &NlFit, sticks: Option<f64>) -> Option<String> {
     // a frequency-domain start kept as it is ran no iteration ([`nominal_at_start`])
     if sticks.is_some() || fit.termination != Termination::MaxIterations || fit.iterations == 0 {
