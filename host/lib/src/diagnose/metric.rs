@@ -567,7 +567,20 @@ pub fn start_sensitivity_segments(
         let v = velocity_band(&driven.theta_m, d.ts, m.band);
         velocity.extend_from_slice(&v[m.skip..]);
     }
-    Ok(fit_percent(&scored.velocity, &velocity)?)
+    self_fit(&scored.velocity, &velocity)
+}
+
+/// The FIT [%] of a model's simulation `moved` from a moved start against its own
+/// `reference`. A simulation at rest (a friction that holds the motor over the whole
+/// record) has no FIT against itself; it forgot its start when the moved one rests too
+/// (100), else not (0). Bench (new other-joints round, case 40: a Coulomb friction at
+/// 0.014 rad RMS): the friction's single came out at rest, and the undefined FIT threw the
+/// candidate away as an error instead of scoring it.
+fn self_fit(reference: &[f64], moved: &[f64]) -> Result<f64, MetricError> {
+    match fit_percent(reference, moved) {
+        Err(ValidateError::ConstantOutput) => Ok(if reference == moved { 100.0 } else { 0.0 }),
+        r => Ok(r?),
+    }
 }
 
 /// Start perturbation of [`Measured::start_sensitivity`] [rad].
@@ -598,7 +611,7 @@ impl Measured {
         let (driven, _, _) = simulate_tracked(model, &moved, self.tracking_hz)?;
         let velocity = velocity_band(&driven.theta_m, data.ts, self.band);
         let s = self.skip;
-        Ok(fit_percent(&scored.velocity[s..], &velocity[s..])?)
+        self_fit(&scored.velocity[s..], &velocity[s..])
     }
 }
 
@@ -750,6 +763,21 @@ fn true_model(cfg: &crate::sim::SimConfig) -> DrivenModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A simulation at rest forgets its start when the one moved from it rests too, and
+    /// not when that one moves; a moving simulation is scored as any FIT.
+    #[test]
+    fn a_simulation_at_rest_is_scored_against_itself() {
+        let rest = vec![0.0; 50];
+        assert_eq!(self_fit(&rest, &rest).unwrap(), 100.0);
+        let mut moved = rest.clone();
+        moved[20] = 1e-6;
+        assert_eq!(self_fit(&rest, &moved).unwrap(), 0.0);
+        let wave: Vec<f64> = (0..50).map(|k| (0.3 * k as f64).sin()).collect();
+        assert!((self_fit(&wave, &wave).unwrap() - 100.0).abs() < 1e-9);
+        let half: Vec<f64> = wave.iter().map(|v| 0.5 * v).collect();
+        assert!(self_fit(&wave, &half).unwrap() < 100.0);
+    }
 
     /// The noise's floor read from the periods of one capture is what a model that followed
     /// the joint exactly would score: the joint simulated again with ideal sensors and no
