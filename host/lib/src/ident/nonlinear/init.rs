@@ -1189,17 +1189,11 @@ fn split_mass(cand: &Effect, plant: &[f64], structure: Structure) -> Option<Vec<
     };
     // the mass it hangs on, as the simulation attaches it: the grounded mass carries every
     // mode; else the first arm mass (parallel) or the chain's last (serial)
-    let masses = match structure {
-        Structure::Rigid => return None,
-        Structure::Grounded => 1,
-        Structure::TwoMass => 2,
-        Structure::ThreeMass => 3,
-        Structure::FourMass => 4,
-    };
     let at = match x.attach {
+        _ if structure == Structure::Rigid => return None,
         _ if structure == Structure::Grounded => 0,
         Attach::Parallel => 1,
-        Attach::Serial => masses - 1,
+        Attach::Serial => structure.masses() - 1,
     };
     let m = *plant.get(at)?;
     (m > x.j && x.j > 0.0).then(|| {
