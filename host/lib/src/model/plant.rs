@@ -16,7 +16,7 @@
 
 use nalgebra::{DMatrix, SymmetricEigen};
 
-use super::effects::{Attach, Effect};
+use super::effects::Effect;
 use super::params::Plant;
 use super::spec::Structure;
 
@@ -146,12 +146,7 @@ impl Mechanism {
         for e in effects {
             if let Effect::ExtraMode(x) = e {
                 extra += 1;
-                let to = match x.attach {
-                    // the grounded mass carries every extra mode
-                    _ if plant.kind == Structure::Grounded => 0,
-                    Attach::Parallel => usize::from(m.bodies.len() > 1),
-                    Attach::Serial => m.bodies.len() - 1,
-                };
+                let to = x.hangs_on(plant.kind, m.bodies.len());
                 m.bodies.push(arm(&format!("x{extra}"), x.j));
                 let new = m.bodies.len() - 1;
                 m.springs.push(spring(to, new, x.k, x.d));
@@ -334,7 +329,7 @@ mod tests {
             j: p.j_p,
             k: p.k_p,
             d: p.d_p,
-            attach: Attach::Parallel,
+            attach: crate::model::effects::Attach::Parallel,
         });
         let a = Mechanism::new(&Plant::new(Structure::ThreeMass), &[x]);
         let b = Mechanism::new(&Plant::new(Structure::FourMass), &[]);

@@ -1187,14 +1187,12 @@ fn split_mass(cand: &Effect, plant: &[f64], structure: Structure) -> Option<Vec<
     let Effect::ExtraMode(x) = cand else {
         return None;
     };
-    // the mass it hangs on, as the simulation attaches it: the grounded mass carries every
-    // mode; else the first arm mass (parallel) or the chain's last (serial)
-    let at = match x.attach {
-        _ if structure == Structure::Rigid => return None,
-        _ if structure == Structure::Grounded => 0,
-        Attach::Parallel => 1,
-        Attach::Serial => structure.masses() - 1,
-    };
+    // the mass it hangs on, as the simulation attaches it; a rigid joint's one mass is the
+    // motor, whose inertia the torque sees whole
+    if structure == Structure::Rigid {
+        return None;
+    }
+    let at = x.hangs_on(structure, structure.masses());
     let m = *plant.get(at)?;
     (m > x.j && x.j > 0.0).then(|| {
         let mut p = plant.to_vec();

@@ -26,7 +26,7 @@
 use num_traits::Float;
 
 use super::dual::Real;
-use crate::model::effects::{Attach, Effect};
+use crate::model::effects::Effect;
 use crate::model::laws;
 use crate::model::params::{model_params, unit_of, JointParams, Plant as SimPlant};
 use crate::model::spec::Structure;
@@ -549,12 +549,7 @@ impl<T: Real> Plant<T> {
                     i += 1;
                 }
                 Effect::ExtraMode(x) => {
-                    let to = match x.attach {
-                        // the grounded mass carries every extra mode
-                        _ if model.structure == Structure::Grounded => 0,
-                        Attach::Parallel => usize::from(inertia.len() > 1),
-                        Attach::Serial => inertia.len() - 1,
-                    };
+                    let to = x.hangs_on(model.structure, inertia.len());
                     inertia.push(p[i]);
                     gains.push(1.0);
                     springs.push((to, inertia.len() - 1, p[i + 1], p[i + 2]));
