@@ -421,7 +421,7 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
     writeln!(out, "  test: {}", d.test)?;
     writeln!(
         out,
-        "  candidates (gain over the nominal; over the answer {}, FIT points):",
+        "  candidates (gain over the nominal; over the answer {}; added to it, FIT points):",
         d.best
     )?;
     for c in &d.effects {
@@ -430,9 +430,13 @@ fn print_summary(out: &mut dyn Write, d: &Diagnosis, val: &str) -> std::io::Resu
             None if c.name == d.best => format!("{:>15}", "answer"),
             None => format!("{:>15}", "—"),
         };
+        let added = match c.with_answer {
+            Some((m, se)) => format!("{:+7.2} ± {:5.2}", Percent(m), Percent(se)),
+            None => format!("{:>15}", "—"),
+        };
         writeln!(
             out,
-            "    {:<20} {:+7.2} ± {:5.2} {:<16} {over}  {}",
+            "    {:<20} {:+7.2} ± {:5.2} {:<16} {over} {added}  {}",
             c.name,
             Percent(c.score),
             Percent(c.score_se),

@@ -334,12 +334,16 @@ fn battery() {
                     .map(|(k, v)| format!("{k} {:.4e}±{:.1e}", v.value, v.std))
                     .collect();
                 println!(
-                    "    {} {:+.3}±{:.3} odd {}: {} warnings {:?}",
+                    "    {} {:+.3}±{:.3} odd {} over the answer {} added to it {}: {} warnings {:?}",
                     c.name,
                     c.score,
                     c.score_se,
                     c.odd_explained
                         .map_or("-".into(), |s| format!("{:.0} %", 100.0 * s)),
+                    c.over_answer
+                        .map_or("-".into(), |(m, se)| format!("{m:+.3}±{se:.3}")),
+                    c.with_answer
+                        .map_or("-".into(), |(m, se)| format!("{m:+.3}±{se:.3}")),
                     p.join(", "),
                     c.warnings
                 );

@@ -32,7 +32,8 @@
 //! ([`select::odd_shown`]).
 //! That test has already rejected the nominal, and the metric has only to confirm the gain. The candidates are
 //! ranked significant first, each group by score ([`table::ranked`]); the answer is the
-//! first when significant. An effect whose
+//! first when significant. Once it is chosen, the others follow it in the order of what
+//! each adds to it ([`table::ranked_after`]). An effect whose
 //! size comes out on its lower bound or within 2σ of nought is never significant, in any
 //! stage, open loop or in the loop ([`fits::Fitted::counts`]; a transport delay, whose
 //! deviation the lag it trades with spreads, is judged there by the excited lines when
@@ -83,7 +84,8 @@
 //!    open-loop response is flagged,
 //!    since no simulation metric can score it.
 //! 4. **Pairs** ([`select::pairs`]): the best single (and the second when they tie) with
-//!    each other significant single, started from the singles' fits and, for two
+//!    each other significant single, and each that gains beyond twice its standard error
+//!    under the floor, started from the singles' fits and, for two
 //!    significant singles, from the data's own start too (seed 001's three steps: a single
 //!    bends its structure to take its partner's part), judged against its lead alone
 //!    (nested); a significant single that leads no pair with each single below its nominal
@@ -91,7 +93,9 @@
 //!    the best single leaves the odd distortion standing above the noise, it is also paired
 //!    with each effect that makes such distortion ([`fits::makes_odd`]); the partner that
 //!    removes most of what it leaves, more than any other, is shown by the odd lines and
-//!    judged as a single they show ([`fits::Fitted::shown_apart`]).
+//!    judged as a single they show ([`fits::Fitted::shown_apart`]). What each partner
+//!    adds to its lead is kept: it ranks the candidates after the answer
+//!    ([`table::ranked_after`], [`Candidate::with_answer`]).
 //! 5. **Refinement** ([`select::polish_answer`]): the answer's fit continued when it
 //!    stopped at its iteration limit; a pair's before its reduction, since a pair stopped
 //!    short of its minimum is no measure of what its second effect adds.
@@ -451,6 +455,12 @@ pub struct Candidate {
     /// scored there; `None` for the answer itself, with no answer, or a failed fit
     #[serde(skip_serializing_if = "Option::is_none")]
     pub over_answer: Option<(f64, f64)>,
+    /// mean and standard error of the gain of the answer with this effect added over the
+    /// answer alone [FIT points]: the pair's test (stage 4), on the open-loop metric, when
+    /// the answer is a single that led that pair; `None` otherwise. What the effect adds to
+    /// the answer, where [`Candidate::over_answer`] is what it does in the answer's place
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub with_answer: Option<(f64, f64)>,
     /// the effects' fitted parameters, `effect.key` for pairs
     pub parameters: BTreeMap<String, ParamValue>,
     /// share of the nominal's residual at the non-excited odd lines of the validation

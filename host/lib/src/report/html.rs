@@ -387,6 +387,12 @@ fn candidate_row(out: &mut String, rank: &str, c: &Candidate) {
             format!("{m:+.2} ± {se:.2}").replace("NaN", "–")
         }),
     );
+    cell(
+        out,
+        &c.with_answer.map_or("–".to_string(), |(m, se)| {
+            format!("{m:+.2} ± {se:.2}").replace("NaN", "–")
+        }),
+    );
     cell(out, &format!("{:.2}", c.fit_val).replace("NaN", "–"));
     let params: Vec<String> = c
         .parameters
@@ -486,7 +492,8 @@ pub fn diagnosis_html(
     h.push_str(
         "<h2>Candidates</h2>\n<table id=\"candidates\">\n<tr><th>rank</th><th>effect</th>\
          <th>score ± SE [FIT points]</th><th>significant</th>\
-         <th>over the answer ± SE [FIT points]</th><th>validation FIT [%]</th>\
+         <th>over the answer ± SE [FIT points]</th><th>added to the answer ± SE [FIT points]</th>\
+         <th>validation FIT [%]</th>\
          <th>parameters (± σ) [unit]</th><th>reason</th></tr>\n",
     );
     for (i, c) in d.effects.iter().enumerate() {
