@@ -526,7 +526,10 @@ mod tests {
     /// frequency-domain start, so every fit starts in the time domain): the nominal carries
     /// the drive's 0.5 ms current-loop lag and no delay is named. Without a lag in the
     /// time-domain start the nominal had none, and `time_delay` took the lag as a delay of
-    /// about one sample (+21.8 points, a false alarm).
+    /// about one sample (+21.8 points, a false alarm). With the lag in the nominal, the
+    /// delay's fit still moves the lag's phase onto the delay (τ_c 0.001 ms, 1.01 samples,
+    /// +0.34 ± 0.04 points, above the floor of 0.1): with no lines to test it, a delay
+    /// that replaced the lag is not counted ([`super::super::fits::delay_unsupported`]).
     #[test]
     fn a_nominal_started_in_the_time_domain_carries_the_current_loop_lag() {
         let d = twin_diagnosis(Structure::ThreeMass, &["time_delay"], 2);

@@ -380,7 +380,8 @@ pub(super) fn singles(
 /// ([`Fitted::shown_apart`]). Other-joints bench (`JOINTS=1 HARD=1`, case 1): a 15 µrad
 /// backlash at 0.040 rad RMS costing the nominal 0.47 points; the odd residual stood 27 dB
 /// above the noise, the backlash removed 99 % of it (the stiffening spring 75 %) and
-/// gained +0.39 ± 0.06 points, short of the 0.3-point floor beyond twice its error.
+/// gained +0.39 ± 0.06 points, short of the floor of the time (0.3 point) beyond twice its
+/// error.
 pub(super) fn odd_shown(shares: &[Option<f64>]) -> Option<usize> {
     shares
         .iter()

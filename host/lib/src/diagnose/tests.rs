@@ -1430,6 +1430,19 @@ fn an_effect_fitted_to_no_size_is_never_significant() {
     ripple.params[0].at_lower = true;
     assert!(vanished_effects_of(&ripple).is_empty());
     assert!(!exactly_of_no_size(&ripple));
+    // an extra mode's size is its inertia: a body the data do not fix is no mode
+    let mode = |j: (f64, f64)| {
+        effect_fit(
+            candidate("extra_mode").expect("a candidate"),
+            vec![
+                effect_param("j", j),
+                effect_param("k", (1.7e6, 3.6e6)),
+                effect_param("d", (130.0, 1e3)),
+            ],
+        )
+    };
+    assert_eq!(vanished_effects_of(&mode((1000.0, 2100.0))).len(), 1);
+    assert!(vanished_effects_of(&mode((0.945, 0.011))).is_empty());
     let friction = |fc: (f64, f64), fs: (f64, f64)| {
         effect_fit(
             candidate("coulomb_friction").expect("a candidate"),
