@@ -84,8 +84,6 @@
 //! with the effects (`SimError::NonFinite`).
 
 use serde::{Deserialize, Serialize};
-
-use super::spec::Structure;
 use std::fmt;
 use std::str::FromStr;
 
@@ -265,20 +263,6 @@ pub struct ExtraMode {
     pub d: f64,
     /// attachment; default parallel
     pub attach: Attach,
-}
-
-impl ExtraMode {
-    /// The body this mode hangs on, in a chain of `bodies` bodies (the motor first, the
-    /// modes already hung counted) of `structure`: the grounded mass carries every mode;
-    /// else the first arm mass (parallel; the motor of a rigid joint) or the chain's last
-    /// (serial). The simulation, the estimator and the start read it here.
-    pub fn hangs_on(&self, structure: Structure, bodies: usize) -> usize {
-        match self.attach {
-            _ if structure == Structure::Grounded => 0,
-            Attach::Parallel => usize::from(bodies > 1),
-            Attach::Serial => bodies - 1,
-        }
-    }
 }
 
 impl Default for ExtraMode {

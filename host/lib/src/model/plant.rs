@@ -146,7 +146,7 @@ impl Mechanism {
         for e in effects {
             if let Effect::ExtraMode(x) = e {
                 extra += 1;
-                let to = x.hangs_on(plant.kind, m.bodies.len());
+                let to = plant.kind.mode_host(x, m.bodies.len());
                 m.bodies.push(arm(&format!("x{extra}"), x.j));
                 let new = m.bodies.len() - 1;
                 m.springs.push(spring(to, new, x.k, x.d));

@@ -8,7 +8,7 @@
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use super::effects::{parse_effects, Effect, EffectParseError};
+use super::effects::{parse_effects, Attach, Effect, EffectParseError, ExtraMode};
 
 /// Mechanical structure of a joint model: the one list of structures the estimators fit
 /// and the simulator simulates ([`crate::model::params::Plant::kind`]); serialised by its
@@ -78,6 +78,19 @@ impl Structure {
             Structure::ThreeMass => "seed 000 eq. (5)-(6): motor and two arm masses",
             Structure::FourMass => "seed 000 eq. (7)-(8): three-mass plus a parallel mass",
             Structure::Grounded => "one mass on a spring and damper to ground (flexure, bench)",
+        }
+    }
+
+    /// The body the extra mode `x` hangs on, in a chain of `bodies` bodies of this
+    /// structure (the motor first, the modes already hung counted): the grounded mass
+    /// carries every mode; else the first arm mass (parallel; the motor of a rigid joint)
+    /// or the chain's last (serial). The simulation, the estimator and the nonlinear start
+    /// read it here.
+    pub fn mode_host(self, x: &ExtraMode, bodies: usize) -> usize {
+        match x.attach {
+            _ if self == Structure::Grounded => 0,
+            Attach::Parallel => usize::from(bodies > 1),
+            Attach::Serial => bodies - 1,
         }
     }
 

@@ -1192,7 +1192,7 @@ fn split_mass(cand: &Effect, plant: &[f64], structure: Structure) -> Option<Vec<
     if structure == Structure::Rigid {
         return None;
     }
-    let at = x.hangs_on(structure, structure.masses());
+    let at = structure.mode_host(x, structure.masses());
     let m = *plant.get(at)?;
     (m > x.j && x.j > 0.0).then(|| {
         let mut p = plant.to_vec();

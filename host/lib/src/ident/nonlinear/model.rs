@@ -549,7 +549,7 @@ impl<T: Real> Plant<T> {
                     i += 1;
                 }
                 Effect::ExtraMode(x) => {
-                    let to = x.hangs_on(model.structure, inertia.len());
+                    let to = model.structure.mode_host(x, inertia.len());
                     inertia.push(p[i]);
                     gains.push(1.0);
                     springs.push((to, inertia.len() - 1, p[i + 1], p[i + 2]));
