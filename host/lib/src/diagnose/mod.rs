@@ -190,12 +190,12 @@ pub struct DiagnoseOptions {
     /// smallest gain counted [FIT points]: significant when `mean − 2·SE` exceeds it (or the
     /// spread of the nominal's own refits, when larger: [`nominal::refit_spread`]). It stands
     /// for what the segments' spread does not see: a wrong model that absorbs a little of
-    /// the nominal's misfit alike on every segment. 0.1: on the bench's held-out and new
-    /// rounds (`MIN_GAIN=0.1`, 172 cases, 28 of them `none` with weak Coulomb friction in the
-    /// background), no `none` case had a candidate above 0.02 beyond twice its error but one
-    /// the noise's ceiling rejects, while effects of 0.13–0.38 points cleared 0.1 and not 0.3
-    /// (an extra mode, a ripple, two Coulomb frictions, the second effect of two pairs). At
-    /// 0.3 (stop 77) those were answered `none`
+    /// the nominal's misfit alike on every segment. 0.1: on the bench's rounds at
+    /// `MIN_GAIN=0.1` (160 cases, 32 of them `none`, most with weak Coulomb friction in the
+    /// background), no `none` case had a candidate above 0.02 beyond twice its error but a
+    /// delay the excited lines reject, while effects of 0.13–0.38 points cleared 0.1 and not
+    /// 0.3 (an extra mode, a ripple, two Coulomb frictions, and an effect of each of three
+    /// pairs), which at 0.3 (stop 77) were answered `none`
     pub min_gain: f64,
     /// threads fitting candidates
     pub threads: usize,

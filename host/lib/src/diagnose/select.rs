@@ -959,7 +959,8 @@ pub(super) fn polish_answer(
 /// ([`super::table::ranked_after`]). Held-out hard bench case 66, a stiffening spring with
 /// a delay of 0.19 samples beside a lag of 3 samples: the delay alone +0.054 ± 0.003
 /// points, under the floor, and never tried beside the stiffness, while backlash (+1.4
-/// alone, +0.000 beside it) ranked second. Not a single of no size: a refit from the
+/// alone, +0.000 beside it) ranked second (tried now, the delay adds +0.000 too: the
+/// lag holds it). Not a single of no size: a refit from the
 /// nominal's values whose effect stayed at nought gains a rounding's worth, and its fit is
 /// no start for the pair (held-out default case 47, a mode with Coulomb friction: the
 /// friction's refit at `fc` 3.5·10⁻⁷ N·m, paired from there, stayed on its bound, where
