@@ -86,14 +86,15 @@ impl Answer {
     /// What each other effect adds to the answer when the answer is a single that led
     /// pairs ([`Candidate::with_answer`], from [`Answer::beside`]).
     pub fn note_with_answer(&mut self, best: &str) {
-        let beside = std::mem::take(&mut self.beside);
-        for (c, _) in &mut self.singles {
+        let Answer {
+            singles, beside, ..
+        } = self;
+        for (c, _) in singles.iter_mut() {
             c.with_answer = beside
                 .iter()
                 .find(|b| b.0 == best && b.1 == c.name)
                 .map(|b| b.2);
         }
-        self.beside = beside;
     }
 
     /// Every fitted model's candidate with its fit: the singles', then the pair's.
