@@ -302,6 +302,22 @@ fn a_backlash_wider_than_the_linear_deflection_is_found() {
         "{:.2} % against the true model's {true_fit:.2} %",
         d.fit_augmented_val
     );
+    // the stiffening spring stands in for the backlash: significant over the nominal, it
+    // adds nothing beside the answer, and the report's column says so
+    let stiffness = d
+        .effects
+        .iter()
+        .find(|c| c.name == "nonlinear_stiffness")
+        .unwrap();
+    let (mean, se) = stiffness
+        .with_answer
+        .expect("what the stiffness adds beside the backlash");
+    assert!(
+        stiffness.significant && mean - 2.0 * se < super::DiagnoseOptions::default().min_gain,
+        "stiffness {:+.2} ± {:.2} over the nominal, {mean:+.3} ± {se:.3} beside the answer",
+        stiffness.score,
+        stiffness.score_se
+    );
 }
 
 /// Bench case 88 of `benches/diagnose.rs`: a linear three-mass joint at 0.0114 rad RMS
