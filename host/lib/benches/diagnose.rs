@@ -32,7 +32,10 @@
 //! every joint whose hidden effects hold no Coulomb friction a weak one of its own
 //! (`weak_friction`: 0.3–1.2 mN·m), which is no effect to name; `JOINTS=1` moves every
 //! joint off the default's scale (`other_joint`: torques × 0.03–30, resonances × 0.6–1.6;
-//! `JOINTS=torque` the torques alone, the same motion in other units).
+//! `JOINTS=torque` the torques alone, the same motion in other units); `NOISE_VAL=1`
+//! validates on a band-limited noise instead of a multisine (no non-excited lines), and
+//! `EST2=1` adds a second estimation capture at twice the amplitude, as an independent
+//! bench gives them.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -46,8 +49,10 @@ use jointid::model::effects::Effect;
 use jointid::model::spec::Structure;
 use jointid::sim::{ControllerConfig, JointParams, SensorConfig};
 use jointid::test_support::battery::{
-    captures, cases, config, other_joint, other_laws, weak_friction, Case,
+    captures, captures_validated_by, cases, config, other_joint, other_laws, second_capture,
+    weak_friction, Case,
 };
+use jointid_core::excitation::SignalKind;
 
 /// The parameters of `e` a user reads its size from, by key.
 fn size_keys(e: &Effect) -> Vec<(&'static str, f64)> {
@@ -226,6 +231,8 @@ fn battery() {
         .ok()
         .map(|v| v.split(',').filter_map(|k| k.trim().parse().ok()).collect());
     let r = JointParams::default().r;
+    let noise_val = std::env::var("NOISE_VAL").is_ok_and(|v| v == "1");
+    let est2 = std::env::var("EST2").is_ok_and(|v| v == "1");
     // hidden label -> answered label -> count
     let mut confusion: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
     let (mut singles, mut singles_right) = (0, 0);
@@ -247,7 +254,15 @@ fn battery() {
         if only.as_ref().is_some_and(|k| !k.contains(&i)) {
             continue;
         }
-        let (est, val) = captures(case, 4, case.rms);
+        // `NOISE_VAL=1`: validated on a band-limited noise, as an independent bench does
+        let (est, val) = if noise_val {
+            captures_validated_by(case, 4, case.rms, SignalKind::BandLimitedNoise)
+        } else {
+            captures(case, 4, case.rms)
+        };
+        // `EST2=1`: a second estimation capture at twice the amplitude (other phases, noise)
+        let est2 = est2.then(|| second_capture(case, 4, 2.0 * case.rms));
+        let ests: Vec<_> = std::iter::once(est.clone()).chain(est2).collect();
         save(i, case, &est, &val);
         // the effects by name (a ripple with a second harmonic is one effect)
         let mut kinds: Vec<&str> = Vec::new();
@@ -264,7 +279,7 @@ fn battery() {
         let truth = true_fit(&config(case), &val);
         let t = Instant::now();
         let c0 = cpu_seconds();
-        let d = match diagnose(std::slice::from_ref(&est), &val, &request(r)) {
+        let d = match diagnose(&ests, &val, &request(r)) {
             Ok(d) => d,
             Err(e) => {
                 // a diagnosis that stops is a wrong answer of every kind

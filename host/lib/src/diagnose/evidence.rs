@@ -23,8 +23,15 @@ pub(super) struct Evidence {
     /// the FRF analysis of each periodic capture, by name
     pub analyses: Vec<(String, FrfAnalysis)>,
     /// the nominal's residual at the non-excited odd lines of a periodic validation
-    /// capture given as one record
+    /// capture given as one record or, when that capture has no such line, of the first
+    /// estimation capture that has ([`Evidence::odd_on`])
     pub odd_nominal: Option<ClassLevel>,
+    /// the estimation capture the odd lines are read on, with its measured side, when the
+    /// validation capture has none: a band-limited noise excites every line (an independent
+    /// bench validates so). A linear model puts nothing at a line it is not driven at, in
+    /// sample or out of it, so the nominal's residual there is the distortion all the same;
+    /// each model's share of it is then read in sample. `None`: on the validation capture
+    odd_on: Option<(Dataset, Measured)>,
     /// the odd-line record's settling periods
     settle_periods: usize,
 }
@@ -34,8 +41,34 @@ impl Evidence {
     /// validation record), when the capture is periodic.
     pub fn odd_of(&self, val: &Dataset, f: &Fitted) -> Option<f64> {
         let n = self.odd_nominal.as_ref()?;
-        let m = locate::odd_residual(val, &f.scored.driven.theta_m, self.settle_periods)?;
+        let m = match &self.odd_on {
+            None => locate::odd_residual(val, &f.scored.driven.theta_m, self.settle_periods)?,
+            Some((est, measured)) => {
+                let s = measured
+                    .score(&DrivenModel::of_fit(&f.fit), &est.data, 1)
+                    .ok()?;
+                locate::odd_residual(est, &s.driven.theta_m, self.settle_periods)?
+            }
+        };
         locate::odd_explained(n, &m)
+    }
+
+    /// Whether the odd lines are read in sample, on an estimation capture
+    /// ([`Evidence::odd_on`]).
+    pub fn odd_in_sample(&self) -> bool {
+        self.odd_on.is_some()
+    }
+
+    /// The capture the odd lines are read on, in words ([`Evidence::odd_on`]).
+    pub fn odd_lines_of(&self) -> String {
+        match &self.odd_on {
+            None => "the validation capture".to_string(),
+            Some((d, _)) => format!(
+                "the estimation capture {} (the validation capture has none: it excites every \
+                 line), in sample",
+                d.name
+            ),
+        }
     }
 }
 
@@ -87,9 +120,16 @@ pub(super) fn gather(fitter: &Fitter<'_>, nominal: &Fitted) -> Evidence {
         lin_of.push(lin);
     }
     let amplitude = (rec.est.len() == 2).then(|| amplitude(fitter, nominal, &lin_of));
-    let odd_nominal = match rec.val_segs {
+    let on_val = match rec.val_segs {
         [one] => locate::odd_residual(one, &nominal.scored.driven.theta_m, o.settle_periods),
         _ => None,
+    };
+    let (odd_nominal, odd_on) = match on_val {
+        Some(c) if c.lines > 0 => (Some(c), None),
+        _ => match odd_on_estimation(fitter, nominal) {
+            Some((c, on)) => (Some(c), Some(on)),
+            None => (on_val, None),
+        },
     };
     Evidence {
         location: Where {
@@ -101,8 +141,29 @@ pub(super) fn gather(fitter: &Fitter<'_>, nominal: &Fitted) -> Evidence {
         residual,
         analyses,
         odd_nominal,
+        odd_on,
         settle_periods: o.settle_periods,
     }
+}
+
+/// The nominal's residual at the non-excited odd lines of the first estimation capture
+/// given as one periodic record that has such lines, in sample ([`Evidence::odd_on`]), with
+/// that capture and its measured side.
+fn odd_on_estimation(
+    fitter: &Fitter<'_>,
+    nominal: &Fitted,
+) -> Option<(ClassLevel, (Dataset, Measured))> {
+    let o = &fitter.req.options;
+    let model = DrivenModel::of_fit(&nominal.fit);
+    fitter.rec.est.iter().find_map(|segs| {
+        let [one] = segs else { return None };
+        one.excitation.as_ref()?;
+        let measured =
+            Measured::new(&one.data, o.band_hz, o.skip_of(&one.data)).with_tracking(o.tracking_hz);
+        let s = measured.score(&model, &one.data, 1).ok()?;
+        let c = locate::odd_residual(one, &s.driven.theta_m, o.settle_periods)?;
+        (c.lines > 0).then(|| (c, (one.clone(), measured)))
+    })
 }
 
 /// How the nominal's gap and the odd distortion (`lin_of`, by capture) change from the

@@ -68,6 +68,12 @@ pub(super) fn rescore(
             return None;
         }
     };
+    if ev.odd_in_sample() {
+        l.words.push_str(&format!(
+            "; the odd lines are those of {}",
+            ev.odd_lines_of()
+        ));
+    }
     // the singles the loop ranks, refined there before the ranking is read
     let mut refined = Vec::new();
     let mut at_floor = None;

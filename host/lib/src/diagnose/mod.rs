@@ -27,7 +27,8 @@
 //! that the validation record, along another trajectory, shows again
 //! ([`crate::ident::nonlinear::ripple::replication`], [`fits::RippleShown`]), and a
 //! friction, a gap or a stiffening spring that removes most of the odd distortion the
-//! nominal leaves at the validation capture's non-excited odd lines (standing
+//! nominal leaves at the validation capture's non-excited odd lines (an estimation
+//! capture's when the validation capture has none, [`evidence::Evidence::odd_in_sample`]; standing
 //! [`locate::ODD_RESIDUAL_ABOVE_NOISE_DB`] above the noise), more than any other single
 //! ([`select::odd_shown`]).
 //! That test has already rejected the nominal, and the metric has only to confirm the gain. The candidates are
@@ -72,7 +73,8 @@
 //!    bands, [`locate`]); the odd/even non-excited lines of periodic captures
 //!    ([`crate::ident::frf`]); with two estimation captures, how distortion and gap change
 //!    with amplitude; the nominal's residual at the odd lines each model's share is read
-//!    against ([`locate::odd_explained`]).
+//!    against ([`locate::odd_explained`]): the validation capture's, or, when a noise
+//!    validation excites every line, the first estimation capture's in sample.
 //! 3. **Singles** ([`select::singles`]): each candidate effect added to the nominal, the
 //!    structure refitted jointly, judged against the nominal. A single significantly below
 //!    the nominal it contains is refitted from the nominal's values on the nominal's cost

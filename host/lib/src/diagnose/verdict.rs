@@ -328,9 +328,10 @@ fn verdict(
         return verdict;
     };
     let left = format!(
-        "the nominal's residual at the non-excited odd lines of the validation capture stands \
-         {db:.1} dB above the noise: odd nonlinear distortion (friction, backlash, a stiffening \
-         spring) that a linear model cannot follow"
+        "the nominal's residual at the non-excited odd lines of {} stands {db:.1} dB above the \
+         noise: odd nonlinear distortion (friction, backlash, a stiffening spring) that a linear \
+         model cannot follow",
+        ev.odd_lines_of()
     );
     // a single whose effect can make odd distortion: a nonlinear one (a linear joint's
     // response to a periodic excitation stays at the excited lines) of a size

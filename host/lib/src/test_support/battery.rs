@@ -7,7 +7,7 @@ use crate::ident::linalg::GaussRng;
 use crate::model::effects::{Effect, EFFECT_NAMES};
 use crate::model::spec::Structure;
 use crate::sim::{ControllerConfig, Disturbance, JointParams, Plant, SensorConfig, SimConfig};
-use jointid_core::excitation::ExcitationConfig;
+use jointid_core::excitation::{ExcitationConfig, SignalKind};
 
 use super::{est_val_captures, random_joint};
 
@@ -262,4 +262,32 @@ pub fn captures(case: &Case, periods: u32, rms: f64) -> (Dataset, Dataset) {
         ..ExcitationConfig::paper_default()
     };
     est_val_captures(&config(case), &exc, case.seed)
+}
+
+/// A second estimation capture of `case` at `rms` (other noise, other phases), for the
+/// amplitude analysis of two captures.
+pub fn second_capture(case: &Case, periods: u32, rms: f64) -> Dataset {
+    let exc = ExcitationConfig {
+        periods,
+        rms_rad: rms as f32,
+        seed: ExcitationConfig::paper_default().seed ^ 0x0F0F_7777,
+        ..ExcitationConfig::paper_default()
+    };
+    est_val_captures(&config(case), &exc, case.seed + 7).0
+}
+
+/// As [`captures`], the validation capture driven by `val_kind` (a band-limited noise, as an
+/// independent bench gives it).
+pub fn captures_validated_by(
+    case: &Case,
+    periods: u32,
+    rms: f64,
+    val_kind: SignalKind,
+) -> (Dataset, Dataset) {
+    let exc = ExcitationConfig {
+        periods,
+        rms_rad: rms as f32,
+        ..ExcitationConfig::paper_default()
+    };
+    crate::test_support::est_val_captures_with(&config(case), &exc, case.seed, val_kind)
 }

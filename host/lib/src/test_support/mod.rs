@@ -211,14 +211,25 @@ pub fn est_val_captures(
     exc: &ExcitationConfig,
     seed: u64,
 ) -> (crate::data::Dataset, crate::data::Dataset) {
-    let run = |seed: u64, exc_seed: u64, name: &str| {
+    est_val_captures_with(cfg, exc, seed, exc.kind)
+}
+
+/// As [`est_val_captures`], the validation capture driven by the signal `val_kind` (a
+/// band-limited noise excites every line: no non-excited line is left to read distortion
+/// at).
+///
+/// # Panics
+/// When the simulation fails.
+pub fn est_val_captures_with(
+    cfg: &crate::sim::SimConfig,
+    exc: &ExcitationConfig,
+    seed: u64,
+    val_kind: SignalKind,
+) -> (crate::data::Dataset, crate::data::Dataset) {
+    let run = |seed: u64, exc: ExcitationConfig, name: &str| {
         let cfg = crate::sim::SimConfig {
             seed,
             ..cfg.clone()
-        };
-        let exc = ExcitationConfig {
-            seed: exc_seed,
-            ..*exc
         };
         let out = crate::sim::simulate_excitation(&cfg, &exc).expect("simulation");
         crate::data::Dataset {
@@ -229,10 +240,12 @@ pub fn est_val_captures(
             meta: Default::default(),
         }
     };
-    (
-        run(seed, exc.seed, "est"),
-        run(seed + 1000, exc.seed ^ 0x5A5A_1234, "val"),
-    )
+    let val_exc = ExcitationConfig {
+        seed: exc.seed ^ 0x5A5A_1234,
+        kind: val_kind,
+        ..*exc
+    };
+    (run(seed, *exc, "est"), run(seed + 1000, val_exc, "val"))
 }
 
 /// `ds` as the reader returns it when the samples `gap` were lost on the way (a serial
