@@ -758,8 +758,8 @@ pub fn diagnose_with_series(
 /// [`diagnose_with_series`] on captures with gaps: each estimation capture and the
 /// validation capture given as its gap-free segments (one or more, in order, as
 /// [`crate::data::segment`] selects them). The fits take the first capture's segments as
-/// separate experiments ([`identify_segments`], the linear start on the FRF averaged over
-/// them, [`linear_start_segments`]); the gap metric simulates every validation segment
+/// separate experiments ([`crate::ident::nonlinear::identify_segments`], the linear start on the FRF averaged over
+/// them, [`crate::ident::nonlinear::linear_start_segments`]); the gap metric simulates every validation segment
 /// from its own start and pools it over their scored ranges, one sum of squares
 /// ([`metric::score_segments`]); the significance test splits the joined scored ranges
 /// into its equal segments, and the residual's location, the series and the time records

@@ -196,7 +196,7 @@ pub struct SimOutput {
     pub tau_motor: Vec<f64>,
     /// disturbance torque held over each sample [N·m]
     pub disturbance: Vec<f64>,
-    /// names of the true state components (see [`plant`] for the layout)
+    /// names of the true state components (see [`crate::model::plant`] for the layout)
     pub state_names: Vec<String>,
     /// true state at each sample, row-major, `state_names.len()` values per sample
     pub states: Vec<f64>,
@@ -293,7 +293,7 @@ impl SimOutput {
     }
 }
 
-/// Timer ticks per sample [ticks]: `timer_hz · T`, rounded.
+/// Timer ticks per sample: `timer_hz · T`, rounded.
 pub fn tick_step(timer_hz: u32, sample_interval_s: f64) -> u64 {
     (f64::from(timer_hz) * sample_interval_s).round() as u64
 }
