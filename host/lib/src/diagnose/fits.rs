@@ -214,6 +214,21 @@ impl Fitter<'_> {
         scored_fit(res, (&r.est_data, &r.val_data, &r.parts), req, self.starts)
     }
 
+    /// The nominal, with no effect, fitted from the structure, lag and offset of the fit
+    /// `from` on the nominal's own cost ([`super::nominal::from_singles`]).
+    pub fn linear_from(&self, from: &NlFit) -> Result<Fitted, CandidateError> {
+        let req = self.req;
+        let r = self.rec;
+        let longest = longest(&r.est_data).ok_or(CandidateError::NoRecord)?;
+        let mut nl = NlRequest {
+            options: req.options.nl.clone(),
+            ..NlRequest::new(req.structure, req.r, Vec::new())
+        };
+        start_from(&mut nl, from, longest);
+        let res = identify_segments(&r.est_data, &nl).map_err(CandidateError::Fit)?;
+        scored_fit(res, (&r.est_data, &r.val_data, &r.parts), req, self.starts)
+    }
+
     /// As [`Fitter::nested`], the effect placed by the automatic start's third step (seed
     /// 001: a grid on the output-error cost over the effect's parameters, for an extra mode
     /// its frequency) on the nominal's structure, lag and cost, instead of at the size and

@@ -894,6 +894,7 @@ fn answer(
     mut warnings: Vec<String>,
     t0: Instant,
 ) -> (Diagnosis, DiagnosisSeries) {
+    let nominal = nominal::from_singles(fitter, nominal, &results, &mut warnings);
     let results = select::nested_refits(fitter, &nominal, results);
     let fitter = Fitter {
         floor: nominal::refit_spread(fitter, &nominal, &results),
