@@ -68,7 +68,10 @@
 //!    search, [`nominal::came_apart`]), it and every single are fitted again from the
 //!    structure fitted to the record's own Welch FRF ([`nominal::restarted`]). No base for
 //!    an answer ([`nominal::trust`]) when it came apart from there too, or describes the
-//!    validation data far worse than its own.
+//!    validation data far worse than its own. Refitted from the structure of each single
+//!    significant over it, and replaced by the refit that scores higher in sample
+//!    ([`nominal::from_singles`]): the nominal is the best linear model found from any
+//!    start, so that no candidate gains on it by a better minimum of the linear part alone.
 //! 2. **Evidence** ([`evidence`]): where the nominal's residual lies (operating regions,
 //!    bands, [`locate`]); the odd/even non-excited lines of periodic captures
 //!    ([`crate::ident::frf`]); with two estimation captures, how distortion and gap change
