@@ -158,8 +158,7 @@ fn odd_on_estimation(
     fitter.rec.est.iter().find_map(|segs| {
         let [one] = segs else { return None };
         one.excitation.as_ref()?;
-        let measured =
-            Measured::new(&one.data, o.band_hz, o.skip_of(&one.data)).with_tracking(o.tracking_hz);
+        let measured = o.measured(&one.data);
         let s = measured.score(&model, &one.data, 1).ok()?;
         let c = locate::odd_residual(one, &s.driven.theta_m, o.settle_periods)?;
         (c.lines > 0).then(|| (c, (one.clone(), measured)))

@@ -202,29 +202,26 @@ impl Fitter<'_> {
     /// residual band-limited as the nominal's, whatever the effect
     /// ([`super::select::nested_refits`]).
     pub fn nested(&self, base: &NlFit, effect: Effect) -> Result<Fitted, CandidateError> {
-        let req = self.req;
-        let r = self.rec;
-        let longest = longest(&r.est_data).ok_or(CandidateError::NoRecord)?;
-        let mut nl = NlRequest {
-            options: req.options.nl.clone(),
-            ..NlRequest::new(req.structure, req.r, vec![effect])
-        };
-        start_from(&mut nl, base, longest);
-        let res = identify_segments(&r.est_data, &nl).map_err(CandidateError::Fit)?;
-        scored_fit(res, (&r.est_data, &r.val_data, &r.parts), req, self.starts)
+        self.refit_from(base, vec![effect])
     }
 
     /// The nominal, with no effect, fitted from the structure, lag and offset of the fit
     /// `from` on the nominal's own cost ([`super::nominal::from_singles`]).
     pub fn linear_from(&self, from: &NlFit) -> Result<Fitted, CandidateError> {
+        self.refit_from(from, Vec::new())
+    }
+
+    /// The structure with `effects` fitted from the values of `base` (structure, lag,
+    /// offset; the effects at the values they carry) on the nominal's own cost, and scored.
+    fn refit_from(&self, base: &NlFit, effects: Vec<Effect>) -> Result<Fitted, CandidateError> {
         let req = self.req;
         let r = self.rec;
         let longest = longest(&r.est_data).ok_or(CandidateError::NoRecord)?;
         let mut nl = NlRequest {
             options: req.options.nl.clone(),
-            ..NlRequest::new(req.structure, req.r, Vec::new())
+            ..NlRequest::new(req.structure, req.r, effects)
         };
-        start_from(&mut nl, from, longest);
+        start_from(&mut nl, base, longest);
         let res = identify_segments(&r.est_data, &nl).map_err(CandidateError::Fit)?;
         scored_fit(res, (&r.est_data, &r.val_data, &r.parts), req, self.starts)
     }
@@ -252,10 +249,7 @@ impl Fitter<'_> {
     pub fn in_sample(&self, model: &DrivenModel) -> Option<f64> {
         let o = &self.req.options;
         let est = &self.rec.est_data;
-        let ms: Vec<Measured> = est
-            .iter()
-            .map(|d| Measured::new(d, o.band_hz, o.skip_of(d)).with_tracking(o.tracking_hz))
-            .collect();
+        let ms: Vec<Measured> = est.iter().map(|d| o.measured(d)).collect();
         score_segments(&ms, model, est, 1).map(|s| s.fit).ok()
     }
 }

@@ -88,10 +88,7 @@ pub(super) fn prepare<'a>(
             });
         }
     }
-    let parts: Vec<Measured> = val
-        .iter()
-        .map(|d| Measured::new(&d.data, o.band_hz, o.skip_of(&d.data)).with_tracking(o.tracking_hz))
-        .collect();
+    let parts: Vec<Measured> = val.iter().map(|d| o.measured(&d.data)).collect();
     let measured = Measured::joined(&parts);
     let joined = if let [one] = val {
         one.clone()

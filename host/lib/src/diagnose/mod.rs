@@ -250,6 +250,13 @@ impl DiagnoseOptions {
     pub fn skip_of(&self, data: &IdData) -> usize {
         ((self.skip_s / data.ts).round() as usize).min(data.len() / 4)
     }
+
+    /// The measured side of the gap metric on `data` as these options score it: their band,
+    /// their skip, their slow torque input ([`metric::Measured`]).
+    pub fn measured(&self, data: &IdData) -> metric::Measured {
+        metric::Measured::new(data, self.band_hz, self.skip_of(data))
+            .with_tracking(self.tracking_hz)
+    }
 }
 
 /// What to diagnose.

@@ -218,10 +218,7 @@ fn nominal_at_start(
     let model = DrivenModel::of_fit(&res.fit);
     let o = &req.options;
     let in_sample = |m: &DrivenModel| {
-        let ms: Vec<Measured> = est
-            .iter()
-            .map(|d| Measured::new(d, o.band_hz, o.skip_of(d)).with_tracking(o.tracking_hz))
-            .collect();
+        let ms: Vec<Measured> = est.iter().map(|d| o.measured(d)).collect();
         score_segments(&ms, m, est, 1).map(|s| s.fit).ok()
     };
     let at_start = in_sample(&model)?;
