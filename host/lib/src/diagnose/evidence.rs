@@ -37,20 +37,26 @@ pub(super) struct Evidence {
 }
 
 impl Evidence {
-    /// The share of the nominal's odd-line residual the model `f` removes, on `val` (the
-    /// validation record), when the capture is periodic.
+    /// The share of the nominal's odd-line residual the model `f` removes, on the capture the
+    /// odd lines are read on ([`Evidence::odd_level`]).
     pub fn odd_of(&self, val: &Dataset, f: &Fitted) -> Option<f64> {
-        let n = self.odd_nominal.as_ref()?;
-        let m = match &self.odd_on {
-            None => locate::odd_residual(val, &f.scored.driven.theta_m, self.settle_periods)?,
+        locate::odd_explained(self.odd_nominal.as_ref()?, &self.odd_level(val, f)?)
+    }
+
+    /// The residual the model `f` leaves at the non-excited odd lines, read as the
+    /// nominal's is: on `val` (the validation record) when it is periodic, else on the
+    /// estimation capture of [`Evidence::odd_on`], in sample.
+    pub fn odd_level(&self, val: &Dataset, f: &Fitted) -> Option<ClassLevel> {
+        self.odd_nominal.as_ref()?;
+        match &self.odd_on {
+            None => locate::odd_residual(val, &f.scored.driven.theta_m, self.settle_periods),
             Some((est, measured)) => {
                 let s = measured
                     .score(&DrivenModel::of_fit(&f.fit), &est.data, 1)
                     .ok()?;
-                locate::odd_residual(est, &s.driven.theta_m, self.settle_periods)?
+                locate::odd_residual(est, &s.driven.theta_m, self.settle_periods)
             }
-        };
-        locate::odd_explained(n, &m)
+        }
     }
 
     /// Whether the odd lines are read in sample, on an estimation capture
@@ -220,13 +226,6 @@ fn rms(x: &[f64]) -> f64 {
 }
 
 impl Evidence {
-    /// The residual the model `f` leaves at the non-excited odd lines of `val` (the
-    /// validation record), when the capture is periodic and read as the nominal's is.
-    pub fn odd_level(&self, val: &Dataset, f: &Fitted) -> Option<ClassLevel> {
-        self.odd_nominal.as_ref()?;
-        locate::odd_residual(val, &f.scored.driven.theta_m, self.settle_periods)
-    }
-
     /// The nominal's residual at the non-excited odd lines against the noise [dB], when it
     /// stands at least [`locate::ODD_RESIDUAL_ABOVE_NOISE_DB`] above it: odd distortion a
     /// linear model cannot follow.
