@@ -349,8 +349,9 @@ fn battery() {
                     .map(|(k, v)| format!("{k} {:.4e}±{:.1e}", v.value, v.std))
                     .collect();
                 println!(
-                    "    {} {:+.3}±{:.3} odd {} over the answer {} added to it {}: {} warnings {:?}",
+                    "    {}{} {:+.3}±{:.3} odd {} over the answer {} added to it {}: {} warnings {:?}",
                     c.name,
+                    if c.significant { " (significant)" } else { "" },
                     c.score,
                     c.score_se,
                     c.odd_explained

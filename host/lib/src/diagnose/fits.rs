@@ -344,6 +344,24 @@ pub(super) fn makes_odd(e: &Effect) -> bool {
     )
 }
 
+/// Why a model with a nonlinear law is not supported by the data: when they show no
+/// nonlinearity at all ([`super::evidence::Nonlinearity::none_shown`]), a friction, a gap
+/// or a stiffening spring, and a ripple that the order search does not show by its own
+/// signature (`ripple_shown`), gain only through their linear part.
+pub(super) fn nonlinear_unsupported(
+    fit: &NlFit,
+    starts: &LinearStarts,
+    ripple_shown: bool,
+) -> Option<String> {
+    let law = fit
+        .model
+        .effects
+        .iter()
+        .find(|e| makes_odd(e) || (matches!(e, Effect::TorqueRipple(_)) && !ripple_shown))?;
+    let why = starts.nonlinearity.as_ref()?.none_shown()?;
+    Some(format!("{}: {why}", law.name()))
+}
+
 /// Why a model with a transport delay is not supported by the data, when the excited lines
 /// hold no evidence of a delay beside the lag ([`crate::ident::nonlinear::DelayLines`]).
 /// The gap metric simulates from the measured torque, which in a closed loop holds the
@@ -637,7 +655,6 @@ pub(super) fn scored_fit(
             metric::START_PERTURBATION_RAD
         ));
     }
-    let unsupported = delay_unsupported(&res.fit, starts);
     let ripple_shown = res
         .ripple_search
         .as_ref()
@@ -651,6 +668,8 @@ pub(super) fn scored_fit(
                 repeats,
             }
         });
+    let unsupported = delay_unsupported(&res.fit, starts)
+        .or_else(|| nonlinear_unsupported(&res.fit, starts, ripple_shown.is_some()));
     Ok(Fitted {
         fit: res.fit,
         scored,

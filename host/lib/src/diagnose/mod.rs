@@ -41,7 +41,11 @@
 //! they show one, [`size::vanished_effects`]), nor a
 //! transport delay the excited lines do not show beside the lag
 //! ([`fits::delay_unsupported`]: the gap metric, simulated from a closed loop's measured
-//! torque, lets a delay follow the disturbance the loop feeds back).
+//! torque, lets a delay follow the disturbance the loop feeds back), nor a nonlinear law (a
+//! friction, a gap, a stiffening spring, a ripple the order search does not show) where
+//! the data show no nonlinearity: no non-excited line of a periodic capture above the
+//! noise, and, with two estimation captures, the same best linear approximation at both
+//! amplitudes ([`fits::nonlinear_unsupported`], [`evidence::Nonlinearity`]).
 //!
 //! [`diagnose_segments`] is a pipeline of stages, one module each:
 //!
@@ -58,7 +62,9 @@
 //!    in-sample the diagnosis goes on from it, its singles fitted on that input.
 //!    **Starts** ([`starts`]): the frequency-domain linear fits the candidates start from;
 //!    where the motor sticks, the structure grown in the time domain
-//!    ([`crate::ident::nonlinear::grow`]).
+//!    ([`crate::ident::nonlinear::grow`]); the data's own evidence of a delay
+//!    ([`crate::ident::nonlinear::DelayLines`]) and of a nonlinearity
+//!    ([`evidence::Nonlinearity`], [`crate::ident::frf::bla_change`]).
 //! 1. **Nominal** ([`nominal`]): the linear physical model of the structure with no effect,
 //!    fitted on the (first) estimation capture by the nonlinear engine
 //!    ([`crate::ident::nonlinear::identify`]) together with the singles ([`fits`], on

@@ -155,6 +155,7 @@ fn recover_nominal(
         grown: None,
         two_mass: None,
         delay_lines: None,
+        nonlinearity: None,
         sticks: None,
         lag_start,
     };

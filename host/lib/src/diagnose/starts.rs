@@ -15,6 +15,7 @@ use crate::ident::sml::{FrfStart, GOOD_START_RATIO};
 use crate::model::effects::{Attach, Effect, ExtraMode};
 use crate::model::spec::Structure;
 
+use super::evidence::{capture_analyses, Nonlinearity};
 use super::inputs::Records;
 use super::{progress, DiagnoseRequest};
 
@@ -98,6 +99,7 @@ pub(super) fn linear_starts(
         grown: None,
         two_mass: None,
         delay_lines: None,
+        nonlinearity: Nonlinearity::of(&capture_analyses(rec, o.settle_periods), rec.est.len()),
         sticks: None,
         lag_start: None,
     };
@@ -249,6 +251,7 @@ impl LinearStarts {
             grown: self.grown.clone(),
             two_mass: self.two_mass.clone(),
             delay_lines: self.delay_lines,
+            nonlinearity: self.nonlinearity.clone(),
             sticks: self.sticks,
             lag_start: self.lag_start,
         }
@@ -278,6 +281,9 @@ pub(super) struct LinearStarts {
     /// the excited lines' evidence of a transport delay beside the lag, from the structure's
     /// frequency-domain fits ([`DelayLines`])
     pub delay_lines: Option<DelayLines>,
+    /// the data's own evidence of a nonlinearity ([`Nonlinearity`]); `None` when no capture
+    /// is periodic
+    pub nonlinearity: Option<Nonlinearity>,
     /// the share of the estimation samples on which the motor sticks (the torque below the
     /// friction level, [`grow::stick_share`]) when above [`grow::STICK_SHARE`]: every fit
     /// is then band-limited ([`super::inputs::nl_options`])

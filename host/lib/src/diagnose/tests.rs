@@ -766,6 +766,39 @@ fn a_noise_validation_reads_the_odd_lines_on_the_estimation_capture() {
     );
 }
 
+/// Other-joints bench case 59 (`JOINTS=1 HARD=1`, validated on a band-limited noise, a
+/// second estimation capture at twice the amplitude: `NOISE_VAL=1 EST2=1`): a joint of
+/// four bodies and no effect, diagnosed under the three-mass structure. A gap of 7.7 µrad
+/// stood in for the missing body, +0.52 ± 0.05 points, and was named. The data show no
+/// nonlinearity (no non-excited line above the noise, the same best linear approximation
+/// at both amplitudes), so no nonlinear law is counted and the answer is `none`.
+#[test]
+fn a_linear_joint_with_a_body_the_structure_lacks_gets_no_nonlinear_effect() {
+    use crate::test_support::battery::{
+        captures_validated_by, cases, other_joint, second_capture, ROUND,
+    };
+    use jointid_core::excitation::SignalKind;
+    let index = 59;
+    let mut case = cases(index / ROUND + 1, false, true).swap_remove(index);
+    other_joint(index, &mut case, true);
+    assert!(case.hidden.is_empty() && case.background.is_empty());
+    let (est, val) = captures_validated_by(&case, 4, case.rms, SignalKind::BandLimitedNoise);
+    let est2 = second_capture(&case, 4, 2.0 * case.rms);
+    let req = DiagnoseRequest {
+        r: case.params.r,
+        ..DiagnoseRequest::default()
+    };
+    let d = diagnose(&[est, est2], &val, &req).unwrap();
+    assert_eq!(d.best, "none", "{}", d.verdict);
+    let gap = d.effects.iter().find(|c| c.name == "backlash").unwrap();
+    assert!(!gap.significant, "{}", gap.reason);
+    assert!(
+        gap.reason.contains("the data show no nonlinearity"),
+        "{}",
+        gap.reason
+    );
+}
+
 /// Other-laws bench case 13 (`LAWS=1 HARD=1 SMALL=1 FRICTION=1`, `ROUNDS=2`, drawn by
 /// [`crate::test_support::battery`]): a 10 Hz mode at the end of the chain
 /// ([`crate::model::effects::Attach::Serial`]) beside a weak friction at 0.27 rad RMS,
@@ -1357,6 +1390,7 @@ fn a_start_that_does_not_simulate_gives_way_to_the_automatic_start() {
         grown: None,
         two_mass: None,
         delay_lines: None,
+        nonlinearity: None,
         sticks: None,
         lag_start: None,
     };
