@@ -183,7 +183,12 @@ impl Nonlinearity {
     /// of them the estimation captures); `None` when no capture is periodic: the data
     /// then hold no such evidence either way.
     pub fn of(analyses: &[(String, Option<FrfAnalysis>)], est: usize) -> Option<Nonlinearity> {
-        let captures = analyses.iter().filter(|(_, a)| a.is_some()).count();
+        // a noise excites every line and has none to read
+        let has_lines = |a: &FrfAnalysis| a.linearity_y.odd.lines + a.linearity_y.even.lines > 0;
+        let captures = analyses
+            .iter()
+            .filter(|(_, a)| a.as_ref().is_some_and(has_lines))
+            .count();
         if captures == 0 {
             return None;
         }
@@ -225,8 +230,8 @@ impl Nonlinearity {
         }
         let bla = self.bla.as_ref().map_or(String::new(), |b| {
             format!(
-                ", and the best linear approximation does not move between the two \
-                 amplitudes (the median ratio of its change to its noise over {} lines is \
+                ", and the best linear approximation is the same on the two estimation \
+                 captures (the median ratio of its change to its noise over {} lines is \
                  {:.2}, {:.2} for a linear joint)",
                 b.lines, b.median_ratio, b.linear_median
             )
@@ -308,6 +313,11 @@ fn amplitude(fitter: &Fitter<'_>, nominal: &Fitted, lin_of: &[Option<Linearity>]
         levels,
         distortion,
         gap_trend: gap_trend.into(),
+        bla: fitter
+            .starts
+            .nonlinearity
+            .as_ref()
+            .and_then(|n| n.bla.clone()),
     }
 }
 

@@ -527,6 +527,9 @@ pub struct Amplitude {
     pub distortion: Option<AmplitudeTrend>,
     /// `grows`, `falls` or `unclear` (changes by less than 1 point)
     pub gap_trend: String,
+    /// how far the FRF at the excited lines moves between the two captures against its
+    /// noise ([`crate::ident::frf::bla_change`]; both captures periodic, on the same lines)
+    pub bla: Option<crate::ident::frf::BlaChange>,
 }
 
 impl Amplitude {
@@ -542,6 +545,18 @@ impl Amplitude {
             "grows" => "the nominal's gap grows with amplitude",
             "falls" => "the nominal's gap falls as amplitude grows",
             _ => "the nominal's gap changes by less than 1 point with amplitude",
+        };
+        let gap = match &self.bla {
+            Some(b) => format!(
+                "{gap}; the best linear approximation {} between the two captures (the median \
+                 ratio of its change to its noise over {} lines is {:.2}, {:.2} for a linear \
+                 joint)",
+                if b.changed { "moves" } else { "does not move" },
+                b.lines,
+                b.median_ratio,
+                b.linear_median
+            ),
+            None => gap.to_string(),
         };
         let Some(d) = &self.distortion else {
             return format!("{gap} (the distortion trend needs two periodic captures)");

@@ -790,6 +790,11 @@ fn a_linear_joint_with_a_body_the_structure_lacks_gets_no_nonlinear_effect() {
     };
     let d = diagnose(&[est, est2], &val, &req).unwrap();
     assert_eq!(d.best, "none", "{}", d.verdict);
+    assert!(
+        d.verdict.contains("a structure with one more body"),
+        "{}",
+        d.verdict
+    );
     let gap = d.effects.iter().find(|c| c.name == "backlash").unwrap();
     assert!(!gap.significant, "{}", gap.reason);
     assert!(
@@ -1817,6 +1822,7 @@ fn amplitude_summary_says_both_trends_with_a_but_when_they_part() {
         levels: Vec::new(),
         distortion: kind.map(trend),
         gap_trend: gap.into(),
+        bla: None,
     };
     let parted = amp("grows", Some(TrendKind::FallsWithAmplitude)).summary();
     assert!(

@@ -261,6 +261,39 @@ fn parameter_mismatch(
     })
 }
 
+/// With the answer `none`, the nonlinear singles that would have passed the test but are
+/// not counted because the data show no nonlinearity ([`super::fits::nonlinear_unsupported`]),
+/// in words: what they gain is a linear mismatch of the structure's.
+fn linear_stand_in(fitter: &Fitter<'_>, answer: &Answer) -> String {
+    let Some(why) = fitter
+        .starts
+        .nonlinearity
+        .as_ref()
+        .and_then(|n| n.none_shown())
+    else {
+        return String::new();
+    };
+    let gains: Vec<String> = answer
+        .singles
+        .iter()
+        .filter(|(c, f)| {
+            // a nonlinear single's support is only ever refused for that reason
+            f.as_ref().is_some_and(|f| {
+                f.unsupported.is_some() && f.fit.model.effects.iter().all(|e| !e.is_linear())
+            }) && c.score - 2.0 * c.score_se > fitter.floor.gain
+        })
+        .map(|(c, _)| format!("{} {:+.2} ± {:.2}", c.name, c.score, c.score_se))
+        .collect();
+    if gains.is_empty() {
+        return String::new();
+    }
+    format!(
+        "; {} gains that much, but {why}: a structure with one more body may close that part \
+         of the gap",
+        gains.join(", ")
+    )
+}
+
 /// The verdict sentence, with the answer's doubts (also into `warnings`).
 fn verdict(
     fitter: &Fitter<'_>,
@@ -303,6 +336,7 @@ fn verdict(
                 String::new()
             }
         ) + &within_noise(nom_fit, f.noise_fit, fitter.floor.gain)
+            + &linear_stand_in(fitter, answer)
     } else {
         format!(
             "{best} closes {:.0} % of the gap: band-passed motor-velocity FIT on the validation \
