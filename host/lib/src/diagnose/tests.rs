@@ -1769,9 +1769,10 @@ fn a_significant_candidate_is_ranked_before_a_higher_score_that_is_not() {
 }
 
 /// The ranking once the answer is chosen: the answer's effects first; then an effect that
-/// adds to the answer beyond twice its standard error, whatever it scored alone; the rest
-/// as before, an effect that adds nothing among them (held-out hard case 56: backlash
-/// +11.4 alone and +0.11 ± 0.15 beside the stiffness, the delay +7.4 and +0.021 ± 0.010).
+/// adds to the answer beyond twice its standard error, whatever it scored alone; then one
+/// that adds a positive mean; the rest as before, an effect that adds nothing among them
+/// (held-out hard case 56: backlash +11.4 alone and +0.11 ± 0.15 beside the stiffness, the
+/// delay +7.4 and +0.021 ± 0.010).
 #[test]
 fn after_the_answer_an_effect_that_adds_to_it_comes_before_one_that_stands_in_for_it() {
     let beside = |name, alone, with: Option<(f64, f64)>| Candidate {
@@ -1803,6 +1804,25 @@ fn after_the_answer_an_effect_that_adds_to_it_comes_before_one_that_stands_in_fo
     all.sort_by(super::table::ranked_after("time_delay+nonlinear_stiffness"));
     assert_eq!(all[0].name, "nonlinear_stiffness");
     assert_eq!(all[1].name, "time_delay");
+    // none adds beyond twice its standard error: a positive mean beside the answer comes
+    // before a higher score alone that adds nothing (held-out default case 46)
+    let mut weak = [
+        beside("backlash", 0.48, Some((-0.0004, 0.001))),
+        beside("time_delay", 0.31, Some((0.001, 0.001))),
+        beside("extra_mode", 0.16, None),
+        beside("nonlinear_stiffness", 0.78, None),
+    ];
+    weak.sort_by(super::table::ranked_after("nonlinear_stiffness"));
+    let names: Vec<&str> = weak.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "nonlinear_stiffness",
+            "time_delay",
+            "backlash",
+            "extra_mode"
+        ]
+    );
 }
 
 /// The amplitude sentence: a gap that grows while the distortion falls is said with a
