@@ -282,15 +282,17 @@ fn linear_stand_in(fitter: &Fitter<'_>, answer: &Answer) -> String {
                 f.unsupported.is_some() && f.fit.model.effects.iter().all(|e| !e.is_linear())
             }) && c.score - 2.0 * c.score_se > fitter.floor.gain
         })
-        .map(|(c, _)| format!("{} {:+.2} ± {:.2}", c.name, c.score, c.score_se))
+        .map(|(c, _)| format!("{} ({:+.2} ± {:.2} points)", c.name, c.score, c.score_se))
         .collect();
     if gains.is_empty() {
         return String::new();
     }
     format!(
-        "; {} gains that much, but {why}: a structure with one more body may close that part \
-         of the gap",
-        gains.join(", ")
+        "; {} {} that test but {} not counted: {why}; a structure with one more body may \
+         close that part of the gap",
+        gains.join(", "),
+        if gains.len() == 1 { "passes" } else { "pass" },
+        if gains.len() == 1 { "is" } else { "are" }
     )
 }
 
