@@ -345,7 +345,7 @@ pub(super) fn makes_odd(e: &Effect) -> bool {
 }
 
 /// Why a model with a nonlinear law is not supported by the data: when they show no
-/// nonlinearity at all ([`super::evidence::Nonlinearity::none_shown`]), a friction, a gap
+/// nonlinearity at all ([`super::linearity::Nonlinearity::none_shown`]), a friction, a gap
 /// or a stiffening spring, and a ripple that the order search does not show by its own
 /// signature (`ripple_shown`), gain only through their linear part.
 pub(super) fn nonlinear_unsupported(

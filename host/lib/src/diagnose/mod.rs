@@ -45,7 +45,7 @@
 //! friction, a gap, a stiffening spring, a ripple the order search does not show) where
 //! the data show no nonlinearity: no non-excited line of a periodic capture above the
 //! noise, and, with two estimation captures, the same best linear approximation at both
-//! amplitudes ([`fits::nonlinear_unsupported`], [`evidence::Nonlinearity`]).
+//! amplitudes ([`fits::nonlinear_unsupported`], [`linearity::Nonlinearity`]).
 //!
 //! [`diagnose_segments`] is a pipeline of stages, one module each:
 //!
@@ -64,7 +64,7 @@
 //!    where the motor sticks, the structure grown in the time domain
 //!    ([`crate::ident::nonlinear::grow`]); the data's own evidence of a delay
 //!    ([`crate::ident::nonlinear::DelayLines`]) and of a nonlinearity
-//!    ([`evidence::Nonlinearity`], [`crate::ident::frf::bla_change`]).
+//!    ([`linearity::Nonlinearity`], [`crate::ident::frf::bla_change`]).
 //! 1. **Nominal** ([`nominal`]): the linear physical model of the structure with no effect,
 //!    fitted on the (first) estimation capture by the nonlinear engine
 //!    ([`crate::ident::nonlinear::identify`]) together with the singles ([`fits`], on
@@ -140,6 +140,7 @@ mod evidence;
 mod fits;
 pub mod in_loop;
 mod inputs;
+mod linearity;
 pub mod locate;
 mod loop_answer;
 pub mod metric;

@@ -15,8 +15,8 @@ use crate::ident::sml::{FrfStart, GOOD_START_RATIO};
 use crate::model::effects::{Attach, Effect, ExtraMode};
 use crate::model::spec::Structure;
 
-use super::evidence::{capture_analyses, Nonlinearity};
 use super::inputs::Records;
+use super::linearity::{capture_analyses, Nonlinearity};
 use super::{progress, DiagnoseRequest};
 
 /// The starts of the candidates in `rec` (notes into `warnings`).
