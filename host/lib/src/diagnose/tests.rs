@@ -1787,10 +1787,13 @@ fn after_the_answer_an_effect_that_adds_to_it_comes_before_one_that_stands_in_fo
         beside("time_delay", 7.4, Some((0.021, 0.010))),
         beside("torque_ripple", 0.23, Some((0.05, 0.01))),
     ];
-    all.sort_by(super::table::ranked_after("nonlinear_stiffness"));
-    let names: Vec<&str> = all.iter().map(|c| c.name.as_str()).collect();
+    // the names in the order after the answer `best`
+    let order = |cs: &mut [Candidate], best: &str| -> Vec<String> {
+        cs.sort_by(super::table::ranked_after(best));
+        cs.iter().map(|c| c.name.clone()).collect()
+    };
     assert_eq!(
-        names,
+        order(&mut all, "nonlinear_stiffness"),
         [
             "nonlinear_stiffness",
             "torque_ripple",
@@ -1812,10 +1815,8 @@ fn after_the_answer_an_effect_that_adds_to_it_comes_before_one_that_stands_in_fo
         beside("extra_mode", 0.16, None),
         beside("nonlinear_stiffness", 0.78, None),
     ];
-    weak.sort_by(super::table::ranked_after("nonlinear_stiffness"));
-    let names: Vec<&str> = weak.iter().map(|c| c.name.as_str()).collect();
     assert_eq!(
-        names,
+        order(&mut weak, "nonlinear_stiffness"),
         [
             "nonlinear_stiffness",
             "time_delay",
