@@ -188,6 +188,11 @@ fn diagnose_says_the_gaps_and_the_distortions_amplitude_trends_in_one_sentence()
             "{said}"
         );
         assert!(!said.contains("the gap grows with amplitude;"), "{said}");
+        // and the best linear approximation's change with amplitude, after the trends
+        assert!(
+            said.contains("; the best linear approximation moves between the two captures"),
+            "{said}"
+        );
     }
     let _ = std::fs::remove_dir_all(&dir);
 }

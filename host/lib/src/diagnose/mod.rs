@@ -542,22 +542,27 @@ impl Amplitude {
     /// multisine leaves empty, relative to the excited ones, whose trend tells the kind of
     /// effect (seed 000 §3). When they part, the sentence says both with a `but` and why.
     pub fn summary(&self) -> String {
-        let gap = match self.gap_trend.as_str() {
-            "grows" => "the nominal's gap grows with amplitude",
-            "falls" => "the nominal's gap falls as amplitude grows",
-            _ => "the nominal's gap changes by less than 1 point with amplitude",
-        };
-        let gap = match &self.bla {
+        let trends = self.trends();
+        match &self.bla {
             Some(b) => format!(
-                "{gap}; the best linear approximation {} between the two captures (the median \
-                 ratio of its change to its noise over {} lines is {:.2}, {:.2} for a linear \
-                 joint)",
+                "{trends}; the best linear approximation {} between the two captures (the \
+                 median ratio of its change to its noise over {} lines is {:.2}, {:.2} for a \
+                 linear joint)",
                 if b.changed { "moves" } else { "does not move" },
                 b.lines,
                 b.median_ratio,
                 b.linear_median
             ),
-            None => gap.to_string(),
+            None => trends,
+        }
+    }
+
+    /// The gap's and the distortion's trends of [`Amplitude::summary`].
+    fn trends(&self) -> String {
+        let gap = match self.gap_trend.as_str() {
+            "grows" => "the nominal's gap grows with amplitude",
+            "falls" => "the nominal's gap falls as amplitude grows",
+            _ => "the nominal's gap changes by less than 1 point with amplitude",
         };
         let Some(d) = &self.distortion else {
             return format!("{gap} (the distortion trend needs two periodic captures)");
