@@ -8,7 +8,6 @@ use crate::data::{Dataset, IdData};
 use crate::ident::frf::{amplitude_trend, ClassLevel, FrfAnalysis, Linearity};
 
 use super::fits::{Fitted, Fitter};
-use super::linearity::capture_analyses;
 use super::locate;
 use super::metric::{score_segments, DrivenModel, Measured};
 use super::{Amplitude, AmplitudeLevel, Distortion, Where};
@@ -97,7 +96,7 @@ pub(super) fn gather(fitter: &Fitter<'_>, nominal: &Fitted) -> Evidence {
     let mut distortion = Vec::new();
     let mut lin_of: Vec<Option<Linearity>> = Vec::new();
     let mut analyses: Vec<(String, FrfAnalysis)> = Vec::new();
-    for (name, a) in capture_analyses(rec, o.settle_periods) {
+    for (name, a) in fitter.starts.analyses.iter().cloned() {
         let lin = a.as_ref().map(|a| a.linearity_y.clone());
         if let Some(l) = &lin {
             distortion.push(Distortion {

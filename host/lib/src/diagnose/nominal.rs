@@ -156,6 +156,7 @@ fn recover_nominal(
         two_mass: None,
         delay_lines: None,
         nonlinearity: None,
+        analyses: Default::default(),
         sticks: None,
         lag_start,
     };

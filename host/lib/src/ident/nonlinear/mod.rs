@@ -25,10 +25,11 @@ pub use output_error::{
     simulate_velocity, Correlation, Gradient, NlError, NlFit, NlOptions, NlParam,
 };
 pub use run::{
-    identify, identify_segments, linear_start, linear_start_segments, linear_start_shared,
-    model_name, model_of, run, sampled_input_note, validate, validate_segments, DelayLines,
-    LinearStart, LinearStartError, NlData, NlRequest, NlResult, NlRun, NlRunError, NlStart,
-    NlValidation, RawFrfFits, StartSearch, CANDIDATE_PATIENCE, UNRESOLVED_LAG,
+    friction_level, identify, identify_segments, linear_start, linear_start_segments,
+    linear_start_shared, model_name, model_of, run, sampled_input_note, validate,
+    validate_segments, DelayLines, LinearStart, LinearStartError, NlData, NlRequest, NlResult,
+    NlRun, NlRunError, NlStart, NlValidation, RawFrfFits, StartSearch, CANDIDATE_PATIENCE,
+    UNRESOLVED_LAG,
 };
 
 #[cfg(test)]

@@ -809,8 +809,13 @@ pub fn run(data: NlData<'_>, req: &NlRequest) -> Result<NlRun, NlRunError> {
 /// the compensation's regression found (its step's `fc` over
 /// [`super::compensate::SHARE`]), else on data that gave no compensation the regression
 /// itself on the longest record ([`super::compensate::level`], one sample ahead), when
-/// significant (above 3 σ).
-fn friction_level(data: &[IdData], req: &NlRequest, compensation: Option<&Step>) -> Option<f64> {
+/// significant (above 3 σ). The diagnosis judges stick-slip by the same level
+/// (`diagnose::starts`), so `fit` and `diagnose` grow the same start on the same data.
+pub fn friction_level(
+    data: &[IdData],
+    req: &NlRequest,
+    compensation: Option<&Step>,
+) -> Option<f64> {
     if let Some((_, v)) = req.fixed.iter().find(|(n, _)| n == "fc") {
         return Some(*v);
     }
