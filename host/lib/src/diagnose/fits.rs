@@ -264,8 +264,8 @@ pub(super) struct Fitted {
     /// single below its nominal
     pub own_start: Option<NlFit>,
     /// why the data do not support an effect of the model however it scores: it is then
-    /// never significant ([`delay_unsupported`])
-    pub unsupported: Option<String>,
+    /// never significant ([`delay_unsupported`], [`nonlinear_unsupported`])
+    pub unsupported: Option<Unsupported>,
     /// the excited lines' likelihood-ratio evidence of a transport delay beside the lag
     /// ([`crate::ident::nonlinear::DelayLines`]); when they show one, a delay's size is
     /// judged by them, not by its deviation, which the lag it trades with spreads
@@ -344,6 +344,25 @@ pub(super) fn makes_odd(e: &Effect) -> bool {
     )
 }
 
+/// Why the data do not support an effect of a model, whatever the model scores.
+#[derive(Clone, Debug, PartialEq)]
+pub(super) enum Unsupported {
+    /// a transport delay the excited lines do not show beside the lag, in words
+    /// ([`delay_unsupported`])
+    Delay(String),
+    /// a nonlinear law on data that show no nonlinearity, in words
+    /// ([`nonlinear_unsupported`]): it stands in for a linear mismatch
+    Linear(String),
+}
+
+impl std::fmt::Display for Unsupported {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Unsupported::Delay(why) | Unsupported::Linear(why) => f.write_str(why),
+        }
+    }
+}
+
 /// Why a model with a nonlinear law is not supported by the data: when they show no
 /// nonlinearity at all ([`super::linearity::Nonlinearity::none_shown`]), a friction, a gap
 /// or a stiffening spring, and a ripple that the order search does not show by its own
@@ -352,14 +371,14 @@ pub(super) fn nonlinear_unsupported(
     fit: &NlFit,
     starts: &LinearStarts,
     ripple_shown: bool,
-) -> Option<String> {
+) -> Option<Unsupported> {
     let law = fit
         .model
         .effects
         .iter()
         .find(|e| makes_odd(e) || (matches!(e, Effect::TorqueRipple(_)) && !ripple_shown))?;
     let why = starts.nonlinearity.as_ref()?.none_shown()?;
-    Some(format!("{}: {why}", law.name()))
+    Some(Unsupported::Linear(format!("{}: {why}", law.name())))
 }
 
 /// Why a model with a transport delay is not supported by the data, when the excited lines
@@ -669,6 +688,7 @@ pub(super) fn scored_fit(
             }
         });
     let unsupported = delay_unsupported(&res.fit, starts)
+        .map(Unsupported::Delay)
         .or_else(|| nonlinear_unsupported(&res.fit, starts, ripple_shown.is_some()));
     Ok(Fitted {
         fit: res.fit,

@@ -7,7 +7,7 @@ use std::time::Instant;
 use crate::model::params::model_params;
 
 use super::evidence::Evidence;
-use super::fits::{Fitted, Fitter, Floor};
+use super::fits::{Fitted, Fitter, Floor, Unsupported};
 use super::in_loop::InLoop;
 use super::metric::{self, score_segments, DrivenModel};
 use super::select::Answer;
@@ -277,10 +277,9 @@ fn linear_stand_in(fitter: &Fitter<'_>, answer: &Answer) -> String {
         .singles
         .iter()
         .filter(|(c, f)| {
-            // a nonlinear single's support is only ever refused for that reason
-            f.as_ref().is_some_and(|f| {
-                f.unsupported.is_some() && f.fit.model.effects.iter().all(|e| !e.is_linear())
-            }) && c.score - 2.0 * c.score_se > fitter.floor.gain
+            f.as_ref()
+                .is_some_and(|f| matches!(f.unsupported, Some(Unsupported::Linear(_))))
+                && c.score - 2.0 * c.score_se > fitter.floor.gain
         })
         .map(|(c, _)| format!("{} ({:+.2} ± {:.2} points)", c.name, c.score, c.score_se))
         .collect();
