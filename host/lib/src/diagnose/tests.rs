@@ -816,10 +816,9 @@ fn a_linear_joint_with_a_body_the_structure_lacks_gets_no_nonlinear_effect() {
 fn a_mode_at_the_end_of_the_chain_is_found_by_the_parallel_candidate() {
     use crate::diagnose::metric::true_fit;
     use crate::model::effects::Attach;
-    use crate::test_support::battery::{cases, config, other_laws, weak_friction, ROUND};
+    use crate::test_support::battery::{config, weak_friction};
     let index = 13;
-    let mut case = cases(index / ROUND + 1, true, true).swap_remove(index);
-    other_laws(index, &mut case.hidden);
+    let mut case = other_laws_case(index);
     case.background = weak_friction(index, &case.hidden);
     let [Effect::ExtraMode(truth)] = case.hidden[..] else {
         panic!("{:?}", case.hidden)
@@ -843,13 +842,8 @@ fn a_mode_at_the_end_of_the_chain_is_found_by_the_parallel_candidate() {
 /// and it closes the gap to within two points of the true model's (93.7 % against 94.1 %).
 #[test]
 fn an_asymmetric_friction_outside_the_candidates_law_is_still_named() {
-    use crate::test_support::battery::{cases, config, other_laws, ROUND};
-    let index = 30;
-    let mut case = cases(index / ROUND + 1, true, true).swap_remove(index);
-    other_laws(index, &mut case.hidden);
-    let [Effect::CoulombFriction(truth)] = case.hidden[..] else {
-        panic!("{:?}", case.hidden)
-    };
+    use crate::test_support::battery::config;
+    let (case, truth) = other_laws_friction(30);
     let backward = truth.fc_backward();
     assert!(backward < 0.8 * truth.fc, "{truth:?}");
     let (d, _, [_, val]) = diagnosed_case(&case);
@@ -2010,14 +2004,9 @@ fn a_ripple_that_turns_the_lines_phase_is_not_taken_for_a_delay() {
 #[test]
 fn a_sticking_motor_is_seen_when_the_frf_takes_no_friction_compensation() {
     use crate::ident::nonlinear::{stick_share, STICK_SHARE};
-    use crate::test_support::battery::{captures_validated_by, cases, other_laws, ROUND};
+    use crate::test_support::battery::captures_validated_by;
     use jointid_core::excitation::SignalKind;
-    let index = 40;
-    let mut case = cases(index / ROUND + 1, true, true).swap_remove(index);
-    other_laws(index, &mut case.hidden);
-    let [Effect::CoulombFriction(truth)] = case.hidden[..] else {
-        panic!("{:?}", case.hidden)
-    };
+    let (case, truth) = other_laws_friction(40);
     assert!(truth.fc_neg.is_some(), "{truth:?}");
     let (est, _) = captures_validated_by(&case, 4, case.rms, SignalKind::BandLimitedNoise);
     let req = DiagnoseRequest {
@@ -2036,4 +2025,28 @@ fn a_sticking_motor_is_seen_when_the_frf_takes_no_friction_compensation() {
     assert!(level > truth.fc, "level {level:e}, truth {:e}", truth.fc);
     let share = stick_share(&data, level);
     assert!(share > STICK_SHARE, "stick share {share}");
+}
+
+/// Bench case `index` of the hard, small-effect rounds with its hidden effects moved off the
+/// estimators' laws (`LAWS=1 HARD=1 SMALL=1`, [`crate::test_support::battery::other_laws`]).
+fn other_laws_case(index: usize) -> crate::test_support::battery::Case {
+    use crate::test_support::battery::{cases, other_laws, ROUND};
+    let mut case = cases(index / ROUND + 1, true, true).swap_remove(index);
+    other_laws(index, &mut case.hidden);
+    case
+}
+
+/// [`other_laws_case`] for a case whose one hidden effect is a Coulomb friction, and that
+/// friction.
+fn other_laws_friction(
+    index: usize,
+) -> (
+    crate::test_support::battery::Case,
+    crate::model::effects::CoulombFriction,
+) {
+    let case = other_laws_case(index);
+    let [Effect::CoulombFriction(truth)] = case.hidden[..] else {
+        panic!("{:?}", case.hidden)
+    };
+    (case, truth)
 }
