@@ -783,6 +783,34 @@ pub fn refine(
     })
 }
 
+/// The gap metric in the loop of `law` of `fit` at its own values, in sample on the record
+/// `data` (`measured` its measured side) [%]: what [`refine`] starts from. `None` when the
+/// model does not simulate in the loop.
+pub fn fit_in_loop(
+    fit: &NlFit,
+    law: &LinearController,
+    (data, measured): (&IdData, &Measured),
+) -> Option<f64> {
+    let problem = LoopProblem {
+        fit,
+        layout: fit.model.layout(),
+        law,
+        data,
+        measured,
+        threads: 1,
+        runs: AtomicUsize::new(0),
+    };
+    let z: Vec<f64> = problem
+        .layout
+        .iter()
+        .zip(&fit.values)
+        .map(|(d, v)| d.to_z(*v))
+        .collect();
+    let ssr = problem.cost(&z);
+    ssr.is_finite()
+        .then(|| fit_from_sums(ssr, centred_sum_of_squares(problem.measured())))
+}
+
 /// Why [`refine`] could not refine the answer in the loop.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum RefineError {

@@ -121,7 +121,11 @@
 //!    is refined in the loop before they are ranked, until
 //!    one reaches in-sample what the noise from period to period leaves
 //!    ([`metric::Measured::noise_fit`]); the loop's answer replaces the open-loop one when it
-//!    removes the distortion.
+//!    removes the distortion. Before that, a gap or a stiffening spring whose open-loop fit
+//!    came out of no size is sized again in the loop ([`loop_answer::seed_vanished`]): the
+//!    automatic start's grid of its sizes scored there, the best refined; such a law can
+//!    make the simulation from the measured torque follow a course of its own (a gap the
+//!    motor rattles in), which the open-loop cost cannot size.
 //! 8. **Verdict** ([`verdict`]): the closure of the gap in one sentence with its doubts (an
 //!    answer in the loop that stops short in sample of what the noise leaves closes at least
 //!    what it says, [`loop_answer::short_of_noise`]), the

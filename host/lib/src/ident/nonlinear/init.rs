@@ -597,25 +597,8 @@ pub fn automatic_start_with(
             searched = Some(f);
         }
     }
-    // the spring a cubic term stiffens, by name: the gearbox's (its index differs between
-    // the structures), or the grounded mass's spring
-    let spring_at = model
-        .structure
-        .param_names()
-        .iter()
-        .position(|n| *n == "k_g" || *n == "k_0");
-    let kg = spring_at
-        .and_then(|i| lin_plant.get(i))
-        .copied()
-        .unwrap_or(0.0);
-    // deflection level: the arm-side torque the motor torque implies, over the stiffness
-    let delta = match model.structure {
-        // the spring to ground deflects by the motion itself
-        Structure::Grounded => rms_about_mean(&data.y),
-        Structure::Rigid => 0.0,
-        _ if kg <= 0.0 => 0.0,
-        _ => u_rms / model.r / kg,
-    };
+    let spring_at = stiffened_spring(model);
+    let delta = deflection_level(model, &lin_plant, data, u_rms);
     // the lag the linear fit refined with the structure's values; a delay takes its time
     // from it (below)
     let mut tau_c = lin.model.tau_c;
@@ -829,6 +812,64 @@ fn short_order_warning(f: &super::ripple::OrderSearch) -> String {
         f.order.unwrap_or(f.best),
         f.periods
     )
+}
+
+/// The index in the structure's values of the spring a cubic term stiffens: the
+/// gearbox's (its index differs between the structures), or the grounded mass's spring.
+fn stiffened_spring(model: &NlModel) -> Option<usize> {
+    model
+        .structure
+        .param_names()
+        .iter()
+        .position(|n| *n == "k_g" || *n == "k_0")
+}
+
+/// The deflection level [rad] the sizes of a gap and a stiffening spring are laid on: the
+/// arm-side torque the motor torque implies (`u_rms` [N·m]) over the stiffness of the
+/// structure's values `plant`; the motion itself for a spring to ground; nought where
+/// there is no spring.
+fn deflection_level(model: &NlModel, plant: &[f64], data: &IdData, u_rms: f64) -> f64 {
+    let kg = stiffened_spring(model)
+        .and_then(|i| plant.get(i))
+        .copied()
+        .unwrap_or(0.0);
+    match model.structure {
+        // the spring to ground deflects by the motion itself
+        Structure::Grounded => rms_about_mean(&data.y),
+        Structure::Rigid => 0.0,
+        _ if kg <= 0.0 => 0.0,
+        _ => u_rms / model.r / kg,
+    }
+}
+
+/// The automatic start's grid over the size of a gap or a stiffening spring `e`
+/// ([`candidates`], each stiffening also with the linear spring split, [`split_spring`]),
+/// laid on the structure's values `plant` of `model` and the record `data`: each size with
+/// the structure's values it goes with. Empty for another effect. The diagnosis searches it
+/// in the controller's loop where the open-loop fit of the effect came out of no size
+/// (`diagnose::loop_answer`).
+pub(crate) fn size_grid(
+    e: &Effect,
+    plant: &[f64],
+    model: &NlModel,
+    data: &IdData,
+) -> Vec<(Effect, Vec<f64>)> {
+    if !matches!(e, Effect::Backlash(_) | Effect::NonlinearStiffness(_)) {
+        return Vec::new();
+    }
+    let u_rms = torque_rms(data);
+    let delta = deflection_level(model, plant, data, u_rms);
+    let spring_at = stiffened_spring(model);
+    candidates(e, plant, model, delta, u_rms)
+        .into_iter()
+        .flat_map(|c| {
+            std::iter::once((c, plant.to_vec())).chain(
+                split_spring(&c, plant, spring_at)
+                    .into_iter()
+                    .map(move |p| (c, p)),
+            )
+        })
+        .collect()
 }
 
 /// RMS of the measured torque of `data` [N·m]: with the gearbox stiffness, the scale of
@@ -1422,5 +1463,65 @@ fn candidates(e: &Effect, plant: &[f64], model: &NlModel, delta: f64, u_rms: f64
             v
         }
         _ => Vec::new(),
+    }
+}
+
+#[cfg(test)]
+mod grid_tests {
+    use super::*;
+    use crate::model::effects::{Backlash, CoulombFriction, NonlinearStiffness};
+
+    /// The loop's search over a gap's or a stiffening spring's size (`size_grid`) is laid on
+    /// the deflection the torque implies through the structure's own gearbox, and a
+    /// stiffening spring also takes its stiffness from the linear spring it would otherwise
+    /// count twice; another law has no such grid.
+    #[test]
+    fn a_size_grid_is_laid_on_the_deflection_of_the_structure_given() {
+        let cfg = crate::sim::SimConfig::default();
+        let gap = Effect::Backlash(Backlash { width: 1e-5 });
+        let (model, values) = crate::test_support::three_mass_truth(&cfg, gap, 1);
+        let plant = values[..8].to_vec();
+        let u: Vec<f64> = (0..2000).map(|k| 0.3 * (k as f64 * 0.01).sin()).collect();
+        let data = IdData {
+            ts: 5e-4,
+            y: vec![0.0; u.len()],
+            u,
+            r: None,
+        };
+        let delta = torque_rms(&data) / model.r / plant[3];
+        let grid = size_grid(&gap, &plant, &model, &data);
+        let widths: Vec<f64> = grid
+            .iter()
+            .map(|(e, _)| match e {
+                Effect::Backlash(b) => b.width / delta,
+                e => panic!("{e:?} in a gap's grid"),
+            })
+            .collect();
+        assert_eq!(widths.len(), 5, "{widths:?}");
+        assert!((widths[0] - 0.01).abs() < 1e-12 && (widths[4] - 1.0).abs() < 1e-12);
+        // a stiffer gearbox deflects less: the widths follow it
+        let mut stiff = plant.clone();
+        stiff[3] *= 4.0;
+        let first = |g: &[(Effect, Vec<f64>)]| match g[0].0 {
+            Effect::Backlash(b) => b.width,
+            _ => f64::NAN,
+        };
+        let ratio = first(&grid) / first(&size_grid(&gap, &stiff, &model, &data));
+        assert!((ratio - 4.0).abs() < 1e-9, "{ratio}");
+        // a stiffening spring: each size on the structure as given and with k_g split
+        let cubic = Effect::NonlinearStiffness(NonlinearStiffness { k3: 1e13 });
+        let grid = size_grid(&cubic, &plant, &model, &data);
+        let kept = grid.iter().filter(|(_, p)| p[3] == plant[3]).count();
+        assert!(
+            kept > 0 && grid.len() > kept,
+            "{} sizes, {kept} unsplit",
+            grid.len()
+        );
+        assert!(grid
+            .iter()
+            .all(|(_, p)| p[3] <= plant[3] && p[4] == plant[4]));
+        // friction has no such grid
+        let friction = Effect::CoulombFriction(CoulombFriction::default());
+        assert!(size_grid(&friction, &plant, &model, &data).is_empty());
     }
 }
