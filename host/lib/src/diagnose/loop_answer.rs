@@ -206,6 +206,51 @@ fn judge_against_loop_answer(
     }
 }
 
+/// What [`refined_adopted`] did with a single.
+enum Refit {
+    /// the refined fit replaced the single's: its validation FIT in the loop [%], the
+    /// in-sample course in words, and whether it reached the noise's floor in sample
+    Adopted {
+        fit: f64,
+        course: String,
+        at_floor: bool,
+    },
+    /// the refined fit scored no higher on validation [%]; the single is kept
+    NoHigher(f64),
+}
+
+/// `start` refined in the loop on the estimation record ([`refine_in_loop`]) and adopted
+/// for the single `(c, f)` ([`adopt`]) when its validation FIT in the loop rises above the
+/// single's.
+///
+/// # Errors
+/// Why the refinement failed, in words.
+fn refined_adopted(
+    l: &in_loop::InLoop,
+    (c, f): (&mut Candidate, &mut Fitted),
+    start: &NlFit,
+    ctx: (&Dataset, &Dataset, &Measured),
+    judge: in_loop::Judge<'_>,
+    o: &DiagnoseOptions,
+) -> Result<Refit, String> {
+    let r = refine_in_loop(&l.scores, (start, Springs), ctx, o)?;
+    if r.cs.fit <= c.fit_val {
+        return Ok(Refit::NoHigher(r.cs.fit));
+    }
+    let (fit, course, at_floor) = (r.cs.fit, r.course, r.at_floor);
+    adopt(
+        (c, f),
+        (r.fit, &r.cs, r.odd),
+        &l.scores.nominal.segments,
+        judge,
+    );
+    Ok(Refit::Adopted {
+        fit,
+        course,
+        at_floor,
+    })
+}
+
 /// Each single of a gap or a stiffening spring whose open-loop fit came out of no size
 /// ([`size::vanished`]) sized again in the loop of `l.scores.law` on the estimation record
 /// `est`: the automatic start's grid of its sizes ([`init::size_grid`]) laid on its own
@@ -275,25 +320,16 @@ pub(super) fn seed_vanished(
         let was = c.fit_val;
         let words = match best {
             Some((seed, at)) if at > own => {
-                match refine_in_loop(&l.scores, (&seed, Springs), (est, val, measured), o) {
-                    Ok(r) if r.cs.fit > was => {
-                        let (fit, course) = (r.cs.fit, r.course);
-                        adopt(
-                            (c, f),
-                            (r.fit, &r.cs, r.odd),
-                            &l.scores.nominal.segments,
-                            judge,
-                        );
-                        format!(
-                            "{} {was:.1} → {fit:.1} % (in sample {own:.1} % as fitted, {at:.1} % \
-                             at the grid's best, refined {course})",
-                            c.name
-                        )
-                    }
-                    Ok(r) => format!(
-                        "{} {was:.1} % kept (from the grid's best, {at:.1} % in sample: {:.1} \
+                match refined_adopted(l, (c, f), &seed, (est, val, measured), judge, o) {
+                    Ok(Refit::Adopted { fit, course, .. }) => format!(
+                        "{} {was:.1} → {fit:.1} % (in sample {own:.1} % as fitted, {at:.1} % at \
+                         the grid's best, refined {course})",
+                        c.name
+                    ),
+                    Ok(Refit::NoHigher(fit)) => format!(
+                        "{} {was:.1} % kept (from the grid's best, {at:.1} % in sample: {fit:.1} \
                          %, no higher)",
-                        c.name, r.cs.fit
+                        c.name
                     ),
                     Err(e) => format!("{} {was:.1} % kept (refining failed: {e})", c.name),
                 }
@@ -605,25 +641,25 @@ fn refine_contenders(
             ));
             continue;
         }
+        let start = f.fit.clone();
         words.push(
-            match refine_in_loop(&l.scores, (&f.fit, Springs), (est, val, measured), o) {
-                Ok(r) if r.cs.fit > was => {
-                    if r.at_floor {
+            match refined_adopted(l, (c, f), &start, (est, val, measured), judge, o) {
+                Ok(Refit::Adopted {
+                    fit,
+                    course,
+                    at_floor: floor,
+                }) => {
+                    if floor {
                         at_floor = Some(c.name.clone());
                     }
-                    let (fit, course) = (r.cs.fit, r.course);
-                    adopt(
-                        (c, f),
-                        (r.fit, &r.cs, r.odd),
-                        &l.scores.nominal.segments,
-                        judge,
-                    );
                     format!("{} {was:.1} → {fit:.1} % (in-sample {course})", c.name)
                 }
-                Ok(r) => format!(
-                    "{} {was:.1} % kept (refined: {:.1} %, no higher)",
-                    c.name, r.cs.fit
-                ),
+                Ok(Refit::NoHigher(fit)) => {
+                    format!(
+                        "{} {was:.1} % kept (refined: {fit:.1} %, no higher)",
+                        c.name
+                    )
+                }
                 Err(e) => format!("{} {was:.1} % kept (refining failed: {e})", c.name),
             },
         );
