@@ -1467,7 +1467,7 @@ fn candidates(e: &Effect, plant: &[f64], model: &NlModel, delta: f64, u_rms: f64
 }
 
 #[cfg(test)]
-mod grid_tests {
+mod tests {
     use super::*;
     use crate::model::effects::{Backlash, CoulombFriction, NonlinearStiffness};
 
