@@ -514,7 +514,34 @@ struct LoopProblem<'a> {
     runs: AtomicUsize,
 }
 
-impl LoopProblem<'_> {
+impl<'a> LoopProblem<'a> {
+    /// The problem of `fit`'s parameters in the loop of `law` on `data` (`measured` its
+    /// measured side), its Jacobian's columns on `threads`, with the optimiser coordinates
+    /// of `fit`'s own values.
+    fn at(
+        fit: &'a NlFit,
+        law: &'a LinearController,
+        (data, measured): (&'a IdData, &'a Measured),
+        threads: usize,
+    ) -> (LoopProblem<'a>, Vec<f64>) {
+        let layout = fit.model.layout();
+        let z = layout
+            .iter()
+            .zip(&fit.values)
+            .map(|(d, v)| d.to_z(*v))
+            .collect();
+        let problem = LoopProblem {
+            fit,
+            layout,
+            law,
+            data,
+            measured,
+            threads,
+            runs: AtomicUsize::new(0),
+        };
+        (problem, z)
+    }
+
     /// The driven model at optimiser coordinates `z` (layout order).
     fn model_at(&self, z: &[f64]) -> DrivenModel {
         let p: Vec<f64> = self
@@ -653,21 +680,8 @@ pub fn refine(
     (enough, from): (Option<f64>, RefineStarts<'_>),
     threads: usize,
 ) -> Result<Refined, RefineError> {
-    let layout = fit.model.layout();
-    let problem = LoopProblem {
-        fit,
-        layout: layout.clone(),
-        law,
-        data,
-        measured,
-        threads,
-        runs: AtomicUsize::new(0),
-    };
-    let z0: Vec<f64> = layout
-        .iter()
-        .zip(&fit.values)
-        .map(|(d, v)| d.to_z(*v))
-        .collect();
+    let (problem, z0) = LoopProblem::at(fit, law, (data, measured), threads);
+    let layout = problem.layout.clone();
     let opts = LmOptions {
         max_iter: REFINE_ITER,
         rel_cost_tol: 1e-6,
@@ -791,21 +805,7 @@ pub fn fit_in_loop(
     law: &LinearController,
     (data, measured): (&IdData, &Measured),
 ) -> Option<f64> {
-    let problem = LoopProblem {
-        fit,
-        layout: fit.model.layout(),
-        law,
-        data,
-        measured,
-        threads: 1,
-        runs: AtomicUsize::new(0),
-    };
-    let z: Vec<f64> = problem
-        .layout
-        .iter()
-        .zip(&fit.values)
-        .map(|(d, v)| d.to_z(*v))
-        .collect();
+    let (problem, z) = LoopProblem::at(fit, law, (data, measured), 1);
     let ssr = problem.cost(&z);
     ssr.is_finite()
         .then(|| fit_from_sums(ssr, centred_sum_of_squares(problem.measured())))
