@@ -441,7 +441,7 @@ pub(super) fn nested_refits(
         // automatic start's grid on the nominal's structure instead
         let new = match effect {
             Effect::ExtraMode(_) => fitter.nested_grid(&nominal.fit, effect),
-            _ => fitter.nested(&nominal.fit, shrunk(effect, NESTED_SHARE)),
+            _ => fitter.nested(&nominal.fit, (shrunk(effect, NESTED_SHARE), effect)),
         }
         .ok()?;
         let at = |f: &Fitted| fitter.in_sample(&DrivenModel::of_fit(&f.fit));
@@ -491,7 +491,8 @@ pub(super) fn nested_refits(
 
 /// The share of a single's fitted effect its nested refit starts from ([`nested_refits`]):
 /// small enough that the model is the nominal to within the noise, not nought, so that a
-/// size fitted on a log scale can grow.
+/// size fitted on a log scale can grow; its search bounds are those about the single's own
+/// fit ([`Fitter::nested`]), so it can grow back to that size.
 const NESTED_SHARE: f64 = 1e-3;
 
 /// `effect` with its size (the level, width, coefficient, coupling, delay or amplitude)

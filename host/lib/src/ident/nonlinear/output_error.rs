@@ -149,8 +149,10 @@ pub struct NlOptions {
     pub fixed: Vec<String>,
     /// plant parameters may move this factor either way from their start [-]
     pub plant_range: f64,
-    /// the values (layout order) `plant_range` is measured from, when not the start: a fit
-    /// continued from where an earlier one stopped keeps that one's bounds
+    /// the values (layout order) `plant_range` is measured from, when not the start (the
+    /// bounds then still hold the start): a fit continued from where an earlier one
+    /// stopped keeps that one's bounds; a nested refit whose effect starts shrunk can grow
+    /// it back to its own fit's size (the diagnosis's nested refits)
     pub range_from: Option<Vec<f64>>,
     /// most lags `L` of the covariance correction
     pub cov_lags: usize,
@@ -916,38 +918,7 @@ pub fn fit_output_error_segments(
         .iter()
         .flatten()
         .fold(0.0f64, |m, x| m.max(x.abs()));
-    let centre = opts
-        .range_from
-        .as_deref()
-        .filter(|c| c.len() == start.len())
-        .unwrap_or(start);
-    let (lower, upper): (Vec<f64>, Vec<f64>) = layout
-        .iter()
-        .zip(centre)
-        .map(|(d, &p)| {
-            let (mut lo, mut hi) = (d.lower, d.upper);
-            let log_effect = matches!(d.owner, Owner::Effect(_)) && d.scale == Scale::Log;
-            if d.owner == Owner::Plant || log_effect {
-                lo = lo.max(p / opts.plant_range);
-                hi = hi.min(p * opts.plant_range);
-            }
-            if d.owner == Owner::InitialVelocity {
-                // the motion never exceeds its measured range by much
-                hi = 10.0 * v_max.max(1e-6);
-                lo = -hi;
-            }
-            if matches!(d.owner, Owner::Effect(_))
-                && matches!(d.name, "fc" | "fc_neg" | "amplitude")
-            {
-                hi = hi.min(u_max.max(p.abs()));
-                lo = lo.max(-hi);
-            }
-            match d.scale {
-                Scale::Log => (if lo > 0.0 { lo.ln() } else { f64::NEG_INFINITY }, hi.ln()),
-                Scale::Linear(s) => (lo / s, hi / s),
-            }
-        })
-        .unzip();
+    let (lower, upper) = search_bounds(&layout, start, opts, (u_max, v_max));
     // the further records' initial velocities: the first one's start, bounds and flag
     let (mut z0, mut lower, mut upper, mut fixed_all) = (z0, lower, upper, fixed.clone());
     if let Some(i) = v0_index {
@@ -1544,6 +1515,52 @@ fn sandwich_parts(
     (h, first + second)
 }
 
+/// The search's bounds in optimiser coordinates (layout order) for a fit from `start`:
+/// each parameter's physical bounds, a structure parameter or a log-scaled effect size
+/// narrowed to [`NlOptions::plant_range`] either way of its centre
+/// ([`NlOptions::range_from`], else the start) and never shutting the start out, the
+/// initial velocity to ten times the largest measured `v_max` [rad/s], and a Coulomb level
+/// or ripple amplitude to the largest torque `u_max` [N·m] applied.
+fn search_bounds(
+    layout: &[ParamDef],
+    start: &[f64],
+    opts: &NlOptions,
+    (u_max, v_max): (f64, f64),
+) -> (Vec<f64>, Vec<f64>) {
+    let centre = opts
+        .range_from
+        .as_deref()
+        .filter(|c| c.len() == start.len())
+        .unwrap_or(start);
+    layout
+        .iter()
+        .zip(centre.iter().zip(start))
+        .map(|(d, (&p, &at))| {
+            let (mut lo, mut hi) = (d.lower, d.upper);
+            let log_effect = matches!(d.owner, Owner::Effect(_)) && d.scale == Scale::Log;
+            if d.owner == Owner::Plant || log_effect {
+                lo = lo.max((p / opts.plant_range).min(at));
+                hi = hi.min((p * opts.plant_range).max(at));
+            }
+            if d.owner == Owner::InitialVelocity {
+                // the motion never exceeds its measured range by much
+                hi = 10.0 * v_max.max(1e-6);
+                lo = -hi;
+            }
+            if matches!(d.owner, Owner::Effect(_))
+                && matches!(d.name, "fc" | "fc_neg" | "amplitude")
+            {
+                hi = hi.min(u_max.max(p.abs()).max(at.abs()));
+                lo = lo.max(-hi);
+            }
+            match d.scale {
+                Scale::Log => (if lo > 0.0 { lo.ln() } else { f64::NEG_INFINITY }, hi.ln()),
+                Scale::Linear(s) => (lo / s, hi / s),
+            }
+        })
+        .unzip()
+}
+
 /// Whether an estimated value at optimiser coordinate `z` sits on its lower bound, and
 /// on either bound, of the search `(lower, upper)` (within a millionth of the bound's
 /// scale): what [`NlParam::at_lower`] and [`NlParam::at_bound`] say, for every fit that
@@ -1557,6 +1574,7 @@ pub fn on_bounds(z: f64, (lower, upper): (f64, f64)) -> (bool, bool) {
 #[cfg(test)]
 mod error_tests {
     use super::*;
+    use crate::model::effects::{CoulombFriction, Effect};
     use crate::model::spec::Structure;
 
     /// A size fitted on a log scale (a backlash's width, bounded below at 1e-9 rad) that
@@ -1573,6 +1591,49 @@ mod error_tests {
         assert_eq!(
             on_bounds(-1e300, (f64::NEG_INFINITY, f64::INFINITY)),
             (false, false)
+        );
+    }
+
+    /// A nested refit starts its effect at a small share of the single's own fit, its
+    /// bounds measured about that fit (`range_from`): the Coulomb level can grow back to
+    /// the own fit's size and a hundredfold beyond (up to the largest torque applied),
+    /// and the bounds still hold the start below. Measured about the start, the level
+    /// could not pass a hundred times the start, a tenth of the own fit's.
+    #[test]
+    fn a_size_started_shrunk_may_grow_back_past_its_own_fit() {
+        let at = |fc: f64| NlModel {
+            structure: Structure::TwoMass,
+            r: 1.0 / 118.0,
+            effects: vec![Effect::CoulombFriction(CoulombFriction {
+                fc,
+                fs: fc,
+                ..CoulombFriction::default()
+            })],
+            tau_c: 0.0,
+            v_eps: 0.05,
+            dz_eps: 1e-7,
+            substeps: 1,
+        };
+        let plant = [1e-3, 0.1, 1e4, 5.0, 1e-3];
+        let (own, start) = (at(2.7e-3), at(2.7e-6));
+        let layout = start.layout();
+        let fc = layout.iter().position(|d| d.name == "fc").unwrap();
+        let u_max = 0.5;
+        let centred = NlOptions {
+            range_from: Some(own.values(&plant, 0.0, 0.0)),
+            ..NlOptions::default()
+        };
+        let z_start = start.values(&plant, 0.0, 0.0);
+        let (lo, hi) = search_bounds(&layout, &z_start, &centred, (u_max, 1.0));
+        assert!(lo[fc] <= 2.7e-6_f64.ln() && hi[fc] > 2.7e-3_f64.ln());
+        assert!((hi[fc] - 0.27_f64.ln()).abs() < 1e-12, "{}", hi[fc].exp());
+        // the structure's bounds are those about the nominal's values either way
+        let (lo_s, hi_s) = search_bounds(&layout, &z_start, &NlOptions::default(), (u_max, 1.0));
+        assert_eq!((lo[0], hi[0]), (lo_s[0], hi_s[0]));
+        assert!(
+            (hi_s[fc] - 2.7e-4_f64.ln()).abs() < 1e-12,
+            "{}",
+            hi_s[fc].exp()
         );
     }
 
