@@ -778,10 +778,10 @@ fn drop_partner(
 /// one; and the reason the open-loop metric needs them, a delay that follows the
 /// controller's reaction held in the measured torque, does not arise in the loop, whose
 /// torque is the controller's law's. Hard bench (`HARD=1 SMALL=1`) case 86, a stiffening
-/// spring and a 0.59-sample delay behind a 0.74 ms lag: the spring alone reached 98.6 % in
-/// sample where the noise leaves 99.6 %; with the delay the pair scores 99.62 % on
-/// validation (the true model's 99.62 %), +1.17 ± 0.01 points over the spring, and the
-/// lines had found no delay.
+/// spring and a 0.59-sample delay behind a 0.31 ms current-loop lag: the spring alone
+/// reached 98.6 % in sample where the noise leaves 99.6 %; with the delay the pair scores
+/// 99.62 % on validation (the true model's 99.62 %), +1.17 ± 0.01 points over the spring,
+/// its delay 0.59 samples beside a lag of 0.30 ms, where the lines had found no delay.
 pub(super) fn counts_beside(f: &Fitted, significant: bool, short: bool) -> bool {
     let delay_unshown = matches!(f.unsupported, Some(super::fits::Unsupported::Delay(_)));
     f.counts(significant)
