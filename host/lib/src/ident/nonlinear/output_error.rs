@@ -1601,18 +1601,12 @@ mod error_tests {
     /// could not pass a hundred times the start, a tenth of the own fit's.
     #[test]
     fn a_size_started_shrunk_may_grow_back_past_its_own_fit() {
-        let at = |fc: f64| NlModel {
-            structure: Structure::TwoMass,
-            r: 1.0 / 118.0,
-            effects: vec![Effect::CoulombFriction(CoulombFriction {
+        let at = |fc: f64| {
+            two_mass(vec![Effect::CoulombFriction(CoulombFriction {
                 fc,
                 fs: fc,
                 ..CoulombFriction::default()
-            })],
-            tau_c: 0.0,
-            v_eps: 0.05,
-            dz_eps: 1e-7,
-            substeps: 1,
+            })])
         };
         let plant = [1e-3, 0.1, 1e4, 5.0, 1e-3];
         let (own, start) = (at(2.7e-3), at(2.7e-6));
@@ -1654,17 +1648,22 @@ mod error_tests {
         assert_eq!(correlation(&flat, 0, 1), None);
     }
 
-    #[test]
-    fn a_fit_that_cannot_start_says_why() {
-        let model = NlModel {
+    /// A two-mass joint's model with `effects`, no current loop.
+    fn two_mass(effects: Vec<Effect>) -> NlModel {
+        NlModel {
             structure: Structure::TwoMass,
             r: 1.0 / 118.0,
-            effects: Vec::new(),
+            effects,
             tau_c: 0.0,
             v_eps: 0.05,
             dz_eps: 1e-7,
             substeps: 1,
-        };
+        }
+    }
+
+    #[test]
+    fn a_fit_that_cannot_start_says_why() {
+        let model = two_mass(Vec::new());
         let opts = NlOptions::default();
         let e = fit_output_error_segments(&[], &model, &[], &opts).unwrap_err();
         assert!(matches!(e, NlError::NoRecord), "{e:?}");
