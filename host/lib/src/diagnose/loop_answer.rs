@@ -3,7 +3,7 @@
 //! scored again in the loop of the robot's controller ([`in_loop`]). Every single
 //! significant there is refined in the loop on the estimation record before the ranking is
 //! read ([`refine_contenders`]); the loop's best may take a partner significant there, or
-//! any partner where the best misses in sample what the noise leaves, the pair refined
+//! any of a size where the best misses in sample what the noise leaves, the pair refined
 //! alike ([`pair_in_loop`]); an answer not refined yet (an open-loop pair the
 //! loop keeps) is refined last ([`refine_answer`]), its partner dropped when it no longer
 //! adds ([`drop_partner`]). The noise's floor ends the search early: a refinement stops
@@ -799,8 +799,8 @@ fn names_of(f: &Fitted) -> Vec<&'static str> {
 /// The pair of the loop's best single `singles[0]` with the other single that gains most
 /// over it in the loop ([`in_loop`]), each other single significant there tried as its
 /// partner from the best's fit and from the data's own start (where the best is short of
-/// the noise's floor in sample, [`short_of_noise`], every other single, those not
-/// significant from the best's fit only: [`counts_beside`]), refined in the loop on the
+/// the noise's floor in sample, [`short_of_noise`], every other single of a size, those
+/// not significant from the best's fit only: [`counts_beside`]), refined in the loop on the
 /// estimation record `est` as the
 /// singles were ([`refine_contenders`]) and judged on the segments in the loop on `val`;
 /// with its scores in the loop, `None` when no pair gains significantly.
@@ -818,12 +818,16 @@ fn pair_in_loop(
     // where the lead misses in sample what a model could follow ([`short_of_noise`]), a
     // partner is judged by what it adds to the lead, whatever it scored alone: an effect
     // the lead's own distortion hides (a sub-sample delay beside a strongly stiffening
-    // spring, whose single scores nothing in the loop) shows only beside it
+    // spring, whose single scores nothing in the loop) shows only beside it; not one that
+    // came out of no size alone (a ripple whose order no search found is held at nought
+    // at an order of no meaning: fresh held-out case 91, a backlash, took such a ripple
+    // as a partner)
     let short = short_of_noise(l, &lead.fit, est, o).is_some();
+    let sized = |f: &Fitted| size::vanished(&f.fit, f.delay_shown()).is_empty();
     let partners: Vec<(&Fitted, bool)> = singles[1..]
         .iter()
-        .filter(|c| c.0.significant || short)
         .filter_map(|c| c.1.as_ref().map(|f| (f, c.0.significant)))
+        .filter(|&(f, significant)| significant || (short && sized(f)))
         .collect();
     // each pair from the lead's fit and, unless the lead was grown where the motor sticks
     // ([`Fitter::grown_lead`]), from the data's own start, as the open-loop pairs

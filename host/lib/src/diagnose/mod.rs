@@ -118,8 +118,8 @@
 //!    again in the loop of the robot's controller, its law identified from the estimation
 //!    record ([`crate::ident::controller`]); every single significant there, and every pair
 //!    of the loop's best with another significant there (from the best's fit and from the
-//!    data's own start; with any other where the best misses in sample what the noise
-//!    leaves, a delay then counted on the loop's test whatever the excited lines say),
+//!    data's own start; with any other of a size where the best misses in sample what the
+//!    noise leaves, a delay then counted on the loop's test whatever the excited lines say),
 //!    is refined in the loop before they are ranked, until
 //!    one reaches in-sample what the noise from period to period leaves
 //!    ([`metric::Measured::noise_fit`]); the loop's answer replaces the open-loop one when it
