@@ -211,33 +211,24 @@ impl Fitter<'_> {
         base: &NlFit,
         (start, about): (Effect, Effect),
     ) -> Result<Fitted, CandidateError> {
-        let req = self.req;
-        let r = self.rec;
-        let longest = longest(&r.est_data).ok_or(CandidateError::NoRecord)?;
-        let mut nl = NlRequest {
-            options: req.options.nl.clone(),
-            ..NlRequest::new(req.structure, req.r, vec![start])
-        };
-        start_from(&mut nl, base, longest);
-        let centre = NlRequest {
-            effects: vec![about],
-            ..nl.clone()
-        };
-        let centre = model_of(&centre, longest).values(&base.plant, offset_of(base), 0.0);
-        nl.options.range_from = Some(centre);
-        let res = identify_segments(&r.est_data, &nl).map_err(CandidateError::Fit)?;
-        scored_fit(res, (&r.est_data, &r.val_data, &r.parts), req, self.starts)
+        self.refit_from(base, (vec![start], Some(vec![about])))
     }
 
     /// The nominal, with no effect, fitted from the structure, lag and offset of the fit
     /// `from` on the nominal's own cost ([`super::nominal::from_singles`]).
     pub fn linear_from(&self, from: &NlFit) -> Result<Fitted, CandidateError> {
-        self.refit_from(from, Vec::new())
+        self.refit_from(from, (Vec::new(), None))
     }
 
     /// The structure with `effects` fitted from the values of `base` (structure, lag,
-    /// offset; the effects at the values they carry) on the nominal's own cost, and scored.
-    fn refit_from(&self, base: &NlFit, effects: Vec<Effect>) -> Result<Fitted, CandidateError> {
+    /// offset; the effects at the values they carry) on the nominal's own cost, and scored;
+    /// the search bounds measured about `base` with the effects `about` when given
+    /// ([`NlOptions::range_from`]), else about the start.
+    fn refit_from(
+        &self,
+        base: &NlFit,
+        (effects, about): (Vec<Effect>, Option<Vec<Effect>>),
+    ) -> Result<Fitted, CandidateError> {
         let req = self.req;
         let r = self.rec;
         let longest = longest(&r.est_data).ok_or(CandidateError::NoRecord)?;
@@ -246,6 +237,14 @@ impl Fitter<'_> {
             ..NlRequest::new(req.structure, req.r, effects)
         };
         start_from(&mut nl, base, longest);
+        if let Some(effects) = about {
+            let centre = NlRequest {
+                effects,
+                ..nl.clone()
+            };
+            let centre = model_of(&centre, longest).values(&base.plant, offset_of(base), 0.0);
+            nl.options.range_from = Some(centre);
+        }
         let res = identify_segments(&r.est_data, &nl).map_err(CandidateError::Fit)?;
         scored_fit(res, (&r.est_data, &r.val_data, &r.parts), req, self.starts)
     }
